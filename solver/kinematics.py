@@ -1,0 +1,203 @@
+"""Vectorised forward kinematics of SMR positions and their analytic identification Jacobian.
+
+The chain tracker -> base -> joints -> flange is written as a list of elementary motions
+(rotations and translations about one local axis). Every calibratable quantity is the amount
+of one such motion, so every Jacobian column is either `axis x (p - origin)` (rotation) or
+`axis` (translation), evaluated for all poses at once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .robot import Robot
+
+AXES = {"x": 0, "y": 1, "z": 2}
+BASE_NAMES = ("base_x", "base_y", "base_z", "base_rz", "base_ry", "base_rx")
+
+
+@dataclass(frozen=True)
+class Op:
+    """An elementary motion: rotation ('r') or translation ('t') about a local axis."""
+
+    kind: str  # 'r' or 't'
+    axis: int  # 0, 1, 2
+    param: int  # index in the parameter vector
+    joint: int = -1  # joint whose reading is added to the amount (-1: none)
+
+
+def joint_ops(robot: Robot, first_param: int = 0) -> list[Op]:
+    """The elementary motions of the arm, from base to flange."""
+    ops, k = [], first_param
+    for i, par in enumerate(robot.parallel):
+        theta, d, a, alpha = k, k + 1, k + 2, k + 3
+        beta = k + 4 if par else None
+        k += 5 if par else 4
+        if robot.convention == "dh":
+            chain = [Op("r", 2, theta, i), Op("t", 2, d), Op("t", 0, a), Op("r", 0, alpha)]
+            if beta is not None:
+                chain.append(Op("r", 1, beta))
+        else:
+            chain = [Op("r", 0, alpha)]
+            if beta is not None:
+                chain.append(Op("r", 1, beta))
+            chain += [Op("t", 0, a), Op("r", 2, theta, i), Op("t", 2, d)]
+        ops += chain
+    return ops
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Index map of the identification vector x = [geometry, base (6), targets (3K)].
+
+    The base is `base_ref @ Trans(x, y, z) @ Rz @ Ry @ Rx` with the six base entries of x;
+    base_ref is a fixed reference (from registration), so those entries stay small.
+    """
+
+    robot: Robot
+    base_ref: np.ndarray
+    target_names: tuple[str, ...]
+
+    @property
+    def n_geo(self) -> int:
+        return len(self.robot.param_names())
+
+    @property
+    def base_slice(self) -> slice:
+        return slice(self.n_geo, self.n_geo + 6)
+
+    @property
+    def target_slice(self) -> slice:
+        return slice(self.n_geo + 6, self.n_geo + 6 + 3 * len(self.target_names))
+
+    @property
+    def n_params(self) -> int:
+        return self.n_geo + 6 + 3 * len(self.target_names)
+
+    def names(self) -> list[str]:
+        tnames = [f"{t}_{c}" for t in self.target_names for c in "xyz"]
+        return self.robot.param_names() + list(BASE_NAMES) + tnames
+
+    def ops(self) -> list[Op]:
+        b = self.n_geo
+        base = [Op("t", 0, b), Op("t", 1, b + 1), Op("t", 2, b + 2),
+                Op("r", 2, b + 3), Op("r", 1, b + 4), Op("r", 0, b + 5)]
+        return base + joint_ops(self.robot)
+
+    def pack(self, geometry, base_delta, targets) -> np.ndarray:
+        return np.concatenate([geometry, base_delta, np.asarray(targets, float).ravel()])
+
+    def initial(self, targets) -> np.ndarray:
+        """x with the robot's own geometry, base equal to base_ref and the given targets."""
+        return self.pack(self.robot.param_vector(), np.zeros(6), targets)
+
+    def targets(self, x) -> np.ndarray:
+        return np.asarray(x[self.target_slice]).reshape(len(self.target_names), 3)
+
+    def base(self, x) -> np.ndarray:
+        """The 4x4 base-in-tracker transform that x describes."""
+        tx, ty, tz, rz, ry, rx = x[self.base_slice]
+        return self.base_ref @ translation(tx, ty, tz) @ rot(2, rz) @ rot(1, ry) @ rot(0, rx)
+
+    def rebased(self, x) -> tuple[Layout, np.ndarray]:
+        """An equivalent layout whose base_ref absorbs x's base entries (which become zero)."""
+        lay = Layout(self.robot, self.base(x), self.target_names)
+        y = np.array(x, dtype=float)
+        y[self.base_slice] = 0.0
+        return lay, y
+
+
+def rot(axis: int, angle: float) -> np.ndarray:
+    """4x4 rotation about x, y or z."""
+    c, s = np.cos(angle), np.sin(angle)
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    m = np.eye(4)
+    m[i, i] = c
+    m[j, j] = c
+    m[i, j] = -s
+    m[j, i] = s
+    return m
+
+
+def translation(x: float, y: float, z: float) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = (x, y, z)
+    return m
+
+
+def _amounts(op: Op, x: np.ndarray, q: np.ndarray, dq: np.ndarray | None):
+    val = x[op.param]
+    if op.joint >= 0:
+        val = val + q[:, op.joint]
+        if dq is not None:
+            val = val + dq[:, op.joint]
+    return val
+
+
+def flange_frames(layout: Layout, x, q, dq=None, record=False):
+    """Flange frames in the tracker frame for every pose.
+
+    q: (m, n) joint readings in rad; dq: optional (m, n) corrections added to them (model
+    extensions). Returns (R (m, 3, 3) with columns as axes, o (m, 3)) and, if record, the
+    per-op (axis, origin) pairs needed for the Jacobian.
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    m = q.shape[0]
+    ref = layout.base_ref
+    cols = [np.broadcast_to(ref[:3, c], (m, 3)).copy() for c in range(3)]
+    o = np.broadcast_to(ref[:3, 3], (m, 3)).copy()
+    rec = []
+    for op in layout.ops():
+        v = _amounts(op, x, q, dq)
+        if op.kind == "t":
+            v = np.reshape(v, (-1, 1))
+            o = o + v * cols[op.axis]
+            if record:
+                rec.append((op, cols[op.axis], None))
+        else:
+            c = np.reshape(np.cos(v), (-1, 1))
+            s = np.reshape(np.sin(v), (-1, 1))
+            i, j = [(1, 2), (2, 0), (0, 1)][op.axis]
+            ci, cj = cols[i], cols[j]
+            cols[i] = c * ci + s * cj
+            cols[j] = c * cj - s * ci
+            if record:
+                rec.append((op, cols[op.axis], o))
+    R = np.stack(cols, axis=-1)
+    return (R, o, rec) if record else (R, o)
+
+
+def predict(layout: Layout, x, q, dq=None) -> np.ndarray:
+    """SMR centres in the tracker frame, shape (m, K, 3)."""
+    R, o = flange_frames(layout, x, q, dq)
+    t = layout.targets(x)
+    return np.einsum("mij,kj->mki", R, t) + o[:, None, :]
+
+
+def predict_with_jacobian(layout: Layout, x, q, dq=None):
+    """SMR centres (m, K, 3), their Jacobian (m, K, 3, P) and d(point)/d(joint angle) (m, K, 3, n).
+
+    The joint-angle derivative lets model extensions that perturb joint angles chain their own
+    parameters onto it.
+    """
+    R, o, rec = flange_frames(layout, x, q, dq, record=True)
+    t = layout.targets(x)
+    p = np.einsum("mij,kj->mki", R, t) + o[:, None, :]
+    m, K = p.shape[:2]
+    P = layout.n_params
+    J = np.zeros((m, K, 3, P))
+    Jq = np.zeros((m, K, 3, layout.robot.n_joints))
+    for op, axis, origin in rec:
+        if op.kind == "t":
+            col = np.broadcast_to(axis[:, None, :], (m, K, 3))
+        else:
+            col = np.cross(axis[:, None, :], p - origin[:, None, :])
+        J[..., op.param] += col
+        if op.joint >= 0:
+            Jq[..., op.joint] += col
+    ts = layout.target_slice
+    for k in range(K):
+        J[:, k, :, ts.start + 3 * k : ts.start + 3 * k + 3] = R
+    return p, J, Jq
