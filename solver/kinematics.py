@@ -186,18 +186,25 @@ def predict_with_jacobian(layout: Layout, x, q, dq=None):
     t = layout.targets(x)
     p = np.einsum("mij,kj->mki", R, t) + o[:, None, :]
     m, K = p.shape[:2]
-    P = layout.n_params
-    J = np.zeros((m, K, 3, P))
+    J = np.empty((m, K, 3, layout.n_params))
+    rot = [(op, a, org) for op, a, org in rec if op.kind == "r"]
+    tra = [(op, a) for op, a, _ in rec if op.kind == "t"]
+    if rot:
+        w = np.stack([a for _, a, _ in rot], axis=-1)[:, None, :, :]  # (m, 1, 3, Nr)
+        v = p[..., None] - np.stack([org for _, _, org in rot], axis=-1)[:, None, :, :]
+        cols = np.empty(np.broadcast_shapes(w.shape, v.shape))
+        cols[:, :, 0] = w[:, :, 1] * v[:, :, 2] - w[:, :, 2] * v[:, :, 1]
+        cols[:, :, 1] = w[:, :, 2] * v[:, :, 0] - w[:, :, 0] * v[:, :, 2]
+        cols[:, :, 2] = w[:, :, 0] * v[:, :, 1] - w[:, :, 1] * v[:, :, 0]
+        J[..., [op.param for op, _, _ in rot]] = cols
+    if tra:
+        J[..., [op.param for op, _ in tra]] = np.stack([a for _, a in tra], axis=-1)[:, None]
     Jq = np.zeros((m, K, 3, layout.robot.n_joints))
-    for op, axis, origin in rec:
-        if op.kind == "t":
-            col = np.broadcast_to(axis[:, None, :], (m, K, 3))
-        else:
-            col = np.cross(axis[:, None, :], p - origin[:, None, :])
-        J[..., op.param] += col
+    for op, _, _ in rot:
         if op.joint >= 0:
-            Jq[..., op.joint] += col
-    ts = layout.target_slice
+            Jq[..., op.joint] += J[..., op.param]
+    ts = layout.target_slice.start
+    J[..., ts:] = 0.0
     for k in range(K):
-        J[:, k, :, ts.start + 3 * k : ts.start + 3 * k + 3] = R
+        J[:, k, :, ts + 3 * k : ts + 3 * k + 3] = R
     return p, J, Jq

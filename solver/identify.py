@@ -1,0 +1,172 @@
+"""Base registration and the least-squares identification methods (the paper's conditions 0-4 and 6)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .kinematics import Layout, predict, predict_with_jacobian
+from .robot import Robot
+
+
+def kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """The rigid 4x4 transform T minimising sum ||T src - dst||^2 (points as rows)."""
+    cs, cd = src.mean(axis=0), dst.mean(axis=0)
+    U, _, Vt = np.linalg.svd((src - cs).T @ (dst - cd))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = cd - R @ cs
+    return T
+
+
+@dataclass
+class Problem:
+    """Joint readings and measured SMR centres to fit, with the layout of the unknowns."""
+
+    layout: Layout
+    q: np.ndarray  # (m, n) rad
+    meas: np.ndarray  # (m, K, 3) mm, NaN where missing
+    mask: np.ndarray = field(init=False)
+
+    def __post_init__(self):
+        self.mask = np.all(np.isfinite(self.meas), axis=-1)
+
+    def residuals(self, x) -> np.ndarray:
+        """pred - meas, (m, K, 3), NaN where missing."""
+        return predict(self.layout, x, self.q) - self.meas
+
+    def sum_squares(self, x) -> np.ndarray:
+        """F_i of eq. (6) per target."""
+        r = self.residuals(x)
+        return np.nansum(r * r, axis=(0, 2))
+
+    def rebased(self, x) -> tuple[Problem, np.ndarray]:
+        lay, y = self.layout.rebased(x)
+        return Problem(lay, self.q, self.meas), y
+
+
+def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None):
+    """A problem and its start vector with the base found from the data (no user guess needed).
+
+    The nominal prediction in the base frame is registered onto the measurements by a
+    closed-form point-set fit; then base and SMR positions are refined with the nominal joints
+    (the paper's condition 0).
+    """
+    targets = np.asarray(targets, dtype=float)
+    if base_guess is None:
+        lay0 = Layout(robot, np.eye(4), tuple(names))
+        nominal = predict(lay0, lay0.initial(targets), q)
+        ok = np.all(np.isfinite(meas), axis=-1)
+        base_guess = kabsch(nominal[ok], meas[ok])
+    prob = Problem(Layout(robot, np.asarray(base_guess, float), tuple(names)), q, meas)
+    x0 = prob.layout.initial(targets)
+    free = np.zeros(prob.layout.n_params, dtype=bool)
+    free[prob.layout.base_slice] = True
+    free[prob.layout.target_slice] = True
+    x, _ = least_squares_fit(prob, x0, free)
+    return prob.rebased(x)
+
+
+def least_squares_fit(prob: Problem, x0, free, rows=None, max_nfev=200):
+    """Levenberg-Marquardt on the point residuals of the selected targets; returns (x, scipy result)."""
+    K = prob.meas.shape[1]
+    sel = np.zeros(K, dtype=bool)
+    sel[list(range(K)) if rows is None else rows] = True
+    mask = prob.mask & sel[None, :]
+    idx = np.flatnonzero(free)
+    x = np.array(x0, dtype=float)
+    cache = {}
+
+    def evaluate(z):
+        key = z.tobytes()
+        if key not in cache:
+            cache.clear()
+            xx = x.copy()
+            xx[idx] = z
+            p, J, _ = predict_with_jacobian(prob.layout, xx, prob.q)
+            cache[key] = ((p - prob.meas)[mask].ravel(), J[mask][..., idx].reshape(-1, len(idx)))
+        return cache[key]
+
+    res = least_squares(lambda z: evaluate(z)[0], x[idx], jac=lambda z: evaluate(z)[1],
+                        method="lm", x_scale="jac", max_nfev=max_nfev)
+    x[idx] = res.x
+    return x, res
+
+
+def fit_targets(prob: Problem, x, which) -> np.ndarray:
+    """SMR positions in the flange frame for the given targets with geometry and base held (linear LS)."""
+    from .kinematics import flange_frames
+
+    R, o = flange_frames(prob.layout, x, prob.q)
+    x = np.array(x, dtype=float)
+    ts = prob.layout.target_slice.start
+    for k in which:
+        ok = prob.mask[:, k]
+        # meas = R t + o  =>  t = mean of R^T (meas - o): R is orthonormal, so this is the LS solution
+        t = np.einsum("mji,mj->mi", R[ok], prob.meas[ok, k] - o[ok]).mean(axis=0)
+        x[ts + 3 * k : ts + 3 * k + 3] = t
+    return x
+
+
+def pose_weight(targets: np.ndarray) -> float:
+    """mm per rad for the ls-pose orientation residual: the RMS radius of the SMR ring.
+
+    An orientation error of w rad then weighs as much as the SMR displacement it causes.
+    """
+    c = targets - targets.mean(axis=0)
+    return float(np.sqrt(np.mean(np.sum(c * c, axis=1))))
+
+
+def pose_residuals(pred, meas, J, weight):
+    """Per pose: centroid error and weight x the small rotation best aligning the SMR errors.
+
+    For errors e_k = pred_k - meas_k at lever arms d_k from the centroid, the rotation w solving
+    min sum ||e_k - mean(e) - w x d_k||^2 is M^-1 sum d_k x (e_k - mean(e)). The rotation is
+    linear in the errors, so its Jacobian is the same map applied to the point Jacobians.
+    """
+    c = pred.mean(axis=1)
+    d = pred - c[:, None, :]
+    e = pred - meas
+    ebar = e.mean(axis=1)
+    dd = np.einsum("mki,mki->m", d, d)
+    M = dd[:, None, None] * np.eye(3) - np.einsum("mki,mkj->mij", d, d)
+    Minv = np.linalg.inv(M)
+    w = np.einsum("mij,mj->mi", Minv, np.cross(d, e - ebar[:, None, :]).sum(axis=1))
+    Jbar = J.mean(axis=1)
+    # d x J for each parameter column: cross along axis -2 of (m, K, 3, P)
+    dJ = np.cross(d[..., None], (J - Jbar[:, None]), axisa=-2, axisb=-2, axisc=-2).sum(axis=1)
+    Jw = np.einsum("mij,mjp->mip", Minv, dJ)
+    r = np.concatenate([ebar, weight * w], axis=1)
+    Jr = np.concatenate([Jbar, weight * Jw], axis=1)
+    return r, Jr
+
+
+def pose_fit(prob: Problem, x0, free, weight, max_nfev=200):
+    """Least squares on position and orientation of the frame spanned by the SMRs (condition 6)."""
+    full = np.all(prob.mask, axis=1)
+    if prob.meas.shape[1] < 3 or full.sum() == 0:
+        raise ValueError("ls-pose needs poses with at least three targets measured")
+    q, meas = prob.q[full], prob.meas[full]
+    idx = np.flatnonzero(free)
+    x = np.array(x0, dtype=float)
+    cache = {}
+
+    def evaluate(z):
+        key = z.tobytes()
+        if key not in cache:
+            cache.clear()
+            xx = x.copy()
+            xx[idx] = z
+            p, J, _ = predict_with_jacobian(prob.layout, xx, q)
+            r, Jr = pose_residuals(p, meas, J[..., idx], weight)
+            cache[key] = (r.ravel(), Jr.reshape(-1, len(idx)))
+        return cache[key]
+
+    res = least_squares(lambda z: evaluate(z)[0], x[idx], jac=lambda z: evaluate(z)[1],
+                        method="lm", x_scale="jac", max_nfev=max_nfev)
+    x[idx] = res.x
+    return x, res
