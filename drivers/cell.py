@@ -1,0 +1,242 @@
+"""The virtual cell: a true arm unlike its nominal model, SMRs on its flange, a laser tracker."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from solver.kinematics import Layout, flange_frames, rot, translation
+from solver.measurements import Measurements
+from solver.robot import Robot
+
+LIMIT_MARGIN_RAD = np.deg2rad(2.0)
+MIN_RANGE_MM = 1000.0  # trackers are specified from about 1 m; closer, the head cannot follow
+AXIS_CLEARANCE_MM = 300.0  # flange near the base z axis: the shoulder singularity
+WRIST_MIN_RAD = np.deg2rad(10.0)  # axes of joints N-2 and N nearly aligned: the wrist singularity
+MOVE_S, PAUSE_S, TARGET_GAP_S = 8.0, 10.0, 2.0  # the seed paper's cycle: move, pause 10 s, measure
+TEMP_NOISE_C = 0.02
+
+
+@dataclass(frozen=True)
+class TrackerSpec:
+    """Tracker accuracy as a maximum permissible error MPE = mpe_um + mpe_um_per_m * range."""
+
+    mpe_um: float = 10.0
+    mpe_um_per_m: float = 2.5
+
+    def sigma_mm(self, distance_mm):
+        """Per-axis standard deviation (mm) of a reading at that range: MPE / 2."""
+        return 0.5e-3 * (self.mpe_um + self.mpe_um_per_m * np.asarray(distance_mm) / 1000.0)
+
+
+@dataclass(frozen=True)
+class GeometricErrors:
+    """Standard deviations of the manufacturing errors (mm, degrees)."""
+
+    length_mm: float = 0.5
+    theta_deg: float = 0.05
+    alpha_deg: float = 0.03
+    beta_deg: float = 0.03
+    smr_mm: float = 1.0  # per coordinate: the fixture drawing is a few mm off
+
+    def sigmas(self, param_names) -> np.ndarray:
+        """Standard deviations (mm, rad) in the order of `Robot.param_names`."""
+        by_kind = {"a": self.length_mm, "d": self.length_mm, "theta": np.deg2rad(self.theta_deg),
+                   "alpha": np.deg2rad(self.alpha_deg), "beta": np.deg2rad(self.beta_deg)}
+        return np.array([by_kind[n.rstrip("0123456789")] for n in param_names])
+
+
+class Effect(Protocol):
+    """Switchable physics beyond geometry; each method returns None when it contributes nothing.
+
+    `time_s` and `temp_c` are per pose (m,) or None when unknown.
+    """
+
+    def joint_offsets(self, cell: VirtualCell, q, time_s, temp_c):
+        """Joint-angle errors dq (m, N) rad added to the readings q, or None."""
+
+    def base_motion(self, cell: VirtualCell, time_s):
+        """Per-pose motions (m, 4, 4) of the robot base, in the base frame, or None."""
+
+
+@dataclass
+class VirtualCell:
+    """Simulated hardware: the true robot and SMRs, the tracker placement, its noise and effects."""
+
+    nominal_robot: Robot
+    true_robot: Robot
+    target_names: tuple[str, ...]
+    nominal_targets: np.ndarray  # (K, 3) mm in the flange frame
+    true_targets: np.ndarray
+    base: np.ndarray  # 4x4 base-in-tracker
+    tracker: TrackerSpec = TrackerSpec()
+    acceptance_rad: float = np.deg2rad(60.0)  # SMR half-angle; an SMR faces along flange z
+    floor_clearance_mm: float = 150.0
+    effects: list = field(default_factory=list)
+    seed: int | None = None
+    last_campaign: dict | None = None
+
+    @classmethod
+    def random(cls, robot: Robot, targets: dict, seed: int,
+               errors: GeometricErrors = GeometricErrors(), tracker: TrackerSpec = TrackerSpec(),
+               acceptance_rad: float = np.deg2rad(60.0), floor_clearance_mm: float = 150.0,
+               effects=()) -> VirtualCell:
+        """A cell whose true geometry, SMR positions and tracker placement are drawn from `seed`."""
+        rng = np.random.default_rng(seed)
+        names = tuple(targets)
+        nominal_t = np.array([targets[n] for n in names], dtype=float).reshape(len(names), 3)
+        p0 = robot.param_vector()
+        p_true = p0 + errors.sigmas(robot.param_names()) * rng.normal(size=p0.size)
+        true_t = nominal_t + rng.normal(scale=errors.smr_mm, size=nominal_t.shape)
+        return cls(robot, robot.with_params(p_true), names, nominal_t, true_t,
+                   random_tracker_placement(rng), tracker, acceptance_rad, floor_clearance_mm,
+                   list(effects), seed)
+
+    def _points(self, q, dq=None, motion=None, record=False):
+        """SMR centres in the tracker frame; in the base frame SMRs, flange R and o; joint axes."""
+        lay = Layout(self.true_robot, np.eye(4), self.target_names)
+        R, o, *rec = flange_frames(lay, lay.initial(self.true_targets), q, dq, record)
+        p = np.einsum("mij,kj->mki", R, self.true_targets) + o[:, None, :]
+        to_tracker = self.base if motion is None else self.base @ motion
+        to_tracker = np.broadcast_to(to_tracker, (len(p), 4, 4))
+        pt = np.einsum("mij,mkj->mki", to_tracker[:, :3, :3], p) + to_tracker[:, None, :3, 3]
+        return pt, p, R, o, (rec[0] if rec else None)
+
+    def pose_checks(self, q) -> dict[str, np.ndarray]:
+        """Per constraint, which poses (m,) satisfy it; static true geometry, effects ignored."""
+        q = np.atleast_2d(q)
+        pt, p, R, o, rec = self._points(q, record=True)
+        dist = np.linalg.norm(pt, axis=-1)
+        normal = np.einsum("ij,mj->mi", self.base[:3, :3], R[:, :, 2])  # flange z in tracker frame
+        facing = np.einsum("mj,mkj->mk", normal, -pt) / dist  # tracker sits at its frame's origin
+        checks = {
+            "limits": self.true_robot.within_limits(q, LIMIT_MARGIN_RAD),
+            "floor": np.all(p[..., 2] >= self.floor_clearance_mm, axis=1),
+            "facing": np.all(facing >= np.cos(self.acceptance_rad), axis=1),
+            "range": np.all(dist >= MIN_RANGE_MM, axis=1),
+            "base_axis": np.hypot(o[:, 0], o[:, 1]) >= AXIS_CLEARANCE_MM,
+        }
+        n = q.shape[1]
+        if n >= 6:  # spherical-wrist arms: singular when the axes of joints N-2 and N align
+            axes = [axis for op, axis, _ in rec if op.kind == "r" and op.joint >= 0]
+            cross = np.linalg.norm(np.cross(axes[n - 3], axes[n - 1]), axis=-1)
+            checks["wrist"] = cross >= np.sin(WRIST_MIN_RAD)
+        return checks
+
+    def sample_poses(self, n: int, rng, max_batches: int = 50) -> np.ndarray:
+        """n poses (n, N) rad drawn uniformly within the limits and meeting every pose check."""
+        lo, hi = self.true_robot.lower + LIMIT_MARGIN_RAD, self.true_robot.upper - LIMIT_MARGIN_RAD
+        batch = max(1024, 4 * n)
+        found, passed = [], {}
+        for _ in range(max_batches):
+            q = rng.uniform(lo, hi, size=(batch, lo.size))
+            checks = self.pose_checks(q)
+            for name, ok in checks.items():
+                passed[name] = passed.get(name, 0) + int(ok.sum())
+            found.append(q[np.logical_and.reduce(list(checks.values()))])
+            if sum(len(f) for f in found) >= n:
+                return np.concatenate(found)[:n]
+        drawn = max_batches * batch
+        rates = ", ".join(f"{k} {v / drawn:.0%}" for k, v in passed.items())
+        raise RuntimeError(f"only {sum(len(f) for f in found)} of {n} poses valid after {drawn} "
+                           f"draws (pass rate per check: {rates})")
+
+    def true_points(self, q, time_s=None, temp_c=None) -> np.ndarray:
+        """Noise-free SMR centres (m, K, 3) in the tracker frame, with every effect applied.
+
+        time_s and temp_c may be per pose (m,) or per reading (m, K).
+        """
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        m, K = q.shape[0], len(self.target_names)
+        if not self.effects:
+            return self._points(q)[0]
+
+        def per_reading(a):  # (m,) or (m, K) -> (m, K)
+            return None if a is None else np.broadcast_to(np.reshape(a, (m, -1)), (m, K))
+
+        t, c = per_reading(time_s), per_reading(temp_c)
+        out = np.empty((m, K, 3))
+        for k in range(K):  # each reading is taken at its own time and temperature
+            tk, ck = (None if t is None else t[:, k]), (None if c is None else c[:, k])
+            dq, motion = None, np.broadcast_to(np.eye(4), (m, 4, 4))
+            for effect in self.effects:
+                d = effect.joint_offsets(self, q, tk, ck)
+                if d is not None:
+                    dq = d if dq is None else dq + d
+                b = effect.base_motion(self, tk)
+                if b is not None:
+                    motion = motion @ b
+            out[:, k] = self._points(q, dq, motion)[0][:, k]
+        return out
+
+    def measure(self, q, rng, time_s=None, temp_c=None) -> np.ndarray:
+        """Tracker readings (m, K, 3): true points plus isotropic Gaussian noise per the spec."""
+        p = self.true_points(q, time_s, temp_c)
+        sigma = self.tracker.sigma_mm(np.linalg.norm(p, axis=-1))
+        return p + sigma[..., None] * rng.normal(size=p.shape)
+
+    def noise_floor_mm(self, q) -> float:
+        """Expected 3-D RMS of the tracker noise over these poses' readings."""
+        sigma = self.tracker.sigma_mm(np.linalg.norm(self._points(np.atleast_2d(q))[0], axis=-1))
+        return float(np.sqrt(np.mean(3 * sigma**2)))
+
+    def campaign(self, n_poses: int, seed: int, beam_break_rate: float = 0.0) -> Measurements:
+        """A measured campaign of n_poses random poses, timed and with the air temperature."""
+        rng = np.random.default_rng(seed)
+        q = self.sample_poses(n_poses, rng)
+        K = len(self.target_names)
+        moves = rng.uniform(MOVE_S - 2, MOVE_S + 2, n_poses)
+        arrive = np.cumsum(moves) + PAUSE_S * np.arange(n_poses)
+        time_s = (arrive[:, None] + 1.0 + TARGET_GAP_S * np.arange(K)
+                  + rng.uniform(0, 0.5, (n_poses, K)))
+        # air: a slow drift of a few tenths of a degree over the campaign; the sensor adds noise
+        drift = rng.uniform(0.2, 0.5) * rng.choice([-1.0, 1.0])
+        air = rng.normal(20.0, 0.3) + drift * time_s / time_s.max()
+        temp_c = air + rng.normal(scale=TEMP_NOISE_C, size=air.shape)
+        xyz = self.measure(q, rng, time_s, air)
+        broken = rng.random((n_poses, K)) < beam_break_rate
+        xyz[broken], time_s[broken], temp_c[broken] = np.nan, np.nan, np.nan
+        self.last_campaign = {"seed": seed, "n_poses": n_poses, "beam_break_rate": beam_break_rate,
+                              "noise_floor_mm": self.noise_floor_mm(q)}
+        return Measurements([str(i) for i in range(1, n_poses + 1)], q, self.target_names, xyz,
+                            time_s, temp_c)
+
+    def truth(self) -> dict:
+        """The hidden truth, JSON-serialisable: lengths in mm, angles in degrees."""
+        def params(robot):
+            return {n: float(np.rad2deg(v) if n.startswith(("theta", "alpha", "beta")) else v)
+                    for n, v in zip(robot.param_names(), robot.param_vector())}
+
+        def targets(t):
+            return {n: [float(v) for v in row] for n, row in zip(self.target_names, t)}
+
+        last = self.last_campaign or {}
+        return {
+            "seed": self.seed,
+            "robot": self.nominal_robot.name,
+            "convention": self.nominal_robot.convention,
+            "true_params": params(self.true_robot),
+            "nominal_params": params(self.nominal_robot),
+            "true_targets": targets(self.true_targets),
+            "nominal_targets": targets(self.nominal_targets),
+            "base": self.base.tolist(),
+            "tracker": asdict(self.tracker),
+            "acceptance_deg": float(np.rad2deg(self.acceptance_rad)),
+            "floor_clearance_mm": float(self.floor_clearance_mm),
+            "effects": [type(e).__name__ for e in self.effects],
+            "campaign": last or None,
+            "noise_floor_mm": last.get("noise_floor_mm"),
+        }
+
+
+def random_tracker_placement(rng) -> np.ndarray:
+    """Base-in-tracker 4x4 for a level tracker 2.5-4.5 m in front of the robot, with random yaw."""
+    r, az = rng.uniform(2500.0, 4500.0), rng.uniform(-np.pi / 3, np.pi / 3)
+    h, yaw = rng.uniform(300.0, 1200.0), rng.uniform(-np.pi, np.pi)
+    tilt, tilt_dir = rng.uniform(0.0, np.deg2rad(0.1)), rng.uniform(-np.pi, np.pi)
+    # tilting about a horizontal axis at tilt_dir leaves z exactly `tilt` off vertical
+    level = rot(2, tilt_dir) @ rot(0, tilt) @ rot(2, -tilt_dir)
+    tracker_in_base = translation(r * np.cos(az), r * np.sin(az), h) @ rot(2, yaw) @ level
+    return np.linalg.inv(tracker_in_base)

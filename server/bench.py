@@ -1,0 +1,247 @@
+"""Solver benchmark: our ls-sum and minimax against scipy with finite differences on the same problems."""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+import scipy
+from scipy.optimize import least_squares, minimize
+
+from solver.calibrate import calibrate
+from solver.identifiability import structural
+from solver.identify import register
+from solver.kinematics import predict, predict_with_jacobian
+from solver.minimax import default_epsilon, measured_distances
+
+SEED = 0
+GOALS = {"ls_sum_100_poses_ms_max": 20, "minimax_100_poses_ms_max": 100, "speedup_min": 20}
+OURS = {"ls_sum": ("ls-sum", "primal-dual"), "minimax": ("minimax", "primal-dual"),
+        "minimax_exact": ("minimax", "exact")}
+
+
+def _log(msg: str) -> None:
+    """Progress line on stderr (stdout carries the JSON)."""
+    print(f"[bench] {msg}", file=sys.stderr, flush=True)
+
+
+def _repeats(m: int) -> int:
+    """Timing repeats for m poses: best of a few for small problems, one run for large ones."""
+    return 5 if m <= 100 else 3 if m <= 1000 else 1
+
+
+def _best_of(n: int, fn):
+    """Run fn n times; return (fastest wall time, result of the fastest run)."""
+    best, out = float("inf"), None
+    for _ in range(n):
+        t0 = time.perf_counter()
+        res = fn()
+        dt = time.perf_counter() - t0
+        if dt < best:
+            best, out = dt, res
+    return best, out
+
+
+def _campaign(cell, m: int, seed: int):
+    """A simulated campaign of m poses on the virtual cell (fixed seed)."""
+    from drivers.cell import TrackerSpec, VirtualCell
+
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(**cell.tracker))
+    return vc.campaign(m, seed=seed)
+
+
+def _violation(targets: np.ndarray, meas: np.ndarray) -> float:
+    """Largest violation (mm^2, 0 if feasible) of the distance-invariance constraints by SMR positions."""
+    pairs, dbar, sem = measured_distances(meas)
+    eps = default_epsilon(sem)
+    c = [(np.linalg.norm(targets[i] - targets[j]) - d) ** 2 - eps for (i, j), d in zip(pairs, dbar)]
+    return float(max(0.0, *c)) if c else 0.0
+
+
+def _ours(robot, targets, names, q, xyz, m: int) -> dict:
+    """Wall time, objectives and effort of calibrate() for ls-sum, minimax and minimax with the exact QP."""
+    out = {}
+    for key, (method, qp) in OURS.items():
+        n = _repeats(m)
+        secs, cal = _best_of(n, lambda: calibrate(robot, targets, names, q, xyz, method=method, qp=qp))
+        r = {"seconds": secs, "repeats": n, "calibrate_seconds": cal.seconds, "F": cal.F.tolist(),
+             "free_parameters": int(len(cal.x) - len(cal.fixed)), "iterations": cal.iterations}
+        if method == "ls-sum":
+            r["objective"] = float(cal.F.sum())
+        else:
+            d = cal.details
+            r.update(objective=float(cal.F.max()), sqp_seconds=d["sqp_seconds"],
+                     qp_iterations=d["qp_iterations"], converged=d["converged"], message=d["message"],
+                     max_constraint_violation_mm2=_violation(cal.targets, xyz))
+        out[key] = r
+        _log(f"  ours {key}: {secs * 1000:.1f} ms, objective {r['objective']:.6g} mm^2, "
+             f"{cal.iterations} iterations")
+    return out
+
+
+class _Counted:
+    """The model's point residuals with a call counter (finite differences call it many times)."""
+
+    def __init__(self, prob, x0, free):
+        self.prob, self.x0, self.idx = prob, np.array(x0, float), np.flatnonzero(free)
+        self.calls = 0
+
+    def x(self, z) -> np.ndarray:
+        x = self.x0.copy()
+        x[self.idx] = z
+        return x
+
+    def residuals(self, z) -> np.ndarray:
+        """pred - meas of the free-parameter vector z, (m, K, 3) with NaN where missing."""
+        self.calls += 1
+        return predict(self.prob.layout, self.x(z), self.prob.q) - self.prob.meas
+
+
+def _reference_ls(prob, x0, free) -> tuple[np.ndarray, dict]:
+    """ls-sum by scipy least_squares (trf) with a 2-point finite-difference Jacobian."""
+    model = _Counted(prob, x0, free)
+    mask = prob.mask
+    t0 = time.perf_counter()
+    res = least_squares(lambda z: model.residuals(z)[mask].ravel(), x0[model.idx], jac="2-point",
+                        method="trf", x_scale="jac")
+    secs = time.perf_counter() - t0
+    x = model.x(res.x)
+    F = prob.sum_squares(x)
+    return x, {"solve_seconds": secs, "objective": float(F.sum()), "F": F.tolist(), "nfev": int(res.nfev),
+               "njev": int(res.njev), "model_evaluations": model.calls, "status": int(res.status),
+               "message": res.message}
+
+
+def _reference_minimax(prob, x_ls, free) -> tuple[np.ndarray, dict]:
+    """min max_i F_i s.t. distance invariance by SLSQP on the epigraph form, finite differences throughout.
+
+    Variables v = (z, w): x = x_ls + z * sqrt(phi0) / |J column| on the free entries and phi = w * phi0,
+    with phi0 = max F_i at the start; every mm^2 quantity is divided by phi0, so F_i/phi0 has a
+    Hessian of order one in z and the objective starts at 1.
+    """
+    lay, K = prob.layout, prob.meas.shape[1]
+    idx = np.flatnonzero(free)
+    _, J, _ = predict_with_jacobian(lay, x_ls, prob.q)
+    scale = np.linalg.norm(J[prob.mask][..., idx].reshape(-1, len(idx)), axis=0)
+    scale[scale == 0] = 1.0
+    pairs, dbar, sem = measured_distances(prob.meas)
+    eps = default_epsilon(sem)
+    phi0 = float(prob.sum_squares(x_ls).max())
+    step = np.sqrt(phi0) / scale
+    model = _Counted(prob, x_ls, free)
+    ts = lay.target_slice.start
+
+    def x_of(v):
+        return model.x(x_ls[idx] + v[:-1] * step)
+
+    def constraints(v):
+        r = model.residuals(x_ls[idx] + v[:-1] * step)
+        F = np.array([np.sum(r[prob.mask[:, k], k] ** 2) for k in range(K)])
+        t = x_of(v)[ts:].reshape(K, 3)
+        dist = np.array([(np.linalg.norm(t[i] - t[j]) - d) ** 2 for (i, j), d in zip(pairs, dbar)])
+        return np.concatenate([v[-1] - F / phi0, (eps - dist) / phi0])
+
+    v0 = np.zeros(len(idx) + 1)
+    v0[-1] = 1.0
+    t0 = time.perf_counter()
+    res = minimize(lambda v: v[-1], v0, method="SLSQP", constraints=[{"type": "ineq", "fun": constraints}],
+                   options={"maxiter": 1000, "ftol": 1e-12})
+    secs = time.perf_counter() - t0
+    x = x_of(res.x)
+    F = prob.sum_squares(x)
+    return x, {"sqp_seconds": secs, "objective": float(F.max()), "F": F.tolist(), "nit": int(res.nit),
+               "nfev": int(res.nfev), "njev": int(res.njev), "model_evaluations": model.calls,
+               "success": bool(res.success), "message": res.message,
+               "max_constraint_violation_mm2": _violation(lay.targets(x), prob.meas)}
+
+
+def _reference(robot, targets, names, q, xyz, m: int) -> dict:
+    """The same ls-sum and minimax problems solved by scipy.optimize with finite differences."""
+    n = 3 if m <= 100 else 1
+
+    def run():
+        t0 = time.perf_counter()
+        # the start and the free parameters exactly as calibrate() finds them for ls-sum and minimax
+        prob, x0 = register(robot, targets, names, q, xyz)
+        lay = prob.layout
+        st = structural(lay, x0, np.ones(lay.n_params, dtype=bool),
+                        rows_fn=lambda p, J: J[:, list(range(len(names)))].reshape(-1, J.shape[-1]))
+        setup = time.perf_counter() - t0
+        x_ls, ls = _reference_ls(prob, x0, st.free)
+        _, mm = _reference_minimax(prob, x_ls, st.free)
+        ls["seconds"] = setup + ls["solve_seconds"]
+        mm["seconds"] = setup + ls["solve_seconds"] + mm["sqp_seconds"]
+        return {"setup_seconds": setup, "free_parameters": int(st.free.sum()), "repeats": n,
+                "ls_sum": ls, "minimax": mm}
+
+    best = min((run() for _ in range(n)), key=lambda r: r["minimax"]["seconds"])
+    _log(f"  reference ls_sum: {best['ls_sum']['seconds']:.3f} s, objective "
+         f"{best['ls_sum']['objective']:.6g} mm^2, {best['ls_sum']['model_evaluations']} model evaluations")
+    _log(f"  reference minimax: {best['minimax']['seconds']:.3f} s (SLSQP {best['minimax']['sqp_seconds']:.3f} s), "
+         f"objective {best['minimax']['objective']:.6g} mm^2, {best['minimax']['model_evaluations']} "
+         f"model evaluations, {best['minimax']['message']}")
+    return best
+
+
+def _compare(ours: dict, ref: dict) -> dict:
+    """Speed ratios reference/ours and relative objective differences (ours - ref) / ref."""
+    ratio = {"ls_sum": ref["ls_sum"]["seconds"] / ours["ls_sum"]["seconds"],
+             "minimax": ref["minimax"]["seconds"] / ours["minimax"]["seconds"],
+             "minimax_exact": ref["minimax"]["seconds"] / ours["minimax_exact"]["seconds"],
+             "minimax_sqp_stage": ref["minimax"]["sqp_seconds"] / ours["minimax"]["sqp_seconds"],
+             "minimax_exact_sqp_stage": ref["minimax"]["sqp_seconds"] / ours["minimax_exact"]["sqp_seconds"]}
+    rel = {k: (ours[k]["objective"] - ref[r]["objective"]) / ref[r]["objective"]
+           for k, r in (("ls_sum", "ls_sum"), ("minimax", "minimax"), ("minimax_exact", "minimax"))}
+    return {"speedup": ratio, "objective_rel_diff": rel}
+
+
+def _machine() -> dict:
+    """What the figures were measured on."""
+    return {"cpu_count": os.cpu_count(), "machine": platform.machine(), "processor": platform.processor(),
+            "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__}
+
+
+def _goals(sizes: dict) -> dict:
+    """The issue's targets, the achieved figures and whether each is met (None: not measured)."""
+    at100 = sizes.get("100", {}).get("ours", {})
+    speedups = [s["comparison"]["speedup"][k] for s in sizes.values() if "comparison" in s
+                for k in ("ls_sum", "minimax")]
+    achieved = {"ls_sum_100_poses_ms": at100["ls_sum"]["seconds"] * 1000 if at100 else None,
+                "minimax_100_poses_ms": at100["minimax"]["seconds"] * 1000 if at100 else None,
+                "speedup_min": min(speedups) if speedups else None}
+    met = {"ls_sum_100_poses_ms_max": None if not at100 else achieved["ls_sum_100_poses_ms"] <= 20,
+           "minimax_100_poses_ms_max": None if not at100 else achieved["minimax_100_poses_ms"] <= 100,
+           "speedup_min": None if not speedups else achieved["speedup_min"] >= 20}
+    return {"targets": dict(GOALS), "achieved": achieved, "met": met}
+
+
+def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=10000, seed=SEED) -> dict:
+    """Time our solvers (and scipy's finite-difference reference) on virtual-cell campaigns of each size."""
+    from .formats.cell_json import default_cell
+
+    cell = default_cell()
+    names = tuple(cell.targets)
+    targets = np.array([cell.targets[t] for t in names], dtype=float)
+    results = {}
+    for m in sizes:
+        meas = _campaign(cell, int(m), seed)
+        _log(f"{m} poses x {len(names)} SMRs ({meas.n_readings} readings)")
+        ours = _ours(cell.robot, targets, meas.target_names, meas.q, meas.xyz, m)
+        entry = {"poses": int(m), "readings": meas.n_readings, "ours": ours,
+                 "ours_ms_per_pose": {k: v["seconds"] * 1000 / m for k, v in ours.items()}}
+        if reference and m <= reference_max:
+            entry["reference"] = _reference(cell.robot, targets, meas.target_names, meas.q, meas.xyz, m)
+            entry["comparison"] = _compare(ours, entry["reference"])
+            _log("  speedup " + ", ".join(f"{k} {v:.1f}x" for k, v in entry["comparison"]["speedup"].items()))
+        results[str(m)] = entry
+    return {"benchmark": "solver", "machine": _machine(),
+            "cell": {"robot": cell.robot.name, "targets": {k: v.tolist() for k, v in zip(names, targets)},
+                     "seed": seed},
+            "reference": {"ls_sum": "scipy.optimize.least_squares(method='trf', jac='2-point', x_scale='jac')",
+                          "minimax": "scipy.optimize.minimize(method='SLSQP') on the epigraph form, "
+                                     "finite-difference derivatives, started from the reference ls-sum",
+                          "seconds": "register + structural + solve (ours: the whole calibrate() call)"},
+            "sizes": results, **_goals(results)}

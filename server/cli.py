@@ -1,0 +1,219 @@
+"""The `robocal` command line."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from solver.calibrate import parse_method
+from solver.identifiability import NotIdentifiable
+
+from . import tables, workflow
+from .formats.errors import InputError
+from .formats.model_json import write_json_atomic, write_model
+from .tables import console
+
+
+def cmd_simulate(args) -> None:
+    from drivers.cell import TrackerSpec, VirtualCell
+
+    from .formats.campaign_csv import write_campaign
+
+    cell = workflow.load_cell(args.cell)
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=args.seed,
+                            tracker=TrackerSpec(**cell.tracker))
+    meas = vc.campaign(args.poses, seed=args.seed, beam_break_rate=args.beam_break_rate)
+    write_campaign(args.out, meas)
+    truth = vc.truth()
+    truth["noise_floor_mm"] = vc.noise_floor_mm(meas.q)
+    if args.truth_out:
+        write_json_atomic(args.truth_out, truth)
+    console.print(f"wrote {meas.n_poses} poses x {len(meas.target_names)} targets "
+                  f"({meas.n_readings} readings) to {args.out}; "
+                  f"tracker noise floor {truth['noise_floor_mm']:.4f} mm RMS")
+
+
+def cmd_calibrate(args) -> None:
+    cell = workflow.load_cell(args.cell)
+    meas = workflow.load_campaign(args.meas, cell)
+    parse_method(args.method, meas.target_names)
+    cal = workflow.run_method(cell, meas, args.method, qp=args.qp)
+    model = workflow.model_file(cal, cell, meas, data_path=args.meas)
+    write_model(args.out, model)
+    fit = model.meta["fit"]
+    console.print(f"{args.method} on {meas.n_poses} poses, {meas.n_readings} readings "
+                  f"in {cal.seconds * 1000:.0f} ms")
+    console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
+    console.print(f"condition number {cal.condition:.3g}; " + ", ".join(
+        f"F_{k} {v:.4f} mm^2" for k, v in fit["F_mm2"].items())
+        + f"; RMSE(phi) {fit['rmse_phi_mm']:.4f} mm; RMS {fit['rmse_mm']:.4f} mm")
+    if "history" in cal.details:
+        d = cal.details
+        console.print(f"SQP ({d['qp']} QP): {cal.iterations} iterations, "
+                      f"{d['qp_iterations']} QP iterations, max F_i "
+                      f"{d['history'][0]:.5f} -> {d['history'][-1]:.5f} mm^2 ({d['message']})")
+    console.print(f"model written to {args.out}")
+
+
+def cmd_predict(args) -> None:
+    from .formats.campaign_csv import read_poses, write_predictions
+
+    model = workflow.read_model(args.model)
+    pose_ids, q, _, _ = read_poses(args.poses, model.robot)
+    xyz = workflow.model_predict(model, q)
+    write_predictions(args.out, pose_ids, list(model.targets), xyz)
+    console.print(f"predicted {len(pose_ids)} poses x {len(model.targets)} targets to {args.out}")
+
+
+def cmd_evaluate(args) -> None:
+    model = workflow.read_model(args.model)
+    from .formats.cell_json import Cell
+
+    meas = workflow.load_campaign(args.meas, Cell(model.robot, model.targets, None, {}, None))
+    res = workflow.evaluate(model, meas)
+    if "nominal" in res:
+        console.print(tables.accuracy(res["nominal"], "Nominal model (base and SMRs fitted)",
+                                      meas.target_names))
+    console.print(tables.accuracy(res["model"], f"Model {args.model}", meas.target_names))
+    if "improvement_pct" in res:
+        console.print("improvement over nominal: " + ", ".join(
+            f"{k} {v:.1f}%" for k, v in res["improvement_pct"].items() if np.isfinite(v)))
+    if args.json:
+        write_json_atomic(args.json, res)
+
+
+def cmd_compare(args) -> None:
+    cell = workflow.load_cell(args.cell)
+    meas = workflow.load_campaign(args.meas, cell)
+    rows = workflow.compare(cell, meas)
+    console.print(tables.table3(rows, meas.target_names))
+    for label, (cal, _) in rows.items():
+        if "history" in cal.details:
+            d = cal.details
+            console.print(f"{label}: {cal.iterations} SQP iterations, {d['qp_iterations']} QP "
+                          f"iterations, {d['sqp_seconds'] * 1000:.1f} ms, final max F_i "
+                          f"{cal.F.max():.6f} mm^2")
+    best = min(rows, key=lambda k: max(rows[k][1]["F"].values()))
+    console.print(f"smallest max F_i: {best}")
+    if args.json:
+        write_json_atomic(args.json, {k: {"F": acc["F"], "rmse_phi": acc["rmse_phi"],
+                                          "accuracy": acc, "seconds": cal.seconds}
+                                      for k, (cal, acc) in rows.items()})
+
+
+def cmd_demo(args) -> None:
+    from drivers.cell import VirtualCell
+
+    from .formats.campaign_csv import write_campaign
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cell = workflow.load_cell(None)
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=args.seed)
+    meas = vc.campaign(args.poses + args.holdout, seed=args.seed)
+    cal_meas, hold = meas.subset(np.arange(args.poses)), meas.subset(np.arange(args.poses, meas.n_poses))
+    write_campaign(out / "meas.csv", cal_meas)
+    write_campaign(out / "holdout.csv", hold)
+    console.print(f"simulated {args.poses} calibration + {args.holdout} held-out poses "
+                  f"(noise floor {vc.noise_floor_mm(meas.q):.4f} mm) in {out}")
+    rows = workflow.compare(cell, cal_meas)
+    console.print(tables.table3(rows, cal_meas.target_names))
+    cal, _ = rows["minimax"]
+    model = workflow.model_file(cal, cell, cal_meas, data_path=out / "meas.csv")
+    write_model(out / "model.json", model)
+    res = workflow.evaluate(model, hold)
+    console.print(tables.accuracy(res["model"], "minimax model on held-out poses",
+                                  hold.target_names))
+    console.print(f"held-out RMS {res['model']['rmse']:.4f} mm (nominal {res['nominal']['rmse']:.4f} mm); "
+                  f"model in {out / 'model.json'}")
+
+
+def cmd_bench(args) -> None:
+    from .bench import run_solver_bench
+
+    result = run_solver_bench(sizes=args.sizes, reference=not args.no_reference,
+                              reference_max=args.reference_max)
+    print(json.dumps(result, indent=2))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="robocal", description="Robot calibration with a laser tracker.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("simulate", help="a campaign from the virtual cell")
+    s.add_argument("--cell", help="cell.json (default: the built-in IRB 2600 cell)")
+    s.add_argument("--poses", type=int, default=100)
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--beam-break-rate", type=float, default=0.0)
+    s.add_argument("--out", required=True, help="meas.csv to write")
+    s.add_argument("--truth-out", help="also write the simulated truth as JSON")
+    s.set_defaults(func=cmd_simulate)
+
+    c = sub.add_parser("calibrate", help="identify a model from a campaign")
+    c.add_argument("meas")
+    c.add_argument("--cell")
+    c.add_argument("--method", default="minimax",
+                   help="minimax (default), ls-sum, ls-single:A, ls-pose")
+    c.add_argument("--qp", choices=("primal-dual", "exact"), default="primal-dual",
+                   help="minimax's QP subsolver: the paper's primal-dual method or Clarabel")
+    c.add_argument("--out", default="model.json")
+    c.set_defaults(func=cmd_calibrate)
+
+    pr = sub.add_parser("predict", help="SMR positions a model predicts for poses")
+    pr.add_argument("model")
+    pr.add_argument("poses")
+    pr.add_argument("--out", default="pred.csv")
+    pr.set_defaults(func=cmd_predict)
+
+    e = sub.add_parser("evaluate", help="accuracy of a model on measured data")
+    e.add_argument("model")
+    e.add_argument("meas")
+    e.add_argument("--json", help="also write the figures as JSON")
+    e.set_defaults(func=cmd_evaluate)
+
+    co = sub.add_parser("compare", help="every method side by side (the paper's Table 3)")
+    co.add_argument("meas")
+    co.add_argument("--cell")
+    co.add_argument("--json", help="also write the figures as JSON")
+    co.set_defaults(func=cmd_compare)
+
+    d = sub.add_parser("demo", help="simulate, calibrate with every method, evaluate held-out")
+    d.add_argument("--out", default="robocal-demo")
+    d.add_argument("--poses", type=int, default=100)
+    d.add_argument("--holdout", type=int, default=50)
+    d.add_argument("--seed", type=int, default=1)
+    d.set_defaults(func=cmd_demo)
+
+    b = sub.add_parser("bench", help="benchmarks printing JSON")
+    b.add_argument("what", choices=("solver",))
+    b.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000])
+    b.add_argument("--no-reference", action="store_true",
+                   help="skip the finite-difference scipy reference")
+    b.add_argument("--reference-max", type=int, default=10000,
+                   help="largest pose count for which to run the reference")
+    b.set_defaults(func=cmd_bench)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        args.func(args)
+    except (InputError, workflow.DataError, NotIdentifiable) as e:
+        print(f"robocal: error: {e}", file=sys.stderr)
+        return 1
+    except FileNotFoundError as e:
+        print(f"robocal: error: {e.filename}: no such file", file=sys.stderr)
+        return 1
+    except ValueError as e:
+        print(f"robocal: error: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,186 @@
+"""Measurement campaigns (`meas.csv`), poses to predict (`poses.csv`) and predictions (`pred.csv`)."""
+
+from __future__ import annotations
+
+import csv
+import io
+
+import numpy as np
+
+from solver.measurements import Measurements
+from solver.robot import Robot
+
+from .csv_table import Row, Table
+from .files import atomic_write_text
+
+# Rows of one pose come from one controller reading; anything beyond print rounding is a mix-up.
+SAME_POSE_TOL_DEG = 1e-6
+# Limits are stored in radians; a reading exactly at a limit must survive the round trip.
+LIMIT_TOL_DEG = 1e-6
+MEASURED = ("x", "y", "z")
+EXTRAS = ("time_s", "temp_c")
+
+
+def joint_columns(robot: Robot) -> list[str]:
+    """The joint column names `q1` ... `qN` for this robot."""
+    return [f"q{i}" for i in range(1, robot.n_joints + 1)]
+
+
+class _Poses:
+    """Collects poses in order of first appearance, checking joint limits and agreement."""
+
+    def __init__(self, table: Table, robot: Robot):
+        self.table, self.robot = table, robot
+        self.columns = joint_columns(robot)
+        self.lo = np.rad2deg(robot.lower)
+        self.hi = np.rad2deg(robot.upper)
+        self.ids: list[str] = []
+        self.index: dict[str, int] = {}
+        self.first: list[Row] = []
+        self.q_deg: list[list[float]] = []
+
+    def add(self, row: Row) -> tuple[int, bool]:
+        """Index of this row's pose, and whether the row is the pose's first."""
+        t = self.table
+        pid = t.text(row, "pose")
+        q = [self._joint(row, i, name) for i, name in enumerate(self.columns)]
+        k = self.index.get(pid)
+        if k is None:
+            self.index[pid] = len(self.ids)
+            self.ids.append(pid)
+            self.first.append(row)
+            self.q_deg.append(q)
+            return len(self.ids) - 1, True
+        first = self.first[k]
+        for name, a, b in zip(self.columns, self.q_deg[k], q):
+            if abs(a - b) > SAME_POSE_TOL_DEG:
+                raise t.error(row, name, f"{t.raw(row, name)} differs from {t.raw(first, name)} "
+                                         f"on line {first.line}, an earlier row of pose {pid!r}")
+        return k, False
+
+    def _joint(self, row: Row, i: int, name: str) -> float:
+        t = self.table
+        value = t.number(row, name)
+        lo, hi = self.lo[i], self.hi[i]
+        if value < lo - LIMIT_TOL_DEG or value > hi + LIMIT_TOL_DEG:
+            raise t.error(row, name, f"{t.raw(row, name)} deg is outside the limits "
+                                     f"[{lo:.6g}, {hi:.6g}] deg of joint {i + 1} of {self.robot.name}")
+        return value
+
+    def q_rad(self) -> np.ndarray:
+        return np.deg2rad(np.array(self.q_deg, dtype=float).reshape(len(self.ids), -1))
+
+
+def read_campaign(path, robot: Robot) -> Measurements:
+    """Read a `meas.csv` campaign (spec section 1) for this robot; InputError on any bad input."""
+    t = Table.read(path)
+    t.require(["pose", *joint_columns(robot), "target", *MEASURED])
+    extras = t.optional(list(EXTRAS))
+    t.require_rows()
+    poses = _Poses(t, robot)
+    seen: dict[tuple[str, str], Row] = {}
+    readings = []  # (pose index, target, xyz, extras)
+    for row in t.rows:
+        k, _ = poses.add(row)
+        target = t.text(row, "target")
+        key = (poses.ids[k], target)
+        if key in seen:
+            raise t.error(row, "target", f"target {target!r} of pose {key[0]!r} is already "
+                                         f"on line {seen[key].line}")
+        seen[key] = row
+        xyz = [t.number(row, c) for c in MEASURED]
+        # A blank time or temperature means "not recorded" (NaN), unlike a blank coordinate.
+        more = [t.number(row, c, blank=np.nan) for c in extras]
+        readings.append((k, target, xyz, more))
+
+    names = tuple(sorted({r[1] for r in readings}))
+    col = {n: j for j, n in enumerate(names)}
+    m, K = len(poses.ids), len(names)
+    xyz = np.full((m, K, 3), np.nan)
+    extra = {c: np.full((m, K), np.nan) for c in extras}
+    for k, target, p, more in readings:
+        xyz[k, col[target]] = p
+        for c, v in zip(extras, more):
+            extra[c][k, col[target]] = v
+    return Measurements(list(poses.ids), poses.q_rad(), names, xyz,
+                        extra.get("time_s"), extra.get("temp_c"))
+
+
+def read_poses(path, robot: Robot):
+    """Read `poses.csv` (or a `meas.csv`, measured columns ignored) -> (ids, q rad, time_s, temp_c).
+
+    time_s and temp_c are (m,) arrays, or None when the column is absent; for a `meas.csv`
+    they come from the first row of each pose.
+    """
+    t = Table.read(path)
+    t.require(["pose", *joint_columns(robot)])
+    extras = t.optional(list(EXTRAS))
+    per_target = bool(t.optional(["target"]))
+    t.require_rows()
+    poses = _Poses(t, robot)
+    values = {c: [] for c in extras}
+    for row in t.rows:
+        k, new = poses.add(row)
+        if not new and not per_target:
+            first = poses.first[k]
+            raise t.error(row, "pose", f"pose {poses.ids[k]!r} is already on line {first.line}")
+        if new:
+            for c in extras:
+                values[c].append(t.number(row, c, blank=np.nan))
+    arrays = {c: np.array(v, dtype=float) for c, v in values.items()}
+    return list(poses.ids), poses.q_rad(), arrays.get("time_s"), arrays.get("temp_c")
+
+
+def _csv_text(header: list[str], rows) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def _fmt(value: float, spec: str) -> str:
+    # NaN only occurs in the optional columns, where a blank field means "not recorded".
+    return spec % value if np.isfinite(value) else ""
+
+
+def write_campaign(path, meas: Measurements) -> None:
+    """Write a campaign as `meas.csv`, one row per present reading, atomically."""
+    m, K = meas.xyz.shape[:2]
+    q = np.asarray(meas.q, dtype=float)
+    if q.ndim != 2 or q.shape[0] != m or len(meas.pose_ids) != m or len(meas.target_names) != K:
+        raise ValueError("inconsistent Measurements: pose ids, q, target names and xyz disagree")
+    if not np.all(np.isfinite(q)):
+        raise ValueError("joint readings must be finite")
+    if len(set(map(str, meas.pose_ids))) != m:
+        raise ValueError("pose ids must be unique")
+    extras = [(c, a) for c, a in (("time_s", meas.time_s), ("temp_c", meas.temp_c)) if a is not None]
+    header = ["pose", *[f"q{i}" for i in range(1, q.shape[1] + 1)], "target", *MEASURED,
+              *[c for c, _ in extras]]
+    q_deg = np.rad2deg(q)
+    mask = meas.mask
+    rows = []
+    for i, pid in enumerate(meas.pose_ids):
+        joints = ["%.9f" % v for v in q_deg[i]]
+        for k, name in enumerate(meas.target_names):
+            if mask[i, k]:
+                rows.append([str(pid), *joints, name, *["%.6f" % v for v in meas.xyz[i, k]],
+                             *[_fmt(a[i, k], "%.6f") for _, a in extras]])
+    atomic_write_text(path, _csv_text(header, rows))
+
+
+def write_predictions(path, pose_ids, target_names, xyz) -> None:
+    """Write `pred.csv`: `pose,target,x,y,z`, one row per (pose, target), atomically."""
+    xyz = np.asarray(xyz, dtype=float)
+    if xyz.shape != (len(pose_ids), len(target_names), 3):
+        raise ValueError(f"xyz has shape {xyz.shape}, expected "
+                         f"({len(pose_ids)}, {len(target_names)}, 3)")
+    if not np.all(np.isfinite(xyz)):
+        raise ValueError("predictions must be finite")
+    rows = [[str(pid), name, *["%.6f" % v for v in xyz[i, k]]]
+            for i, pid in enumerate(pose_ids) for k, name in enumerate(target_names)]
+    atomic_write_text(path, _csv_text(["pose", "target", *MEASURED], rows))
+
+
+__all__ = ["joint_columns", "read_campaign", "read_poses", "write_campaign",
+           "write_predictions"]

@@ -1,0 +1,141 @@
+"""A CSV file as a header plus rows that remember their line, with located field parsing."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+from dataclasses import dataclass
+
+from .errors import InputError
+from .files import read_text
+
+# Plain decimal notation only: float() would also take '1_000', 'nan' and 'infinity'.
+_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+_NOT_FINITE = {"nan", "inf", "infinity"}
+
+
+@dataclass(frozen=True)
+class Row:
+    """One data row: its 1-based line number in the file and its raw fields."""
+
+    line: int
+    fields: list[str]
+
+
+class Table:
+    """A parsed CSV file; column names match after stripping whitespace, case-insensitively."""
+
+    def __init__(self, path, text: str):
+        self.path = path
+        records = self._records(text)
+        if not records:
+            raise InputError(path, 1, None, "empty file: expected a header row")
+        self.header_line, raw = records[0]
+        self.header = [h.strip() for h in raw]
+        self.rows: list[Row] = []
+        for line, fields in records[1:]:
+            self._check_width(line, fields)
+            self.rows.append(Row(line, fields))
+        self._index: dict[str, int] = {}
+
+    @classmethod
+    def read(cls, path) -> Table:
+        """Read and parse the CSV file at path."""
+        return cls(path, read_text(path))
+
+    def _records(self, text: str) -> list[tuple[int, list[str]]]:
+        reader = csv.reader(io.StringIO(text, newline=""))
+        records, start = [], 1
+        try:
+            for fields in reader:
+                # Blank lines (often trailing) carry nothing; skip rather than refuse them.
+                if fields and not (len(fields) == 1 and not fields[0].strip()):
+                    records.append((start, fields))
+                start = reader.line_num + 1
+        except csv.Error as e:
+            raise InputError(self.path, reader.line_num or 1, None, f"malformed CSV: {e}") from None
+        return records
+
+    def _check_width(self, line: int, fields: list[str]) -> None:
+        n, width = len(fields), len(self.header)
+        if n < width:
+            raise InputError(self.path, line, n + 1,
+                             f"row has {n} fields but the header has {width}: "
+                             f"column '{self.header[n]}' and after are missing")
+        if n > width:
+            raise InputError(self.path, line, width + 1,
+                             f"row has {n} fields but the header has {width} "
+                             f"(extra value {fields[width].strip()!r})")
+
+    def require(self, names: list[str]) -> None:
+        """Locate these columns; InputError on line 1 (the header) if one is missing."""
+        for name in names:
+            col = self._find(name)
+            if col is None:
+                raise InputError(self.path, self.header_line, None,
+                                 f"missing required column '{name}'{self._header_hint()}")
+            self._index[name] = col
+
+    def optional(self, names: list[str]) -> list[str]:
+        """Locate those of these columns that are present; return their names."""
+        found = []
+        for name in names:
+            col = self._find(name)
+            if col is not None:
+                self._index[name] = col
+                found.append(name)
+        return found
+
+    def require_rows(self) -> None:
+        """InputError if the file has a header but no data."""
+        if not self.rows:
+            raise InputError(self.path, self.header_line, None, "no data rows below the header")
+
+    def _find(self, name: str) -> int | None:
+        cols = [i for i, h in enumerate(self.header) if h.lower() == name]
+        if len(cols) > 1:
+            raise InputError(self.path, self.header_line, cols[1] + 1,
+                             f"column '{name}' appears twice (columns {cols[0] + 1} and {cols[1] + 1})")
+        return cols[0] if cols else None
+
+    def _header_hint(self) -> str:
+        have = ", ".join(repr(h) for h in self.header)
+        hint = f" (header: {have})"
+        if len(self.header) == 1:
+            for sep, what in ((";", "semicolons"), ("\t", "tabs")):
+                if sep in self.header[0]:
+                    hint += f"; the file seems separated by {what}, expected commas"
+        return hint
+
+    def error(self, row: Row, name: str, message: str) -> InputError:
+        """An InputError at this row's field in column `name`, naming the column."""
+        return InputError(self.path, row.line, self._index[name] + 1, f"column '{name}': {message}")
+
+    def text(self, row: Row, name: str) -> str:
+        """The stripped, non-empty string in column `name`."""
+        value = row.fields[self._index[name]].strip()
+        if not value:
+            raise self.error(row, name, "empty field")
+        return value
+
+    def raw(self, row: Row, name: str) -> str:
+        """The stripped string in column `name`, possibly empty."""
+        return row.fields[self._index[name]].strip()
+
+    def number(self, row: Row, name: str, blank: float | None = None) -> float:
+        """The finite number in column `name`; an empty field gives `blank` if that is not None."""
+        s = row.fields[self._index[name]].strip()
+        if not s:
+            if blank is not None:
+                return blank
+            raise self.error(row, name, "empty field, expected a number")
+        if _NUMBER.fullmatch(s):
+            value = float(s)
+            if math.isfinite(value):
+                return value
+            raise self.error(row, name, f"{s!r} is out of range")
+        if s.lower().lstrip("+-") in _NOT_FINITE:
+            raise self.error(row, name, f"{s!r} is not a finite number")
+        raise self.error(row, name, f"{s!r} is not a number")

@@ -1,0 +1,66 @@
+"""Human summaries of results as terminal tables."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+# Wide enough for Table 3's eight columns when the output is a file or a pipe.
+console = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
+
+
+def _f(v, digits=4) -> str:
+    if v is None or not np.isfinite(v):
+        return "-"
+    return f"{v:.{digits}g}" if abs(v) >= 10 ** digits or abs(v) < 1e-3 else f"{v:.{digits}f}"
+
+
+def table3(rows: dict, target_names) -> Table:
+    """The paper's Table 3 (sum of squared errors per SMR, RMSE(phi)) plus AP/AO statistics."""
+    t = Table(title="Methods side by side on the calibration data (the paper's Table 3)")
+    t.add_column("")
+    for label in rows:
+        t.add_column(label, justify="right")
+    for i, name in enumerate(target_names):
+        t.add_row(f"F_{name} / mm^2", *[_f(acc["F"][name]) for _, acc in rows.values()])
+    t.add_row("max F_i / mm^2", *[_f(max(acc["F"].values())) for _, acc in rows.values()],
+              style="bold")
+    t.add_row("RMSE(phi) / mm", *[_f(acc["rmse_phi"]) for _, acc in rows.values()])
+    t.add_row("AP mean / mm", *[_f(acc["ap"]["mean"]) for _, acc in rows.values()])
+    t.add_row("AP std / mm", *[_f(acc["ap"]["std"]) for _, acc in rows.values()])
+    t.add_row("AP max / mm", *[_f(acc["ap"]["max"]) for _, acc in rows.values()])
+    if "ao_log" in next(iter(rows.values()))[1]:
+        t.add_row("AO' mean / deg", *[_f(acc["ao_log"]["mean"]) for _, acc in rows.values()])
+        t.add_row("AO' max / deg", *[_f(acc["ao_log"]["max"]) for _, acc in rows.values()])
+        for c in "abc":
+            t.add_row(f"AO {c} mean / deg",
+                      *[_f(acc["ao_euler"][c]["mean"]) for _, acc in rows.values()])
+    t.add_row("time / ms", *[f"{cal.seconds * 1000:.0f}" for cal, _ in rows.values()])
+    return t
+
+
+def accuracy(acc: dict, title: str, target_names) -> Table:
+    """Positioning and orientation statistics of one model on one data set."""
+    t = Table(title=title)
+    for col in ("", "mean", "std", "max", "rms"):
+        t.add_column(col, justify="right" if col else "left")
+    for name in target_names:
+        s = acc["ap_per_target"][name]
+        t.add_row(f"AP {name} / mm", *[_f(s[k]) for k in ("mean", "std", "max", "rms")])
+    s = acc["ap"]
+    t.add_row("AP all / mm", *[_f(s[k]) for k in ("mean", "std", "max", "rms")], style="bold")
+    if "ao_log" in acc:
+        for c in "abc":
+            s = acc["ao_euler"][c]
+            t.add_row(f"AO {c} (Euler) / deg", *[_f(s[k]) for k in ("mean", "std", "max", "rms")])
+        s = acc["ao_log"]
+        t.add_row("AO' (log) / deg", *[_f(s[k]) for k in ("mean", "std", "max", "rms")],
+                  style="bold")
+    return t
+
+
+def fixed_parameters(fixed: dict) -> str:
+    return "; ".join(f"{k} ({v})" for k, v in fixed.items()) or "none"

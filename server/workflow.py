@@ -1,0 +1,119 @@
+"""What the commands do, between files and the solver: load, calibrate, predict, compare."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from solver import metrics
+from solver.calibrate import Calibration, calibrate
+from solver.kinematics import Layout, predict
+from solver.measurements import Measurements
+
+from .formats.campaign_csv import read_campaign
+from .formats.cell_json import Cell, default_cell, read_cell
+from .formats.model_json import ModelFile, file_digest, read_model
+
+PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
+
+
+class DataError(ValueError):
+    """Inputs that are well-formed but do not fit together; the message names the file."""
+
+
+def load_cell(path) -> Cell:
+    return default_cell() if path is None else read_cell(path)
+
+
+def load_campaign(path, cell: Cell) -> Measurements:
+    """A campaign whose targets the cell describes."""
+    meas = read_campaign(path, cell.robot)
+    unknown = [t for t in meas.target_names if t not in cell.targets]
+    if unknown:
+        raise DataError(f"{path}: target {unknown[0]!r} is not among the cell's targets "
+                        f"({', '.join(cell.targets)})")
+    return meas
+
+
+def run_method(cell: Cell, meas: Measurements, method: str, qp="primal-dual") -> Calibration:
+    targets = np.array([cell.targets[t] for t in meas.target_names])
+    return calibrate(cell.robot, targets, meas.target_names, meas.q, meas.xyz, method=method,
+                     base_guess=cell.base, qp=qp)
+
+
+def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None) -> ModelFile:
+    """The self-contained model file of a calibration."""
+    pred = predict(cal.layout, cal.x, meas.q)
+    acc = metrics.accuracy(pred, meas.xyz, meas.target_names)
+    data = {"poses": meas.n_poses, "readings": meas.n_readings,
+            "targets": list(meas.target_names)}
+    if data_path is not None:
+        data.update(file=Path(data_path).name, sha256=file_digest(data_path))
+    fit = {
+        "F_mm2": dict(zip(meas.target_names, np.round(cal.F, 9).tolist())),
+        "rmse_phi_mm": acc["rmse_phi"],
+        "rmse_mm": acc["rmse"],
+        "ap_max_mm": acc["ap"]["max"],
+        "condition_number": cal.condition,
+        "fixed_parameters": cal.fixed,
+        "iterations": cal.iterations,
+        "seconds": round(cal.seconds, 4),
+    }
+    meta = {"method": cal.method, "data": data, "fit": fit}
+    if "qp" in cal.details:
+        meta["qp"] = cal.details["qp"]
+    return ModelFile(cal.robot, cal.base, dict(zip(meas.target_names, cal.targets)),
+                     nominal=cell.robot, meta=meta)
+
+
+def model_predict(model: ModelFile, q) -> np.ndarray:
+    lay, x = model.layout()
+    return predict(lay, x, q)
+
+
+def paper_methods(target_names) -> list[str]:
+    """The paper's conditions 0-6 for these targets, in Table 3's order."""
+    out = ["nominal"] + [f"ls-single:{t}" for t in target_names] + ["ls-sum", "minimax"]
+    if len(target_names) >= 3:
+        out.append("ls-pose")
+    return out
+
+
+def compare(cell: Cell, meas: Measurements, methods=None, qp_solvers=("primal-dual", "exact")):
+    """Every method on the same data: calibrations and their accuracy on that data."""
+    rows = {}
+    for method in methods or paper_methods(meas.target_names):
+        solvers = qp_solvers if method == "minimax" else (None,)
+        for qp in solvers:
+            cal = run_method(cell, meas, method, qp or "primal-dual")
+            label = method if qp is None or qp == qp_solvers[0] else f"{method} ({qp} QP)"
+            pred = predict(cal.layout, cal.x, meas.q)
+            rows[label] = (cal, metrics.accuracy(pred, meas.xyz, meas.target_names))
+    return rows
+
+
+def evaluate(model: ModelFile, meas: Measurements) -> dict:
+    """Accuracy of a model on measured data, next to the nominal model fitted to the same data."""
+    unknown = [t for t in meas.target_names if t not in model.targets]
+    if unknown:
+        raise DataError(f"target {unknown[0]!r} of the data is not in the model "
+                        f"({', '.join(model.targets)})")
+    if model.robot.n_joints != meas.q.shape[1]:
+        raise DataError("the data's joint count differs from the model's robot")
+    names = meas.target_names
+    lay = Layout(model.robot, model.base, names)
+    xs = lay.initial(np.array([model.targets[t] for t in names]))
+    after = metrics.accuracy(predict(lay, xs, meas.q), meas.xyz, names)
+    out = {"model": after}
+    if model.nominal is not None:
+        targets = np.array([model.targets[t] for t in names])
+        nom = calibrate(model.nominal, targets, names, meas.q, meas.xyz, method="nominal")
+        before = metrics.accuracy(predict(nom.layout, nom.x, meas.q), meas.xyz, names)
+        out["nominal"] = before
+        out["improvement_pct"] = metrics.compare_accuracy(before, after)
+    return out
+
+
+__all__ = ["DataError", "load_cell", "load_campaign", "run_method", "model_file", "model_predict",
+           "compare", "evaluate", "read_model", "paper_methods"]
