@@ -13,8 +13,8 @@ from scipy.optimize import least_squares, minimize
 
 from solver.calibrate import calibrate
 from solver.identifiability import structural
-from solver.identify import register
-from solver.kinematics import predict, predict_with_jacobian
+from solver.identify import least_squares_fit, register
+from solver.kinematics import predict
 from solver.minimax import default_epsilon, measured_distances
 
 SEED = 0
@@ -33,16 +33,17 @@ def _repeats(m: int) -> int:
     return 5 if m <= 100 else 3 if m <= 1000 else 1
 
 
-def _best_of(n: int, fn):
-    """Run fn n times; return (fastest wall time, result of the fastest run)."""
-    best, out = float("inf"), None
-    for _ in range(n):
+def _best_of(n: int, fn, budget_s: float = 5.0):
+    """Run fn up to n times (fewer once budget_s is spent); return (fastest time, its result, runs)."""
+    best, out, spent, runs = float("inf"), None, 0.0, 0
+    while runs < n and (runs == 0 or spent < budget_s):
         t0 = time.perf_counter()
         res = fn()
         dt = time.perf_counter() - t0
+        spent, runs = spent + dt, runs + 1
         if dt < best:
             best, out = dt, res
-    return best, out
+    return best, out, runs
 
 
 def _campaign(cell, m: int, seed: int):
@@ -61,15 +62,28 @@ def _violation(targets: np.ndarray, meas: np.ndarray) -> float:
     return float(max(0.0, *c)) if c else 0.0
 
 
+def _setup(robot, targets, names, q, xyz):
+    """Registered problem, start and free parameters as calibrate() finds them for ls-sum and minimax."""
+    prob, x0 = register(robot, targets, names, q, xyz)
+    lay = prob.layout
+    st = structural(lay, x0, np.ones(lay.n_params, dtype=bool),
+                    rows_fn=lambda p, J: J[:, list(range(len(names)))].reshape(-1, J.shape[-1]))
+    return prob, x0, st.free
+
+
 def _ours(robot, targets, names, q, xyz, m: int) -> dict:
-    """Wall time, objectives and effort of calibrate() for ls-sum, minimax and minimax with the exact QP."""
+    """Wall time, objectives and effort of calibrate(): ls-sum, minimax, minimax with the exact QP."""
+    calibrate(robot, targets, names, q, xyz, method="ls-sum")  # untimed warm-up: a first large run is slower
     out = {}
     for key, (method, qp) in OURS.items():
-        n = _repeats(m)
-        secs, cal = _best_of(n, lambda: calibrate(robot, targets, names, q, xyz, method=method, qp=qp))
+        secs, cal, n = _best_of(_repeats(m),
+                                lambda: calibrate(robot, targets, names, q, xyz, method=method, qp=qp))
         r = {"seconds": secs, "repeats": n, "calibrate_seconds": cal.seconds, "F": cal.F.tolist(),
              "free_parameters": int(len(cal.x) - len(cal.fixed)), "iterations": cal.iterations}
         if method == "ls-sum":
+            # the fit alone on the registered problem, to set against the reference's solve stage
+            prob, x0, free = _setup(robot, targets, names, q, xyz)
+            r["solve_seconds"], *_ = _best_of(_repeats(m), lambda: least_squares_fit(prob, x0, free))
             r["objective"] = float(cal.F.sum())
         else:
             d = cal.details
@@ -100,8 +114,8 @@ class _Counted:
         return predict(self.prob.layout, self.x(z), self.prob.q) - self.prob.meas
 
 
-def _reference_ls(prob, x0, free) -> tuple[np.ndarray, dict]:
-    """ls-sum by scipy least_squares (trf) with a 2-point finite-difference Jacobian."""
+def _reference_ls(prob, x0, free):
+    """ls-sum by scipy least_squares (trf), 2-point finite-difference Jacobian; (x, figures, Jacobian)."""
     model = _Counted(prob, x0, free)
     mask = prob.mask
     t0 = time.perf_counter()
@@ -110,22 +124,22 @@ def _reference_ls(prob, x0, free) -> tuple[np.ndarray, dict]:
     secs = time.perf_counter() - t0
     x = model.x(res.x)
     F = prob.sum_squares(x)
-    return x, {"solve_seconds": secs, "objective": float(F.sum()), "F": F.tolist(), "nfev": int(res.nfev),
-               "njev": int(res.njev), "model_evaluations": model.calls, "status": int(res.status),
-               "message": res.message}
+    return x, {"solve_seconds": secs, "objective": float(F.sum()), "F": F.tolist(),
+               "nfev": int(res.nfev), "njev": int(res.njev), "model_evaluations": model.calls,
+               "status": int(res.status), "message": res.message}, res.jac
 
 
-def _reference_minimax(prob, x_ls, free) -> tuple[np.ndarray, dict]:
-    """min max_i F_i s.t. distance invariance by SLSQP on the epigraph form, finite differences throughout.
+def _reference_minimax(prob, x_ls, free, jac) -> tuple[np.ndarray, dict]:
+    """min max_i F_i s.t. distance invariance: SLSQP on the epigraph form, finite differences throughout.
 
     Variables v = (z, w): x = x_ls + z * sqrt(phi0) / |J column| on the free entries and phi = w * phi0,
-    with phi0 = max F_i at the start; every mm^2 quantity is divided by phi0, so F_i/phi0 has a
-    Hessian of order one in z and the objective starts at 1.
+    with phi0 = max F_i at the start and J the reference ls-sum's own finite-difference Jacobian;
+    every mm^2 quantity is divided by phi0, so F_i/phi0 has a Hessian of order one in z and the
+    objective starts at 1 (ftol is then relative).
     """
     lay, K = prob.layout, prob.meas.shape[1]
     idx = np.flatnonzero(free)
-    _, J, _ = predict_with_jacobian(lay, x_ls, prob.q)
-    scale = np.linalg.norm(J[prob.mask][..., idx].reshape(-1, len(idx)), axis=0)
+    scale = np.linalg.norm(jac, axis=0)
     scale[scale == 0] = 1.0
     pairs, dbar, sem = measured_distances(prob.meas)
     eps = default_epsilon(sem)
@@ -147,8 +161,8 @@ def _reference_minimax(prob, x_ls, free) -> tuple[np.ndarray, dict]:
     v0 = np.zeros(len(idx) + 1)
     v0[-1] = 1.0
     t0 = time.perf_counter()
-    res = minimize(lambda v: v[-1], v0, method="SLSQP", constraints=[{"type": "ineq", "fun": constraints}],
-                   options={"maxiter": 1000, "ftol": 1e-12})
+    res = minimize(lambda v: v[-1], v0, method="SLSQP", options={"maxiter": 1000, "ftol": 1e-10},
+                   constraints=[{"type": "ineq", "fun": constraints}])
     secs = time.perf_counter() - t0
     x = x_of(res.x)
     F = prob.sum_squares(x)
@@ -160,29 +174,26 @@ def _reference_minimax(prob, x_ls, free) -> tuple[np.ndarray, dict]:
 
 def _reference(robot, targets, names, q, xyz, m: int) -> dict:
     """The same ls-sum and minimax problems solved by scipy.optimize with finite differences."""
-    n = 3 if m <= 100 else 1
 
     def run():
         t0 = time.perf_counter()
-        # the start and the free parameters exactly as calibrate() finds them for ls-sum and minimax
-        prob, x0 = register(robot, targets, names, q, xyz)
-        lay = prob.layout
-        st = structural(lay, x0, np.ones(lay.n_params, dtype=bool),
-                        rows_fn=lambda p, J: J[:, list(range(len(names)))].reshape(-1, J.shape[-1]))
+        prob, x0, free = _setup(robot, targets, names, q, xyz)
         setup = time.perf_counter() - t0
-        x_ls, ls = _reference_ls(prob, x0, st.free)
-        _, mm = _reference_minimax(prob, x_ls, st.free)
+        x_ls, ls, jac = _reference_ls(prob, x0, free)
+        _, mm = _reference_minimax(prob, x_ls, free, jac)
         ls["seconds"] = setup + ls["solve_seconds"]
         mm["seconds"] = setup + ls["solve_seconds"] + mm["sqp_seconds"]
-        return {"setup_seconds": setup, "free_parameters": int(st.free.sum()), "repeats": n,
-                "ls_sum": ls, "minimax": mm}
+        return {"setup_seconds": setup, "free_parameters": int(free.sum()), "ls_sum": ls, "minimax": mm}
 
-    best = min((run() for _ in range(n)), key=lambda r: r["minimax"]["seconds"])
-    _log(f"  reference ls_sum: {best['ls_sum']['seconds']:.3f} s, objective "
-         f"{best['ls_sum']['objective']:.6g} mm^2, {best['ls_sum']['model_evaluations']} model evaluations")
-    _log(f"  reference minimax: {best['minimax']['seconds']:.3f} s (SLSQP {best['minimax']['sqp_seconds']:.3f} s), "
-         f"objective {best['minimax']['objective']:.6g} mm^2, {best['minimax']['model_evaluations']} "
-         f"model evaluations, {best['minimax']['message']}")
+    # best of up to three runs while they are quick; the figures are those of the fastest run
+    _, best, runs = _best_of(3 if m <= 100 else 1, run)
+    best["repeats"] = runs
+    ls, mm = best["ls_sum"], best["minimax"]
+    _log(f"  reference ls_sum: {ls['seconds']:.3f} s, objective {ls['objective']:.6g} mm^2, "
+         f"{ls['model_evaluations']} model evaluations")
+    _log(f"  reference minimax: {mm['seconds']:.3f} s (SLSQP {mm['sqp_seconds']:.3f} s, "
+         f"{mm['nit']} iterations), objective {mm['objective']:.6g} mm^2, "
+         f"{mm['model_evaluations']} model evaluations, {mm['message']}")
     return best
 
 
@@ -191,6 +202,7 @@ def _compare(ours: dict, ref: dict) -> dict:
     ratio = {"ls_sum": ref["ls_sum"]["seconds"] / ours["ls_sum"]["seconds"],
              "minimax": ref["minimax"]["seconds"] / ours["minimax"]["seconds"],
              "minimax_exact": ref["minimax"]["seconds"] / ours["minimax_exact"]["seconds"],
+             "ls_sum_solve_stage": ref["ls_sum"]["solve_seconds"] / ours["ls_sum"]["solve_seconds"],
              "minimax_sqp_stage": ref["minimax"]["sqp_seconds"] / ours["minimax"]["sqp_seconds"],
              "minimax_exact_sqp_stage": ref["minimax"]["sqp_seconds"] / ours["minimax_exact"]["sqp_seconds"]}
     rel = {k: (ours[k]["objective"] - ref[r]["objective"]) / ref[r]["objective"]
@@ -205,21 +217,30 @@ def _machine() -> dict:
 
 
 def _goals(sizes: dict) -> dict:
-    """The issue's targets, the achieved figures and whether each is met (None: not measured)."""
-    at100 = sizes.get("100", {}).get("ours", {})
-    speedups = [s["comparison"]["speedup"][k] for s in sizes.values() if "comparison" in s
-                for k in ("ls_sum", "minimax")]
-    achieved = {"ls_sum_100_poses_ms": at100["ls_sum"]["seconds"] * 1000 if at100 else None,
-                "minimax_100_poses_ms": at100["minimax"]["seconds"] * 1000 if at100 else None,
-                "speedup_min": min(speedups) if speedups else None}
-    met = {"ls_sum_100_poses_ms_max": None if not at100 else achieved["ls_sum_100_poses_ms"] <= 20,
-           "minimax_100_poses_ms_max": None if not at100 else achieved["minimax_100_poses_ms"] <= 100,
-           "speedup_min": None if not speedups else achieved["speedup_min"] >= 20}
+    """The issue's targets, the achieved figures and whether each is met (None: not measured).
+
+    speedup_min is judged on the end-to-end ratios of ls-sum and minimax at every size with a
+    reference; the smallest solve-stage ratio is reported alongside for information.
+    """
+    at100 = sizes.get("100", {}).get("ours")
+    ratios = [s["comparison"]["speedup"] for s in sizes.values() if "comparison" in s]
+    achieved = {
+        "ls_sum_100_poses_ms": at100["ls_sum"]["seconds"] * 1000 if at100 else None,
+        "minimax_100_poses_ms": at100["minimax"]["seconds"] * 1000 if at100 else None,
+        "speedup_min": min((r[k] for r in ratios for k in ("ls_sum", "minimax")), default=None),
+        "speedup_min_solve_stage": min((r[k] for r in ratios
+                                        for k in ("ls_sum_solve_stage", "minimax_sqp_stage")), default=None),
+    }
+    ls_ms, mm_ms, speedup = (achieved[k] for k in
+                             ("ls_sum_100_poses_ms", "minimax_100_poses_ms", "speedup_min"))
+    met = {"ls_sum_100_poses_ms_max": None if ls_ms is None else ls_ms <= GOALS["ls_sum_100_poses_ms_max"],
+           "minimax_100_poses_ms_max": None if mm_ms is None else mm_ms <= GOALS["minimax_100_poses_ms_max"],
+           "speedup_min": None if speedup is None else speedup >= GOALS["speedup_min"]}
     return {"targets": dict(GOALS), "achieved": achieved, "met": met}
 
 
 def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=10000, seed=SEED) -> dict:
-    """Time our solvers (and scipy's finite-difference reference) on virtual-cell campaigns of each size."""
+    """Time our solvers and scipy's finite-difference reference on virtual-cell campaigns of each size."""
     from .formats.cell_json import default_cell
 
     cell = default_cell()
@@ -231,16 +252,18 @@ def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=100
         _log(f"{m} poses x {len(names)} SMRs ({meas.n_readings} readings)")
         ours = _ours(cell.robot, targets, meas.target_names, meas.q, meas.xyz, m)
         entry = {"poses": int(m), "readings": meas.n_readings, "ours": ours,
-                 "ours_ms_per_pose": {k: v["seconds"] * 1000 / m for k, v in ours.items()}}
+                 "ours_seconds_per_pose": {k: v["seconds"] / m for k, v in ours.items()}}
         if reference and m <= reference_max:
             entry["reference"] = _reference(cell.robot, targets, meas.target_names, meas.q, meas.xyz, m)
             entry["comparison"] = _compare(ours, entry["reference"])
-            _log("  speedup " + ", ".join(f"{k} {v:.1f}x" for k, v in entry["comparison"]["speedup"].items()))
+            _log("  speedup " + ", ".join(f"{k} {v:.1f}x"
+                                          for k, v in entry["comparison"]["speedup"].items()))
         results[str(m)] = entry
     return {"benchmark": "solver", "machine": _machine(),
             "cell": {"robot": cell.robot.name, "targets": {k: v.tolist() for k, v in zip(names, targets)},
                      "seed": seed},
-            "reference": {"ls_sum": "scipy.optimize.least_squares(method='trf', jac='2-point', x_scale='jac')",
+            "reference": {"ls_sum": "scipy.optimize.least_squares(method='trf', jac='2-point', "
+                                    "x_scale='jac')",
                           "minimax": "scipy.optimize.minimize(method='SLSQP') on the epigraph form, "
                                      "finite-difference derivatives, started from the reference ls-sum",
                           "seconds": "register + structural + solve (ours: the whole calibrate() call)"},
