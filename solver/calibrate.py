@@ -58,13 +58,6 @@ def parse_method(method: str, target_names) -> tuple[str, list[int]]:
     return name, list(range(len(target_names)))
 
 
-def _pose_jacobian(weight):
-    def rows(p, J):
-        _, Jr = pose_residuals(p, p, J, weight)
-        return Jr.reshape(-1, J.shape[-1])
-    return rows
-
-
 def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", base_guess=None,
               qp="primal-dual", epsilon=None) -> Calibration:
     """Fit geometry, base frame and SMR positions to measurements with the chosen method.
@@ -85,18 +78,14 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
     for k in range(len(target_names)):
         if k not in rows:
             candidates[ts + 3 * k : ts + 3 * k + 3] = False
-    if name == "ls-pose":
-        weight = pose_weight(lay.targets(x0))
-        st = ident.structural(lay, x0, candidates, rows_fn=_pose_jacobian(weight))
-    else:
-        st = ident.structural(lay, x0, candidates,
-                              rows_fn=lambda p, J: J[:, rows].reshape(-1, J.shape[-1]))
+    weight = pose_weight(lay.targets(x0)) if name == "ls-pose" else None
+    st = ident.structural(lay, x0, candidates, rows=rows, pose_weight=weight)
     sel = np.zeros(len(target_names), dtype=bool)
     sel[rows] = True
     if name == "ls-pose":
         full = np.all(prob.mask, axis=1)
         p, J, _ = predict_with_jacobian(lay, x0, q[full])
-        Jd = _pose_jacobian(weight)(p, J)
+        Jd = pose_residuals(p, p, J, weight)[1].reshape(-1, lay.n_params)
         n_eq = int(full.sum())
     else:
         Jd = ident.jacobian_rows(lay, x0, q, prob.mask & sel[None, :])
@@ -107,12 +96,12 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
         x, res = pose_fit(prob, x0, st.free, weight)
         x = fit_targets(prob, x, range(len(target_names)))
         details["pose_weight_mm_per_rad"] = weight
-        iters = res.nfev
     else:
         x, res = least_squares_fit(prob, x0, st.free, rows=rows)
-        iters = res.nfev
         if name == "ls-single":
             x = fit_targets(prob, x, [k for k in range(len(target_names)) if k not in rows])
+    iters = res.iterations
+    details["lm"] = {"iterations": res.iterations, "evaluations": res.nfev, "message": res.message}
     if name == "minimax":
         details["ls_sum_F"] = prob.sum_squares(x).tolist()
         mm = minimax(prob, x, st.free, rows=rows, qp=qp, epsilon=epsilon)

@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
-from .kinematics import Layout, predict_with_jacobian
+from .kinematics import Layout, predict_rows, predict_with_jacobian
 
-# A column whose part outside the span of the columns kept before it is below this fraction of
-# its norm is redundant: exact redundancies sit near 1e-12, weak but real ones far above.
-STRUCTURAL_TOL = 1e-6
+# Singular values of the unit-norm Jacobian columns below this fraction of the largest count as
+# zero: exact redundancies sit near 1e-14, weak but real ones far above.
+STRUCTURAL_TOL = 1e-8
+# A column adding less than this fraction of its norm is kept only if the rank needs it.
+CLEAR_NEW = 0.1
 # Refuse data whose Jacobi-scaled Jacobian is worse conditioned than this.
 MAX_CONDITION = 1e7
 STRUCTURAL_POSES = 240
@@ -46,27 +49,48 @@ def preference_order(layout: Layout) -> list[int]:
     return base + tgt + early + late
 
 
-def _greedy_span(R: np.ndarray, order, candidates: np.ndarray, tol: float):
-    """Walk columns of R in order; keep those adding a direction above tol, return kept mask and residuals."""
-    P = R.shape[1]
+def _residual_norms(R: np.ndarray, basis: np.ndarray, cols) -> np.ndarray:
+    """Part of each column outside span(basis), relative to the column's norm."""
+    A = R[:, cols]
+    norms = np.linalg.norm(A, axis=0)
+    for _ in range(2):  # twice keeps Gram-Schmidt orthogonal
+        A = A - basis @ (basis.T @ A)
+    return np.linalg.norm(A, axis=0) / np.where(norms > 0, norms, 1.0)
+
+
+def choose_free(R: np.ndarray, order, candidates: np.ndarray, tol: float) -> np.ndarray:
+    """The parameters to identify: as many as the rank, well-conditioned, in preference order.
+
+    The rank comes from the singular values of the unit-norm columns. A first sweep in
+    preference order keeps columns that add a clearly new direction; then the columns adding
+    the most are taken until the rank is reached. A plain greedy sweep with a tiny threshold
+    would keep barely independent columns early (e.g. SMR coordinates that differ only through
+    a slightly non-planar SMR triangle) and hold well-determined ones later.
+    """
+    cols = [j for j in order if candidates[j]]
+    A = R[:, cols]
+    norms = np.linalg.norm(A, axis=0)
+    live = [c for c, n in zip(cols, norms) if n > 0]
+    if not live:
+        return np.zeros(R.shape[1], dtype=bool)
+    s = np.linalg.svd(R[:, live] / np.linalg.norm(R[:, live], axis=0), compute_uv=False)
+    rank = int(np.sum(s > tol * s[0]))
+    kept = np.zeros(R.shape[1], dtype=bool)
     basis = np.zeros((R.shape[0], 0))
-    kept = np.zeros(P, dtype=bool)
-    rel = np.ones(P)
-    for j in order:
-        if not candidates[j]:
-            continue
-        col = R[:, j]
-        norm = np.linalg.norm(col)
-        if norm == 0.0:
-            rel[j] = 0.0
-            continue
-        resid = col - basis @ (basis.T @ col)
-        resid = resid - basis @ (basis.T @ resid)  # second pass keeps Gram-Schmidt orthogonal
-        rel[j] = np.linalg.norm(resid) / norm
-        if rel[j] > tol:
-            basis = np.column_stack([basis, resid / np.linalg.norm(resid)])
-            kept[j] = True
-    return kept, rel
+
+    def add(j):
+        v = R[:, j] - basis @ (basis.T @ R[:, j])
+        v = v - basis @ (basis.T @ v)
+        kept[j] = True
+        return np.column_stack([basis, v / np.linalg.norm(v)])
+
+    for j in live:
+        if len(np.flatnonzero(kept)) < rank and _residual_norms(R, basis, [j])[0] > CLEAR_NEW:
+            basis = add(j)
+    while kept.sum() < rank:
+        rest = [j for j in live if not kept[j]]
+        basis = add(rest[int(np.argmax(_residual_norms(R, basis, rest)))])
+    return kept
 
 
 def _explain(R: np.ndarray, j: int, kept: np.ndarray, names) -> str:
@@ -81,27 +105,43 @@ def _explain(R: np.ndarray, j: int, kept: np.ndarray, names) -> str:
 
 def jacobian_rows(layout: Layout, x, q, mask) -> np.ndarray:
     """Identification Jacobian rows (readings x 3, P) of the measured readings."""
-    _, J, _ = predict_with_jacobian(layout, x, q)
-    return J[mask].reshape(-1, layout.n_params)
+    _, Jt = predict_rows(layout, x, q, mask, np.arange(layout.n_params))
+    return Jt.reshape(layout.n_params, -1).T
 
 
-def structural(layout: Layout, x, candidates: np.ndarray, rows_fn=None,
-               rng_seed: int = 0) -> Identifiability:
+def structural(layout: Layout, x, candidates: np.ndarray, rows=None, pose_weight=None) -> Identifiability:
     """Redundancies of the model itself, found on a rich set of random poses within the limits.
 
-    rows_fn(points, J) turns the point Jacobian into the method's residual Jacobian rows
-    (default: every SMR coordinate is a residual).
+    Rows are the coordinates of the SMRs in `rows` (default all) or, with pose_weight, the
+    ls-pose residuals. Depends only on the robot, the SMR layout and the method, so it is cached.
     """
-    rng = np.random.default_rng(rng_seed)
-    robot = layout.robot
+    K = len(layout.target_names)
+    rows = tuple(range(K)) if rows is None else tuple(rows)
+    targets = tuple(np.round(layout.targets(x), 3).ravel())
+    weight = None if pose_weight is None else round(float(pose_weight), 6)
+    return _structural(layout.robot, layout.target_names, targets,
+                       np.asarray(candidates, dtype=bool).tobytes(), rows, weight)
+
+
+@lru_cache(maxsize=64)
+def _structural(robot, names, targets, candidates, rows, weight) -> Identifiability:
+    from .identify import pose_residuals
+
+    layout = Layout(robot, np.eye(4), names)
+    x = layout.initial(np.reshape(targets, (-1, 3)))
+    candidates = np.frombuffer(candidates, dtype=bool)
+    rng = np.random.default_rng(0)
     q = rng.uniform(robot.lower, robot.upper, size=(STRUCTURAL_POSES, robot.n_joints))
     p, J, _ = predict_with_jacobian(layout, x, q)
-    J = J.reshape(-1, layout.n_params) if rows_fn is None else rows_fn(p, J)
+    if weight is None:
+        J = J[:, list(rows)].reshape(-1, layout.n_params)
+    else:
+        J = pose_residuals(p, p, J, weight)[1].reshape(-1, layout.n_params)
     R = np.linalg.qr(J, mode="r")
-    kept, _ = _greedy_span(R, preference_order(layout), candidates, STRUCTURAL_TOL)
-    names = layout.names()
-    fixed = {names[j]: _explain(R, j, kept, names)
-             for j in np.flatnonzero(candidates & ~kept)}
+    kept = choose_free(R, preference_order(layout), candidates, STRUCTURAL_TOL)
+    names_ = layout.names()
+    fixed = {names_[j]: _explain(R, j, kept, names_) for j in np.flatnonzero(candidates & ~kept)}
+    kept.setflags(write=False)
     return Identifiability(kept, fixed, condition_number(J[:, kept]))
 
 
@@ -125,7 +165,8 @@ def check_data(J: np.ndarray, free: np.ndarray, names, n_poses: int) -> float:
     dead = [names[i] for i, n in zip(idx, norms) if n == 0]
     if dead:
         raise NotIdentifiable("the data does not move with: " + ", ".join(dead))
-    U, s, Vt = np.linalg.svd(Jf / norms, full_matrices=False)
+    # singular values and directions of J equal those of its R factor, which is far smaller
+    _, s, Vt = np.linalg.svd(np.linalg.qr(Jf / norms, mode="r"))
     cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
     if cond > MAX_CONDITION:
         weak = Vt[s < s[0] / MAX_CONDITION]

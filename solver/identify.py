@@ -5,9 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
-
-from .kinematics import Layout, predict, predict_with_jacobian
+from .kinematics import Layout, predict, predict_rows
+from .lm import levenberg_marquardt
 from .robot import Robot
 
 
@@ -71,30 +70,30 @@ def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None)
     return prob.rebased(x)
 
 
-def least_squares_fit(prob: Problem, x0, free, rows=None, max_nfev=200):
-    """Levenberg-Marquardt on the point residuals of the selected targets; returns (x, scipy result)."""
+def least_squares_fit(prob: Problem, x0, free, rows=None, max_iter=100):
+    """Levenberg-Marquardt on the point residuals of the selected targets; returns (x, LMResult)."""
     K = prob.meas.shape[1]
     sel = np.zeros(K, dtype=bool)
     sel[list(range(K)) if rows is None else rows] = True
     mask = prob.mask & sel[None, :]
+    meas = prob.meas[mask]
     idx = np.flatnonzero(free)
     x = np.array(x0, dtype=float)
-    cache = {}
 
-    def evaluate(z):
-        key = z.tobytes()
-        if key not in cache:
-            cache.clear()
-            xx = x.copy()
-            xx[idx] = z
-            p, J, _ = predict_with_jacobian(prob.layout, xx, prob.q)
-            cache[key] = ((p - prob.meas)[mask].ravel(), J[mask][..., idx].reshape(-1, len(idx)))
-        return cache[key]
+    def full(z):
+        xx = x.copy()
+        xx[idx] = z
+        return xx
 
-    res = least_squares(lambda z: evaluate(z)[0], x[idx], jac=lambda z: evaluate(z)[1],
-                        method="lm", x_scale="jac", max_nfev=max_nfev)
-    x[idx] = res.x
-    return x, res
+    def fun(z):
+        p, Jt = predict_rows(prob.layout, full(z), prob.q, mask, idx)
+        return (p - meas).ravel(), Jt.reshape(len(idx), -1)
+
+    def residual(z):
+        return (predict(prob.layout, full(z), prob.q)[mask] - meas).ravel()
+
+    res = levenberg_marquardt(fun, x[idx], residual, max_iter=max_iter)
+    return full(res.x), res
 
 
 def fit_targets(prob: Problem, x, which) -> np.ndarray:
@@ -124,12 +123,12 @@ def pose_weight(targets: np.ndarray) -> float:
 def pose_residuals(pred, meas, J, weight):
     """Per pose: centroid error and weight x the small rotation best aligning the SMR errors.
 
-    For errors e_k = pred_k - meas_k at lever arms d_k from the centroid, the rotation w solving
-    min sum ||e_k - mean(e) - w x d_k||^2 is M^-1 sum d_k x (e_k - mean(e)). The rotation is
-    linear in the errors, so its Jacobian is the same map applied to the point Jacobians.
+    For errors e_k = pred_k - meas_k at lever arms d_k from the measured centroid, the rotation
+    w solving min sum ||e_k - mean(e) - w x d_k||^2 is M^-1 sum d_k x (e_k - mean(e)). With the
+    lever arms taken from the measurement, w is exactly linear in the errors, so its Jacobian is
+    the same map applied to the point Jacobians.
     """
-    c = pred.mean(axis=1)
-    d = pred - c[:, None, :]
+    d = meas - meas.mean(axis=1, keepdims=True)
     e = pred - meas
     ebar = e.mean(axis=1)
     dd = np.einsum("mki,mki->m", d, d)
@@ -145,28 +144,25 @@ def pose_residuals(pred, meas, J, weight):
     return r, Jr
 
 
-def pose_fit(prob: Problem, x0, free, weight, max_nfev=200):
+def pose_fit(prob: Problem, x0, free, weight, max_iter=100):
     """Least squares on position and orientation of the frame spanned by the SMRs (condition 6)."""
-    full = np.all(prob.mask, axis=1)
-    if prob.meas.shape[1] < 3 or full.sum() == 0:
+    full_poses = np.all(prob.mask, axis=1)
+    if prob.meas.shape[1] < 3 or full_poses.sum() == 0:
         raise ValueError("ls-pose needs poses with at least three targets measured")
-    q, meas = prob.q[full], prob.meas[full]
+    q, meas = prob.q[full_poses], prob.meas[full_poses]
+    m, K = meas.shape[:2]
+    mask = np.ones((m, K), dtype=bool)
     idx = np.flatnonzero(free)
     x = np.array(x0, dtype=float)
-    cache = {}
 
-    def evaluate(z):
-        key = z.tobytes()
-        if key not in cache:
-            cache.clear()
-            xx = x.copy()
-            xx[idx] = z
-            p, J, _ = predict_with_jacobian(prob.layout, xx, q)
-            r, Jr = pose_residuals(p, meas, J[..., idx], weight)
-            cache[key] = (r.ravel(), Jr.reshape(-1, len(idx)))
-        return cache[key]
+    def fun(z):
+        xx = x.copy()
+        xx[idx] = z
+        p, Jt = predict_rows(prob.layout, xx, q, mask, idx)
+        J = Jt.reshape(len(idx), m, K, 3).transpose(1, 2, 3, 0)
+        r, Jr = pose_residuals(p.reshape(m, K, 3), meas, J, weight)
+        return r.ravel(), Jr.reshape(-1, len(idx)).T
 
-    res = least_squares(lambda z: evaluate(z)[0], x[idx], jac=lambda z: evaluate(z)[1],
-                        method="lm", x_scale="jac", max_nfev=max_nfev)
+    res = levenberg_marquardt(fun, x[idx], max_iter=max_iter)
     x[idx] = res.x
     return x, res

@@ -9,6 +9,7 @@ of one such motion, so every Jacobian column is either `axis x (p - origin)` (ro
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -60,7 +61,7 @@ class Layout:
     base_ref: np.ndarray
     target_names: tuple[str, ...]
 
-    @property
+    @cached_property
     def n_geo(self) -> int:
         return len(self.robot.param_names())
 
@@ -72,7 +73,7 @@ class Layout:
     def target_slice(self) -> slice:
         return slice(self.n_geo + 6, self.n_geo + 6 + 3 * len(self.target_names))
 
-    @property
+    @cached_property
     def n_params(self) -> int:
         return self.n_geo + 6 + 3 * len(self.target_names)
 
@@ -80,11 +81,15 @@ class Layout:
         tnames = [f"{t}_{c}" for t in self.target_names for c in "xyz"]
         return self.robot.param_names() + list(BASE_NAMES) + tnames
 
-    def ops(self) -> list[Op]:
+    @cached_property
+    def _ops(self) -> tuple[Op, ...]:
         b = self.n_geo
         base = [Op("t", 0, b), Op("t", 1, b + 1), Op("t", 2, b + 2),
                 Op("r", 2, b + 3), Op("r", 1, b + 4), Op("r", 0, b + 5)]
-        return base + joint_ops(self.robot)
+        return tuple(base + joint_ops(self.robot))
+
+    def ops(self) -> tuple[Op, ...]:
+        return self._ops
 
     def pack(self, geometry, base_delta, targets) -> np.ndarray:
         return np.concatenate([geometry, base_delta, np.asarray(targets, float).ravel()])
@@ -208,3 +213,50 @@ def predict_with_jacobian(layout: Layout, x, q, dq=None):
     for k in range(K):
         J[:, k, :, ts + 3 * k : ts + 3 * k + 3] = R
     return p, J, Jq
+
+
+def predict_rows(layout: Layout, x, q, mask, cols, dq=None, joint_cols=False):
+    """Predicted SMR centres of the readings in `mask` and the transposed Jacobian of their coordinates.
+
+    Returns p (N, 3) for the N readings where mask (m, K) is true, Jt (len(cols), N, 3) with
+    d p / d x[cols[c]] in Jt[c] (parameter-first, so each column is one contiguous block that the
+    solvers use as Jt.reshape(len(cols), -1)), and, if joint_cols, Jq (n, N, 3), d p / d q.
+    """
+    R, o, rec = flange_frames(layout, x, q, dq, record=True)
+    t = layout.targets(x)
+    full = np.einsum("mij,kj->mki", R, t) + o[:, None, :]  # (m, K, 3)
+    m, K = mask.shape
+    where = np.full(layout.n_params, -1)
+    where[np.asarray(cols)] = np.arange(len(cols))
+    n_extra = layout.robot.n_joints if joint_cols else 0
+    # Work per pose and target, then keep the measured readings once at the end.
+    Jf = np.zeros((len(cols) + n_extra, m, K, 3))
+    v = np.empty_like(full)
+    for op, axis, origin in rec:
+        c = where[op.param]
+        jq = len(cols) + op.joint if joint_cols and op.joint >= 0 else -1
+        if c < 0 and jq < 0:
+            continue
+        dst = Jf[c if c >= 0 else jq]
+        if op.kind == "t":
+            dst[...] = axis[:, None, :]
+        else:
+            np.subtract(full, origin[:, None, :], out=v)
+            w = axis[:, None, :]
+            dst[..., 0] = w[..., 1] * v[..., 2] - w[..., 2] * v[..., 1]
+            dst[..., 1] = w[..., 2] * v[..., 0] - w[..., 0] * v[..., 2]
+            dst[..., 2] = w[..., 0] * v[..., 1] - w[..., 1] * v[..., 0]
+        if c >= 0 and jq >= 0:
+            Jf[jq] = dst
+    ts = layout.target_slice.start
+    for k in range(K):
+        for ax in range(3):
+            c = where[ts + 3 * k + ax]
+            if c >= 0:
+                Jf[c, :, k] = R[:, :, ax]
+    if mask.all():
+        p, Jf = full.reshape(-1, 3), Jf.reshape(Jf.shape[0], -1, 3)
+    else:
+        p, Jf = full[mask], Jf[:, mask]
+    Jt = Jf[: len(cols)]
+    return (p, Jt, Jf[len(cols):]) if joint_cols else (p, Jt)

@@ -9,7 +9,7 @@ from itertools import combinations
 import numpy as np
 
 from .identify import Problem
-from .kinematics import predict_with_jacobian
+from .kinematics import predict, predict_rows
 from .qp import SOLVERS
 
 
@@ -50,57 +50,72 @@ def default_epsilon(sem: np.ndarray) -> float:
 
 
 class _Objective:
-    """F_i, their gradients and the distance constraints on the free parameters, scaled."""
+    """F_i, their gradients and the distance constraints on the free parameters, scaled.
+
+    The scaled variables are z = scale * (x_free - x0_free), scale being the norms of the
+    Jacobian columns at x0, so that every variable moves the SMRs alike.
+    """
 
     def __init__(self, prob: Problem, x0, free, rows, epsilon):
         self.prob, self.x0 = prob, np.array(x0, float)
         self.idx = np.flatnonzero(free)
         self.rows = list(rows)
+        sel = np.zeros(prob.meas.shape[1], dtype=bool)
+        sel[self.rows] = True
+        self.mask = prob.mask & sel[None, :]
+        self.meas = prob.meas[self.mask]
+        tgt = np.nonzero(self.mask)[1]
+        self.onehot = (tgt[:, None] == np.array(self.rows)[None, :]).astype(float)  # (N, K)
         self.pairs, self.dbar, sem = measured_distances(prob.meas[:, self.rows])
         self.pairs = [(self.rows[i], self.rows[j]) for i, j in self.pairs]
         self.eps = default_epsilon(sem) if epsilon is None else float(epsilon)
-        _, J, _ = predict_with_jacobian(prob.layout, self.x0, prob.q)
-        Jf = J[prob.mask][..., self.idx].reshape(-1, len(self.idx))
-        self.scale = np.linalg.norm(Jf, axis=0)
-        self.scale[self.scale == 0] = 1.0
+        self.scale = None
+        self.pos = {j: n for n, j in enumerate(self.idx)}
 
     def x(self, z):
         x = self.x0.copy()
         x[self.idx] += z / self.scale
         return x
 
-    def __call__(self, z, jac=True):
-        x = self.x(z)
-        prob = self.prob
-        ts = prob.layout.target_slice.start
-        if jac:
-            p, J, _ = predict_with_jacobian(prob.layout, x, prob.q)
-            J = J[..., self.idx] / self.scale
-        else:
-            from .kinematics import predict
-            p = predict(prob.layout, x, prob.q)
-        r = p - prob.meas
-        F = np.array([np.sum(r[prob.mask[:, k], k] ** 2) for k in self.rows])
+    def constraints(self, x):
+        """c(x) of eq. (9) and its gradient (eq. 28-29) in the scaled variables."""
+        ts = self.prob.layout.target_slice.start
         c = np.zeros(len(self.pairs))
         A = np.zeros((len(self.pairs), len(self.idx)))
-        pos = {j: n for n, j in enumerate(self.idx)}
         for n, ((i, j), dbar) in enumerate(zip(self.pairs, self.dbar)):
             ti, tj = x[ts + 3 * i : ts + 3 * i + 3], x[ts + 3 * j : ts + 3 * j + 3]
             dist = np.linalg.norm(ti - tj)
             rt = dist - dbar
             c[n] = rt * rt - self.eps
-            u = (ti - tj) / dist  # eq. (29): d||ti - tj|| / d ti
+            u = (ti - tj) / dist  # d||ti - tj|| / d ti
             for sign, k in ((1.0, i), (-1.0, j)):
                 for a in range(3):
-                    col = pos.get(ts + 3 * k + a)
+                    col = self.pos.get(ts + 3 * k + a)
                     if col is not None:
-                        A[n, col] += 2.0 * rt * sign * u[a] / self.scale[col]  # eq. (28)
-        if not jac:
-            return F, c
-        g = np.array([2.0 * J[prob.mask[:, k], k].reshape(-1, len(self.idx)).T
-                      @ r[prob.mask[:, k], k].ravel() for k in self.rows])  # eq. (26)
-        JtJ = [J[prob.mask[:, k], k].reshape(-1, len(self.idx)) for k in self.rows]
-        return F, c, g, A, JtJ
+                        A[n, col] += 2.0 * rt * sign * u[a] / self.scale[col]
+        return c, A
+
+    def values(self, z):
+        """F_i and c at z, without derivatives (for the line search)."""
+        x = self.x(z)
+        r = predict(self.prob.layout, x, self.prob.q)[self.mask] - self.meas
+        return np.sum(r * r, axis=1) @ self.onehot, self.constraints(x)[0]
+
+    def __call__(self, z=None):
+        """F_i (K,), c (L,), gradients of F_i (K, n) (eq. 26), of c (L, n), and Jt (n, N*3)."""
+        first = self.scale is None
+        x = self.x0 if first else self.x(z)
+        p, Jt = predict_rows(self.prob.layout, x, self.prob.q, self.mask, self.idx)
+        Jt = Jt.reshape(len(self.idx), -1)
+        if first:
+            self.scale = np.linalg.norm(Jt, axis=1)
+            self.scale[self.scale == 0] = 1.0
+        Jt = Jt / self.scale[:, None]
+        r = p - self.meas
+        F = np.sum(r * r, axis=1) @ self.onehot
+        g = 2.0 * (Jt * r.ravel()).reshape(len(self.idx), -1, 3).sum(axis=2) @ self.onehot
+        c, A = self.constraints(x)
+        return F, c, g.T, A, Jt
 
 
 def _merit(F, c, rho):
@@ -121,9 +136,9 @@ def minimax(prob: Problem, x0, free, rows=None, qp="primal-dual", epsilon=None,
     solve = SOLVERS[qp]
     n = len(obj.idx)
     z = np.zeros(n)
-    F, c, g, A, Js = obj(z)
+    F, c, g, A, Jt = obj()
     K = len(rows)
-    H = sum(2.0 / K * Jk.T @ Jk for Jk in Js) + 1e-12 * np.eye(n)
+    H = (2.0 / K) * (Jt @ Jt.T) + 1e-12 * np.eye(n)
     lam, mu = np.full(K, 1.0 / K), np.zeros(len(c))
     history = [float(np.max(F))]
     qp_iters, converged, message = 0, False, "iteration limit reached"
@@ -142,7 +157,7 @@ def minimax(prob: Problem, x0, free, rows=None, qp="primal-dual", epsilon=None,
             break
         alpha = 1.0
         while True:
-            Fn, cn = obj(z + alpha * sol.dx, jac=False)
+            Fn, cn = obj.values(z + alpha * sol.dx)
             if _merit(Fn, cn, rho) <= merit + 1e-4 * alpha * predicted or alpha < 1e-6:
                 break
             alpha *= 0.5
@@ -152,7 +167,7 @@ def minimax(prob: Problem, x0, free, rows=None, qp="primal-dual", epsilon=None,
         s = alpha * sol.dx
         z = z + s
         grad_old = sol.lam @ g + sol.mu @ A
-        F, c, g, A, Js = obj(z)
+        F, c, g, A, _ = obj(z)
         lam, mu = sol.lam, sol.mu
         y = lam @ g + mu @ A - grad_old
         Hs = H @ s
