@@ -66,8 +66,7 @@ def _setup(robot, targets, names, q, xyz):
     """Registered problem, start and free parameters as calibrate() finds them for ls-sum and minimax."""
     prob, x0 = register(robot, targets, names, q, xyz)
     lay = prob.layout
-    st = structural(lay, x0, np.ones(lay.n_params, dtype=bool),
-                    rows_fn=lambda p, J: J[:, list(range(len(names)))].reshape(-1, J.shape[-1]))
+    st = structural(lay, x0, np.ones(lay.n_params, dtype=bool))
     return prob, x0, st.free
 
 
