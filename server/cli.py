@@ -63,8 +63,11 @@ def cmd_predict(args) -> None:
     from .formats.campaign_csv import read_poses, write_predictions
 
     model = workflow.read_model(args.model)
-    pose_ids, q, _, _ = read_poses(args.poses, model.robot)
-    xyz = workflow.model_predict(model, q)
+    pose_ids, q, time_s, temp_c = read_poses(args.poses, model.robot)
+    try:
+        xyz = workflow.model_predict(model, q, time_s, temp_c)
+    except workflow.DataError as e:
+        raise workflow.DataError(f"{args.poses}: {e}") from None
     write_predictions(args.out, pose_ids, list(model.targets), xyz)
     console.print(f"predicted {len(pose_ids)} poses x {len(model.targets)} targets to {args.out}")
 
@@ -104,6 +107,47 @@ def cmd_compare(args) -> None:
         write_json_atomic(args.json, {k: {"F": acc["F"], "rmse_phi": acc["rmse_phi"],
                                           "accuracy": acc, "seconds": cal.seconds}
                                       for k, (cal, acc) in rows.items()})
+
+
+def cmd_diagnose(args) -> None:
+    from .plots import write_figures
+
+    cell = workflow.load_cell(args.cell)
+    meas = workflow.load_campaign(args.meas, cell)
+    with console.status("diagnosing: cross-validating candidate effects...") as status:
+        d, model = workflow.diagnose(cell, meas, log=lambda msg: status.update(msg.strip()))
+    report = d.report
+    figures = write_figures(d.figures, args.out)
+    by_label = {f["label"]: path.name for f, path in zip(d.figures, figures)}
+    for e, ext in zip(report["effects"], _report_order(report, d.extensions)):
+        e["figure"] = by_label.get(ext.label())
+    model.meta["data"] = {"file": Path(args.meas).name, "poses": meas.n_poses,
+                          "readings": meas.n_readings}
+    write_json_atomic(args.out, report)
+    if args.model_out:
+        write_model(args.model_out, model)
+    floor = report["noise_floor_mm"]
+    console.print(f"baseline (geometric) held-out RMS {report['baseline']['holdout_rmse_mm']:.4f} mm, "
+                  f"max {report['baseline']['holdout_max_mm']:.4f} mm; noise floor "
+                  + (f"{floor:.4f} mm" if floor else "unknown (one SMR)"))
+    if not report["effects"]:
+        console.print("no effect beyond geometry pays off on held-out poses")
+    for e in report["effects"]:
+        console.print(f"[bold]{e['name']}[/bold]" + (f" joint {e['joint']}" if "joint" in e else "")
+                      + (f" harmonic {e['harmonic']}" if "harmonic" in e else "")
+                      + (f" at {e['at_s']:.0f} s" if "at_s" in e else "") + f": {e['evidence']}")
+    console.print(f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
+                  f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)")
+    console.print(f"report written to {args.out}" + (f", model to {args.model_out}" if args.model_out else "")
+                  + "".join(f", figure {p}" for p in figures))
+
+
+def _report_order(report, exts):
+    """The extensions in the report's order (most important first)."""
+    def key(e):
+        return (e["name"], e.get("joint"), e.get("harmonic"))
+    index = {(x.name, None if x.joint is None else x.joint + 1, x.harmonic): x for x in exts}
+    return [index[key(e)] for e in report["effects"]]
 
 
 def cmd_demo(args) -> None:
@@ -181,6 +225,13 @@ def build_parser() -> argparse.ArgumentParser:
     co.add_argument("--cell")
     co.add_argument("--json", help="also write the figures as JSON")
     co.set_defaults(func=cmd_compare)
+
+    dg = sub.add_parser("diagnose", help="what the geometric model misses, named and modelled")
+    dg.add_argument("meas")
+    dg.add_argument("--cell")
+    dg.add_argument("--out", default="report.json", help="report (figures are written beside it)")
+    dg.add_argument("--model-out", help="the final, extended model.json")
+    dg.set_defaults(func=cmd_diagnose)
 
     d = sub.add_parser("demo", help="simulate, calibrate with every method, evaluate held-out")
     d.add_argument("--out", default="robocal-demo")

@@ -8,6 +8,9 @@ import numpy as np
 
 from solver import metrics
 from solver.calibrate import Calibration, calibrate
+from solver.diagnose import diagnose as run_diagnosis
+from solver.effects import Inputs, prepare
+from solver.extended import predict_extended
 from solver.kinematics import Layout, predict
 from solver.measurements import Measurements
 
@@ -67,9 +70,29 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
                      nominal=cell.robot, meta=meta)
 
 
-def model_predict(model: ModelFile, q) -> np.ndarray:
+def model_predict(model: ModelFile, q, time_s=None, temp_c=None) -> np.ndarray:
+    """SMR centres (m, K, 3) a model file predicts, with its extensions (time and temperature per
+    pose (m,) or per reading (m, K))."""
     lay, x = model.layout()
-    return predict(lay, x, q)
+    if not model.extensions:
+        return predict(lay, x, q)
+    m, K = len(q), len(model.targets)
+
+    def per_reading(a, name):
+        if a is None:
+            return None
+        a = np.broadcast_to(np.reshape(np.asarray(a, dtype=float), (m, -1)), (m, K))
+        return a
+
+    inputs = Inputs(q, per_reading(time_s, "time_s"), per_reading(temp_c, "temp_c"))
+    for e in model.extensions:
+        need = e.variable if e.name == "thermal_drift" else "time_s" if e.name == "base_shift" else None
+        if need and getattr(inputs, need) is None:
+            raise DataError(f"the model's {e.label()} needs a {need} column in the poses")
+    nominal = Layout(model.nominal or model.robot, np.eye(4), lay.target_names)
+    nx = nominal.initial(np.zeros((K, 3)))
+    bases = [prepare(e, nominal, nx, inputs) for e in model.extensions]
+    return predict_extended(lay, x, model.extensions, inputs, bases)
 
 
 def paper_methods(target_names) -> list[str]:
@@ -102,9 +125,9 @@ def evaluate(model: ModelFile, meas: Measurements) -> dict:
     if model.robot.n_joints != meas.q.shape[1]:
         raise DataError("the data's joint count differs from the model's robot")
     names = meas.target_names
-    lay = Layout(model.robot, model.base, names)
-    xs = lay.initial(np.array([model.targets[t] for t in names]))
-    after = metrics.accuracy(predict(lay, xs, meas.q), meas.xyz, names)
+    order = [list(model.targets).index(t) for t in names]
+    pred = model_predict(model, meas.q, _pose_column(meas.time_s), _pose_column(meas.temp_c))
+    after = metrics.accuracy(pred[:, order], meas.xyz, names)
     out = {"model": after}
     if model.nominal is not None:
         targets = np.array([model.targets[t] for t in names])
@@ -113,6 +136,28 @@ def evaluate(model: ModelFile, meas: Measurements) -> dict:
         out["nominal"] = before
         out["improvement_pct"] = metrics.compare_accuracy(before, after)
     return out
+
+
+def _pose_column(a):
+    """Per-pose value of a per-reading column (the first measured reading of each pose)."""
+    if a is None:
+        return None
+    first = np.argmax(np.isfinite(a), axis=1)
+    return a[np.arange(len(a)), first]
+
+
+def diagnose(cell: Cell, meas: Measurements, log=None):
+    """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
+    targets = np.array([cell.targets[t] for t in meas.target_names])
+    d = run_diagnosis(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s,
+                      meas.temp_c, base_guess=cell.base, log=log)
+    lay, x = d.layout, d.x
+    robot = lay.robot.with_params(x[: lay.n_geo])
+    model = ModelFile(robot, lay.base(x), dict(zip(meas.target_names, lay.targets(x))),
+                      nominal=cell.robot, extensions=d.extensions, parameters=d.parameters,
+                      meta={"method": "ls-sum+extensions", "diagnosis": {
+                          "final": d.report["final"], "noise_floor_mm": d.report["noise_floor_mm"]}})
+    return d, model
 
 
 __all__ = ["DataError", "load_cell", "load_campaign", "run_method", "model_file", "model_predict",

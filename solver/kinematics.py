@@ -174,6 +174,32 @@ def flange_frames(layout: Layout, x, q, dq=None, record=False):
     return (R, o, rec) if record else (R, o)
 
 
+def joint_frames(layout: Layout, x, q, dq=None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per joint, the frame (R (m, 3, 3), o (m, 3)) of the body it moves, in the tracker frame.
+
+    Each is taken right after the joint's rotation, so its z axis is the joint axis and it moves
+    rigidly with the link that follows the joint.
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    m = q.shape[0]
+    ref = layout.base_ref
+    cols = [np.broadcast_to(ref[:3, c], (m, 3)).copy() for c in range(3)]
+    o = np.broadcast_to(ref[:3, 3], (m, 3)).copy()
+    frames = []
+    for op in layout.ops():
+        v = np.reshape(_amounts(op, x, q, dq), (-1, 1))
+        if op.kind == "t":
+            o = o + v * cols[op.axis]
+        else:
+            i, j = [(1, 2), (2, 0), (0, 1)][op.axis]
+            ci, cj = cols[i], cols[j]
+            cols[i] = np.cos(v) * ci + np.sin(v) * cj
+            cols[j] = np.cos(v) * cj - np.sin(v) * ci
+            if op.joint >= 0:
+                frames.append((np.stack(cols, axis=-1), o))
+    return frames
+
+
 def predict(layout: Layout, x, q, dq=None) -> np.ndarray:
     """SMR centres in the tracker frame, shape (m, K, 3)."""
     R, o = flange_frames(layout, x, q, dq)
@@ -227,7 +253,7 @@ def predict_rows(layout: Layout, x, q, mask, cols, dq=None, joint_cols=False):
     full = np.einsum("mij,kj->mki", R, t) + o[:, None, :]  # (m, K, 3)
     m, K = mask.shape
     where = np.full(layout.n_params, -1)
-    where[np.asarray(cols)] = np.arange(len(cols))
+    where[np.asarray(cols, dtype=int)] = np.arange(len(cols))
     n_extra = layout.robot.n_joints if joint_cols else 0
     # Work per pose and target, then keep the measured readings once at the end.
     Jf = np.zeros((len(cols) + n_extra, m, K, 3))

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from solver.effects import Extension
 from solver.kinematics import Layout
 from solver.robot import Robot
 
@@ -18,6 +19,7 @@ from .files import atomic_write_text, read_text
 from .json_doc import JsonDoc
 
 SCHEMA = 1
+EXTENSION_NAMES = ("joint_compliance", "joint_periodic", "joint_scale", "thermal_drift", "base_shift")
 
 
 @dataclass
@@ -30,12 +32,59 @@ class ModelFile:
     nominal: Robot | None = None
     extensions: list = field(default_factory=list)
     meta: dict = field(default_factory=dict)
+    parameters: list | None = None  # per extension, its parameters in edge units (for people)
 
     def layout(self) -> tuple[Layout, np.ndarray]:
         """The kinematic layout and parameter vector that reproduce this model's predictions."""
         names = tuple(self.targets)
         lay = Layout(self.robot, self.base, names)
         return lay, lay.initial(np.array([self.targets[n] for n in names]))
+
+
+def extension_to_json(ext: Extension, parameters: dict | None = None) -> dict:
+    """An extension as stored: its kind and place (joints from 1), coefficients, readable parameters."""
+    out = {"name": ext.name}
+    if ext.joint is not None:
+        out["joint"] = ext.joint + 1
+    for key in ("harmonic", "at_s", "t_ref", "variable"):
+        if getattr(ext, key) is not None:
+            out[key] = getattr(ext, key)
+    for key in ("origin", "gravity"):
+        if getattr(ext, key) is not None:
+            out[key] = np.asarray(getattr(ext, key)).tolist()
+    if ext.keep is not None:
+        out["gravity_terms"] = np.flatnonzero(ext.keep).tolist()
+        out["gravity_terms_total"] = len(ext.keep)
+    # model-internal coefficients (rad per basis unit, or per reading scalar); `parameters` says
+    # the same in degrees, ppm and mm
+    out["coef"] = np.asarray(ext.coef, dtype=float).tolist()
+    if parameters is not None:
+        out["parameters"] = parameters
+    return out
+
+
+def extension_from_json(obj: dict, doc: JsonDoc, at: tuple) -> Extension:
+    """The inverse of extension_to_json; errors located in the file."""
+    doc.object(obj, at)
+    name = doc.string(doc.require(obj, "name", at), (*at, "name"))
+    if name not in EXTENSION_NAMES:
+        raise doc.error((*at, "name"), f"unknown extension {name!r} (known: {', '.join(EXTENSION_NAMES)})")
+    num = lambda k: None if k not in obj else doc.number(obj[k], (*at, k))  # noqa: E731
+    vec = lambda k: None if k not in obj else np.array(  # noqa: E731
+        [doc.number(v, (*at, k, i)) for i, v in enumerate(doc.array(obj[k], (*at, k)))])
+    keep = None
+    if "gravity_terms" in obj:
+        keep = np.zeros(int(doc.number(doc.require(obj, "gravity_terms_total", at),
+                                       (*at, "gravity_terms_total"))), dtype=bool)
+        keep[[int(v) for v in vec("gravity_terms")]] = True
+    joint = num("joint")
+    ext = Extension(name, joint=None if joint is None else int(joint) - 1,
+                    harmonic=None if num("harmonic") is None else int(num("harmonic")),
+                    at_s=num("at_s"), t_ref=num("t_ref"), variable=obj.get("variable"),
+                    origin=vec("origin"), coef=vec("coef"), keep=keep, gravity=vec("gravity"))
+    if ext.coef is None or len(ext.coef) != ext.n_params:
+        raise doc.error((*at, "coef"), f"expected {ext.n_params} coefficients")
+    return ext
 
 
 def file_digest(path) -> str:
@@ -56,7 +105,8 @@ def model_to_json(model: ModelFile) -> dict:
         "nominal_robot": robot_to_json(model.nominal) if model.nominal is not None else None,
         "base": np.asarray(model.base).round(9).tolist(),
         "targets": {k: np.asarray(v).round(6).tolist() for k, v in model.targets.items()},
-        "extensions": model.extensions,
+        "extensions": [extension_to_json(e, p) for e, p in
+                       zip(model.extensions, model.parameters or [None] * len(model.extensions))],
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         **model.meta,
     }
@@ -85,7 +135,8 @@ def read_model(path) -> ModelFile:
         targets[k] = np.array([doc.number(c, (*at, i)) for i, c in enumerate(doc.array(v, at, 3))])
     if not targets:
         raise doc.error(("targets",), "at least one target is needed")
-    extensions = doc.array(obj.get("extensions", []), ("extensions",))
+    extensions = [extension_from_json(e, doc, ("extensions", i))
+                  for i, e in enumerate(doc.array(obj.get("extensions", []), ("extensions",)))]
     meta = {k: v for k, v in obj.items()
             if k not in ("schema", "robot", "nominal_robot", "base", "targets", "extensions")}
     return ModelFile(robot, base, targets, nominal, list(extensions), meta)

@@ -1,0 +1,166 @@
+"""Non-geometric model extensions, each linear in its own parameters.
+
+A joint extension adds a correction dq_j = basis(q) @ c to one joint's reading (cyclic gear
+error, scale error, compliance under gravity). A point extension moves the predicted SMR centres
+after the kinematics (links growing with temperature, the base moving during the campaign).
+Bases are computed once per data set from the registered nominal model, so the extended model
+stays linear in the new parameters and their Jacobian is the joint's column times the basis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .kinematics import Layout, joint_frames
+
+DOWN = np.array([0.0, 0.0, -1.0])  # gravity in a levelled tracker's frame
+
+
+@dataclass
+class Inputs:
+    """What extensions depend on, per pose and reading: joints, time, temperature."""
+
+    q: np.ndarray  # (m, n) rad
+    time_s: np.ndarray | None = None  # (m, K)
+    temp_c: np.ndarray | None = None  # (m, K)
+
+    def subset(self, idx) -> Inputs:
+        pick = lambda a: None if a is None else a[idx]  # noqa: E731
+        return Inputs(self.q[idx], pick(self.time_s), pick(self.temp_c))
+
+
+@dataclass
+class Extension:
+    """One extension: its kind, where it acts, and its fitted coefficients."""
+
+    name: str
+    joint: int | None = None  # 0-based
+    harmonic: int | None = None
+    at_s: float | None = None
+    t_ref: float | None = None  # thermal: temperature (or time) of zero growth
+    variable: str | None = None  # thermal: "temp_c" or "time_s"
+    origin: np.ndarray | None = None  # base shift: centre of the rotation (the data's centroid)
+    coef: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # compliance: raw gravity-basis columns kept and the gravity direction in the base frame
+    keep: np.ndarray | None = None
+    gravity: np.ndarray | None = None
+
+    @property
+    def is_joint(self) -> bool:
+        return self.name in ("joint_periodic", "joint_scale", "joint_compliance")
+
+    @property
+    def n_params(self) -> int:
+        return {"joint_periodic": 2, "joint_scale": 1, "thermal_drift": 1, "base_shift": 6}.get(
+            self.name, 0 if self.keep is None else int(self.keep.sum()))
+
+    def label(self) -> str:
+        if self.name == "joint_periodic":
+            return f"{self.name}({self.joint + 1},k={self.harmonic})"
+        if self.joint is not None:
+            return f"{self.name}({self.joint + 1})"
+        if self.name == "base_shift" and self.at_s is not None:
+            return f"{self.name}(t={self.at_s:.0f}s)"
+        return self.name
+
+
+def gravity_basis(layout: Layout, x, q, joint: int, gravity: np.ndarray) -> np.ndarray:
+    """Gravity torque on a joint per unit of each link's mass and first mass moments, (m, 4 (n - j)).
+
+    The torque about joint j of a link i >= j with mass m_i and centre of gravity r_i (in the link's
+    frame R_i, o_i) is z_j . ((o_i - o_j + R_i r_i) x m_i g): linear in m_i and m_i r_i, whose values
+    (unknown on a real arm) become the fitted coefficients.
+    """
+    lay = Layout(layout.robot, np.eye(4), layout.target_names)  # base frame
+    frames = joint_frames(lay, x, q)
+    Rj, oj = frames[joint]
+    zj = Rj[:, :, 2]
+    cols = []
+    for Ri, oi in frames[joint:]:
+        cols.append(np.einsum("mi,mi->m", zj, np.cross(oi - oj, gravity)))
+        for a in range(3):
+            cols.append(np.einsum("mi,mi->m", zj, np.cross(Ri[:, :, a], gravity)))
+    return np.stack(cols, axis=1) / 1000.0  # per metre of lever: coefficients in N m-ish units
+
+
+def gravity_in_base(layout: Layout, x) -> np.ndarray:
+    """Gravity direction in the robot base frame, assuming the tracker is levelled (z up)."""
+    return layout.base(x)[:3, :3].T @ DOWN
+
+
+def select_independent(B: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """Columns of B independent of each other and of a constant (which a joint offset absorbs)."""
+    from scipy.linalg import qr
+
+    A = B - B.mean(axis=0)
+    norms = np.linalg.norm(A, axis=0)
+    keep = np.zeros(B.shape[1], dtype=bool)
+    live = np.flatnonzero(norms > tol * max(norms.max(), 1e-300))
+    if len(live) == 0:
+        return keep
+    _, R, piv = qr(A[:, live] / norms[live], mode="economic", pivoting=True)
+    rank = int(np.sum(np.abs(np.diag(R)) > tol * abs(R[0, 0])))
+    keep[live[piv[:rank]]] = True
+    return keep
+
+
+def joint_basis(ext: Extension, layout: Layout, x, inputs: Inputs) -> np.ndarray:
+    """(m, P) basis of a joint extension: dq_joint = basis @ coef."""
+    qj = inputs.q[:, ext.joint]
+    if ext.name == "joint_periodic":
+        k = ext.harmonic
+        return np.stack([np.sin(k * qj), np.cos(k * qj)], axis=1)
+    if ext.name == "joint_scale":
+        return qj[:, None]
+    if ext.name == "joint_compliance":
+        return gravity_basis(layout, x, inputs.q, ext.joint, ext.gravity)[:, ext.keep]
+    raise ValueError(f"{ext.name} is not a joint extension")
+
+
+def point_basis(ext: Extension, layout: Layout, x, inputs: Inputs):
+    """Per reading (m, K): the scalar that switches or scales a point extension."""
+    if ext.name == "thermal_drift":
+        v = inputs.temp_c if ext.variable == "temp_c" else inputs.time_s
+        return v - ext.t_ref
+    if ext.name == "base_shift":
+        return (inputs.time_s >= ext.at_s).astype(float)
+    raise ValueError(f"{ext.name} is not a point extension")
+
+
+def prepare(ext: Extension, layout: Layout, x, inputs: Inputs) -> np.ndarray:
+    """The extension's basis on this data: (m, P) for joint extensions, (m, K) for point ones."""
+    return joint_basis(ext, layout, x, inputs) if ext.is_joint else point_basis(ext, layout, x, inputs)
+
+
+def joint_offsets(exts, bases, n_joints: int) -> np.ndarray | None:
+    """Sum of the joint corrections (m, n) of the joint extensions."""
+    dq = None
+    for ext, B in zip(exts, bases):
+        if ext.is_joint:
+            if dq is None:
+                dq = np.zeros((B.shape[0], n_joints))
+            dq[:, ext.joint] += B @ ext.coef
+    return dq
+
+
+def point_shift(ext: Extension, s: np.ndarray, p: np.ndarray, origin: np.ndarray, coef=None):
+    """Displacement (N, 3) of points p by a point extension and its Jacobian (P, N, 3).
+
+    s is the extension's per-reading scalar; origin the base origin (thermal) or the data's
+    centroid (base shift, so rotation and translation are not confounded).
+    """
+    coef = ext.coef if coef is None else coef
+    v = p - origin
+    if ext.name == "thermal_drift":
+        J = (s[:, None] * v)[None]
+        return coef[0] * J[0], J
+    # base shift: translation + small rotation about `origin` after at_s
+    J = np.zeros((6, len(p), 3))
+    for a in range(3):
+        J[a, :, a] = s
+        e = np.zeros(3)
+        e[a] = 1.0
+        J[3 + a] = s[:, None] * np.cross(e, v)
+    return np.einsum("pnc,p->nc", J, coef), J

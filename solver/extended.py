@@ -1,0 +1,85 @@
+"""The geometric model plus extensions: prediction and joint least-squares fit."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .effects import Extension, Inputs, joint_offsets, point_shift, prepare
+from .identify import Problem
+from .kinematics import Layout, predict, predict_rows
+from .lm import levenberg_marquardt
+
+
+def _origin(ext: Extension, layout: Layout, x) -> np.ndarray:
+    return layout.base(x)[:3, 3] if ext.name == "thermal_drift" else ext.origin
+
+
+def predict_extended(layout: Layout, x, exts, inputs: Inputs, bases=None) -> np.ndarray:
+    """SMR centres (m, K, 3) predicted by the geometric model with its extensions."""
+    bases = bases or [prepare(e, layout, x, inputs) for e in exts]
+    dq = joint_offsets(exts, bases, layout.robot.n_joints)
+    p = predict(layout, x, inputs.q, dq)
+    moved = np.zeros_like(p)
+    for ext, B in zip(exts, bases):
+        if not ext.is_joint:
+            d, _ = point_shift(ext, B.ravel(), p.reshape(-1, 3), _origin(ext, layout, x))
+            moved += d.reshape(p.shape)
+    return p + moved
+
+
+def _rows(layout, x, exts, bases, inputs, mask, idx):
+    """Predicted readings (N, 3) and the transposed Jacobian over [x[idx], every coef] (P, N, 3)."""
+    dq = joint_offsets(exts, bases, layout.robot.n_joints)
+    p, Jt, Jq = predict_rows(layout, x, inputs.q, mask, idx, dq=dq, joint_cols=True)
+    pose = np.nonzero(mask)[0]
+    blocks, moved = [Jt], np.zeros_like(p)
+    for ext, B in zip(exts, bases):
+        if ext.is_joint:
+            blocks.append(B[pose].T[:, :, None] * Jq[ext.joint][None])
+        else:
+            d, J = point_shift(ext, B[mask], p, _origin(ext, layout, x))
+            moved += d
+            blocks.append(J)
+    return p + moved, np.concatenate(blocks, axis=0)
+
+
+def fit_extended(prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_iter=50):
+    """Fit free geometric parameters and every extension's coefficients on the given poses.
+
+    Returns (x, exts with fitted coef, LMResult). Bases are evaluated at x0 and held.
+    """
+    poses = np.arange(prob.q.shape[0]) if poses is None else np.asarray(poses)
+    sub = Inputs(inputs.q[poses], *(None if a is None else a[poses]
+                                    for a in (inputs.time_s, inputs.temp_c)))
+    meas = prob.meas[poses]
+    mask = np.all(np.isfinite(meas), axis=-1)
+    y = meas[mask]
+    layout = prob.layout
+    bases = [prepare(e, layout, x0, sub) for e in exts]
+    idx = np.flatnonzero(free)
+    sizes = [e.n_params for e in exts]
+    x = np.array(x0, dtype=float)
+    start = np.concatenate([x[idx]] + [np.zeros(n) if len(e.coef) != n else e.coef
+                                       for e, n in zip(exts, sizes)])
+
+    def unpack(z):
+        xx = x.copy()
+        xx[idx] = z[: len(idx)]
+        out, k = [], len(idx)
+        for e, n in zip(exts, sizes):
+            out.append(Extension(**{**e.__dict__, "coef": z[k : k + n]}))
+            k += n
+        return xx, out
+
+    def fun(z):
+        xx, ee = unpack(z)
+        p, Jt = _rows(layout, xx, ee, bases, sub, mask, idx)
+        return (p - y).ravel(), Jt.reshape(Jt.shape[0], -1)
+
+    def residual(z):
+        xx, ee = unpack(z)
+        return (predict_extended(layout, xx, ee, sub, bases)[mask] - y).ravel()
+
+    res = levenberg_marquardt(fun, start, residual, max_iter=max_iter)
+    xx, ee = unpack(res.x)
+    return xx, ee, res
