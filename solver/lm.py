@@ -23,7 +23,7 @@ class LMResult:
     message: str
 
 
-def levenberg_marquardt(fun, x0, residual=None, max_iter=100, ftol=1e-12, xtol=1e-12) -> LMResult:
+def levenberg_marquardt(fun, x0, residual=None, max_iter=100, ftol=1e-10, xtol=1e-12) -> LMResult:
     """Minimise ||r(x)||^2 given fun(x) -> (r (M,), Jt (P, M)), the transposed Jacobian.
 
     residual(x) -> r, if given, evaluates a trial step without its Jacobian.
@@ -47,11 +47,14 @@ def levenberg_marquardt(fun, x0, residual=None, max_iter=100, ftol=1e-12, xtol=1
             except np.linalg.LinAlgError:
                 lam *= 10.0
                 continue
+            predicted = -(2.0 * g @ step + step @ A @ step)  # decrease of the linear model
+            if predicted <= ftol * cost:
+                # nothing left to gain at this damping: at the minimum, up to rounding
+                return LMResult(x, cost, it, nfev, "converged")
             xn = x + step
             rn = residual(xn)
             nfev += 1
             cn = float(rn @ rn)
-            predicted = -(2.0 * g @ step + step @ A @ step)  # decrease of the linear model
             if cn < cost:
                 break
             lam *= 10.0
