@@ -51,14 +51,20 @@ class GeometricErrors:
 class Effect(Protocol):
     """Switchable physics beyond geometry; each method returns None when it contributes nothing.
 
-    `time_s` and `temp_c` are per pose (m,) or None when unknown.
+    `time_s` and `temp_c` are per pose (m,) or None when unknown. Optional extras that
+    `campaign` honours: a `temperature_rise_c` attribute (the air warms by that much over the
+    campaign) and a `start_campaign(cell, time_s, temp_c)` method, called with the readings'
+    (m, K) times and true air temperatures before they are measured.
     """
 
     def joint_offsets(self, cell: VirtualCell, q, time_s, temp_c):
         """Joint-angle errors dq (m, N) rad added to the readings q, or None."""
 
-    def base_motion(self, cell: VirtualCell, time_s):
-        """Per-pose motions (m, 4, 4) of the robot base, in the base frame, or None."""
+    def base_motion(self, cell: VirtualCell, time_s, temp_c):
+        """Per-pose maps (m, 4, 4) applied to base-frame points before the base, or None.
+
+        Usually rigid motions of the base; thermal growth returns a scaling diag(s, s, s, 1).
+        """
 
 
 @dataclass
@@ -165,7 +171,7 @@ class VirtualCell:
                 d = effect.joint_offsets(self, q, tk, ck)
                 if d is not None:
                     dq = d if dq is None else dq + d
-                b = effect.base_motion(self, tk)
+                b = effect.base_motion(self, tk, ck)
                 if b is not None:
                     motion = motion @ b
             out[:, k] = self._points(q, dq, motion)[0][:, k]
@@ -194,7 +200,13 @@ class VirtualCell:
         # air: a slow drift of a few tenths of a degree over the campaign; the sensor adds noise
         drift = rng.uniform(0.2, 0.5) * rng.choice([-1.0, 1.0])
         air = rng.normal(20.0, 0.3) + drift * time_s / time_s.max()
+        rise = sum(getattr(e, "temperature_rise_c", 0.0) for e in self.effects)
+        if rise:  # effects that need a warming cell: a warm-up curve, steeper at the start
+            air = air + rise * np.expm1(-2.0 * time_s / time_s.max()) / np.expm1(-2.0)
         temp_c = air + rng.normal(scale=TEMP_NOISE_C, size=air.shape)
+        for effect in self.effects:
+            if hasattr(effect, "start_campaign"):
+                effect.start_campaign(self, time_s, air)
         xyz = self.measure(q, rng, time_s, air)
         broken = rng.random((n_poses, K)) < beam_break_rate
         xyz[broken], time_s[broken], temp_c[broken] = np.nan, np.nan, np.nan
@@ -225,7 +237,8 @@ class VirtualCell:
             "tracker": asdict(self.tracker),
             "acceptance_deg": float(np.rad2deg(self.acceptance_rad)),
             "floor_clearance_mm": float(self.floor_clearance_mm),
-            "effects": [type(e).__name__ for e in self.effects],
+            "effects": [e.describe() if hasattr(e, "describe") else {"name": type(e).__name__}
+                        for e in self.effects],
             "campaign": last or None,
             "noise_floor_mm": last.get("noise_floor_mm"),
         }

@@ -20,12 +20,14 @@ from .tables import console
 
 def cmd_simulate(args) -> None:
     from drivers.cell import TrackerSpec, VirtualCell
+    from drivers.effects import make_effects
 
     from .formats.campaign_csv import write_campaign
 
     cell = workflow.load_cell(args.cell)
     vc = VirtualCell.random(cell.robot, cell.targets, seed=args.seed,
                             tracker=TrackerSpec(**cell.tracker))
+    vc.effects.extend(make_effects(args.effect, vc, args.seed))  # bad specs fail before any output
     meas = vc.campaign(args.poses, seed=args.seed, beam_break_rate=args.beam_break_rate)
     write_campaign(args.out, meas)
     truth = vc.truth()
@@ -34,7 +36,8 @@ def cmd_simulate(args) -> None:
         write_json_atomic(args.truth_out, truth)
     console.print(f"wrote {meas.n_poses} poses x {len(meas.target_names)} targets "
                   f"({meas.n_readings} readings) to {args.out}; "
-                  f"tracker noise floor {truth['noise_floor_mm']:.4f} mm RMS")
+                  f"tracker noise floor {truth['noise_floor_mm']:.4f} mm RMS; effects: "
+                  + (", ".join(e.label() for e in vc.effects) or "none"))
 
 
 def cmd_calibrate(args) -> None:
@@ -110,22 +113,34 @@ def cmd_compare(args) -> None:
 
 
 def cmd_diagnose(args) -> None:
-    from .plots import write_figures
-
     cell = workflow.load_cell(args.cell)
     meas = workflow.load_campaign(args.meas, cell)
+    report, figures = _diagnose_to_files(cell, meas, args.meas, args.out, args.model_out)
+    _print_diagnosis(report)
+    console.print(f"report written to {args.out}" + (f", model to {args.model_out}" if args.model_out else "")
+                  + "".join(f", figure {p}" for p in figures))
+
+
+def _diagnose_to_files(cell, meas, meas_path, report_path, model_path):
+    """Run the diagnosis; write the report, its figures beside it and the extended model."""
+    from .plots import write_figures
+
     with console.status("diagnosing: cross-validating candidate effects...") as status:
         d, model = workflow.diagnose(cell, meas, log=lambda msg: status.update(msg.strip()))
     report = d.report
-    figures = write_figures(d.figures, args.out)
+    figures = write_figures(d.figures, report_path)
     by_label = {f["label"]: path.name for f, path in zip(d.figures, figures)}
     for e, ext in zip(report["effects"], _report_order(report, d.extensions)):
         e["figure"] = by_label.get(ext.label())
-    model.meta["data"] = {"file": Path(args.meas).name, "poses": meas.n_poses,
+    model.meta["data"] = {"file": Path(meas_path).name, "poses": meas.n_poses,
                           "readings": meas.n_readings}
-    write_json_atomic(args.out, report)
-    if args.model_out:
-        write_model(args.model_out, model)
+    write_json_atomic(report_path, report)
+    if model_path:
+        write_model(model_path, model)
+    return report, figures
+
+
+def _print_diagnosis(report) -> None:
     floor = report["noise_floor_mm"]
     console.print(f"baseline (geometric) held-out RMS {report['baseline']['holdout_rmse_mm']:.4f} mm, "
                   f"max {report['baseline']['holdout_max_mm']:.4f} mm; noise floor "
@@ -138,8 +153,6 @@ def cmd_diagnose(args) -> None:
                       + (f" at {e['at_s']:.0f} s" if "at_s" in e else "") + f": {e['evidence']}")
     console.print(f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
                   f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)")
-    console.print(f"report written to {args.out}" + (f", model to {args.model_out}" if args.model_out else "")
-                  + "".join(f", figure {p}" for p in figures))
 
 
 def _report_order(report, exts):
@@ -152,6 +165,7 @@ def _report_order(report, exts):
 
 def cmd_demo(args) -> None:
     from drivers.cell import VirtualCell
+    from drivers.effects import make_effects
 
     from .formats.campaign_csv import write_campaign
 
@@ -159,29 +173,42 @@ def cmd_demo(args) -> None:
     out.mkdir(parents=True, exist_ok=True)
     cell = workflow.load_cell(None)
     vc = VirtualCell.random(cell.robot, cell.targets, seed=args.seed)
+    vc.effects.extend(make_effects(args.effect, vc, args.seed))
     meas = vc.campaign(args.poses + args.holdout, seed=args.seed)
     cal_meas, hold = meas.subset(np.arange(args.poses)), meas.subset(np.arange(args.poses, meas.n_poses))
     write_campaign(out / "meas.csv", cal_meas)
     write_campaign(out / "holdout.csv", hold)
-    console.print(f"simulated {args.poses} calibration + {args.holdout} held-out poses "
-                  f"(noise floor {vc.noise_floor_mm(meas.q):.4f} mm) in {out}")
+    console.print(f"simulated {args.poses} calibration + {args.holdout} held-out poses on the "
+                  f"virtual IRB 2600 (hidden effects: {', '.join(args.effect) or 'none'}; tracker "
+                  f"noise floor {vc.noise_floor_mm(meas.q):.4f} mm) in {out}")
     rows = workflow.compare(cell, cal_meas)
     console.print(tables.table3(rows, cal_meas.target_names))
     cal, _ = rows["minimax"]
     model = workflow.model_file(cal, cell, cal_meas, data_path=out / "meas.csv")
     write_model(out / "model.json", model)
-    res = workflow.evaluate(model, hold)
-    console.print(tables.accuracy(res["model"], "minimax model on held-out poses",
+    geo = workflow.evaluate(model, hold)
+    report, figures = _diagnose_to_files(cell, cal_meas, out / "meas.csv", out / "report.json",
+                                         out / "model-extended.json")
+    _print_diagnosis(report)
+    ext = workflow.evaluate(workflow.read_model(out / "model-extended.json"), hold)
+    console.print(tables.accuracy(ext["model"], "extended model on held-out poses",
                                   hold.target_names))
-    console.print(f"held-out RMS {res['model']['rmse']:.4f} mm (nominal {res['nominal']['rmse']:.4f} mm); "
-                  f"model in {out / 'model.json'}")
+    console.print(f"held-out RMS: nominal {geo['nominal']['rmse']:.4f} mm, minimax "
+                  f"{geo['model']['rmse']:.4f} mm, extended {ext['model']['rmse']:.4f} mm")
+    console.print(f"files in {out}: model.json (minimax), model-extended.json, report.json"
+                  + "".join(f", {p.name}" for p in figures))
 
 
 def cmd_bench(args) -> None:
-    from .bench import run_solver_bench
+    if args.what == "diagnose":
+        from .bench_diagnose import run_diagnose_bench
 
-    result = run_solver_bench(sizes=args.sizes, reference=not args.no_reference,
-                              reference_max=args.reference_max)
+        result = run_diagnose_bench(poses=args.poses)
+    else:
+        from .bench import run_solver_bench
+
+        result = run_solver_bench(sizes=args.sizes, reference=not args.no_reference,
+                                  reference_max=args.reference_max)
     print(json.dumps(result, indent=2))
 
 
@@ -196,6 +223,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--beam-break-rate", type=float, default=0.0)
     s.add_argument("--out", required=True, help="meas.csv to write")
     s.add_argument("--truth-out", help="also write the simulated truth as JSON")
+    from drivers.effects import EFFECTS as FX
+
+    d = {name: f"default {e.default:g} {e.unit}" for name, e in FX.items()}
+    s.add_argument("--effect", action="append", default=[], metavar="SPEC", help=(
+        "add a physical effect, NAME[:JOINT[:HARMONIC]][=MAGNITUDE], joints from 1; repeatable. "
+        f"joint_compliance:J (dq = compliance x gravity torque, {d['joint_compliance']}); "
+        f"joint_periodic:J[:K] (dq = A sin(K q + phase), K 1 or 2 drawn if omitted, amplitude "
+        f"{d['joint_periodic']}); joint_scale:J (dq = s q, {d['joint_scale']}); "
+        f"thermal_drift (growth per degree of air, which then warms 2-5 degC, "
+        f"{d['thermal_drift']}); base_shift (a rigid move at a random time mid-campaign, "
+        f"{d['base_shift']})"))
     s.set_defaults(func=cmd_simulate)
 
     c = sub.add_parser("calibrate", help="identify a model from a campaign")
@@ -238,10 +276,14 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--poses", type=int, default=100)
     d.add_argument("--holdout", type=int, default=50)
     d.add_argument("--seed", type=int, default=1)
+    d.add_argument("--effect", action="append", metavar="SPEC",
+                   help="hidden effects of the simulated arm (default: joint_compliance:2); "
+                        "see `simulate --help`")
     d.set_defaults(func=cmd_demo)
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
-    b.add_argument("what", choices=("solver",))
+    b.add_argument("what", choices=("solver", "diagnose"))
+    b.add_argument("--poses", type=int, default=100, help="diagnose: poses per campaign")
     b.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000])
     b.add_argument("--no-reference", action="store_true",
                    help="skip the finite-difference scipy reference")
@@ -253,6 +295,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    if args.command == "demo" and args.effect is None:
+        args.effect = ["joint_compliance:2"]
     try:
         args.func(args)
     except (InputError, workflow.DataError, NotIdentifiable) as e:

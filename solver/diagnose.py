@@ -37,6 +37,7 @@ class CV:
     n: np.ndarray  # (m,) readings per pose
     maxerr: float
     exts: list  # extensions as fitted on all data (with coefficients)
+    fits: dict = field(default_factory=dict)  # fold (or "all") -> (x, extensions) fitted there
 
     @property
     def mse(self) -> float:
@@ -122,22 +123,37 @@ class Diagnoser:
         self.folds = folds(prob.q.shape[0], k_folds)
         self.centroid = np.nanmean(prob.meas.reshape(-1, 3), axis=0)
         self.fits = 0
+        self.warm: dict = {}  # fold -> (x, extensions) of the current model, to start fits from
 
-    def _with_shift_time(self, exts, poses):
-        """Base-shift extensions get their time from the training poses (a scan), others pass."""
+    def _with_shift_time(self, exts):
+        """Base-shift extensions get their time from a scan of all poses; others pass.
+
+        The change time is located once on the whole campaign and then held in every fold. Were
+        it located per fold, a held-out pose between the two training poses around the shift
+        would fall on either side by a coin flip, however clear the shift: no training reading
+        says on which side of it the unseen pose lies. The shift itself is fitted per fold and
+        judged on the held-out poses like every other extension.
+        """
         out = []
         for e in exts:
             if e.name == "base_shift" and e.at_s is None:
                 e = Extension("base_shift", at_s=self.scan_shift(
-                    [o for o in exts if o is not e], poses), origin=self.centroid)
+                    [o for o in exts if o is not e], np.arange(self.prob.q.shape[0])),
+                    origin=self.centroid)
             out.append(e)
         return out
 
-    def fit(self, exts, poses=None):
+    def fit(self, exts, poses=None, fold="all"):
         self.fits += 1
         poses = np.arange(self.prob.q.shape[0]) if poses is None else poses
-        exts = self._with_shift_time(exts, poses)
-        x, ee, _ = fit_extended(self.prob, self.inputs, self.x0, self.free, exts, poses)
+        start = None
+        if fold in self.warm:
+            # the current model's fit on the same poses: only the new extension starts from zero
+            start, known = self.warm[fold]
+            exts = [Extension(**{**e.__dict__, "coef": k.coef}) if i < len(known) else e
+                    for i, (e, k) in enumerate(zip(exts, known + [None] * len(exts)))]
+        x, ee, _ = fit_extended(self.prob, self.inputs, self.x0, self.free, exts, poses,
+                                start=start)
         return x, ee
 
     def residuals(self, x, exts, poses):
@@ -146,54 +162,68 @@ class Diagnoser:
 
     def cross_validate(self, exts) -> CV:
         m = self.prob.q.shape[0]
+        exts = self._with_shift_time(exts)
         sq, n = np.zeros(m), np.zeros(m)
         maxerr = 0.0
-        for test in self.folds:
+        fits = {}
+        for f, test in enumerate(self.folds):
             train = np.setdiff1d(np.arange(m), test)
-            x, ee = self.fit(exts, train)
+            x, ee = self.fit(exts, train, fold=f)
+            fits[f] = (x, ee)
             r = self.residuals(x, ee, test)
             e2 = np.sum(r * r, axis=-1)
             sq[test] = np.nansum(e2, axis=1)
             n[test] = np.sum(np.isfinite(e2), axis=1)
             maxerr = max(maxerr, float(np.sqrt(np.nanmax(e2))))
-        _, ee = self.fit(exts)
-        return CV(sq, n, maxerr, ee)
+        x, ee = self.fit(exts)
+        fits["all"] = (x, ee)
+        return CV(sq, n, maxerr, ee, fits)
 
     def scan_shift(self, others, poses) -> float:
-        """The time of a base shift that best explains the training residuals (linearised)."""
+        """The time of a base shift that best explains the training residuals (linearised).
+
+        Every gap between two consecutive readings is a candidate (a shift may fall between the
+        SMRs of one pose). For each, the gain of the six shift columns, made orthogonal to the
+        geometric Jacobian, is b' (Z'Z)^-1 b; all the Gram sums are suffix sums over readings in
+        time order, so the whole scan costs about one Jacobian.
+        """
         x, ee = self.fit_plain(others, poses)
         sub = self.inputs.subset(poses)
         meas = self.prob.meas[poses]
-        mask = np.all(np.isfinite(meas), axis=-1)
-        r = (predict_extended(self.prob.layout, x, ee, sub)[mask] - meas[mask]).ravel()
+        mask = np.all(np.isfinite(meas), axis=-1) & np.isfinite(sub.time_s)
+        r = predict_extended(self.prob.layout, x, ee, sub)[mask] - meas[mask]  # (N, 3)
         idx = np.flatnonzero(self.free)
-        _, Jt = predict_rows(self.prob.layout, x, sub.q, mask, idx)
+        _, Jt = predict_rows(self.prob.layout, x, sub.q, mask, idx)  # (P, N, 3)
         Q, _ = np.linalg.qr(Jt.reshape(len(idx), -1).T)
+        Q = Q.reshape(-1, 3, Q.shape[1])  # (N, 3, P)
         t = sub.time_s[mask]
-        times = np.unique(np.nanmedian(sub.time_s, axis=1))
-        if len(times) <= 2 * EDGE_POSES:
-            return float(times[len(times) // 2])
-        cands = 0.5 * (times[EDGE_POSES - 1 : -EDGE_POSES] + times[EDGE_POSES : -EDGE_POSES + 1])
-        p = self.prob.meas[poses][mask]  # lever arms about the centroid, as in the fit
-        v = p - self.centroid
-        best, best_at = -1.0, float(cands[0])
-        for at in cands:
-            s = (t >= at).astype(float)
-            Z = np.zeros((len(t), 3, 6))
-            for a in range(3):
-                Z[:, a, a] = s
-                e = np.zeros(3)
-                e[a] = 1.0
-                Z[:, :, 3 + a] = s[:, None] * np.cross(e, v)
-            Z = Z.reshape(-1, 6)
-            Z = Z - Q @ (Q.T @ Z)
-            b = Z.T @ r
+        order = np.argsort(t, kind="stable")
+        t, r, Q = t[order], r[order], Q[order]
+        v = meas[mask][order] - self.centroid
+        Z = np.zeros((len(t), 3, 6))  # per reading: translation and rotation columns
+        Z[:, [0, 1, 2], [0, 1, 2]] = 1.0
+        for a in range(3):
+            e = np.zeros(3)
+            e[a] = 1.0
+            Z[:, :, 3 + a] = np.cross(e, v)
+        suffix = lambda a: np.cumsum(a[::-1], axis=0)[::-1]  # noqa: E731
+        ZZ = suffix(np.einsum("nci,ncj->nij", Z, Z))
+        QZ = suffix(np.einsum("ncp,nci->npi", Q, Z))
+        Zr = suffix(np.einsum("nci,nc->ni", Z, r))
+        Qr = np.einsum("ncp,nc->p", Q, r)
+        lo = EDGE_POSES * meas.shape[1]
+        best, best_at = -1.0, float(np.median(t))
+        for n in range(max(lo, 1), len(t) - lo):
+            if t[n] == t[n - 1]:
+                continue
+            G = ZZ[n] - QZ[n].T @ QZ[n]
+            b = Zr[n] - QZ[n].T @ Qr
             try:
-                gain = float(b @ np.linalg.solve(Z.T @ Z + 1e-12 * np.eye(6), b))
+                gain = float(b @ np.linalg.solve(G + 1e-12 * np.trace(G) * np.eye(6), b))
             except np.linalg.LinAlgError:
                 continue
             if gain > best:
-                best, best_at = gain, float(at)
+                best, best_at = gain, 0.5 * float(t[n - 1] + t[n])
         return best_at
 
     def fit_plain(self, exts, poses):
@@ -214,6 +244,7 @@ def select(diag: Diagnoser, cands, log=None):
     """Forward selection; returns the accepted steps [(extension, cv_before, cv_after, t)] and final CV."""
     current: list[Extension] = []
     cv_now = diag.cross_validate(current)
+    diag.warm = cv_now.fits
     base = cv_now
     steps = []
     remaining = list(cands)
@@ -240,6 +271,7 @@ def select(diag: Diagnoser, cands, log=None):
         if c.name in ("thermal_drift", "base_shift"):
             remaining = [r for r in remaining if r.name != c.name]
         cv_now = cv
+        diag.warm = cv.fits
     return steps, base, cv_now
 
 

@@ -43,10 +43,12 @@ def _rows(layout, x, exts, bases, inputs, mask, idx):
     return p + moved, np.concatenate(blocks, axis=0)
 
 
-def fit_extended(prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_iter=50):
+def fit_extended(prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_iter=50,
+                 start=None):
     """Fit free geometric parameters and every extension's coefficients on the given poses.
 
-    Returns (x, exts with fitted coef, LMResult). Bases are evaluated at x0 and held.
+    Returns (x, exts with fitted coef, LMResult). Bases are evaluated at x0 and held; the fit
+    starts from `start` (default x0) and from each extension's coef where it has one.
     """
     poses = np.arange(prob.q.shape[0]) if poses is None else np.asarray(poses)
     sub = Inputs(inputs.q[poses], *(None if a is None else a[poses]
@@ -58,9 +60,9 @@ def fit_extended(prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_
     bases = [prepare(e, layout, x0, sub) for e in exts]
     idx = np.flatnonzero(free)
     sizes = [e.n_params for e in exts]
-    x = np.array(x0, dtype=float)
-    start = np.concatenate([x[idx]] + [np.zeros(n) if len(e.coef) != n else e.coef
-                                       for e, n in zip(exts, sizes)])
+    x = np.array(x0 if start is None else start, dtype=float)
+    z0 = np.concatenate([x[idx]] + [np.zeros(n) if len(e.coef) != n else e.coef
+                                    for e, n in zip(exts, sizes)])
 
     def unpack(z):
         xx = x.copy()
@@ -80,6 +82,6 @@ def fit_extended(prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_
         xx, ee = unpack(z)
         return (predict_extended(layout, xx, ee, sub, bases)[mask] - y).ravel()
 
-    res = levenberg_marquardt(fun, start, residual, max_iter=max_iter)
+    res = levenberg_marquardt(fun, z0, residual, max_iter=max_iter)
     xx, ee = unpack(res.x)
     return xx, ee, res

@@ -188,7 +188,7 @@ class KickAndShift:
         dq[:, 1] = 1e-3
         return dq
 
-    def base_motion(self, cell, time_s):
+    def base_motion(self, cell, time_s, temp_c):
         if time_s is None:
             return None
         after = (np.asarray(time_s) >= 100.0)[:, None, None]

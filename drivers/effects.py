@@ -1,0 +1,312 @@
+"""Physics the geometric model lacks: one class per effect, made from a spec by `make_effect`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from solver.kinematics import Layout, flange_frames, translation
+from solver.robot import Robot
+
+G = 9.81  # m/s^2, along -z of the robot base frame (a floor-mounted arm)
+REFERENCE_TEMP_C = 20.0  # ISO 1 reference temperature: zero growth until a campaign sets T0
+EFFECT_STREAM = 0xEFFEC7  # effects draw from their own stream, so the cell's geometry is unchanged
+
+
+def link_frames(robot: Robot, q):
+    """Per joint in the base frame: axis, a point on it (m, N, 3), its link's frame R (m, N, 3, 3), o."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    n = robot.n_joints
+    lay = Layout(robot, np.eye(4), ())
+    _, _, rec = flange_frames(lay, lay.initial(np.zeros((0, 3))), q, record=True)
+    axes = np.stack([a for op, a, _ in rec if op.kind == "r" and op.joint >= 0], axis=1)
+    points = np.stack([o for op, _, o in rec if op.kind == "r" and op.joint >= 0], axis=1)
+    R, o = [], []
+    for j in range(1, n + 1):  # the convention's frame J (the flange for J = N): the arm cut after J
+        sub = Robot(robot.name, robot.convention, robot.joints[:j], robot.parallel[:j])
+        sl = Layout(sub, np.eye(4), ())
+        Rj, oj = flange_frames(sl, sl.initial(np.zeros((0, 3))), q[:, :j])
+        R.append(Rj)
+        o.append(oj)
+    return axes, points, np.stack(R, axis=1), np.stack(o, axis=1)
+
+
+class MassModel:
+    """Point masses fixed to links: a centre of gravity (mm, in its link's frame) per body."""
+
+    def __init__(self, link, mass_kg, cog_mm):
+        self.link = np.asarray(link, dtype=int)  # 0-based joint whose link carries the body
+        self.mass_kg = np.asarray(mass_kg, dtype=float)
+        self.cog_mm = np.asarray(cog_mm, dtype=float).reshape(-1, 3)
+
+    @classmethod
+    def random(cls, robot: Robot, rng) -> MassModel:
+        """Per link 5 kg + 25 kg/m of length, x U(0.5, 1.5), near the link; a 2-20 kg payload."""
+        n = robot.n_joints
+        _, points, R, o = link_frames(robot, np.zeros((1, n)))
+        ends = np.vstack([points[0, 1:], o[0, -1:]])  # a link runs from its axis to the next (flange)
+        links, masses, cogs = [], [], []
+        for j in range(n):
+            start, end = (R[0, j].T @ (p - o[0, j]) for p in (points[0, j], ends[j]))  # link frame
+            length_m = np.abs(end - start).sum() / 1000.0  # |a| + |d|
+            masses.append((5.0 + 25.0 * length_m) * rng.uniform(0.5, 1.5))
+            # anywhere in the box the link spans, 50 mm of flesh around its kinematic skeleton
+            cogs.append(rng.uniform(np.minimum(start, end) - 50.0, np.maximum(start, end) + 50.0))
+            links.append(j)
+        direction = rng.normal(size=3)
+        r = 150.0 * rng.uniform() ** (1 / 3)  # uniform in a 150 mm ball about the flange
+        links.append(n - 1)
+        masses.append(rng.uniform(2.0, 20.0))
+        cogs.append(r * direction / np.linalg.norm(direction))
+        return cls(links, masses, cogs)
+
+    def positions(self, robot: Robot, q) -> np.ndarray:
+        """Centres of gravity (m, bodies, 3) in the base frame, mm."""
+        _, _, R, o = link_frames(robot, q)
+        return self._place(R, o)
+
+    def _place(self, R, o):
+        return o[:, self.link] + np.einsum("mbij,bj->mbi", R[:, self.link], self.cog_mm)
+
+    def torques(self, robot: Robot, q) -> np.ndarray:
+        """Gravity torque (m, N) about each joint axis, N m: z_J . sum_(bodies beyond J) r x m g."""
+        axes, points, R, o = link_frames(robot, q)
+        r = self._place(R, o)
+        force = np.zeros((len(self.mass_kg), 3))
+        force[:, 2] = -G * self.mass_kg
+        tau = np.empty(axes.shape[:2])
+        for j in range(axes.shape[1]):
+            beyond = self.link >= j
+            lever_m = (r[:, beyond] - points[:, j, None]) / 1000.0
+            moment = np.cross(lever_m, force[beyond]).sum(axis=1)
+            tau[:, j] = np.einsum("mi,mi->m", moment, axes[:, j])
+        return tau
+
+    def describe(self) -> dict:
+        bodies = [{"link": int(j) + 1, "mass_kg": float(mk), "cog_mm": [float(v) for v in c]}
+                  for j, mk, c in zip(self.link[:-1], self.mass_kg[:-1], self.cog_mm[:-1])]
+        return {"frames": "each link's cog in the convention's frame of its joint (frame J); "
+                          "the payload's in the flange frame",
+                "links": bodies, "payload_kg": float(self.mass_kg[-1]),
+                "payload_cog_mm": [float(v) for v in self.cog_mm[-1]]}
+
+
+class _Effect:
+    """Shared parts: the spec fields and a no-op for the hook an effect does not use."""
+
+    name = ""
+    unit = ""
+    default = 0.0
+    takes_joint = takes_harmonic = False
+
+    def __init__(self, magnitude: float, joint: int | None = None, harmonic: int | None = None):
+        self.magnitude = float(magnitude)
+        self.joint = joint  # 0-based inside the code
+        self.harmonic = harmonic
+
+    def joint_offsets(self, cell, q, time_s, temp_c):
+        return None
+
+    def base_motion(self, cell, time_s, temp_c):
+        return None
+
+    def _dq(self, q, values):
+        dq = np.zeros_like(np.atleast_2d(q), dtype=float)
+        dq[:, self.joint] = values
+        return dq
+
+    def label(self) -> str:
+        """The effect as a spec with its magnitude and unit, e.g. `joint_periodic:3:2=0.01 deg`."""
+        head = self.name
+        if self.joint is not None:
+            head += f":{self.joint + 1}"
+        if self.harmonic is not None:
+            head += f":{self.harmonic}"
+        return f"{head}={self.magnitude:g} {self.unit}"
+
+    def describe(self) -> dict:
+        """Name, joint (from 1), harmonic, magnitude and unit, and the drawn hidden parameters."""
+        return {"name": self.name, "joint": None if self.joint is None else self.joint + 1,
+                "harmonic": self.harmonic, "magnitude": self.magnitude, "unit": self.unit,
+                **self.hidden()}
+
+    def hidden(self) -> dict:
+        return {}
+
+
+class JointCompliance(_Effect):
+    """dq_J = c tau_J(q): the joint gives way under the gravity torque of a random mass model."""
+
+    name, unit, default, takes_joint = "joint_compliance", "urad/(N m)", 0.3, True
+
+    def __init__(self, cell, rng, magnitude, joint, harmonic=None):
+        super().__init__(magnitude, joint)
+        self.mass = MassModel.random(cell.true_robot, rng)
+
+    def joint_offsets(self, cell, q, time_s, temp_c):
+        return self._dq(q, 1e-6 * self.magnitude * self.mass.torques(cell.true_robot, q)[:, self.joint])
+
+    def hidden(self) -> dict:
+        return self.mass.describe()
+
+
+class JointPeriodic(_Effect):
+    """dq_J = A sin(K q_J + phase): a cyclic transmission or encoder error."""
+
+    name, unit, default, takes_joint, takes_harmonic = "joint_periodic", "deg", 0.01, True, True
+
+    def __init__(self, cell, rng, magnitude, joint, harmonic=None):
+        super().__init__(magnitude, joint, int(rng.integers(1, 3)) if harmonic is None else harmonic)
+        self.phase = rng.uniform(0.0, 2 * np.pi)
+
+    def joint_offsets(self, cell, q, time_s, temp_c):
+        qj = np.atleast_2d(q)[:, self.joint]
+        return self._dq(q, np.deg2rad(self.magnitude) * np.sin(self.harmonic * qj + self.phase))
+
+    def hidden(self) -> dict:
+        return {"phase_deg": float(np.rad2deg(self.phase))}
+
+
+class JointScale(_Effect):
+    """dq_J = s q_J: a gear-ratio or encoder scale error."""
+
+    name, unit, default, takes_joint = "joint_scale", "ppm", 100.0, True
+
+    def __init__(self, cell, rng, magnitude, joint, harmonic=None):
+        super().__init__(magnitude, joint)
+
+    def joint_offsets(self, cell, q, time_s, temp_c):
+        return self._dq(q, 1e-6 * self.magnitude * np.atleast_2d(q)[:, self.joint])
+
+
+class ThermalDrift(_Effect):
+    """The arm grows with the air temperature: base-frame points scale by 1 + kappa (T - T0)."""
+
+    name, unit, default = "thermal_drift", "ppm/degC", 50.0
+
+    def __init__(self, cell, rng, magnitude, joint=None, harmonic=None):
+        super().__init__(magnitude)
+        self.temperature_rise_c = rng.uniform(2.0, 5.0)  # the cell warms so the effect shows
+        self.t0_c = REFERENCE_TEMP_C
+
+    def start_campaign(self, cell, time_s, temp_c):
+        self.t0_c = float(temp_c.flat[0])  # the first reading's air
+
+    def base_motion(self, cell, time_s, temp_c):
+        if temp_c is None:
+            return None
+        s = 1.0 + 1e-6 * self.magnitude * (np.asarray(temp_c, dtype=float) - self.t0_c)
+        m = np.zeros((s.size, 4, 4))
+        m[:, 0, 0] = m[:, 1, 1] = m[:, 2, 2] = s
+        m[:, 3, 3] = 1.0
+        return m
+
+    def hidden(self) -> dict:
+        return {"t0_c": self.t0_c, "temperature_rise_c": float(self.temperature_rise_c)}
+
+
+class BaseShift(_Effect):
+    """At at_s the base moves `magnitude` mm and turns magnitude/2000 rad, in random directions."""
+
+    name, unit, default = "base_shift", "mm", 0.2
+
+    def __init__(self, cell, rng, magnitude, joint=None, harmonic=None):
+        super().__init__(magnitude)
+        self.direction = _unit(rng.normal(size=3))
+        self.axis = _unit(rng.normal(size=3))
+        self.fraction = rng.uniform(0.3, 0.7)  # of the campaign's duration
+        self.at_s = None  # known once a campaign starts
+
+    def start_campaign(self, cell, time_s, temp_c):
+        self.at_s = float(self.fraction * np.nanmax(time_s))
+
+    @property
+    def motion(self) -> np.ndarray:
+        """The 4x4 move of the base, in the base frame."""
+        m = translation(*(self.magnitude * self.direction))
+        m[:3, :3] = _rotation(self.axis, self.magnitude / 2000.0)
+        return m
+
+    def base_motion(self, cell, time_s, temp_c):
+        if time_s is None or self.at_s is None:
+            return None
+        after = np.asarray(time_s, dtype=float) >= self.at_s  # NaN (no time) counts as before
+        return np.where(after[:, None, None], self.motion, np.eye(4))
+
+    def hidden(self) -> dict:
+        return {"at_s": self.at_s, "at_fraction": float(self.fraction),
+                "translation_mm": [float(v) for v in self.magnitude * self.direction],
+                "rotation_axis": [float(v) for v in self.axis],
+                "rotation_deg": float(np.rad2deg(self.magnitude / 2000.0))}
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
+
+
+def _rotation(axis, angle) -> np.ndarray:
+    """3x3 rotation by angle (rad) about a unit axis (Rodrigues)."""
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+EFFECTS = {e.name: e for e in (JointCompliance, JointPeriodic, JointScale, ThermalDrift, BaseShift)}
+SPEC_HELP = "NAME[:JOINT[:HARMONIC]][=MAGNITUDE]"
+
+
+def make_effect(spec: str, cell, rng):
+    """The effect a spec `NAME[:JOINT[:HARMONIC]][=MAGNITUDE]` names, on this cell; ValueError if bad."""
+    head, eq, mag_text = str(spec).strip().partition("=")
+    name, *fields = [f.strip() for f in head.split(":")]
+    cls = EFFECTS.get(name)
+    if cls is None:
+        raise ValueError(f"effect {spec!r}: unknown effect {name!r}; choose from {', '.join(EFFECTS)}")
+    n = cell.true_robot.n_joints
+    allowed = int(cls.takes_joint) + int(cls.takes_harmonic)
+    if len(fields) > allowed:
+        what = {0: "no joint", 1: "only a joint"}.get(allowed, "a joint and a harmonic")
+        raise ValueError(f"effect {spec!r}: {name} takes {what} ({_grammar(cls)})")
+    joint = harmonic = None
+    if cls.takes_joint:
+        if not fields or not fields[0]:
+            raise ValueError(f"effect {spec!r}: {name} needs a joint, 1 to {n} ({_grammar(cls)})")
+        joint = _integer(spec, "joint", fields[0])
+        if not 1 <= joint <= n:
+            raise ValueError(f"effect {spec!r}: joint {joint} is not one of the robot's "
+                             f"joints 1 to {n}")
+        joint -= 1
+    if len(fields) > 1:
+        harmonic = _integer(spec, "harmonic", fields[1])
+        if harmonic < 1:
+            raise ValueError(f"effect {spec!r}: the harmonic must be a positive integer, not {harmonic}")
+    magnitude = cls.default
+    if eq:
+        try:
+            magnitude = float(mag_text)
+        except ValueError:
+            raise ValueError(f"effect {spec!r}: magnitude {mag_text.strip()!r} is not a number "
+                             f"(in {cls.unit})") from None
+        if not math.isfinite(magnitude):
+            raise ValueError(f"effect {spec!r}: magnitude must be finite")
+        if magnitude < 0 and cls in (JointCompliance, JointPeriodic, BaseShift):
+            raise ValueError(f"effect {spec!r}: magnitude must not be negative (in {cls.unit})")
+    return cls(cell, rng, magnitude, joint, harmonic)
+
+
+def make_effects(specs, cell, seed: int) -> list:
+    """Effects for several specs, their hidden parameters drawn from a stream of their own per seed."""
+    rng = np.random.default_rng([EFFECT_STREAM, seed])
+    return [make_effect(s, cell, rng) for s in specs]
+
+
+def _grammar(cls) -> str:
+    return cls.name + (":JOINT" if cls.takes_joint else "") + ("[:HARMONIC]" if cls.takes_harmonic
+                                                               else "") + f"[=MAGNITUDE in {cls.unit}]"
+
+
+def _integer(spec, what, text) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise ValueError(f"effect {spec!r}: {what} {text!r} is not an integer") from None
