@@ -9,18 +9,17 @@ import matplotlib
 matplotlib.use("Agg")  # files only: the workstation may have no display
 
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 
 
 def effect_figure(series: dict, path: Path) -> Path:
     """One PNG: residual signature against the effect's variable, before and after, with the fitted law."""
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(10, 4), sharey=True, constrained_layout=True)
-    order = np.argsort(series["model_x"])
-    for ax, key, title in ((ax0, "before", "before: geometric model"),
+    for ax, key, title in ((ax0, "before", "before: fitted without it"),
                            (ax1, "after", "after: with " + series["label"])):
-        ax.scatter(series["x"], series[key], s=12, alpha=0.7, label="residual per pose")
-        ax.plot(np.asarray(series["model_x"])[order], np.asarray(series["model_y"])[order], "r-",
-                lw=1.5, label="fitted effect")
+        ax.scatter(series["x"], series[key], s=14, alpha=0.7, label="residual per pose")
+        if key == "before":
+            ax.scatter(series["x"], series["expected"], s=10, marker="x", color="red",
+                       label="fitted effect, less what geometry absorbs")
         ax.axhline(0.0, color="grey", lw=0.8)
         ax.set_title(title)
         ax.set_xlabel(series["x_label"])

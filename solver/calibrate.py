@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import identifiability as ident
-from .identify import Problem, fit_targets, least_squares_fit, pose_fit, pose_residuals, pose_weight, register
+from .identify import fit_targets, least_squares_fit, pose_fit, pose_residuals, pose_weight, register
 from .kinematics import Layout, predict_with_jacobian
 from .minimax import minimax
 from .robot import Robot

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .effects import Extension, Inputs, joint_basis, prepare
+from .effects import Extension, joint_basis, joint_offsets, point_shift, prepare
 from .extended import predict_extended
 from .kinematics import predict_rows
 
@@ -69,7 +69,7 @@ def build_report(diag, steps, base, final, exts, x, floor, n_candidates):
     layout, inputs = diag.prob.layout, diag.inputs
     m = diag.prob.q.shape[0]
     effects, params = [], []
-    for (ext, before, after, t), fitted in zip(steps, exts):
+    for (_, before, after, t), fitted in zip(steps, exts):
         basis = joint_basis(fitted, layout, diag.x0, inputs) if fitted.is_joint else None
         p = parameters(fitted, basis)
         params.append(p)
@@ -98,72 +98,78 @@ def build_report(diag, steps, base, final, exts, x, floor, n_candidates):
     }
 
 
-def _joint_error(layout, x, exts, inputs, meas, joint):
-    """Per pose, the joint-angle error that best explains its residuals (rad; NaN if unseen)."""
-    mask = np.all(np.isfinite(meas), axis=-1)
-    r = predict_extended(layout, x, exts, inputs)[mask] - meas[mask]
-    _, _, Jq = predict_rows(layout, x, inputs.q, mask, [], joint_cols=True)
-    g = Jq[joint]
-    pose = np.nonzero(mask)[0]
-    num = np.bincount(pose, np.einsum("nc,nc->n", g, r), minlength=len(inputs.q))
-    den = np.bincount(pose, np.einsum("nc,nc->n", g, g), minlength=len(inputs.q))
-    # pred - meas = -(missing joint error) along the joint's motion
-    return -num / np.where(den > 0, den, np.nan)
-
-
 def figure_series(diag, steps, exts, x) -> list[dict]:
-    """For each found effect, its signature in the residuals against its variable, before and after."""
+    """For each found effect, its signature in the residuals against its variable, before and after.
+
+    `before` is the residual of the model fitted without the effect, `expected` what the effect
+    leaves in such residuals once the geometric parameters have absorbed what they can (its
+    displacement minus the projection on the geometric Jacobian): the points should follow it.
+    `after` is the residual of the final model.
+    """
     from .extended import fit_extended
 
     prob, inputs, layout = diag.prob, diag.inputs, diag.prob.layout
+    mask = prob.mask
+    pose = np.nonzero(mask)[0]
+    m = prob.q.shape[0]
+    bases = [prepare(e, layout, diag.x0, inputs) for e in exts]
+    dq = joint_offsets(exts, bases, layout.robot.n_joints)
+    idx = np.flatnonzero(diag.free)
+    p, Jt, Jq = predict_rows(layout, x, inputs.q, mask, idx, dq=dq, joint_cols=True)
+    Q, _ = np.linalg.qr(Jt.reshape(len(idx), -1).T)
+    meas = prob.meas[mask]
+    r_after = predict_extended(layout, x, exts, inputs, bases)[mask] - meas
     out = []
     for i, ext in enumerate(exts):
+        if ext.is_joint:
+            D = Jq[ext.joint] * (bases[i] @ ext.coef)[pose][:, None]
+        else:
+            D, _ = point_shift(ext, bases[i][mask], p, _point_origin(ext, layout, x))
+        D_res = D - (Q @ (Q.T @ D.ravel())).reshape(D.shape)
         others = [e for j, e in enumerate(exts) if j != i]
         xb, eb, _ = fit_extended(prob, inputs, diag.x0, diag.free, others)
-        series = {"name": ext.name, "label": ext.label()}
-        if ext.is_joint:
-            j = ext.joint
-            before = _joint_error(layout, xb, eb, inputs, prob.meas, j)
-            after = _joint_error(layout, x, exts, inputs, prob.meas, j)
-            model = joint_basis(ext, layout, diag.x0, inputs) @ ext.coef
-            if ext.name == "joint_compliance":
-                var, xl = np.degrees(model - model.mean()) * 1000, "fitted gravity deflection / mdeg"
-            else:
-                var, xl = np.degrees(inputs.q[:, j]), f"q{j + 1} / deg"
-            shift = np.nanmean(before - model)  # joint offsets absorb the constant part
-            series.update(x=var, before=np.degrees(before - shift) * 1000,
-                          after=np.degrees(after) * 1000, model_x=var,
-                          model_y=np.degrees(model - np.mean(model)) * 1000 if
-                          ext.name == "joint_compliance" else np.degrees(model) * 1000,
-                          x_label=xl, y_label=f"joint {j + 1} error / mdeg")
+        r_before = predict_extended(layout, xb, eb, inputs)[mask] - meas
+        sig = _signature(ext, Jq, p, layout, x, pose, m)
+        series = {"name": ext.name, "label": ext.label(), "before": sig(r_before),
+                  "after": sig(r_after), "expected": sig(-D_res)}
+        if ext.name == "joint_compliance":
+            series.update(x=series["expected"], x_label="unabsorbed gravity deflection / mdeg",
+                          y_label=f"joint {ext.joint + 1} error / mdeg")
+        elif ext.is_joint:
+            series.update(x=np.degrees(inputs.q[:, ext.joint]), x_label=f"q{ext.joint + 1} / deg",
+                          y_label=f"joint {ext.joint + 1} error / mdeg")
+        elif ext.name == "thermal_drift":
+            var = inputs.temp_c if ext.variable == "temp_c" else inputs.time_s
+            series.update(x=np.nanmean(var, axis=1), y_label="radial growth / ppm",
+                          x_label="air temperature / degC" if ext.variable == "temp_c" else "time / s")
         else:
-            s = prepare(ext, layout, x, inputs)
-            var = np.nanmean(s, axis=1) + (ext.t_ref or 0.0)
-            before = _point_signature(ext, layout, xb, eb, inputs, prob.meas, x)
-            after = _point_signature(ext, layout, x, exts, inputs, prob.meas, x)
-            if ext.name == "thermal_drift":
-                model_y = (np.nanmean(s, axis=1)) * ext.coef[0] * 1e6
-                xl = "air temperature / degC" if ext.variable == "temp_c" else "time / s"
-                yl = "radial growth / ppm"
-            else:
-                var = np.nanmean(inputs.time_s, axis=1)
-                model_y = np.nanmean(s, axis=1) * np.linalg.norm(ext.coef[:3])
-                xl, yl = "time / s", "displacement along the shift / mm"
-            series.update(x=var, before=before, after=after, model_x=var, model_y=model_y,
-                          x_label=xl, y_label=yl)
-        for k in ("x", "before", "after", "model_x", "model_y"):
-            series[k] = np.asarray(series[k], dtype=float)
-        out.append(series)
+            series.update(x=np.nanmean(inputs.time_s, axis=1), x_label="time / s",
+                          y_label="displacement along the shift / mm")
+        out.append({k: np.asarray(v, dtype=float) if k in ("x", "before", "after", "expected")
+                    else v for k, v in series.items()})
     return out
 
 
-def _point_signature(ext, layout, x, exts, inputs, meas, x_final):
-    """Per pose: radial growth (ppm) for thermal drift, displacement along the shift (mm) for a shift."""
-    r = -(predict_extended(layout, x, exts, inputs) - meas)  # what the model misses
-    if ext.name == "thermal_drift":
-        v = predict_extended(layout, x, exts, inputs) - layout.base(x_final)[:3, 3]
-        num = np.nansum(np.einsum("mkc,mkc->mk", v, r), axis=1)
-        den = np.nansum(np.einsum("mkc,mkc->mk", v, v), axis=1)
-        return num / den * 1e6
-    u = ext.coef[:3] / max(np.linalg.norm(ext.coef[:3]), 1e-12)
-    return np.nanmean(r @ u, axis=1)
+def _point_origin(ext, layout, x):
+    return layout.base(x)[:3, 3] if ext.name == "thermal_drift" else ext.origin
+
+
+def _signature(ext, Jq, p, layout, x, pose, m):
+    """Per pose, the effect's own coordinate of a residual field r (N, 3): joint error in mdeg,
+    radial growth in ppm, or displacement along the shift in mm (positive: what the model misses)."""
+    if ext.is_joint:
+        g = Jq[ext.joint]
+        scale = np.degrees(1.0) * 1000.0
+    elif ext.name == "thermal_drift":
+        g = p - layout.base(x)[:3, 3]
+        scale = 1e6
+    else:
+        u = ext.coef[:3] / max(np.linalg.norm(ext.coef[:3]), 1e-12)
+        g = np.broadcast_to(u, p.shape)
+        scale = 1.0
+
+    def sig(r):
+        num = np.bincount(pose, np.einsum("nc,nc->n", g, r), minlength=m)
+        den = np.bincount(pose, np.einsum("nc,nc->n", g, g), minlength=m)
+        return -scale * num / np.where(den > 0, den, np.nan)
+    return sig
