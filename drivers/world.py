@@ -31,7 +31,7 @@ class SimulatedWorld:
         self._t0 = self._t1 = clock.now()
         self.air_c, self.air_drift = air_c, air_drift_c_per_h
         self._start = clock.now()
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()  # command_move asks move_duration, which reads joints
 
     def move_duration(self, q_target) -> float:
         """Seconds a joint move from the current position to q_target takes."""

@@ -1,0 +1,191 @@
+"""Campaign planning: valid random poses, an observability-optimal subset, a short order."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from solver import observability as obs
+from solver.identifiability import structural
+from solver.kinematics import Layout, predict, predict_rows
+from solver.robot import Robot
+
+from .cell import LIMIT_MARGIN_RAD, VirtualCell
+from .world import ACCEL_S, DEFAULT_SPEEDS_DEG_S
+
+
+def _targets(targets) -> tuple[tuple[str, ...], np.ndarray]:
+    """Names and (K, 3) positions of the SMRs, from a {name: xyz} dict or a (K, 3) array."""
+    if isinstance(targets, dict):
+        return tuple(targets), np.array(list(targets.values()), dtype=float).reshape(-1, 3)
+    t = np.asarray(targets, dtype=float).reshape(-1, 3)
+    return tuple(f"T{i + 1}" for i in range(len(t))), t
+
+
+def pose_checks(robot: Robot, base_in_tracker, targets, q, acceptance_deg: float = 60.0,
+                floor_mm: float = 150.0, bounds=None) -> dict[str, np.ndarray]:
+    """Per constraint, which poses (m,) pass: the virtual cell's checks, plus SMRs inside `bounds`.
+
+    bounds: optional ((xmin, ymin, zmin), (xmax, ymax, zmax)), mm in the robot base frame.
+    """
+    names, t = _targets(targets)
+    # A cell whose "true" arm is the model we plan with: its pose_checks are the rules.
+    cell = VirtualCell(robot, robot, names, t, t, np.asarray(base_in_tracker, dtype=float),
+                       acceptance_rad=np.deg2rad(acceptance_deg), floor_clearance_mm=floor_mm)
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    checks = cell.pose_checks(q)
+    if bounds is not None:
+        lo, hi = np.asarray(bounds, dtype=float).reshape(2, 3)
+        lay = Layout(robot, np.eye(4), names)
+        p = predict(lay, lay.initial(t), q)
+        checks["bounds"] = np.all((p >= lo) & (p <= hi), axis=(1, 2))
+    return checks
+
+
+def plan_poses(robot: Robot, base_in_tracker, targets, n: int, rng, acceptance_deg: float = 60.0,
+               floor_mm: float = 150.0, bounds=None, max_batches: int = 50) -> np.ndarray:
+    """n poses (n, N) rad, uniform within the limits, meeting every check on the nominal model."""
+    lo, hi = robot.lower + LIMIT_MARGIN_RAD, robot.upper - LIMIT_MARGIN_RAD
+    batch = max(1024, 4 * n)
+    found, passed, count = [], {}, 0
+    for _ in range(max_batches):
+        q = rng.uniform(lo, hi, size=(batch, robot.n_joints))
+        checks = pose_checks(robot, base_in_tracker, targets, q, acceptance_deg, floor_mm, bounds)
+        for name, ok in checks.items():
+            passed[name] = passed.get(name, 0) + int(ok.sum())
+        found.append(q[np.logical_and.reduce(list(checks.values()))])
+        count += len(found[-1])
+        if count >= n:
+            return np.concatenate(found)[:n]
+    drawn = max_batches * batch
+    rates = ", ".join(f"{k} {v / drawn:.1%}" for k, v in passed.items())
+    raise RuntimeError(f"constraints too tight: only {count} of {n} poses valid after {drawn} "
+                       f"draws (pass rate per check: {rates})")
+
+
+def default_speeds(n_joints: int) -> np.ndarray:
+    """Joint speeds (rad/s) of the simulated world: IRB 2600-class, 360 deg/s beyond six axes."""
+    return np.deg2rad(np.asarray((DEFAULT_SPEEDS_DEG_S + (360.0,) * n_joints)[:n_joints]))
+
+
+def move_time(q_a, q_b, speeds=None) -> np.ndarray:
+    """Seconds from q_a to q_b (broadcasting), as drivers/world.py moves: slowest joint + ramp."""
+    q_a, q_b = np.asarray(q_a, dtype=float), np.asarray(q_b, dtype=float)
+    v = default_speeds(q_a.shape[-1]) if speeds is None else np.asarray(speeds, dtype=float)
+    return np.max(np.abs(q_b - q_a) / v, axis=-1) + ACCEL_S
+
+
+def total_move_time(q, order=None, start=None, speeds=None) -> float:
+    """Seconds to visit the poses q in `order` (default as given), from `start` if given."""
+    q = np.asarray(q, dtype=float)
+    path = q if order is None else q[np.asarray(order)]
+    if start is not None:
+        path = np.vstack([np.asarray(start, dtype=float)[None], path])
+    return float(np.sum(move_time(path[:-1], path[1:], speeds)))
+
+
+def _nearest_neighbour(D: np.ndarray, first: int) -> np.ndarray:
+    n = len(D)
+    path, free = [first], np.ones(n, dtype=bool)
+    free[first] = False
+    for _ in range(n - 1):
+        j = int(np.argmin(np.where(free, D[path[-1]], np.inf)))
+        path.append(j)
+        free[j] = False
+    return np.array(path)
+
+
+def _path_cost(D: np.ndarray, path: np.ndarray) -> float:
+    return float(D[path[:-1], path[1:]].sum())
+
+
+def _two_opt(D: np.ndarray, path: np.ndarray) -> np.ndarray:
+    """Reverse segments path[i..j] (path[0] fixed) while that shortens the open path."""
+    # valid because move times between poses are symmetric; only those out of path[0] may not be
+    path = path.copy()
+    L = len(path)
+    improved = True
+    while improved:
+        improved = False
+        for i in range(1, L - 1):
+            a, b = path[i - 1], path[i]
+            c = path[i + 1:]  # candidate segment ends j = i+1 .. L-1
+            delta = D[a, c] - D[a, b]
+            d = path[i + 2:]  # the pose after each end, none after the last
+            delta[:-1] += D[b, d] - D[c[:-1], d]
+            j = int(np.argmin(delta))
+            if delta[j] < -1e-9:
+                path[i:i + j + 2] = path[i:i + j + 2][::-1].copy()
+                improved = True
+    return path
+
+
+def order_poses(q, start=None, speeds=None) -> np.ndarray:
+    """Deterministic order of q (n, N), never slower than as given: nearest neighbour + 2-opt."""
+    # The path is open; without a start it may begin at any pose.
+    q = np.asarray(q, dtype=float)
+    n = len(q)
+    if n < 2:
+        return np.arange(n)
+    # Node 0 is the start; with no start it is a free virtual node (zero-cost first move).
+    D = np.zeros((n + 1, n + 1))
+    D[1:, 1:] = move_time(q[:, None], q[None], speeds)
+    if start is not None:
+        D[0, 1:] = move_time(np.asarray(start, dtype=float), q, speeds)
+    firsts = [None] if start is not None else range(1, n + 1)
+    best = None
+    for f in firsts:
+        if f is None:
+            path = _nearest_neighbour(D, 0)
+        else:
+            sub = D.copy()
+            sub[0, :] = np.inf
+            sub[0, f] = 0.0
+            path = _nearest_neighbour(sub, 0)
+        if best is None or _path_cost(D, path) < _path_cost(D, best):
+            best = path
+    best = _two_opt(D, best)
+    given = np.arange(n + 1)
+    if _path_cost(D, given) <= _path_cost(D, best):
+        best = given
+    return best[1:] - 1
+
+
+def candidate_jacobians(robot: Robot, base_in_tracker, targets, q) -> np.ndarray:
+    """Per pose, the nominal ls-sum identification Jacobian (m, 3K, P) on the free parameters."""
+    # free parameters as calibrate() picks them, so the design is for what will be identified
+    names, t = _targets(targets)
+    lay = Layout(robot, np.asarray(base_in_tracker, dtype=float), names)
+    x = lay.initial(t)
+    cols = np.flatnonzero(structural(lay, x, np.ones(lay.n_params, dtype=bool)).free)
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    _, Jt = predict_rows(lay, x, q, np.ones((len(q), len(names)), dtype=bool), cols)
+    return Jt.reshape(len(cols), len(q), 3 * len(names)).transpose(1, 2, 0)
+
+
+def plan_campaign(robot: Robot, base_in_tracker, targets, n_candidates: int, rng, k=None,
+                  criterion: str = "D", start=None, speeds=None, acceptance_deg: float = 60.0,
+                  floor_mm: float = 150.0, bounds=None) -> tuple[np.ndarray, dict]:
+    """Valid random candidates -> optionally the k best by `criterion` -> ordered; (q, summary)."""
+    # The summary compares move time in candidate order with the planned order, and the chosen
+    # poses' observability with the first k candidates (a random choice of the same size).
+    cand = plan_poses(robot, base_in_tracker, targets, n_candidates, rng, acceptance_deg,
+                      floor_mm, bounds)
+    J = obs.unit_columns(candidate_jacobians(robot, base_in_tracker, targets, cand))
+    if k is None:
+        chosen = np.arange(n_candidates)
+        random_ = chosen
+    else:
+        chosen = obs.select_poses(J, k, criterion)
+        random_ = np.arange(k)  # candidates are i.i.d. random, so any k of them are a random choice
+    order = order_poses(cand[chosen], start, speeds)
+    q = cand[chosen][order]
+    summary = {
+        "n_candidates": n_candidates,
+        "n_poses": len(q),
+        "criterion": criterion if k is not None else None,
+        "move_time_s": {"before": total_move_time(cand[chosen], None, start, speeds),
+                        "after": total_move_time(q, None, start, speeds)},
+        "observability": {"random": obs.observability_indices(J[random_]),
+                          "chosen": obs.observability_indices(J[chosen])},
+    }
+    return q, summary

@@ -1,0 +1,66 @@
+"""Where each SMR will be at the next pose, so the tracker finds it without searching.
+
+Nominal model at first (with the cell's rough base); after a few poses, base and SMR positions
+registered to the readings so far; once the data can identify it, the full geometric model. At a
+pose, the targets not yet measured are also shifted by the offset seen on those already measured
+there: the flange's pose error is common to all its SMRs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from solver.calibrate import calibrate
+from solver.identifiability import NotIdentifiable
+from solver.identify import register
+from solver.kinematics import Layout, predict
+from solver.robot import Robot
+
+MIN_REGISTER_POSES = 3
+MIN_CALIBRATE_POSES = 12
+REFIT_EVERY = 5
+
+
+class SmrPredictor:
+    """Predicted SMR centres (tracker frame, mm) for joint positions (rad)."""
+
+    def __init__(self, robot: Robot, targets, names, base_guess=None):
+        self.robot, self.names = robot, tuple(names)
+        self.targets = np.asarray(targets, dtype=float)
+        base = np.eye(4) if base_guess is None else np.asarray(base_guess, dtype=float)
+        self.layout = Layout(robot, base, self.names)
+        self.x = self.layout.initial(self.targets)
+        self.stage = "nominal"
+        self._fitted_at = 0
+
+    def predict(self, q) -> np.ndarray:
+        """(K, 3) predicted centres at one pose."""
+        return predict(self.layout, self.x, np.atleast_2d(q))[0]
+
+    def correct(self, predicted: np.ndarray, measured: dict) -> np.ndarray:
+        """Shift predictions by the mean offset of the targets already measured at this pose."""
+        offsets = [measured[n] - predicted[k] for k, n in enumerate(self.names) if n in measured]
+        return predicted + np.mean(offsets, axis=0) if offsets else predicted
+
+    def update(self, q, meas) -> str:
+        """Refit from all readings so far (q (m, n) rad, meas (m, K, 3) NaN where missing)."""
+        m = int(np.sum(np.any(np.all(np.isfinite(meas), axis=-1), axis=1)))
+        if m < MIN_REGISTER_POSES or m - self._fitted_at < (1 if m < MIN_CALIBRATE_POSES else REFIT_EVERY):
+            return self.stage
+        self._fitted_at = m
+        if m >= MIN_CALIBRATE_POSES and len(self.names) * m * 3 > 2 * self.layout.n_params:
+            try:
+                cal = calibrate(self.robot, self.targets, self.names, q, meas, method="ls-sum",
+                                base_guess=self.layout.base(self.x))
+                self.layout, self.x, self.stage = cal.layout, cal.x, "calibrated"
+                return self.stage
+            except (NotIdentifiable, np.linalg.LinAlgError):
+                pass
+        prob, x = register(self.robot, self.targets, self.names, q, meas,
+                           None if self.stage == "nominal" and self._base_is_identity() else
+                           self.layout.base(self.x))
+        self.layout, self.x, self.stage = prob.layout, x, "registered"
+        return self.stage
+
+    def _base_is_identity(self) -> bool:
+        return bool(np.allclose(self.layout.base(self.x), np.eye(4)))
