@@ -1,0 +1,450 @@
+"""Data access: keyword-only functions, each its own transaction, committed before it returns."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from sqlalchemy import and_, delete, exists, func, insert, select
+from sqlalchemy.orm import Session
+
+from server.formats.campaign_csv import read_campaign, write_campaign
+from server.formats.cell_json import parse_cell
+from solver.measurements import Measurements
+from solver.robot import Robot
+
+from . import checks
+from .db import Database
+from .errors import Conflict, NotFound, StoreError
+from .models import POSE_STATES, STATUSES, Campaign, PlannedPose, PoseOutcome, Reading
+
+# Which status may follow which. A killed run leaves `running` behind; resuming it sets
+# `running` again, which is allowed as a no-op. `failed` (a device fault) may be resumed.
+TRANSITIONS = {
+    "planned": {"running", "aborted"},
+    "running": {"paused", "done", "aborted", "failed"},
+    "paused": {"running", "aborted"},
+    "failed": {"running", "aborted"},
+    "done": set(),
+    "aborted": set(),
+}
+# Readings and outcomes arrive only while the engine owns the campaign; a reading already in
+# flight when a pause was requested still lands.
+RECORDING = ("running", "paused")
+
+
+@dataclass(frozen=True)
+class CampaignInfo:
+    """A campaign as the store holds it, with its progress."""
+
+    id: int
+    name: str
+    created_at: dt.datetime
+    status: str
+    cell_json: str
+    settings: dict
+    simulated: bool
+    notes: str
+    n_poses: int
+    n_done: int  # poses with an outcome
+
+
+@dataclass(frozen=True)
+class PoseInfo:
+    """A planned pose and, once it has one, its outcome."""
+
+    index: int
+    label: str
+    joints_deg: tuple[float, ...]
+    state: str | None = None
+    reached_deg: tuple[float, ...] | None = None
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class ReadingInfo:
+    """One stored reading; xyz is None for a `missing` target."""
+
+    pose_index: int
+    target: str
+    status: str
+    xyz: tuple[float, float, float] | None
+    std: tuple[float, float, float] | None
+    samples: int | None
+    time_s: float | None
+    temp_c: float | None
+    pressure_hpa: float | None
+    humidity_pct: float | None
+    detail: str
+    created_at: dt.datetime
+
+
+# --- campaigns ---------------------------------------------------------------------------------
+
+def create_campaign(db: Database, *, name: str, cell_json: str | Mapping, poses_deg,
+                    settings: Mapping | None = None, labels: Sequence[str] | None = None,
+                    simulated: bool = False, notes: str = "") -> int:
+    """Store a new `planned` campaign and its plan (n poses x N joints, deg) together; its id.
+
+    Labels (the `pose` column of an exported meas.csv) default to "1" ... "n".
+    """
+    cell, cell_text = checks.cell_text(cell_json)
+    q = checks.plan_deg(poses_deg, cell.robot)
+    labels = checks.pose_labels(labels, len(q))
+    with db.session(write=True) as s:
+        campaign = _add_campaign(s, name=name, cell_text=cell_text, settings=settings,
+                                 simulated=simulated, notes=notes, status="planned")
+        _add_plan(s, campaign.id, labels, q)
+    return campaign.id
+
+
+def get_campaign(db: Database, *, campaign_id: int) -> CampaignInfo:
+    """The campaign with this id; NotFound if there is none."""
+    with db.session() as s:
+        return _info(s, _campaign(s, campaign_id))
+
+
+def list_campaigns(db: Database, *, status: str | None = None) -> list[CampaignInfo]:
+    """Every campaign (or those with this status), oldest first."""
+    with db.session() as s:
+        query = select(Campaign).order_by(Campaign.id)
+        if status is not None:
+            query = query.where(Campaign.status == checks.one_of(status, STATUSES, "status"))
+        return [_info(s, c) for c in s.scalars(query)]
+
+
+def set_status(db: Database, *, campaign_id: int, status: str) -> str:
+    """Move the campaign to `status` (see TRANSITIONS); the status it had. Same status: no-op."""
+    checks.one_of(status, STATUSES, "status")
+    with db.session(write=True) as s:
+        campaign = _campaign(s, campaign_id)
+        before = campaign.status
+        if status == before:
+            return before
+        if status not in TRANSITIONS[before]:
+            allowed = ", ".join(sorted(TRANSITIONS[before])) or "nothing (final)"
+            raise Conflict(f"campaign {campaign_id} is {before}; it can go to {allowed}, "
+                           f"not {status}")
+        if status == "done" and _next_unmeasured(s, campaign_id) is not None:
+            raise Conflict(f"campaign {campaign_id} cannot be done: pose "
+                           f"{_next_unmeasured(s, campaign_id)} has no outcome yet")
+        campaign.status = status
+    return before
+
+
+def planned_poses(db: Database, *, campaign_id: int) -> list[PoseInfo]:
+    """The plan in order, each pose with its outcome if it has one."""
+    with db.session() as s:
+        _campaign(s, campaign_id)
+        rows = s.execute(_poses_query(campaign_id)).all()
+    return [PoseInfo(r.pose_index, r.label, tuple(r.joints_deg), r.state,
+                     None if r.reached_deg is None else tuple(r.reached_deg), r.detail or "")
+            for r in rows]
+
+
+def next_unmeasured_pose(db: Database, *, campaign_id: int) -> int | None:
+    """The first planned pose without an outcome (where a run resumes); None when all have one."""
+    with db.session() as s:
+        _campaign(s, campaign_id)
+        return _next_unmeasured(s, campaign_id)
+
+
+# --- readings and outcomes ---------------------------------------------------------------------
+
+def record_reading(db: Database, *, campaign_id: int, pose_index: int, target: str, xyz,
+                   std=None, samples: int | None = None, time_s: float | None = None,
+                   temp_c: float | None = None, pressure_hpa: float | None = None,
+                   humidity_pct: float | None = None, detail: str = "") -> bool:
+    """Store one target's reading (mm, tracker frame), committed before returning.
+
+    True if stored now, False if the same reading was already there (a retried call); Conflict
+    if a different one is, or if the pose already has its outcome.
+    """
+    x, y, z = checks.vector3(xyz, "xyz")
+    sx, sy, sz = (None, None, None) if std is None else checks.vector3(std, "std", minimum=0.0)
+    opt = checks.optional
+    values = dict(status="ok", x=x, y=y, z=z, std_x=sx, std_y=sy, std_z=sz,
+                  samples=checks.samples(samples), time_s=opt(time_s), temp_c=opt(temp_c),
+                  pressure_hpa=opt(pressure_hpa), humidity_pct=opt(humidity_pct),
+                  detail=str(detail))
+    return _record(db, campaign_id, pose_index, target, values)
+
+
+def record_missing(db: Database, *, campaign_id: int, pose_index: int, target: str,
+                   detail: str = "", time_s: float | None = None) -> bool:
+    """Record that a target could not be measured at this pose (beam break after retries).
+
+    Same contract as record_reading: True if new, False if already recorded so, else Conflict.
+    """
+    values = dict(status="missing", x=None, y=None, z=None, std_x=None, std_y=None, std_z=None,
+                  samples=None, time_s=checks.optional(time_s), temp_c=None, pressure_hpa=None,
+                  humidity_pct=None, detail=str(detail))
+    return _record(db, campaign_id, pose_index, target, values)
+
+
+def record_pose_outcome(db: Database, *, campaign_id: int, pose_index: int, state: str,
+                        reached_deg=None, detail: str = "",
+                        missing: Sequence[str] | None = None) -> bool:
+    """Close a pose: `measured` (every target read), `missing-target` (some recorded missing) or
+    `skipped` (nothing read). True if new, False if identical to the stored one, else Conflict.
+
+    `reached_deg`: the joints as the controller reported them there; None if it never arrived.
+    `missing`: targets to record missing in the same transaction; for `missing-target` it
+    defaults to the cell's targets without a reading at this pose.
+    """
+    state = checks.one_of(state, POSE_STATES, "state")
+    reached = None if reached_deg is None else list(checks.floats(reached_deg, "reached_deg"))
+    missing = None if missing is None else [checks.target_name(t) for t in missing]
+    with db.session(write=True) as s:
+        campaign = _campaign(s, campaign_id)
+        pose = _planned(s, campaign_id, pose_index)
+        old = s.scalar(select(PoseOutcome).where(PoseOutcome.campaign_id == campaign_id,
+                                                 PoseOutcome.pose_index == pose_index))
+        if old is not None:
+            if (old.state, old.reached_deg, old.detail) == (state, reached, str(detail)):
+                return False
+            raise Conflict(f"campaign {campaign_id} pose {pose_index} is already closed as "
+                           f"{old.state} with other values")
+        _check_recording(campaign)
+        if reached is not None and len(reached) != len(pose.joints_deg):
+            raise ValueError(f"reached_deg has {len(reached)} joints, the plan has "
+                             f"{len(pose.joints_deg)}")
+        status = dict(s.execute(select(Reading.target, Reading.status).where(
+            Reading.campaign_id == campaign_id, Reading.pose_index == pose_index)).all())
+        if missing is None and state == "missing-target":
+            targets = parse_cell(campaign.cell_json, f"<campaign {campaign_id} cell>").targets
+            missing = [t for t in targets if t not in status]
+        for t in missing or ():
+            if status.get(t) == "ok":
+                raise Conflict(f"pose {pose_index} target {t} has a reading; it is not missing")
+            if t not in status:
+                s.add(Reading(campaign_id=campaign_id, pose_index=pose_index, target=t,
+                              status="missing", detail=str(detail) or "not measured"))
+                status[t] = "missing"
+        counts = [sum(v == k for v in status.values()) for k in ("ok", "missing")]
+        checks.outcome_agrees(state, *counts, pose_index)
+        s.add(PoseOutcome(campaign_id=campaign_id, pose_index=pose_index, state=state,
+                          reached_deg=reached, detail=str(detail)))
+    return True
+
+
+def discard_unfinished_pose(db: Database, *, campaign_id: int, pose_index: int) -> int:
+    """Delete the readings of a pose that has no outcome yet (to measure it again whole, at one
+    arrival of the arm); how many. Conflict if the pose is closed."""
+    with db.session(write=True) as s:
+        _planned(s, campaign_id, pose_index)
+        closed = s.scalar(select(PoseOutcome.state).where(PoseOutcome.campaign_id == campaign_id,
+                                                          PoseOutcome.pose_index == pose_index))
+        if closed is not None:
+            raise Conflict(f"campaign {campaign_id} pose {pose_index} is closed ({closed}); "
+                           "its readings stay")
+        return s.execute(delete(Reading).where(Reading.campaign_id == campaign_id,
+                                               Reading.pose_index == pose_index)).rowcount
+
+
+def pose_readings(db: Database, *, campaign_id: int, pose_index: int) -> dict[str, ReadingInfo]:
+    """The readings stored for one pose, by target: on resume, the ones not to measure again."""
+    with db.session() as s:
+        _planned(s, campaign_id, pose_index)
+        rows = s.scalars(select(Reading).where(Reading.campaign_id == campaign_id,
+                                               Reading.pose_index == pose_index)
+                         .order_by(Reading.id))
+        return {r.target: _reading_info(r) for r in rows}
+
+
+# --- arrays and files --------------------------------------------------------------------------
+
+def campaign_measurements(db: Database, *, campaign_id: int, robot: Robot | None = None,
+                          targets: Sequence[str] | None = None) -> Measurements:
+    """The campaign's readings as arrays: poses with at least one reading, in plan order.
+
+    Targets sorted by name (or `targets`, in that order), missing ones NaN; q in rad from the
+    joints reached (the plan's where no outcome gives them); time_s / temp_c None when no
+    reading has one. `robot` defaults to the cell's.
+    """
+    with db.session() as s:
+        campaign = _campaign(s, campaign_id)
+        poses = s.execute(_poses_query(campaign_id)).all()
+        rows = s.execute(select(Reading.pose_index, Reading.target, Reading.x, Reading.y,
+                                Reading.z, Reading.time_s, Reading.temp_c)
+                         .where(Reading.campaign_id == campaign_id, Reading.status == "ok")).all()
+        cell_text = campaign.cell_json
+    robot = checks.matching_robot(robot, parse_cell(cell_text, f"<campaign {campaign_id} cell>"))
+    if targets is None:
+        names = tuple(sorted({r.target for r in rows}))
+    else:
+        names = tuple(checks.target_name(t) for t in targets)
+        rows = [r for r in rows if r.target in names]
+    used = {r.pose_index for r in rows}
+    poses = [p for p in poses if p.pose_index in used]
+    row_of = {p.pose_index: i for i, p in enumerate(poses)}
+    col = {n: k for k, n in enumerate(names)}
+    m, K = len(poses), len(names)
+    q = np.array([p.reached_deg if p.reached_deg is not None else p.joints_deg for p in poses],
+                 dtype=float).reshape(m, -1 if m else robot.n_joints)
+    if q.shape[1] != robot.n_joints:
+        raise ValueError(f"campaign {campaign_id} has {q.shape[1]} joints per pose, "
+                         f"{robot.name} has {robot.n_joints}")
+    xyz = np.full((m, K, 3), np.nan)
+    time_s, temp_c = np.full((m, K), np.nan), np.full((m, K), np.nan)
+    for r in rows:
+        i, k = row_of[r.pose_index], col[r.target]
+        xyz[i, k] = r.x, r.y, r.z
+        time_s[i, k] = np.nan if r.time_s is None else r.time_s
+        temp_c[i, k] = np.nan if r.temp_c is None else r.temp_c
+    some = lambda a: a if np.isfinite(a).any() else None  # noqa: E731
+    return Measurements([p.label for p in poses], np.deg2rad(q), names, xyz, some(time_s),
+                        some(temp_c))
+
+
+def export_csv(db: Database, *, campaign_id: int, path, robot: Robot | None = None) -> None:
+    """Write the campaign's readings as a `meas.csv` (spec section 1), atomically."""
+    meas = campaign_measurements(db, campaign_id=campaign_id, robot=robot)
+    if meas.n_poses == 0:
+        raise StoreError(f"campaign {campaign_id} has no readings to export")
+    write_campaign(path, meas)
+
+
+def import_csv(db: Database, *, path, cell_json: str | Mapping, name: str,
+               robot: Robot | None = None, notes: str = "") -> int:
+    """Store a `meas.csv` as a `done` campaign; its id. All or nothing: InputError on a bad file
+    (or cell), and then nothing is written.
+
+    Joints are the file's (planned = reached); a target absent at a pose is recorded missing.
+    """
+    cell, cell_text = checks.cell_text(cell_json)
+    robot = checks.matching_robot(robot, cell)
+    meas = read_campaign(path, robot)  # the whole file is checked before the database is touched
+    q = np.rad2deg(meas.q)
+    mask = meas.mask
+    settings = {"source": "csv", "file": os.path.basename(os.fspath(path))}
+    with db.session(write=True) as s:
+        campaign = _add_campaign(s, name=name, cell_text=cell_text, settings=settings,
+                                 simulated=False, notes=notes, status="done")
+        cid = campaign.id
+        _add_plan(s, cid, meas.pose_ids, q)
+        readings, outcomes = [], []
+        for i in range(meas.n_poses):
+            for k, target in enumerate(meas.target_names):
+                readings.append(_imported_reading(meas, cid, i, k, target, mask[i, k]))
+            outcomes.append(dict(campaign_id=cid, pose_index=i, reached_deg=q[i].tolist(),
+                                 state="measured" if mask[i].all() else "missing-target",
+                                 detail="imported"))
+        s.execute(insert(Reading), readings)
+        s.execute(insert(PoseOutcome), outcomes)
+    return cid
+
+
+# --- helpers -----------------------------------------------------------------------------------
+
+def _campaign(s: Session, campaign_id: int) -> Campaign:
+    campaign = s.get(Campaign, campaign_id)
+    if campaign is None:
+        raise NotFound(f"no campaign {campaign_id}")
+    return campaign
+
+
+def _planned(s: Session, campaign_id: int, pose_index: int) -> PlannedPose:
+    pose = s.scalar(select(PlannedPose).where(PlannedPose.campaign_id == campaign_id,
+                                              PlannedPose.pose_index == pose_index))
+    if pose is None:
+        _campaign(s, campaign_id)
+        raise NotFound(f"campaign {campaign_id} has no planned pose {pose_index}")
+    return pose
+
+
+def _next_unmeasured(s: Session, campaign_id: int) -> int | None:
+    closed = exists().where(PoseOutcome.campaign_id == PlannedPose.campaign_id,
+                            PoseOutcome.pose_index == PlannedPose.pose_index)
+    return s.scalar(select(func.min(PlannedPose.pose_index))
+                    .where(PlannedPose.campaign_id == campaign_id, ~closed))
+
+
+def _poses_query(campaign_id: int):
+    on = and_(PoseOutcome.campaign_id == PlannedPose.campaign_id,
+              PoseOutcome.pose_index == PlannedPose.pose_index)
+    return (select(PlannedPose.pose_index, PlannedPose.label, PlannedPose.joints_deg,
+                   PoseOutcome.state, PoseOutcome.reached_deg, PoseOutcome.detail)
+            .outerjoin(PoseOutcome, on).where(PlannedPose.campaign_id == campaign_id)
+            .order_by(PlannedPose.pose_index))
+
+
+def _info(s: Session, c: Campaign) -> CampaignInfo:
+    n_poses = s.scalar(select(func.count()).where(PlannedPose.campaign_id == c.id))
+    n_done = s.scalar(select(func.count()).where(PoseOutcome.campaign_id == c.id))
+    return CampaignInfo(c.id, c.name, c.created_at, c.status, c.cell_json,
+                        json.loads(c.settings_json), c.simulated, c.notes, n_poses, n_done)
+
+
+def _add_campaign(s: Session, *, name, cell_text, settings, simulated, notes, status) -> Campaign:
+    if not isinstance(name, str) or not name.strip():
+        raise ValueError("a campaign needs a name")
+    try:
+        settings_text = json.dumps(dict(settings or {}), sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"settings must be plain JSON values: {e}") from None
+    campaign = Campaign(name=name.strip(), cell_json=cell_text, settings_json=settings_text,
+                        simulated=bool(simulated), notes=str(notes), status=status)
+    s.add(campaign)
+    s.flush()  # assigns the id
+    return campaign
+
+
+def _add_plan(s: Session, campaign_id: int, labels, q_deg: np.ndarray) -> None:
+    s.execute(insert(PlannedPose), [
+        dict(campaign_id=campaign_id, pose_index=i, label=str(label),
+             joints_deg=[float(v) for v in q_deg[i]])
+        for i, label in enumerate(labels)])
+
+
+def _record(db: Database, campaign_id: int, pose_index: int, target: str, values: dict) -> bool:
+    checks.target_name(target)
+    with db.session(write=True) as s:
+        campaign = _campaign(s, campaign_id)
+        _planned(s, campaign_id, pose_index)
+        old = s.scalar(select(Reading).where(Reading.campaign_id == campaign_id,
+                                             Reading.pose_index == pose_index,
+                                             Reading.target == target))
+        if old is not None:
+            differ = [k for k, v in values.items() if getattr(old, k) != v]
+            if not differ:
+                return False
+            raise Conflict(f"campaign {campaign_id} pose {pose_index} target {target} is already "
+                           f"recorded with other {', '.join(differ)}")
+        _check_recording(campaign)
+        closed = s.scalar(select(PoseOutcome.state).where(PoseOutcome.campaign_id == campaign_id,
+                                                          PoseOutcome.pose_index == pose_index))
+        if closed is not None:
+            raise Conflict(f"campaign {campaign_id} pose {pose_index} is already closed "
+                           f"({closed}); no new readings")
+        s.add(Reading(campaign_id=campaign_id, pose_index=pose_index, target=target, **values))
+    return True
+
+
+def _imported_reading(meas: Measurements, cid: int, i: int, k: int, target: str, present) -> dict:
+    row = dict(campaign_id=cid, pose_index=i, target=target, std_x=None, std_y=None,
+               std_z=None, samples=None, pressure_hpa=None, humidity_pct=None)
+    if not present:
+        return row | dict(status="missing", x=None, y=None, z=None, time_s=None, temp_c=None,
+                          detail="absent from the imported file")
+    extra = {c: None if a is None else checks.optional(a[i, k])
+             for c, a in (("time_s", meas.time_s), ("temp_c", meas.temp_c))}
+    x, y, z = (float(v) for v in meas.xyz[i, k])
+    return row | extra | dict(status="ok", x=x, y=y, z=z, detail="")
+
+
+def _check_recording(campaign: Campaign) -> None:
+    if campaign.status not in RECORDING:
+        raise Conflict(f"campaign {campaign.id} is {campaign.status}: readings are recorded "
+                       "only while it is running or paused")
+
+
+def _reading_info(r: Reading) -> ReadingInfo:
+    xyz = None if r.status != "ok" else (r.x, r.y, r.z)
+    std = None if r.std_x is None else (r.std_x, r.std_y, r.std_z)
+    return ReadingInfo(r.pose_index, r.target, r.status, xyz, std, r.samples, r.time_s,
+                       r.temp_c, r.pressure_hpa, r.humidity_pct, r.detail, r.created_at)

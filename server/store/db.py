@@ -1,0 +1,123 @@
+"""Opening the store: the URL, SQLite pragmas on every connection, migrations to head, sessions."""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from alembic import command
+from alembic.config import Config
+from sqlalchemy import Engine, create_engine, event
+from sqlalchemy.engine import URL, make_url
+from sqlalchemy.orm import Session, sessionmaker
+
+MIGRATIONS = Path(__file__).resolve().parents[2] / "migrations"
+# How long a writer waits for another process's write lock before "database is locked".
+BUSY_TIMEOUT_MS = 30_000
+WRITE_OPTION = "robocal_write"
+# Alembic keeps its running context in module globals: one migration at a time per process.
+_MIGRATING = threading.Lock()
+
+
+def database_url(url_or_path) -> URL:
+    """A SQLAlchemy URL from a URL (`sqlite:///x.db`, `DATABASE_URL` style) or a plain file path."""
+    if isinstance(url_or_path, URL):
+        return url_or_path
+    text = os.fspath(url_or_path)
+    if "://" in text:
+        return make_url(text)
+    return URL.create("sqlite", database=str(Path(text).expanduser().resolve()))
+
+
+def make_engine(url_or_path) -> Engine:
+    """An engine whose SQLite connections use WAL, enforce foreign keys and sync at NORMAL."""
+    url = database_url(url_or_path)
+    if url.get_backend_name() != "sqlite":
+        return create_engine(url)
+    if url.database in (None, "", ":memory:"):
+        # Every pooled connection would get its own empty database; the store needs a file.
+        raise ValueError("the store needs a database file, not an in-memory SQLite database")
+    Path(url.database).parent.mkdir(parents=True, exist_ok=True)
+    engine = create_engine(url)
+    event.listen(engine, "connect", _sqlite_connect)
+    event.listen(engine, "begin", _sqlite_begin)
+    return engine
+
+
+def _sqlite_connect(dbapi_connection, _record) -> None:
+    # pysqlite opens transactions itself, lazily and not before SELECTs; _sqlite_begin does it.
+    dbapi_connection.isolation_level = None
+    cursor = dbapi_connection.cursor()
+    # First, so that the pragmas below wait for another process's lock too.
+    cursor.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+    # WAL: a commit is one append, readers never block the writer, and a killed writer leaves a
+    # log that the next open replays. NORMAL syncs at checkpoints only: every commit survives a
+    # killed process; an OS crash or power cut may lose the last few.
+    cursor.execute("PRAGMA journal_mode=WAL")
+    cursor.execute("PRAGMA synchronous=NORMAL")
+    cursor.execute("PRAGMA foreign_keys=ON")
+    cursor.close()
+
+
+def _sqlite_begin(connection) -> None:
+    # A writer takes the write lock up front, so its checks and inserts see no other writer in
+    # between and a busy database is waited for (busy_timeout) rather than failed mid-way.
+    write = connection.get_execution_options().get(WRITE_OPTION, False)
+    connection.exec_driver_sql("BEGIN IMMEDIATE" if write else "BEGIN")
+
+
+def alembic_config(url_or_path=None) -> Config:
+    """Alembic's configuration built in code (no alembic.ini needed), for this database if given."""
+    config = Config()
+    config.set_main_option("script_location", str(MIGRATIONS))
+    if url_or_path is not None:
+        config.attributes["url"] = database_url(url_or_path)
+    return config
+
+
+def migrate(engine: Engine, revision: str = "head") -> None:
+    """Bring the database to `revision` on one of the engine's connections, in one transaction."""
+    config = alembic_config()
+    with _MIGRATING, engine.connect().execution_options(**{WRITE_OPTION: True}) as connection:
+        with connection.begin():
+            config.attributes["connection"] = connection
+            command.upgrade(config, revision)
+
+
+class Database:
+    """An open store: the engine and its sessions."""
+
+    def __init__(self, engine: Engine):
+        self.engine = engine
+        self._sessions = sessionmaker(engine, expire_on_commit=False)
+
+    @contextmanager
+    def session(self, *, write: bool = False) -> Iterator[Session]:
+        """One transaction, committed on leaving or rolled back on error; `write` locks first."""
+        with self._sessions() as session, session.begin():
+            if write:
+                session.connection(execution_options={WRITE_OPTION: True})
+            yield session
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    def __enter__(self) -> Database:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_database(url_or_path) -> Database:
+    """Open (creating it and its folder if needed) the store and migrate it to the latest schema."""
+    engine = make_engine(url_or_path)
+    try:
+        migrate(engine)
+    except Exception:
+        engine.dispose()
+        raise
+    return Database(engine)

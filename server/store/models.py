@@ -1,0 +1,158 @@
+"""The store's tables: a campaign, its planned poses, the readings and each pose's outcome.
+
+A campaign is one run on the cell. Its plan (`planned_pose`) is written with it, so a later run
+can resume it. Readings arrive one per (pose, target) and are committed one by one; the unique
+key (campaign_id, pose_index, target) makes a duplicate impossible. A target the tracker could not
+measure after its retries is a `reading` row with status `missing` and no coordinates, so the
+record says "tried, beam broken" rather than nothing. `pose_outcome` is written last for a pose
+and is its completion mark: a planned pose without one is still to do, which is all resume needs.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+
+from sqlalchemy import (JSON, Boolean, CheckConstraint, DateTime, Float, ForeignKey,
+                        ForeignKeyConstraint, Integer, MetaData, String, Text, TypeDecorator,
+                        UniqueConstraint)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+STATUSES = ("planned", "running", "paused", "done", "aborted", "failed")
+POSE_STATES = ("measured", "missing-target", "skipped")
+READING_STATUSES = ("ok", "missing")
+
+# SQLite alters a table by copying it (Alembic batch mode), which can only drop or change
+# constraints that have names; this convention names every one.
+NAMING = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_N_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_N_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+def utcnow() -> dt.datetime:
+    """The current time, UTC-aware."""
+    return dt.datetime.now(dt.UTC)
+
+
+class UTCDateTime(TypeDecorator):
+    """Aware UTC datetimes; SQLite keeps no zone, so naive UTC is stored and the zone reattached."""
+
+    impl = DateTime
+    cache_ok = True
+
+    def process_bind_param(self, value, dialect):
+        if value is None:
+            return None
+        if value.tzinfo is None:
+            raise ValueError("naive datetime: store times are UTC-aware")
+        return value.astimezone(dt.UTC).replace(tzinfo=None)
+
+    def process_result_value(self, value, dialect):
+        return None if value is None else value.replace(tzinfo=dt.UTC)
+
+
+def one_of(column: str, values) -> str:
+    """SQL for a CHECK that the column holds one of these strings."""
+    return f"{column} IN ({', '.join(repr(v) for v in values)})"
+
+
+class Base(DeclarativeBase):
+    """The store's declarative base; its metadata names every constraint."""
+
+    metadata = MetaData(naming_convention=NAMING)
+
+
+class Campaign(Base):
+    """One run on the cell: the cell it ran on, its settings, its life-cycle status."""
+
+    __tablename__ = "campaign"
+    __table_args__ = (CheckConstraint(one_of("status", STATUSES), name="status"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[dt.datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    status: Mapped[str] = mapped_column(String(16), default="planned")
+    cell_json: Mapped[str] = mapped_column(Text)  # the cell.json text (spec section 2)
+    settings_json: Mapped[str] = mapped_column(Text, default="{}")  # pause, settle, retries...
+    simulated: Mapped[bool] = mapped_column(Boolean, default=False)
+    notes: Mapped[str] = mapped_column(Text, default="")
+
+
+class PlannedPose(Base):
+    """Pose `pose_index` (0..n-1) of a campaign's plan: its CSV label and commanded joints (deg)."""
+
+    __tablename__ = "planned_pose"
+    __table_args__ = (
+        UniqueConstraint("campaign_id", "pose_index"),
+        UniqueConstraint("campaign_id", "label"),
+        CheckConstraint("pose_index >= 0", name="pose_index"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    pose_index: Mapped[int] = mapped_column(Integer)
+    label: Mapped[str] = mapped_column(Text)  # the `pose` column of meas.csv
+    joints_deg: Mapped[list] = mapped_column(JSON)
+
+
+def _pose_fk() -> ForeignKeyConstraint:
+    # Readings and outcomes can only refer to a pose of the plan.
+    return ForeignKeyConstraint(["campaign_id", "pose_index"],
+                                ["planned_pose.campaign_id", "planned_pose.pose_index"],
+                                ondelete="CASCADE")
+
+
+class Reading(Base):
+    """One target at one pose: the SMR centre (mm, tracker frame) or an explicit `missing`."""
+
+    __tablename__ = "reading"
+    __table_args__ = (
+        UniqueConstraint("campaign_id", "pose_index", "target"),
+        _pose_fk(),
+        CheckConstraint(one_of("status", READING_STATUSES), name="status"),
+        CheckConstraint("(status = 'ok' AND x IS NOT NULL AND y IS NOT NULL AND z IS NOT NULL) OR "
+                        "(status = 'missing' AND x IS NULL AND y IS NULL AND z IS NULL)",
+                        name="xyz_present"),
+        CheckConstraint("samples IS NULL OR samples >= 1", name="samples"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)  # increasing = order of arrival
+    campaign_id: Mapped[int] = mapped_column(Integer)
+    pose_index: Mapped[int] = mapped_column(Integer)
+    target: Mapped[str] = mapped_column(Text)
+    status: Mapped[str] = mapped_column(String(16), default="ok")
+    x: Mapped[float | None] = mapped_column(Float)
+    y: Mapped[float | None] = mapped_column(Float)
+    z: Mapped[float | None] = mapped_column(Float)
+    std_x: Mapped[float | None] = mapped_column(Float)  # spread of the averaged samples, mm
+    std_y: Mapped[float | None] = mapped_column(Float)
+    std_z: Mapped[float | None] = mapped_column(Float)
+    samples: Mapped[int | None] = mapped_column(Integer)
+    time_s: Mapped[float | None] = mapped_column(Float)  # since campaign start
+    temp_c: Mapped[float | None] = mapped_column(Float)
+    pressure_hpa: Mapped[float | None] = mapped_column(Float)
+    humidity_pct: Mapped[float | None] = mapped_column(Float)
+    detail: Mapped[str] = mapped_column(Text, default="")  # why missing, tracker remarks
+    created_at: Mapped[dt.datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+
+class PoseOutcome(Base):
+    """How a pose ended (measured / missing-target / skipped) and the joints reached (deg)."""
+
+    __tablename__ = "pose_outcome"
+    __table_args__ = (
+        UniqueConstraint("campaign_id", "pose_index"),
+        _pose_fk(),
+        CheckConstraint(one_of("state", POSE_STATES), name="state"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(Integer)
+    pose_index: Mapped[int] = mapped_column(Integer)
+    state: Mapped[str] = mapped_column(String(16))
+    reached_deg: Mapped[list | None] = mapped_column(JSON)  # None when the arm never got there
+    detail: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[dt.datetime] = mapped_column(UTCDateTime(), default=utcnow)

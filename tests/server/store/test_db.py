@@ -1,0 +1,170 @@
+"""Opening the store: migrations make the schema, pragmas on every connection, commits shared."""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from alembic import command
+from alembic.autogenerate import compare_metadata
+from alembic.migration import MigrationContext
+from sqlalchemy import inspect, text
+
+from server.store import open_database, record_reading
+from server.store.db import alembic_config, database_url
+from server.store.models import Base
+
+ROOT = Path(__file__).resolve().parents[3]
+TABLES = {"alembic_version", "campaign", "planned_pose", "reading", "pose_outcome"}
+
+
+def test_migrations_create_the_schema(tmp_path):
+    db = open_database(tmp_path / "deep" / "er" / "store.db")  # the folder is created
+    insp = inspect(db.engine)
+    assert set(insp.get_table_names()) == TABLES
+    columns = {c["name"] for c in insp.get_columns("reading")}
+    assert {"campaign_id", "pose_index", "target", "x", "y", "z", "std_x", "std_y", "std_z",
+            "samples", "time_s", "temp_c", "pressure_hpa", "humidity_pct", "status"} <= columns
+    uniques = {tuple(u["column_names"]) for u in insp.get_unique_constraints("reading")}
+    assert ("campaign_id", "pose_index", "target") in uniques
+    with db.engine.connect() as c:
+        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0001"
+        # The migration and the models describe the same schema.
+        assert compare_metadata(MigrationContext.configure(c, opts={"compare_type": True}),
+                                Base.metadata) == []
+    db.close()
+
+
+def test_reopening_keeps_data_and_migrates_once(tmp_path, running, db):
+    record_reading(db, campaign_id=running, pose_index=0, target="A", xyz=[1, 2, 3])
+    again = open_database(db.engine.url.database)
+    with again.engine.connect() as c:
+        assert c.execute(text("SELECT count(*) FROM reading")).scalar() == 1
+        assert c.execute(text("SELECT count(*) FROM alembic_version")).scalar() == 1
+    again.close()
+
+
+def test_pragmas_on_every_connection(db):
+    a, b = db.engine.raw_connection(), db.engine.raw_connection()  # two pooled connections
+    try:
+        for conn in (a, b):
+            cur = conn.cursor()
+            assert cur.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+            assert cur.execute("PRAGMA foreign_keys").fetchone()[0] == 1
+            assert cur.execute("PRAGMA synchronous").fetchone()[0] == 1  # NORMAL
+            assert cur.execute("PRAGMA busy_timeout").fetchone()[0] > 0
+    finally:
+        a.close()
+        b.close()
+
+
+def test_a_commit_is_visible_to_an_independent_connection(running, db):
+    """What crash safety rests on: once record_reading returns, the row is in the file."""
+    other = open_database(db.engine.url.database)
+    raw = sqlite3.connect(db.engine.url.database)
+    try:
+        record_reading(db, campaign_id=running, pose_index=0, target="B", xyz=[4.0, 5.0, 6.0])
+        with other.session() as s:
+            assert s.execute(text("SELECT x, y, z FROM reading")).one() == (4.0, 5.0, 6.0)
+        assert raw.execute("SELECT target FROM reading").fetchall() == [("B",)]
+    finally:
+        raw.close()
+        other.close()
+
+
+def test_readers_are_not_blocked_by_an_open_write(running, db):
+    other = open_database(db.engine.url.database)
+    try:
+        with db.session(write=True) as s:
+            s.execute(text("UPDATE campaign SET notes = 'uncommitted'"))
+            with other.session() as r:  # WAL: the reader sees the last commit, at once
+                assert r.execute(text("SELECT notes FROM campaign")).scalar() == ""
+        with other.session() as r:
+            assert r.execute(text("SELECT notes FROM campaign")).scalar() == "uncommitted"
+    finally:
+        other.close()
+
+
+def test_urls_and_paths(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert database_url("rel.db").database == str(tmp_path / "rel.db")
+    url = f"sqlite:///{tmp_path / 'by-url.db'}"
+    assert str(database_url(url)) == url
+    open_database(url).close()
+    assert (tmp_path / "by-url.db").exists()
+    with pytest.raises(ValueError, match="in-memory"):
+        open_database("sqlite://")
+
+
+def test_migrations_in_code_down_and_up(tmp_path):
+    path = tmp_path / "store.db"
+    config = alembic_config(path)
+    command.upgrade(config, "head")  # env.py's own engine, no alembic.ini
+    command.downgrade(config, "base")
+    assert set(inspect(open_database(path).engine).get_table_names()) == TABLES
+
+
+def test_alembic_command_line_with_database_url(tmp_path):
+    path = tmp_path / "cli.db"
+    env = dict(os.environ, DATABASE_URL=f"sqlite:///{path}")
+    done = subprocess.run([sys.executable, "-m", "alembic", "upgrade", "head"], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    con = sqlite3.connect(path)
+    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0001",)
+    assert con.execute("PRAGMA journal_mode").fetchone() == ("wal",)
+    con.close()
+
+
+def test_two_writers_wait_for_each_other(tmp_path, cell_json):
+    """Write transactions take the lock up front, so a second writer waits instead of failing."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from server.store import create_campaign, set_status
+
+    from .conftest import POSES_DEG
+
+    path = tmp_path / "store.db"
+    with open_database(path) as db:
+        cids = [create_campaign(db, name=f"c{i}", cell_json=cell_json, poses_deg=POSES_DEG)
+                for i in range(2)]
+        for cid in cids:
+            set_status(db, campaign_id=cid, status="running")
+
+    def write(cid):
+        with open_database(path) as db:  # its own engine, as another process would have
+            for i in range(len(POSES_DEG)):
+                for t in ("A", "B", "C"):
+                    record_reading(db, campaign_id=cid, pose_index=i, target=t, xyz=[i, cid, 0])
+        return cid
+
+    with ThreadPoolExecutor(2) as pool:
+        assert sorted(pool.map(write, cids)) == cids
+    con = sqlite3.connect(path)
+    assert con.execute("SELECT count(*) FROM reading").fetchone() == (18,)
+    con.close()
+
+
+def test_opening_a_new_file_from_many_places_at_once(tmp_path):
+    """Threads and processes that open a new store together: one migrates, the others wait."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    path = tmp_path / "fresh.db"
+    code = "import sys; from server.store import open_database; open_database(sys.argv[1])"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    procs = [subprocess.Popen([sys.executable, "-c", code, str(path)], cwd=ROOT, env=env,
+                              stderr=subprocess.PIPE, text=True) for _ in range(3)]
+
+    def version(_):
+        with open_database(path) as db, db.engine.connect() as c:
+            return c.execute(text("SELECT version_num FROM alembic_version")).all()
+
+    with ThreadPoolExecutor(4) as pool:
+        assert list(pool.map(version, range(4))) == [[("0001",)]] * 4
+    for p in procs:
+        _, err = p.communicate(timeout=120)
+        assert p.returncode == 0, err
