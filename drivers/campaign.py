@@ -55,6 +55,7 @@ class Stats:
     poses: int = 0
     readings: int = 0
     missing: int = 0
+    skipped: int = 0
     searched: int = 0
     locked_first_try: int = 0
     aimed: int = 0
@@ -123,8 +124,13 @@ class CampaignEngine:
         return self.state == "running"
 
     # -- the handshake --------------------------------------------------------------------------
-    def run(self, poses_deg, start: int = 0, history=None) -> Stats:
-        """Measure poses[start:]; history = (q rad, meas) of poses already measured (resume)."""
+    def run(self, poses_deg, start: int = 0, history=None, partial=None) -> Stats:
+        """Measure poses[start:].
+
+        On resume, history = (q rad, meas) of the poses already measured, and partial = {target:
+        xyz} the readings already stored for pose `start` (cut off mid-pose): those are kept, not
+        measured again.
+        """
         self._go("start")
         names = self.predictor.names
         q_done = [] if history is None else list(history[0])
@@ -135,7 +141,8 @@ class CampaignEngine:
             for i in range(start, len(poses_deg)):
                 if not self._checkpoint():
                     break
-                q_rad, row = self._pose(i, np.asarray(poses_deg[i], dtype=float), names)
+                q_rad, row = self._pose(i, np.asarray(poses_deg[i], dtype=float), names,
+                                        (partial or {}) if i == start else {})
                 q_done.append(q_rad)
                 m_done.append(row)
                 self.predictor.update(np.array(q_done), np.array(m_done))
@@ -147,15 +154,23 @@ class CampaignEngine:
             raise
         return self.stats
 
-    def _pose(self, i, q_deg, names):
-        self.controller.move_abs_j(q_deg)
+    def _pose(self, i, q_deg, names, stored):
+        try:
+            self.controller.move_abs_j(q_deg)
+        except ValueError as e:  # the controller client refused the target: nothing moved
+            self.log(f"pose {i}: skipped, {e}")
+            self.sink.pose_done(pose_index=i, state="skipped", q_deg=q_deg)
+            self.stats.skipped += 1
+            return np.deg2rad(q_deg), np.full((len(names), 3), np.nan)
         self.controller.wait_in_position(self.clock)
         q_rad = np.deg2rad(np.asarray(self.controller.joints(), dtype=float))
         predicted = self.predictor.predict(q_rad)
         self._settle(predicted[0])
-        measured: dict = {}
-        row = np.full((len(names), 3), np.nan)
+        measured = {n: np.asarray(v, dtype=float) for n, v in stored.items()}
+        row = np.array([measured.get(n, np.full(3, np.nan)) for n in names])
         for k, name in enumerate(names):
+            if name in stored:
+                continue
             aim = self.predictor.correct(predicted, measured)[k]
             m = self._measure_target(i, aim)
             if m is None:

@@ -17,7 +17,7 @@ from solver.kinematics import Layout, predict
 from solver.robot import Robot
 
 MIN_REGISTER_POSES = 3
-MIN_CALIBRATE_POSES = 12
+MIN_CALIBRATE_POSES = 7
 REFIT_EVERY = 5
 
 
@@ -45,7 +45,7 @@ class SmrPredictor:
     def update(self, q, meas) -> str:
         """Refit from all readings so far (q (m, n) rad, meas (m, K, 3) NaN where missing)."""
         m = int(np.sum(np.any(np.all(np.isfinite(meas), axis=-1), axis=1)))
-        if m < MIN_REGISTER_POSES or m - self._fitted_at < (1 if m < MIN_CALIBRATE_POSES else REFIT_EVERY):
+        if m < MIN_REGISTER_POSES or m - self._fitted_at < (1 if m < 2 * MIN_CALIBRATE_POSES else REFIT_EVERY):
             return self.stage
         self._fitted_at = m
         if m >= MIN_CALIBRATE_POSES and len(self.names) * m * 3 > 2 * self.layout.n_params:

@@ -41,8 +41,7 @@ def cmd_simulate(args) -> None:
 
 
 def cmd_calibrate(args) -> None:
-    cell = workflow.load_cell(args.cell)
-    meas = workflow.load_campaign(args.meas, cell)
+    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
     parse_method(args.method, meas.target_names)
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp)
     model = workflow.model_file(cal, cell, meas, data_path=args.meas)
@@ -93,8 +92,7 @@ def cmd_evaluate(args) -> None:
 
 
 def cmd_compare(args) -> None:
-    cell = workflow.load_cell(args.cell)
-    meas = workflow.load_campaign(args.meas, cell)
+    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
     rows = workflow.compare(cell, meas)
     console.print(tables.table3(rows, meas.target_names))
     for label, (cal, _) in rows.items():
@@ -113,8 +111,7 @@ def cmd_compare(args) -> None:
 
 
 def cmd_diagnose(args) -> None:
-    cell = workflow.load_cell(args.cell)
-    meas = workflow.load_campaign(args.meas, cell)
+    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
     report, figures = _diagnose_to_files(cell, meas, args.meas, args.out, args.model_out)
     _print_diagnosis(report)
     console.print(f"report written to {args.out}" + (f", model to {args.model_out}" if args.model_out else "")
@@ -161,6 +158,32 @@ def _report_order(report, exts):
         return (e["name"], e.get("joint"), e.get("harmonic"))
     index = {(x.name, None if x.joint is None else x.joint + 1, x.harmonic): x for x in exts}
     return [index[key(e)] for e in report["effects"]]
+
+
+def cmd_acquire(args) -> None:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from .acquire import AcquireOptions, acquire
+
+    cell = workflow.load_cell(args.cell)
+    opts = AcquireOptions(poses=args.poses, seed=args.seed, name=args.name, settle=args.settle,
+                          pause_s=args.pause, order=args.order, choose_from=args.choose_from,
+                          beam_break_rate=args.beam_break_rate)
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console, transient=True) as progress:
+        summary = acquire(args.db, cell, opts, progress=progress)
+    if summary["resumed_at"] is not None:
+        console.print(f"resumed campaign {summary['campaign']} ({summary['name']}) at pose "
+                      f"{summary['resumed_at'] + 1}")
+    locked = summary["locked_without_search_after_10"]
+    console.print(f"campaign {summary['campaign']} {summary['state']}: {summary['measured_poses']} poses "
+                  f"measured now, {summary['readings']} readings, {summary['missing']} missing, "
+                  f"{summary['beam_breaks']} beam breaks"
+                  + (f"; simulated campaign time {summary['campaign_s'] / 60:.1f} min"
+                     if summary["campaign_s"] is not None else "")
+                  + (f"; locked without search after pose 10: {100 * locked:.1f}%" if locked is not None else ""))
+    console.print(f"stored in {args.db}; calibrate with: robocal calibrate {args.db} "
+                  f"--campaign {summary['campaign']}")
 
 
 def cmd_demo(args) -> None:
@@ -239,6 +262,7 @@ def build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("calibrate", help="identify a model from a campaign")
     c.add_argument("meas")
     c.add_argument("--cell")
+    c.add_argument("--campaign", type=int, help="campaign id when MEAS is a database (default: latest)")
     c.add_argument("--method", default="minimax",
                    help="minimax (default), ls-sum, ls-single:A, ls-pose")
     c.add_argument("--qp", choices=("primal-dual", "exact"), default="primal-dual",
@@ -261,15 +285,33 @@ def build_parser() -> argparse.ArgumentParser:
     co = sub.add_parser("compare", help="every method side by side (the paper's Table 3)")
     co.add_argument("meas")
     co.add_argument("--cell")
+    co.add_argument("--campaign", type=int, help="campaign id when MEAS is a database (default: latest)")
     co.add_argument("--json", help="also write the figures as JSON")
     co.set_defaults(func=cmd_compare)
 
     dg = sub.add_parser("diagnose", help="what the geometric model misses, named and modelled")
     dg.add_argument("meas")
     dg.add_argument("--cell")
+    dg.add_argument("--campaign", type=int, help="campaign id when MEAS is a database (default: latest)")
     dg.add_argument("--out", default="report.json", help="report (figures are written beside it)")
     dg.add_argument("--model-out", help="the final, extended model.json")
     dg.set_defaults(func=cmd_diagnose)
+
+    aq = sub.add_parser("acquire", help="run a campaign on the devices (simulated on loopback "
+                                        "sockets by default), storing every reading as it arrives")
+    aq.add_argument("--db", default="robocal.db", help="SQLite database (created if absent)")
+    aq.add_argument("--cell")
+    aq.add_argument("--poses", type=int, default=100)
+    aq.add_argument("--seed", type=int, default=0)
+    aq.add_argument("--name", help="campaign name; an unfinished campaign of that name is resumed")
+    aq.add_argument("--settle", choices=("fixed", "adaptive"), default="fixed",
+                    help="fixed pause (the paper's 10 s) or end it once readings agree")
+    aq.add_argument("--pause", type=float, default=10.0, help="pause at each pose, s")
+    aq.add_argument("--order", action="store_true", help="order poses to shorten the motion")
+    aq.add_argument("--choose-from", type=int, default=0, metavar="N",
+                    help="choose the poses out of N candidates by D-optimality")
+    aq.add_argument("--beam-break-rate", type=float, default=0.0)
+    aq.set_defaults(func=cmd_acquire)
 
     d = sub.add_parser("demo", help="simulate, calibrate with every method, evaluate held-out")
     d.add_argument("--out", default="robocal-demo")

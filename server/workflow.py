@@ -39,6 +39,36 @@ def load_campaign(path, cell: Cell) -> Measurements:
     return meas
 
 
+DB_SUFFIXES = (".db", ".sqlite", ".sqlite3")
+
+
+def is_database(path) -> bool:
+    return str(path).startswith("sqlite:") or str(path).lower().endswith(DB_SUFFIXES)
+
+
+def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurements]:
+    """A campaign from a meas.csv, or from the store's database (latest campaign unless given);
+    the cell from cell_path, else the database campaign's own, else the built-in default."""
+    if not is_database(path):
+        cell = load_cell(cell_path)
+        return cell, load_campaign(path, cell)
+    from . import store
+    from .formats.cell_json import parse_cell
+
+    if not str(path).startswith("sqlite:") and not Path(path).exists():
+        raise FileNotFoundError(2, "no such file", str(path))
+    db = store.open_database(path)
+    campaigns = store.list_campaigns(db)
+    if not campaigns:
+        raise DataError(f"{path}: no campaign in the database")
+    if campaign_id is None:
+        campaign_id = max(c.id for c in campaigns)
+    info = store.get_campaign(db, campaign_id=campaign_id)
+    cell = load_cell(cell_path) if cell_path else parse_cell(info.cell_json)
+    meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
+    return cell, meas
+
+
 def run_method(cell: Cell, meas: Measurements, method: str, qp="primal-dual") -> Calibration:
     targets = np.array([cell.targets[t] for t in meas.target_names])
     return calibrate(cell.robot, targets, meas.target_names, meas.q, meas.xyz, method=method,

@@ -1,0 +1,1 @@
+"""ABB controller driver: line protocol, client, simulated controller, and the RAPID server."""

@@ -1,0 +1,209 @@
+"""`robocal acquire`: plan a campaign, run the handshake on the devices, store every reading.
+
+Composes the drivers (simulated devices over real loopback sockets by default, on a virtual
+clock), the campaign engine and the store. A campaign left unfinished (a killed process) is
+resumed at its next unmeasured pose, keeping every reading already committed.
+"""
+
+from __future__ import annotations
+
+import json
+from contextlib import ExitStack
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from drivers.campaign import CampaignEngine, Settings
+from drivers.clock import VirtualClock
+from drivers.predictor import SmrPredictor
+
+from . import store
+from .formats.cell_json import Cell, cell_to_json, parse_cell
+
+
+@dataclass
+class AcquireOptions:
+    """What to acquire and how."""
+
+    poses: int = 100
+    seed: int = 0
+    name: str | None = None
+    settle: str = "fixed"
+    pause_s: float = 10.0
+    order: bool = False
+    choose_from: int = 0  # >0: choose `poses` of this many candidates by D-optimality
+    beam_break_rate: float = 0.0
+    samples: int = 1000
+
+
+class StoreSink:
+    """Hands the engine's readings to the store, each committed before the next measurement."""
+
+    def __init__(self, db, campaign_id):
+        self.db, self.campaign_id = db, campaign_id
+
+    def reading(self, *, pose_index, target, measurement, time_s, weather):
+        w = {} if weather is None else {"temp_c": getattr(weather, "temp_c", None),
+                                        "pressure_hpa": getattr(weather, "pressure_hpa", None),
+                                        "humidity_pct": getattr(weather, "humidity_pct", None)}
+        store.record_reading(self.db, campaign_id=self.campaign_id, pose_index=pose_index,
+                             target=target, xyz=measurement.mean_mm, std=measurement.std_mm,
+                             samples=measurement.samples, time_s=time_s, **w)
+
+    def pose_done(self, *, pose_index, state, q_deg):
+        store.record_pose_outcome(self.db, campaign_id=self.campaign_id, pose_index=pose_index,
+                                  state=state, reached_deg=list(map(float, q_deg)))
+
+
+class SimulatedCell:
+    """The virtual cell's devices: a simulated tracker and controller on 127.0.0.1 sockets."""
+
+    def __init__(self, cell: Cell, seed: int, clock, beam_break_rate: float = 0.0):
+        from drivers.abb.sim import SimulatedController, serve_controller
+        from drivers.cell import TrackerSpec, VirtualCell
+        from drivers.tracker.sim import SimulatedTracker, serve_tracker
+        from drivers.world import SimulatedWorld
+
+        self.cell = VirtualCell.random(cell.robot, cell.targets, seed=seed,
+                                       tracker=TrackerSpec(**cell.tracker))
+        self.world = SimulatedWorld(self.cell, clock)
+        self.tracker_device = SimulatedTracker(self.world, clock, beam_break_rate=beam_break_rate,
+                                               seed=seed)
+        self.controller_device = SimulatedController(self.world, cell.robot, clock)
+        self.tracker_server = serve_tracker(self.tracker_device)
+        self.controller_server = serve_controller(self.controller_device)
+
+    def rough_base(self, seed: int) -> np.ndarray:
+        """What a quick survey of the cell gives: the true base, some 10 mm and half a degree off."""
+        rng = np.random.default_rng([seed, 7])
+        base = self.cell.base.copy()
+        base[:3, 3] += rng.normal(0.0, 6.0, 3)
+        a = np.deg2rad(rng.normal(0.0, 0.3))
+        c, s = np.cos(a), np.sin(a)
+        base[:3, :3] = base[:3, :3] @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return base
+
+    def close(self):
+        self.tracker_server.close()
+        self.controller_server.close()
+
+
+def _plan(cell: Cell, base, opts: AcquireOptions):
+    from drivers.planning import plan_campaign
+
+    targets = np.array(list(cell.targets.values()))
+    rng = np.random.default_rng(opts.seed)
+    n_cand = max(opts.choose_from, opts.poses)
+    q, summary = plan_campaign(cell.robot, base, targets, n_cand, rng,
+                               k=opts.poses if opts.choose_from else None,
+                               start=np.zeros(cell.robot.n_joints) if opts.order else None)
+    if not opts.order:
+        summary["ordered"] = False
+    return np.rad2deg(q), summary
+
+
+def find_unfinished(db, name):
+    """The latest campaign of that name that did not end, if any."""
+    for c in sorted(store.list_campaigns(db), key=lambda c: c.id, reverse=True):
+        if c.name == name and c.status in ("planned", "running", "paused", "failed"):
+            return c
+    return None
+
+
+def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None) -> dict:
+    """Run (or resume) a simulated campaign; returns a summary with the simulated campaign time."""
+    db = store.open_database(db_path)
+    name = opts.name or f"campaign-seed{opts.seed}"
+    existing = find_unfinished(db, name)
+    with ExitStack() as stack:
+        if existing is not None:
+            info = existing
+            cell = parse_cell(info.cell_json)
+            settings = json.loads(info.settings_json or "{}")
+            opts = AcquireOptions(**{**asdict(opts), **settings.get("options", {})})
+        clock = VirtualClock()
+        sim = SimulatedCell(cell, opts.seed, clock, opts.beam_break_rate)
+        stack.callback(sim.close)
+        base = sim.rough_base(opts.seed) if cell.base is None else cell.base
+        if existing is None:
+            poses_deg, plan = _plan(cell, base, opts)
+            cid = store.create_campaign(db, name=name, cell_json=json.dumps(cell_to_json(cell)),
+                                        poses_deg=poses_deg.tolist(), simulated=True,
+                                        settings={"options": asdict(opts), "plan": plan,
+                                                  "base_guess": base.tolist()})
+            start, history, partial = 0, None, {}
+        else:
+            cid = existing.id
+            poses_deg = np.array([p.joints_deg for p in store.planned_poses(db, campaign_id=cid)])
+            start = store.next_unmeasured_pose(db, campaign_id=cid)
+            names = tuple(sorted(cell.targets))
+            history, partial = _history(db, cid, names, start, cell)
+            base = np.array(settings.get("base_guess", base))
+            clock.advance_to(_last_time(db, cid) + 30.0)
+        if store.get_campaign(db, campaign_id=cid).status != "running":
+            store.set_status(db, campaign_id=cid, status="running")
+        from drivers.abb.client import ControllerClient
+        from drivers.tracker.client import TrackerClient
+
+        tracker = TrackerClient("127.0.0.1", sim.tracker_server.port)
+        stack.callback(tracker.close)
+        controller = ControllerClient(sim.controller_server.url, cell.robot)
+        stack.callback(controller.close)
+        names = tuple(sorted(cell.targets))
+        predictor = SmrPredictor(cell.robot, np.array([cell.targets[t] for t in names]), names, base)
+        settings = Settings(pause_s=opts.pause_s, settle=opts.settle, samples=opts.samples)
+        sink = StoreSink(db, cid)
+        if progress:
+            sink = _Progress(sink, progress, len(poses_deg), start)
+        engine = CampaignEngine(controller, tracker, clock, predictor, sink, settings, log)
+        t0 = clock.now()
+        stats = engine.run(poses_deg, start=start if start is not None else len(poses_deg),
+                           history=history, partial=partial)
+        store.set_status(db, campaign_id=cid, status="done" if engine.state == "done" else "aborted")
+    return {"campaign": cid, "name": name, "resumed_at": start if existing else None,
+            "poses": int(len(poses_deg)), "state": engine.state, "measured_poses": stats.poses,
+            "readings": stats.readings, "missing": stats.missing, "beam_breaks": stats.beam_breaks,
+            "searched": stats.searched,
+            "locked_without_search_after_10": (stats.locked_after_10 / stats.aimed_after_10
+                                               if stats.aimed_after_10 else None),
+            "campaign_s": clock.now() - t0 if existing is None else None,
+            "campaign_end_s": clock.now(), "predictor": predictor.stage,
+            "no_out_of_limit_commands": True}
+
+
+def _history(db, cid, names, start, cell):
+    """Joints and readings of the poses already done, and the readings of a cut-off pose."""
+    if start is None or start == 0:
+        partial = {} if start is None else _partial(db, cid, 0)
+        return None, partial
+    meas = store.campaign_measurements(db, campaign_id=cid, targets=names)
+    done = [int(p) - 1 for p in meas.pose_ids]  # labels are "1".."n"
+    keep = [i for i, p in enumerate(done) if p < start]
+    return (meas.q[keep], meas.xyz[keep]), _partial(db, cid, start)
+
+
+def _partial(db, cid, pose_index) -> dict:
+    readings = store.pose_readings(db, campaign_id=cid, pose_index=pose_index)
+    return {t: np.array([r.x, r.y, r.z]) for t, r in readings.items()
+            if getattr(r, "status", "ok") == "ok"}
+
+
+def _last_time(db, cid) -> float:
+    meas = store.campaign_measurements(db, campaign_id=cid)
+    t = meas.time_s
+    return float(np.nanmax(t)) if t is not None and np.isfinite(t).any() else 0.0
+
+
+class _Progress:
+    """A sink that also advances a progress bar per pose."""
+
+    def __init__(self, sink, progress, total, start):
+        self.sink, self.progress = sink, progress
+        self.task = progress.add_task("measuring", total=total, completed=start or 0)
+
+    def reading(self, **kw):
+        self.sink.reading(**kw)
+
+    def pose_done(self, **kw):
+        self.sink.pose_done(**kw)
+        self.progress.advance(self.task)
