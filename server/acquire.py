@@ -119,7 +119,7 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None) 
         if existing is not None:
             info = existing
             cell = parse_cell(info.cell_json)
-            settings = json.loads(info.settings_json or "{}")
+            settings = info.settings or {}
             opts = AcquireOptions(**{**asdict(opts), **settings.get("options", {})})
         clock = VirtualClock()
         sim = SimulatedCell(cell, opts.seed, clock, opts.beam_break_rate)
@@ -177,15 +177,14 @@ def _history(db, cid, names, start, cell):
         partial = {} if start is None else _partial(db, cid, 0)
         return None, partial
     meas = store.campaign_measurements(db, campaign_id=cid, targets=names)
-    done = [int(p) - 1 for p in meas.pose_ids]  # labels are "1".."n"
-    keep = [i for i, p in enumerate(done) if p < start]
+    index = {p.label: p.index for p in store.planned_poses(db, campaign_id=cid)}
+    keep = [i for i, label in enumerate(meas.pose_ids) if index[label] < start]
     return (meas.q[keep], meas.xyz[keep]), _partial(db, cid, start)
 
 
 def _partial(db, cid, pose_index) -> dict:
     readings = store.pose_readings(db, campaign_id=cid, pose_index=pose_index)
-    return {t: np.array([r.x, r.y, r.z]) for t, r in readings.items()
-            if getattr(r, "status", "ok") == "ok"}
+    return {t: np.array(r.xyz) for t, r in readings.items() if r.status == "ok"}
 
 
 def _last_time(db, cid) -> float:

@@ -199,7 +199,7 @@ def parse_request(line: str) -> Request:
 
 
 def encode_reply(req_id: int, value) -> str:
-    """The reply line for a result (Ident, bool locked, Measurement, Weather, Status, TrackerError)."""
+    """The reply line for a result: Ident, bool (locked), Measurement, Weather, Status or error."""
     if isinstance(value, TrackerError):
         message = "".join(c if 32 <= ord(c) < 127 else "?" for c in value.message)
         return f"#{req_id} ERR {value.code} {message}".rstrip() + "\n"

@@ -288,6 +288,7 @@ class TrackerServer:
             await asyncio.wait(list(self._tasks), timeout=2.0)
 
 
-def serve_tracker(device: SimulatedTracker, host: str = "127.0.0.1", port: int = 0) -> TrackerServer:
-    """Serve `device` over TCP from a background thread with its own event loop; port 0: any free."""
+def serve_tracker(device: SimulatedTracker, host: str = "127.0.0.1",
+                  port: int = 0) -> TrackerServer:
+    """Serve `device` over TCP from a background thread with its own event loop; port 0: any."""
     return TrackerServer(device, host, port)

@@ -1,4 +1,4 @@
-"""A virtual cell with an IRB 2600 and its simulated tracker, at a valid pose, on a virtual clock."""
+"""An IRB 2600 cell with its simulated tracker, at a valid pose, on a virtual clock."""
 
 from types import SimpleNamespace
 

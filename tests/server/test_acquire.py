@@ -1,0 +1,128 @@
+"""robocal acquire end to end: simulated devices over loopback sockets, readings in SQLite."""
+
+import re
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from drivers.abb.client import ControllerClient
+from drivers.abb.sim import SimulatedController, serve_controller
+from drivers.campaign import CampaignEngine, Settings
+from drivers.cell import VirtualCell
+from drivers.clock import VirtualClock
+from drivers.predictor import SmrPredictor
+from drivers.tracker.client import TrackerClient
+from drivers.tracker.sim import SimulatedTracker, serve_tracker
+from drivers.world import SimulatedWorld
+from solver.robot import IRB2600
+from tests.robots import TARGETS
+
+CMD = [sys.executable, "-m", "server.cli"]
+
+
+def robocal(*args, cwd, check=True):
+    r = subprocess.run(CMD + list(map(str, args)), cwd=cwd, capture_output=True, text=True,
+                       timeout=600)
+    if check:
+        assert r.returncode == 0, r.stderr
+    return r
+
+
+def counts(db):
+    con = sqlite3.connect(db)
+    try:
+        ok = con.execute("select count(*) from reading where status = 'ok'").fetchone()[0]
+        missing = con.execute("select count(*) from reading where status = 'missing'").fetchone()[0]
+        dup = con.execute("select count(*) from (select pose_index, target, count(*) c from reading "
+                          "group by campaign_id, pose_index, target having c > 1)").fetchone()[0]
+        outcomes = con.execute("select count(*) from pose_outcome").fetchone()[0]
+    finally:
+        con.close()
+    return ok, missing, dup, outcomes
+
+
+def test_campaign_ends_in_a_database_that_calibrate_reads(tmp_path):
+    r = robocal("acquire", "--db", "cell.db", "--poses", 40, "--seed", 2, cwd=tmp_path)
+    locked = float(re.search(r"locked without search after pose 10: ([\d.]+)%", r.stdout).group(1))
+    assert locked >= 95.0
+    ok, missing, dup, outcomes = counts(tmp_path / "cell.db")
+    assert (ok, missing, dup, outcomes) == (120, 0, 0, 40)
+    r = robocal("calibrate", "cell.db", "--out", "model.json", cwd=tmp_path)
+    rms = float(re.search(r"RMS ([\d.]+) mm", r.stdout.split("RMSE(phi)")[1]).group(1))
+    assert rms < 0.03
+
+
+def test_beam_breaks_lose_and_duplicate_nothing(tmp_path):
+    r = robocal("acquire", "--db", "b.db", "--poses", 40, "--seed", 5, "--beam-break-rate", 0.1,
+                cwd=tmp_path)
+    breaks = int(re.search(r"(\d+) beam breaks", r.stdout).group(1))
+    assert breaks > 0
+    ok, missing, dup, outcomes = counts(tmp_path / "b.db")
+    assert dup == 0 and outcomes == 40 and ok + missing == 120
+    assert missing <= 3  # retries recover nearly every break
+
+
+def test_killed_acquisition_resumes_at_the_next_pose(tmp_path):
+    db = tmp_path / "k.db"
+    args = ["acquire", "--db", "k.db", "--poses", 100, "--seed", 7, "--name", "run"]
+    proc = subprocess.Popen(CMD + list(map(str, args)), cwd=tmp_path, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    seen = 0
+    while time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+        try:
+            seen = counts(db)[0]
+        except sqlite3.Error:
+            continue
+        if seen >= 60:
+            break
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    before_ok, _, _, before_outcomes = counts(db)
+    assert 0 < before_outcomes < 100, "the kill must land mid-campaign"
+    r = robocal(*args, cwd=tmp_path)
+    assert f"resumed campaign 1 (run) at pose {before_outcomes + 1}" in r.stdout
+    ok, missing, dup, outcomes = counts(db)
+    assert dup == 0 and outcomes == 100 and ok + missing == 300 and ok >= before_ok
+
+
+def test_no_out_of_limit_command_reaches_the_controller():
+    cell = VirtualCell.random(IRB2600, TARGETS, seed=4)
+    clock = VirtualClock()
+    world = SimulatedWorld(cell, clock)
+    ctrl_dev = SimulatedController(world, IRB2600, clock)
+    trk_dev = SimulatedTracker(world, clock, seed=4)
+    with serve_controller(ctrl_dev) as cs, serve_tracker(trk_dev) as ts:
+        controller = ControllerClient(cs.url, IRB2600)
+        tracker = TrackerClient("127.0.0.1", ts.port)
+        q = np.rad2deg(cell.sample_poses(6, np.random.default_rng(0)))
+        q[2, 1] = 170.0  # joint 2 beyond its +155 deg limit
+        q[4, 4] = -150.0  # joint 5 beyond -120
+        names = tuple(TARGETS)
+        pred = SmrPredictor(IRB2600, np.array([TARGETS[t] for t in names]), names, cell.base)
+
+        class Sink:
+            states = []
+
+            def reading(self, **kw):
+                pass
+
+            def pose_done(self, *, pose_index, state, q_deg):
+                self.states.append(state)
+
+        sink = Sink()
+        CampaignEngine(controller, tracker, clock, pred, sink, Settings(pause_s=1.0)).run(q)
+        controller.close()
+        tracker.close()
+    assert sink.states[2] == "skipped" and sink.states[4] == "skipped"
+    moves = [line for line in ctrl_dev.received if "MOVEJ" in line]
+    assert len(moves) == 4
+    lo, hi = np.rad2deg(IRB2600.lower), np.rad2deg(IRB2600.upper)
+    for line in moves:
+        v = np.array(line.split("MOVEJ")[1].split(), dtype=float)
+        assert np.all(v >= lo) and np.all(v <= hi)
