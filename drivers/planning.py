@@ -164,8 +164,9 @@ def candidate_jacobians(robot: Robot, base_in_tracker, targets, q) -> np.ndarray
 
 def plan_campaign(robot: Robot, base_in_tracker, targets, n_candidates: int, rng, k=None,
                   criterion: str = "D", start=None, speeds=None, acceptance_deg: float = 60.0,
-                  floor_mm: float = 150.0, bounds=None) -> tuple[np.ndarray, dict]:
-    """Valid random candidates -> optionally the k best by `criterion` -> ordered; (q, summary)."""
+                  floor_mm: float = 150.0, bounds=None, order: bool = True) -> tuple[np.ndarray, dict]:
+    """Valid random candidates -> optionally the k best by `criterion` -> ordered (unless not
+    asked: the paper measures in plan order); (q, summary)."""
     # The summary compares move time in candidate order with the planned order, and the chosen
     # poses' observability with the first k candidates (a random choice of the same size).
     cand = plan_poses(robot, base_in_tracker, targets, n_candidates, rng, acceptance_deg,
@@ -177,8 +178,8 @@ def plan_campaign(robot: Robot, base_in_tracker, targets, n_candidates: int, rng
     else:
         chosen = obs.select_poses(J, k, criterion)
         random_ = np.arange(k)  # candidates are i.i.d. random, so any k of them are a random choice
-    order = order_poses(cand[chosen], start, speeds)
-    q = cand[chosen][order]
+    perm = order_poses(cand[chosen], start, speeds) if order else np.arange(len(chosen))
+    q = cand[chosen][perm]
     summary = {
         "n_candidates": n_candidates,
         "n_poses": len(q),

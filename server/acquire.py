@@ -96,9 +96,8 @@ def _plan(cell: Cell, base, opts: AcquireOptions):
     n_cand = max(opts.choose_from, opts.poses)
     q, summary = plan_campaign(cell.robot, base, targets, n_cand, rng,
                                k=opts.poses if opts.choose_from else None,
-                               start=np.zeros(cell.robot.n_joints) if opts.order else None)
-    if not opts.order:
-        summary["ordered"] = False
+                               start=np.zeros(cell.robot.n_joints), order=opts.order)
+    summary["ordered"] = opts.order
     return np.rad2deg(q), summary
 
 

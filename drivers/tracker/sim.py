@@ -48,7 +48,6 @@ class SimulatedTracker:
         self._layout = Layout(cell.true_robot, cell.base, cell.target_names)
         self._x = self._layout.initial(cell.true_targets)
         self.aim_mm = np.zeros(3)  # until the first POINT
-        self._search_from = self.aim_mm
         self.target: int | None = None  # index of the SMR the beam is locked on
         self._locked_at = -np.inf
         self._busy = threading.Lock()
@@ -67,10 +66,10 @@ class SimulatedTracker:
         if not self._busy.acquire(blocking=False):
             return encode_reply(req.id, TrackerError(ErrorCode.BUSY, "another request is running"))
         try:
-            method = {"ID": self.ident, "POINT": self.point, "SEARCH": self.search,
-                      "MEASURE": self.measure, "WEATHER": self.weather,
+            method = {"ID": self.ident, "POINT": lambda *xyz: self.point(xyz),
+                      "SEARCH": self.search, "MEASURE": self.measure, "WEATHER": self.weather,
                       "STATUS": self.status}[req.command]
-            value = method(req.args) if req.command == "POINT" else method(*req.args)
+            value = method(*req.args)
         except TrackerError as e:
             value = e
         finally:
@@ -84,14 +83,13 @@ class SimulatedTracker:
         """Aim at xyz (mm); lock on the nearest SMR within the capture radius."""
         self.clock.sleep(POINT_S)
         self.aim_mm = np.asarray(xyz, dtype=float).copy()
-        return self._lock_nearest(self.capture_radius_mm)
+        return self._lock_nearest(self.capture_radius_mm) is not None
 
     def search(self, radius_mm: float) -> bool:
         """Spiral out from the aim; lock on the first SMR met, or TARGET_NOT_FOUND."""
         radius = max(float(radius_mm), self.capture_radius_mm)
-        found = self._lock_nearest(radius)
-        if found:  # the spiral grows outwards: the search ends where it met the SMR
-            reached = np.linalg.norm(self.world.smr_positions()[self.target] - self._search_from)
+        reached = self._lock_nearest(radius)
+        if reached is not None:  # the spiral grows outwards: it ends where it met the SMR
             self.clock.sleep(search_time_s(reached))
             self._locked_at = self.clock.now()
             return True
@@ -147,19 +145,19 @@ class SimulatedTracker:
             self.target = None
         return self.target is not None
 
-    def _lock_nearest(self, radius_mm: float) -> bool:
-        """Lock on the nearest facing SMR within radius_mm of the aim; unlock if there is none."""
-        self.target, self._search_from = None, self.aim_mm.copy()
+    def _lock_nearest(self, radius_mm: float) -> float | None:
+        """Lock on the nearest facing SMR within radius_mm of the aim: its distance, or None."""
+        self.target = None
         if self.world.moving():
-            return False
+            return None
         p = self.world.smr_positions()
         d = np.linalg.norm(p - self.aim_mm, axis=1)
         d[(d > radius_mm) | ~self._facing(p)] = np.inf
         k = int(np.argmin(d))
         if not np.isfinite(d[k]):
-            return False
+            return None
         self.target, self._locked_at, self.aim_mm = k, self.clock.now(), p[k].copy()
-        return True
+        return float(d[k])
 
     def _facing(self, p) -> np.ndarray:
         """Which SMRs (K,) face the tracker within the acceptance angle; effects ignored."""
