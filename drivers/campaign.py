@@ -151,8 +151,14 @@ class CampaignEngine:
             else:
                 self._go("finish")
         except Exception:
+            # a device fault: halt the arm and end; every reading so far is already stored, and a
+            # later run resumes at the next unmeasured pose
             with self._lock:
                 self.state = "failed"
+            try:
+                self.controller.stop()
+            except Exception:  # noqa: BLE001 - the original error is the one to report
+                pass
             raise
         return self.stats
 

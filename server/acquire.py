@@ -21,6 +21,10 @@ from . import store
 from .formats.cell_json import Cell, cell_to_json, parse_cell
 
 
+class AcquisitionFailed(RuntimeError):
+    """A device fault ended the run; the message says where and that it can be resumed."""
+
+
 @dataclass
 class AcquireOptions:
     """What to acquire and how."""
@@ -156,8 +160,14 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None) 
             sink = _Progress(sink, progress, len(poses_deg), start)
         engine = CampaignEngine(controller, tracker, clock, predictor, sink, settings, log)
         t0 = clock.now()
-        stats = engine.run(poses_deg, start=start if start is not None else len(poses_deg),
-                           history=history, partial=partial)
+        try:
+            stats = engine.run(poses_deg, start=start if start is not None else len(poses_deg),
+                               history=history, partial=partial)
+        except Exception as e:
+            store.set_status(db, campaign_id=cid, status="failed")
+            raise AcquisitionFailed(f"campaign {cid} ({name}) stopped at pose "
+                                    f"{engine.stats.poses + (start or 0) + 1}: {e}; its readings are "
+                                    f"stored, run again to resume") from e
         store.set_status(db, campaign_id=cid, status="done" if engine.state == "done" else "aborted")
     return {"campaign": cid, "name": name, "resumed_at": start if existing else None,
             "poses": int(len(poses_deg)), "state": engine.state, "measured_poses": stats.poses,

@@ -13,6 +13,7 @@ from solver.calibrate import parse_method
 from solver.identifiability import NotIdentifiable
 
 from . import tables, workflow
+from .acquire import AcquisitionFailed
 from .formats.errors import InputError
 from .formats.model_json import write_json_atomic, write_model
 from .tables import console
@@ -345,7 +346,7 @@ def main(argv=None) -> int:
         args.effect = ["joint_compliance:2"]
     try:
         args.func(args)
-    except (InputError, workflow.DataError, NotIdentifiable) as e:
+    except (InputError, workflow.DataError, NotIdentifiable, AcquisitionFailed) as e:
         print(f"robocal: error: {e}", file=sys.stderr)
         return 1
     except FileNotFoundError as e:

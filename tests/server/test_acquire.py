@@ -8,6 +8,7 @@ import sys
 import time
 
 import numpy as np
+import pytest
 
 from drivers.abb.client import ControllerClient
 from drivers.abb.sim import SimulatedController, serve_controller
@@ -126,3 +127,40 @@ def test_no_out_of_limit_command_reaches_the_controller():
     for line in moves:
         v = np.array(line.split("MOVEJ")[1].split(), dtype=float)
         assert np.all(v >= lo) and np.all(v <= hi)
+
+
+def test_controller_fault_stops_keeps_readings_and_resumes(tmp_path, monkeypatch):
+    import server.acquire as acq
+    from server import store
+    from server.formats.cell_json import default_cell
+
+    made = []
+    real = acq.SimulatedCell
+
+    class Faulty(real):
+        """The controller faults when the 6th move is commanded."""
+
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            made.append(self)
+            dev = self.controller_device
+            handle = dev.handle_line
+
+            def handle_line(line):
+                moves = sum("MOVEJ" in r for r in dev.received)
+                if "MOVEJ" in line and moves == 5 and len(made) == 1:  # first run only
+                    dev.fault(42)
+                return handle(line)
+            dev.handle_line = handle_line
+
+    monkeypatch.setattr(acq, "SimulatedCell", Faulty)
+    opts = acq.AcquireOptions(poses=12, seed=3, name="f", pause_s=1.0)
+    with pytest.raises(acq.AcquisitionFailed, match="run again to resume"):
+        acq.acquire(tmp_path / "f.db", default_cell(), opts)
+    db = store.open_database(tmp_path / "f.db")
+    info = store.list_campaigns(db)[0]
+    assert info.status == "failed" and info.n_done == 5
+    summary = acq.acquire(tmp_path / "f.db", default_cell(), opts)
+    assert summary["resumed_at"] == 5 and summary["state"] == "done"
+    ok, missing, dup, outcomes = counts(tmp_path / "f.db")
+    assert (ok + missing, dup, outcomes) == (36, 0, 12)
