@@ -141,12 +141,13 @@ def _amounts(op: Op, x: np.ndarray, q: np.ndarray, dq: np.ndarray | None):
     return val
 
 
-def flange_frames(layout: Layout, x, q, dq=None, record=False):
+def flange_frames(layout: Layout, x, q, dq=None, record=False, frames=None):
     """Flange frames in the tracker frame for every pose.
 
     q: (m, n) joint readings in rad; dq: optional (m, n) corrections added to them (model
     extensions). Returns (R (m, 3, 3) with columns as axes, o (m, 3)) and, if record, the
-    per-op (axis, origin) pairs needed for the Jacobian.
+    per-op (axis, origin) pairs needed for the Jacobian. A `frames` list receives each joint's
+    frame (see joint_frames).
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
     m = q.shape[0]
@@ -170,6 +171,8 @@ def flange_frames(layout: Layout, x, q, dq=None, record=False):
             cols[j] = c * cj - s * ci
             if record:
                 rec.append((op, cols[op.axis], o))
+            if frames is not None and op.joint >= 0:
+                frames.append((np.stack(cols, axis=-1), o))
     R = np.stack(cols, axis=-1)
     return (R, o, rec) if record else (R, o)
 
@@ -180,23 +183,8 @@ def joint_frames(layout: Layout, x, q, dq=None) -> list[tuple[np.ndarray, np.nda
     Each is taken right after the joint's rotation, so its z axis is the joint axis and it moves
     rigidly with the link that follows the joint.
     """
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    m = q.shape[0]
-    ref = layout.base_ref
-    cols = [np.broadcast_to(ref[:3, c], (m, 3)).copy() for c in range(3)]
-    o = np.broadcast_to(ref[:3, 3], (m, 3)).copy()
-    frames = []
-    for op in layout.ops():
-        v = np.reshape(_amounts(op, x, q, dq), (-1, 1))
-        if op.kind == "t":
-            o = o + v * cols[op.axis]
-        else:
-            i, j = [(1, 2), (2, 0), (0, 1)][op.axis]
-            ci, cj = cols[i], cols[j]
-            cols[i] = np.cos(v) * ci + np.sin(v) * cj
-            cols[j] = np.cos(v) * cj - np.sin(v) * ci
-            if op.joint >= 0:
-                frames.append((np.stack(cols, axis=-1), o))
+    frames: list = []
+    flange_frames(layout, x, q, dq, frames=frames)
     return frames
 
 
