@@ -47,6 +47,10 @@ def cmd_calibrate(args) -> None:
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp)
     model = workflow.model_file(cal, cell, meas, data_path=args.meas)
     write_model(args.out, model)
+    if args.recording:
+        from .recording import record_calibration
+
+        record_calibration(args.recording, cell=cell, meas=meas, calibration=cal)
     fit = model.meta["fit"]
     console.print(f"{args.method} on {meas.n_poses} poses, {meas.n_readings} readings "
                   f"in {cal.seconds * 1000:.0f} ms")
@@ -59,7 +63,8 @@ def cmd_calibrate(args) -> None:
         console.print(f"SQP ({d['qp']} QP): {cal.iterations} iterations, "
                       f"{d['qp_iterations']} QP iterations, max F_i "
                       f"{d['history'][0]:.5f} -> {d['history'][-1]:.5f} mm^2 ({d['message']})")
-    console.print(f"model written to {args.out}")
+    console.print(f"model written to {args.out}"
+                  + (f", rerun recording to {args.recording}" if args.recording else ""))
 
 
 def cmd_predict(args) -> None:
@@ -113,7 +118,7 @@ def cmd_compare(args) -> None:
 
 def cmd_diagnose(args) -> None:
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
-    report, figures = _diagnose_to_files(cell, meas, args.meas, args.out, args.model_out)
+    report, figures, _ = _diagnose_to_files(cell, meas, args.meas, args.out, args.model_out)
     _print_diagnosis(report)
     console.print(f"report written to {args.out}" + (f", model to {args.model_out}" if args.model_out else "")
                   + "".join(f", figure {p}" for p in figures))
@@ -135,7 +140,7 @@ def _diagnose_to_files(cell, meas, meas_path, report_path, model_path):
     write_json_atomic(report_path, report)
     if model_path:
         write_model(model_path, model)
-    return report, figures
+    return report, figures, d
 
 
 def _print_diagnosis(report) -> None:
@@ -211,15 +216,20 @@ def cmd_demo(args) -> None:
     model = workflow.model_file(cal, cell, cal_meas, data_path=out / "meas.csv")
     write_model(out / "model.json", model)
     geo = workflow.evaluate(model, hold)
-    report, figures = _diagnose_to_files(cell, cal_meas, out / "meas.csv", out / "report.json",
-                                         out / "model-extended.json")
+    report, figures, diagnosis = _diagnose_to_files(cell, cal_meas, out / "meas.csv",
+                                                    out / "report.json", out / "model-extended.json")
+    from .recording import record_calibration
+
+    record_calibration(out / "calibration.rrd", cell=cell, meas=cal_meas, calibration=cal,
+                       nominal=rows["nominal"][0], diagnosis=diagnosis)
     _print_diagnosis(report)
     ext = workflow.evaluate(workflow.read_model(out / "model-extended.json"), hold)
     console.print(tables.accuracy(ext["model"], "extended model on held-out poses",
                                   hold.target_names))
     console.print(f"held-out RMS: nominal {geo['nominal']['rmse']:.4f} mm, minimax "
                   f"{geo['model']['rmse']:.4f} mm, extended {ext['model']['rmse']:.4f} mm")
-    console.print(f"files in {out}: model.json (minimax), model-extended.json, report.json"
+    console.print(f"files in {out}: model.json (minimax), model-extended.json, report.json, "
+                  f"calibration.rrd (open with `rerun {out / 'calibration.rrd'}`)"
                   + "".join(f", {p.name}" for p in figures))
 
 
@@ -273,6 +283,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--qp", choices=("primal-dual", "exact"), default="primal-dual",
                    help="minimax's QP subsolver: the paper's primal-dual method or Clarabel")
     c.add_argument("--out", default="model.json")
+    c.add_argument("--recording", help="also write a rerun recording (.rrd) of the calibration")
     c.set_defaults(func=cmd_calibrate)
 
     pr = sub.add_parser("predict", help="SMR positions a model predicts for poses")
