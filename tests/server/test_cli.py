@@ -4,6 +4,7 @@ import csv
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -39,8 +40,13 @@ def test_simulate_writes_the_spec_columns(workdir):
 
 
 def test_calibrate_predict_evaluate(workdir):
-    r = robocal("calibrate", "cal.csv", "--method", "minimax", "--out", "model.json", cwd=workdir)
+    r = robocal("calibrate", "cal.csv", "--method", "minimax", "--out", "model.json",
+                "--recording", "cal.rrd", cwd=workdir)
     assert r.returncode == 0, r.stderr
+    rerun = Path(sys.executable).parent / "rerun"
+    v = subprocess.run([str(rerun), "rrd", "verify", str(workdir / "cal.rrd")], capture_output=True,
+                       text=True, timeout=120)
+    assert v.returncode == 0, v.stderr
     assert "held fixed: theta1" in r.stdout and "SQP" in r.stdout
     model = json.loads((workdir / "model.json").read_text())
     assert model["schema"] == 1 and model["method"] == "minimax"
