@@ -192,6 +192,15 @@ def cmd_acquire(args) -> None:
                   f"--campaign {summary['campaign']}")
 
 
+def cmd_serve(args) -> None:
+    from .app import serve
+    from .settings import Settings
+
+    overrides = {k: v for k, v in (("database", args.db), ("host", args.host), ("port", args.port),
+                                   ("data_dir", args.data_dir)) if v is not None}
+    serve(Settings(**overrides))
+
+
 def cmd_demo(args) -> None:
     from drivers.cell import VirtualCell
     from drivers.effects import make_effects
@@ -328,6 +337,13 @@ def build_parser() -> argparse.ArgumentParser:
                     help="choose the poses out of N candidates by D-optimality")
     aq.add_argument("--beam-break-rate", type=float, default=0.0)
     aq.set_defaults(func=cmd_acquire)
+
+    sv = sub.add_parser("serve", help="the workstation service (REST API), on 127.0.0.1 unless told")
+    sv.add_argument("--db", help="database file or URL (default robocal.db, or ROBOCAL_DATABASE)")
+    sv.add_argument("--host", help="address to listen on (default 127.0.0.1)")
+    sv.add_argument("--port", type=int, help="port (default 8000)")
+    sv.add_argument("--data-dir", help="models, recordings and the token hash (default robocal-data)")
+    sv.set_defaults(func=cmd_serve)
 
     d = sub.add_parser("demo", help="simulate, calibrate with every method, evaluate held-out")
     d.add_argument("--out", default="robocal-demo")

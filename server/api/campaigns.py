@@ -1,0 +1,75 @@
+"""Campaigns: plan a simulated one, follow its progress, start, abort, e-stop."""
+
+from __future__ import annotations
+
+
+from fastapi import APIRouter
+
+from server import store
+from server.acquire import AcquireOptions
+
+from . import ops
+from .deps import AcquisitionsDep, Authorized, DbDep, SettingsDep
+from .schemas import CampaignCreate, CampaignDetail, CampaignPublic, RunPublic, StopPublic
+
+router = APIRouter(prefix="/campaigns", tags=["campaigns"])
+STOP_NOTE = ("marked aborted in the store: a running acquisition ends at its next reading, "
+             "which the store refuses; no stop is sent to the controller in this version")
+
+
+def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
+    run = acquisitions.get(info.id)
+    extra = {"settings": info.settings} if cls is CampaignDetail else {}
+    return cls(id=info.id, name=info.name, created_at=info.created_at, status=info.status,
+               simulated=info.simulated, notes=info.notes, poses_total=info.n_poses,
+               poses_done=info.n_done, run=None if run is None else RunPublic(
+                   state=run.state, stop_requested=run.stop_requested, detail=run.detail,
+                   summary=run.summary), **extra)
+
+
+@router.post("", status_code=201, dependencies=[Authorized])
+def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
+                    acquisitions: AcquisitionsDep) -> CampaignDetail:
+    """Plan a simulated campaign (stored `planned`; POST .../start runs it)."""
+    cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
+    opts = AcquireOptions(**body.model_dump(exclude={"cell_id"}))
+    cid = ops.plan_simulated_campaign(db, cell=cell, opts=opts)
+    return _public(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)
+
+
+@router.get("")
+def list_campaigns(db: DbDep, acquisitions: AcquisitionsDep,
+                   status: str | None = None) -> list[CampaignPublic]:
+    """Every campaign, oldest first (or those with this status)."""
+    return [_public(c, acquisitions) for c in store.list_campaigns(db, status=status)]
+
+
+@router.get("/{campaign_id}")
+def get_campaign(campaign_id: int, db: DbDep, acquisitions: AcquisitionsDep) -> CampaignDetail:
+    """One campaign with its live state: status and poses done of total, from the store."""
+    return _public(store.get_campaign(db, campaign_id=campaign_id), acquisitions, CampaignDetail)
+
+
+@router.post("/{campaign_id}/start", status_code=202, dependencies=[Authorized])
+def start_campaign(campaign_id: int, db: DbDep,
+                   acquisitions: AcquisitionsDep) -> CampaignPublic:
+    """Run (or resume) the acquisition on the worker thread; poll GET for progress."""
+    acquisitions.start(campaign_id=campaign_id)
+    return _public(store.get_campaign(db, campaign_id=campaign_id), acquisitions)
+
+
+@router.post("/{campaign_id}/abort", dependencies=[Authorized])
+def abort_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
+    """Abort the campaign (final: readings stay, it cannot be resumed)."""
+    was = acquisitions.stop(campaign_id=campaign_id, how="abort")
+    return StopPublic(id=campaign_id, status="aborted", was=was, note=STOP_NOTE)
+
+
+@router.post("/{campaign_id}/estop", dependencies=[Authorized])
+def estop_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
+    """Emergency stop: for now the same as abort (see note); the cell's hardware e-stop rules."""
+    was = acquisitions.stop(campaign_id=campaign_id, how="estop")
+    return StopPublic(id=campaign_id, status="aborted", was=was, note=STOP_NOTE)
+
+
+__all__ = ["router"]

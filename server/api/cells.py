@@ -1,0 +1,38 @@
+"""Cells: the built-in simulated cell and uploaded cell.json files."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Request
+from starlette.concurrency import run_in_threadpool
+
+from server.formats.cell_json import cell_to_json
+
+from . import ops
+from .deps import Authorized, SettingsDep
+from .schemas import CellPublic
+
+router = APIRouter(prefix="/cells", tags=["cells"])
+JSON_BODY = {"requestBody": {"required": True, "content": {"application/json": {
+    "schema": {"type": "object", "description": "a cell.json (spec section 2)"}}}}}
+
+
+@router.get("")
+def list_cells(settings: SettingsDep) -> list[str]:
+    """The cell ids: `default` (the simulated IRB 2600 cell) and uploads."""
+    return ops.list_cells(cells_dir=settings.cells_dir)
+
+
+@router.get("/{cell_id}")
+def get_cell(cell_id: str, settings: SettingsDep) -> CellPublic:
+    """One cell as cell.json."""
+    cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=cell_id)
+    return CellPublic(id=cell_id, cell=cell_to_json(cell))
+
+
+@router.post("", status_code=201, dependencies=[Authorized], openapi_extra=JSON_BODY)
+async def upload_cell(request: Request, settings: SettingsDep) -> CellPublic:
+    """Validate and keep a cell.json (read raw, so errors name its line and column)."""
+    text = (await request.body()).decode("utf-8", errors="replace")
+    cell_id, cell = await run_in_threadpool(ops.save_cell, cells_dir=settings.cells_dir,
+                                            text=text)
+    return CellPublic(id=cell_id, cell=cell_to_json(cell))

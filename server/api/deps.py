@@ -1,0 +1,36 @@
+"""The dependencies routes declare: the store, the settings, the worker tables, the token."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import Depends, Request
+
+from server.jobs import Acquisitions, Jobs
+from server.security import require_token
+from server.settings import Settings
+from server.store import Database
+
+
+def get_db(request: Request) -> Database:
+    return request.app.state.db
+
+
+def get_settings(request: Request) -> Settings:
+    return request.app.state.settings
+
+
+def get_jobs(request: Request) -> Jobs:
+    return request.app.state.jobs
+
+
+def get_acquisitions(request: Request) -> Acquisitions:
+    return request.app.state.acquisitions
+
+
+DbDep = Annotated[Database, Depends(get_db)]
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+JobsDep = Annotated[Jobs, Depends(get_jobs)]
+AcquisitionsDep = Annotated[Acquisitions, Depends(get_acquisitions)]
+# Every POST / PUT / PATCH / DELETE route lists this; create_app refuses to build otherwise.
+Authorized = Depends(require_token)

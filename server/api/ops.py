@@ -1,0 +1,115 @@
+"""What the routes do with the store and the data dir: keyword-only functions, no HTTP."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import tempfile
+from dataclasses import asdict
+from pathlib import Path
+
+from drivers.clock import VirtualClock
+from server import store
+from server.acquire import AcquireOptions, SimulatedCell, _plan
+from server.formats.cell_json import Cell, cell_to_json, default_cell, parse_cell
+from server.formats.errors import InputError
+from server.formats.files import atomic_write_text
+
+DEFAULT_CELL = "default"
+CELL_ID = re.compile(r"[0-9a-f]{16}")
+UNFINISHED = ("planned", "running", "paused", "failed")
+
+
+# --- cells -------------------------------------------------------------------------------------
+
+def save_cell(*, cells_dir: Path, text: str, filename: str = "cell.json") -> tuple[str, Cell]:
+    """Validate a cell.json and keep it under its content hash; (id, cell)."""
+    cell = parse_cell(text, filename)
+    normal = json.dumps(cell_to_json(cell), sort_keys=True, indent=2)
+    cell_id = hashlib.sha256(normal.encode()).hexdigest()[:16]
+    path = Path(cells_dir) / f"{cell_id}.json"
+    if not path.exists():
+        atomic_write_text(path, normal + "\n")
+    return cell_id, cell
+
+
+def load_cell(*, cells_dir: Path, cell_id: str) -> Cell:
+    """The built-in default cell or an uploaded one; NotFound otherwise."""
+    if cell_id == DEFAULT_CELL:
+        return default_cell()
+    # The id becomes a file name: accept nothing but the hash shape.
+    path = Path(cells_dir) / f"{cell_id}.json"
+    if not CELL_ID.fullmatch(cell_id) or not path.exists():
+        raise store.NotFound(f"no cell {cell_id!r}")
+    return parse_cell(path.read_text(), path.name)
+
+
+def list_cells(*, cells_dir: Path) -> list[str]:
+    """Cell ids: the default first, then uploads."""
+    uploaded = sorted(p.stem for p in Path(cells_dir).glob("*.json") if CELL_ID.fullmatch(p.stem))
+    return [DEFAULT_CELL, *uploaded]
+
+
+# --- campaigns ---------------------------------------------------------------------------------
+
+def plan_simulated_campaign(db: store.Database, *, cell: Cell, opts: AcquireOptions) -> int:
+    """Plan a simulated campaign exactly as `robocal acquire` would, and store it `planned`."""
+    name = opts.name or f"campaign-seed{opts.seed}"
+    # acquire() resumes the latest unfinished campaign of a name, so names must not collide.
+    clash = [c.id for c in store.list_campaigns(db) if c.name == name and c.status in UNFINISHED]
+    if clash:
+        raise store.Conflict(f"campaign {clash[-1]} is already named {name!r} and unfinished")
+    opts = AcquireOptions(**{**asdict(opts), "name": name})
+    base = cell.base
+    if base is None:
+        # The simulated cell's survey guess depends on the seed only; the devices are not used.
+        sim = SimulatedCell(cell, opts.seed, VirtualClock(), opts.beam_break_rate)
+        try:
+            base = sim.rough_base(opts.seed)
+        finally:
+            sim.close()
+    poses_deg, plan = _plan(cell, base, opts)
+    return store.create_campaign(db, name=name, cell_json=cell_to_json(cell),
+                                 poses_deg=poses_deg.tolist(), simulated=True,
+                                 settings={"options": asdict(opts), "plan": _plain(plan),
+                                           "base_guess": base.tolist()})
+
+
+def _plain(obj):
+    """JSON-safe copy of a plan summary (numpy scalars and arrays to Python)."""
+    return json.loads(json.dumps(obj, default=lambda v: v.tolist() if hasattr(v, "tolist")
+                                 else str(v)))
+
+
+# --- readings and files ------------------------------------------------------------------------
+
+def campaign_readings(db: store.Database, *,
+                      campaign_id: int) -> list[tuple[str, store.ReadingInfo]]:
+    """Every stored reading with its pose label, in plan order."""
+    out = []
+    for pose in store.planned_poses(db, campaign_id=campaign_id):
+        for r in store.pose_readings(db, campaign_id=campaign_id, pose_index=pose.index).values():
+            out.append((pose.label, r))
+    return out
+
+
+def export_campaign_csv(db: store.Database, *, campaign_id: int) -> str:
+    """The campaign as meas.csv text."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "meas.csv"
+        store.export_csv(db, campaign_id=campaign_id, path=path)
+        return path.read_text()
+
+
+def import_campaign_csv(db: store.Database, *, data: bytes, filename: str, cell: Cell,
+                        name: str) -> int:
+    """Store an uploaded meas.csv as a done campaign; InputError naming `filename`:line:column."""
+    filename = Path(filename).name or "meas.csv"  # only a label: never a path on this machine
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / filename
+        path.write_bytes(data)
+        try:
+            return store.import_csv(db, path=path, cell_json=cell_to_json(cell), name=name)
+        except InputError as e:
+            raise InputError(filename, e.line, e.column, e.message) from None

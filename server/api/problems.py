@@ -1,0 +1,59 @@
+"""Errors as RFC 9457 problem details (application/problem+json)."""
+
+from __future__ import annotations
+
+from http import HTTPStatus
+
+from fastapi import FastAPI, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from server.formats.errors import InputError
+from server.store import Conflict, NotFound, StoreError
+
+MEDIA_TYPE = "application/problem+json"
+
+
+def problem(request: Request, status: int, detail: str, headers=None, **extra) -> JSONResponse:
+    """A problem-details response."""
+    body = {"type": "about:blank", "title": HTTPStatus(status).phrase, "status": status,
+            "detail": detail, "instance": request.url.path, **extra}
+    return JSONResponse(jsonable_encoder(body), status_code=status, headers=headers,
+                        media_type=MEDIA_TYPE)
+
+
+def install(app: FastAPI) -> None:
+    """Register the handlers that turn every refusal into a problem-details body."""
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, exc: StarletteHTTPException):
+        return problem(request, exc.status_code, str(exc.detail), headers=exc.headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def validation_error(request: Request, exc: RequestValidationError):
+        errors = [{k: e[k] for k in ("loc", "msg", "type") if k in e} for e in exc.errors()]
+        return problem(request, 422, "the request does not match the schema", errors=errors)
+
+    @app.exception_handler(InputError)
+    async def input_error(request: Request, exc: InputError):
+        # The uploaded file's own line and column, so the user can fix it in an editor.
+        return problem(request, 422, str(exc), file=exc.path, line=exc.line, column=exc.column)
+
+    @app.exception_handler(NotFound)
+    async def not_found(request: Request, exc: NotFound):
+        return problem(request, 404, str(exc))
+
+    @app.exception_handler(Conflict)
+    async def conflict(request: Request, exc: Conflict):
+        return problem(request, 409, str(exc))
+
+    @app.exception_handler(StoreError)
+    async def store_error(request: Request, exc: StoreError):
+        return problem(request, 422, str(exc))
+
+    @app.exception_handler(ValueError)
+    async def value_error(request: Request, exc: ValueError):
+        # The store and the solver front ends raise ValueError for bad arguments only.
+        return problem(request, 422, str(exc))

@@ -1,0 +1,90 @@
+"""Request and response bodies, one family per resource (Create / Public)."""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Literal
+
+from pydantic import BaseModel, Field
+
+
+class CellPublic(BaseModel):
+    id: str
+    cell: dict
+
+
+class CampaignCreate(BaseModel):
+    """A simulated campaign to plan (as `robocal acquire` plans it)."""
+
+    name: str | None = Field(None, min_length=1, max_length=200)
+    cell_id: str = "default"
+    poses: int = Field(20, ge=3, le=5000)
+    seed: int = Field(0, ge=0)
+    settle: Literal["fixed", "adaptive"] = "fixed"
+    pause_s: float = Field(10.0, ge=0.0, le=600.0)
+    order: bool = False
+    choose_from: int = Field(0, ge=0, le=100_000)
+    beam_break_rate: float = Field(0.0, ge=0.0, lt=1.0)
+    samples: int = Field(1000, ge=1, le=100_000)
+
+
+class RunPublic(BaseModel):
+    """The acquisition worker's view of the campaign since the server started."""
+
+    state: Literal["running", "finished", "failed", "stopped"]
+    stop_requested: str | None = None
+    detail: str | None = None
+    summary: dict | None = None
+
+
+class CampaignPublic(BaseModel):
+    id: int
+    name: str
+    created_at: dt.datetime
+    status: str
+    simulated: bool
+    notes: str
+    poses_total: int
+    poses_done: int
+    run: RunPublic | None = None
+
+
+class CampaignDetail(CampaignPublic):
+    settings: dict
+
+
+class StopPublic(BaseModel):
+    id: int
+    status: str
+    was: str
+    note: str
+
+
+class ReadingPublic(BaseModel):
+    pose: str
+    pose_index: int
+    target: str
+    status: str
+    xyz: tuple[float, float, float] | None
+    std: tuple[float, float, float] | None
+    samples: int | None
+    time_s: float | None
+    temp_c: float | None
+    detail: str
+
+
+class JobCreate(BaseModel):
+    campaign_id: int
+    method: str = Field("minimax", description="minimax, ls-sum, ls-single[:T], ls-pose, nominal")
+
+
+class JobPublic(BaseModel):
+    id: int
+    campaign_id: int
+    method: str
+    state: Literal["queued", "running", "done", "failed"]
+    reason: str | None
+    created_at: dt.datetime
+    started_at: dt.datetime | None
+    finished_at: dt.datetime | None
+    model_url: str | None = None

@@ -1,0 +1,99 @@
+"""The web service: `create_app(settings)` builds it, `serve(settings)` runs it with uvicorn."""
+
+from __future__ import annotations
+
+import sys
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.routing import APIRoute
+
+from . import store
+from .api import ROUTERS, problems
+from .jobs import Acquisitions, Jobs
+from .security import ensure_token, require_token
+from .settings import Settings
+
+API_PREFIX = "/api"
+MUTATING = {"POST", "PUT", "PATCH", "DELETE"}
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The FastAPI application for these settings (the store opens when it starts)."""
+    settings = settings or Settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        token = ensure_token(settings.token_file)
+        if token is not None:
+            # Shown this once only: the file keeps just its sha256.
+            print(f"robocal: API token (shown once, keep it): {token}", file=sys.stderr,
+                  flush=True)
+        for d in (settings.models_dir, settings.recordings_dir, settings.cells_dir):
+            d.mkdir(parents=True, exist_ok=True)
+        db = store.open_database(settings.database)
+        app.state.db = db
+        app.state.jobs = Jobs(db, settings.models_dir, settings.job_workers)
+        app.state.acquisitions = Acquisitions(settings.database, db)
+        try:
+            yield
+        finally:
+            app.state.acquisitions.shutdown()
+            app.state.jobs.shutdown()
+            db.close()
+
+    app = FastAPI(title="robocal", summary="Robot calibration workstation", version="0.1.0",
+                  lifespan=lifespan)
+    app.state.settings = settings
+    problems.install(app)
+    if settings.cors_origins:  # closed unless origins are listed
+        app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins,
+                           allow_methods=["*"], allow_headers=["Authorization", "Content-Type"])
+    for router in ROUTERS:
+        app.include_router(router, prefix=API_PREFIX)
+    check_authorized(app)
+    return app
+
+
+def unguarded_routes(app: FastAPI) -> list[str]:
+    """Mutating routes that do not require the token (should be none)."""
+    bad = []
+    for route in _api_routes(app.routes):
+        if route.methods & MUTATING:
+            calls = {d.call for d in _flat(route.dependant)}
+            if require_token not in calls:
+                bad.append(f"{','.join(sorted(route.methods))} {route.path}")
+    return bad
+
+
+def _api_routes(routes):
+    for route in routes:
+        if isinstance(route, APIRoute):
+            yield route
+        # FastAPI >= 0.16x keeps included routers as lazy wrappers around the original router.
+        inner = getattr(route, "original_router", None)
+        if inner is not None:
+            yield from _api_routes(inner.routes)
+
+
+def check_authorized(app: FastAPI) -> None:
+    """Refuse to build an app where a mutating route forgot the token: fail closed."""
+    bad = unguarded_routes(app)
+    if bad:
+        raise RuntimeError(f"routes without require_token: {', '.join(bad)}")
+
+
+def _flat(dependant):
+    for d in dependant.dependencies:
+        yield d
+        yield from _flat(d)
+
+
+def serve(settings: Settings | None = None) -> None:
+    """Run the service with uvicorn on settings.host:port (127.0.0.1 unless told otherwise)."""
+    import uvicorn
+
+    settings = settings or Settings()
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
+                log_level="info")

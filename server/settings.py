@@ -1,0 +1,45 @@
+"""The service's settings, from ROBOCAL_* environment variables (and DATABASE_URL)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import AliasChoices, Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Where the service keeps its data, where it listens, and who may call it from a browser."""
+
+    model_config = SettingsConfigDict(env_prefix="ROBOCAL_", populate_by_name=True,
+                                      extra="ignore")
+
+    # A SQLAlchemy URL or a plain SQLite file path; DATABASE_URL is honoured as hosting platforms
+    # set it, but ROBOCAL_DATABASE wins so a stray platform variable cannot redirect a cell's data.
+    database: str = Field("robocal.db", validation_alias=AliasChoices(
+        "ROBOCAL_DATABASE", "DATABASE_URL", "database"))
+    # Loopback only unless told otherwise: the API can command a robot to move.
+    host: str = "127.0.0.1"
+    port: int = Field(8000, ge=0, le=65535)
+    # Models, recordings, uploaded cells and the token hash live here.
+    data_dir: Path = Path("robocal-data")
+    # Browser origins allowed to call the API; none by default (the UI is served same-origin).
+    cors_origins: list[str] = []
+    # Calibration jobs run at once; each is CPU-bound numpy.
+    job_workers: int = Field(2, ge=1, le=64)
+
+    @property
+    def models_dir(self) -> Path:
+        return self.data_dir / "models"
+
+    @property
+    def recordings_dir(self) -> Path:
+        return self.data_dir / "recordings"
+
+    @property
+    def cells_dir(self) -> Path:
+        return self.data_dir / "cells"
+
+    @property
+    def token_file(self) -> Path:
+        return self.data_dir / "token.sha256"

@@ -1,0 +1,66 @@
+"""A real uvicorn server on 127.0.0.1 per test, with its own database, data dir and token."""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from dataclasses import dataclass
+
+import httpx
+import pytest
+import uvicorn
+
+from server.app import create_app
+from server.security import ensure_token
+from server.settings import Settings
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class Live:
+    """A running server: its settings, token and clients with and without the token."""
+
+    settings: Settings
+    token: str
+    url: str
+    client: httpx.Client  # sends the token
+    anonymous: httpx.Client
+
+
+@pytest.fixture
+def live(tmp_path):
+    settings = Settings(database=str(tmp_path / "robocal.db"), data_dir=tmp_path / "data",
+                        port=free_port())
+    # Made before start, as a first start would (the server then finds it and prints nothing).
+    token = ensure_token(settings.token_file)
+    server = uvicorn.Server(uvicorn.Config(create_app(settings), host=settings.host,
+                                           port=settings.port, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 30
+    while not server.started:
+        assert thread.is_alive() and time.monotonic() < deadline, "server did not start"
+        time.sleep(0.02)
+    url = f"http://{settings.host}:{settings.port}"
+    with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"},
+                      timeout=30) as client, httpx.Client(base_url=url, timeout=30) as anonymous:
+        yield Live(settings, token, url, client, anonymous)
+    server.should_exit = True
+    thread.join(timeout=30)
+
+
+def wait_for(get, done, timeout=180.0, interval=0.1):
+    """Poll get() until done(result); the last result."""
+    deadline = time.monotonic() + timeout
+    while True:
+        result = get()
+        if done(result):
+            return result
+        assert time.monotonic() < deadline, f"timed out; last: {result}"
+        time.sleep(interval)

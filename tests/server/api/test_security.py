@@ -1,0 +1,93 @@
+"""Every mutating route needs the token; the token is stored hashed; the service is closed."""
+
+import hashlib
+
+import pytest
+
+from server.app import MUTATING, _api_routes, create_app
+from server.security import ensure_token, reset_token
+from server.settings import Settings
+
+PROBLEM = "application/problem+json"
+
+
+def mutating_operations(schema):
+    return [(method.upper(), path) for path, ops in schema["paths"].items()
+            for method in ops if method.upper() in MUTATING]
+
+
+def concrete(path):
+    return path.replace("{campaign_id}", "1").replace("{job_id}", "1").replace("{cell_id}",
+                                                                              "default")
+
+
+def test_every_mutating_route_answers_401_without_the_token(live):
+    schema = live.anonymous.get("/openapi.json").json()
+    ops = mutating_operations(schema)
+    app_ops = {(m, "/api" + r.path) for r in _api_routes(create_app(live.settings).routes)
+               for m in r.methods & MUTATING}
+    assert set(ops) == app_ops and len(ops) >= 7  # the schema hides none of the app's routes
+    for method, path in ops:
+        for headers in ({}, {"Authorization": "Bearer wrong"}, {"Authorization": "Basic eDp5"}):
+            r = live.anonymous.request(method, concrete(path), headers=headers, json={})
+            assert r.status_code == 401, (method, path, headers, r.text)
+            assert r.headers["content-type"] == PROBLEM
+            assert r.headers["www-authenticate"] == "Bearer"
+            assert r.json()["status"] == 401 and r.json()["detail"]
+        assert schema["paths"][path][method.lower()]["security"] == [{"HTTPBearer": []}]
+    # Nothing was created by the refused requests.
+    assert live.anonymous.get("/api/campaigns").json() == []
+
+
+def test_reads_need_no_token_and_the_token_opens_writes(live):
+    assert live.anonymous.get("/api/cells").json() == ["default"]
+    r = live.client.post("/api/campaigns", json={"poses": 5, "seed": 1})
+    assert r.status_code == 201, r.text
+
+
+def test_token_is_stored_only_as_its_sha256(tmp_path):
+    path = tmp_path / "token.sha256"
+    token = ensure_token(path)
+    assert len(token) >= 40
+    stored = path.read_text().strip()
+    assert stored == hashlib.sha256(token.encode()).hexdigest() and token not in stored
+    assert path.stat().st_mode & 0o077 == 0
+    assert ensure_token(path) is None  # shown at first start only
+    assert reset_token(path) != token
+
+
+def test_rotated_token_takes_effect_without_restart(live):
+    new = reset_token(live.settings.token_file)
+    assert live.client.post("/api/campaigns", json={"poses": 5}).status_code == 401
+    r = live.anonymous.post("/api/campaigns", json={"poses": 5},
+                            headers={"Authorization": f"Bearer {new}"})
+    assert r.status_code == 201, r.text
+
+
+def test_cors_is_closed_by_default(live):
+    r = live.anonymous.options("/api/campaigns", headers={
+        "Origin": "http://evil.example", "Access-Control-Request-Method": "POST"})
+    assert "access-control-allow-origin" not in r.headers
+
+
+def test_settings_listen_on_loopback_by_default(monkeypatch):
+    monkeypatch.delenv("ROBOCAL_HOST", raising=False)
+    assert Settings().host == "127.0.0.1"
+    assert Settings().cors_origins == []
+    monkeypatch.setenv("DATABASE_URL", "sqlite:///platform.db")
+    assert Settings().database == "sqlite:///platform.db"
+    monkeypatch.setenv("ROBOCAL_DATABASE", "mine.db")
+    monkeypatch.setenv("ROBOCAL_PORT", "9123")
+    assert (Settings().database, Settings().port) == ("mine.db", 9123)
+
+
+def test_an_unguarded_mutating_route_is_refused_at_build(tmp_path, monkeypatch):
+    from fastapi import APIRouter
+
+    import server.app as app_module
+
+    extra = APIRouter()
+    extra.delete("/oops")(lambda: None)
+    monkeypatch.setattr(app_module, "ROUTERS", (*app_module.ROUTERS, extra))
+    with pytest.raises(RuntimeError, match="DELETE /oops"):
+        create_app(Settings(database=str(tmp_path / "x.db"), data_dir=tmp_path))
