@@ -105,19 +105,34 @@ def _plan(cell: Cell, base, opts: AcquireOptions):
     return np.rad2deg(q), summary
 
 
+UNFINISHED = ("planned", "running", "paused", "failed")
+
+
 def find_unfinished(db, name):
     """The latest campaign of that name that did not end, if any."""
     for c in sorted(store.list_campaigns(db), key=lambda c: c.id, reverse=True):
-        if c.name == name and c.status in ("planned", "running", "paused", "failed"):
+        if c.name == name and c.status in UNFINISHED:
             return c
     return None
 
 
-def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None) -> dict:
-    """Run (or resume) a simulated campaign; returns a summary with the simulated campaign time."""
+def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, *,
+            campaign_id: int | None = None, on_engine=None, on_event=None) -> dict:
+    """Run (or resume) a simulated campaign; returns a summary with the simulated campaign time.
+
+    campaign_id runs that stored campaign (else the latest unfinished one named opts.name, or a
+    new one); on_engine(engine) is called before the run so another thread can pause or stop it;
+    on_event(dict) hears each pose done and each state change.
+    """
     db = store.open_database(db_path)
     name = opts.name or f"campaign-seed{opts.seed}"
-    existing = find_unfinished(db, name)
+    if campaign_id is not None:
+        existing = store.get_campaign(db, campaign_id=campaign_id)
+        if existing.status not in UNFINISHED:
+            raise store.Conflict(f"campaign {campaign_id} is {existing.status}; it cannot run")
+        name = existing.name
+    else:
+        existing = find_unfinished(db, name)
     with ExitStack() as stack:
         if existing is not None:
             info = existing
@@ -159,16 +174,26 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None) 
         if progress:
             sink = _Progress(sink, progress, len(poses_deg), start)
         engine = CampaignEngine(controller, tracker, clock, predictor, sink, settings, log)
+        if on_event:
+            sink = engine.sink = _Events(sink, on_event, engine, cid, len(poses_deg), start)
+        if on_engine:
+            on_engine(engine)
         t0 = clock.now()
         try:
             stats = engine.run(poses_deg, start=start if start is not None else len(poses_deg),
                                history=history, partial=partial)
         except Exception as e:
-            store.set_status(db, campaign_id=cid, status="failed")
+            _finish(db, cid, "failed")
+            if on_event:
+                on_event({"type": "campaign.state", "campaign_id": cid, "state": "failed",
+                          "detail": f"{type(e).__name__}: {e}"})
             raise AcquisitionFailed(f"campaign {cid} ({name}) stopped at pose "
                                     f"{engine.stats.poses + (start or 0) + 1}: {e}; its readings are "
                                     f"stored, run again to resume") from e
-        store.set_status(db, campaign_id=cid, status="done" if engine.state == "done" else "aborted")
+        final = "done" if engine.state == "done" else "aborted"
+        _finish(db, cid, final)
+        if on_event:
+            on_event({"type": "campaign.state", "campaign_id": cid, "state": final})
     return {"campaign": cid, "name": name, "resumed_at": start if existing else None,
             "poses": int(len(poses_deg)), "state": engine.state, "measured_poses": stats.poses,
             "readings": stats.readings, "missing": stats.missing, "beam_breaks": stats.beam_breaks,
@@ -178,6 +203,14 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None) 
             "campaign_s": clock.now() - t0 if existing is None else None,
             "campaign_end_s": clock.now(), "predictor": predictor.stage,
             "no_out_of_limit_commands": True}
+
+
+def _finish(db, cid, status) -> None:
+    """Set the final status; a campaign paused in the store (by the API) passes through running,
+    as the engine may finish or fail its last pose after a pause was asked for."""
+    if store.get_campaign(db, campaign_id=cid).status == "paused":
+        store.set_status(db, campaign_id=cid, status="running")
+    store.set_status(db, campaign_id=cid, status=status)
 
 
 def _history(db, cid, names, start, cell):
@@ -215,3 +248,24 @@ class _Progress:
     def pose_done(self, **kw):
         self.sink.pose_done(**kw)
         self.progress.advance(self.task)
+
+
+class _Events:
+    """A sink that also reports each pose done, with the run's counts, to on_event."""
+
+    def __init__(self, sink, on_event, engine, campaign_id, total, start):
+        self.sink, self.on_event, self.engine = sink, on_event, engine
+        self.campaign_id, self.total, self.done = campaign_id, int(total), int(start or 0)
+
+    def reading(self, **kw):
+        self.sink.reading(**kw)
+
+    def pose_done(self, *, pose_index, state, q_deg):
+        self.sink.pose_done(pose_index=pose_index, state=state, q_deg=q_deg)
+        self.done += 1
+        st = self.engine.stats
+        self.on_event({"type": "campaign.pose", "campaign_id": self.campaign_id,
+                       "pose_index": int(pose_index), "pose_state": state,
+                       "poses_done": self.done, "poses_total": self.total,
+                       "readings": st.readings, "missing": st.missing,
+                       "engine_state": self.engine.state})

@@ -11,9 +11,10 @@ from fastapi.routing import APIRoute
 
 from . import store
 from .api import ROUTERS, problems
-from .jobs import Acquisitions, Jobs
+from .jobs import Acquisitions, Events, Jobs
 from .security import ensure_token, require_token
 from .settings import Settings
+from .web import mount_web
 
 API_PREFIX = "/api"
 MUTATING = {"POST", "PUT", "PATCH", "DELETE"}
@@ -30,15 +31,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             # Shown this once only: the file keeps just its sha256.
             print(f"robocal: API token (shown once, keep it): {token}", file=sys.stderr,
                   flush=True)
-        for d in (settings.models_dir, settings.recordings_dir, settings.cells_dir):
+        reports_dir = settings.data_dir / "reports"
+        for d in (settings.models_dir, settings.recordings_dir, settings.cells_dir, reports_dir):
             d.mkdir(parents=True, exist_ok=True)
         db = store.open_database(settings.database)
         app.state.db = db
-        app.state.jobs = Jobs(db, settings.models_dir, settings.job_workers)
-        app.state.acquisitions = Acquisitions(settings.database, db)
+        app.state.events = events = Events()
+        # Jobs() fails the jobs a previous process left queued or running.
+        app.state.jobs = Jobs(db, settings.models_dir, settings.job_workers,
+                              recordings_dir=settings.recordings_dir, reports_dir=reports_dir,
+                              events=events)
+        app.state.acquisitions = Acquisitions(settings.database, db, events)
         try:
             yield
         finally:
+            events.close()
             app.state.acquisitions.shutdown()
             app.state.jobs.shutdown()
             db.close()
@@ -53,6 +60,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for router in ROUTERS:
         app.include_router(router, prefix=API_PREFIX)
     check_authorized(app)
+    mount_web(app)  # last: a mount at / hides any route added after it
     return app
 
 

@@ -1,12 +1,16 @@
-"""Work the API hands off: calibration jobs in a worker pool, acquisitions on one worker thread.
+"""Work the API hands off: calibration and diagnosis jobs in a worker pool, acquisitions on one
+worker thread, and the event bus both report to.
 
-Both tables live in memory for this increment: a restart forgets jobs (their model files stay
-in the data dir) and the campaigns keep their state in the store.
+Jobs live in the store (a restart marks the ones it cut off as failed); acquisition runs are in
+memory, and the campaigns keep their state in the store.
 """
 
 from __future__ import annotations
 
+import asyncio
 import datetime as dt
+import itertools
+import json
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
@@ -21,109 +25,223 @@ from .formats.model_json import model_to_json, write_json_atomic
 from .workflow import model_file, run_method
 
 JOB_STATES = ("queued", "running", "done", "failed")
+JOB_KINDS = ("calibration", "diagnosis")
 # A campaign the engine may (re)start: the store resumes planned, paused and failed ones.
 STARTABLE = ("planned", "paused", "failed")
+FINAL = ("done", "aborted")
+RESTART_REASON = "service stopped while running"
+# Past this many unread events a slow subscriber loses the oldest rather than holding memory.
+QUEUE_SIZE = 1000
 
 
 def _now() -> dt.datetime:
     return dt.datetime.now(dt.timezone.utc)
 
 
-@dataclass(frozen=True)
-class Job:
-    """A calibration job as the API reports it."""
+class Events:
+    """Fans events out from worker threads to asyncio subscribers (the SSE streams)."""
 
-    id: int
-    campaign_id: int
-    method: str
-    state: str
-    reason: str | None
-    created_at: dt.datetime
-    started_at: dt.datetime | None = None
-    finished_at: dt.datetime | None = None
-    model_file: str | None = None
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._subscribers: set[tuple[asyncio.AbstractEventLoop, asyncio.Queue]] = set()
+        self._ids = itertools.count(1)
+
+    def subscribe(self) -> asyncio.Queue:
+        """A queue of (id, event) for the calling event loop; unsubscribe() it when done."""
+        queue: asyncio.Queue = asyncio.Queue(QUEUE_SIZE)
+        with self._lock:
+            self._subscribers.add((asyncio.get_running_loop(), queue))
+        return queue
+
+    def unsubscribe(self, queue: asyncio.Queue) -> None:
+        with self._lock:
+            self._subscribers = {(l, q) for l, q in self._subscribers if q is not queue}
+
+    def publish(self, event: dict) -> None:
+        """Send an event (a dict with a "type") to every subscriber; safe from any thread."""
+        with self._lock:
+            item = (next(self._ids), dict(event, time=_now().isoformat()))
+            subscribers = list(self._subscribers)
+        for loop, queue in subscribers:
+            try:
+                loop.call_soon_threadsafe(_put, queue, item)
+            except RuntimeError:  # that loop has closed: its stream is gone
+                self.unsubscribe(queue)
+
+    def close(self) -> None:
+        """End every stream (at shutdown)."""
+        with self._lock:
+            subscribers, self._subscribers = list(self._subscribers), set()
+        for loop, queue in subscribers:
+            try:
+                loop.call_soon_threadsafe(_put, queue, None)
+            except RuntimeError:
+                pass
+
+
+def _put(queue: asyncio.Queue, item) -> None:
+    if queue.full():
+        queue.get_nowait()  # drop the oldest: a stalled client must not stall the workers
+    queue.put_nowait(item)
+
+
+Job = store.JobInfo
+
+
+def check_job(db: store.Database, *, kind: str, campaign_id: int, method: str) -> None:
+    """Refuse a job before queueing it: NotFound, Conflict if not done, ValueError if bad."""
+    if kind not in JOB_KINDS:
+        raise ValueError(f"kind must be one of {', '.join(JOB_KINDS)}, not {kind!r}")
+    info = store.get_campaign(db, campaign_id=campaign_id)
+    if info.status != "done":
+        raise store.Conflict(f"campaign {campaign_id} is {info.status}; {kind} needs a done "
+                             "campaign")
+    if kind == "calibration":
+        targets = sorted(parse_cell(info.cell_json, f"<campaign {campaign_id} cell>").targets)
+        parse_method(method, targets)
 
 
 def check_method(db: store.Database, *, campaign_id: int, method: str) -> None:
-    """Refuse a job before queueing it: NotFound, Conflict if not done, ValueError if bad method."""
-    info = store.get_campaign(db, campaign_id=campaign_id)
-    if info.status != "done":
-        raise store.Conflict(f"campaign {campaign_id} is {info.status}; calibrate a done campaign")
-    targets = sorted(parse_cell(info.cell_json, f"<campaign {campaign_id} cell>").targets)
-    parse_method(method, targets)
+    """Refuse a calibration before queueing it (see check_job)."""
+    check_job(db, kind="calibration", campaign_id=campaign_id, method=method)
 
 
-def calibrate_campaign(db: store.Database, *, campaign_id: int, method: str) -> dict:
-    """Fit `method` to a stored campaign; the model.json object."""
+def _campaign_data(db: store.Database, campaign_id: int):
     info = store.get_campaign(db, campaign_id=campaign_id)
     cell = parse_cell(info.cell_json, f"<campaign {campaign_id} cell>")
     meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
     if meas.n_poses == 0:
         raise store.StoreError(f"campaign {campaign_id} has no readings")
+    return cell, meas
+
+
+def calibrate_campaign(db: store.Database, *, campaign_id: int, method: str) -> dict:
+    """Fit `method` to a stored campaign; the model.json object."""
+    cell, meas = _campaign_data(db, campaign_id)
     model = model_to_json(model_file(run_method(cell, meas, method), cell, meas))
     model["data"]["campaign"] = campaign_id
     return model
 
 
 class Jobs:
-    """Calibration jobs: queued -> running -> done | failed (with the reason)."""
+    """Calibration and diagnosis jobs, kept in the store: queued -> running -> done | failed."""
 
-    def __init__(self, db: store.Database, models_dir: Path, workers: int = 2):
+    def __init__(self, db: store.Database, models_dir: Path, workers: int = 2, *,
+                 recordings_dir: Path | None = None, reports_dir: Path | None = None,
+                 events: Events | None = None):
         self.db, self.models_dir = db, Path(models_dir)
+        self.recordings_dir = Path(recordings_dir or self.models_dir.parent / "recordings")
+        self.reports_dir = Path(reports_dir or self.models_dir.parent / "reports")
+        self.events = events or Events()
+        # Nothing runs a job this process did not queue: fail those a stop cut off.
+        for job_id in store.fail_unfinished_jobs(db, reason=RESTART_REASON):
+            self._publish(store.get_job(db, job_id=job_id))
         # Threads: numpy and the QP solvers release the GIL in their heavy loops, so the event
         # loop stays responsive; a process pool is the next step if profiles say otherwise.
         self._pool = ThreadPoolExecutor(workers, thread_name_prefix="robocal-job")
-        self._lock = threading.Lock()
-        self._jobs: dict[int, Job] = {}
-        self._next = 1
 
-    def submit(self, *, campaign_id: int, method: str) -> Job:
+    def submit(self, *, campaign_id: int, method: str = "minimax",
+               kind: str = "calibration") -> Job:
         """Check and queue a job; the job as queued."""
-        check_method(self.db, campaign_id=campaign_id, method=method)
-        with self._lock:
-            job = Job(self._next, campaign_id, method, "queued", None, _now())
-            self._jobs[job.id] = job
-            self._next += 1
+        if kind == "diagnosis":
+            method = "diagnose"
+        check_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
+        job = store.create_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
+        self._publish(job)
         self._pool.submit(self._run, job.id)
         return job
 
     def get(self, job_id: int) -> Job:
-        with self._lock:
-            if job_id not in self._jobs:
-                raise store.NotFound(f"no job {job_id}")
-            return self._jobs[job_id]
+        return store.get_job(self.db, job_id=job_id)
 
     def list(self) -> list[Job]:
-        with self._lock:
-            return list(self._jobs.values())
+        return store.list_jobs(self.db)
 
-    def model_path(self, job_id: int) -> Path:
-        """The model file of a done job; NotFound / Conflict otherwise."""
+    def result_path(self, job_id: int, what: str) -> Path:
+        """A file a done job wrote (model, recording, report); NotFound / Conflict otherwise."""
         job = self.get(job_id)
         if job.state != "done":
             raise store.Conflict(f"job {job_id} is {job.state}"
-                                 + (f": {job.reason}" if job.reason else "") + "; no model")
-        return Path(job.model_file)
+                                 + (f": {job.reason}" if job.reason else "") + f"; no {what}")
+        path = job.results.get(what)
+        if path is None:
+            raise store.NotFound(f"job {job_id} ({job.kind}) has no {what}")
+        if not Path(path).exists():
+            raise store.NotFound(f"job {job_id}'s {what} file is gone from the data dir")
+        return Path(path)
+
+    def model_path(self, job_id: int) -> Path:
+        """The model file of a done job; NotFound / Conflict otherwise."""
+        return self.result_path(job_id, "model")
+
+    def figure_path(self, job_id: int, name: str) -> Path:
+        """One figure of a done diagnosis, by file name (only names the job listed)."""
+        self.result_path(job_id, "report")
+        figures = {Path(p).name: Path(p) for p in self.get(job_id).results.get("figures", [])}
+        if name not in figures:
+            raise store.NotFound(f"job {job_id} has no figure {name!r}")
+        return figures[name]
 
     def shutdown(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)
 
+    def _publish(self, job: Job) -> None:
+        self.events.publish({"type": "job", "job_id": job.id, "kind": job.kind,
+                             "campaign_id": job.campaign_id, "state": job.state,
+                             "progress": job.progress, "reason": job.reason})
+
     def _update(self, job_id: int, **changes) -> Job:
-        with self._lock:
-            self._jobs[job_id] = job = replace(self._jobs[job_id], **changes)
-            return job
+        job = store.update_job(self.db, job_id=job_id, **changes)
+        self._publish(job)
+        return job
 
     def _run(self, job_id: int) -> None:
-        job = self._update(job_id, state="running", started_at=_now())
+        job = self._update(job_id, state="running")
         try:
-            model = calibrate_campaign(self.db, campaign_id=job.campaign_id, method=job.method)
-            path = self.models_dir / f"job-{job_id}.model.json"
-            write_json_atomic(path, model)
+            work = self._calibrate if job.kind == "calibration" else self._diagnose
+            results = work(job)
         except Exception as e:  # the reason is the job's result, not a server error
-            self._update(job_id, state="failed", reason=f"{type(e).__name__}: {e}",
-                         finished_at=_now())
+            self._update(job_id, state="failed", reason=f"{type(e).__name__}: {e}")
             return
-        self._update(job_id, state="done", model_file=str(path), finished_at=_now())
+        self._update(job_id, state="done", results=results)
+
+    def _calibrate(self, job: Job) -> dict:
+        from .recording import record_calibration  # rerun is heavy; load it with the first job
+
+        cell, meas = _campaign_data(self.db, job.campaign_id)
+        cal = run_method(cell, meas, job.method)
+        model = model_to_json(model_file(cal, cell, meas))
+        model["data"]["campaign"] = job.campaign_id
+        path = self.models_dir / f"job-{job.id}.model.json"
+        write_json_atomic(path, model)
+        self._update(job.id, progress=0.5, results={"model": str(path)})
+        rrd = record_calibration(self.recordings_dir / f"job-{job.id}.rrd", cell=cell, meas=meas,
+                                 calibration=cal)
+        return {"model": str(path), "recording": str(rrd)}
+
+    def _diagnose(self, job: Job) -> dict:
+        from .formats.model_json import write_model
+        from .plots import write_figures
+        from .workflow import diagnose
+
+        cell, meas = _campaign_data(self.db, job.campaign_id)
+        d, model = diagnose(cell, meas)
+        self._update(job.id, progress=0.8)
+        report_path = self.reports_dir / f"job-{job.id}" / "report.json"
+        figures = write_figures(d.figures, report_path)
+        report = json.loads(json.dumps(d.report, default=_plain_value))
+        report["figures"] = [p.name for p in figures]
+        write_json_atomic(report_path, report)
+        model.meta["data"] = {"campaign": job.campaign_id, "poses": meas.n_poses,
+                              "readings": meas.n_readings}
+        path = self.models_dir / f"job-{job.id}.model.json"
+        write_model(path, model)
+        return {"model": str(path), "report": str(report_path),
+                "figures": [str(p) for p in figures]}
+
+
+def _plain_value(v):
+    return v.tolist() if hasattr(v, "tolist") else str(v)
 
 
 @dataclass(frozen=True)
@@ -138,14 +256,17 @@ class Run:
 
 
 class Acquisitions:
-    """Runs simulated acquisitions one at a time: a cell has one arm."""
+    """Runs simulated acquisitions one at a time (a cell has one arm) and holds the running
+    engine so pause, resume, abort and emergency stop reach it from the request threads."""
 
-    def __init__(self, database_url: str, db: store.Database):
+    def __init__(self, database_url: str, db: store.Database, events: Events | None = None):
         self.database_url, self.db = database_url, db
+        self.events = events or Events()
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="robocal-acquire")
         self._lock = threading.Lock()
         self._runs: dict[int, Run] = {}
         self._current: int | None = None
+        self._engine = None  # the CampaignEngine of self._current, once acquire() built it
 
     def start(self, *, campaign_id: int) -> Run:
         """Queue the campaign on the worker; Conflict if one is running or it cannot start."""
@@ -161,45 +282,161 @@ class Acquisitions:
                 raise store.Conflict(f"campaign {self._current} is running; one at a time")
             self._current = campaign_id
             self._runs[campaign_id] = run = Run(campaign_id, "running")
+        self._state(campaign_id, "queued")
         self._pool.submit(self._run, info)
         return run
 
+    def pause(self, *, campaign_id: int) -> str:
+        """Ask the running engine to pause after its current pose; the status it had."""
+        from drivers.campaign import StateError
+
+        with self._lock:
+            engine = self._running_engine(campaign_id, "pause")
+            try:
+                engine.pause()
+            except StateError as e:
+                raise store.Conflict(f"campaign {campaign_id}: {e}") from None
+            # Readings of the pose in progress still land: the store records while paused.
+            before = store.set_status(self.db, campaign_id=campaign_id, status="paused")
+        self._state(campaign_id, "pausing")
+        return before
+
+    def resume(self, *, campaign_id: int) -> str:
+        """Resume a paused engine, or start a campaign paused before this server started."""
+        from drivers.campaign import StateError
+
+        with self._lock:
+            engine = self._engine if self._current == campaign_id else None
+            if engine is not None:
+                try:
+                    engine.resume()
+                except StateError as e:
+                    raise store.Conflict(f"campaign {campaign_id}: {e}") from None
+                before = store.set_status(self.db, campaign_id=campaign_id, status="running")
+        if engine is None:
+            before = store.get_campaign(self.db, campaign_id=campaign_id).status
+            if before != "paused":
+                raise store.Conflict(f"campaign {campaign_id} is {before}, not paused")
+            self.start(campaign_id=campaign_id)
+            return before
+        self._state(campaign_id, "running")
+        return before
+
     def stop(self, *, campaign_id: int, how: str) -> str:
-        """Mark the campaign aborted; the status it had. The engine stops at its next reading,
-        which the store then refuses (the arm is not halted mid-move in this version)."""
-        with self._lock:  # not between _run's check and its own status change
-            before = store.set_status(self.db, campaign_id=campaign_id, status="aborted")
+        """Abort (at the next pose) or emergency-stop (the arm halts now); the status it had.
+
+        With no engine running it just marks the campaign aborted in the store (if not final).
+        """
+        from drivers.campaign import StateError
+
+        error = None
+        with self._lock:
+            info = store.get_campaign(self.db, campaign_id=campaign_id)
+            before = info.status
             if campaign_id in self._runs:
                 self._runs[campaign_id] = replace(self._runs[campaign_id], stop_requested=how)
+            engine = self._engine if self._current == campaign_id else None
+            if engine is not None and how == "estop":
+                try:
+                    engine.emergency_stop()
+                except Exception as e:  # noqa: BLE001 - the state is marked; the caller is told
+                    error = e
+            elif engine is not None:
+                try:
+                    engine.abort()
+                except StateError as e:
+                    raise store.Conflict(f"campaign {campaign_id}: {e}") from None
+            elif before not in FINAL:
+                store.set_status(self.db, campaign_id=campaign_id, status="aborted")
+            elif before == "done" and how != "estop":
+                raise store.Conflict(f"campaign {campaign_id} is done; it cannot be aborted")
+        self._state(campaign_id, "estop" if how == "estop" else "aborting")
+        if error is not None:
+            raise ControllerUnreachable(f"emergency stop of campaign {campaign_id}: the "
+                                        f"controller did not confirm the stop: {error}")
         return before
+
+    def emergency_stop_all(self) -> int | None:
+        """Emergency-stop whatever runs (nothing if nothing does); the campaign id, if any."""
+        with self._lock:
+            current = self._current
+        if current is not None:
+            self.stop(campaign_id=current, how="estop")
+        return current
 
     def get(self, campaign_id: int) -> Run | None:
         with self._lock:
             return self._runs.get(campaign_id)
 
     def shutdown(self) -> None:
+        with self._lock:
+            engine = self._engine
+        if engine is not None:
+            try:
+                engine.abort()  # the worker thread should not keep moving the arm after us
+            except Exception:  # noqa: BLE001 - best effort at shutdown
+                pass
         self._pool.shutdown(wait=False, cancel_futures=True)
+
+    def _running_engine(self, campaign_id: int, what: str):
+        if self._current != campaign_id or self._engine is None:
+            raise store.Conflict(f"campaign {campaign_id} is not running here; cannot {what}")
+        return self._engine
+
+    def _attach(self, engine) -> None:
+        with self._lock:
+            cid = self._current
+            if self._runs[cid].stop_requested:
+                raise _Stopped()  # stopped while acquire() was setting up
+            self._engine = engine
+        self._state(cid, "running")
+
+    def _state(self, campaign_id: int, state: str) -> None:
+        self.events.publish({"type": "campaign.state", "campaign_id": campaign_id,
+                             "state": state})
 
     def _run(self, info: store.CampaignInfo) -> None:
         cid = info.id
         try:
             with self._lock:
-                # Stopped while queued: acquire() would not find it unfinished and would plan
-                # a new campaign of the same name, so it must not be called at all.
+                # Stopped while queued: do not start at all.
                 if self._runs[cid].stop_requested:
                     raise _Stopped()
-                store.set_status(self.db, campaign_id=cid, status="running")
             opts = AcquireOptions(**{**info.settings.get("options", {}), "name": info.name})
-            # acquire() resumes the latest unfinished campaign of this name: the one we planned.
-            summary = acquire(self.database_url, parse_cell(info.cell_json), opts)
-            change = dict(state="finished", summary=_plain(summary))
-        except Exception as e:  # a fault, or the store refusing readings after an abort
+            summary = acquire(self.database_url, parse_cell(info.cell_json), opts,
+                              campaign_id=cid, on_engine=self._attach,
+                              on_event=self.events.publish)
             how = self.get(cid).stop_requested
-            change = (dict(state="stopped", detail=f"stopped by {how} at the next reading")
+            change = (dict(state="finished", summary=_plain(summary))
+                      if summary["state"] == "done" else
+                      dict(state="stopped", detail=f"stopped by {how or 'abort'}",
+                           summary=_plain(summary)))
+        except Exception as e:  # a fault, or a stop before or during the run
+            how = self.get(cid).stop_requested
+            if how:
+                _mark_aborted(self.db, cid)
+            change = (dict(state="stopped", detail=f"stopped by {how}")
                       if how else dict(state="failed", detail=f"{type(e).__name__}: {e}"))
         with self._lock:
-            self._runs[cid] = replace(self._runs[cid], **change)
-            self._current = None
+            self._runs[cid] = run = replace(self._runs[cid], **change)
+            self._current, self._engine = None, None
+        self.events.publish({"type": "campaign.run", "campaign_id": cid, "state": run.state,
+                             "detail": run.detail})
+
+
+class ControllerUnreachable(RuntimeError):
+    """The controller did not confirm an emergency stop (the hardware e-stop must be used)."""
+
+
+def _mark_aborted(db: store.Database, campaign_id: int) -> None:
+    try:
+        status = store.get_campaign(db, campaign_id=campaign_id).status
+        if status == "paused":
+            store.set_status(db, campaign_id=campaign_id, status="running")
+        if status not in FINAL:
+            store.set_status(db, campaign_id=campaign_id, status="aborted")
+    except store.StoreError:
+        pass
 
 
 class _Stopped(Exception):
@@ -210,4 +447,5 @@ def _plain(summary: dict) -> dict:
     return {k: (float(v) if hasattr(v, "item") else v) for k, v in summary.items()}
 
 
-__all__ = ["Acquisitions", "Job", "Jobs", "Run", "calibrate_campaign", "check_method"]
+__all__ = ["Acquisitions", "ControllerUnreachable", "Events", "Job", "Jobs", "Run",
+           "calibrate_campaign", "check_job", "check_method"]

@@ -10,11 +10,14 @@ from server.acquire import AcquireOptions
 
 from . import ops
 from .deps import AcquisitionsDep, Authorized, DbDep, SettingsDep
-from .schemas import CampaignCreate, CampaignDetail, CampaignPublic, RunPublic, StopPublic
+from .schemas import (CampaignCreate, CampaignDetail, CampaignPublic, EstopPublic, RunPublic,
+                      StopPublic)
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
-STOP_NOTE = ("marked aborted in the store: a running acquisition ends at its next reading, "
-             "which the store refuses; no stop is sent to the controller in this version")
+ABORT_NOTE = ("a running acquisition ends after the pose in progress, whose readings are kept; "
+              "one not running is marked aborted at once")
+ESTOP_NOTE = ("STOP sent to the controller (the arm halts where it is) and the campaign aborted; "
+              "one not running is just marked aborted; the cell's hardware e-stop still rules")
 
 
 def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
@@ -58,18 +61,44 @@ def start_campaign(campaign_id: int, db: DbDep,
     return _public(store.get_campaign(db, campaign_id=campaign_id), acquisitions)
 
 
+@router.post("/{campaign_id}/pause", dependencies=[Authorized])
+def pause_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
+    """Pause the running acquisition after its current pose (409 if it is not running here)."""
+    was = acquisitions.pause(campaign_id=campaign_id)
+    return StopPublic(id=campaign_id, status="paused", was=was,
+                      note="the engine pauses after the pose in progress; POST .../resume")
+
+
+@router.post("/{campaign_id}/resume", status_code=202, dependencies=[Authorized])
+def resume_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
+    """Resume a paused campaign (the live engine, or a new run from its next unmeasured pose)."""
+    was = acquisitions.resume(campaign_id=campaign_id)
+    return StopPublic(id=campaign_id, status="running", was=was, note="resumed")
+
+
 @router.post("/{campaign_id}/abort", dependencies=[Authorized])
 def abort_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
-    """Abort the campaign (final: readings stay, it cannot be resumed)."""
+    """Abort the campaign after the pose in progress (final: readings stay, no resume)."""
     was = acquisitions.stop(campaign_id=campaign_id, how="abort")
-    return StopPublic(id=campaign_id, status="aborted", was=was, note=STOP_NOTE)
+    return StopPublic(id=campaign_id, status="aborted", was=was, note=ABORT_NOTE)
 
 
 @router.post("/{campaign_id}/estop", dependencies=[Authorized])
 def estop_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
-    """Emergency stop: for now the same as abort (see note); the cell's hardware e-stop rules."""
+    """Emergency stop: the controller halts the arm now and the campaign is aborted."""
     was = acquisitions.stop(campaign_id=campaign_id, how="estop")
-    return StopPublic(id=campaign_id, status="aborted", was=was, note=STOP_NOTE)
+    return StopPublic(id=campaign_id, status="aborted", was=was, note=ESTOP_NOTE)
 
 
-__all__ = ["router"]
+estop_router = APIRouter(tags=["campaigns"])
+
+
+@estop_router.post("/estop", dependencies=[Authorized])
+def estop_all(acquisitions: AcquisitionsDep) -> EstopPublic:
+    """Emergency stop whatever campaign runs (none: nothing to do); the cell's hardware e-stop
+    still rules."""
+    cid = acquisitions.emergency_stop_all()
+    return EstopPublic(campaign_id=cid, note=ESTOP_NOTE if cid is not None else "nothing runs")
+
+
+__all__ = ["estop_router", "router"]

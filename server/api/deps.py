@@ -6,7 +6,7 @@ from typing import Annotated
 
 from fastapi import Depends, Request
 
-from server.jobs import Acquisitions, Jobs
+from server.jobs import Acquisitions, Events, Jobs
 from server.security import require_token
 from server.settings import Settings
 from server.store import Database
@@ -28,9 +28,14 @@ def get_acquisitions(request: Request) -> Acquisitions:
     return request.app.state.acquisitions
 
 
+def get_events(request: Request) -> Events:
+    return request.app.state.events
+
+
 DbDep = Annotated[Database, Depends(get_db)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 JobsDep = Annotated[Jobs, Depends(get_jobs)]
 AcquisitionsDep = Annotated[Acquisitions, Depends(get_acquisitions)]
+EventsDep = Annotated[Events, Depends(get_events)]
 # Every POST / PUT / PATCH / DELETE route lists this; create_app refuses to build otherwise.
 Authorized = Depends(require_token)

@@ -1,37 +1,77 @@
-"""Calibration jobs: queued -> running -> done | failed, on the worker pool."""
+"""Jobs: calibrations and diagnoses of done campaigns, queued -> running -> done | failed."""
 
 from __future__ import annotations
 
+import json
+
 from fastapi import APIRouter
+from fastapi.responses import FileResponse
 
 from server.jobs import Job
 
 from .deps import Authorized, JobsDep
-from .schemas import JobCreate, JobPublic
+from .schemas import FigurePublic, JobCreate, JobPublic
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
 
 def _public(job: Job) -> JobPublic:
-    return JobPublic(id=job.id, campaign_id=job.campaign_id, method=job.method, state=job.state,
-                     reason=job.reason, created_at=job.created_at, started_at=job.started_at,
-                     finished_at=job.finished_at,
-                     model_url=f"/api/models/{job.id}" if job.state == "done" else None)
+    done = job.state == "done"
+    urls = {}
+    if done:
+        base = f"/api/jobs/{job.id}"
+        urls = dict(model_url=f"/api/models/{job.id}" if "model" in job.results else None,
+                    recording_url=f"{base}/recording" if "recording" in job.results else None,
+                    report_url=f"{base}/report" if "report" in job.results else None,
+                    figures_url=f"{base}/figures" if "report" in job.results else None)
+    return JobPublic(id=job.id, kind=job.kind, campaign_id=job.campaign_id, method=job.method,
+                     state=job.state, reason=job.reason, progress=job.progress,
+                     created_at=job.created_at, started_at=job.started_at,
+                     finished_at=job.finished_at, **urls)
 
 
 @router.post("", status_code=202, dependencies=[Authorized])
 def create_job(body: JobCreate, jobs: JobsDep) -> JobPublic:
-    """Queue a calibration of a done campaign; poll GET /jobs/{id}."""
-    return _public(jobs.submit(campaign_id=body.campaign_id, method=body.method))
+    """Queue a calibration or diagnosis of a done campaign; poll GET /jobs/{id} or /api/events."""
+    return _public(jobs.submit(campaign_id=body.campaign_id, method=body.method, kind=body.kind))
 
 
 @router.get("")
 def list_jobs(jobs: JobsDep) -> list[JobPublic]:
-    """Jobs since the server started."""
+    """Every job in the store, oldest first."""
     return [_public(j) for j in jobs.list()]
 
 
 @router.get("/{job_id}")
 def get_job(job_id: int, jobs: JobsDep) -> JobPublic:
-    """One job's state, and the reason if it failed."""
+    """One job's state and progress, and the reason if it failed."""
     return _public(jobs.get(job_id))
+
+
+@router.get("/{job_id}/recording", response_class=FileResponse,
+            responses={200: {"content": {"application/octet-stream": {}}}})
+def get_recording(job_id: int, jobs: JobsDep) -> FileResponse:
+    """The Rerun recording (.rrd) of a done calibration (404 none, 409 not done)."""
+    return FileResponse(jobs.result_path(job_id, "recording"),
+                        media_type="application/octet-stream", filename=f"job-{job_id}.rrd")
+
+
+@router.get("/{job_id}/report")
+def get_report(job_id: int, jobs: JobsDep) -> dict:
+    """The report.json of a done diagnosis (404 none, 409 not done)."""
+    return json.loads(jobs.result_path(job_id, "report").read_text())
+
+
+@router.get("/{job_id}/figures")
+def list_figures(job_id: int, jobs: JobsDep) -> list[FigurePublic]:
+    """The figures of a done diagnosis, one PNG per effect found."""
+    jobs.result_path(job_id, "report")
+    names = [p.rsplit("/", 1)[-1] for p in jobs.get(job_id).results.get("figures", [])]
+    return [FigurePublic(name=n, url=f"/api/jobs/{job_id}/figures/{n}") for n in names]
+
+
+@router.get("/{job_id}/figures/{name}", response_class=FileResponse,
+            responses={200: {"content": {"image/png": {}}}})
+def get_figure(job_id: int, name: str, jobs: JobsDep) -> FileResponse:
+    """One figure of a done diagnosis, by the name the list gives."""
+    return FileResponse(jobs.figure_path(job_id, name), media_type="image/png")

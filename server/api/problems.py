@@ -11,6 +11,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from server.formats.errors import InputError
+from server.jobs import ControllerUnreachable
 from server.store import Conflict, NotFound, StoreError
 
 MEDIA_TYPE = "application/problem+json"
@@ -52,6 +53,11 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(StoreError)
     async def store_error(request: Request, exc: StoreError):
         return problem(request, 422, str(exc))
+
+    @app.exception_handler(ControllerUnreachable)
+    async def controller_unreachable(request: Request, exc: ControllerUnreachable):
+        # The state is marked aborted, but the arm may still move: say so loudly.
+        return problem(request, 502, str(exc))
 
     @app.exception_handler(ValueError)
     async def value_error(request: Request, exc: ValueError):

@@ -60,6 +60,11 @@ class StopPublic(BaseModel):
     note: str
 
 
+class EstopPublic(BaseModel):
+    campaign_id: int | None
+    note: str
+
+
 class ReadingPublic(BaseModel):
     pose: str
     pose_index: int
@@ -75,16 +80,28 @@ class ReadingPublic(BaseModel):
 
 class JobCreate(BaseModel):
     campaign_id: int
-    method: str = Field("minimax", description="minimax, ls-sum, ls-single[:T], ls-pose, nominal")
+    kind: Literal["calibration", "diagnosis"] = "calibration"
+    method: str = Field("minimax", description="minimax, ls-sum, ls-single[:T], ls-pose, nominal "
+                        "(calibration only)")
 
 
 class JobPublic(BaseModel):
     id: int
+    kind: Literal["calibration", "diagnosis"]
     campaign_id: int
     method: str
     state: Literal["queued", "running", "done", "failed"]
     reason: str | None
+    progress: float
     created_at: dt.datetime
     started_at: dt.datetime | None
     finished_at: dt.datetime | None
     model_url: str | None = None
+    recording_url: str | None = None
+    report_url: str | None = None
+    figures_url: str | None = None
+
+
+class FigurePublic(BaseModel):
+    name: str
+    url: str

@@ -20,7 +20,8 @@ from solver.robot import Robot
 from . import checks
 from .db import Database
 from .errors import Conflict, NotFound, StoreError
-from .models import POSE_STATES, STATUSES, Campaign, PlannedPose, PoseOutcome, Reading
+from .models import (JOB_KINDS, JOB_STATES, POSE_STATES, STATUSES, Campaign, Job, PlannedPose,
+                     PoseOutcome, Reading, utcnow)
 
 # Which status may follow which. A killed run leaves `running` behind; resuming it sets
 # `running` again, which is allowed as a no-op. `failed` (a device fault) may be resumed.
@@ -339,6 +340,93 @@ def import_csv(db: Database, *, path, cell_json: str | Mapping, name: str,
     return cid
 
 
+# --- jobs --------------------------------------------------------------------------------------
+
+# queued -> running -> done | failed; a queued job may fail without running (a restart).
+JOB_TRANSITIONS = {"queued": {"running", "failed"}, "running": {"done", "failed"},
+                   "done": set(), "failed": set()}
+JOB_FIELDS = ("progress", "reason", "results")
+
+
+@dataclass(frozen=True)
+class JobInfo:
+    """A job as the store holds it."""
+
+    id: int
+    kind: str
+    campaign_id: int
+    method: str
+    state: str
+    reason: str | None
+    progress: float
+    created_at: dt.datetime
+    started_at: dt.datetime | None
+    finished_at: dt.datetime | None
+    results: dict
+
+
+def create_job(db: Database, *, kind: str, campaign_id: int, method: str) -> JobInfo:
+    """Store a queued job on an existing campaign; the job."""
+    checks.one_of(kind, JOB_KINDS, "kind")
+    with db.session(write=True) as s:
+        _campaign(s, campaign_id)
+        job = Job(kind=kind, campaign_id=campaign_id, method=str(method), state="queued",
+                  progress=0.0, results={}, created_at=utcnow())
+        s.add(job)
+        s.flush()
+        return _job_info(job)
+
+
+def get_job(db: Database, *, job_id: int) -> JobInfo:
+    """The job with this id; NotFound if there is none."""
+    with db.session() as s:
+        return _job_info(_job(s, job_id))
+
+
+def list_jobs(db: Database, *, state: str | None = None) -> list[JobInfo]:
+    """Every job (or those in this state), oldest first."""
+    with db.session() as s:
+        query = select(Job).order_by(Job.id)
+        if state is not None:
+            query = query.where(Job.state == checks.one_of(state, JOB_STATES, "state"))
+        return [_job_info(j) for j in s.scalars(query)]
+
+
+def update_job(db: Database, *, job_id: int, state: str | None = None, **changes) -> JobInfo:
+    """Move a job along (see JOB_TRANSITIONS) and/or set progress, reason, results; the job."""
+    unknown = set(changes) - set(JOB_FIELDS)
+    if unknown:
+        raise ValueError(f"cannot set {', '.join(sorted(unknown))} of a job")
+    if "progress" in changes and not 0.0 <= float(changes["progress"]) <= 1.0:
+        raise ValueError("progress is a fraction in [0, 1]")
+    with db.session(write=True) as s:
+        job = _job(s, job_id)
+        if state is not None and state != job.state:
+            checks.one_of(state, JOB_STATES, "state")
+            if state not in JOB_TRANSITIONS[job.state]:
+                raise Conflict(f"job {job_id} is {job.state}; it cannot go to {state}")
+            job.state = state
+            if state == "running":
+                job.started_at = utcnow()
+            if state in ("done", "failed"):
+                job.finished_at = utcnow()
+                if state == "done":
+                    job.progress = 1.0
+        for key, value in changes.items():
+            setattr(job, key, dict(value) if key == "results" else value)
+        s.flush()
+        return _job_info(job)
+
+
+def fail_unfinished_jobs(db: Database, *, reason: str) -> list[int]:
+    """Mark every queued or running job failed with `reason` (nothing runs them any more); ids."""
+    with db.session(write=True) as s:
+        jobs = list(s.scalars(select(Job).where(Job.state.in_(("queued", "running")))))
+        for job in jobs:
+            job.state, job.reason, job.finished_at = "failed", reason, utcnow()
+        return [j.id for j in jobs]
+
+
 # --- helpers -----------------------------------------------------------------------------------
 
 def _campaign(s: Session, campaign_id: int) -> Campaign:
@@ -346,6 +434,18 @@ def _campaign(s: Session, campaign_id: int) -> Campaign:
     if campaign is None:
         raise NotFound(f"no campaign {campaign_id}")
     return campaign
+
+
+def _job(s: Session, job_id: int) -> Job:
+    job = s.get(Job, job_id)
+    if job is None:
+        raise NotFound(f"no job {job_id}")
+    return job
+
+
+def _job_info(j: Job) -> JobInfo:
+    return JobInfo(j.id, j.kind, j.campaign_id, j.method, j.state, j.reason, j.progress,
+                   j.created_at, j.started_at, j.finished_at, dict(j.results or {}))
 
 
 def _planned(s: Session, campaign_id: int, pose_index: int) -> PlannedPose:

@@ -20,6 +20,8 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 STATUSES = ("planned", "running", "paused", "done", "aborted", "failed")
 POSE_STATES = ("measured", "missing-target", "skipped")
 READING_STATUSES = ("ok", "missing")
+JOB_KINDS = ("calibration", "diagnosis")
+JOB_STATES = ("queued", "running", "done", "failed")
 
 # SQLite alters a table by copying it (Alembic batch mode), which can only drop or change
 # constraints that have names; this convention names every one.
@@ -156,3 +158,27 @@ class PoseOutcome(Base):
     reached_deg: Mapped[list | None] = mapped_column(JSON)  # None when the arm never got there
     detail: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[dt.datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+
+class Job(Base):
+    """Work on a stored campaign (a calibration or a diagnosis), kept so a restart can tell."""
+
+    __tablename__ = "job"
+    __table_args__ = (
+        CheckConstraint(one_of("kind", JOB_KINDS), name="kind"),
+        CheckConstraint(one_of("state", JOB_STATES), name="state"),
+        CheckConstraint("progress >= 0 AND progress <= 1", name="progress"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    method: Mapped[str] = mapped_column(Text)
+    state: Mapped[str] = mapped_column(String(16), default="queued")
+    reason: Mapped[str | None] = mapped_column(Text)
+    progress: Mapped[float] = mapped_column(Float, default=0.0)  # 0..1
+    created_at: Mapped[dt.datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    started_at: Mapped[dt.datetime | None] = mapped_column(UTCDateTime())
+    finished_at: Mapped[dt.datetime | None] = mapped_column(UTCDateTime())
+    # Paths of what the job wrote: model, recording, report, figures (a list).
+    results: Mapped[dict] = mapped_column(JSON, default=dict)

@@ -33,10 +33,18 @@ class Live:
     anonymous: httpx.Client
 
 
+def settings_for(tmp_path) -> Settings:
+    return Settings(database=str(tmp_path / "robocal.db"), data_dir=tmp_path / "data",
+                    port=free_port())
+
+
 @pytest.fixture
 def live(tmp_path):
-    settings = Settings(database=str(tmp_path / "robocal.db"), data_dir=tmp_path / "data",
-                        port=free_port())
+    yield from serve(settings_for(tmp_path))
+
+
+def serve(settings: Settings):
+    """Run a server with these settings until the generator is closed; yields a Live."""
     # Made before start, as a first start would (the server then finds it and prints nothing).
     token = ensure_token(settings.token_file)
     server = uvicorn.Server(uvicorn.Config(create_app(settings), host=settings.host,

@@ -43,6 +43,27 @@ def test_simulated_campaign_runs_then_calibrates_to_a_model(live):
     assert model["method"] == "minimax" and model["data"]["poses"] == 20
     assert model["data"]["campaign"] == cid and set(model["targets"]) == {"A", "B", "C"}
     assert (live.settings.models_dir / f"job-{job['id']}.model.json").exists()
+    assert job["kind"] == "calibration" and job["progress"] == 1.0
+    r = c.get(job["recording_url"])
+    assert r.status_code == 200 and len(r.content) > 1000, r.text
+    assert r.headers["content-type"] == "application/octet-stream"
+
+    # A diagnosis of the same campaign: a report, its figures and the extended model.
+    r = c.post("/api/jobs", json={"campaign_id": cid, "kind": "diagnosis"})
+    assert r.status_code == 202, r.text
+    diag = wait_for(lambda: c.get(f"/api/jobs/{r.json()['id']}").json(),
+                    lambda j: j["state"] in ("done", "failed"))
+    assert diag["state"] == "done" and diag["kind"] == "diagnosis", diag
+    report = c.get(diag["report_url"]).json()
+    assert "final" in report and "effects" in report
+    figures = c.get(diag["figures_url"]).json()
+    assert [f["name"] for f in figures] == report["figures"]
+    for f in figures:
+        png = c.get(f["url"])
+        assert png.status_code == 200 and png.content.startswith(b"\x89PNG")
+    assert c.get(f"/api/jobs/{diag['id']}/figures/..%2Fsecret.png").status_code == 404
+    assert c.get(f"/api/jobs/{diag['id']}/recording").status_code == 404
+    assert c.get(diag["model_url"]).status_code == 200
 
 
 def test_job_requests_are_checked_before_queueing(live):

@@ -19,7 +19,7 @@ from server.store.db import alembic_config, database_url
 from server.store.models import Base
 
 ROOT = Path(__file__).resolve().parents[3]
-TABLES = {"alembic_version", "campaign", "planned_pose", "reading", "pose_outcome"}
+TABLES = {"alembic_version", "campaign", "planned_pose", "reading", "pose_outcome", "job"}
 
 
 def test_migrations_create_the_schema(tmp_path):
@@ -32,7 +32,7 @@ def test_migrations_create_the_schema(tmp_path):
     uniques = {tuple(u["column_names"]) for u in insp.get_unique_constraints("reading")}
     assert ("campaign_id", "pose_index", "target") in uniques
     with db.engine.connect() as c:
-        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0001"
+        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0002"
         # The migration and the models describe the same schema.
         assert compare_metadata(MigrationContext.configure(c, opts={"compare_type": True}),
                                 Base.metadata) == []
@@ -115,7 +115,7 @@ def test_alembic_command_line_with_database_url(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     con = sqlite3.connect(path)
-    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0001",)
+    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0002",)
     assert con.execute("PRAGMA journal_mode").fetchone() == ("wal",)
     con.close()
 
@@ -164,7 +164,7 @@ def test_opening_a_new_file_from_many_places_at_once(tmp_path):
             return c.execute(text("SELECT version_num FROM alembic_version")).all()
 
     with ThreadPoolExecutor(4) as pool:
-        assert list(pool.map(version, range(4))) == [[("0001",)]] * 4
+        assert list(pool.map(version, range(4))) == [[("0002",)]] * 4
     for p in procs:
         _, err = p.communicate(timeout=120)
         assert p.returncode == 0, err

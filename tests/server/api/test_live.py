@@ -1,0 +1,131 @@
+"""Driving a running campaign (pause, resume, e-stop), live events over SSE, persisted jobs."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import httpx
+
+from server import store
+from server.formats import cell_to_json, default_cell
+from tests.server.api.conftest import serve, settings_for, wait_for
+
+PROBLEM = "application/problem+json"
+
+
+class EventReader:
+    """Reads /api/events on a thread over a real socket; the events seen so far."""
+
+    def __init__(self, url):
+        self.events: list[tuple[str, dict]] = []
+        self.connected = threading.Event()
+        self._client = httpx.Client(base_url=url, timeout=httpx.Timeout(30, read=None))
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+        assert self.connected.wait(10), "no event stream"
+
+    def _read(self):
+        try:
+            with self._client.stream("GET", "/api/events") as r:
+                assert r.headers["content-type"].startswith("text/event-stream")
+                self.connected.set()
+                kind = None
+                for line in r.iter_lines():
+                    if line.startswith("event:"):
+                        kind = line.split(":", 1)[1].strip()
+                    elif line.startswith("data:") and kind:
+                        self.events.append((kind, json.loads(line.split(":", 1)[1])))
+        except httpx.HTTPError:
+            pass  # closed by close()
+
+    def wait(self, pred, timeout=120.0):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            found = [e for e in list(self.events) if pred(*e)]
+            if found:
+                return found[0]
+            time.sleep(0.02)
+        raise AssertionError(f"no such event; seen {self.events[-10:]}")
+
+    def close(self):
+        self._client.close()
+
+
+def test_events_pause_resume_and_estop_a_running_campaign(live):
+    c = live.client
+    reader = EventReader(live.url)
+    try:
+        cid = c.post("/api/campaigns", json={"name": "live", "poses": 40, "seed": 1}).json()["id"]
+        assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
+        pose = reader.wait(lambda k, e: k == "campaign.pose" and e["campaign_id"] == cid)[1]
+        assert pose["poses_total"] == 40 and pose["poses_done"] >= 1 and pose["readings"] >= 1
+        reader.wait(lambda k, e: k == "campaign.state" and e["state"] == "running")
+
+        r = c.post(f"/api/campaigns/{cid}/pause")
+        assert r.status_code == 200, r.text
+        assert c.get(f"/api/campaigns/{cid}").json()["status"] == "paused"
+        # The engine finishes the pose in progress, then holds.
+        time.sleep(1.0)
+        held = c.get(f"/api/campaigns/{cid}").json()["poses_done"]
+        time.sleep(1.0)
+        assert c.get(f"/api/campaigns/{cid}").json()["poses_done"] == held < 40
+
+        assert c.post(f"/api/campaigns/{cid}/resume").status_code == 202
+        assert c.get(f"/api/campaigns/{cid}").json()["status"] == "running"
+        reader.wait(lambda k, e: k == "campaign.pose" and e["poses_done"] > held)
+
+        assert live.anonymous.post(f"/api/campaigns/{cid}/estop").status_code == 401
+        r = c.post(f"/api/campaigns/{cid}/estop")
+        assert r.status_code == 200 and r.json()["was"] == "running", r.text
+        run = reader.wait(lambda k, e: k == "campaign.run" and e["campaign_id"] == cid)[1]
+        assert run["state"] == "stopped", run
+        final = c.get(f"/api/campaigns/{cid}").json()
+        assert final["status"] == "aborted" and final["poses_done"] < 40, final
+        assert final["run"]["stop_requested"] == "estop"
+        # Nothing runs now: pause is refused as a problem, a global e-stop is harmless.
+        r = c.post(f"/api/campaigns/{cid}/pause")
+        assert r.status_code == 409 and r.headers["content-type"] == PROBLEM
+        r = c.post("/api/estop")
+        assert r.status_code == 200 and r.json()["campaign_id"] is None
+        assert live.anonymous.post("/api/estop").status_code == 401
+    finally:
+        reader.close()
+
+
+def test_abort_a_running_campaign_ends_after_the_pose(live):
+    c = live.client
+    cid = c.post("/api/campaigns", json={"name": "ab", "poses": 40, "seed": 2}).json()["id"]
+    c.post(f"/api/campaigns/{cid}/start")
+    wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(), lambda j: j["poses_done"] >= 1,
+             interval=0.02)
+    r = c.post(f"/api/campaigns/{cid}/abort")
+    assert r.status_code == 200, r.text
+    done = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
+                    lambda j: (j["run"] or {}).get("state") != "running")
+    assert done["status"] == "aborted" and done["run"]["state"] == "stopped", done
+    assert done["poses_done"] < 40
+
+
+def test_jobs_left_running_fail_when_the_service_starts(tmp_path):
+    settings = settings_for(tmp_path)
+    db = store.open_database(settings.database)
+    cid = store.create_campaign(db, name="old", cell_json=cell_to_json(default_cell()),
+                                poses_deg=[[0, 0, 0, 0, 30, 0]])
+    running = store.create_job(db, kind="calibration", campaign_id=cid, method="minimax")
+    store.update_job(db, job_id=running.id, state="running", progress=0.5)
+    queued = store.create_job(db, kind="diagnosis", campaign_id=cid, method="diagnose")
+    db.close()
+    server = serve(settings)
+    live = next(server)
+    try:
+        for job_id in (running.id, queued.id):
+            job = live.client.get(f"/api/jobs/{job_id}").json()
+            assert job["state"] == "failed", job
+            assert job["reason"] == "service stopped while running"
+            assert job["finished_at"] is not None
+        r = live.client.get(f"/api/jobs/{running.id}/recording")
+        assert r.status_code == 409 and r.headers["content-type"] == PROBLEM
+    finally:
+        server.close()

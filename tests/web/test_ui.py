@@ -1,0 +1,136 @@
+"""The page in real headless Chromium against a real server: token, campaign, calibration, charts."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.server.api.conftest import wait_for
+
+CHROMIUM = Path("/usr/bin/chromium")
+ARTIFACTS = Path(__file__).parent / "artifacts"
+# Playwright cannot download its own browser here: Debian's chromium, quiet and sandbox-free
+# (the tests may run as root in a container, where Chromium's sandbox cannot start).
+ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+        "--disable-component-update", "--disable-sync", "--no-first-run"]
+
+
+@pytest.fixture
+def page():
+    if not CHROMIUM.exists():
+        pytest.skip("no /usr/bin/chromium (.ci/run installs it)")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
+        context = browser.new_context(viewport={"width": 1200, "height": 900})
+        page = context.new_page()
+        page.set_default_timeout(60_000)
+        yield page
+        context.close()
+        browser.close()
+
+
+def _shot(page, name: str) -> Path:
+    ARTIFACTS.mkdir(exist_ok=True)
+    path = ARTIFACTS / f"{name}.png"
+    page.screenshot(path=str(path), full_page=True)
+    return path
+
+
+def _done_job(served, poses=20, method="ls-sum"):
+    """A done calibration job made through the API; its id."""
+    with httpx.Client(base_url=served.url, timeout=60,
+                      headers={"Authorization": f"Bearer {served.token}"}) as c:
+        cid = c.post("/api/campaigns", json={"poses": poses}).json()["id"]
+        assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
+        wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["status"],
+                 lambda s: s in ("done", "failed", "aborted"))
+        job = c.post("/api/jobs", json={"campaign_id": cid, "method": method}).json()
+        job = wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(),
+                       lambda j: j["state"] in ("done", "failed"))
+        assert job["state"] == "done", job
+        return job["id"]
+
+
+def test_chart_endpoints_answer_png_and_table3(served):
+    job = _done_job(served)
+    base = f"{served.url}/api/charts/jobs/{job}"
+    for name in ("boxplot.png", "errors.png"):
+        r = httpx.get(f"{base}/{name}", timeout=60)
+        assert r.status_code == 200 and r.headers["content-type"] == "image/png", r.text
+        assert r.content.startswith(b"\x89PNG")
+    t = httpx.get(f"{base}/table3", timeout=120).json()
+    assert t["targets"] == ["A", "B", "C"] and t["poses"] == 20
+    assert t["columns"][0] == "nominal" and "ls-sum" in t["columns"]
+    ap_max = next(r["values"] for r in t["rows"] if r["label"] == "AP max / mm")
+    col = dict(zip(t["columns"], ap_max))
+    assert col["ls-sum"] < col["nominal"]  # calibrating must beat the nominal model
+    missing = httpx.get(f"{served.url}/api/charts/jobs/999/boxplot.png")
+    assert missing.status_code == 404 and missing.json()["detail"] == "no job 999"
+
+
+def test_page_is_served_and_api_still_answers(served):
+    r = httpx.get(f"{served.url}/")
+    assert r.status_code == 200 and "<title>robocal</title>" in r.text
+    assert httpx.get(f"{served.url}/app.js").status_code == 200
+    assert httpx.get(f"{served.url}/api/campaigns").json() == []  # the mount shadows nothing
+    r = httpx.post(f"{served.url}/api/no-such-route")  # a 404 problem, not the file server's 405
+    assert r.status_code == 404 and r.headers["content-type"] == "application/problem+json"
+    assert r.json()["detail"] == "no API route POST /api/no-such-route"
+
+
+def test_campaign_to_calibration_charts_in_the_browser(served, page):
+    t0 = time.monotonic()
+    page.goto(served.url + "/")
+    page.fill("#token", served.token)
+    page.click("#token-form button[type=submit]")
+    assert page.evaluate("sessionStorage.getItem('robocal.token')") == served.token
+
+    page.fill("#c-poses", "20")
+    page.fill("#c-seed", "3")
+    page.select_option("#c-settle", "adaptive")
+    page.click("#create")
+    page.wait_for_selector("#progress:not([hidden])")
+    page.click("#start")
+    page.wait_for_function("document.getElementById('p-status').textContent === 'done'",
+                           timeout=180_000)
+    assert page.text_content("#p-count") == "20 / 20 poses"
+
+    # A control the API may lack (pause, today) must show the API's problem detail, not fail
+    # silently; once the route exists it answers for a done campaign with a 2xx or a 409.
+    paths = httpx.get(f"{served.url}/openapi.json").json()["paths"]
+    page.click(".controls button[data-action=pause]")
+    page.wait_for_selector("#message:not([hidden])")
+    message = page.text_content("#message")
+    if "/api/campaigns/{campaign_id}/pause" not in paths:
+        assert "404" in message and "no API route POST /api/campaigns/1/pause" in message, message
+    _shot(page, "campaign_done")
+
+    page.select_option("#j-method", "minimax")
+    page.click("#calibrate")
+    page.wait_for_selector("#results:not([hidden])", timeout=180_000)
+    for img in ("#boxplot", "#errors"):
+        page.wait_for_function(
+            f"(() => {{ const i = document.querySelector('{img}');"
+            " return i.complete && i.naturalWidth > 0; })()", timeout=120_000)
+    page.wait_for_selector("#table3-table", timeout=180_000)
+    headers = page.locator("#table3-table thead th").all_text_contents()
+    assert "minimax" in headers and "nominal" in headers
+    assert page.locator("#table3-table tbody tr").count() >= 5
+    href = page.get_attribute("#model-link", "href")
+    assert href.startswith("/api/models/")
+    model = httpx.get(served.url + href).json()
+    assert model["method"] == "minimax"
+    shot = _shot(page, "results")
+    assert shot.stat().st_size > 10_000
+    print(f"browser flow took {time.monotonic() - t0:.1f} s")
+
+
+def test_token_missing_shows_the_refusal(served, page):
+    page.goto(served.url + "/")
+    page.click("#create")
+    page.wait_for_selector("#message:not([hidden])")
+    assert "401" in page.text_content("#message")
