@@ -38,6 +38,7 @@ class AcquireOptions:
     choose_from: int = 0  # >0: choose `poses` of this many candidates by D-optimality
     beam_break_rate: float = 0.0
     samples: int = 1000
+    effects: tuple = ()  # hidden physics of the simulated arm, `simulate --effect` specs
 
 
 class StoreSink:
@@ -62,15 +63,25 @@ class StoreSink:
 class SimulatedCell:
     """The virtual cell's devices: a simulated tracker and controller on 127.0.0.1 sockets."""
 
-    def __init__(self, cell: Cell, seed: int, clock, beam_break_rate: float = 0.0):
+    def __init__(self, cell: Cell, seed: int, clock, beam_break_rate: float = 0.0, effects=(),
+                 expected_s: float = 2000.0):
         from drivers.abb.sim import SimulatedController, serve_controller
         from drivers.cell import TrackerSpec, VirtualCell
         from drivers.tracker.sim import SimulatedTracker, serve_tracker
         from drivers.world import SimulatedWorld
 
+        from drivers.effects import make_effects
+
         self.cell = VirtualCell.random(cell.robot, cell.targets, seed=seed,
                                        tracker=TrackerSpec(**cell.tracker))
+        self.cell.effects.extend(make_effects(list(effects), self.cell, seed))
         self.world = SimulatedWorld(self.cell, clock)
+        # effects tied to the campaign's time axis (a base shift's moment, thermal T0) learn it
+        # from the expected duration, as VirtualCell.campaign tells them the real one
+        span = np.linspace(0.0, expected_s, 50)[:, None]
+        for e in self.cell.effects:
+            if hasattr(e, "start_campaign"):
+                e.start_campaign(self.cell, span, np.full_like(span, self.world.air_temperature()))
         self.tracker_device = SimulatedTracker(self.world, clock, beam_break_rate=beam_break_rate,
                                                seed=seed)
         self.controller_device = SimulatedController(self.world, cell.robot, clock)
@@ -140,7 +151,8 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
             settings = info.settings or {}
             opts = AcquireOptions(**{**asdict(opts), **settings.get("options", {})})
         clock = VirtualClock()
-        sim = SimulatedCell(cell, opts.seed, clock, opts.beam_break_rate)
+        sim = SimulatedCell(cell, opts.seed, clock, opts.beam_break_rate, opts.effects,
+                            expected_s=20.0 * opts.poses)
         stack.callback(sim.close)
         base = sim.rough_base(opts.seed) if cell.base is None else cell.base
         if existing is None:

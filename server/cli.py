@@ -202,44 +202,50 @@ def cmd_serve(args) -> None:
 
 
 def cmd_demo(args) -> None:
-    from drivers.cell import VirtualCell
-    from drivers.effects import make_effects
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-    from .formats.campaign_csv import write_campaign
+    from .acquire import AcquireOptions, acquire
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    db = out / "robocal.db"
+    for f in out.glob("robocal.db*"):  # a fresh campaign each run
+        f.unlink()
     cell = workflow.load_cell(None)
-    vc = VirtualCell.random(cell.robot, cell.targets, seed=args.seed)
-    vc.effects.extend(make_effects(args.effect, vc, args.seed))
-    meas = vc.campaign(args.poses + args.holdout, seed=args.seed)
-    cal_meas, hold = meas.subset(np.arange(args.poses)), meas.subset(np.arange(args.poses, meas.n_poses))
-    write_campaign(out / "meas.csv", cal_meas)
-    write_campaign(out / "holdout.csv", hold)
-    console.print(f"simulated {args.poses} calibration + {args.holdout} held-out poses on the "
-                  f"virtual IRB 2600 (hidden effects: {', '.join(args.effect) or 'none'}; tracker "
-                  f"noise floor {vc.noise_floor_mm(meas.q):.4f} mm) in {out}")
+    opts = AcquireOptions(poses=args.poses + args.holdout, seed=args.seed, name="demo",
+                          effects=tuple(args.effect))
+    console.print(f"acquiring {opts.poses} poses on the simulated IRB 2600 cell (tracker and "
+                  f"controller on 127.0.0.1, virtual clock; hidden effects: "
+                  f"{', '.join(args.effect) or 'none'}) into {db}")
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  console=console, transient=True) as progress:
+        summary = acquire(db, cell, opts, progress=progress)
+    console.print(f"campaign done: {summary['readings']} readings, simulated campaign time "
+                  f"{summary['campaign_s'] / 60:.1f} min")
+    cell, meas = workflow.load_data(db)
+    cal_meas = meas.subset(np.arange(args.poses))
+    hold = meas.subset(np.arange(args.poses, meas.n_poses))
     rows = workflow.compare(cell, cal_meas)
     console.print(tables.table3(rows, cal_meas.target_names))
     cal, _ = rows["minimax"]
-    model = workflow.model_file(cal, cell, cal_meas, data_path=out / "meas.csv")
+    model = workflow.model_file(cal, cell, cal_meas)
     write_model(out / "model.json", model)
     geo = workflow.evaluate(model, hold)
-    report, figures, diagnosis = _diagnose_to_files(cell, cal_meas, out / "meas.csv",
-                                                    out / "report.json", out / "model-extended.json")
+    report, figures, diagnosis = _diagnose_to_files(cell, cal_meas, db, out / "report.json",
+                                                    out / "model-extended.json")
+    _print_diagnosis(report)
     from .recording import record_calibration
 
     record_calibration(out / "calibration.rrd", cell=cell, meas=cal_meas, calibration=cal,
                        nominal=rows["nominal"][0], diagnosis=diagnosis)
-    _print_diagnosis(report)
     ext = workflow.evaluate(workflow.read_model(out / "model-extended.json"), hold)
-    console.print(tables.accuracy(ext["model"], "extended model on held-out poses",
+    console.print(tables.accuracy(ext["model"], f"extended model on the {args.holdout} held-out poses",
                                   hold.target_names))
     console.print(f"held-out RMS: nominal {geo['nominal']['rmse']:.4f} mm, minimax "
                   f"{geo['model']['rmse']:.4f} mm, extended {ext['model']['rmse']:.4f} mm")
-    console.print(f"files in {out}: model.json (minimax), model-extended.json, report.json, "
-                  f"calibration.rrd (open with `rerun {out / 'calibration.rrd'}`)"
-                  + "".join(f", {p.name}" for p in figures))
+    console.print(f"files in {out}: robocal.db (the campaign), model.json (minimax), "
+                  f"model-extended.json, report.json, calibration.rrd (open with `uv run rerun "
+                  f"{out / 'calibration.rrd'}`)" + "".join(f", {p.name}" for p in figures))
 
 
 def cmd_bench(args) -> None:

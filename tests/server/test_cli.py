@@ -142,3 +142,18 @@ def test_unidentifiable_data_is_refused(workdir):
     lines = open(workdir / "cal.csv").read().splitlines()
     (workdir / "few.csv").write_text("\n".join(lines[:13]) + "\n")  # four poses
     one_line_error(robocal("calibrate", "few.csv", cwd=workdir), "poses")
+
+
+def test_demo_runs_the_whole_job(tmp_path):
+    r = robocal("demo", "--poses", 40, "--holdout", 20, "--out", "d", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "Table 3" in r.stdout and "held-out RMS: nominal" in r.stdout
+    out = tmp_path / "d"
+    for name in ("robocal.db", "model.json", "model-extended.json", "report.json", "calibration.rrd"):
+        assert (out / name).stat().st_size > 0, name
+    report = json.loads((out / "report.json").read_text())
+    assert report["effects"][0]["name"] == "joint_compliance" and report["effects"][0]["joint"] == 2
+    rerun = Path(sys.executable).parent / "rerun"
+    v = subprocess.run([str(rerun), "rrd", "verify", str(out / "calibration.rrd")],
+                       capture_output=True, text=True, timeout=120)
+    assert v.returncode == 0, v.stderr
