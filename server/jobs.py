@@ -267,6 +267,10 @@ class Acquisitions:
         self._runs: dict[int, Run] = {}
         self._current: int | None = None
         self._engine = None  # the CampaignEngine of self._current, once acquire() built it
+        # Nothing drives a campaign this process did not start: one left running by a stopped
+        # service is failed, so POST .../start resumes it at its next unmeasured pose.
+        for c in store.list_campaigns(db, status="running"):
+            store.set_status(db, campaign_id=c.id, status="failed")
 
     def start(self, *, campaign_id: int) -> Run:
         """Queue the campaign on the worker; Conflict if one is running or it cannot start."""
