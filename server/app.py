@@ -40,7 +40,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # Jobs() fails the jobs a previous process left queued or running.
         app.state.jobs = Jobs(db, settings.models_dir, settings.job_workers,
                               recordings_dir=settings.recordings_dir, reports_dir=reports_dir,
-                              events=events)
+                              events=events, viewer_url=settings.rerun_viewer_url)
         app.state.acquisitions = Acquisitions(settings.database, db, events)
         try:
             yield

@@ -50,7 +50,8 @@ def cmd_calibrate(args) -> None:
     if args.recording:
         from .recording import record_calibration
 
-        record_calibration(args.recording, cell=cell, meas=meas, calibration=cal)
+        record_calibration(args.recording, cell=cell, meas=meas, calibration=cal,
+                           viewer_url=args.rerun_viewer)
     fit = model.meta["fit"]
     console.print(f"{args.method} on {meas.n_poses} poses, {meas.n_readings} readings "
                   f"in {cal.seconds * 1000:.0f} ms")
@@ -303,6 +304,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="minimax's QP subsolver: the paper's primal-dual method or Clarabel")
     c.add_argument("--out", default="model.json")
     c.add_argument("--recording", help="also write a rerun recording (.rrd) of the calibration")
+    c.add_argument("--rerun-viewer", metavar="URL",
+                   help="also stream the recording live to a running viewer, e.g. "
+                        "rerun+http://127.0.0.1:9876/proxy")
     c.set_defaults(func=cmd_calibrate)
 
     pr = sub.add_parser("predict", help="SMR positions a model predicts for poses")

@@ -128,8 +128,9 @@ class Jobs:
 
     def __init__(self, db: store.Database, models_dir: Path, workers: int = 2, *,
                  recordings_dir: Path | None = None, reports_dir: Path | None = None,
-                 events: Events | None = None):
+                 events: Events | None = None, viewer_url: str | None = None):
         self.db, self.models_dir = db, Path(models_dir)
+        self.viewer_url = viewer_url
         self.recordings_dir = Path(recordings_dir or self.models_dir.parent / "recordings")
         self.reports_dir = Path(reports_dir or self.models_dir.parent / "reports")
         self.events = events or Events()
@@ -216,7 +217,7 @@ class Jobs:
         write_json_atomic(path, model)
         self._update(job.id, progress=0.5, results={"model": str(path)})
         rrd = record_calibration(self.recordings_dir / f"job-{job.id}.rrd", cell=cell, meas=meas,
-                                 calibration=cal)
+                                 calibration=cal, viewer_url=self.viewer_url)
         return {"model": str(path), "recording": str(rrd)}
 
     def _diagnose(self, job: Job) -> dict:

@@ -72,8 +72,12 @@ def _log_diagnosis(rec: rr.RecordingStream, figures: list[dict]) -> None:
 
 def record_calibration(path, *, cell: Cell, meas: Measurements, calibration: Calibration,
                        nominal: Calibration | None = None, diagnosis=None,
-                       magnify: float = 100.0) -> Path:
-    """Write a .rrd of a calibration: per pose (timeline "pose") arm, SMRs, errors; the solver's history."""
+                       magnify: float = 100.0, viewer_url: str | None = None) -> Path:
+    """Write a .rrd of a calibration: per pose (timeline "pose") arm, SMRs, errors; the solver's history.
+
+    With viewer_url (a running viewer's gRPC address, e.g. rerun+http://127.0.0.1:9876/proxy)
+    the same data is also streamed to it live.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if nominal is None:
@@ -89,9 +93,12 @@ def record_calibration(path, *, cell: Cell, meas: Measurements, calibration: Cal
     names = list(meas.target_names)
 
     # An explicit stream, not the global one: several recordings may be written in one process,
-    # and nothing is sent anywhere until the file sink below.
+    # and nothing is sent anywhere but the file (and the viewer, when one is configured).
     rec = rr.RecordingStream("robocal", send_properties=False)
-    rec.save(path)
+    if viewer_url:
+        rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(viewer_url))
+    else:
+        rec.save(path)
     summary = (f"# Calibration\n\nmethod: {calibration.method}\n\nposes: {meas.n_poses}, "
                f"readings: {meas.n_readings}, targets: {', '.join(names)}\n\n"
                f"RMS error before: {np.sqrt(np.nanmean(rms['before'] ** 2)):.4f} mm, "

@@ -27,6 +27,9 @@ class Settings(BaseSettings):
     cors_origins: list[str] = []
     # Calibration jobs run at once; each is CPU-bound numpy.
     job_workers: int = Field(2, ge=1, le=64)
+    # A running rerun viewer to stream calibration recordings to live, e.g.
+    # rerun+http://127.0.0.1:9876/proxy; the .rrd files are written either way.
+    rerun_viewer_url: str | None = None
 
     @property
     def models_dir(self) -> Path:

@@ -91,3 +91,33 @@ def test_rms_per_pose_skips_missing_readings():
     err = np.array([[[3.0, 4.0, 0.0], [np.nan] * 3], [[np.nan] * 3, [np.nan] * 3]])
     rms = _rms(err)
     assert rms[0] == pytest.approx(5.0) and np.isnan(rms[1])
+
+
+def test_recording_streams_live_to_a_viewer(tmp_path):
+    """A rerun gRPC server on 127.0.0.1 receives the recording while the file is written."""
+    import socket
+    import time
+
+    from solver.robot import IRB2600
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    exe = shutil.which("rerun") or str(Path(sys.executable).parent / "rerun")
+    # --test-receive: host a gRPC server, take in a recording, exit 0 on the SDK's goodbye
+    server = subprocess.Popen([exe, "--test-receive", "--bind", "127.0.0.1", "--port", str(port)],
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                              env={**os.environ, "RERUN_ANALYTICS": "0"})
+    try:
+        time.sleep(1.5)
+        cell = default_cell()
+        meas = VirtualCell.random(IRB2600, {k: list(v) for k, v in cell.targets.items()},
+                                  seed=2).campaign(12, seed=2)
+        cal = run_method(cell, meas, "ls-sum")
+        path = record_calibration(tmp_path / "local.rrd", cell=cell, meas=meas, calibration=cal,
+                                  viewer_url=f"rerun+http://127.0.0.1:{port}/proxy")
+        assert path.stat().st_size > 1000
+        assert server.wait(timeout=60) == 0, server.stdout.read()
+    finally:
+        if server.poll() is None:
+            server.kill()

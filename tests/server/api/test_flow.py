@@ -1,5 +1,9 @@
 """Plan, run, calibrate, fetch the model; import and export meas.csv; the schema is served."""
 
+import subprocess
+import sys
+from pathlib import Path
+
 from tests.server.api.conftest import wait_for
 
 PROBLEM = "application/problem+json"
@@ -47,6 +51,14 @@ def test_simulated_campaign_runs_then_calibrates_to_a_model(live):
     r = c.get(job["recording_url"])
     assert r.status_code == 200 and len(r.content) > 1000, r.text
     assert r.headers["content-type"] == "application/octet-stream"
+    rrd = live.settings.data_dir / "downloaded.rrd"
+    rrd.write_bytes(r.content)
+    rerun = Path(sys.executable).parent / "rerun"
+    v = subprocess.run([str(rerun), "rrd", "verify", str(rrd)], capture_output=True, text=True,
+                       timeout=120)
+    assert v.returncode == 0, v.stderr
+    ev = c.get(f"/api/models/{job['id']}/evaluate", params={"campaign_id": cid}).json()
+    assert ev["model"]["rmse"] < 0.05 and ev["improvement_pct"]["ap_mean"] > 90
 
     # A diagnosis of the same campaign: a report, its figures and the extended model.
     r = c.post("/api/jobs", json={"campaign_id": cid, "kind": "diagnosis"})
