@@ -6,7 +6,9 @@ const TOKEN_KEY = "robocal.token";
 const POLL_MS = 400;
 const TERMINAL = new Set(["done", "aborted", "failed"]);
 const $ = (id) => document.getElementById(id);
-const state = { campaign: null, job: null, campaignTimer: null, jobTimer: null };
+const state = { campaign: null, job: null, diag: null, campaignTimer: null, jobTimer: null,
+                diagTimer: null };
+const READINGS_SHOWN = 6;  // the latest readings table keeps this many rows
 
 /** Show a message at the corner (an error unless ok). */
 function say(text, ok = false) {
@@ -19,13 +21,14 @@ function say(text, ok = false) {
 }
 
 /** Call the API; the JSON body, or throw with the problem-detail message. */
-async function api(method, path, body) {
+async function api(method, path, body, raw = false) {
   const headers = { Accept: "application/json" };
   const token = sessionStorage.getItem(TOKEN_KEY);
   if (token) headers.Authorization = `Bearer ${token}`;
   if (body !== undefined) headers["Content-Type"] = "application/json";
+  // raw: the body is already JSON text, sent as is (a cell.json keeps its lines for the errors).
   const r = await fetch(`/api${path}`, {
-    method, headers, body: body === undefined ? undefined : JSON.stringify(body),
+    method, headers, body: body === undefined ? undefined : raw ? body : JSON.stringify(body),
   });
   const type = r.headers.get("content-type") || "";
   const data = type.includes("json") ? await r.json() : await r.text();
@@ -50,11 +53,31 @@ $("token-form").addEventListener("submit", (ev) => {
   showTokenState();
 });
 
+/** Fill the cell picker from GET /api/cells, keeping (or setting) the selection. */
+async function loadCells(select) {
+  try {
+    const ids = await api("GET", "/cells");
+    const pick = select || $("c-cell").value || "default";
+    $("c-cell").replaceChildren(...ids.map((id) => new Option(id, id)));
+    $("c-cell").value = ids.includes(pick) ? pick : ids[0];
+  } catch (e) { say(e.message); }
+}
+
+$("cells-refresh").addEventListener("click", () => loadCells());
+
+$("cell-upload-btn").addEventListener("click", async () => {
+  try {
+    const c = await api("POST", "/cells", $("cell-json").value, true);
+    await loadCells(c.id);
+    say(`cell ${c.id} uploaded`, true);
+  } catch (e) { say(e.message); }  // a 422 names the line and column of the problem
+});
+
 $("campaign-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
   const body = {
     poses: Number($("c-poses").value), seed: Number($("c-seed").value),
-    settle: $("c-settle").value,
+    settle: $("c-settle").value, cell_id: $("c-cell").value || "default",
   };
   if ($("c-name").value.trim()) body.name = $("c-name").value.trim();
   try {
@@ -64,7 +87,8 @@ $("campaign-form").addEventListener("submit", async (ev) => {
     $("start").disabled = false;
     $("calibrate").disabled = true;
     $("results").hidden = true;
-    say(`campaign ${c.id} planned`, true);
+    $("readings").innerHTML = '<p class="muted">none yet</p>';
+    say(`campaign ${c.id} planned on cell ${body.cell_id}`, true);
   } catch (e) { say(e.message); }
 });
 
@@ -106,9 +130,40 @@ async function pollCampaign() {
     const c = await api("GET", `/campaigns/${id}`);
     if (id !== state.campaign) return;  // another campaign was created meanwhile
     showCampaign(c);
+    await pollReadings(id);
     if (TERMINAL.has(c.status) && !(c.run && c.run.state === "running")) return;
   } catch (e) { say(e.message); }
   state.campaignTimer = setTimeout(pollCampaign, POLL_MS);
+}
+
+/** The last few readings of the campaign, newest last. */
+async function pollReadings(id) {
+  try {
+    const all = await api("GET", `/campaigns/${id}/measurements`);
+    if (id !== state.campaign) return;
+    renderReadings(all.slice(-READINGS_SHOWN), all.length);
+  } catch (e) { say(e.message); }
+}
+
+function renderReadings(rows, total) {
+  if (!rows.length) { $("readings").innerHTML = '<p class="muted">none yet</p>'; return; }
+  const table = document.createElement("table");
+  table.id = "readings-table";
+  const head = table.createTHead().insertRow();
+  ["pose", "SMR", "status", "x / mm", "y / mm", "z / mm", "std max / mm", "t / s", "T / °C"]
+    .forEach((h) => { head.appendChild(document.createElement("th")).textContent = h; });
+  const body = table.createTBody();
+  rows.forEach((r) => {
+    const tr = body.insertRow();
+    const xyz = r.xyz || [null, null, null];
+    [r.pose, r.target, r.status + (r.detail ? ` (${r.detail})` : ""), ...xyz.map((v) => fmt(v)),
+     r.std ? fmt(Math.max(...r.std)) : "-", r.time_s === null ? "-" : r.time_s.toFixed(1),
+     r.temp_c === null ? "-" : r.temp_c.toFixed(2)]
+      .forEach((v) => { tr.insertCell().textContent = v; });
+  });
+  const caption = table.createCaption();
+  caption.textContent = `last ${rows.length} of ${total} readings`;
+  $("readings").replaceChildren(table);
 }
 
 $("job-form").addEventListener("submit", async (ev) => {
@@ -116,11 +171,83 @@ $("job-form").addEventListener("submit", async (ev) => {
   try {
     const j = await api("POST", "/jobs", { campaign_id: state.campaign, method: $("j-method").value });
     state.job = j.id;
+    state.diag = null;
+    clearTimeout(state.diagTimer);
     $("results").hidden = true;
+    $("diagnosis").hidden = true;
     showJob(j);
     pollJob();
+    // Automatic extensions: a diagnosis job on the same campaign, alongside the calibration.
+    if ($("j-auto").checked) {
+      const d = await api("POST", "/jobs", { campaign_id: state.campaign, kind: "diagnosis" });
+      state.diag = d.id;
+      $("diagnosis").hidden = false;
+      $("d-effects").replaceChildren();
+      $("d-figures").replaceChildren();
+      $("d-links").replaceChildren();
+      pollDiagnosis();
+    }
   } catch (e) { say(e.message); }
 });
+
+async function pollDiagnosis() {
+  clearTimeout(state.diagTimer);
+  const id = state.diag;
+  try {
+    const d = await api("GET", `/jobs/${id}`);
+    if (id !== state.diag) return;
+    $("d-state").textContent = `diagnosis job ${d.id}: ${d.state}`
+      + (d.state === "running" ? ` (${Math.round(d.progress * 100)} %)` : "")
+      + (d.reason ? `: ${d.reason}` : "");
+    if (d.state === "done") return await showDiagnosis(d);
+    if (d.state === "failed") return say(`diagnosis job ${d.id} failed: ${d.reason}`);
+  } catch (e) { say(e.message); return; }
+  state.diagTimer = setTimeout(pollDiagnosis, POLL_MS);
+}
+
+async function showDiagnosis(d) {
+  const [report, figures] = await Promise.all([api("GET", d.report_url.slice(4)),
+                                               api("GET", d.figures_url.slice(4))]);
+  if (d.id !== state.diag) return;
+  const b = report.baseline, f = report.final;
+  $("d-state").textContent = `geometric model: held-out RMS ${fmt(b.holdout_rmse_mm)} mm; `
+    + `${f.model}: ${fmt(f.holdout_rmse_mm)} mm (noise floor `
+    + `${report.noise_floor_mm ? `${fmt(report.noise_floor_mm)} mm` : "unknown"})`;
+  if (!report.effects.length) {
+    $("d-effects").innerHTML = '<p id="d-none">No effect beyond geometry pays off on held-out poses.</p>';
+  } else {
+    const table = document.createElement("table");
+    table.id = "effects-table";
+    const head = table.createTHead().insertRow();
+    ["effect", "joint", "evidence", "held-out RMS before / mm", "after / mm"]
+      .forEach((h) => { head.appendChild(document.createElement("th")).textContent = h; });
+    const body = table.createTBody();
+    report.effects.forEach((e) => {
+      const tr = body.insertRow();
+      const name = e.name + (e.harmonic ? ` (harmonic ${e.harmonic})` : "")
+        + (e.at_s !== undefined ? ` at ${e.at_s.toFixed(0)} s` : "");
+      [name, e.joint ?? "-", e.evidence, fmt(e.holdout_rmse_before_mm), fmt(e.holdout_rmse_after_mm)]
+        .forEach((v) => { tr.insertCell().textContent = v; });
+      tr.cells[2].className = "evidence";
+    });
+    $("d-effects").replaceChildren(table);
+  }
+  $("d-figures").replaceChildren(...figures.map((fig) => {
+    const el = document.createElement("figure");
+    const img = el.appendChild(document.createElement("img"));
+    img.src = fig.url;
+    img.alt = fig.name;
+    el.appendChild(document.createElement("figcaption")).textContent = fig.name;
+    return el;
+  }));
+  const reportLink = Object.assign(document.createElement("a"),
+    { href: d.report_url, textContent: "Download report.json" });
+  reportLink.setAttribute("download", `job-${d.id}.report.json`);
+  const modelLink = Object.assign(document.createElement("a"),
+    { href: d.model_url, textContent: "Download extended model.json" });
+  modelLink.setAttribute("download", `job-${d.id}.model.json`);
+  $("d-links").replaceChildren(reportLink, " · ", modelLink);
+}
 
 function showJob(j) {
   $("j-state").textContent = `job ${j.id} (${j.method}): ${j.state}${j.reason ? `: ${j.reason}` : ""}`;
@@ -143,6 +270,13 @@ function showResults(j) {
   $("results").hidden = false;
   $("model-link").href = j.model_url;
   $("model-link").setAttribute("download", `job-${j.id}.model.json`);
+  // The Rerun recording: absent if the server could not write one.
+  $("recording-link").hidden = !j.recording_url;
+  $("recording-none").hidden = !!j.recording_url;
+  if (j.recording_url) {
+    $("recording-link").href = j.recording_url;
+    $("recording-link").setAttribute("download", `job-${j.id}.rrd`);
+  }
   const charts = `/api/charts/jobs/${j.id}`;
   $("boxplot").src = `${charts}/boxplot.png`;
   $("errors").src = `${charts}/errors.png`;
@@ -183,3 +317,4 @@ function renderTable3(t) {
 }
 
 showTokenState();
+loadCells();

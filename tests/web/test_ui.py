@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -89,6 +90,8 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
     page.click("#token-form button[type=submit]")
     assert page.evaluate("sessionStorage.getItem('robocal.token')") == served.token
 
+    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.select_option("#c-cell", "default")
     page.fill("#c-poses", "20")
     page.fill("#c-seed", "3")
     page.select_option("#c-settle", "adaptive")
@@ -98,6 +101,11 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
     page.wait_for_function("document.getElementById('p-status').textContent === 'done'",
                            timeout=180_000)
     assert page.text_content("#p-count") == "20 / 20 poses"
+    # The latest readings, refreshed with the progress poll: the last is pose 20's.
+    page.wait_for_selector("#readings-table tbody tr")
+    rows = page.locator("#readings-table tbody tr")
+    assert 1 <= rows.count() <= 6
+    assert "of 60 readings" in page.text_content("#readings-table caption")
 
     # A control the API may lack (pause, today) must show the API's problem detail, not fail
     # silently; once the route exists it answers for a done campaign with a 2xx or a 409.
@@ -110,6 +118,7 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
     _shot(page, "campaign_done")
 
     page.select_option("#j-method", "minimax")
+    page.check("#j-auto")  # automatic extensions: a diagnosis job as well
     page.click("#calibrate")
     page.wait_for_selector("#results:not([hidden])", timeout=180_000)
     for img in ("#boxplot", "#errors"):
@@ -124,6 +133,19 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
     assert href.startswith("/api/models/")
     model = httpx.get(served.url + href).json()
     assert model["method"] == "minimax"
+    rrd = page.get_attribute("#recording-link", "href")
+    assert rrd.startswith("/api/jobs/") and rrd.endswith("/recording")
+    assert page.is_visible("#recording-link")
+    # The diagnosis: on clean simulated data it may well find nothing; either is a rendering.
+    page.wait_for_selector("#diagnosis:not([hidden])")
+    page.wait_for_selector("#effects-table, #d-none", timeout=300_000)
+    assert "held-out RMS" in page.text_content("#d-state")
+    if page.locator("#effects-table").count():
+        assert page.locator("#effects-table tbody tr").count() >= 1
+        assert page.locator("#d-figures img").count() >= 1
+    else:
+        assert "No effect" in page.text_content("#d-none")
+    assert page.get_attribute("#d-links a", "href").endswith("/report")
     shot = _shot(page, "results")
     assert shot.stat().st_size > 10_000
     print(f"browser flow took {time.monotonic() - t0:.1f} s")
@@ -134,3 +156,26 @@ def test_token_missing_shows_the_refusal(served, page):
     page.click("#create")
     page.wait_for_selector("#message:not([hidden])")
     assert "401" in page.text_content("#message")
+
+
+def test_cell_picker_upload_and_refusal(served, page):
+    page.goto(served.url + "/")
+    page.fill("#token", served.token)
+    page.click("#token-form button[type=submit]")
+    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.click("#cell-upload summary")
+    page.fill("#cell-json", '{"schema": 1,\n "robot": ')  # broken JSON: a 422 with its line
+    page.click("#cell-upload-btn")
+    page.wait_for_selector("#message:not([hidden])")
+    message = page.text_content("#message")
+    assert "422" in message and "POST /api/cells" in message, message
+    # The default cell, sent back, is a valid upload: it becomes an id in the picker, selected.
+    cell = httpx.get(f"{served.url}/api/cells/default").json()["cell"]
+    page.fill("#cell-json", json.dumps(cell, indent=2))
+    page.click("#cell-upload-btn")
+    page.wait_for_function("document.getElementById('c-cell').options.length === 2")
+    chosen = page.input_value("#c-cell")
+    assert chosen != "default" and chosen in httpx.get(f"{served.url}/api/cells").json()
+    page.click("#create")
+    page.wait_for_selector("#progress:not([hidden])")
+    assert "on cell " + chosen in page.text_content("#message")
