@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import json
 import time
 from pathlib import Path
@@ -105,7 +107,14 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
     page.wait_for_selector("#readings-table tbody tr")
     rows = page.locator("#readings-table tbody tr")
     assert 1 <= rows.count() <= 6
-    assert "of 60 readings" in page.text_content("#readings-table caption")
+    # 20 poses x 3 SMRs; an early target the rough base leaves unfound may be recorded missing.
+    # The table refreshes on the next progress poll after the count, so wait for it.
+    page.wait_for_function("""() => {
+        const c = document.querySelector('#readings-table caption');
+        const m = c && c.textContent.match(/of (\\d+) readings/);
+        return m && Number(m[1]) >= 55; }""", timeout=15000)
+    caption = page.text_content("#readings-table caption")
+    assert 55 <= int(re.search(r"of (\d+) readings", caption).group(1)) <= 60, caption
 
     # A control the API may lack (pause, today) must show the API's problem detail, not fail
     # silently; once the route exists it answers for a done campaign with a 2xx or a 409.
