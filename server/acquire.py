@@ -214,7 +214,7 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
                                                if stats.aimed_after_10 else None),
             "campaign_s": clock.now() - t0 if existing is None else None,
             "campaign_end_s": clock.now(), "predictor": predictor.stage,
-            "no_out_of_limit_commands": True}
+            "skipped_poses": stats.skipped}
 
 
 def _finish(db, cid, status) -> None:
