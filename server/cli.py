@@ -270,6 +270,13 @@ def cmd_bench(args) -> None:
     print(json.dumps(result, indent=2))
 
 
+def _data_arguments(p) -> None:
+    """A campaign to read: a meas.csv or a database (with its campaign id), and the cell."""
+    p.add_argument("meas", help="meas.csv, or a campaign database (.db)")
+    p.add_argument("--cell")
+    p.add_argument("--campaign", type=int, help="campaign id when MEAS is a database (default: latest)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="robocal", description="Robot calibration with a laser tracker.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -295,9 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_simulate)
 
     c = sub.add_parser("calibrate", help="identify a model from a campaign")
-    c.add_argument("meas")
-    c.add_argument("--cell")
-    c.add_argument("--campaign", type=int, help="campaign id when MEAS is a database (default: latest)")
+    _data_arguments(c)
     c.add_argument("--method", default="minimax",
                    help="minimax (default), ls-sum, ls-single:A, ls-pose")
     c.add_argument("--qp", choices=("primal-dual", "exact"), default="primal-dual",
@@ -322,16 +327,12 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_evaluate)
 
     co = sub.add_parser("compare", help="every method side by side (the paper's Table 3)")
-    co.add_argument("meas")
-    co.add_argument("--cell")
-    co.add_argument("--campaign", type=int, help="campaign id when MEAS is a database (default: latest)")
+    _data_arguments(co)
     co.add_argument("--json", help="also write the figures as JSON")
     co.set_defaults(func=cmd_compare)
 
     dg = sub.add_parser("diagnose", help="what the geometric model misses, named and modelled")
-    dg.add_argument("meas")
-    dg.add_argument("--cell")
-    dg.add_argument("--campaign", type=int, help="campaign id when MEAS is a database (default: latest)")
+    _data_arguments(dg)
     dg.add_argument("--out", default="report.json", help="report (figures are written beside it)")
     dg.add_argument("--model-out", help="the final, extended model.json")
     dg.set_defaults(func=cmd_diagnose)

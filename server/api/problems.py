@@ -42,24 +42,11 @@ def install(app: FastAPI) -> None:
         # The uploaded file's own line and column, so the user can fix it in an editor.
         return problem(request, 422, str(exc), file=exc.path, line=exc.line, column=exc.column)
 
-    @app.exception_handler(NotFound)
-    async def not_found(request: Request, exc: NotFound):
-        return problem(request, 404, str(exc))
-
-    @app.exception_handler(Conflict)
-    async def conflict(request: Request, exc: Conflict):
-        return problem(request, 409, str(exc))
-
-    @app.exception_handler(StoreError)
-    async def store_error(request: Request, exc: StoreError):
-        return problem(request, 422, str(exc))
-
-    @app.exception_handler(ControllerUnreachable)
-    async def controller_unreachable(request: Request, exc: ControllerUnreachable):
-        # The state is marked aborted, but the arm may still move: say so loudly.
-        return problem(request, 502, str(exc))
-
-    @app.exception_handler(ValueError)
-    async def value_error(request: Request, exc: ValueError):
-        # The store and the solver front ends raise ValueError for bad arguments only.
-        return problem(request, 422, str(exc))
+    # Store and device errors map to one status each; the store and the solver front ends raise
+    # ValueError for bad arguments only. A 502 means the arm may still move: said loudly.
+    statuses = ((NotFound, 404), (Conflict, 409), (StoreError, 422),
+                (ControllerUnreachable, 502), (ValueError, 422))
+    for exc_type, status in statuses:
+        async def handler(request: Request, exc: Exception, status: int = status):
+            return problem(request, status, str(exc))
+        app.add_exception_handler(exc_type, handler)
