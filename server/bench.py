@@ -64,7 +64,7 @@ def _violation(targets: np.ndarray, meas: np.ndarray) -> float:
 
 def _setup(robot, targets, names, q, xyz):
     """Registered problem, start and free parameters as calibrate() finds them for ls-sum and minimax."""
-    prob, x0 = register(robot, targets, names, q, xyz)
+    prob, x0 = register(robot, targets, names, q, xyz, refine=False)
     lay = prob.layout
     st = structural(lay, x0, np.ones(lay.n_params, dtype=bool))
     return prob, x0, st.free

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import identifiability as ident
-from .identify import fit_targets, least_squares_fit, pose_fit, pose_residuals, pose_weight, register
+from .identify import SumOfSquares, fit_targets, pose_fit, pose_residuals, pose_weight, register
 from .kinematics import Layout, predict_with_jacobian
 from .minimax import minimax
 from .robot import Robot
@@ -68,7 +68,7 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
     name, rows = parse_method(method, list(target_names))
     if name == "ls-pose" and len(target_names) < 3:
         raise ValueError("ls-pose needs at least three targets")
-    prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
+    prob, x0 = register(robot, targets, target_names, q, meas, base_guess, refine=name == "nominal")
     lay = prob.layout
     if name == "nominal":
         F = prob.sum_squares(x0)
@@ -80,28 +80,27 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
             candidates[ts + 3 * k : ts + 3 * k + 3] = False
     weight = pose_weight(lay.targets(x0)) if name == "ls-pose" else None
     st = ident.structural(lay, x0, candidates, rows=rows, pose_weight=weight)
-    sel = np.zeros(len(target_names), dtype=bool)
-    sel[rows] = True
+    details: dict = {"structural_condition": st.condition}
     if name == "ls-pose":
         full = np.all(prob.mask, axis=1)
         p, J, _ = predict_with_jacobian(lay, x0, q[full])
         Jd = pose_residuals(p, p, J, weight)[1].reshape(-1, lay.n_params)
-        n_eq = int(full.sum())
-    else:
-        Jd = ident.jacobian_rows(lay, x0, q, prob.mask & sel[None, :])
-        n_eq = prob.q.shape[0]
-    cond = ident.check_data(Jd, st.free, lay.names(), n_eq)
-    details: dict = {"structural_condition": st.condition}
-    if name == "ls-pose":
+        cond = ident.check_data(ident.gram(Jd, st.free), st.free, lay.names(), Jd.shape[0],
+                                int(full.sum()))
         x, res = pose_fit(prob, x0, st.free, weight)
         x = fit_targets(prob, x, range(len(target_names)))
         details["pose_weight_mm_per_rad"] = weight
     else:
-        x, res = least_squares_fit(prob, x0, st.free, rows=rows)
+        fit = SumOfSquares(prob, x0, st.free, rows=rows)
+        first = fit.normal()  # checks the data and starts the fit
+        cond = ident.check_data(first.A, st.free, lay.names(), 3 * int(fit.mask.sum()),
+                                prob.q.shape[0])
+        x, res = fit.fit(first)
         if name == "ls-single":
             x = fit_targets(prob, x, [k for k in range(len(target_names)) if k not in rows])
     iters = res.iterations
-    details["lm"] = {"iterations": res.iterations, "evaluations": res.nfev, "message": res.message}
+    details["lm"] = {"iterations": res.iterations, "evaluations": res.nfev,
+                     "jacobians": res.njev, "message": res.message}
     if name == "minimax":
         details["ls_sum_F"] = prob.sum_squares(x).tolist()
         mm = minimax(prob, x, st.free, rows=rows, qp=qp, epsilon=epsilon)
@@ -111,6 +110,10 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
                        converged=mm.converged, message=mm.message, lam=mm.lam.tolist(),
                        mu=mm.mu.tolist(), constraints=mm.constraints.tolist(),
                        sqp_seconds=mm.seconds)
+    if name == "ls-sum" and res.r is not None and fit.mask.sum() == prob.mask.sum():
+        F = fit.per_target(res.r)  # the fit's last residuals are those of x
+    else:
+        F = None
     prob, x = prob.rebased(x)
-    return Calibration(method, prob.layout, x, st.fixed, cond, prob.sum_squares(x),
+    return Calibration(method, prob.layout, x, st.fixed, cond, prob.sum_squares(x) if F is None else F,
                        time.perf_counter() - t0, iters, details)

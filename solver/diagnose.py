@@ -282,8 +282,8 @@ def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=N
     clock = {}
     prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
     st = ident.structural(prob.layout, x0, np.ones(prob.layout.n_params, dtype=bool))
-    ident.check_data(ident.jacobian_rows(prob.layout, x0, q, prob.mask), st.free,
-                     prob.layout.names(), q.shape[0])
+    J = ident.jacobian_rows(prob.layout, x0, q, prob.mask)
+    ident.check_data(ident.gram(J, st.free), st.free, prob.layout.names(), J.shape[0], q.shape[0])
     inputs = Inputs(q, time_s, temp_c)
     clock["setup"] = time.perf_counter() - t0
     diag = Diagnoser(prob, x0, st.free, inputs)

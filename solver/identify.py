@@ -6,7 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from .kinematics import Layout, predict, predict_rows
-from .lm import levenberg_marquardt
+from .lm import Normal, levenberg_marquardt
+from .normal import PointNormal
 from .robot import Robot
 
 
@@ -48,21 +49,29 @@ class Problem:
         return Problem(lay, self.q, self.meas), y
 
 
-def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None):
+# The closed-form start needs no more poses than this (spread evenly over the campaign).
+REGISTER_POSES = 256
+
+
+def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None, refine=True):
     """A problem and its start vector with the base found from the data (no user guess needed).
 
     The nominal prediction in the base frame is registered onto the measurements by a
-    closed-form point-set fit; then base and SMR positions are refined with the nominal joints
-    (the paper's condition 0).
+    closed-form point-set fit; then, if refine, base and SMR positions are fitted with the
+    nominal joints (the paper's condition 0). The fitting methods skip that: they start from
+    the closed-form base and fit base and SMRs with everything else.
     """
     targets = np.asarray(targets, dtype=float)
     if base_guess is None:
         lay0 = Layout(robot, np.eye(4), tuple(names))
-        nominal = predict(lay0, lay0.initial(targets), q)
-        ok = np.all(np.isfinite(meas), axis=-1)
-        base_guess = kabsch(nominal[ok], meas[ok])
+        some = np.unique(np.linspace(0, len(q) - 1, min(len(q), REGISTER_POSES)).astype(int))
+        nominal = predict(lay0, lay0.initial(targets), np.asarray(q)[some])
+        ok = np.all(np.isfinite(meas[some]), axis=-1)
+        base_guess = kabsch(nominal[ok], meas[some][ok])
     prob = Problem(Layout(robot, np.asarray(base_guess, float), tuple(names)), q, meas)
     x0 = prob.layout.initial(targets)
+    if not refine:
+        return prob, x0
     free = np.zeros(prob.layout.n_params, dtype=bool)
     free[prob.layout.base_slice] = True
     free[prob.layout.target_slice] = True
@@ -70,30 +79,43 @@ def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None)
     return prob.rebased(x)
 
 
+class SumOfSquares:
+    """ls-sum on the selected targets (eq. 6 summed) over the free entries of x."""
+
+    def __init__(self, prob: Problem, x0, free, rows=None):
+        K = prob.meas.shape[1]
+        sel = np.zeros(K, dtype=bool)
+        sel[list(range(K)) if rows is None else rows] = True
+        self.mask = prob.mask & sel[None, :]
+        self.idx = np.flatnonzero(free)
+        self.x0 = np.array(x0, dtype=float)
+        self.points = PointNormal(prob.layout, prob.q, self.mask, prob.meas, self.idx)
+
+    def full(self, z) -> np.ndarray:
+        x = self.x0.copy()
+        x[self.idx] = z
+        return x
+
+    def normal(self, z=None) -> Normal:
+        """J'J, J'r and the cost at z (default: the start)."""
+        return self.points(self.x0 if z is None else self.full(z))
+
+    def per_target(self, r: np.ndarray) -> np.ndarray:
+        """F_i of eq. (6) per target from residuals (predict - meas)[mask] flattened."""
+        k = np.nonzero(self.mask)[1]
+        return np.bincount(k, np.sum(r.reshape(-1, 3) ** 2, axis=1), minlength=self.mask.shape[1])
+
+    def fit(self, first: Normal | None = None, max_iter=100):
+        """Levenberg-Marquardt from the start; returns (x, LMResult)."""
+        res = levenberg_marquardt(None, self.x0[self.idx], normal=self.normal, first=first,
+                                  residual=lambda z: self.points.residual(self.full(z)),
+                                  max_iter=max_iter)
+        return self.full(res.x), res
+
+
 def least_squares_fit(prob: Problem, x0, free, rows=None, max_iter=100):
     """Levenberg-Marquardt on the point residuals of the selected targets; returns (x, LMResult)."""
-    K = prob.meas.shape[1]
-    sel = np.zeros(K, dtype=bool)
-    sel[list(range(K)) if rows is None else rows] = True
-    mask = prob.mask & sel[None, :]
-    meas = prob.meas[mask]
-    idx = np.flatnonzero(free)
-    x = np.array(x0, dtype=float)
-
-    def full(z):
-        xx = x.copy()
-        xx[idx] = z
-        return xx
-
-    def fun(z):
-        p, Jt = predict_rows(prob.layout, full(z), prob.q, mask, idx)
-        return (p - meas).ravel(), Jt.reshape(len(idx), -1)
-
-    def residual(z):
-        return (predict(prob.layout, full(z), prob.q)[mask] - meas).ravel()
-
-    res = levenberg_marquardt(fun, x[idx], residual, max_iter=max_iter)
-    return full(res.x), res
+    return SumOfSquares(prob, x0, free, rows).fit(max_iter=max_iter)
 
 
 def fit_targets(prob: Problem, x, which) -> np.ndarray:

@@ -1,0 +1,272 @@
+"""Normal equations J'J, J'r of the SMR point residuals, assembled without forming J.
+
+Every geometric or base parameter moves the flange rigidly, so its effect on all SMRs of a pose
+is one twist (6 numbers) instead of 3K point derivatives: d p_k = R (v + w x t_k) with the
+twist (v, w) and the SMR offset t_k in a frame fixed to the flange. Taking that frame at the
+SMRs' centroid along their principal axes, sum_k A_k' A_k (A_k = [I, -[t_k]x]) is diagonal for
+a pose with all readings present, so J'J = sum_i d_i U_i U_i' over the six twist rows: 6 rows
+per pose instead of 3K, no 6x6 products, and J itself is never stored. Poses missing a reading
+use their own (full) 6x6 weight.
+
+The twists come from one pass down the chain from the flange to the tracker, which also yields
+the SMR frame's pose. Arrays are pose-last (..., m) so every step is a long vector operation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg.blas import dsyrk
+
+from .kinematics import Layout, _amounts, predict
+from .lm import Normal
+
+PAIRS = ((1, 2), (2, 0), (0, 1))  # (i1, i2) with e_a = e_i1 x e_i2
+
+
+def _pass(ops, x, q, where: dict, M: np.ndarray, U: np.ndarray | None) -> None:
+    """Prepend ops (walked from the last) to the frame M (3, 4, m) in place, recording twists in U."""
+    m = M.shape[2]
+    r1, tmp = np.empty((4, m)), np.empty((3, m))
+    for op in reversed(ops):
+        j = where.get(op.param, -1)
+        a = op.axis
+        if j >= 0:
+            if op.kind == "t":
+                U[:3, j] = M[a, :3]
+                U[3:, j] = 0.0
+            else:
+                i1, i2 = PAIRS[a]
+                U[3:, j] = M[a, :3]
+                np.multiply(M[i1, 3], M[i2, :3], out=U[:3, j])
+                np.multiply(M[i2, 3], M[i1, :3], out=tmp)
+                U[:3, j] -= tmp
+        v = _amounts(op, x, q, None)
+        if op.kind == "t":
+            M[a, 3] += v
+        else:
+            c, s = np.cos(v), np.sin(v)
+            i1, i2 = PAIRS[a]
+            r1[:] = M[i1]
+            M[i1] *= c
+            M[i1] -= M[i2] * s
+            M[i2] *= c
+            M[i2] += r1 * s
+
+
+def flange_twists(layout: Layout, x, q, cols, start: np.ndarray, extra: int = 0, arm=None):
+    """The pose of a flange-fixed frame and its twists per unit of each parameter in cols.
+
+    start (3, 4): that frame in flange coordinates. Returns M (3, 4, m), the frame-to-tracker
+    transform [R | o] for every pose, and U (6, len(cols) + extra, m): per column the frame's
+    linear (rows 0-2) and angular (rows 3-5) velocity in its own coordinates (the last `extra`
+    columns are left for the caller). cols must be geometric or base entries of x. arm: the
+    flange in the base_ref frame (3, 4, m) when cols hold no geometric entry and it is known.
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    m = q.shape[0]
+    where = {int(c): j for j, c in enumerate(cols)}
+    U = np.empty((6, len(where) + extra, m))
+    ops = layout.ops()
+    if arm is None:
+        M = np.empty((3, 4, m))
+        M[:] = start[:, :, None]
+        _pass(ops[6:], x, q, where, M, U)
+    else:
+        M = np.einsum("ijm,jk->ikm", arm[:, :3], start)
+        M[:, 3] += arm[:, 3]
+    _pass(ops[:6], x, q, where, M, U)
+    ref = layout.base_ref
+    M = np.einsum("ij,jkm->ikm", ref[:3, :3], M)
+    M[:, 3] += ref[:3, 3, None]
+    return M, U
+
+
+def arm_frames(layout: Layout, x, q) -> np.ndarray:
+    """The flange in the base_ref frame for every pose, (3, 4, m): the chain without the base."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    M = np.zeros((3, 4, q.shape[0]))
+    for i in range(3):
+        M[i, i] = 1.0
+    _pass(layout.ops()[6:], x, q, {}, M, None)
+    return M
+
+
+def _skew(t: np.ndarray) -> np.ndarray:
+    """[t]x for each row of t (..., 3) -> (..., 3, 3)."""
+    S = np.zeros(t.shape[:-1] + (3, 3))
+    S[..., 0, 1], S[..., 0, 2] = -t[..., 2], t[..., 1]
+    S[..., 1, 0], S[..., 1, 2] = t[..., 2], -t[..., 0]
+    S[..., 2, 0], S[..., 2, 1] = -t[..., 1], t[..., 0]
+    return S
+
+
+def _weight(t: np.ndarray) -> np.ndarray:
+    """sum_k A_k' A_k with A_k = [I, -[t_k]x] acting on a twist (v, w); t (k, 3)."""
+    S = _skew(t)
+    G = np.zeros((6, 6))
+    G[:3, :3] = len(t) * np.eye(3)
+    G[:3, 3:] = -S.sum(axis=0)
+    G[3:, :3] = S.sum(axis=0)
+    G[3:, 3:] = -(S @ S).sum(axis=0)
+    return G
+
+
+def smr_frame(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Frame at the SMRs' centroid along their principal axes: ([V | centroid] (3, 4), t in it)."""
+    c = t.mean(axis=0)
+    d = t - c
+    _, V = np.linalg.eigh(d.T @ d)
+    if np.linalg.det(V) < 0:
+        V[:, 0] = -V[:, 0]
+    return np.column_stack([V, c]), d @ V
+
+
+class PointNormal:
+    """Normal equations of the point residuals of the readings in mask, on the parameters in cols.
+
+    Residuals handed to `jt` are (predict - meas)[mask] flattened, as the solvers build them.
+    """
+
+    def __init__(self, layout: Layout, q, mask, meas, cols):
+        self.layout, self.q, self.mask = layout, np.asarray(q, float), np.asarray(mask, bool)
+        cols = np.asarray(cols, dtype=int)
+        ts = layout.target_slice.start
+        self.gcols, self.tcols = cols[cols < ts], cols[cols >= ts]
+        pos = {int(c): i for i, c in enumerate(np.concatenate([self.gcols, self.tcols]))}
+        self.perm = np.array([pos[int(c)] for c in cols], dtype=int)
+        self.meas_t = np.nan_to_num(np.asarray(meas, float)).transpose(2, 1, 0)  # (3, K, m)
+        self.w = self.mask.T.astype(float)  # (K, m)
+        K = self.mask.shape[1]
+        codes = self.mask @ (1 << np.arange(K))
+        full = (1 << K) - 1
+        self.full = codes == full
+        self.partial = [(self.mask[codes == c][0], codes == c) for c in np.unique(codes)
+                        if c and c != full]
+        self.n_k = self.mask.sum(axis=0)
+        self.tk = [divmod(int(c) - ts, 3) for c in self.tcols]
+        self.meas_rows = np.asarray(meas, float)[self.mask]
+        # with the geometry held (base registration), the arm's frames are computed once
+        self.arm_held = not np.any(self.gcols < layout.base_slice.start)
+        self._arm: tuple[bytes, np.ndarray] | None = None
+
+    def arm(self, x) -> np.ndarray | None:
+        """The arm's flange frames at x's geometry when that is held, else None."""
+        if not self.arm_held:
+            return None
+        key = np.asarray(x[: self.layout.n_geo]).tobytes()
+        if self._arm is None or self._arm[0] != key:
+            self._arm = key, arm_frames(self.layout, x, self.q)
+        return self._arm[1]
+
+    def residual(self, x) -> np.ndarray:
+        """(predict - meas)[mask] flattened: the residuals `jt` takes."""
+        arm = self.arm(x)
+        if arm is None:
+            return (predict(self.layout, x, self.q)[self.mask] - self.meas_rows).ravel()
+        M, _ = flange_twists(self.layout, x, self.q, [], np.eye(4)[:3], arm=arm)
+        p = np.einsum("ijm,kj->mki", M[:, :3], self.layout.targets(x)) + M[:, 3].T[:, None]
+        return (p[self.mask] - self.meas_rows).ravel()
+
+    def __call__(self, x) -> Normal:
+        lay, ng = self.layout, len(self.gcols)
+        t = lay.targets(x)
+        start, tc = smr_frame(t)
+        M, U = flange_twists(lay, x, self.q, self.gcols, start, extra=7, arm=self.arm(x))
+        R = M[:, :3]
+        p = np.einsum("ijm,kj->ikm", R, tc) + M[:, 3, None, :]
+        r = (p - self.meas_t) * self.w  # (3, K, m), zero where missing
+        rho = np.einsum("ijm,ikm->jkm", R, r)  # in the SMR frame
+        b = _twist_sums(tc, rho)
+        A, g = np.zeros((ng, ng)), np.zeros(ng)
+        Usum = np.zeros((len(tc), 6, ng))  # per SMR, sum of U over the poses that measured it
+        if self.full.any():
+            Af, gf, Uf = _full_group(U, b, tc, self.full, ng)
+            A += Af
+            g += gf
+            Usum += Uf
+        for present, sel in self.partial:
+            Us = U[:, :ng, sel]
+            wv, V = np.linalg.eigh(_weight(tc[present]))
+            W = ((V * np.sqrt(np.clip(wv, 0.0, None))).T @ Us.reshape(6, -1)).reshape(6, ng, -1)
+            for i in range(6):
+                A += W[i] @ W[i].T
+                g += Us[i] @ b[i, sel]
+            Usum[present] += Us.sum(axis=2)
+        A, g = self._with_targets(A, g, tc, start, Usum, rho)
+        return Normal(float(np.einsum("ikm,ikm->", r, r)), A, g, _Jt(self, tc, start, R, U))
+
+    def _with_targets(self, A, g, tc, start, Usum, rho):
+        """Add the SMR columns (identity in the flange frame) and order as the caller's cols."""
+        ng, nt = len(self.gcols), len(self.tcols)
+        full = np.zeros((ng + nt, ng + nt))
+        full[:ng, :ng] = A
+        gg = np.zeros(ng + nt)
+        gg[:ng] = g
+        V = start[:, :3]
+        rho_flange = V @ rho.sum(axis=2)  # (3, K)
+        # row (k, ax): sum over poses of c' (v + w x t_k) with c = V[ax], the flange axis in the SMR frame
+        rows = (np.einsum("kic,ai->kac", Usum[:, :3], V)
+                + np.einsum("kic,kai->kac", Usum[:, 3:], np.cross(tc[:, None, :], V[None, :, :])))
+        k, ax = np.array(self.tk, dtype=int).reshape(-1, 2).T
+        j = np.arange(ng, ng + nt)
+        full[j, j] = self.n_k[k]
+        full[j, :ng] = rows[k, ax]
+        gg[j] = rho_flange[ax, k]
+        full[:ng, ng:] = full[ng:, :ng].T
+        perm = self.perm
+        return full[np.ix_(perm, perm)], gg[perm]
+
+
+def _full_group(U, b, tc, sel, ng):
+    """A, g and per-row U sums of the poses with every reading: the weight is diagonal there.
+
+    One symmetric rank-k update per twist row i gives all three: the row's U block is extended
+    by b_i / d_i and by 1 / d_i in a column of its own, so d_i times its Gram matrix holds
+    U_i U_i', U_i b_i and sum U_i.
+    """
+    d = np.concatenate([np.full(3, float(len(tc))), np.sum(tc * tc) - np.sum(tc * tc, axis=0)])
+    live = d > 1e-12 * d.max()
+    Uf = U if sel.all() else U[:, :, sel]
+    bf = b if sel.all() else b[:, sel]
+    C = np.zeros((ng + 7, ng + 7))
+    Uf[:, ng + 1:] = 0.0
+    for i in range(6):
+        if not live[i]:
+            continue  # the SMRs have no spread about this axis: it carries no information
+        np.divide(bf[i], d[i], out=Uf[i, ng])
+        Uf[i, ng + 1 + i] = 1.0 / d[i]
+        C = dsyrk(d[i], Uf[i].T, beta=1.0, c=C, trans=1, overwrite_c=1)
+    C = np.triu(C) + np.triu(C, 1).T
+    return C[:ng, :ng], C[:ng, ng], np.broadcast_to(C[ng + 1:, :ng], (len(tc), 6, ng))
+
+
+def _twist_sums(tc: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """Per pose, sum_k A_k' rho_k = (sum rho_k, sum t_k x rho_k): (6, m)."""
+    b = np.empty((6, rho.shape[2]))
+    b[:3] = rho.sum(axis=1)
+    for a, (i1, i2) in enumerate(PAIRS):
+        b[3 + a] = tc[:, i1] @ rho[i2] - tc[:, i2] @ rho[i1]
+    return b
+
+
+class _Jt:
+    """r' -> J'r' with the Jacobian of one evaluation (valid until the next one)."""
+
+    def __init__(self, normal: PointNormal, tc, start, R, U):
+        self.normal, self.tc, self.start, self.R, self.U = normal, tc, start, R, U
+
+    def __call__(self, res: np.ndarray) -> np.ndarray:
+        nm = self.normal
+        m, K = nm.mask.shape
+        r = np.zeros((m, K, 3))
+        r[nm.mask] = res.reshape(-1, 3)
+        rho = np.einsum("ijm,mki->jkm", self.R, r)
+        b = _twist_sums(self.tc, rho)
+        ng = len(nm.gcols)
+        g = np.zeros(ng)
+        for i in range(6):
+            g += self.U[i, :ng] @ b[i]
+        V = self.start[:, :3]
+        rho_flange = V @ rho.sum(axis=2)
+        gg = np.concatenate([g, [rho_flange[ax, k] for k, ax in nm.tk]])
+        return gg[nm.perm]
