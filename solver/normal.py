@@ -144,6 +144,7 @@ class PointNormal:
                         if c and c != full]
         self.n_k = self.mask.sum(axis=0)
         self.tk = [divmod(int(c) - ts, 3) for c in self.tcols]
+        self.tk_k, self.tk_ax = np.array(self.tk, dtype=int).reshape(-1, 2).T
         self.meas_rows = np.asarray(meas, float)[self.mask]
         # with the geometry held (base registration), the arm's frames are computed once
         self.arm_held = not np.any(self.gcols < layout.base_slice.start)
@@ -207,7 +208,7 @@ class PointNormal:
         # row (k, ax): sum over poses of c' (v + w x t_k) with c = V[ax], the flange axis in the SMR frame
         rows = (np.einsum("kic,ai->kac", Usum[:, :3], V)
                 + np.einsum("kic,kai->kac", Usum[:, 3:], np.cross(tc[:, None, :], V[None, :, :])))
-        k, ax = np.array(self.tk, dtype=int).reshape(-1, 2).T
+        k, ax = self.tk_k, self.tk_ax
         j = np.arange(ng, ng + nt)
         full[j, j] = self.n_k[k]
         full[j, :ng] = rows[k, ax]
@@ -228,13 +229,12 @@ def _full_group(U, b, tc, sel, ng):
     live = d > 1e-12 * d.max()
     Uf = U if sel.all() else U[:, :, sel]
     bf = b if sel.all() else b[:, sel]
-    C = np.zeros((ng + 7, ng + 7))
-    Uf[:, ng + 1:] = 0.0
-    for i in range(6):
-        if not live[i]:
-            continue  # the SMRs have no spread about this axis: it carries no information
+    Uf[:, ng:] = 0.0
+    for i in np.flatnonzero(live):  # a row without SMR spread about its axis carries nothing
         np.divide(bf[i], d[i], out=Uf[i, ng])
         Uf[i, ng + 1 + i] = 1.0 / d[i]
+    C = np.zeros((ng + 7, ng + 7))
+    for i in np.flatnonzero(live):
         C = dsyrk(d[i], Uf[i].T, beta=1.0, c=C, trans=1, overwrite_c=1)
     C = np.triu(C) + np.triu(C, 1).T
     return C[:ng, :ng], C[:ng, ng], np.broadcast_to(C[ng + 1:, :ng], (len(tc), 6, ng))
