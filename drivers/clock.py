@@ -7,14 +7,21 @@ import time
 
 
 class RealClock:
-    """Wall-clock time."""
+    """Wall-clock time, counted from `start` at construction (a campaign's time axis)."""
+
+    def __init__(self, start: float = 0.0):
+        self._offset = float(start) - time.monotonic()
 
     def now(self) -> float:
-        return time.monotonic()
+        return self._offset + time.monotonic()
 
     def sleep(self, seconds: float) -> None:
         if seconds > 0:
             time.sleep(seconds)
+
+    def advance_to(self, t: float) -> None:
+        """Move the time axis forward to t (a resumed campaign continues its readings' times)."""
+        self._offset += max(0.0, float(t) - self.now())
 
 
 class VirtualClock:

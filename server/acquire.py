@@ -1,12 +1,15 @@
 """`robocal acquire`: plan a campaign, run the handshake on the devices, store every reading.
 
-Composes the drivers (simulated devices over real loopback sockets by default, on a virtual
-clock), the campaign engine and the store. A campaign left unfinished (a killed process) is
-resumed at its next unmeasured pose, keeping every reading already committed.
+Composes the drivers, the campaign engine and the store. A simulated cell gets simulated devices
+over real loopback sockets on a virtual clock; a cell with `devices` gets clients for the real
+tracker and controller at those addresses, on the wall clock. A campaign left unfinished (a killed
+process, an unreachable device) is resumed at its next unmeasured pose, keeping every reading
+already committed.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass
@@ -14,7 +17,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from drivers.campaign import CampaignEngine, Settings
-from drivers.clock import VirtualClock
+from drivers.clock import RealClock, VirtualClock
 from drivers.predictor import SmrPredictor
 
 from . import store
@@ -23,6 +26,10 @@ from .formats.cell_json import Cell, cell_to_json, parse_cell
 
 class AcquisitionFailed(RuntimeError):
     """A device fault ended the run; the message says where and that it can be resumed."""
+
+
+class DeviceUnreachable(ConnectionError):
+    """A real device did not answer at its address when the run began."""
 
 
 @dataclass
@@ -89,18 +96,91 @@ class SimulatedCell:
         self.controller_server = serve_controller(self.controller_device)
 
     def rough_base(self, seed: int) -> np.ndarray:
-        """What a quick survey of the cell gives: the true base, some 10 mm and half a degree off."""
-        rng = np.random.default_rng([seed, 7])
-        base = self.cell.base.copy()
-        base[:3, 3] += rng.normal(0.0, 6.0, 3)
-        a = np.deg2rad(rng.normal(0.0, 0.3))
-        c, s = np.cos(a), np.sin(a)
-        base[:3, :3] = base[:3, :3] @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        return base
+        """What a quick survey of the cell gives (see `_surveyed`)."""
+        return _surveyed(self.cell.base, seed)
 
     def close(self):
         self.tracker_server.close()
         self.controller_server.close()
+
+
+def _surveyed(true_base: np.ndarray, seed: int) -> np.ndarray:
+    """The true base some 10 mm and half a degree off, as a quick survey of the cell gives it."""
+    rng = np.random.default_rng([seed, 7])
+    base = true_base.copy()
+    base[:3, 3] += rng.normal(0.0, 6.0, 3)
+    a = np.deg2rad(rng.normal(0.0, 0.3))
+    c, s = np.cos(a), np.sin(a)
+    base[:3, :3] = base[:3, :3] @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return base
+
+
+def base_guess(cell: Cell, seed: int) -> np.ndarray:
+    """The cell's `base`, else (simulated cell) the survey guess of the virtual cell of `seed`."""
+    if cell.base is not None:
+        return np.asarray(cell.base, dtype=float)
+    if not cell.simulated:  # parse_cell refuses this; a hand-built Cell must not plan blind
+        raise ValueError("a cell with real devices needs a `base` guess")
+    from drivers.cell import TrackerSpec, VirtualCell
+
+    true = VirtualCell.random(cell.robot, cell.targets, seed=seed,
+                              tracker=TrackerSpec(**cell.tracker))
+    return _surveyed(true.base, seed)
+
+
+def check_options(cell: Cell, opts: AcquireOptions) -> None:
+    """Refuse simulation-only options on a real cell (ValueError naming them)."""
+    if cell.simulated:
+        return
+    bad = [n for n, v in (("beam_break_rate", opts.beam_break_rate), ("effects", opts.effects))
+           if v]
+    if bad:
+        raise ValueError(f"{', '.join(bad)}: only the simulated cell has them; this cell's "
+                         "devices are real")
+
+
+def plan_and_store(db, *, name: str, cell: Cell, opts: AcquireOptions, base):
+    """Plan the campaign's poses from the base guess and store it `planned`; (id, poses deg)."""
+    poses_deg, plan = _plan(cell, base, opts)
+    return store.create_campaign(db, name=name, cell_json=json.dumps(cell_to_json(cell)),
+                                 poses_deg=poses_deg.tolist(), simulated=cell.simulated,
+                                 settings={"options": asdict(opts), "plan": _plain(plan),
+                                           "base_guess": np.asarray(base).tolist()}), poses_deg
+
+
+def _plain(obj):
+    """JSON-safe copy of a plan summary (numpy scalars and arrays to Python)."""
+    return json.loads(json.dumps(obj, default=lambda v: v.tolist() if hasattr(v, "tolist")
+                                 else str(v)))
+
+
+def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
+    """(tracker, controller) clients: of the simulated devices, else of the cell's real ones,
+    each asked once so that a wrong address fails the run before the arm moves."""
+    from drivers.abb.client import ControllerClient, ControllerError
+    from drivers.tracker.client import TrackerClient
+    from drivers.tracker.protocol import ProtocolError, TrackerError
+
+    if sim is not None:
+        tracker = TrackerClient("127.0.0.1", sim.tracker_server.port)
+        stack.callback(tracker.close)
+        controller = ControllerClient(sim.controller_server.url, cell.robot)
+        stack.callback(controller.close)
+        return tracker, controller
+    d = cell.devices
+    tracker = TrackerClient(d.tracker_host, d.tracker_port, timeout_s=d.tracker_timeout_s)
+    stack.callback(tracker.close)
+    try:
+        tracker.ident()
+    except (OSError, TrackerError, ProtocolError) as e:
+        raise DeviceUnreachable(f"tracker at {d.tracker_address()} does not answer: {e}") from e
+    try:
+        controller = ControllerClient(d.controller_url, cell.robot,
+                                      timeout_s=d.controller_timeout_s, baudrate=d.baudrate)
+    except (ControllerError, OSError) as e:
+        raise DeviceUnreachable(f"controller at {d.controller_url} does not answer: {e}") from e
+    stack.callback(controller.close)
+    return tracker, controller
 
 
 def _plan(cell: Cell, base, opts: AcquireOptions):
@@ -129,7 +209,7 @@ def find_unfinished(db, name):
 
 def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, *,
             campaign_id: int | None = None, on_engine=None, on_event=None) -> dict:
-    """Run (or resume) a simulated campaign; returns a summary with the simulated campaign time.
+    """Run (or resume) a campaign on the cell's devices; a summary with the campaign time.
 
     campaign_id runs that stored campaign (else the latest unfinished one named opts.name, or a
     new one); on_engine(engine) is called before the run so another thread can pause or stop it;
@@ -150,17 +230,18 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
             cell = parse_cell(info.cell_json)
             settings = info.settings or {}
             opts = AcquireOptions(**{**asdict(opts), **settings.get("options", {})})
-        clock = VirtualClock()
-        sim = SimulatedCell(cell, opts.seed, clock, opts.beam_break_rate, opts.effects,
-                            expected_s=20.0 * opts.poses)
-        stack.callback(sim.close)
-        base = sim.rough_base(opts.seed) if cell.base is None else cell.base
+        check_options(cell, opts)
+        if cell.simulated:
+            clock = VirtualClock()
+            sim = SimulatedCell(cell, opts.seed, clock, opts.beam_break_rate, opts.effects,
+                                expected_s=20.0 * opts.poses)
+            stack.callback(sim.close)
+        else:
+            # the real arm and tracker take real time: the pause must really wait
+            clock, sim = RealClock(), None
+        base = base_guess(cell, opts.seed)
         if existing is None:
-            poses_deg, plan = _plan(cell, base, opts)
-            cid = store.create_campaign(db, name=name, cell_json=json.dumps(cell_to_json(cell)),
-                                        poses_deg=poses_deg.tolist(), simulated=True,
-                                        settings={"options": asdict(opts), "plan": plan,
-                                                  "base_guess": base.tolist()})
+            cid, poses_deg = plan_and_store(db, name=name, cell=cell, opts=opts, base=base)
             start, history, partial = 0, None, {}
         else:
             cid = existing.id
@@ -169,16 +250,15 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
             names = tuple(sorted(cell.targets))
             history, partial = _history(db, cid, names, start, cell)
             base = np.array(settings.get("base_guess", base))
-            clock.advance_to(_last_time(db, cid) + 30.0)
+            clock.advance_to(_last_time(db, cid) + (30.0 if cell.simulated else
+                                                    _since_last_reading(db, cid, start,
+                                                                        len(poses_deg))))
         if store.get_campaign(db, campaign_id=cid).status != "running":
             store.set_status(db, campaign_id=cid, status="running")
-        from drivers.abb.client import ControllerClient
-        from drivers.tracker.client import TrackerClient
-
-        tracker = TrackerClient("127.0.0.1", sim.tracker_server.port)
-        stack.callback(tracker.close)
-        controller = ControllerClient(sim.controller_server.url, cell.robot)
-        stack.callback(controller.close)
+        try:
+            tracker, controller = _clients(cell, sim, stack)
+        except DeviceUnreachable as e:
+            raise _failed(db, cid, name, start or 0, e, on_event) from e
         names = tuple(sorted(cell.targets))
         predictor = SmrPredictor(cell.robot, np.array([cell.targets[t] for t in names]), names, base)
         settings = Settings(pause_s=opts.pause_s, settle=opts.settle, samples=opts.samples)
@@ -195,13 +275,7 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
             stats = engine.run(poses_deg, start=start if start is not None else len(poses_deg),
                                history=history, partial=partial)
         except Exception as e:
-            _finish(db, cid, "failed")
-            if on_event:
-                on_event({"type": "campaign.state", "campaign_id": cid, "state": "failed",
-                          "detail": f"{type(e).__name__}: {e}"})
-            raise AcquisitionFailed(f"campaign {cid} ({name}) stopped at pose "
-                                    f"{engine.stats.poses + (start or 0) + 1}: {e}; its readings are "
-                                    f"stored, run again to resume") from e
+            raise _failed(db, cid, name, engine.stats.poses + (start or 0), e, on_event) from e
         final = "done" if engine.state == "done" else "aborted"
         _finish(db, cid, final)
         if on_event:
@@ -214,7 +288,17 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
                                                if stats.aimed_after_10 else None),
             "campaign_s": clock.now() - t0 if existing is None else None,
             "campaign_end_s": clock.now(), "predictor": predictor.stage,
-            "skipped_poses": stats.skipped}
+            "skipped_poses": stats.skipped, "simulated": cell.simulated}
+
+
+def _failed(db, cid, name, pose_index, error, on_event) -> AcquisitionFailed:
+    """Mark the campaign failed and say why to on_event; the one-line error to raise."""
+    _finish(db, cid, "failed")
+    if on_event:
+        on_event({"type": "campaign.state", "campaign_id": cid, "state": "failed",
+                  "detail": f"{type(error).__name__}: {error}"})
+    return AcquisitionFailed(f"campaign {cid} ({name}) stopped at pose {pose_index + 1}: "
+                             f"{error}; its readings are stored, run again to resume")
 
 
 def _finish(db, cid, status) -> None:
@@ -239,6 +323,16 @@ def _history(db, cid, names, start, cell):
 def _partial(db, cid, pose_index) -> dict:
     readings = store.pose_readings(db, campaign_id=cid, pose_index=pose_index)
     return {t: np.array(r.xyz) for t, r in readings.items() if r.status == "ok"}
+
+
+def _since_last_reading(db, cid, start, n_poses) -> float:
+    """Wall seconds since the last stored reading (0 if none): the real gap of a resumed run."""
+    at = n_poses - 1 if start is None else start  # the last readings are on this pose or before
+    last = [r.created_at for i in {max(at - 1, 0), at}
+            for r in store.pose_readings(db, campaign_id=cid, pose_index=i).values()]
+    if not last:
+        return 0.0
+    return max(0.0, (dt.datetime.now(dt.timezone.utc) - max(last)).total_seconds())
 
 
 def _last_time(db, cid) -> float:

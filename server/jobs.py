@@ -257,8 +257,9 @@ class Run:
 
 
 class Acquisitions:
-    """Runs simulated acquisitions one at a time (a cell has one arm) and holds the running
-    engine so pause, resume, abort and emergency stop reach it from the request threads."""
+    """Runs acquisitions (simulated or on a cell's real devices) one at a time (a cell has one
+    arm) and holds the running engine, whose controller client is the real one on a real cell,
+    so pause, resume, abort and emergency stop reach it from the request threads."""
 
     def __init__(self, database_url: str, db: store.Database, events: Events | None = None):
         self.database_url, self.db = database_url, db
@@ -276,9 +277,9 @@ class Acquisitions:
     def start(self, *, campaign_id: int) -> Run:
         """Queue the campaign on the worker; Conflict if one is running or it cannot start."""
         info = store.get_campaign(self.db, campaign_id=campaign_id)
-        if not info.simulated:
-            raise store.Conflict(f"campaign {campaign_id} is not simulated; only the simulated "
-                                 "cell can be driven in this version")
+        if "options" not in (info.settings or {}):
+            raise store.Conflict(f"campaign {campaign_id} has no acquisition settings (its "
+                                 "readings were imported); there is nothing to acquire")
         if info.status not in STARTABLE:
             raise store.Conflict(f"campaign {campaign_id} is {info.status}; it can start when "
                                  f"{', '.join(STARTABLE)}")

@@ -53,12 +53,20 @@ $("token-form").addEventListener("submit", (ev) => {
   showTokenState();
 });
 
+/** A cell's picker label: simulated, or the real devices a campaign on it will drive. */
+function cellLabel(c) {
+  const d = c.cell.devices;
+  return c.simulated ? `${c.id} (simulated)`
+    : `${c.id} (real: tracker ${d.tracker.host}:${d.tracker.port}, controller ${d.controller.url})`;
+}
+
 /** Fill the cell picker from GET /api/cells, keeping (or setting) the selection. */
 async function loadCells(select) {
   try {
     const ids = await api("GET", "/cells");
+    const cells = await Promise.all(ids.map((id) => api("GET", `/cells/${id}`)));
     const pick = select || $("c-cell").value || "default";
-    $("c-cell").replaceChildren(...ids.map((id) => new Option(id, id)));
+    $("c-cell").replaceChildren(...cells.map((c) => new Option(cellLabel(c), c.id)));
     $("c-cell").value = ids.includes(pick) ? pick : ids[0];
   } catch (e) { say(e.message); }
 }

@@ -1,4 +1,4 @@
-"""Campaigns: plan a simulated one, follow its progress, start, abort, e-stop."""
+"""Campaigns: plan one on a cell (simulated or real), follow its progress, start, abort, e-stop."""
 
 from __future__ import annotations
 
@@ -33,10 +33,11 @@ def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
 @router.post("", status_code=201, dependencies=[Authorized])
 def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
                     acquisitions: AcquisitionsDep) -> CampaignDetail:
-    """Plan a simulated campaign (stored `planned`; POST .../start runs it)."""
+    """Plan a campaign on the cell (stored `planned`; POST .../start runs it): on its real devices
+    if the cell has `devices`, else on the simulated ones."""
     cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
     opts = AcquireOptions(**body.model_dump(exclude={"cell_id"}))
-    cid = ops.plan_simulated_campaign(db, cell=cell, opts=opts)
+    cid = ops.plan_campaign(db, cell=cell, opts=opts)
     return _public(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)
 
 

@@ -1,11 +1,11 @@
-"""Cells: the built-in simulated cell and uploaded cell.json files."""
+"""Cells: the built-in simulated cell and uploaded cell.json files (with `devices`: real ones)."""
 
 from __future__ import annotations
 
 from fastapi import APIRouter, Request
 from starlette.concurrency import run_in_threadpool
 
-from server.formats.cell_json import cell_to_json
+from server.formats.cell_json import Cell, cell_to_json
 
 from . import ops
 from .deps import Authorized, SettingsDep
@@ -24,15 +24,19 @@ def list_cells(settings: SettingsDep) -> list[str]:
 
 @router.get("/{cell_id}")
 def get_cell(cell_id: str, settings: SettingsDep) -> CellPublic:
-    """One cell as cell.json."""
-    cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=cell_id)
-    return CellPublic(id=cell_id, cell=cell_to_json(cell))
+    """One cell as cell.json, and whether it is simulated."""
+    return _public(cell_id, ops.load_cell(cells_dir=settings.cells_dir, cell_id=cell_id))
 
 
 @router.post("", status_code=201, dependencies=[Authorized], openapi_extra=JSON_BODY)
 async def upload_cell(request: Request, settings: SettingsDep) -> CellPublic:
-    """Validate and keep a cell.json (read raw, so errors name its line and column)."""
+    """Validate and keep a cell.json (read raw, so errors name its line and column); a
+    `devices` object makes it a real cell, whose campaigns drive the tracker and controller there."""
     text = (await request.body()).decode("utf-8", errors="replace")
     cell_id, cell = await run_in_threadpool(ops.save_cell, cells_dir=settings.cells_dir,
                                             text=text)
-    return CellPublic(id=cell_id, cell=cell_to_json(cell))
+    return _public(cell_id, cell)
+
+
+def _public(cell_id: str, cell: Cell) -> CellPublic:
+    return CellPublic(id=cell_id, simulated=cell.simulated, cell=cell_to_json(cell))

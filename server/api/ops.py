@@ -9,9 +9,8 @@ import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
-from drivers.clock import VirtualClock
 from server import store
-from server.acquire import AcquireOptions, SimulatedCell, _plan
+from server.acquire import AcquireOptions, base_guess, check_options, plan_and_store
 from server.formats.cell_json import Cell, cell_to_json, default_cell, parse_cell
 from server.formats.errors import InputError
 from server.formats.files import atomic_write_text
@@ -53,33 +52,18 @@ def list_cells(*, cells_dir: Path) -> list[str]:
 
 # --- campaigns ---------------------------------------------------------------------------------
 
-def plan_simulated_campaign(db: store.Database, *, cell: Cell, opts: AcquireOptions) -> int:
-    """Plan a simulated campaign exactly as `robocal acquire` would, and store it `planned`."""
+def plan_campaign(db: store.Database, *, cell: Cell, opts: AcquireOptions) -> int:
+    """Plan a campaign on the cell (simulated or real) exactly as `robocal acquire` would, and
+    store it `planned`; ValueError for options the cell cannot have."""
+    check_options(cell, opts)
     name = opts.name or f"campaign-seed{opts.seed}"
     # acquire() resumes the latest unfinished campaign of a name, so names must not collide.
     clash = [c.id for c in store.list_campaigns(db) if c.name == name and c.status in UNFINISHED]
     if clash:
         raise store.Conflict(f"campaign {clash[-1]} is already named {name!r} and unfinished")
     opts = AcquireOptions(**{**asdict(opts), "name": name})
-    base = cell.base
-    if base is None:
-        # The simulated cell's survey guess depends on the seed only; the devices are not used.
-        sim = SimulatedCell(cell, opts.seed, VirtualClock(), opts.beam_break_rate)
-        try:
-            base = sim.rough_base(opts.seed)
-        finally:
-            sim.close()
-    poses_deg, plan = _plan(cell, base, opts)
-    return store.create_campaign(db, name=name, cell_json=cell_to_json(cell),
-                                 poses_deg=poses_deg.tolist(), simulated=True,
-                                 settings={"options": asdict(opts), "plan": _plain(plan),
-                                           "base_guess": base.tolist()})
-
-
-def _plain(obj):
-    """JSON-safe copy of a plan summary (numpy scalars and arrays to Python)."""
-    return json.loads(json.dumps(obj, default=lambda v: v.tolist() if hasattr(v, "tolist")
-                                 else str(v)))
+    cid, _ = plan_and_store(db, name=name, cell=cell, opts=opts, base=base_guess(cell, opts.seed))
+    return cid
 
 
 # --- readings and files ------------------------------------------------------------------------

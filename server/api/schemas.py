@@ -10,11 +10,13 @@ from pydantic import BaseModel, Field
 
 class CellPublic(BaseModel):
     id: str
+    simulated: bool = Field(description="false when the cell has real `devices`")
     cell: dict
 
 
 class CampaignCreate(BaseModel):
-    """A simulated campaign to plan (as `robocal acquire` plans it)."""
+    """A campaign to plan (as `robocal acquire` plans it), on the cell's real devices if it has
+    `devices`, else on the simulated ones."""
 
     name: str | None = Field(None, min_length=1, max_length=200)
     cell_id: str = "default"
@@ -24,7 +26,7 @@ class CampaignCreate(BaseModel):
     pause_s: float = Field(10.0, ge=0.0, le=600.0)
     order: bool = False
     choose_from: int = Field(0, ge=0, le=100_000)
-    beam_break_rate: float = Field(0.0, ge=0.0, lt=1.0)
+    beam_break_rate: float = Field(0.0, ge=0.0, lt=1.0, description="simulated cell only")
     samples: int = Field(1000, ge=1, le=100_000)
 
 

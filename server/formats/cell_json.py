@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 import re
 from dataclasses import dataclass, field
 
@@ -20,6 +21,29 @@ TRACKER_DEFAULTS = {"mpe_um": 10.0, "mpe_um_per_m": 2.5}
 # and parameter names (A_x), so no spaces or punctuation.
 TARGET_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,15}")
 ORTHONORMAL_TOL = 1e-6
+DEVICE_KEYS = ("tracker", "controller")
+TRACKER_ADDRESS_KEYS = ("host", "port", "timeout_s")
+CONTROLLER_ADDRESS_KEYS = ("url", "baudrate", "timeout_s")
+# pyserial URL schemes that reach a controller over the network; other strings are serial ports
+NETWORK_SCHEMES = ("socket", "rfc2217")
+HOST_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9.-]{0,252}")
+SERIAL_PORT = re.compile(r"/dev/[A-Za-z0-9._/-]+|COM[0-9]{1,3}|\\\\\.\\COM[0-9]{1,3}")
+DEFAULT_TIMEOUT_S, DEFAULT_BAUDRATE = 5.0, 9600
+
+
+@dataclass(frozen=True)
+class Devices:
+    """Where a real cell's devices answer: the tracker over TCP, the controller over pyserial."""
+
+    tracker_host: str
+    tracker_port: int
+    controller_url: str  # socket://host:port, rfc2217://host:port or a serial port (/dev/ttyUSB0)
+    tracker_timeout_s: float = DEFAULT_TIMEOUT_S
+    controller_timeout_s: float = DEFAULT_TIMEOUT_S
+    baudrate: int = DEFAULT_BAUDRATE  # serial ports only
+
+    def tracker_address(self) -> str:
+        return f"{self.tracker_host}:{self.tracker_port}"
 
 
 @dataclass
@@ -31,6 +55,11 @@ class Cell:
     base: np.ndarray | None = None  # 4x4 base-in-tracker guess, mm
     tracker: dict = field(default_factory=lambda: dict(TRACKER_DEFAULTS))
     payload_kg: float | None = None
+    devices: Devices | None = None  # None: the simulated cell
+
+    @property
+    def simulated(self) -> bool:
+        return self.devices is None
 
 
 def default_cell() -> Cell:
@@ -55,7 +84,14 @@ def parse_cell(text: str, path="<cell>") -> Cell:
     payload = root.get("payload_kg")
     if payload is not None:
         payload = doc.number(payload, ("payload_kg",), minimum=0.0)
-    return Cell(robot, targets, base, tracker, payload)
+    devices = None if root.get("devices") is None else _devices(doc, root["devices"])
+    if devices is not None and base is None:
+        # Planning and the tracker's first aims need the base: a search covers 10 to 50 mm
+        # around each predicted SMR, not the metres between the tracker and an unknown base.
+        raise doc.error(("devices",), "a cell with real devices needs a `base` guess (4x4, the "
+                                      "robot base in the tracker frame, to within about 10 mm)",
+                        key=True)
+    return Cell(robot, targets, base, tracker, payload, devices)
 
 
 def _robot(doc: JsonDoc, value) -> Robot:
@@ -109,6 +145,76 @@ def _tracker(doc: JsonDoc, value) -> dict:
     for key in TRACKER_DEFAULTS:
         tracker[key] = doc.number(tracker[key], ("tracker", key), minimum=0.0)
     return tracker
+
+
+def _devices(doc: JsonDoc, value) -> Devices:
+    doc.object(value, ("devices",), DEVICE_KEYS)
+    at = ("devices", "tracker")
+    tracker = doc.object(doc.require(value, "tracker", ("devices",)), at, TRACKER_ADDRESS_KEYS)
+    host = doc.string(doc.require(tracker, "host", at), (*at, "host")).strip()
+    if not _is_host(host):
+        raise doc.error((*at, "host"), f"{host!r} is not a host name or IP address")
+    host = host[1:-1] if host.startswith("[") else host  # a socket wants IPv6 bare
+    port = _integer(doc, doc.require(tracker, "port", at), (*at, "port"), 1, 65535)
+    t_timeout = _timeout(doc, tracker, at)
+    at = ("devices", "controller")
+    controller = doc.object(doc.require(value, "controller", ("devices",)), at,
+                            CONTROLLER_ADDRESS_KEYS)
+    url = _controller_url(doc, doc.require(controller, "url", at), (*at, "url"))
+    baudrate = DEFAULT_BAUDRATE
+    if "baudrate" in controller:
+        baudrate = _integer(doc, controller["baudrate"], (*at, "baudrate"), 50, 4_000_000)
+    return Devices(host, port, url, t_timeout, _timeout(doc, controller, at), baudrate)
+
+
+def _controller_url(doc: JsonDoc, value, at: tuple) -> str:
+    url = doc.string(value, at).strip()
+    scheme, sep, rest = url.partition("://")
+    if not sep:
+        if not SERIAL_PORT.fullmatch(url):
+            raise doc.error(at, f"{url!r} is neither socket://host:port nor a serial port such "
+                                "as /dev/ttyUSB0 or COM3")
+        return url
+    if scheme not in NETWORK_SCHEMES:
+        raise doc.error(at, f"scheme {scheme!r} is not one of "
+                            f"{', '.join(s + '://' for s in NETWORK_SCHEMES)} (or a serial port)")
+    host, colon, port = rest.split("?", 1)[0].rpartition(":")
+    if not colon or not _is_host(host) or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise doc.error(at, f"{url!r}: expected {scheme}://host:port with a port in 1..65535")
+    return url
+
+
+def _is_host(host: str) -> bool:
+    """A host name or an IP address (IPv6 in brackets or bare)."""
+    try:
+        ipaddress.ip_address(host[1:-1] if host.startswith("[") and host.endswith("]") else host)
+        return True
+    except ValueError:
+        return bool(HOST_NAME.fullmatch(host))
+
+
+def _integer(doc: JsonDoc, value, at: tuple, lo: int, hi: int) -> int:
+    x = doc.number(value, at)
+    if x != int(x) or not lo <= x <= hi:
+        raise doc.error(at, f"{value} must be an integer in {lo}..{hi}")
+    return int(x)
+
+
+def _timeout(doc: JsonDoc, obj: dict, at: tuple) -> float:
+    if "timeout_s" not in obj:
+        return DEFAULT_TIMEOUT_S
+    t = doc.number(obj["timeout_s"], (*at, "timeout_s"))
+    if not 0.0 < t <= 600.0:
+        raise doc.error((*at, "timeout_s"), f"{t:g} s must be in (0, 600]")
+    return t
+
+
+def devices_to_json(d: Devices) -> dict:
+    """The `devices` object of a cell.json (every value spelled out)."""
+    return {"tracker": {"host": d.tracker_host, "port": d.tracker_port,
+                        "timeout_s": d.tracker_timeout_s},
+            "controller": {"url": d.controller_url, "baudrate": d.baudrate,
+                           "timeout_s": d.controller_timeout_s}}
 
 
 def robot_from_json(obj, doc: JsonDoc | None = None, at: tuple = ()) -> Robot:
@@ -175,6 +281,8 @@ def cell_to_json(cell: Cell) -> dict:
                       for k, v in cell.tracker.items()}
     if cell.payload_kg is not None:
         out["payload_kg"] = float(cell.payload_kg)
+    if cell.devices is not None:
+        out["devices"] = devices_to_json(cell.devices)
     return out
 
 
