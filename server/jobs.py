@@ -1,5 +1,5 @@
-"""Work the API hands off: calibration and diagnosis jobs in a worker pool, acquisitions on one
-worker thread, and the event bus both report to.
+"""Work the API hands off: calibration and diagnosis jobs in a pool of worker processes,
+acquisitions on one worker thread, and the event bus both report to.
 
 Jobs live in the store (a restart marks the ones it cut off as failed); acquisition runs are in
 memory, and the campaigns keep their state in the store.
@@ -10,10 +10,12 @@ from __future__ import annotations
 import asyncio
 import datetime as dt
 import itertools
-import json
+import signal
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 from solver.calibrate import parse_method
@@ -21,7 +23,8 @@ from solver.calibrate import parse_method
 from . import store
 from .acquire import AcquireOptions, acquire
 from .formats.cell_json import parse_cell
-from .formats.model_json import model_to_json, write_json_atomic
+from .formats.model_json import model_to_json
+from .worker import JobSetup, WorkerPool, campaign_data, job_event, one_line
 from .workflow import model_file, run_method
 
 JOB_STATES = ("queued", "running", "done", "failed")
@@ -106,40 +109,45 @@ def check_method(db: store.Database, *, campaign_id: int, method: str) -> None:
     check_job(db, kind="calibration", campaign_id=campaign_id, method=method)
 
 
-def _campaign_data(db: store.Database, campaign_id: int):
-    info = store.get_campaign(db, campaign_id=campaign_id)
-    cell = parse_cell(info.cell_json, f"<campaign {campaign_id} cell>")
-    meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
-    if meas.n_poses == 0:
-        raise store.StoreError(f"campaign {campaign_id} has no readings")
-    return cell, meas
-
-
 def calibrate_campaign(db: store.Database, *, campaign_id: int, method: str) -> dict:
     """Fit `method` to a stored campaign; the model.json object."""
-    cell, meas = _campaign_data(db, campaign_id)
+    cell, meas = campaign_data(db, campaign_id)
     model = model_to_json(model_file(run_method(cell, meas, method), cell, meas))
     model["data"]["campaign"] = campaign_id
     return model
 
 
 class Jobs:
-    """Calibration and diagnosis jobs, kept in the store: queued -> running -> done | failed."""
+    """Calibration and diagnosis jobs, kept in the store: queued -> running -> done | failed.
+
+    They run in a pool of worker processes (server.worker), so a job's numpy and Python never
+    hold the service's GIL; each worker writes its job's steps to the store and reports them,
+    and a thread here forwards the reports to the event bus. A worker that dies fails its job.
+    """
+
+    pool_kind = WorkerPool.kind
 
     def __init__(self, db: store.Database, models_dir: Path, workers: int = 2, *,
                  recordings_dir: Path | None = None, reports_dir: Path | None = None,
                  events: Events | None = None, viewer_url: str | None = None):
-        self.db, self.models_dir = db, Path(models_dir)
-        self.viewer_url = viewer_url
+        self.db, self.models_dir, self.workers = db, Path(models_dir), workers
         self.recordings_dir = Path(recordings_dir or self.models_dir.parent / "recordings")
         self.reports_dir = Path(reports_dir or self.models_dir.parent / "reports")
         self.events = events or Events()
+        self._setup = JobSetup(db.engine.url.render_as_string(hide_password=False),
+                               self.models_dir, self.recordings_dir, self.reports_dir, viewer_url)
+        self._lock = threading.Lock()
+        self._pool: WorkerPool | None = None  # made at the first job, again after a crash
+        # Handing a job to the pool may wait seconds for the fork server to start (first job):
+        # not on the request's thread. One thread keeps the jobs in order.
+        self._sender = ThreadPoolExecutor(1, thread_name_prefix="robocal-job-send")
+        self._closing = False
+        self._in_flight: set[int] = set()
+        self._pids: dict[int, int] = {}  # job id -> the worker process running it
+        self._resent: set[int] = set()  # jobs sent again after a crash they never started in
         # Nothing runs a job this process did not queue: fail those a stop cut off.
         for job_id in store.fail_unfinished_jobs(db, reason=RESTART_REASON):
             self._publish(store.get_job(db, job_id=job_id))
-        # Threads: numpy and the QP solvers release the GIL in their heavy loops, so the event
-        # loop stays responsive; a process pool is the next step if profiles say otherwise.
-        self._pool = ThreadPoolExecutor(workers, thread_name_prefix="robocal-job")
 
     def submit(self, *, campaign_id: int, method: str = "minimax",
                kind: str = "calibration") -> Job:
@@ -149,7 +157,7 @@ class Jobs:
         check_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
         job = store.create_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
         self._publish(job)
-        self._pool.submit(self._run, job.id)
+        self._send(job.id)
         return job
 
     def get(self, job_id: int) -> Job:
@@ -157,6 +165,11 @@ class Jobs:
 
     def list(self) -> list[Job]:
         return store.list_jobs(self.db)
+
+    def worker_pid(self, job_id: int) -> int | None:
+        """The pid of the worker process running this job (None unless it runs)."""
+        with self._lock:
+            return self._pids.get(job_id)
 
     def result_path(self, job_id: int, what: str) -> Path:
         """A file a done job wrote (model, recording, report); NotFound / Conflict otherwise."""
@@ -184,65 +197,111 @@ class Jobs:
         return figures[name]
 
     def shutdown(self) -> None:
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        """End the workers, then fail the jobs they had (a job cannot outlive the service)."""
+        with self._lock:
+            self._closing = True
+            pool, self._pool = self._pool, None
+            cut_off = sorted(self._in_flight)
+        self._sender.shutdown(wait=False, cancel_futures=True)
+        if pool is not None:
+            pool.close()
+        for job_id in cut_off:
+            self._fail(job_id, RESTART_REASON)
 
     def _publish(self, job: Job) -> None:
-        self.events.publish({"type": "job", "job_id": job.id, "kind": job.kind,
-                             "campaign_id": job.campaign_id, "state": job.state,
-                             "progress": job.progress, "reason": job.reason})
+        self.events.publish(job_event(job))
 
-    def _update(self, job_id: int, **changes) -> Job:
-        job = store.update_job(self.db, job_id=job_id, **changes)
-        self._publish(job)
-        return job
+    def _send(self, job_id: int) -> None:
+        with self._lock:
+            if self._closing:
+                return  # left queued: the next start fails it
+            self._in_flight.add(job_id)
+            self._sender.submit(self._dispatch, job_id)
 
-    def _run(self, job_id: int) -> None:
-        job = self._update(job_id, state="running")
+    def _dispatch(self, job_id: int) -> None:
         try:
-            work = self._calibrate if job.kind == "calibration" else self._diagnose
-            results = work(job)
-        except Exception as e:  # the reason is the job's result, not a server error
-            self._update(job_id, state="failed", reason=f"{type(e).__name__}: {e}")
+            pool = self._current_pool()
+            try:
+                future = pool.submit(self._setup, job_id)
+            except BrokenProcessPool:  # a worker died while idle: that pool refuses work
+                self._retire(pool)
+                pool = self._current_pool()
+                future = pool.submit(self._setup, job_id)
+        except Exception as e:  # noqa: BLE001 - the job says why it cannot run
+            if not self._closing:  # else shutdown() fails it
+                with self._lock:
+                    self._in_flight.discard(job_id)
+                self._fail(job_id, f"no worker process could take it: {one_line(e)}")
             return
-        self._update(job_id, state="done", results=results)
+        future.add_done_callback(partial(self._finished, job_id, pool))
 
-    def _calibrate(self, job: Job) -> dict:
-        from .recording import record_calibration  # rerun is heavy; load it with the first job
+    def _current_pool(self) -> WorkerPool:
+        with self._lock:
+            if self._closing:
+                raise RuntimeError("the job pool is shut down")
+            if self._pool is None:
+                self._pool = WorkerPool(self.workers, self._reported)
+            return self._pool
 
-        cell, meas = _campaign_data(self.db, job.campaign_id)
-        cal = run_method(cell, meas, job.method)
-        model = model_to_json(model_file(cal, cell, meas))
-        model["data"]["campaign"] = job.campaign_id
-        path = self.models_dir / f"job-{job.id}.model.json"
-        write_json_atomic(path, model)
-        self._update(job.id, progress=0.5, results={"model": str(path)})
-        rrd = record_calibration(self.recordings_dir / f"job-{job.id}.rrd", cell=cell, meas=meas,
-                                 calibration=cal, viewer_url=self.viewer_url)
-        return {"model": str(path), "recording": str(rrd)}
+    def _reported(self, job_id: int, pid: int, event: dict) -> None:
+        with self._lock:
+            if event["state"] == "running":
+                self._pids[job_id] = pid
+            else:
+                self._pids.pop(job_id, None)
+        self.events.publish(event)
 
-    def _diagnose(self, job: Job) -> dict:
-        from .formats.model_json import write_model
-        from .plots import write_figures
-        from .workflow import diagnose
+    def _finished(self, job_id: int, pool: WorkerPool, future: Future) -> None:
+        # In the pool's thread: the worker wrote done or failed itself unless the call broke.
+        error = None if future.cancelled() else future.exception()
+        with self._lock:
+            self._in_flight.discard(job_id)
+            pid = self._pids.pop(job_id, None)
+            if self._closing or error is None:
+                return
+        if not isinstance(error, BrokenProcessPool):
+            self._fail(job_id, f"the worker could not run the job: {one_line(error)}")
+            return
+        self._retire(pool)
+        code, state = pool.died.get(pid), self.get(job_id).state
+        if state == "queued" and job_id not in self._resent:
+            self._resent.add(job_id)  # it never started: another job's worker died
+            self._send(job_id)
+        elif state == "queued":
+            self._fail(job_id, "worker processes died before it could start; see the "
+                               "service's log")
+        elif pid is None:
+            self._fail(job_id, "a worker process died while it ran")
+        elif code is None:
+            self._fail(job_id, "stopped: another job's worker process died, which ends the "
+                               "whole pool")
+        else:
+            self._fail(job_id, f"its worker process died ({_exit_reason(code)})")
 
-        cell, meas = _campaign_data(self.db, job.campaign_id)
-        d, model = diagnose(cell, meas)
-        self._update(job.id, progress=0.8)
-        report_path = self.reports_dir / f"job-{job.id}" / "report.json"
-        figures = write_figures(d.figures, report_path)
-        report = json.loads(json.dumps(d.report, default=_plain_value))
-        report["figures"] = [p.name for p in figures]
-        write_json_atomic(report_path, report)
-        model.meta["data"] = {"campaign": job.campaign_id, "poses": meas.n_poses,
-                              "readings": meas.n_readings}
-        path = self.models_dir / f"job-{job.id}.model.json"
-        write_model(path, model)
-        return {"model": str(path), "report": str(report_path),
-                "figures": [str(p) for p in figures]}
+    def _retire(self, pool: WorkerPool) -> None:
+        # A broken pool stays broken: the next job gets a new one (and a new report queue).
+        with self._lock:
+            if self._pool is pool:
+                self._pool = None
+        pool.close()
+
+    def _fail(self, job_id: int, reason: str) -> None:
+        try:
+            job = self.get(job_id)
+            if job.state not in ("done", "failed"):
+                self._publish(store.update_job(self.db, job_id=job_id, state="failed",
+                                               reason=reason))
+        except store.StoreError:
+            pass  # it went done or failed meanwhile, or the store is closing: nothing to mark
 
 
-def _plain_value(v):
-    return v.tolist() if hasattr(v, "tolist") else str(v)
+def _exit_reason(code: int) -> str:
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit code {code}"
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,8 @@ class Settings(BaseSettings):
     data_dir: Path = Path("robocal-data")
     # Browser origins allowed to call the API; none by default (the UI is served same-origin).
     cors_origins: list[str] = []
-    # Calibration jobs run at once; each is CPU-bound numpy.
+    # Worker processes for calibration and diagnosis jobs, each running one job at a time
+    # (CPU-bound numpy); jobs beyond them wait queued.
     job_workers: int = Field(2, ge=1, le=64)
     # A running rerun viewer to stream calibration recordings to live, e.g.
     # rerun+http://127.0.0.1:9876/proxy; the .rrd files are written either way.
