@@ -186,8 +186,8 @@ def cmd_acquire(args) -> None:
     console.print(f"campaign {summary['campaign']} {summary['state']}: {summary['measured_poses']} poses "
                   f"measured now, {summary['readings']} readings, {summary['missing']} missing, "
                   f"{summary['beam_breaks']} beam breaks"
-                  + (f"; simulated campaign time {summary['campaign_s'] / 60:.1f} min"
-                     if summary["campaign_s"] is not None else "")
+                  + (f"; {'simulated ' if summary.get('simulated', True) else ''}campaign time "
+                     f"{summary['campaign_s'] / 60:.1f} min" if summary["campaign_s"] is not None else "")
                   + (f"; locked without search after pose 10: {100 * locked:.1f}%" if locked is not None else ""))
     console.print(f"stored in {args.db}; calibrate with: robocal calibrate {args.db} "
                   f"--campaign {summary['campaign']}")
