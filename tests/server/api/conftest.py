@@ -47,8 +47,11 @@ def serve(settings: Settings):
     """Run a server with these settings until the generator is closed; yields a Live."""
     # Made before start, as a first start would (the server then finds it and prints nothing).
     token = ensure_token(settings.token_file)
+    # An open event stream would hold a graceful stop until its next keep-alive: cut it short
+    # (signals, which end the streams at once, reach only a server on the main thread).
     server = uvicorn.Server(uvicorn.Config(create_app(settings), host=settings.host,
-                                           port=settings.port, log_level="warning"))
+                                           port=settings.port, log_level="warning",
+                                           timeout_graceful_shutdown=1))
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     deadline = time.monotonic() + 30
