@@ -21,12 +21,13 @@ function say(text, ok = false) {
 }
 
 /** Call the API; the JSON body, or throw with the problem-detail message. */
-async function api(method, path, body, raw = false) {
+async function api(method, path, body, raw = false, contentType = "application/json") {
   const headers = { Accept: "application/json" };
   const token = sessionStorage.getItem(TOKEN_KEY);
   if (token) headers.Authorization = `Bearer ${token}`;
-  if (body !== undefined) headers["Content-Type"] = "application/json";
-  // raw: the body is already JSON text, sent as is (a cell.json keeps its lines for the errors).
+  if (body !== undefined) headers["Content-Type"] = contentType;
+  // raw: the body is already text, sent as is (a cell.json or meas.csv keeps its lines for the
+  // errors).
   const r = await fetch(`/api${path}`, {
     method, headers, body: body === undefined ? undefined : raw ? body : JSON.stringify(body),
   });
@@ -81,6 +82,30 @@ $("cell-upload-btn").addEventListener("click", async () => {
   } catch (e) { say(e.message); }  // a 422 names the line and column of the problem
 });
 
+/** A campaign becomes the page's current one: progress, readings, calibration enabled if done. */
+function useCampaign(c) {
+  state.campaign = c.id;
+  showCampaign(c);
+  $("results").hidden = true;
+  $("readings").innerHTML = '<p class="muted">none yet</p>';
+}
+
+// A meas.csv measured elsewhere (or by `robocal simulate`) becomes a done campaign on the chosen
+// cell; a malformed file is refused with its line numbers and nothing is stored.
+$("m-import-btn").addEventListener("click", async () => {
+  const file = $("m-file").files[0];
+  if (!file) { say("choose a meas.csv file first"); return; }
+  const query = new URLSearchParams({ filename: file.name, cell_id: $("c-cell").value || "default" });
+  if ($("m-name").value.trim()) query.set("name", $("m-name").value.trim());
+  try {
+    const c = await api("POST", `/measurements/import?${query}`, await file.text(), true, "text/csv");
+    useCampaign(c);
+    $("start").disabled = true;
+    await pollReadings(c.id);
+    say(`${file.name} imported as campaign ${c.id} (${c.poses_done} poses)`, true);
+  } catch (e) { say(e.message); }
+});
+
 $("campaign-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
   const body = {
@@ -90,12 +115,9 @@ $("campaign-form").addEventListener("submit", async (ev) => {
   if ($("c-name").value.trim()) body.name = $("c-name").value.trim();
   try {
     const c = await api("POST", "/campaigns", body);
-    state.campaign = c.id;
-    showCampaign(c);
+    useCampaign(c);
     $("start").disabled = false;
     $("calibrate").disabled = true;
-    $("results").hidden = true;
-    $("readings").innerHTML = '<p class="muted">none yet</p>';
     say(`campaign ${c.id} planned on cell ${body.cell_id}`, true);
   } catch (e) { say(e.message); }
 });
@@ -213,6 +235,39 @@ async function pollDiagnosis() {
   state.diagTimer = setTimeout(pollDiagnosis, POLL_MS);
 }
 
+const UNITS = [["_ppm_per_c", "ppm/°C"], ["_ppm_per_hour", "ppm/h"], ["_deg", "deg"],
+               ["_ppm", "ppm"], ["_mm", "mm"], ["_s", "s"]];
+
+/** An effect's parameters as text, units taken from the key suffixes of the report. */
+function formatParameters(params) {
+  return Object.entries(params || {}).map(([key, v]) => {
+    const [suffix, unit] = UNITS.find(([sfx]) => key.endsWith(sfx)) || ["", ""];
+    const label = (suffix ? key.slice(0, -suffix.length) : key).replaceAll("_", " ");
+    const value = Array.isArray(v) ? `(${v.map(fmt).join(", ")})`
+      : typeof v === "number" ? (Number.isInteger(v) ? String(v) : fmt(v)) : String(v);
+    return `${label} ${value}${unit ? ` ${unit}` : ""}`;
+  }).join("; ");
+}
+
+/** The name a person reads for an effect of the report: type, joint, harmonic, time. */
+function effectLabel(e) {
+  return e.name + (e.joint !== undefined && e.joint !== null ? `, joint ${e.joint}` : "")
+    + (e.harmonic ? `, harmonic ${e.harmonic}` : "")
+    + (e.at_s !== undefined && e.at_s !== null ? ` at ${e.at_s.toFixed(0)} s` : "");
+}
+
+/** Whether this figure file shows this effect: the report's `figure` key where it has one, else
+ * the name the server gives the file, `<report>_<step>_<effect label>.png`, the label as in the
+ * final model's name (joint_periodic(4,k=2) becomes joint_periodic_4_k2). */
+function figureOf(e, file) {
+  if (e.figure) return e.figure === file;
+  const stem = e.name === "base_shift" && e.at_s !== undefined && e.at_s !== null
+    ? `base_shift_t${e.at_s.toFixed(0)}s`
+    : e.name + (e.joint !== undefined && e.joint !== null ? `_${e.joint}` : "")
+      + (e.harmonic ? `_k${e.harmonic}` : "");
+  return file.endsWith(`_${stem}.png`);
+}
+
 async function showDiagnosis(d) {
   const [report, figures] = await Promise.all([api("GET", d.report_url.slice(4)),
                                                api("GET", d.figures_url.slice(4))]);
@@ -227,25 +282,33 @@ async function showDiagnosis(d) {
     const table = document.createElement("table");
     table.id = "effects-table";
     const head = table.createTHead().insertRow();
-    ["effect", "joint", "evidence", "held-out RMS before / mm", "after / mm"]
+    ["effect", "joint", "evidence", "parameters", "held-out RMS before / mm", "after / mm"]
       .forEach((h) => { head.appendChild(document.createElement("th")).textContent = h; });
     const body = table.createTBody();
     report.effects.forEach((e) => {
       const tr = body.insertRow();
       const name = e.name + (e.harmonic ? ` (harmonic ${e.harmonic})` : "")
-        + (e.at_s !== undefined ? ` at ${e.at_s.toFixed(0)} s` : "");
-      [name, e.joint ?? "-", e.evidence, fmt(e.holdout_rmse_before_mm), fmt(e.holdout_rmse_after_mm)]
+        + (e.at_s !== undefined && e.at_s !== null ? ` at ${e.at_s.toFixed(0)} s` : "");
+      [name, e.joint ?? "-", e.evidence, formatParameters(e.parameters),
+       fmt(e.holdout_rmse_before_mm), fmt(e.holdout_rmse_after_mm)]
         .forEach((v) => { tr.insertCell().textContent = v; });
       tr.cells[2].className = "evidence";
+      tr.cells[3].className = "parameters";
     });
     $("d-effects").replaceChildren(table);
   }
+  // One figure per effect: its caption names the effect it shows.
   $("d-figures").replaceChildren(...figures.map((fig) => {
+    let i = report.effects.findIndex((e) => figureOf(e, fig.name));
+    if (i < 0 && figures.length === 1 && report.effects.length === 1) i = 0;
+    const e = report.effects[i];
     const el = document.createElement("figure");
     const img = el.appendChild(document.createElement("img"));
     img.src = fig.url;
-    img.alt = fig.name;
-    el.appendChild(document.createElement("figcaption")).textContent = fig.name;
+    img.alt = e ? `residuals against ${effectLabel(e)}, before and after` : fig.name;
+    el.appendChild(document.createElement("figcaption")).textContent = e
+      ? `Effect ${i + 1}: ${effectLabel(e)}. Residuals before and after, with what the effect `
+        + `predicts (${fig.name})` : fig.name;
     return el;
   }));
   const reportLink = Object.assign(document.createElement("a"),
