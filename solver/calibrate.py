@@ -93,7 +93,7 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
     else:
         fit = SumOfSquares(prob, x0, st.free, rows=rows)
         first = fit.normal()  # checks the data and starts the fit
-        cond = ident.check_data(first.A, st.free, lay.names(), 3 * int(fit.mask.sum()),
+        cond = ident.check_data(first.A, st.free, lay.names, 3 * int(fit.mask.sum()),
                                 prob.q.shape[0])
         x, res = fit.fit(first)
         if name == "ls-single":

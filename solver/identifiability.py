@@ -160,6 +160,7 @@ def check_data(A: np.ndarray, free: np.ndarray, names, n_rows: int, n_poses: int
     singular values of the unit-column Jacobian, resolved down to ~1e-7 of the largest singular value.
     """
     idx = np.flatnonzero(free)
+    names = _Names(names)
     if n_rows < len(idx):
         raise NotIdentifiable(
             f"{n_poses} poses give {n_rows} equations for {len(idx)} parameters: "
@@ -168,10 +169,11 @@ def check_data(A: np.ndarray, free: np.ndarray, names, n_rows: int, n_poses: int
     dead = [names[i] for i, n in zip(idx, norms) if n == 0]
     if dead:
         raise NotIdentifiable("the data does not move with: " + ", ".join(dead))
-    lam, V = np.linalg.eigh(A / np.outer(norms, norms))
-    s = np.sqrt(np.clip(lam[::-1], 0.0, None))
+    As = A / np.outer(norms, norms)
+    s = np.sqrt(np.clip(np.linalg.eigvalsh(As)[::-1], 0.0, None))
     cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
     if cond > MAX_CONDITION:
+        V = np.linalg.eigh(As)[1]
         weak = V[:, ::-1].T[s < s[0] / MAX_CONDITION]
         score = np.max(np.abs(weak), axis=0)
         worst = [names[idx[i]] for i in np.argsort(-score)[:4] if score[i] > 0.2]
@@ -179,6 +181,18 @@ def check_data(A: np.ndarray, free: np.ndarray, names, n_rows: int, n_poses: int
             f"the poses cannot separate {', '.join(worst)} (condition number {cond:.3g}): "
             "measure more poses, spread over the joint ranges")
     return cond
+
+
+class _Names:
+    """Parameter names, or a callable giving them, looked up only for a message."""
+
+    def __init__(self, names):
+        self.names = names
+
+    def __getitem__(self, i):
+        if callable(self.names):
+            self.names = self.names()
+        return self.names[i]
 
 
 def gram(J: np.ndarray, free: np.ndarray) -> np.ndarray:

@@ -50,7 +50,7 @@ class Problem:
 
 
 # The closed-form start needs no more poses than this (spread evenly over the campaign).
-REGISTER_POSES = 256
+REGISTER_POSES = 32
 
 
 def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None, refine=True):
@@ -64,7 +64,7 @@ def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None,
     targets = np.asarray(targets, dtype=float)
     if base_guess is None:
         lay0 = Layout(robot, np.eye(4), tuple(names))
-        some = np.unique(np.linspace(0, len(q) - 1, min(len(q), REGISTER_POSES)).astype(int))
+        some = slice(None, None, -(-len(q) // REGISTER_POSES))  # evenly spread
         nominal = predict(lay0, lay0.initial(targets), np.asarray(q)[some])
         ok = np.all(np.isfinite(meas[some]), axis=-1)
         base_guess = kabsch(nominal[ok], meas[some][ok])
@@ -79,6 +79,10 @@ def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None,
     return prob.rebased(x)
 
 
+# Moves under which the point Jacobian of a metre-sized arm changes by about 1e-4 of itself.
+NEAR_RAD, NEAR_MM = 1e-4, 0.1
+
+
 class SumOfSquares:
     """ls-sum on the selected targets (eq. 6 summed) over the free entries of x."""
 
@@ -90,6 +94,13 @@ class SumOfSquares:
         self.idx = np.flatnonzero(free)
         self.x0 = np.array(x0, dtype=float)
         self.points = PointNormal(prob.layout, prob.q, self.mask, prob.meas, self.idx)
+        kinds = {op.param: op.kind for op in prob.layout.ops()}
+        self.angle = np.array([kinds.get(int(i)) == "r" for i in self.idx], dtype=bool)
+
+    def near(self, za, zb) -> bool:
+        """The Jacobian at za stands for the one at zb: it changes by ~1e-4 of itself in between."""
+        dz = np.abs(np.asarray(zb) - np.asarray(za))
+        return dz[self.angle].max(initial=0.0) <= NEAR_RAD and dz[~self.angle].max(initial=0.0) <= NEAR_MM
 
     def full(self, z) -> np.ndarray:
         x = self.x0.copy()
@@ -109,7 +120,7 @@ class SumOfSquares:
         """Levenberg-Marquardt from the start; returns (x, LMResult)."""
         res = levenberg_marquardt(None, self.x0[self.idx], normal=self.normal, first=first,
                                   residual=lambda z: self.points.residual(self.full(z)),
-                                  max_iter=max_iter)
+                                  max_iter=max_iter, near=self.near)
         return self.full(res.x), res
 
 

@@ -9,7 +9,7 @@ of one such motion, so every Jacobian column is either `axis x (p - origin)` (ro
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -29,8 +29,9 @@ class Op:
     joint: int = -1  # joint whose reading is added to the amount (-1: none)
 
 
-def joint_ops(robot: Robot, first_param: int = 0) -> list[Op]:
-    """The elementary motions of the arm, from base to flange."""
+@lru_cache(maxsize=64)
+def joint_ops(robot: Robot, first_param: int = 0) -> tuple[Op, ...]:
+    """The elementary motions of the arm, from base to flange (cached: layouts are made often)."""
     ops, k = [], first_param
     for i, par in enumerate(robot.parallel):
         theta, d, a, alpha = k, k + 1, k + 2, k + 3
@@ -46,7 +47,7 @@ def joint_ops(robot: Robot, first_param: int = 0) -> list[Op]:
                 chain.append(Op("r", 1, beta))
             chain += [Op("t", 0, a), Op("r", 2, theta, i), Op("t", 2, d)]
         ops += chain
-    return ops
+    return tuple(ops)
 
 
 @dataclass(frozen=True)
@@ -86,7 +87,7 @@ class Layout:
         b = self.n_geo
         base = [Op("t", 0, b), Op("t", 1, b + 1), Op("t", 2, b + 2),
                 Op("r", 2, b + 3), Op("r", 1, b + 4), Op("r", 0, b + 5)]
-        return tuple(base + joint_ops(self.robot))
+        return tuple(base) + joint_ops(self.robot)
 
     def ops(self) -> tuple[Op, ...]:
         return self._ops

@@ -7,8 +7,10 @@ beats a QR of J per iteration, and is accurate here because the columns are scal
 Calibration problems are nearly linear (errors of a millimetre on a metre-sized arm), so after a
 step whose linear model predicted the decrease well, the same Jacobian serves once more: the next
 step costs one residual evaluation instead of a new Jacobian (a chord step), for as long as the
-steps keep decreasing the cost as predicted. Convergence is only declared on a fresh Jacobian, so
-the end point is a true stationary point.
+steps keep decreasing the cost as predicted. A first step that removes most of the cost is
+evaluated with its Jacobian at once, since the point it reaches needs one. Convergence is only
+declared on a Jacobian taken at the answer or so near it that they differ by rounding (the caller
+can say what near means for its parameters), so the end point is a true stationary point.
 """
 
 from __future__ import annotations
@@ -22,6 +24,8 @@ import numpy as np
 REUSE_RHO = 0.9
 # A Jacobian taken where the cost was within this fraction of the current one certifies a minimum.
 NEAR = 1e-2
+# A step predicted to remove more than this fraction of the cost lands where the Jacobian differs.
+FAR = 0.5
 
 
 @dataclass
@@ -57,14 +61,20 @@ def from_jacobian(fun):
     return normal
 
 
+def near_by_cost(cost_at_jacobian: float, cost: float) -> bool:
+    """Default test that a Jacobian taken where the cost was cost_at_jacobian still holds now."""
+    return cost_at_jacobian - cost <= NEAR * cost_at_jacobian
+
+
 def levenberg_marquardt(fun, x0, residual=None, max_iter=100, ftol=1e-8, xtol=1e-12,
-                        normal=None, first: Normal | None = None) -> LMResult:
+                        normal=None, first: Normal | None = None, near=None) -> LMResult:
     """Minimise ||r(x)||^2.
 
     Either fun(x) -> (r, Jt) or normal(x) -> Normal; residual(x) -> r evaluates a trial step
     without derivatives (required with normal). first: the normal equations at x0, if known.
     ftol: stop when the next step would lower the cost by less than this fraction (scipy's
-    least_squares default).
+    least_squares default). near(x_at_jacobian, x) -> True when the Jacobian taken at the first
+    point is, to rounding, that of the second (default: the cost has changed by under 1%).
     """
     if normal is None:
         normal = from_jacobian(fun)
@@ -72,14 +82,13 @@ def levenberg_marquardt(fun, x0, residual=None, max_iter=100, ftol=1e-8, xtol=1e
     x = np.array(x0, dtype=float)
     ne = first or normal(x)
     cost = ne.cost
-    at_jacobian, chords = cost, 0  # cost where the Jacobian in use was taken; steps reusing it
+    at = (x, cost)  # where the Jacobian in use was taken, and the cost there
+    chords = 0  # steps taken on it since
     nfev = njev = 1
-    lam, message, it, r = 1e-3, "iteration limit reached", 0, None
+    lam, message, it, r = 1e-5, "iteration limit reached", 0, None
 
-    def refresh():
-        nonlocal ne, at_jacobian, chords, nfev, njev
-        ne, at_jacobian, chords = normal(x), cost, 0
-        nfev, njev = nfev + 1, njev + 1
+    def holds() -> bool:
+        return chords == 0 or (near(at[0], x) if near else near_by_cost(at[1], cost))
 
     for it in range(1, max_iter + 1):
         A, g = ne.A, ne.g
@@ -87,6 +96,7 @@ def levenberg_marquardt(fun, x0, residual=None, max_iter=100, ftol=1e-8, xtol=1e
         d[d == 0] = 1.0
         As, gs = A / np.outer(d, d), g / d
         while True:
+            fresh_ne = None
             try:
                 step = -np.linalg.solve(As + lam * np.eye(len(d)), gs) / d
             except np.linalg.LinAlgError:
@@ -94,35 +104,45 @@ def levenberg_marquardt(fun, x0, residual=None, max_iter=100, ftol=1e-8, xtol=1e
                 continue
             predicted = -(2.0 * g @ step + step @ A @ step)  # decrease of the linear model
             if predicted <= ftol * cost:
-                # nothing left to gain at this damping: a minimum, if this Jacobian is that of x
-                # or was taken so near that it differs from it by rounding only
-                if chords == 0 or at_jacobian - cost <= NEAR * at_jacobian:
-                    return LMResult(x, cost, it, nfev, "converged", njev, r)
                 break
-            rn = residual(x + step)
-            nfev += 1
-            cn = float(rn @ rn)
+            if chords == 0 and predicted > FAR * cost:
+                # far from the minimum the next point needs its own Jacobian: take it as the trial
+                fresh_ne = normal(x + step)
+                rn, cn = None, fresh_ne.cost
+                nfev, njev = nfev + 1, njev + 1
+            else:
+                rn = residual(x + step)
+                nfev += 1
+                cn = float(rn @ rn)
             if cn < cost or chords:
                 break
             lam *= 10.0
             if lam > 1e16:
                 return LMResult(x, cost, it, nfev, "no further decrease", njev, r)
-        if chords and (predicted <= ftol * cost or cn >= cost):
-            refresh()  # the reused Jacobian is spent
+        if predicted <= ftol * cost or cn >= cost:
+            # nothing left to gain on this Jacobian: a minimum if it holds here, else take a fresh one
+            if predicted <= ftol * cost and holds():
+                return LMResult(x, cost, it, nfev, "converged", njev, r)
+            ne, at, chords = normal(x), (x, cost), 0
+            nfev, njev = nfev + 1, njev + 1
             continue
         small_f = (cost - cn) <= ftol * cost
         small_x = np.linalg.norm(step * d) <= xtol * (np.linalg.norm(x * d) + xtol)
         rho = (cost - cn) / predicted if predicted > 0 else 0.0
-        lam = lam * 0.3 if rho > 0.75 else lam * 2.0 if rho < 0.25 else lam
+        lam = lam * (0.1 if rho > 0.9 else 0.3 if rho > 0.75 else 2.0 if rho < 0.25 else 1.0)
         lam = max(lam, 1e-12)
         x, cost, r = x + step, cn, rn
-        if chords == 0 and (small_f or small_x):
+        if fresh_ne is not None:
+            ne, at, chords = fresh_ne, (x, cost), 0
+            continue
+        chords += 1
+        if (small_f or small_x) and holds():
             message = "converged"
             break
-        # Reuse the Jacobian while its linear model predicts the decrease; after a large move
-        # (far from the minimum, where it bends) only once.
-        if abs(1.0 - rho) < 1.0 - REUSE_RHO and (chords == 0 or cost >= 0.5 * at_jacobian):
-            ne, chords = Normal(cn, A, ne.jt(rn), ne.jt), chords + 1
+        if abs(1.0 - rho) < 1.0 - REUSE_RHO:
+            # the linear model was right: another step on this Jacobian, at the new residual
+            ne = Normal(cn, A, ne.jt(rn), ne.jt)
         else:
-            refresh()
+            ne, at, chords = normal(x), (x, cost), 0
+            nfev, njev = nfev + 1, njev + 1
     return LMResult(x, cost, it, nfev, message, njev, r)

@@ -207,7 +207,7 @@ class PointNormal:
         rho_flange = V @ rho.sum(axis=2)  # (3, K)
         # row (k, ax): sum over poses of c' (v + w x t_k) with c = V[ax], the flange axis in the SMR frame
         rows = (np.einsum("kic,ai->kac", Usum[:, :3], V)
-                + np.einsum("kic,kai->kac", Usum[:, 3:], np.cross(tc[:, None, :], V[None, :, :])))
+                + np.einsum("kic,kai->kac", Usum[:, 3:], np.einsum("ijl,kj,al->kai", LEVI, tc, V)))
         k, ax = self.tk_k, self.tk_ax
         j = np.arange(ng, ng + nt)
         full[j, j] = self.n_k[k]
@@ -225,27 +225,34 @@ def _full_group(U, b, tc, sel, ng):
     by b_i / d_i and by 1 / d_i in a column of its own, so d_i times its Gram matrix holds
     U_i U_i', U_i b_i and sum U_i.
     """
-    d = np.concatenate([np.full(3, float(len(tc))), np.sum(tc * tc) - np.sum(tc * tc, axis=0)])
+    tt = np.sum(tc * tc, axis=0)
+    d = np.array([len(tc), len(tc), len(tc), tt[1] + tt[2], tt[0] + tt[2], tt[0] + tt[1]], float)
     live = d > 1e-12 * d.max()
     Uf = U if sel.all() else U[:, :, sel]
     bf = b if sel.all() else b[:, sel]
     Uf[:, ng:] = 0.0
-    for i in np.flatnonzero(live):  # a row without SMR spread about its axis carries nothing
-        np.divide(bf[i], d[i], out=Uf[i, ng])
-        Uf[i, ng + 1 + i] = 1.0 / d[i]
+    inv = np.divide(1.0, d, out=np.zeros(6), where=live)
+    Uf[:, ng] = bf * inv[:, None]
+    Uf[np.arange(6), ng + 1 + np.arange(6)] = inv[:, None]
     C = np.zeros((ng + 7, ng + 7))
     for i in np.flatnonzero(live):
         C = dsyrk(d[i], Uf[i].T, beta=1.0, c=C, trans=1, overwrite_c=1)
-    C = np.triu(C) + np.triu(C, 1).T
+    C += C.T  # dsyrk filled the upper triangle only
+    C[np.diag_indices_from(C)] *= 0.5
     return C[:ng, :ng], C[:ng, ng], np.broadcast_to(C[ng + 1:, :ng], (len(tc), 6, ng))
+
+
+# LEVI[a, b, c]: the sign of the permutation (a, b, c), so (t x r)_a = LEVI[a, b, c] t_b r_c.
+LEVI = np.zeros((3, 3, 3))
+for _a, (_b, _c) in enumerate(PAIRS):
+    LEVI[_a, _b, _c], LEVI[_a, _c, _b] = 1.0, -1.0
 
 
 def _twist_sums(tc: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """Per pose, sum_k A_k' rho_k = (sum rho_k, sum t_k x rho_k): (6, m)."""
     b = np.empty((6, rho.shape[2]))
     b[:3] = rho.sum(axis=1)
-    for a, (i1, i2) in enumerate(PAIRS):
-        b[3 + a] = tc[:, i1] @ rho[i2] - tc[:, i2] @ rho[i1]
+    b[3:] = np.einsum("abck,ckm->am", LEVI[..., None] * tc.T[None, :, None, :], rho)
     return b
 
 
