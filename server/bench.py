@@ -29,11 +29,12 @@ def _log(msg: str) -> None:
 
 
 def _repeats(m: int) -> int:
-    """Timing repeats for m poses: the best of several (other load on the machine only adds time)."""
-    return 20 if m <= 100 else 10 if m <= 1000 else 3
+    """Timing repeats for m poses, ours and the reference alike: the best of many, since other
+    load on the machine only adds time and a millisecond run has a long tail."""
+    return 200 if m <= 100 else 50 if m <= 1000 else 10
 
 
-def _best_of(n: int, fn, budget_s: float = 5.0):
+def _best_of(n: int, fn, budget_s: float = 60.0):
     """Run fn up to n times (fewer once budget_s is spent); return (fastest time, its result, runs)."""
     best, out, spent, runs = float("inf"), None, 0.0, 0
     while runs < n and (runs == 0 or spent < budget_s):
@@ -70,19 +71,19 @@ def _setup(robot, targets, names, q, xyz):
     return prob, x0, st.free
 
 
-def _ours(robot, targets, names, q, xyz, m: int) -> dict:
+def _ours(robot, targets, names, q, xyz, m: int, repeats: int) -> dict:
     """Wall time, objectives and effort of calibrate(): ls-sum, minimax, minimax with the exact QP."""
     calibrate(robot, targets, names, q, xyz, method="ls-sum")  # untimed warm-up: a first large run is slower
     out = {}
     for key, (method, qp) in OURS.items():
-        secs, cal, n = _best_of(_repeats(m),
+        secs, cal, n = _best_of(repeats if method == "ls-sum" else max(1, repeats // 10),
                                 lambda: calibrate(robot, targets, names, q, xyz, method=method, qp=qp))
         r = {"seconds": secs, "repeats": n, "calibrate_seconds": cal.seconds, "F": cal.F.tolist(),
              "free_parameters": int(len(cal.x) - len(cal.fixed)), "iterations": cal.iterations}
         if method == "ls-sum":
             # the fit alone on the registered problem, to set against the reference's solve stage
             prob, x0, free = _setup(robot, targets, names, q, xyz)
-            r["solve_seconds"], *_ = _best_of(_repeats(m), lambda: least_squares_fit(prob, x0, free))
+            r["solve_seconds"], *_ = _best_of(repeats, lambda: least_squares_fit(prob, x0, free))
             r["objective"] = float(cal.F.sum())
         else:
             d = cal.details
@@ -171,7 +172,7 @@ def _reference_minimax(prob, x_ls, free, jac) -> tuple[np.ndarray, dict]:
                "max_constraint_violation_mm2": _violation(lay.targets(x), prob.meas)}
 
 
-def _reference(robot, targets, names, q, xyz, m: int) -> dict:
+def _reference(robot, targets, names, q, xyz, m: int, repeats: int) -> dict:
     """The same ls-sum and minimax problems solved by scipy.optimize with finite differences."""
 
     def run_ls():
@@ -184,7 +185,7 @@ def _reference(robot, targets, names, q, xyz, m: int) -> dict:
 
     # ls-sum: the best of as many runs as ours (within a time budget); minimax (SLSQP, far
     # slower): the best of up to three runs while they are quick
-    _, (ls, (prob, x_ls, free, jac)), ls_runs = _best_of(_repeats(m), run_ls, budget_s=20.0)
+    _, (ls, (prob, x_ls, free, jac)), ls_runs = _best_of(repeats, run_ls)
     ls["repeats"] = ls_runs
 
     def run_mm():
@@ -247,7 +248,8 @@ def _goals(sizes: dict) -> dict:
     return {"targets": dict(GOALS), "achieved": achieved, "met": met}
 
 
-def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=10000, seed=SEED) -> dict:
+def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=10000, seed=SEED,
+                     repeats=None) -> dict:
     """Time our solvers and scipy's finite-difference reference on virtual-cell campaigns of each size."""
     from .formats.cell_json import default_cell
 
@@ -258,11 +260,12 @@ def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=100
     for m in sizes:
         meas = _campaign(cell, int(m), seed)
         _log(f"{m} poses x {len(names)} SMRs ({meas.n_readings} readings)")
-        ours = _ours(cell.robot, targets, meas.target_names, meas.q, meas.xyz, m)
+        n = repeats or _repeats(m)
+        ours = _ours(cell.robot, targets, meas.target_names, meas.q, meas.xyz, m, n)
         entry = {"poses": int(m), "readings": meas.n_readings, "ours": ours,
                  "ours_seconds_per_pose": {k: v["seconds"] / m for k, v in ours.items()}}
         if reference and m <= reference_max:
-            entry["reference"] = _reference(cell.robot, targets, meas.target_names, meas.q, meas.xyz, m)
+            entry["reference"] = _reference(cell.robot, targets, meas.target_names, meas.q, meas.xyz, m, n)
             entry["comparison"] = _compare(ours, entry["reference"])
             _log("  speedup " + ", ".join(f"{k} {v:.1f}x"
                                           for k, v in entry["comparison"]["speedup"].items()))

@@ -127,20 +127,11 @@ def cmd_diagnose(args) -> None:
 
 def _diagnose_to_files(cell, meas, meas_path, report_path, model_path):
     """Run the diagnosis; write the report, its figures beside it and the extended model."""
-    from .plots import write_figures
-
     with console.status("diagnosing: cross-validating candidate effects...") as status:
         d, model = workflow.diagnose(cell, meas, log=lambda msg: status.update(msg.strip()))
-    report = d.report
-    figures = write_figures(d.figures, report_path)
-    by_label = {f["label"]: path.name for f, path in zip(d.figures, figures)}
-    for e, ext in zip(report["effects"], _report_order(report, d.extensions)):
-        e["figure"] = by_label.get(ext.label())
-    model.meta["data"] = {"file": Path(meas_path).name, "poses": meas.n_poses,
-                          "readings": meas.n_readings}
-    write_json_atomic(report_path, report)
-    if model_path:
-        write_model(model_path, model)
+    report, figures = workflow.write_diagnosis(
+        d, model, Path(report_path), {"file": Path(meas_path).name, "poses": meas.n_poses,
+                                      "readings": meas.n_readings}, model_path)
     return report, figures, d
 
 
@@ -158,13 +149,6 @@ def _print_diagnosis(report) -> None:
     console.print(f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
                   f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)")
 
-
-def _report_order(report, exts):
-    """The extensions in the report's order (most important first)."""
-    def key(e):
-        return (e["name"], e.get("joint"), e.get("harmonic"))
-    index = {(x.name, None if x.joint is None else x.joint + 1, x.harmonic): x for x in exts}
-    return [index[key(e)] for e in report["effects"]]
 
 
 def cmd_acquire(args) -> None:

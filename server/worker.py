@@ -143,23 +143,18 @@ def _calibrate(db: store.Database, setup: JobSetup, job: store.JobInfo) -> dict:
 
 
 def _diagnose(db: store.Database, setup: JobSetup, job: store.JobInfo) -> dict:
-    from .formats.model_json import write_model
-    from .plots import write_figures
-    from .workflow import diagnose
+    from .workflow import diagnose, write_diagnosis
 
     cell, meas = campaign_data(db, job.campaign_id)
     _update(db, job.id, progress=0.1)
     d, model = diagnose(cell, meas)
     _update(db, job.id, progress=0.8)
     report_path = setup.reports_dir / f"job-{job.id}" / "report.json"
-    figures = write_figures(d.figures, report_path)
-    report = json.loads(json.dumps(d.report, default=_plain_value))
-    report["figures"] = [p.name for p in figures]
-    write_json_atomic(report_path, report)
-    model.meta["data"] = {"campaign": job.campaign_id, "poses": meas.n_poses,
-                          "readings": meas.n_readings}
     path = setup.models_dir / f"job-{job.id}.model.json"
-    write_model(path, model)
+    d.report = json.loads(json.dumps(d.report, default=_plain_value))
+    _, figures = write_diagnosis(d, model, report_path, {
+        "campaign": job.campaign_id, "poses": meas.n_poses, "readings": meas.n_readings}, path,
+        list_figures=True)
     return {"model": str(path), "report": str(report_path),
             "figures": [str(p) for p in figures]}
 

@@ -190,5 +190,34 @@ def diagnose(cell: Cell, meas: Measurements, log=None):
     return d, model
 
 
+def write_diagnosis(d, model: ModelFile, report_path: Path, data: dict, model_path=None,
+                    list_figures=False):
+    """Write the report (each effect naming its figure; with list_figures, every figure in
+    `figures`), its figures beside it and the model. Returns (report, figure paths)."""
+    from .formats.model_json import write_json_atomic, write_model
+    from .plots import write_figures
+
+    report = d.report
+    figures = write_figures(d.figures, report_path)
+    by_label = {f["label"]: path.name for f, path in zip(d.figures, figures)}
+    for e, ext in zip(report["effects"], _report_order(report, d.extensions)):
+        e["figure"] = by_label.get(ext.label())
+    if list_figures:
+        report["figures"] = [p.name for p in figures]
+    model.meta["data"] = data
+    write_json_atomic(report_path, report)
+    if model_path:
+        write_model(model_path, model)
+    return report, figures
+
+
+def _report_order(report, exts):
+    """The extensions in the report's order (most important first)."""
+    def key(e):
+        return (e["name"], e.get("joint"), e.get("harmonic"))
+    index = {(x.name, None if x.joint is None else x.joint + 1, x.harmonic): x for x in exts}
+    return [index[key(e)] for e in report["effects"]]
+
+
 __all__ = ["DataError", "load_cell", "load_campaign", "run_method", "model_file", "model_predict",
            "compare", "evaluate", "read_model", "paper_methods"]

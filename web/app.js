@@ -256,16 +256,9 @@ function effectLabel(e) {
     + (e.at_s !== undefined && e.at_s !== null ? ` at ${e.at_s.toFixed(0)} s` : "");
 }
 
-/** Whether this figure file shows this effect: the report's `figure` key where it has one, else
- * the name the server gives the file, `<report>_<step>_<effect label>.png`, the label as in the
- * final model's name (joint_periodic(4,k=2) becomes joint_periodic_4_k2). */
+/** Whether this figure file shows this effect: the report names each effect's figure. */
 function figureOf(e, file) {
-  if (e.figure) return e.figure === file;
-  const stem = e.name === "base_shift" && e.at_s !== undefined && e.at_s !== null
-    ? `base_shift_t${e.at_s.toFixed(0)}s`
-    : e.name + (e.joint !== undefined && e.joint !== null ? `_${e.joint}` : "")
-      + (e.harmonic ? `_k${e.harmonic}` : "");
-  return file.endsWith(`_${stem}.png`);
+  return e.figure === file;
 }
 
 async function showDiagnosis(d) {
@@ -299,8 +292,7 @@ async function showDiagnosis(d) {
   }
   // One figure per effect: its caption names the effect it shows.
   $("d-figures").replaceChildren(...figures.map((fig) => {
-    let i = report.effects.findIndex((e) => figureOf(e, fig.name));
-    if (i < 0 && figures.length === 1 && report.effects.length === 1) i = 0;
+    const i = report.effects.findIndex((e) => figureOf(e, fig.name));
     const e = report.effects[i];
     const el = document.createElement("figure");
     const img = el.appendChild(document.createElement("img"));

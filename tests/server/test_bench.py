@@ -11,7 +11,7 @@ from server.bench import GOALS, run_solver_bench
 @pytest.fixture(scope="module")
 def bench():
     """One small benchmark with the finite-difference reference, shared by the tests."""
-    return run_solver_bench(sizes=(60,), reference=True)
+    return run_solver_bench(sizes=(60,), reference=True, repeats=3)
 
 
 def test_report_structure(bench):
@@ -58,7 +58,7 @@ def test_ours_at_least_as_good_as_reference(bench):
 
 def test_reference_skipped_above_reference_max():
     """Without a reference there are no comparisons and the speed-up target is not judged."""
-    res = run_solver_bench(sizes=(30,), reference=True, reference_max=20)
+    res = run_solver_bench(sizes=(30,), reference=True, reference_max=20, repeats=2)
     size = res["sizes"]["30"]
     assert "reference" not in size and "comparison" not in size
     assert res["met"]["speedup_min"] is None and res["achieved"]["speedup_min"] is None
