@@ -20,8 +20,9 @@ ESTOP_NOTE = ("STOP sent to the controller (the arm halts where it is) and the c
               "one not running is just marked aborted; the cell's hardware e-stop still rules")
 
 
-def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
-    run = acquisitions.get(info.id)
+def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic, run=...):
+    """The campaign as the API shows it; run: its run state read before info (default: now)."""
+    run = acquisitions.get(info.id) if run is ... else run
     extra = {"settings": info.settings} if cls is CampaignDetail else {}
     return cls(id=info.id, name=info.name, created_at=info.created_at, status=info.status,
                simulated=info.simulated, notes=info.notes, poses_total=info.n_poses,
@@ -51,7 +52,10 @@ def list_campaigns(db: DbDep, acquisitions: AcquisitionsDep,
 @router.get("/{campaign_id}")
 def get_campaign(campaign_id: int, db: DbDep, acquisitions: AcquisitionsDep) -> CampaignDetail:
     """One campaign with its live state: status and poses done of total, from the store."""
-    return _public(store.get_campaign(db, campaign_id=campaign_id), acquisitions, CampaignDetail)
+    # the run first: a run that ends in between then shows with the status it left behind
+    run = acquisitions.get(campaign_id)
+    return _public(store.get_campaign(db, campaign_id=campaign_id), acquisitions, CampaignDetail,
+                   run=run)
 
 
 @router.post("/{campaign_id}/start", status_code=202, dependencies=[Authorized])
