@@ -140,8 +140,8 @@ class PointNormal:
         codes = self.mask @ (1 << np.arange(K))
         full = (1 << K) - 1
         self.full = codes == full
-        self.partial = [(self.mask[codes == c][0], codes == c) for c in np.unique(codes)
-                        if c and c != full]
+        self.partial = [] if self.full.all() else [
+            (self.mask[codes == c][0], codes == c) for c in np.unique(codes) if c and c != full]
         self.n_k = self.mask.sum(axis=0)
         self.tk = [divmod(int(c) - ts, 3) for c in self.tcols]
         self.tk_k, self.tk_ax = np.array(self.tk, dtype=int).reshape(-1, 2).T
@@ -172,7 +172,7 @@ class PointNormal:
         lay, ng = self.layout, len(self.gcols)
         t = lay.targets(x)
         start, tc = smr_frame(t)
-        M, U = flange_twists(lay, x, self.q, self.gcols, start, extra=7, arm=self.arm(x))
+        M, U = flange_twists(lay, x, self.q, self.gcols, start, extra=1, arm=self.arm(x))
         R = M[:, :3]
         p = np.einsum("ijm,kj->ikm", R, tc) + M[:, 3, None, :]
         r = (p - self.meas_t) * self.w  # (3, K, m), zero where missing
@@ -221,25 +221,23 @@ class PointNormal:
 def _full_group(U, b, tc, sel, ng):
     """A, g and per-row U sums of the poses with every reading: the weight is diagonal there.
 
-    One symmetric rank-k update per twist row i gives all three: the row's U block is extended
-    by b_i / d_i and by 1 / d_i in a column of its own, so d_i times its Gram matrix holds
-    U_i U_i', U_i b_i and sum U_i.
+    One symmetric rank-k update per twist row i, with the row's U block extended by b_i / d_i,
+    gives d_i U_i U_i' and U_i b_i at once.
     """
     tt = np.sum(tc * tc, axis=0)
     d = np.array([len(tc), len(tc), len(tc), tt[1] + tt[2], tt[0] + tt[2], tt[0] + tt[1]], float)
     live = d > 1e-12 * d.max()
     Uf = U if sel.all() else U[:, :, sel]
     bf = b if sel.all() else b[:, sel]
-    Uf[:, ng:] = 0.0
     inv = np.divide(1.0, d, out=np.zeros(6), where=live)
     Uf[:, ng] = bf * inv[:, None]
-    Uf[np.arange(6), ng + 1 + np.arange(6)] = inv[:, None]
-    C = np.zeros((ng + 7, ng + 7))
+    C = np.zeros((ng + 1, ng + 1))
     for i in np.flatnonzero(live):
-        C = dsyrk(d[i], Uf[i].T, beta=1.0, c=C, trans=1, overwrite_c=1)
+        C = dsyrk(d[i], Uf[i, : ng + 1].T, beta=1.0, c=C, trans=1, overwrite_c=1)
     C += C.T  # dsyrk filled the upper triangle only
     C[np.diag_indices_from(C)] *= 0.5
-    return C[:ng, :ng], C[:ng, ng], np.broadcast_to(C[ng + 1:, :ng], (len(tc), 6, ng))
+    sums = Uf[:, :ng].sum(axis=2) * live[:, None]  # a row without SMR spread carries nothing
+    return C[:ng, :ng], C[:ng, ng], np.broadcast_to(sums, (len(tc), 6, ng))
 
 
 # LEVI[a, b, c]: the sign of the permutation (a, b, c), so (t x r)_a = LEVI[a, b, c] t_b r_c.
@@ -265,8 +263,11 @@ class _Jt:
     def __call__(self, res: np.ndarray) -> np.ndarray:
         nm = self.normal
         m, K = nm.mask.shape
-        r = np.zeros((m, K, 3))
-        r[nm.mask] = res.reshape(-1, 3)
+        if nm.full.all():
+            r = res.reshape(m, K, 3)
+        else:
+            r = np.zeros((m, K, 3))
+            r[nm.mask] = res.reshape(-1, 3)
         rho = np.einsum("ijm,mki->jkm", self.R, r)
         b = _twist_sums(self.tc, rho)
         ng = len(nm.gcols)
