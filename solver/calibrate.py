@@ -93,7 +93,7 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
     else:
         fit = SumOfSquares(prob, x0, st.free, rows=rows)
         first = fit.normal()  # checks the data and starts the fit
-        cond = ident.check_data(first.A, st.free, lay.names, 3 * int(fit.mask.sum()),
+        cond = ident.check_data(first.A, st.free, lay.names(), 3 * int(fit.mask.sum()),
                                 prob.q.shape[0])
         x, res = fit.fit(first)
         if name == "ls-single":
@@ -110,10 +110,8 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
                        converged=mm.converged, message=mm.message, lam=mm.lam.tolist(),
                        mu=mm.mu.tolist(), constraints=mm.constraints.tolist(),
                        sqp_seconds=mm.seconds)
-    if name == "ls-sum" and res.r is not None and fit.mask.sum() == prob.mask.sum():
-        F = fit.per_target(res.r)  # the fit's last residuals are those of x
-    else:
-        F = None
+    # ls-sum's last residuals, when the fit kept them, are those of x over every target
+    F = fit.per_target(res.r) if name == "ls-sum" and res.r is not None else prob.sum_squares(x)
     prob, x = prob.rebased(x)
-    return Calibration(method, prob.layout, x, st.fixed, cond, prob.sum_squares(x) if F is None else F,
+    return Calibration(method, prob.layout, x, st.fixed, cond, F,
                        time.perf_counter() - t0, iters, details)

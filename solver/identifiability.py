@@ -160,7 +160,6 @@ def check_data(A: np.ndarray, free: np.ndarray, names, n_rows: int, n_poses: int
     singular values of the unit-column Jacobian, resolved down to ~1e-7 of the largest singular value.
     """
     idx = np.flatnonzero(free)
-    names = _Names(names)
     if n_rows < len(idx):
         raise NotIdentifiable(
             f"{n_poses} poses give {n_rows} equations for {len(idx)} parameters: "
@@ -181,18 +180,6 @@ def check_data(A: np.ndarray, free: np.ndarray, names, n_rows: int, n_poses: int
             f"the poses cannot separate {', '.join(worst)} (condition number {cond:.3g}): "
             "measure more poses, spread over the joint ranges")
     return cond
-
-
-class _Names:
-    """Parameter names, or a callable giving them, looked up only for a message."""
-
-    def __init__(self, names):
-        self.names = names
-
-    def __getitem__(self, i):
-        if callable(self.names):
-            self.names = self.names()
-        return self.names[i]
 
 
 def gram(J: np.ndarray, free: np.ndarray) -> np.ndarray:

@@ -78,9 +78,13 @@ class Layout:
     def n_params(self) -> int:
         return self.n_geo + 6 + 3 * len(self.target_names)
 
-    def names(self) -> list[str]:
+    def names(self) -> tuple[str, ...]:
+        return self._names
+
+    @cached_property
+    def _names(self) -> tuple[str, ...]:
         tnames = [f"{t}_{c}" for t in self.target_names for c in "xyz"]
-        return self.robot.param_names() + list(BASE_NAMES) + tnames
+        return tuple(self.robot.param_names() + list(BASE_NAMES) + tnames)
 
     @cached_property
     def _ops(self) -> tuple[Op, ...]:

@@ -22,6 +22,11 @@ from .lm import Normal
 
 PAIRS = ((1, 2), (2, 0), (0, 1))  # (i1, i2) with e_a = e_i1 x e_i2
 
+# LEVI[a, b, c]: the sign of the permutation (a, b, c), so (t x r)_a = LEVI[a, b, c] t_b r_c.
+LEVI = np.zeros((3, 3, 3))
+for _a, (_b, _c) in enumerate(PAIRS):
+    LEVI[_a, _b, _c], LEVI[_a, _c, _b] = 1.0, -1.0
+
 
 def _pass(ops, x, q, where: dict, M: np.ndarray, U: np.ndarray | None) -> None:
     """Prepend ops (walked from the last) to the frame M (3, 4, m) in place, recording twists in U."""
@@ -143,8 +148,8 @@ class PointNormal:
         self.partial = [] if self.full.all() else [
             (self.mask[codes == c][0], codes == c) for c in np.unique(codes) if c and c != full]
         self.n_k = self.mask.sum(axis=0)
-        self.tk = [divmod(int(c) - ts, 3) for c in self.tcols]
-        self.tk_k, self.tk_ax = np.array(self.tk, dtype=int).reshape(-1, 2).T
+        # each SMR column's target and axis
+        self.tk_k, self.tk_ax = np.divmod(self.tcols - ts, 3)
         self.meas_rows = np.asarray(meas, float)[self.mask]
         # with the geometry held (base registration), the arm's frames are computed once
         self.arm_held = not np.any(self.gcols < layout.base_slice.start)
@@ -204,7 +209,6 @@ class PointNormal:
         gg = np.zeros(ng + nt)
         gg[:ng] = g
         V = start[:, :3]
-        rho_flange = V @ rho.sum(axis=2)  # (3, K)
         # row (k, ax): sum over poses of c' (v + w x t_k) with c = V[ax], the flange axis in the SMR frame
         rows = (np.einsum("kic,ai->kac", Usum[:, :3], V)
                 + np.einsum("kic,kai->kac", Usum[:, 3:], np.einsum("ijl,kj,al->kai", LEVI, tc, V)))
@@ -212,10 +216,14 @@ class PointNormal:
         j = np.arange(ng, ng + nt)
         full[j, j] = self.n_k[k]
         full[j, :ng] = rows[k, ax]
-        gg[j] = rho_flange[ax, k]
+        gg[j] = self._target_gradient(start, rho)
         full[:ng, ng:] = full[ng:, :ng].T
         perm = self.perm
         return full[np.ix_(perm, perm)], gg[perm]
+
+    def _target_gradient(self, start, rho) -> np.ndarray:
+        """J'r on the SMR columns: the residuals summed over poses, in the flange frame."""
+        return (start[:, :3] @ rho.sum(axis=2))[self.tk_ax, self.tk_k]
 
 
 def _full_group(U, b, tc, sel, ng):
@@ -240,12 +248,6 @@ def _full_group(U, b, tc, sel, ng):
     return C[:ng, :ng], C[:ng, ng], np.broadcast_to(sums, (len(tc), 6, ng))
 
 
-# LEVI[a, b, c]: the sign of the permutation (a, b, c), so (t x r)_a = LEVI[a, b, c] t_b r_c.
-LEVI = np.zeros((3, 3, 3))
-for _a, (_b, _c) in enumerate(PAIRS):
-    LEVI[_a, _b, _c], LEVI[_a, _c, _b] = 1.0, -1.0
-
-
 def _twist_sums(tc: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """Per pose, sum_k A_k' rho_k = (sum rho_k, sum t_k x rho_k): (6, m)."""
     b = np.empty((6, rho.shape[2]))
@@ -255,7 +257,7 @@ def _twist_sums(tc: np.ndarray, rho: np.ndarray) -> np.ndarray:
 
 
 class _Jt:
-    """r' -> J'r' with the Jacobian of one evaluation (valid until the next one)."""
+    """r' -> J'r' with the Jacobian of one evaluation."""
 
     def __init__(self, normal: PointNormal, tc, start, R, U):
         self.normal, self.tc, self.start, self.R, self.U = normal, tc, start, R, U
@@ -274,7 +276,4 @@ class _Jt:
         g = np.zeros(ng)
         for i in range(6):
             g += self.U[i, :ng] @ b[i]
-        V = self.start[:, :3]
-        rho_flange = V @ rho.sum(axis=2)
-        gg = np.concatenate([g, [rho_flange[ax, k] for k, ax in nm.tk]])
-        return gg[nm.perm]
+        return np.concatenate([g, nm._target_gradient(self.start, rho)])[nm.perm]
