@@ -22,6 +22,7 @@ from drivers.predictor import SmrPredictor
 
 from . import store
 from .formats.cell_json import Cell, cell_to_json, parse_cell
+from .formats.model_json import to_plain
 
 
 class AcquisitionFailed(RuntimeError):
@@ -115,12 +116,15 @@ def _surveyed(true_base: np.ndarray, seed: int) -> np.ndarray:
     return base
 
 
-def base_guess(cell: Cell, seed: int) -> np.ndarray:
-    """The cell's `base`, else (simulated cell) the survey guess of the virtual cell of `seed`."""
+def base_guess(cell: Cell, seed: int, sim: SimulatedCell | None = None) -> np.ndarray:
+    """The cell's `base`, else (simulated cell) the survey guess of the virtual cell of `seed`
+    (that of `sim` when it is running)."""
     if cell.base is not None:
         return np.asarray(cell.base, dtype=float)
     if not cell.simulated:  # parse_cell refuses this; a hand-built Cell must not plan blind
         raise ValueError("a cell with real devices needs a `base` guess")
+    if sim is not None:
+        return sim.rough_base(seed)
     from drivers.cell import TrackerSpec, VirtualCell
 
     true = VirtualCell.random(cell.robot, cell.targets, seed=seed,
@@ -144,14 +148,8 @@ def plan_and_store(db, *, name: str, cell: Cell, opts: AcquireOptions, base):
     poses_deg, plan = _plan(cell, base, opts)
     return store.create_campaign(db, name=name, cell_json=json.dumps(cell_to_json(cell)),
                                  poses_deg=poses_deg.tolist(), simulated=cell.simulated,
-                                 settings={"options": asdict(opts), "plan": _plain(plan),
+                                 settings={"options": asdict(opts), "plan": to_plain(plan),
                                            "base_guess": np.asarray(base).tolist()}), poses_deg
-
-
-def _plain(obj):
-    """JSON-safe copy of a plan summary (numpy scalars and arrays to Python)."""
-    return json.loads(json.dumps(obj, default=lambda v: v.tolist() if hasattr(v, "tolist")
-                                 else str(v)))
 
 
 def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
@@ -239,7 +237,7 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
         else:
             # the real arm and tracker take real time: the pause must really wait
             clock, sim = RealClock(), None
-        base = base_guess(cell, opts.seed)
+        base = base_guess(cell, opts.seed, sim)
         if existing is None:
             cid, poses_deg = plan_and_store(db, name=name, cell=cell, opts=opts, base=base)
             start, history, partial = 0, None, {}

@@ -23,7 +23,7 @@ from solver.calibrate import parse_method
 from . import store
 from .acquire import AcquireOptions, acquire
 from .formats.cell_json import parse_cell
-from .formats.model_json import model_to_json
+from .formats.model_json import model_to_json, to_plain
 from .worker import JobSetup, WorkerPool, campaign_data, job_event, one_line
 from .workflow import model_file, run_method
 
@@ -472,10 +472,10 @@ class Acquisitions:
                               campaign_id=cid, on_engine=self._attach,
                               on_event=self.events.publish)
             how = self.get(cid).stop_requested
-            change = (dict(state="finished", summary=_plain(summary))
+            change = (dict(state="finished", summary=to_plain(summary))
                       if summary["state"] == "done" else
                       dict(state="stopped", detail=f"stopped by {how or 'abort'}",
-                           summary=_plain(summary)))
+                           summary=to_plain(summary)))
         except Exception as e:  # a fault, or a stop before or during the run
             how = self.get(cid).stop_requested
             if how:
@@ -506,10 +506,6 @@ def _mark_aborted(db: store.Database, campaign_id: int) -> None:
 
 class _Stopped(Exception):
     """The run was stopped before it began."""
-
-
-def _plain(summary: dict) -> dict:
-    return {k: (float(v) if hasattr(v, "item") else v) for k, v in summary.items()}
 
 
 __all__ = ["Acquisitions", "ControllerUnreachable", "Events", "Job", "Jobs", "Run",

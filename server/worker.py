@@ -6,7 +6,6 @@ Only picklable things cross to a worker (a JobSetup and a job id); it opens the 
 
 from __future__ import annotations
 
-import json
 import multiprocessing
 import os
 import queue
@@ -21,7 +20,7 @@ from pathlib import Path
 
 from . import store
 from .formats.cell_json import parse_cell
-from .formats.model_json import model_to_json, write_json_atomic
+from .formats.model_json import model_to_json, to_plain, write_json_atomic
 from .workflow import model_file, run_method
 
 # Not fork: the service has threads (uvicorn, the acquisition, the event bus) whose locks a
@@ -151,16 +150,12 @@ def _diagnose(db: store.Database, setup: JobSetup, job: store.JobInfo) -> dict:
     _update(db, job.id, progress=0.8)
     report_path = setup.reports_dir / f"job-{job.id}" / "report.json"
     path = setup.models_dir / f"job-{job.id}.model.json"
-    d.report = json.loads(json.dumps(d.report, default=_plain_value))
+    d.report = to_plain(d.report)
     _, figures = write_diagnosis(d, model, report_path, {
         "campaign": job.campaign_id, "poses": meas.n_poses, "readings": meas.n_readings}, path,
         list_figures=True)
     return {"model": str(path), "report": str(report_path),
             "figures": [str(p) for p in figures]}
-
-
-def _plain_value(v):
-    return v.tolist() if hasattr(v, "tolist") else str(v)
 
 
 # --- in the service -----------------------------------------------------------------------------

@@ -92,6 +92,12 @@ def file_digest(path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
+def to_plain(obj):
+    """A JSON-safe copy: numpy scalars and arrays become Python numbers and lists, anything else
+    unknown its text."""
+    return json.loads(json.dumps(obj, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)))
+
+
 def write_json_atomic(path, obj) -> None:
     """Write JSON through a temporary file so a crash never leaves half a file."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
