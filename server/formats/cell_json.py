@@ -155,7 +155,7 @@ def _devices(doc: JsonDoc, value) -> Devices:
     if not _is_host(host):
         raise doc.error((*at, "host"), f"{host!r} is not a host name or IP address")
     host = host[1:-1] if host.startswith("[") else host  # a socket wants IPv6 bare
-    port = _integer(doc, doc.require(tracker, "port", at), (*at, "port"), 1, 65535)
+    port = doc.integer(doc.require(tracker, "port", at), (*at, "port"), 1, 65535)
     t_timeout = _timeout(doc, tracker, at)
     at = ("devices", "controller")
     controller = doc.object(doc.require(value, "controller", ("devices",)), at,
@@ -163,7 +163,7 @@ def _devices(doc: JsonDoc, value) -> Devices:
     url = _controller_url(doc, doc.require(controller, "url", at), (*at, "url"))
     baudrate = DEFAULT_BAUDRATE
     if "baudrate" in controller:
-        baudrate = _integer(doc, controller["baudrate"], (*at, "baudrate"), 50, 4_000_000)
+        baudrate = doc.integer(controller["baudrate"], (*at, "baudrate"), 50, 4_000_000)
     return Devices(host, port, url, t_timeout, _timeout(doc, controller, at), baudrate)
 
 
@@ -191,13 +191,6 @@ def _is_host(host: str) -> bool:
         return True
     except ValueError:
         return bool(HOST_NAME.fullmatch(host))
-
-
-def _integer(doc: JsonDoc, value, at: tuple, lo: int, hi: int) -> int:
-    x = doc.number(value, at)
-    if x != int(x) or not lo <= x <= hi:
-        raise doc.error(at, f"{value} must be an integer in {lo}..{hi}")
-    return int(x)
 
 
 def _timeout(doc: JsonDoc, obj: dict, at: tuple) -> float:

@@ -113,6 +113,12 @@ class JsonDoc:
             raise self.error(at, f"{value} is below the minimum {minimum:g}")
         return x
 
+    def integer(self, value, at: tuple, lo: int, hi: int) -> int:
+        x = self.number(value, at)
+        if x != int(x) or not lo <= x <= hi:
+            raise self.error(at, f"{value} must be an integer in {lo}..{hi}")
+        return int(x)
+
     def string(self, value, at: tuple) -> str:
         if not isinstance(value, str) or not value.strip():
             raise self.error(at, f"expected a non-empty string, got {_kind(value)}")
