@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import identifiability as ident
-from .identify import SumOfSquares, fit_targets, pose_fit, pose_residuals, pose_weight, register
+from .identify import fit_targets, pose_fit, pose_residuals, pose_weight, register, start_fit
 from .kinematics import Layout, predict_with_jacobian
 from .minimax import minimax
 from .robot import Robot
@@ -68,11 +68,13 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
     name, rows = parse_method(method, list(target_names))
     if name == "ls-pose" and len(target_names) < 3:
         raise ValueError("ls-pose needs at least three targets")
-    prob, x0 = register(robot, targets, target_names, q, meas, base_guess, refine=name == "nominal")
-    lay = prob.layout
     if name == "nominal":
+        prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
         F = prob.sum_squares(x0)
-        return Calibration(method, lay, x0, {}, float("nan"), F, time.perf_counter() - t0, 0)
+        return Calibration(method, prob.layout, x0, {}, float("nan"), F, time.perf_counter() - t0, 0)
+    # which parameters the model can identify does not depend on where the base is
+    lay = Layout(robot, np.eye(4), tuple(target_names))
+    x0 = lay.initial(targets)
     candidates = np.ones(lay.n_params, dtype=bool)
     ts = lay.target_slice.start
     for k in range(len(target_names)):
@@ -82,6 +84,8 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
     st = ident.structural(lay, x0, candidates, rows=rows, pose_weight=weight)
     details: dict = {"structural_condition": st.condition}
     if name == "ls-pose":
+        prob, x0 = register(robot, targets, target_names, q, meas, base_guess, refine=False)
+        lay = prob.layout
         full = np.all(prob.mask, axis=1)
         p, J, _ = predict_with_jacobian(lay, x0, q[full])
         Jd = pose_residuals(p, p, J, weight)[1].reshape(-1, lay.n_params)
@@ -91,11 +95,12 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
         x = fit_targets(prob, x, range(len(target_names)))
         details["pose_weight_mm_per_rad"] = weight
     else:
-        fit = SumOfSquares(prob, x0, st.free, rows=rows)
-        first = fit.normal()  # checks the data and starts the fit
+        fit, first = start_fit(robot, targets, target_names, q, meas, st.free, rows, base_guess)
+        prob = fit.prob
         cond = ident.check_data(first.A, st.free, lay.names(), 3 * int(fit.mask.sum()),
                                 prob.q.shape[0])
         x, res = fit.fit(first)
+        details["start"] = fit.start
         if name == "ls-single":
             x = fit_targets(prob, x, [k for k in range(len(target_names)) if k not in rows])
     iters = res.iterations

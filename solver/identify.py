@@ -6,21 +6,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from .kinematics import Layout, predict, predict_rows
-from .lm import Normal, levenberg_marquardt
+from .lm import Normal, damped_step, levenberg_marquardt, scaled
 from .normal import PointNormal
+from .rigid import kabsch
 from .robot import Robot
-
-
-def kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """The rigid 4x4 transform T minimising sum ||T src - dst||^2 (points as rows)."""
-    cs, cd = src.mean(axis=0), dst.mean(axis=0)
-    U, _, Vt = np.linalg.svd((src - cs).T @ (dst - cd))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    R = Vt.T @ D @ U.T
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = cd - R @ cs
-    return T
 
 
 @dataclass
@@ -51,6 +40,16 @@ class Problem:
 
 # The closed-form start needs no more poses than this (spread evenly over the campaign).
 REGISTER_POSES = 32
+# On large campaigns the fits' first step is taken on about this many poses: it only has to
+# land near the minimum, where the Jacobian of all the data is then taken once.
+START_POSES = 64
+# A first step is only taken on a subset of the poses that identifies the free parameters this well.
+START_CONDITION = 1e6
+
+
+def spread(m: int, n: int) -> slice:
+    """At most n of m poses, evenly spread over the campaign."""
+    return slice(None, None, -(-m // n))
 
 
 def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None, refine=True):
@@ -64,7 +63,7 @@ def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None,
     targets = np.asarray(targets, dtype=float)
     if base_guess is None:
         lay0 = Layout(robot, np.eye(4), tuple(names))
-        some = slice(None, None, -(-len(q) // REGISTER_POSES))  # evenly spread
+        some = spread(len(q), REGISTER_POSES)
         nominal = predict(lay0, lay0.initial(targets), np.asarray(q)[some])
         ok = np.all(np.isfinite(meas[some]), axis=-1)
         base_guess = kabsch(nominal[ok], meas[some][ok])
@@ -83,17 +82,25 @@ def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None,
 NEAR_RAD, NEAR_MM = 1e-4, 0.1
 
 
+def selected(mask: np.ndarray, rows=None) -> np.ndarray:
+    """The readings of mask (m, K) on the targets in rows (default all)."""
+    if rows is None:
+        return mask
+    sel = np.zeros(mask.shape[1], dtype=bool)
+    sel[list(rows)] = True
+    return mask & sel[None, :]
+
+
 class SumOfSquares:
     """ls-sum on the selected targets (eq. 6 summed) over the free entries of x."""
 
-    def __init__(self, prob: Problem, x0, free, rows=None):
-        K = prob.meas.shape[1]
-        sel = np.zeros(K, dtype=bool)
-        sel[list(range(K)) if rows is None else rows] = True
-        self.mask = prob.mask & sel[None, :]
+    def __init__(self, prob: Problem, x0, free, rows=None, points: PointNormal | None = None):
+        self.prob = prob
+        self.mask = selected(prob.mask, rows)
         self.idx = np.flatnonzero(free)
         self.x0 = np.array(x0, dtype=float)
-        self.points = PointNormal(prob.layout, prob.q, self.mask, prob.meas, self.idx)
+        self.points = points or PointNormal(prob.layout, prob.q, self.mask, prob.meas, self.idx)
+        self.start: dict = {}  # how start_fit chose x0: poses of its first step, whether it stepped
         kinds = {op.param: op.kind for op in prob.layout.ops()}
         self.angle = np.array([kinds.get(int(i)) == "r" for i in self.idx], dtype=bool)
 
@@ -122,6 +129,38 @@ class SumOfSquares:
                                   residual=lambda z: self.points.residual(self.full(z)),
                                   max_iter=max_iter, near=self.near)
         return self.full(res.x), res
+
+
+def start_fit(robot: Robot, targets, names, q, meas, free, rows=None, base_guess=None):
+    """ls-sum on the selected targets started from the data alone: (SumOfSquares, normal equations at its start).
+
+    One pass down the chain yields both the closed-form base (unless base_guess is given) and
+    the normal equations at the nominal model. Up to 2 x START_POSES poses, that pass covers the
+    campaign and the fit starts there. On larger campaigns it covers START_POSES spread poses,
+    the fit starts after their Gauss-Newton step, and the normal equations of all the data are
+    taken once, there.
+    """
+    q, meas = np.asarray(q, dtype=float), np.asarray(meas, dtype=float)
+    lay = Layout(robot, np.eye(4) if base_guess is None else np.asarray(base_guess, float), tuple(names))
+    x0 = lay.initial(targets)
+    mask = selected(np.all(np.isfinite(meas), axis=-1), rows)
+    few = len(q) <= 2 * START_POSES  # where a subset would save little
+    sub = slice(None) if few else spread(len(q), START_POSES)
+    points = PointNormal(lay, q[sub], mask[sub], meas[sub], np.flatnonzero(free))
+    ne = points(x0) if base_guess is not None else points.register(x0)
+    prob = Problem(points.layout, q, meas)
+    if few:
+        fit = SumOfSquares(prob, x0, free, rows, points=points)
+        fit.start = {"poses": len(q), "stepped": False}
+        return fit, ne
+    x1 = x0.copy()
+    w = np.linalg.eigvalsh(scaled(ne.A, ne.g)[0])
+    stepped = bool(w[0] > w[-1] / START_CONDITION ** 2)
+    if stepped:
+        x1[free] += damped_step(ne.A, ne.g)
+    fit = SumOfSquares(prob, x1, free, rows)
+    fit.start = {"poses": len(points.q), "stepped": stepped}
+    return fit, fit.normal()
 
 
 def least_squares_fit(prob: Problem, x0, free, rows=None, max_iter=100):

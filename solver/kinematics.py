@@ -50,6 +50,18 @@ def joint_ops(robot: Robot, first_param: int = 0) -> tuple[Op, ...]:
     return tuple(ops)
 
 
+@lru_cache(maxsize=64)
+def layout_shape(robot: Robot, target_names: tuple[str, ...]):
+    """A layout's geometric parameter count, parameter names and elementary motions (cached:
+    layouts are made for every fit and rebasing)."""
+    n_geo = len(robot.param_names())
+    names = tuple(robot.param_names() + list(BASE_NAMES)
+                  + [f"{t}_{c}" for t in target_names for c in "xyz"])
+    base = (Op("t", 0, n_geo), Op("t", 1, n_geo + 1), Op("t", 2, n_geo + 2),
+            Op("r", 2, n_geo + 3), Op("r", 1, n_geo + 4), Op("r", 0, n_geo + 5))
+    return n_geo, names, base + joint_ops(robot)
+
+
 @dataclass(frozen=True)
 class Layout:
     """Index map of the identification vector x = [geometry, base (6), targets (3K)].
@@ -64,7 +76,7 @@ class Layout:
 
     @cached_property
     def n_geo(self) -> int:
-        return len(self.robot.param_names())
+        return self._shape[0]
 
     @property
     def base_slice(self) -> slice:
@@ -78,23 +90,15 @@ class Layout:
     def n_params(self) -> int:
         return self.n_geo + 6 + 3 * len(self.target_names)
 
+    @cached_property
+    def _shape(self):
+        return layout_shape(self.robot, self.target_names)
+
     def names(self) -> tuple[str, ...]:
-        return self._names
-
-    @cached_property
-    def _names(self) -> tuple[str, ...]:
-        tnames = [f"{t}_{c}" for t in self.target_names for c in "xyz"]
-        return tuple(self.robot.param_names() + list(BASE_NAMES) + tnames)
-
-    @cached_property
-    def _ops(self) -> tuple[Op, ...]:
-        b = self.n_geo
-        base = [Op("t", 0, b), Op("t", 1, b + 1), Op("t", 2, b + 2),
-                Op("r", 2, b + 3), Op("r", 1, b + 4), Op("r", 0, b + 5)]
-        return tuple(base) + joint_ops(self.robot)
+        return self._shape[1]
 
     def ops(self) -> tuple[Op, ...]:
-        return self._ops
+        return self._shape[2]
 
     def pack(self, geometry, base_delta, targets) -> np.ndarray:
         return np.concatenate([geometry, base_delta, np.asarray(targets, float).ravel()])

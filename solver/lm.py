@@ -61,6 +61,23 @@ def from_jacobian(fun):
     return normal
 
 
+# The damping Levenberg-Marquardt starts with, relative to the Jacobi-scaled J'J.
+LAMBDA0 = 1e-5
+
+
+def scaled(A: np.ndarray, g: np.ndarray):
+    """J'J and J'r with the columns of J scaled to unit norm: (As, gs, column norms)."""
+    d = np.sqrt(np.diag(A))
+    d[d == 0] = 1.0
+    return A / np.outer(d, d), g / d, d
+
+
+def damped_step(A: np.ndarray, g: np.ndarray, lam: float = LAMBDA0) -> np.ndarray:
+    """The Levenberg-Marquardt step -(A + lam diag(A))^-1 g."""
+    As, gs, d = scaled(A, g)
+    return -np.linalg.solve(As + lam * np.eye(len(d)), gs) / d
+
+
 def near_by_cost(cost_at_jacobian: float, cost: float) -> bool:
     """Default test that a Jacobian taken where the cost was cost_at_jacobian still holds now."""
     return cost_at_jacobian - cost <= NEAR * cost_at_jacobian
@@ -85,16 +102,14 @@ def levenberg_marquardt(fun, x0, residual=None, max_iter=100, ftol=1e-8, xtol=1e
     at = (x, cost)  # where the Jacobian in use was taken, and the cost there
     chords = 0  # steps taken on it since
     nfev = njev = 1
-    lam, message, it, r = 1e-5, "iteration limit reached", 0, None
+    lam, message, it, r = LAMBDA0, "iteration limit reached", 0, None
 
     def holds() -> bool:
         return chords == 0 or (near(at[0], x) if near else near_by_cost(at[1], cost))
 
     for it in range(1, max_iter + 1):
         A, g = ne.A, ne.g
-        d = np.sqrt(np.diag(A))
-        d[d == 0] = 1.0
-        As, gs = A / np.outer(d, d), g / d
+        As, gs, d = scaled(A, g)
         while True:
             fresh_ne = None
             try:

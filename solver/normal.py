@@ -14,11 +14,14 @@ the SMR frame's pose. Arrays are pose-last (..., m) so every step is a long vect
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.linalg.blas import dsyrk
 
-from .kinematics import Layout, _amounts, predict
+from .kinematics import Layout, predict
 from .lm import Normal
+from .rigid import kabsch
 
 PAIRS = ((1, 2), (2, 0), (0, 1))  # (i1, i2) with e_a = e_i1 x e_i2
 
@@ -29,48 +32,61 @@ for _a, (_b, _c) in enumerate(PAIRS):
 
 
 def _pass(ops, x, q, where: dict, M: np.ndarray, U: np.ndarray | None) -> None:
-    """Prepend ops (walked from the last) to the frame M (3, 4, m) in place, recording twists in U."""
+    """Prepend ops (walked from the last) to the frame M (3, 4, m) in place, recording twists in U.
+
+    At a hundred poses every numpy call costs more than its arithmetic, so the joints' sines and
+    cosines are taken in one call each and constant amounts stay Python floats.
+    """
     m = M.shape[2]
-    r1, tmp = np.empty((4, m)), np.empty((3, m))
+    t1, t2 = np.empty((4, m)), np.empty((4, m))
+    xs = np.asarray(x, dtype=float).tolist()
+    moving = [op for op in ops if op.joint >= 0]
+    if moving:
+        amount = q.T[[op.joint for op in moving]] + np.array([xs[op.param] for op in moving])[:, None]
+        cos, sin = np.cos(amount), np.sin(amount)
+        row = {id(op): i for i, op in enumerate(moving)}
     for op in reversed(ops):
-        j = where.get(op.param, -1)
         a = op.axis
-        if j >= 0:
+        if U is not None and (j := where.get(op.param, -1)) >= 0:
             if op.kind == "t":
-                U[:3, j] = M[a, :3]
-                U[3:, j] = 0.0
+                U[j, :3] = M[a, :3]
+                U[j, 3:] = 0.0
             else:
                 i1, i2 = PAIRS[a]
-                U[3:, j] = M[a, :3]
-                np.multiply(M[i1, 3], M[i2, :3], out=U[:3, j])
-                np.multiply(M[i2, 3], M[i1, :3], out=tmp)
-                U[:3, j] -= tmp
-        v = _amounts(op, x, q, None)
+                U[j, 3:] = M[a, :3]
+                np.multiply(M[i1, 3], M[i2, :3], out=U[j, :3])
+                np.multiply(M[i2, 3], M[i1, :3], out=t1[:3])
+                U[j, :3] -= t1[:3]
         if op.kind == "t":
-            M[a, 3] += v
+            M[a, 3] += amount[row[id(op)]] if op.joint >= 0 else xs[op.param]
+            continue
+        if op.joint >= 0:
+            c, s = cos[row[id(op)]], sin[row[id(op)]]
         else:
-            c, s = np.cos(v), np.sin(v)
-            i1, i2 = PAIRS[a]
-            r1[:] = M[i1]
-            M[i1] *= c
-            M[i1] -= M[i2] * s
-            M[i2] *= c
-            M[i2] += r1 * s
+            c, s = math.cos(xs[op.param]), math.sin(xs[op.param])
+        i1, i2 = PAIRS[a]
+        M1, M2 = M[i1], M[i2]
+        np.multiply(M2, s, out=t1)
+        np.multiply(M1, s, out=t2)
+        M1 *= c
+        M1 -= t1
+        M2 *= c
+        M2 += t2
 
 
 def flange_twists(layout: Layout, x, q, cols, start: np.ndarray, extra: int = 0, arm=None):
     """The pose of a flange-fixed frame and its twists per unit of each parameter in cols.
 
     start (3, 4): that frame in flange coordinates. Returns M (3, 4, m), the frame-to-tracker
-    transform [R | o] for every pose, and U (6, len(cols) + extra, m): per column the frame's
-    linear (rows 0-2) and angular (rows 3-5) velocity in its own coordinates (the last `extra`
-    columns are left for the caller). cols must be geometric or base entries of x. arm: the
+    transform [R | o] for every pose, and U (len(cols) + extra, 6, m): per column the frame's
+    linear (0-2) and angular (3-5) velocity in its own coordinates (the last `extra` rows are
+    left for the caller). cols must be geometric or base entries of x. arm: the
     flange in the base_ref frame (3, 4, m) when cols hold no geometric entry and it is known.
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
     m = q.shape[0]
     where = {int(c): j for j, c in enumerate(cols)}
-    U = np.empty((6, len(where) + extra, m))
+    U = np.empty((len(where) + extra, 6, m))
     ops = layout.ops()
     if arm is None:
         M = np.empty((3, 4, m))
@@ -174,32 +190,62 @@ class PointNormal:
         return (p[self.mask] - self.meas_rows).ravel()
 
     def __call__(self, x) -> Normal:
-        lay, ng = self.layout, len(self.gcols)
-        t = lay.targets(x)
-        start, tc = smr_frame(t)
-        M, U = flange_twists(lay, x, self.q, self.gcols, start, extra=1, arm=self.arm(x))
+        start, tc = smr_frame(self.layout.targets(x))
+        M, U = flange_twists(self.layout, x, self.q, self.gcols, start, extra=1, arm=self.arm(x))
+        return self._assemble(start, tc, M, U)
+
+    def register(self, x) -> Normal:
+        """Move base_ref so that x's prediction best fits the readings (closed form); the normal equations there.
+
+        The twists are taken in the SMR frame, so they do not depend on base_ref: one pass down
+        the chain serves both the registration and the normal equations.
+        """
+        start, tc = smr_frame(self.layout.targets(x))
+        M, U = flange_twists(self.layout, x, self.q, self.gcols, start, extra=1, arm=self.arm(x))
+        p = np.einsum("ijm,kj->ikm", M[:, :3], tc) + M[:, 3, None, :]
+        on = self.mask.T
+        T = kabsch(p[:, on].T, self.meas_t[:, on].T)
+        M = np.einsum("ij,jkm->ikm", T[:3, :3], M)
+        M[:, 3] += T[:3, 3, None]
+        lay = self.layout
+        self.layout = Layout(lay.robot, T @ lay.base_ref, lay.target_names)
+        return self._assemble(start, tc, M, U)
+
+    def _assemble(self, start, tc, M, U) -> Normal:
+        """J'J, J'r and the cost from the SMR frame's poses M and its twists U (see flange_twists).
+
+        U is scaled in place by the square root of the full pose weight (diagonal in the SMR
+        frame), which turns the poses with every reading into one rank-k update; its last row
+        takes b / sqrt(weight) for J'r.
+        """
+        ng = len(self.gcols)
         R = M[:, :3]
         p = np.einsum("ijm,kj->ikm", R, tc) + M[:, 3, None, :]
         r = (p - self.meas_t) * self.w  # (3, K, m), zero where missing
         rho = np.einsum("ijm,ikm->jkm", R, r)  # in the SMR frame
-        b = _twist_sums(tc, rho)
+        root, inv = _root_weight(tc)
+        U[:ng] *= root[:, None]
+        b = _twist_sums(tc, rho) * inv[:, None]
+        U[ng] = b
         A, g = np.zeros((ng, ng)), np.zeros(ng)
-        Usum = np.zeros((len(tc), 6, ng))  # per SMR, sum of U over the poses that measured it
+        Usum = np.zeros((len(tc), 6, ng))  # per SMR, the sum of U over the poses that measured it
         if self.full.any():
-            Af, gf, Uf = _full_group(U, b, tc, self.full, ng)
-            A += Af
-            g += gf
-            Usum += Uf
+            Uf = U if self.full.all() else U[:, :, self.full]
+            C = dsyrk(1.0, Uf.reshape(ng + 1, -1).T, trans=1)  # fills the upper triangle only
+            C += C.T
+            C[np.diag_indices_from(C)] *= 0.5
+            A += C[:ng, :ng]
+            g += C[:ng, ng]
+            Usum += Uf[:ng].sum(axis=2).T * inv[:, None]
         for present, sel in self.partial:
-            Us = U[:, :ng, sel]
+            Us = U[:ng, :, sel]
             wv, V = np.linalg.eigh(_weight(tc[present]))
-            W = ((V * np.sqrt(np.clip(wv, 0.0, None))).T @ Us.reshape(6, -1)).reshape(6, ng, -1)
-            for i in range(6):
-                A += W[i] @ W[i].T
-                g += Us[i] @ b[i, sel]
-            Usum[present] += Us.sum(axis=2)
+            W = np.matmul((V * np.sqrt(np.clip(wv, 0.0, None))).T * inv, Us).reshape(ng, -1)
+            A += W @ W.T
+            g += Us.reshape(ng, -1) @ b[:, sel].ravel()
+            Usum[present] += Us.sum(axis=2).T * inv[:, None]
         A, g = self._with_targets(A, g, tc, start, Usum, rho)
-        return Normal(float(np.einsum("ikm,ikm->", r, r)), A, g, _Jt(self, tc, start, R, U))
+        return Normal(float(np.einsum("ikm,ikm->", r, r)), A, g, _Jt(self, tc, start, R, U[:ng], inv))
 
     def _with_targets(self, A, g, tc, start, Usum, rho):
         """Add the SMR columns (identity in the flange frame) and order as the caller's cols."""
@@ -226,26 +272,17 @@ class PointNormal:
         return (start[:, :3] @ rho.sum(axis=2))[self.tk_ax, self.tk_k]
 
 
-def _full_group(U, b, tc, sel, ng):
-    """A, g and per-row U sums of the poses with every reading: the weight is diagonal there.
+def _root_weight(tc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """sqrt of the diagonal weight sum_k A_k' A_k in the SMR frame, and its inverse (0 on dead rows).
 
-    One symmetric rank-k update per twist row i, with the row's U block extended by b_i / d_i,
-    gives d_i U_i U_i' and U_i b_i at once.
+    A rotation row is dead when every SMR lies on its axis: it moves no SMR in any pose.
     """
     tt = np.sum(tc * tc, axis=0)
-    d = np.array([len(tc), len(tc), len(tc), tt[1] + tt[2], tt[0] + tt[2], tt[0] + tt[1]], float)
+    K = float(len(tc))
+    d = np.array([K, K, K, tt[1] + tt[2], tt[0] + tt[2], tt[0] + tt[1]])
     live = d > 1e-12 * d.max()
-    Uf = U if sel.all() else U[:, :, sel]
-    bf = b if sel.all() else b[:, sel]
-    inv = np.divide(1.0, d, out=np.zeros(6), where=live)
-    Uf[:, ng] = bf * inv[:, None]
-    C = np.zeros((ng + 1, ng + 1))
-    for i in np.flatnonzero(live):
-        C = dsyrk(d[i], Uf[i, : ng + 1].T, beta=1.0, c=C, trans=1, overwrite_c=1)
-    C += C.T  # dsyrk filled the upper triangle only
-    C[np.diag_indices_from(C)] *= 0.5
-    sums = Uf[:, :ng].sum(axis=2) * live[:, None]  # a row without SMR spread carries nothing
-    return C[:ng, :ng], C[:ng, ng], np.broadcast_to(sums, (len(tc), 6, ng))
+    root = np.sqrt(d) * live
+    return root, np.divide(1.0, root, out=np.zeros(6), where=live)
 
 
 def _twist_sums(tc: np.ndarray, rho: np.ndarray) -> np.ndarray:
@@ -259,21 +296,18 @@ def _twist_sums(tc: np.ndarray, rho: np.ndarray) -> np.ndarray:
 class _Jt:
     """r' -> J'r' with the Jacobian of one evaluation."""
 
-    def __init__(self, normal: PointNormal, tc, start, R, U):
-        self.normal, self.tc, self.start, self.R, self.U = normal, tc, start, R, U
+    def __init__(self, normal: PointNormal, tc, start, R, U, inv):
+        self.normal, self.tc, self.start, self.R, self.U, self.inv = normal, tc, start, R, U, inv
 
     def __call__(self, res: np.ndarray) -> np.ndarray:
         nm = self.normal
         m, K = nm.mask.shape
+        r = np.zeros((3, K, m))  # pose-last, as the normal equations hold their residuals
         if nm.full.all():
-            r = res.reshape(m, K, 3)
+            r[:] = res.reshape(m, K, 3).T
         else:
-            r = np.zeros((m, K, 3))
-            r[nm.mask] = res.reshape(-1, 3)
-        rho = np.einsum("ijm,mki->jkm", self.R, r)
+            r.transpose(0, 2, 1)[:, nm.mask] = res.reshape(-1, 3).T
+        rho = np.einsum("ijm,ikm->jkm", self.R, r)
         b = _twist_sums(self.tc, rho)
-        ng = len(nm.gcols)
-        g = np.zeros(ng)
-        for i in range(6):
-            g += self.U[i, :ng] @ b[i]
+        g = self.U.reshape(len(self.U), -1) @ (b * self.inv[:, None]).ravel()  # U is scaled
         return np.concatenate([g, nm._target_gradient(self.start, rho)])[nm.perm]
