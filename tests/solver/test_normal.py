@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from solver.identify import SumOfSquares, register
+from solver.identify import SumOfSquares, register, start_fit
+from solver.identifiability import structural
 from solver.kinematics import Layout, predict, predict_rows
 from solver.lm import levenberg_marquardt
 from solver.normal import PointNormal
@@ -103,3 +104,37 @@ def test_levenberg_marquardt_with_explicit_jacobian_still_works():
     res = levenberg_marquardt(fun, [1.0, 1.0])
     np.testing.assert_allclose(res.x, [2.0, 1.3], atol=5e-3)
     assert res.message == "converged"
+
+
+def test_register_fits_the_base_in_the_same_pass_as_the_normal_equations():
+    lay, x, q, meas = _problem(PUMA_LIKE, 21, m=30, missing=0.2)
+    wrong = Layout(lay.robot, np.eye(4), lay.target_names)
+    mask = np.all(np.isfinite(meas), axis=-1)
+    cols = np.arange(wrong.n_params)
+    points = PointNormal(wrong, q, mask, meas, cols)
+    x = wrong.initial(lay.targets(x))  # the nominal model, as register() takes it
+    ne = points.register(x)
+    # the closed-form base of register() (30 poses: all of them) ...
+    prob, _ = register(lay.robot, lay.targets(x), lay.target_names, q, meas, refine=False)
+    np.testing.assert_allclose(points.layout.base_ref, prob.layout.base_ref, atol=1e-9)
+    # ... and the normal equations there, as the explicit Jacobian gives them
+    r, J = _explicit(points.layout, x, q, meas, cols)
+    np.testing.assert_allclose(ne.A, J @ J.T, atol=1e-10 * np.abs(J @ J.T).max())
+    np.testing.assert_allclose(ne.g, J @ r, atol=1e-10 * np.abs(J @ r).max())
+    assert ne.cost == pytest.approx(r @ r, rel=1e-10)
+
+
+@pytest.mark.parametrize("seed,missing", [(31, 0.0), (32, 0.15)])
+def test_a_first_step_on_spread_poses_reaches_the_minimum_of_all_the_data(seed, missing):
+    lay, x, q, meas = _problem(KUKA_LIKE, seed, m=400, missing=missing)
+    targets = lay.targets(x)
+    prob, x0 = register(KUKA_LIKE, targets, lay.target_names, q, meas, refine=False)
+    free = structural(prob.layout, x0, np.ones(prob.layout.n_params, dtype=bool)).free
+    fit, first = start_fit(KUKA_LIKE, targets, lay.target_names, q, meas, free)
+    assert fit.start == {"poses": 58, "stepped": True}  # every 7th pose
+    xs, res = fit.fit(first)
+    ref_x, ref = SumOfSquares(prob, x0, free).fit()
+    assert res.message == "converged" and res.njev <= 2
+    assert res.cost == pytest.approx(ref.cost, rel=1e-8)  # the fits stop at ftol 1e-8
+    # the same arm, base and SMRs, whatever base_ref each fit kept
+    np.testing.assert_allclose(predict(fit.prob.layout, xs, q), predict(prob.layout, ref_x, q), atol=1e-6)
