@@ -28,23 +28,48 @@ def _log(msg: str) -> None:
     print(f"[bench] {msg}", file=sys.stderr, flush=True)
 
 
+# ls-sum: ours runs this many times in a row between two runs of the reference.
+BURST = 5
+
+
 def _repeats(m: int) -> int:
-    """Timing repeats for m poses, ours and the reference alike: the best of many, since other
-    load on the machine only adds time and a millisecond run has a long tail."""
+    """Timing rounds for m poses: the best of many, since other load on the machine only adds
+    time and a millisecond run has a long tail (ls-sum: the reference runs once a round, ours
+    BURST times)."""
     return 200 if m <= 100 else 50 if m <= 1000 else 10
+
+
+def _in_turns(n: int, fns, bursts=None, budget_s: float = 60.0):
+    """Run the callables in turn, up to n rounds (fewer once budget_s is spent), each
+    bursts[i] times in a row per round (default once).
+
+    Returns per callable (fastest time, its result, fastest first run of a burst) and the
+    rounds. Taking turns makes the sides of a comparison see the same machine: a slow spell on
+    a shared host slows them all. A burst's first run follows the other callables, so its
+    caches are cold; the later ones run warm, as in a timing loop.
+    """
+    bursts = bursts or [1] * len(fns)
+    best = [[float("inf"), None, float("inf")] for _ in fns]
+    spent, runs = 0.0, 0
+    while runs < n and (runs == 0 or spent < budget_s):
+        for i, fn in enumerate(fns):
+            for k in range(bursts[i]):
+                t0 = time.perf_counter()
+                res = fn()
+                dt = time.perf_counter() - t0
+                spent += dt
+                if dt < best[i][0]:
+                    best[i][:2] = dt, res
+                if k == 0:
+                    best[i][2] = min(best[i][2], dt)
+        runs += 1
+    return [tuple(b) for b in best], runs
 
 
 def _best_of(n: int, fn, budget_s: float = 60.0):
     """Run fn up to n times (fewer once budget_s is spent); return (fastest time, its result, runs)."""
-    best, out, spent, runs = float("inf"), None, 0.0, 0
-    while runs < n and (runs == 0 or spent < budget_s):
-        t0 = time.perf_counter()
-        res = fn()
-        dt = time.perf_counter() - t0
-        spent, runs = spent + dt, runs + 1
-        if dt < best:
-            best, out = dt, res
-    return best, out, runs
+    ((secs, out, _),), runs = _in_turns(n, [fn], budget_s=budget_s)
+    return secs, out, runs
 
 
 def _campaign(cell, m: int, seed: int):
@@ -71,20 +96,32 @@ def _setup(robot, targets, names, q, xyz):
     return prob, x0, st.free
 
 
-def _ours(robot, targets, names, q, xyz, m: int, repeats: int) -> dict:
-    """Wall time, objectives and effort of calibrate(): ls-sum, minimax, minimax with the exact QP."""
+def _ours(robot, targets, names, q, xyz, m: int, repeats: int, reference_ls=None):
+    """Wall time, objectives and effort of calibrate(): ls-sum, minimax, minimax with the exact QP.
+
+    reference_ls: the reference's ls-sum run, timed in turn with ours; returns (ours, its best
+    run's result or None).
+    """
     calibrate(robot, targets, names, q, xyz, method="ls-sum")  # untimed warm-up: a first large run is slower
-    out = {}
+    out, ref = {}, None
     for key, (method, qp) in OURS.items():
-        secs, cal, n = _best_of(repeats if method == "ls-sum" else max(1, repeats // 10),
-                                lambda: calibrate(robot, targets, names, q, xyz, method=method, qp=qp))
+        def ours():
+            return calibrate(robot, targets, names, q, xyz, method=method, qp=qp)
+
+        if method == "ls-sum":
+            # with the fit alone on the registered problem, to set against the reference's solve stage
+            prob, x0, free = _setup(robot, targets, names, q, xyz)
+            fns = [ours, lambda: least_squares_fit(prob, x0, free)] + ([reference_ls] if reference_ls else [])
+            best, n = _in_turns(repeats, fns, [BURST, BURST, 1][: len(fns)])
+            (secs, cal, cold), (solve, _, _) = best[:2]
+            ref = best[2][1] if reference_ls else None
+        else:
+            secs, cal, n = _best_of(max(1, repeats // 10), ours)
         r = {"seconds": secs, "repeats": n, "calibrate_seconds": cal.seconds, "F": cal.F.tolist(),
              "free_parameters": int(len(cal.x) - len(cal.fixed)), "iterations": cal.iterations}
         if method == "ls-sum":
-            # the fit alone on the registered problem, to set against the reference's solve stage
-            prob, x0, free = _setup(robot, targets, names, q, xyz)
-            r["solve_seconds"], *_ = _best_of(repeats, lambda: least_squares_fit(prob, x0, free))
-            r["objective"] = float(cal.F.sum())
+            r.update(solve_seconds=solve, objective=float(cal.F.sum()), repeats=n * BURST,
+                     first_of_burst_seconds=cold)
         else:
             d = cal.details
             r.update(objective=float(cal.F.max()), sqp_seconds=d["sqp_seconds"],
@@ -93,7 +130,7 @@ def _ours(robot, targets, names, q, xyz, m: int, repeats: int) -> dict:
         out[key] = r
         _log(f"  ours {key}: {secs * 1000:.1f} ms, objective {r['objective']:.6g} mm^2, "
              f"{cal.iterations} iterations")
-    return out
+    return out, ref
 
 
 class _Counted:
@@ -172,21 +209,23 @@ def _reference_minimax(prob, x_ls, free, jac) -> tuple[np.ndarray, dict]:
                "max_constraint_violation_mm2": _violation(lay.targets(x), prob.meas)}
 
 
-def _reference(robot, targets, names, q, xyz, m: int, repeats: int) -> dict:
-    """The same ls-sum and minimax problems solved by scipy.optimize with finite differences."""
+def _reference_ls_run(robot, targets, names, q, xyz):
+    """One run of the reference ls-sum, set-up included: (figures, (problem, x, free, Jacobian))."""
+    t0 = time.perf_counter()
+    prob, x0, free = _setup(robot, targets, names, q, xyz)
+    secs = time.perf_counter() - t0
+    x_ls, ls, jac = _reference_ls(prob, x0, free)
+    ls["setup_seconds"], ls["seconds"] = secs, secs + ls["solve_seconds"]
+    return ls, (prob, x_ls, free, jac)
 
-    def run_ls():
-        t0 = time.perf_counter()
-        prob, x0, free = _setup(robot, targets, names, q, xyz)
-        secs = time.perf_counter() - t0
-        x_ls, ls, jac = _reference_ls(prob, x0, free)
-        ls["setup_seconds"], ls["seconds"] = secs, secs + ls["solve_seconds"]
-        return ls, (prob, x_ls, free, jac)
 
-    # ls-sum: the best of as many runs as ours (within a time budget); minimax (SLSQP, far
-    # slower): the best of up to three runs while they are quick
-    _, (ls, (prob, x_ls, free, jac)), ls_runs = _best_of(repeats, run_ls)
-    ls["repeats"] = ls_runs
+def _reference(m: int, ls_run, repeats: int) -> dict:
+    """The same ls-sum and minimax problems solved by scipy.optimize with finite differences.
+
+    ls_run: the fastest of the reference's ls-sum runs, timed in turn with ours (see _ours).
+    """
+    ls, (prob, x_ls, free, jac) = ls_run
+    ls["repeats"] = repeats
 
     def run_mm():
         _, mm = _reference_minimax(prob, x_ls, free, jac)
@@ -261,11 +300,13 @@ def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=100
         meas = _campaign(cell, int(m), seed)
         _log(f"{m} poses x {len(names)} SMRs ({meas.n_readings} readings)")
         n = repeats or _repeats(m)
-        ours = _ours(cell.robot, targets, meas.target_names, meas.q, meas.xyz, m, n)
+        args = (cell.robot, targets, meas.target_names, meas.q, meas.xyz)
+        with_ref = reference and m <= reference_max
+        ours, ls_run = _ours(*args, m, n, (lambda: _reference_ls_run(*args)) if with_ref else None)
         entry = {"poses": int(m), "readings": meas.n_readings, "ours": ours,
                  "ours_seconds_per_pose": {k: v["seconds"] / m for k, v in ours.items()}}
-        if reference and m <= reference_max:
-            entry["reference"] = _reference(cell.robot, targets, meas.target_names, meas.q, meas.xyz, m, n)
+        if with_ref:
+            entry["reference"] = _reference(m, ls_run, ours["ls_sum"]["repeats"] // BURST)
             entry["comparison"] = _compare(ours, entry["reference"])
             _log("  speedup " + ", ".join(f"{k} {v:.1f}x"
                                           for k, v in entry["comparison"]["speedup"].items()))

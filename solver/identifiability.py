@@ -165,8 +165,8 @@ def check_data(A: np.ndarray, free: np.ndarray, names, n_rows: int, n_poses: int
             f"{n_poses} poses give {n_rows} equations for {len(idx)} parameters: "
             f"measure at least {int(np.ceil(len(idx) / max(1, n_rows // max(n_poses, 1))))} poses")
     norms = np.sqrt(np.diag(A))
-    dead = [names[i] for i, n in zip(idx, norms) if n == 0]
-    if dead:
+    if not norms.all():
+        dead = [names[i] for i, n in zip(idx, norms) if n == 0]
         raise NotIdentifiable("the data does not move with: " + ", ".join(dead))
     As = A / np.outer(norms, norms)
     s = np.sqrt(np.clip(np.linalg.eigvalsh(As)[::-1], 0.0, None))

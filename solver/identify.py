@@ -100,7 +100,7 @@ class SumOfSquares:
         self.idx = np.flatnonzero(free)
         self.x0 = np.array(x0, dtype=float)
         self.points = points or PointNormal(prob.layout, prob.q, self.mask, prob.meas, self.idx)
-        self.start: dict = {}  # how start_fit chose x0: poses of its first step, whether it stepped
+        self.start: dict = {}  # the poses of a first step on a subset, and whether it was taken
         kinds = {op.param: op.kind for op in prob.layout.ops()}
         self.angle = np.array([kinds.get(int(i)) == "r" for i in self.idx], dtype=bool)
 
@@ -123,8 +123,26 @@ class SumOfSquares:
         k = np.nonzero(self.mask)[1]
         return np.bincount(k, np.sum(r.reshape(-1, 3) ** 2, axis=1), minlength=self.mask.shape[1])
 
+    def step_from(self, ne: Normal) -> bool:
+        """Move the start by the Gauss-Newton step of ne, the normal equations of a subset of
+        the poses there, if they identify the free parameters well; whether it moved."""
+        w = np.linalg.eigvalsh(scaled(ne.A, ne.g)[0])
+        if w[0] <= w[-1] / START_CONDITION ** 2:
+            return False
+        self.x0[self.idx] += damped_step(ne.A, ne.g)
+        return True
+
     def fit(self, first: Normal | None = None, max_iter=100):
-        """Levenberg-Marquardt from the start; returns (x, LMResult)."""
+        """Levenberg-Marquardt from the start; returns (x, LMResult).
+
+        Without first, a large campaign's first step is taken on START_POSES spread poses.
+        """
+        m = len(self.mask)
+        if first is None and m > 2 * START_POSES:
+            sub = spread(m, START_POSES)
+            prob = self.prob
+            subset = PointNormal(prob.layout, prob.q[sub], self.mask[sub], prob.meas[sub], self.idx)
+            self.start = {"poses": len(subset.q), "stepped": self.step_from(subset(self.x0))}
         res = levenberg_marquardt(None, self.x0[self.idx], normal=self.normal, first=first,
                                   residual=lambda z: self.points.residual(self.full(z)),
                                   max_iter=max_iter, near=self.near)
@@ -153,13 +171,8 @@ def start_fit(robot: Robot, targets, names, q, meas, free, rows=None, base_guess
         fit = SumOfSquares(prob, x0, free, rows, points=points)
         fit.start = {"poses": len(q), "stepped": False}
         return fit, ne
-    x1 = x0.copy()
-    w = np.linalg.eigvalsh(scaled(ne.A, ne.g)[0])
-    stepped = bool(w[0] > w[-1] / START_CONDITION ** 2)
-    if stepped:
-        x1[free] += damped_step(ne.A, ne.g)
-    fit = SumOfSquares(prob, x1, free, rows)
-    fit.start = {"poses": len(points.q), "stepped": stepped}
+    fit = SumOfSquares(prob, x0, free, rows)
+    fit.start = {"poses": len(points.q), "stepped": fit.step_from(ne)}
     return fit, fit.normal()
 
 

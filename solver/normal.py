@@ -155,6 +155,7 @@ class PointNormal:
         self.gcols, self.tcols = cols[cols < ts], cols[cols >= ts]
         pos = {int(c): i for i, c in enumerate(np.concatenate([self.gcols, self.tcols]))}
         self.perm = np.array([pos[int(c)] for c in cols], dtype=int)
+        self.in_order = bool(np.all(self.perm == np.arange(len(cols))))
         self.meas_t = np.nan_to_num(np.asarray(meas, float)).transpose(2, 1, 0)  # (3, K, m)
         self.w = self.mask.T.astype(float)  # (K, m)
         K = self.mask.shape[1]
@@ -233,7 +234,7 @@ class PointNormal:
             Uf = U if self.full.all() else U[:, :, self.full]
             C = dsyrk(1.0, Uf.reshape(ng + 1, -1).T, trans=1)  # fills the upper triangle only
             C += C.T
-            C[np.diag_indices_from(C)] *= 0.5
+            C.flat[:: ng + 2] *= 0.5
             A += C[:ng, :ng]
             g += C[:ng, ng]
             Usum += Uf[:ng].sum(axis=2).T * inv[:, None]
@@ -264,6 +265,8 @@ class PointNormal:
         full[j, :ng] = rows[k, ax]
         gg[j] = self._target_gradient(start, rho)
         full[:ng, ng:] = full[ng:, :ng].T
+        if self.in_order:
+            return full, gg
         perm = self.perm
         return full[np.ix_(perm, perm)], gg[perm]
 
@@ -277,12 +280,11 @@ def _root_weight(tc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     A rotation row is dead when every SMR lies on its axis: it moves no SMR in any pose.
     """
-    tt = np.sum(tc * tc, axis=0)
+    x, y, z = np.sum(tc * tc, axis=0).tolist()
     K = float(len(tc))
-    d = np.array([K, K, K, tt[1] + tt[2], tt[0] + tt[2], tt[0] + tt[1]])
-    live = d > 1e-12 * d.max()
-    root = np.sqrt(d) * live
-    return root, np.divide(1.0, root, out=np.zeros(6), where=live)
+    d = [K, K, K, y + z, x + z, x + y]
+    root = [math.sqrt(v) if v > 1e-12 * max(d) else 0.0 for v in d]
+    return np.array(root), np.array([1.0 / v if v else 0.0 for v in root])
 
 
 def _twist_sums(tc: np.ndarray, rho: np.ndarray) -> np.ndarray:

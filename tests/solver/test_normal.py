@@ -133,8 +133,15 @@ def test_a_first_step_on_spread_poses_reaches_the_minimum_of_all_the_data(seed, 
     fit, first = start_fit(KUKA_LIKE, targets, lay.target_names, q, meas, free)
     assert fit.start == {"poses": 58, "stepped": True}  # every 7th pose
     xs, res = fit.fit(first)
-    ref_x, ref = SumOfSquares(prob, x0, free).fit()
+    whole = SumOfSquares(prob, x0, free)
+    ref_x, ref = whole.fit(whole.normal())  # normal equations of all the poses from the start
+    assert whole.start == {}
     assert res.message == "converged" and res.njev <= 2
     assert res.cost == pytest.approx(ref.cost, rel=1e-8)  # the fits stop at ftol 1e-8
     # the same arm, base and SMRs, whatever base_ref each fit kept
     np.testing.assert_allclose(predict(fit.prob.layout, xs, q), predict(prob.layout, ref_x, q), atol=1e-6)
+    # a fit on a registered problem takes the same first step by itself
+    again = SumOfSquares(prob, x0, free)
+    xa, ra = again.fit()
+    assert again.start == {"poses": 58, "stepped": True} and ra.njev <= 2
+    assert ra.cost == pytest.approx(ref.cost, rel=1e-8)
