@@ -318,5 +318,8 @@ def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=100
                                     "x_scale='jac')",
                           "minimax": "scipy.optimize.minimize(method='SLSQP') on the epigraph form, "
                                      "finite-difference derivatives, started from the reference ls-sum",
-                          "seconds": "register + structural + solve (ours: the whole calibrate() call)"},
+                          "seconds": "register + structural + solve (ours: the whole calibrate() call)",
+                          "timing": f"ls-sum: ours and the reference in turns, ours {BURST} times in a row "
+                                    "per reference run; the fastest of each side (first_of_burst_seconds: "
+                                    "ours' fastest run right after a reference run, caches cold)"},
             "sizes": results, **_goals(results)}

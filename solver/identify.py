@@ -168,9 +168,7 @@ def start_fit(robot: Robot, targets, names, q, meas, free, rows=None, base_guess
     ne = points(x0) if base_guess is not None else points.register(x0)
     prob = Problem(points.layout, q, meas)
     if few:
-        fit = SumOfSquares(prob, x0, free, rows, points=points)
-        fit.start = {"poses": len(q), "stepped": False}
-        return fit, ne
+        return SumOfSquares(prob, x0, free, rows, points=points), ne
     fit = SumOfSquares(prob, x0, free, rows)
     fit.start = {"poses": len(points.q), "stepped": fit.step_from(ne)}
     return fit, fit.normal()

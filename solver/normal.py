@@ -191,9 +191,13 @@ class PointNormal:
         return (p[self.mask] - self.meas_rows).ravel()
 
     def __call__(self, x) -> Normal:
+        return self._assemble(*self._twists(x))
+
+    def _twists(self, x):
+        """The SMR frame (in the flange, and the SMRs in it), its poses and twists at x."""
         start, tc = smr_frame(self.layout.targets(x))
         M, U = flange_twists(self.layout, x, self.q, self.gcols, start, extra=1, arm=self.arm(x))
-        return self._assemble(start, tc, M, U)
+        return start, tc, M, U
 
     def register(self, x) -> Normal:
         """Move base_ref so that x's prediction best fits the readings (closed form); the normal equations there.
@@ -201,8 +205,7 @@ class PointNormal:
         The twists are taken in the SMR frame, so they do not depend on base_ref: one pass down
         the chain serves both the registration and the normal equations.
         """
-        start, tc = smr_frame(self.layout.targets(x))
-        M, U = flange_twists(self.layout, x, self.q, self.gcols, start, extra=1, arm=self.arm(x))
+        start, tc, M, U = self._twists(x)
         p = np.einsum("ijm,kj->ikm", M[:, :3], tc) + M[:, 3, None, :]
         on = self.mask.T
         T = kabsch(p[:, on].T, self.meas_t[:, on].T)
