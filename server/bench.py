@@ -114,7 +114,9 @@ def _ours(robot, targets, names, q, xyz, m: int, repeats: int, reference_ls=None
             fns = [ours, lambda: least_squares_fit(prob, x0, free)] + ([reference_ls] if reference_ls else [])
             best, n = _in_turns(repeats, fns, [BURST, BURST, 1][: len(fns)])
             (secs, cal, cold), (solve, _, _) = best[:2]
-            ref = best[2][1] if reference_ls else None
+            if reference_ls:
+                ref = best[2][1]
+                ref[0]["repeats"] = n
         else:
             secs, cal, n = _best_of(max(1, repeats // 10), ours)
         r = {"seconds": secs, "repeats": n, "calibrate_seconds": cal.seconds, "F": cal.F.tolist(),
@@ -219,13 +221,12 @@ def _reference_ls_run(robot, targets, names, q, xyz):
     return ls, (prob, x_ls, free, jac)
 
 
-def _reference(m: int, ls_run, repeats: int) -> dict:
+def _reference(m: int, ls_run) -> dict:
     """The same ls-sum and minimax problems solved by scipy.optimize with finite differences.
 
     ls_run: the fastest of the reference's ls-sum runs, timed in turn with ours (see _ours).
     """
     ls, (prob, x_ls, free, jac) = ls_run
-    ls["repeats"] = repeats
 
     def run_mm():
         _, mm = _reference_minimax(prob, x_ls, free, jac)
@@ -306,7 +307,7 @@ def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=100
         entry = {"poses": int(m), "readings": meas.n_readings, "ours": ours,
                  "ours_seconds_per_pose": {k: v["seconds"] / m for k, v in ours.items()}}
         if with_ref:
-            entry["reference"] = _reference(m, ls_run, ours["ls_sum"]["repeats"] // BURST)
+            entry["reference"] = _reference(m, ls_run)
             entry["comparison"] = _compare(ours, entry["reference"])
             _log("  speedup " + ", ".join(f"{k} {v:.1f}x"
                                           for k, v in entry["comparison"]["speedup"].items()))

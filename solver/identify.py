@@ -52,6 +52,11 @@ def spread(m: int, n: int) -> slice:
     return slice(None, None, -(-m // n))
 
 
+def start_poses(m: int) -> slice | None:
+    """The poses a fit's first step is taken on, or None where a subset of m would save little."""
+    return spread(m, START_POSES) if m > 2 * START_POSES else None
+
+
 def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None, refine=True):
     """A problem and its start vector with the base found from the data (no user guess needed).
 
@@ -126,10 +131,11 @@ class SumOfSquares:
     def step_from(self, ne: Normal) -> bool:
         """Move the start by the Gauss-Newton step of ne, the normal equations of a subset of
         the poses there, if they identify the free parameters well; whether it moved."""
-        w = np.linalg.eigvalsh(scaled(ne.A, ne.g)[0])
+        As, gs, d = scaled(ne.A, ne.g)
+        w = np.linalg.eigvalsh(As)
         if w[0] <= w[-1] / START_CONDITION ** 2:
             return False
-        self.x0[self.idx] += damped_step(ne.A, ne.g)
+        self.x0[self.idx] += damped_step(As, gs, d)
         return True
 
     def fit(self, first: Normal | None = None, max_iter=100):
@@ -137,9 +143,8 @@ class SumOfSquares:
 
         Without first, a large campaign's first step is taken on START_POSES spread poses.
         """
-        m = len(self.mask)
-        if first is None and m > 2 * START_POSES:
-            sub = spread(m, START_POSES)
+        sub = start_poses(len(self.mask))
+        if first is None and sub is not None:
             prob = self.prob
             subset = PointNormal(prob.layout, prob.q[sub], self.mask[sub], prob.meas[sub], self.idx)
             self.start = {"poses": len(subset.q), "stepped": self.step_from(subset(self.x0))}
@@ -162,12 +167,12 @@ def start_fit(robot: Robot, targets, names, q, meas, free, rows=None, base_guess
     lay = Layout(robot, np.eye(4) if base_guess is None else np.asarray(base_guess, float), tuple(names))
     x0 = lay.initial(targets)
     mask = selected(np.all(np.isfinite(meas), axis=-1), rows)
-    few = len(q) <= 2 * START_POSES  # where a subset would save little
-    sub = slice(None) if few else spread(len(q), START_POSES)
-    points = PointNormal(lay, q[sub], mask[sub], meas[sub], np.flatnonzero(free))
+    sub = start_poses(len(q))
+    some = sub or slice(None)
+    points = PointNormal(lay, q[some], mask[some], meas[some], np.flatnonzero(free))
     ne = points(x0) if base_guess is not None else points.register(x0)
     prob = Problem(points.layout, q, meas)
-    if few:
+    if sub is None:
         return SumOfSquares(prob, x0, free, rows, points=points), ne
     fit = SumOfSquares(prob, x0, free, rows)
     fit.start = {"poses": len(points.q), "stepped": fit.step_from(ne)}

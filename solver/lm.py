@@ -72,9 +72,8 @@ def scaled(A: np.ndarray, g: np.ndarray):
     return A / np.outer(d, d), g / d, d
 
 
-def damped_step(A: np.ndarray, g: np.ndarray, lam: float = LAMBDA0) -> np.ndarray:
-    """The Levenberg-Marquardt step -(A + lam diag(A))^-1 g."""
-    As, gs, d = scaled(A, g)
+def damped_step(As: np.ndarray, gs: np.ndarray, d: np.ndarray, lam: float = LAMBDA0) -> np.ndarray:
+    """The Levenberg-Marquardt step -(A + lam diag(A))^-1 g from scaled(A, g)."""
     return -np.linalg.solve(As + lam * np.eye(len(d)), gs) / d
 
 
@@ -113,7 +112,7 @@ def levenberg_marquardt(fun, x0, residual=None, max_iter=100, ftol=1e-8, xtol=1e
         while True:
             fresh_ne = None
             try:
-                step = -np.linalg.solve(As + lam * np.eye(len(d)), gs) / d
+                step = damped_step(As, gs, d, lam)
             except np.linalg.LinAlgError:
                 lam *= 10.0
                 continue
