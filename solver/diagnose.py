@@ -38,6 +38,7 @@ class CV:
     maxerr: float
     exts: list  # extensions as fitted on all data (with coefficients)
     fits: dict = field(default_factory=dict)  # fold (or "all") -> (x, extensions) fitted there
+    resid: np.ndarray | None = None  # (m, K, 3) held-out residual (prediction - reading), NaN if missing
 
     @property
     def mse(self) -> float:
@@ -164,6 +165,7 @@ class Diagnoser:
         m = self.prob.q.shape[0]
         exts = self._with_shift_time(exts)
         sq, n = np.zeros(m), np.zeros(m)
+        resid = np.full(self.prob.meas.shape, np.nan)
         maxerr = 0.0
         fits = {}
         for f, test in enumerate(self.folds):
@@ -171,13 +173,14 @@ class Diagnoser:
             x, ee = self.fit(exts, train, fold=f)
             fits[f] = (x, ee)
             r = self.residuals(x, ee, test)
+            resid[test] = r
             e2 = np.sum(r * r, axis=-1)
             sq[test] = np.nansum(e2, axis=1)
             n[test] = np.sum(np.isfinite(e2), axis=1)
             maxerr = max(maxerr, float(np.sqrt(np.nanmax(e2))))
         x, ee = self.fit(exts)
         fits["all"] = (x, ee)
-        return CV(sq, n, maxerr, ee, fits)
+        return CV(sq, n, maxerr, ee, fits, resid)
 
     def scan_shift(self, others, poses) -> float:
         """The time of a base shift that best explains the training residuals (linearised).

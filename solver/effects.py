@@ -14,21 +14,28 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .kinematics import Layout, joint_frames
+from .motion import last_motion
 
 DOWN = np.array([0.0, 0.0, -1.0])  # gravity in a levelled tracker's frame
 
 
 @dataclass
 class Inputs:
-    """What extensions depend on, per pose and reading: joints, time, temperature."""
+    """What extensions depend on, per pose and reading: joints, time, temperature, last motion."""
 
     q: np.ndarray  # (m, n) rad
     time_s: np.ndarray | None = None  # (m, K)
     temp_c: np.ndarray | None = None  # (m, K)
+    # (m, n) sign of each joint's last move before the pose, from the whole campaign's order
+    motion: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.motion is None:
+            self.motion = last_motion(self.q, self.time_s)
 
     def subset(self, idx) -> Inputs:
         pick = lambda a: None if a is None else a[idx]  # noqa: E731
-        return Inputs(self.q[idx], pick(self.time_s), pick(self.temp_c))
+        return Inputs(self.q[idx], pick(self.time_s), pick(self.temp_c), self.motion[idx])
 
 
 @dataclass

@@ -51,8 +51,7 @@ def fit_extended(prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_
     starts from `start` (default x0) and from each extension's coef where it has one.
     """
     poses = np.arange(prob.q.shape[0]) if poses is None else np.asarray(poses)
-    sub = Inputs(inputs.q[poses], *(None if a is None else a[poses]
-                                    for a in (inputs.time_s, inputs.temp_c)))
+    sub = inputs.subset(poses)
     meas = prob.meas[poses]
     mask = np.all(np.isfinite(meas), axis=-1)
     y = meas[mask]

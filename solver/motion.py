@@ -1,0 +1,38 @@
+"""The direction of each joint's last motion before a pose, from the order the poses were visited."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def visit_order(time_s: np.ndarray | None, m: int) -> np.ndarray:
+    """Pose indices in the order visited: by each pose's first reading time, else the file order.
+
+    A pose without any time (or data without times) leaves the file order in force, since the
+    times cannot place it.
+    """
+    if time_s is None:
+        return np.arange(m)
+    t = np.asarray(time_s, dtype=float).reshape(m, -1)
+    ok = np.isfinite(t).any(axis=1)
+    if not ok.all():
+        return np.arange(m)
+    return np.argsort(np.nanmin(t, axis=1), kind="stable")
+
+
+def last_motion(q: np.ndarray, time_s: np.ndarray | None = None) -> np.ndarray:
+    """Per pose and joint (m, n): +1 or -1, the sign of the joint's last move before the pose.
+
+    A joint that did not move keeps the direction of its previous move; before its first move
+    (the first pose visited) the direction is unknown, 0.
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    m = q.shape[0]
+    order = visit_order(time_s, m)
+    step = np.sign(np.diff(q[order], axis=0))  # (m - 1, n)
+    seq = np.zeros_like(q)
+    for i in range(1, m):
+        seq[i] = np.where(step[i - 1] != 0, step[i - 1], seq[i - 1])
+    out = np.empty_like(seq)
+    out[order] = seq
+    return out
