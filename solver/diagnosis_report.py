@@ -36,9 +36,11 @@ def parameters(ext: Extension, basis: np.ndarray | None) -> dict:
     return {}
 
 
-def evidence(ext: Extension, p: dict, before: float, after: float, t: float, m: int) -> str:
+def evidence(ext: Extension, p: dict, before: float, after: float, decision: dict, m: int) -> str:
     """One sentence a person can check against the figure."""
-    gain = f"modelling it cuts the held-out RMS from {before:.4f} to {after:.4f} mm (paired t = {t:.1f} over {m} poses)"
+    gain = (f"modelling it cuts the held-out RMS from {before:.4f} to {after:.4f} mm over {m} poses "
+            f"(p = {decision['p_value']:.4f} against this campaign's own null, "
+            f"{decision['candidates']} candidates tried)")
     j = None if ext.joint is None else ext.joint + 1
     if ext.name == "joint_periodic":
         return (f"Joint {j}'s residual rotation follows {p['amplitude_deg'] * 1000:.1f} mdeg x "
@@ -69,7 +71,7 @@ def build_report(diag, steps, base, final, exts, x, floor, n_candidates):
     layout, inputs = diag.prob.layout, diag.inputs
     m = diag.prob.q.shape[0]
     effects, params = [], []
-    for (_, before, after, t), fitted in zip(steps, exts):
+    for (_, before, after, decision), fitted in zip(steps, exts):
         basis = joint_basis(fitted, layout, diag.x0, inputs) if fitted.is_joint else None
         p = parameters(fitted, basis)
         params.append(p)
@@ -80,10 +82,12 @@ def build_report(diag, steps, base, final, exts, x, floor, n_candidates):
             e["harmonic"] = fitted.harmonic
         if fitted.name == "base_shift":
             e["at_s"] = fitted.at_s
-        e.update(evidence=evidence(fitted, p, before.rmse, after.rmse, t, m),
+        e.update(evidence=evidence(fitted, p, before.rmse, after.rmse, decision, m),
                  holdout_rmse_before_mm=before.rmse, holdout_rmse_after_mm=after.rmse,
                  holdout_max_before_mm=before.maxerr, holdout_max_after_mm=after.maxerr,
-                 paired_t=t, parameters=p)
+                 holdout_gain_interval_mm=list(decision["holdout_gain_interval_mm"]),
+                 significance={k: decision[k] for k in ("z", "threshold", "p_value")},
+                 alternatives=decision["alternatives"], parameters=p)
         effects.append(e)
     effects.sort(key=lambda e: e["holdout_rmse_after_mm"] - e["holdout_rmse_before_mm"])
     return params, {

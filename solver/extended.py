@@ -27,7 +27,7 @@ def predict_extended(layout: Layout, x, exts, inputs: Inputs, bases=None) -> np.
     return p + moved
 
 
-def _rows(layout, x, exts, bases, inputs, mask, idx):
+def extension_rows(layout, x, exts, bases, inputs, mask, idx):
     """Predicted readings (N, 3) and the transposed Jacobian over [x[idx], every coef] (P, N, 3)."""
     dq = joint_offsets(exts, bases, layout.robot.n_joints)
     p, Jt, Jq = predict_rows(layout, x, inputs.q, mask, idx, dq=dq, joint_cols=True)
@@ -74,7 +74,7 @@ def fit_extended(prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_
 
     def fun(z):
         xx, ee = unpack(z)
-        p, Jt = _rows(layout, xx, ee, bases, sub, mask, idx)
+        p, Jt = extension_rows(layout, xx, ee, bases, sub, mask, idx)
         return (p - y).ravel(), Jt.reshape(Jt.shape[0], -1)
 
     def residual(z):
