@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import identifiability as ident
-from .effects import Extension, Inputs, gravity_basis, gravity_in_base, select_independent
+from . import vocabulary
+from .effects import Extension, Inputs
 from .extended import fit_extended, predict_extended
 from .identify import Problem, register
 from .kinematics import predict_rows
@@ -94,26 +95,7 @@ def folds(m: int, k: int = FOLDS, seed: int = 0) -> list[np.ndarray]:
 
 def candidates(layout, x, inputs: Inputs) -> list[Extension]:
     """Every effect of the vocabulary that this data could show, per joint and harmonic."""
-    n = layout.robot.n_joints
-    out = []
-    for j in range(n):
-        out += [Extension("joint_periodic", joint=j, harmonic=1),
-                Extension("joint_periodic", joint=j, harmonic=2),
-                Extension("joint_scale", joint=j)]
-    g = gravity_in_base(layout, x)
-    for j in range(n):
-        keep = select_independent(gravity_basis(layout, x, inputs.q, j, g))
-        if keep.any():
-            out.append(Extension("joint_compliance", joint=j, keep=keep, gravity=g))
-    if inputs.temp_c is not None and np.nanmax(inputs.temp_c) - np.nanmin(inputs.temp_c) >= 0.3:
-        out.append(Extension("thermal_drift", variable="temp_c",
-                             t_ref=float(np.nanmean(inputs.temp_c))))
-    elif inputs.time_s is not None:
-        out.append(Extension("thermal_drift", variable="time_s",
-                             t_ref=float(np.nanmean(inputs.time_s))))
-    if inputs.time_s is not None and np.isfinite(inputs.time_s).any():
-        out.append(Extension("base_shift"))
-    return out
+    return vocabulary.candidates(layout, x, inputs)
 
 
 class Diagnoser:
@@ -137,8 +119,8 @@ class Diagnoser:
         """
         out = []
         for e in exts:
-            if e.name == "base_shift" and e.at_s is None:
-                e = Extension("base_shift", at_s=self.scan_shift(
+            if e.kind.located_in_time and e.at_s is None:
+                e = Extension(e.name, at_s=self.scan_shift(
                     [o for o in exts if o is not e], np.arange(self.prob.q.shape[0])),
                     origin=self.centroid)
             out.append(e)
@@ -266,12 +248,12 @@ def select(diag: Diagnoser, cands, log=None):
         pick = min(peers, key=lambda s: (s[0].n_params, s[1].mse))
         c, cv, t = pick
         steps.append((cv.exts[-1], cv_now, cv, t))
-        current = current + [cv.exts[-1] if c.name != "base_shift" else
-                             Extension("base_shift", at_s=cv.exts[-1].at_s, origin=diag.centroid)]
+        current = current + [cv.exts[-1] if not c.kind.located_in_time else
+                             Extension(c.name, at_s=cv.exts[-1].at_s, origin=diag.centroid)]
         # the same joint's other candidates of the same kind stay: two effects may share a joint
         remaining = [r for r in remaining if not (r.name == c.name and r.joint == c.joint
                                                   and r.harmonic == c.harmonic)]
-        if c.name in ("thermal_drift", "base_shift"):
+        if c.kind.once:
             remaining = [r for r in remaining if r.name != c.name]
         cv_now = cv
         diag.warm = cv.fits
