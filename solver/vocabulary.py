@@ -196,9 +196,10 @@ class JointBacklash(Effect):
                 f"{gain}.")
 
     def figure(self, ext, inputs, expected):
-        j = ext.joint + 1
-        return {"x": inputs.motion[:, ext.joint].astype(float),
-                "x_label": f"direction of joint {j}'s last motion (0: not yet moved)",
+        j, m = ext.joint + 1, len(inputs.q)
+        spread = 0.3 * (np.arange(m) / max(m - 1, 1) - 0.5)  # the poses side by side, in file order
+        return {"x": inputs.motion[:, ext.joint] + spread,
+                "x_label": f"direction of joint {j}'s last motion (spread by pose)",
                 "y_label": f"joint {j} error / mdeg"}
 
 
