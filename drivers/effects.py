@@ -291,7 +291,7 @@ class JointBacklash(_Effect):
 class JointCoupling(_Effect):
     """dq_J = c q_(J-1): joint J turns with the joint before it (a coupled wrist); simulator only."""
 
-    name, unit, default, takes_joint, signed = "joint_coupling", "ppm", 500.0, True, True
+    name, unit, default, takes_joint, signed = "joint_coupling", "ppm", 200.0, True, True
     law = "dq_J = c q_(J-1), a wrist coupling"
     first_joint = 2
 

@@ -27,6 +27,7 @@ def test_every_kind_proposes_candidates_and_backlash_one_per_joint():
     lay, x, q, time_s, temp_c = data(1)
     cands = candidates(lay, x, Inputs(q, time_s, temp_c))
     assert {c.name for c in cands} == set(KINDS)
+    assert "joint_coupling" not in KINDS  # the simulator's wrist coupling stays outside the vocabulary
     assert [c.joint for c in cands if c.name == "joint_backlash"] == list(range(6))
     assert all(c.kind is KINDS[c.name] and c.n_params >= 1 for c in cands)
 
