@@ -98,7 +98,10 @@ class _Effect:
     name = ""
     unit = ""
     default = 0.0
+    law = ""  # what it does, for `simulate --help`
     takes_joint = takes_harmonic = False
+    first_joint = 1  # lowest joint it can act on (from 1)
+    signed = False  # a negative magnitude means something (else it is refused)
 
     def __init__(self, magnitude: float, joint: int | None = None, harmonic: int | None = None):
         self.magnitude = float(magnitude)
@@ -139,6 +142,7 @@ class JointCompliance(_Effect):
     """dq_J = c tau_J(q): the joint gives way under the gravity torque of a random mass model."""
 
     name, unit, default, takes_joint = "joint_compliance", "urad/(N m)", 0.3, True
+    law = "dq = compliance x gravity torque"
 
     def __init__(self, cell, rng, magnitude, joint, harmonic=None):
         super().__init__(magnitude, joint)
@@ -155,6 +159,7 @@ class JointPeriodic(_Effect):
     """dq_J = A sin(K q_J + phase): a cyclic transmission or encoder error."""
 
     name, unit, default, takes_joint, takes_harmonic = "joint_periodic", "deg", 0.01, True, True
+    law = "dq = A sin(K q + phase), K 1 or 2 drawn if omitted"
 
     def __init__(self, cell, rng, magnitude, joint, harmonic=None):
         super().__init__(magnitude, joint, int(rng.integers(1, 3)) if harmonic is None else harmonic)
@@ -171,7 +176,8 @@ class JointPeriodic(_Effect):
 class JointScale(_Effect):
     """dq_J = s q_J: a gear-ratio or encoder scale error."""
 
-    name, unit, default, takes_joint = "joint_scale", "ppm", 100.0, True
+    name, unit, default, takes_joint, signed = "joint_scale", "ppm", 100.0, True, True
+    law = "dq = s q"
 
     def __init__(self, cell, rng, magnitude, joint, harmonic=None):
         super().__init__(magnitude, joint)
@@ -183,7 +189,8 @@ class JointScale(_Effect):
 class ThermalDrift(_Effect):
     """The arm grows with the air temperature: base-frame points scale by 1 + kappa (T - T0)."""
 
-    name, unit, default = "thermal_drift", "ppm/degC", 50.0
+    name, unit, default, signed = "thermal_drift", "ppm/degC", 50.0, True
+    law = "growth per degree of air, which then warms 2-5 degC"
 
     def __init__(self, cell, rng, magnitude, joint=None, harmonic=None):
         super().__init__(magnitude)
@@ -210,6 +217,7 @@ class BaseShift(_Effect):
     """At at_s the base moves `magnitude` mm and turns magnitude/2000 rad, in random directions."""
 
     name, unit, default = "base_shift", "mm", 0.2
+    law = "a rigid move at a random time mid-campaign"
 
     def __init__(self, cell, rng, magnitude, joint=None, harmonic=None):
         super().__init__(magnitude)
@@ -241,6 +249,59 @@ class BaseShift(_Effect):
                 "rotation_deg": float(np.rad2deg(self.magnitude / 2000.0))}
 
 
+class JointBacklash(_Effect):
+    """dq_J = -b d_J: lost motion in a gear, the joint lags by b behind the direction d of its last move.
+
+    The direction is state: the last commanded angle and the sign of the last move, so that a
+    campaign computed at once (poses in visit order) and a cell driven pose by pose (the
+    simulated controller, read again for each SMR) see the same physics. A joint that has not
+    moved yet rests mid-play (d = 0), as the diagnosis assumes for the first pose.
+    """
+
+    name, unit, default, takes_joint = "joint_backlash", "deg", 0.01, True
+    law = "dq = -b x the sign of the joint's last move, state kept pose to pose"
+
+    def __init__(self, cell, rng, magnitude, joint, harmonic=None):
+        super().__init__(magnitude, joint)
+        self.start_campaign(cell, None, None)
+
+    def start_campaign(self, cell, time_s, temp_c):
+        """A new campaign: no move seen yet."""
+        self._last_q = None  # the joint's last commanded angle, rad
+        self._direction = 0.0
+        self._seen = None  # (poses, their directions): reading the same poses again moves nothing
+
+    def follow(self, q) -> np.ndarray:
+        """Directions (m,) of the joint's last move at each pose, the poses visited in row order."""
+        out = np.empty(len(q))
+        for i, v in enumerate(np.atleast_2d(q)[:, self.joint]):
+            if self._last_q is not None and v != self._last_q:
+                self._direction = float(np.sign(v - self._last_q))
+            self._last_q = v
+            out[i] = self._direction
+        return out
+
+    def joint_offsets(self, cell, q, time_s, temp_c):
+        q = np.atleast_2d(q)
+        if self._seen is None or not np.array_equal(self._seen[0], q):
+            self._seen = (q.copy(), self.follow(q))
+        return self._dq(q, -np.deg2rad(self.magnitude) * self._seen[1])
+
+
+class JointCoupling(_Effect):
+    """dq_J = c q_(J-1): joint J turns with the joint before it (a coupled wrist); simulator only."""
+
+    name, unit, default, takes_joint, signed = "joint_coupling", "ppm", 200.0, True, True
+    law = "dq_J = c q_(J-1), a wrist coupling"
+    first_joint = 2
+
+    def __init__(self, cell, rng, magnitude, joint, harmonic=None):
+        super().__init__(magnitude, joint)
+
+    def joint_offsets(self, cell, q, time_s, temp_c):
+        return self._dq(q, 1e-6 * self.magnitude * np.atleast_2d(q)[:, self.joint - 1])
+
+
 def _unit(v):
     return v / np.linalg.norm(v)
 
@@ -251,7 +312,8 @@ def _rotation(axis, angle) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
-EFFECTS = {e.name: e for e in (JointCompliance, JointPeriodic, JointScale, ThermalDrift, BaseShift)}
+EFFECTS = {e.name: e for e in (JointCompliance, JointPeriodic, JointScale, ThermalDrift, BaseShift,
+                               JointBacklash, JointCoupling)}
 SPEC_HELP = "NAME[:JOINT[:HARMONIC]][=MAGNITUDE]"
 
 
@@ -275,6 +337,8 @@ def make_effect(spec: str, cell, rng):
         if not 1 <= joint <= n:
             raise ValueError(f"effect {spec!r}: joint {joint} is not one of the robot's "
                              f"joints 1 to {n}")
+        if joint < cls.first_joint:
+            raise ValueError(f"effect {spec!r}: {name} acts on joints {cls.first_joint} to {n}")
         joint -= 1
     if len(fields) > 1:
         harmonic = _integer(spec, "harmonic", fields[1])
@@ -289,7 +353,7 @@ def make_effect(spec: str, cell, rng):
                              f"(in {cls.unit})") from None
         if not math.isfinite(magnitude):
             raise ValueError(f"effect {spec!r}: magnitude must be finite")
-        if magnitude < 0 and cls in (JointCompliance, JointPeriodic, BaseShift):
+        if magnitude < 0 and not cls.signed:
             raise ValueError(f"effect {spec!r}: magnitude must not be negative (in {cls.unit})")
     return cls(cell, rng, magnitude, joint, harmonic)
 
@@ -303,6 +367,17 @@ def make_effects(specs, cell, seed: int) -> list:
 def _grammar(cls) -> str:
     return cls.name + (":JOINT" if cls.takes_joint else "") + ("[:HARMONIC]" if cls.takes_harmonic
                                                                else "") + f"[=MAGNITUDE in {cls.unit}]"
+
+
+def spec_help(diagnosed) -> str:
+    """Every effect's spec, law and default, those outside `diagnosed` (names) marked simulator-only."""
+    def one(cls):
+        head = cls.name + (":J" if cls.takes_joint else "") + ("[:K]" if cls.takes_harmonic else "")
+        return f"{head} ({cls.law}, default {cls.default:g} {cls.unit})"
+    inside = [one(c) for c in EFFECTS.values() if c.name in diagnosed]
+    outside = [one(c) for c in EFFECTS.values() if c.name not in diagnosed]
+    return "; ".join(inside) + ("; simulator only, outside the diagnosis vocabulary: "
+                                + "; ".join(outside) if outside else "")
 
 
 def _integer(spec, what, text) -> int:

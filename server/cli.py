@@ -272,17 +272,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--beam-break-rate", type=float, default=0.0)
     s.add_argument("--out", required=True, help="meas.csv to write")
     s.add_argument("--truth-out", help="also write the simulated truth as JSON")
-    from drivers.effects import EFFECTS as FX
+    from drivers.effects import spec_help
+    from solver.vocabulary import KINDS
 
-    d = {name: f"default {e.default:g} {e.unit}" for name, e in FX.items()}
     s.add_argument("--effect", action="append", default=[], metavar="SPEC", help=(
         "add a physical effect, NAME[:JOINT[:HARMONIC]][=MAGNITUDE], joints from 1; repeatable. "
-        f"joint_compliance:J (dq = compliance x gravity torque, {d['joint_compliance']}); "
-        f"joint_periodic:J[:K] (dq = A sin(K q + phase), K 1 or 2 drawn if omitted, amplitude "
-        f"{d['joint_periodic']}); joint_scale:J (dq = s q, {d['joint_scale']}); "
-        f"thermal_drift (growth per degree of air, which then warms 2-5 degC, "
-        f"{d['thermal_drift']}); base_shift (a rigid move at a random time mid-campaign, "
-        f"{d['base_shift']})"))
+        + spec_help(KINDS)))
     s.set_defaults(func=cmd_simulate)
 
     c = sub.add_parser("calibrate", help="identify a model from a campaign")

@@ -102,7 +102,11 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
 
 def model_predict(model: ModelFile, q, time_s=None, temp_c=None) -> np.ndarray:
     """SMR centres (m, K, 3) a model file predicts, with its extensions (time and temperature per
-    pose (m,) or per reading (m, K))."""
+    pose (m,) or per reading (m, K)).
+
+    The poses are taken as visited in time_s order, else in the given order: backlash follows
+    each joint's last motion (Inputs computes it).
+    """
     lay, x = model.layout()
     if not model.extensions:
         return predict(lay, x, q)
@@ -116,7 +120,7 @@ def model_predict(model: ModelFile, q, time_s=None, temp_c=None) -> np.ndarray:
 
     inputs = Inputs(q, per_reading(time_s, "time_s"), per_reading(temp_c, "temp_c"))
     for e in model.extensions:
-        need = e.variable if e.name == "thermal_drift" else "time_s" if e.name == "base_shift" else None
+        need = e.kind.needs(e)
         if need and getattr(inputs, need) is None:
             raise DataError(f"the model's {e.label()} needs a {need} column in the poses")
     nominal = Layout(model.nominal or model.robot, np.eye(4), lay.target_names)

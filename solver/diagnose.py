@@ -15,10 +15,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import identifiability as ident
-from .effects import (Extension, Inputs, gravity_basis, gravity_in_base, point_shift, prepare,
-                      select_independent)
-from .motion import visit_order
+from . import vocabulary
+from .effects import Extension, Inputs, point_shift, prepare
 from .extended import extension_rows, fit_extended, predict_extended
+from .motion import visit_order
 from .identify import Problem, register
 from .kinematics import predict_rows
 from .robot import Robot
@@ -95,26 +95,7 @@ def folds(m: int, k: int = FOLDS, seed: int = 0) -> list[np.ndarray]:
 
 def candidates(layout, x, inputs: Inputs) -> list[Extension]:
     """Every effect of the vocabulary that this data could show, per joint and harmonic."""
-    n = layout.robot.n_joints
-    out = []
-    for j in range(n):
-        out += [Extension("joint_periodic", joint=j, harmonic=1),
-                Extension("joint_periodic", joint=j, harmonic=2),
-                Extension("joint_scale", joint=j)]
-    g = gravity_in_base(layout, x)
-    for j in range(n):
-        keep = select_independent(gravity_basis(layout, x, inputs.q, j, g))
-        if keep.any():
-            out.append(Extension("joint_compliance", joint=j, keep=keep, gravity=g))
-    if inputs.temp_c is not None and np.nanmax(inputs.temp_c) - np.nanmin(inputs.temp_c) >= 0.3:
-        out.append(Extension("thermal_drift", variable="temp_c",
-                             t_ref=float(np.nanmean(inputs.temp_c))))
-    elif inputs.time_s is not None:
-        out.append(Extension("thermal_drift", variable="time_s",
-                             t_ref=float(np.nanmean(inputs.time_s))))
-    if inputs.time_s is not None and np.isfinite(inputs.time_s).any():
-        out.append(Extension("base_shift"))
-    return out
+    return vocabulary.candidates(layout, x, inputs)
 
 
 class Diagnoser:
@@ -138,8 +119,8 @@ class Diagnoser:
         """
         out = []
         for e in exts:
-            if e.name == "base_shift" and e.at_s is None:
-                e = Extension("base_shift", at_s=self.scan_shift(
+            if e.kind.located_in_time and e.at_s is None:
+                e = Extension(e.name, at_s=self.scan_shift(
                     [o for o in exts if o is not e], np.arange(self.prob.q.shape[0])),
                     origin=self.centroid)
             out.append(e)
@@ -240,8 +221,8 @@ class Diagnoser:
         layout, inputs, mask = self.prob.layout, self.inputs, self.prob.mask
         trial = []
         for c in cands:
-            if c.name == "base_shift" and c.at_s is None:
-                c = Extension("base_shift", at_s=self.scan_shift(current, np.arange(len(inputs.q))),
+            if c.kind.located_in_time and c.at_s is None:
+                c = Extension(c.name, at_s=self.scan_shift(current, np.arange(len(inputs.q))),
                               origin=self.centroid)
             trial.append(Extension(**{**c.__dict__, "coef": np.zeros(c.n_params)}))
         exts = list(ee) + trial
@@ -256,7 +237,7 @@ class Diagnoser:
         pose_of_row = np.repeat(np.nonzero(mask)[0], 3)
         scans = {}
         for i, c in enumerate(trial):
-            if c.name == "base_shift":  # its rigid columns before the switch, for the split scan
+            if c.kind.located_in_time:  # its rigid columns before the switch, for the split scan
                 _, Z = point_shift(c, np.ones(len(p)), p, c.origin, np.zeros(6))
                 scans[i] = (Z.reshape(6, -1).T, visit_order(inputs.time_s, len(inputs.q)))
         return trial, J[:, :n_cur], r, blocks, pose_of_row, scans
@@ -312,11 +293,11 @@ def select(diag: Diagnoser, cands, log=None):
                     "holdout_gain_interval_mm": rmse_gain_interval(cv_now.sq, cv.sq, cv.n)}
         c = trial[best]
         steps.append((cv.exts[-1], cv_now, cv, decision))
-        current = current + [cv.exts[-1] if c.name != "base_shift" else c]
+        current = current + [c if c.kind.located_in_time else cv.exts[-1]]
         # the same joint's other candidates of the same kind stay: two effects may share a joint
         remaining = [r for r in remaining if not (r.name == c.name and r.joint == c.joint
                                                   and r.harmonic == c.harmonic)]
-        if c.name in ("thermal_drift", "base_shift"):
+        if c.kind.once:
             remaining = [r for r in remaining if r.name != c.name]
         cv_now = cv
         diag.warm = cv.fits

@@ -5,6 +5,8 @@ error, scale error, compliance under gravity). A point extension moves the predi
 after the kinematics (links growing with temperature, the base moving during the campaign).
 Bases are computed once per data set from the registered nominal model, so the extended model
 stays linear in the new parameters and their Jacobian is the joint's column times the basis.
+What each effect is (basis, parameters, report, file form) lives in its class in vocabulary.py;
+the functions here only dispatch to it.
 """
 
 from __future__ import annotations
@@ -55,22 +57,22 @@ class Extension:
     gravity: np.ndarray | None = None
 
     @property
+    def kind(self):
+        """Its class in the vocabulary (solver.vocabulary), which knows everything else about it."""
+        from .vocabulary import KINDS  # the vocabulary builds on this module
+
+        return KINDS[self.name]
+
+    @property
     def is_joint(self) -> bool:
-        return self.name in ("joint_periodic", "joint_scale", "joint_compliance")
+        return self.kind.is_joint
 
     @property
     def n_params(self) -> int:
-        return {"joint_periodic": 2, "joint_scale": 1, "thermal_drift": 1, "base_shift": 6}.get(
-            self.name, 0 if self.keep is None else int(self.keep.sum()))
+        return self.kind.n_params(self)
 
     def label(self) -> str:
-        if self.name == "joint_periodic":
-            return f"{self.name}({self.joint + 1},k={self.harmonic})"
-        if self.joint is not None:
-            return f"{self.name}({self.joint + 1})"
-        if self.name == "base_shift" and self.at_s is not None:
-            return f"{self.name}(t={self.at_s:.0f}s)"
-        return self.name
+        return self.kind.label(self)
 
 
 def gravity_basis(layout: Layout, x, q, joint: int, gravity: np.ndarray) -> np.ndarray:
@@ -115,25 +117,16 @@ def select_independent(B: np.ndarray, tol: float = 1e-6) -> np.ndarray:
 
 def joint_basis(ext: Extension, layout: Layout, x, inputs: Inputs) -> np.ndarray:
     """(m, P) basis of a joint extension: dq_joint = basis @ coef."""
-    qj = inputs.q[:, ext.joint]
-    if ext.name == "joint_periodic":
-        k = ext.harmonic
-        return np.stack([np.sin(k * qj), np.cos(k * qj)], axis=1)
-    if ext.name == "joint_scale":
-        return qj[:, None]
-    if ext.name == "joint_compliance":
-        return gravity_basis(layout, x, inputs.q, ext.joint, ext.gravity)[:, ext.keep]
-    raise ValueError(f"{ext.name} is not a joint extension")
+    if not ext.is_joint:
+        raise ValueError(f"{ext.name} is not a joint extension")
+    return ext.kind.basis(ext, layout, x, inputs)
 
 
 def point_basis(ext: Extension, layout: Layout, x, inputs: Inputs):
     """Per reading (m, K): the scalar that switches or scales a point extension."""
-    if ext.name == "thermal_drift":
-        v = inputs.temp_c if ext.variable == "temp_c" else inputs.time_s
-        return v - ext.t_ref
-    if ext.name == "base_shift":
-        return (inputs.time_s >= ext.at_s).astype(float)
-    raise ValueError(f"{ext.name} is not a point extension")
+    if ext.is_joint:
+        raise ValueError(f"{ext.name} is not a point extension")
+    return ext.kind.basis(ext, layout, x, inputs)
 
 
 def prepare(ext: Extension, layout: Layout, x, inputs: Inputs) -> np.ndarray:
@@ -155,19 +148,6 @@ def joint_offsets(exts, bases, n_joints: int) -> np.ndarray | None:
 def point_shift(ext: Extension, s: np.ndarray, p: np.ndarray, origin: np.ndarray, coef=None):
     """Displacement (N, 3) of points p by a point extension and its Jacobian (P, N, 3).
 
-    s is the extension's per-reading scalar; origin the base origin (thermal) or the data's
-    centroid (base shift, so rotation and translation are not confounded).
+    s is the extension's per-reading scalar; origin the point it acts about (`kind.origin`).
     """
-    coef = ext.coef if coef is None else coef
-    v = p - origin
-    if ext.name == "thermal_drift":
-        J = (s[:, None] * v)[None]
-        return coef[0] * J[0], J
-    # base shift: translation + small rotation about `origin` after at_s
-    J = np.zeros((6, len(p), 3))
-    for a in range(3):
-        J[a, :, a] = s
-        e = np.zeros(3)
-        e[a] = 1.0
-        J[3 + a] = s[:, None] * np.cross(e, v)
-    return np.einsum("pnc,p->nc", J, coef), J
+    return ext.kind.shift(ext, s, p - origin, ext.coef if coef is None else coef)

@@ -11,7 +11,7 @@ from .lm import levenberg_marquardt
 
 
 def _origin(ext: Extension, layout: Layout, x) -> np.ndarray:
-    return layout.base(x)[:3, 3] if ext.name == "thermal_drift" else ext.origin
+    return ext.kind.origin(ext, layout, x)
 
 
 def predict_extended(layout: Layout, x, exts, inputs: Inputs, bases=None) -> np.ndarray:

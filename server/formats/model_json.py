@@ -13,13 +13,13 @@ import numpy as np
 from solver.effects import Extension
 from solver.kinematics import Layout
 from solver.robot import Robot
+from solver.vocabulary import KINDS
 
 from .cell_json import robot_from_json, robot_to_json
 from .files import atomic_write_text, read_text
 from .json_doc import JsonDoc
 
 SCHEMA = 1
-EXTENSION_NAMES = ("joint_compliance", "joint_periodic", "joint_scale", "thermal_drift", "base_shift")
 
 
 @dataclass
@@ -42,19 +42,12 @@ class ModelFile:
 
 
 def extension_to_json(ext: Extension, parameters: dict | None = None) -> dict:
-    """An extension as stored: its kind and place (joints from 1), coefficients, readable parameters."""
+    """An extension as stored: its kind and place (joints from 1), its own fields (the kind's
+    `to_json`), coefficients, readable parameters."""
     out = {"name": ext.name}
     if ext.joint is not None:
         out["joint"] = ext.joint + 1
-    for key in ("harmonic", "at_s", "t_ref", "variable"):
-        if getattr(ext, key) is not None:
-            out[key] = getattr(ext, key)
-    for key in ("origin", "gravity"):
-        if getattr(ext, key) is not None:
-            out[key] = np.asarray(getattr(ext, key)).tolist()
-    if ext.keep is not None:
-        out["gravity_terms"] = np.flatnonzero(ext.keep).tolist()
-        out["gravity_terms_total"] = len(ext.keep)
+    out.update(ext.kind.to_json(ext))
     # model-internal coefficients (rad per basis unit, or per reading scalar); `parameters` says
     # the same in degrees, ppm and mm
     out["coef"] = np.asarray(ext.coef, dtype=float).tolist()
@@ -63,26 +56,50 @@ def extension_to_json(ext: Extension, parameters: dict | None = None) -> dict:
     return out
 
 
-def extension_from_json(obj: dict, doc: JsonDoc, at: tuple) -> Extension:
+class _Fields:
+    """Required fields of one extension object, read with errors located in the file."""
+
+    def __init__(self, obj: dict, doc: JsonDoc, at: tuple):
+        self.obj, self.doc, self.at = obj, doc, at
+
+    def error(self, key, message):
+        return self.doc.error((*self.at, key), message)
+
+    def _get(self, key):
+        return self.doc.require(self.obj, key, self.at)
+
+    def number(self, key) -> float:
+        return self.doc.number(self._get(key), (*self.at, key))
+
+    def integer(self, key) -> int:
+        v = self.number(key)
+        if v != int(v):
+            raise self.error(key, f"expected an integer, found {v!r}")
+        return int(v)
+
+    def string(self, key) -> str:
+        return self.doc.string(self._get(key), (*self.at, key))
+
+    def vector(self, key) -> np.ndarray:
+        at = (*self.at, key)
+        return np.array([self.doc.number(v, (*at, i)) for i, v in
+                         enumerate(self.doc.array(self._get(key), at))], dtype=float)
+
+
+def extension_from_json(obj: dict, doc: JsonDoc, at: tuple, n_joints: int | None = None) -> Extension:
     """The inverse of extension_to_json; errors located in the file."""
     doc.object(obj, at)
     name = doc.string(doc.require(obj, "name", at), (*at, "name"))
-    if name not in EXTENSION_NAMES:
-        raise doc.error((*at, "name"), f"unknown extension {name!r} (known: {', '.join(EXTENSION_NAMES)})")
-    num = lambda k: None if k not in obj else doc.number(obj[k], (*at, k))  # noqa: E731
-    vec = lambda k: None if k not in obj else np.array(  # noqa: E731
-        [doc.number(v, (*at, k, i)) for i, v in enumerate(doc.array(obj[k], (*at, k)))])
-    keep = None
-    if "gravity_terms" in obj:
-        keep = np.zeros(int(doc.number(doc.require(obj, "gravity_terms_total", at),
-                                       (*at, "gravity_terms_total"))), dtype=bool)
-        keep[[int(v) for v in vec("gravity_terms")]] = True
-    joint = num("joint")
-    ext = Extension(name, joint=None if joint is None else int(joint) - 1,
-                    harmonic=None if num("harmonic") is None else int(num("harmonic")),
-                    at_s=num("at_s"), t_ref=num("t_ref"), variable=obj.get("variable"),
-                    origin=vec("origin"), coef=vec("coef"), keep=keep, gravity=vec("gravity"))
-    if ext.coef is None or len(ext.coef) != ext.n_params:
+    if name not in KINDS:
+        raise doc.error((*at, "name"), f"unknown extension {name!r} (known: {', '.join(KINDS)})")
+    read, kind = _Fields(obj, doc, at), KINDS[name]
+    joint = None
+    if kind.is_joint:
+        joint = read.integer("joint") - 1
+        if n_joints is not None and not 0 <= joint < n_joints:
+            raise read.error("joint", f"joint {joint + 1} is not one of the robot's joints 1 to {n_joints}")
+    ext = Extension(name, joint=joint, coef=read.vector("coef"), **kind.from_json(read))
+    if len(ext.coef) != ext.n_params:
         raise doc.error((*at, "coef"), f"expected {ext.n_params} coefficients")
     return ext
 
@@ -141,7 +158,7 @@ def read_model(path) -> ModelFile:
         targets[k] = np.array([doc.number(c, (*at, i)) for i, c in enumerate(doc.array(v, at, 3))])
     if not targets:
         raise doc.error(("targets",), "at least one target is needed")
-    extensions = [extension_from_json(e, doc, ("extensions", i))
+    extensions = [extension_from_json(e, doc, ("extensions", i), robot.n_joints)
                   for i, e in enumerate(doc.array(obj.get("extensions", []), ("extensions",)))]
     meta = {k: v for k, v in obj.items()
             if k not in ("schema", "robot", "nominal_robot", "base", "targets", "extensions")}

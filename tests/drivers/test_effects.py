@@ -53,12 +53,65 @@ def test_periodic_draws_its_harmonic_when_not_given():
     assert drawn == {1, 2}
 
 
-def test_scale_grows_with_the_joint_angle():
-    cell, _ = cell_with("joint_scale:2=250")
+@pytest.mark.parametrize("spec, joint, driver", [
+    ("joint_scale:2=250", 1, 1),  # scale: the joint's own angle
+    ("joint_coupling:5=250", 4, 3),  # wrist coupling: the joint before it
+])
+def test_linear_effects_grow_with_their_joint_angle(spec, joint, driver):
+    cell, _ = cell_with(spec)
     q = poses(cell)
     dq = np.zeros_like(q)
-    dq[:, 1] = 250e-6 * q[:, 1]
+    dq[:, joint] = 250e-6 * q[:, driver]
     np.testing.assert_allclose(cell.true_points(q), true_arm(cell, q, dq), atol=1e-9)
+
+
+def test_backlash_lags_behind_the_last_move_in_visit_order():
+    cell, eff = cell_with("joint_backlash:3=0.02")
+    q = poses(cell)
+    q[5, 2] = q[4, 2]  # joint 3 stands still: it keeps the direction of its previous move
+    step = np.sign(np.diff(q[:, 2]))
+    d = np.concatenate([[0.0], np.where(step == 0, np.roll(step, 1), step)])  # first pose: no move yet
+    dq = np.zeros_like(q)
+    dq[:, 2] = -np.deg2rad(0.02) * d
+    np.testing.assert_allclose(cell.true_points(q), true_arm(cell, q, dq), atol=1e-9)
+    np.testing.assert_allclose(cell.true_points(q), true_arm(cell, q, dq), atol=1e-9)  # read again
+
+
+def test_backlash_is_the_same_campaign_at_once_or_pose_by_pose():
+    """The batch campaign and the socket-driven world (moves, then one read per SMR, some twice)."""
+    from drivers.clock import VirtualClock
+    from drivers.world import SimulatedWorld
+
+    rng = np.random.default_rng(11)
+    joint = int(rng.integers(1, 7))
+    spec = f"joint_backlash:{joint}={rng.uniform(0.005, 0.05):.4f}"
+
+    def fresh():
+        cell = VirtualCell.random(IRB2600, TARGETS, seed=3)
+        cell.effects.extend(make_effects([spec], cell, 3))
+        return cell
+
+    batch = fresh()
+    m = batch.campaign(25, seed=4)
+    at_once = batch.true_points(m.q)
+    world_cell = fresh()
+    clock = VirtualClock()
+    world = SimulatedWorld(world_cell, clock)
+    by_pose = []
+    for i, q in enumerate(m.q):
+        clock.sleep(world.command_move(q) + 1.0)
+        reads = [world.smr_positions() for _ in range(2 + i % 2)]
+        np.testing.assert_array_equal(reads[0], reads[-1])
+        by_pose.append(reads[0])
+    np.testing.assert_allclose(np.array(by_pose), at_once, atol=1e-9)
+    d = np.linalg.norm(at_once - cell_without_effects(batch).true_points(m.q), axis=-1)
+    assert d[1:].min() > 1e-3  # the effect is on from the second pose
+
+
+def cell_without_effects(cell):
+    from dataclasses import replace
+
+    return replace(cell, effects=[])
 
 
 def body_positions(robot, mass, q):
@@ -181,6 +234,8 @@ def test_base_shift_happens_mid_campaign():
     ("thermal_drift=20", "thermal_drift", None, None, 20.0),
     ("base_shift=0.3", "base_shift", None, None, 0.3),
     ("base_shift", "base_shift", None, None, 0.2),
+    ("joint_backlash:4", "joint_backlash", 4, None, EFFECTS["joint_backlash"].default),
+    ("joint_coupling:5=-300", "joint_coupling", 5, None, -300.0),
 ])
 def test_spec_parsing(spec, name, joint, harmonic, magnitude):
     d = cell_with(spec)[1].describe()
@@ -205,6 +260,8 @@ def test_spec_parsing(spec, name, joint, harmonic, magnitude):
     ("base_shift=", "magnitude '' is not a number"),
     ("base_shift=-0.1", "must not be negative"),
     ("joint_compliance:2=inf", "must be finite"),
+    ("joint_backlash:2=-0.01", "must not be negative"),
+    ("joint_coupling:1", "joint_coupling acts on joints 2 to 6"),
 ])
 def test_bad_specs_are_refused(spec, message):
     cell = VirtualCell.random(IRB2600, TARGETS, seed=1)
@@ -232,7 +289,8 @@ def test_same_seed_same_effects_and_campaign():
 
 
 @pytest.mark.parametrize("spec", ["joint_compliance:2", "joint_periodic:2", "joint_scale:2",
-                                  "thermal_drift", "base_shift"])
+                                  "thermal_drift", "base_shift", "joint_backlash:2",
+                                  "joint_coupling:5"])
 def test_defaults_are_clearly_visible_to_a_geometric_calibration(spec):
     cell = VirtualCell.random(IRB2600, TARGETS, seed=0)
     cell.effects.extend(make_effects([spec], cell, 0))
@@ -261,6 +319,10 @@ def test_simulate_with_an_effect_end_to_end(tmp_path):
     assert periodic["magnitude"] == 0.02 and periodic["unit"] == "deg"
     assert 0.0 <= periodic["phase_deg"] < 360.0
     assert shift["name"] == "base_shift" and shift["at_s"] > 0.0
+
+    r = robocal("simulate", "--help", cwd=tmp_path)
+    inside, _, outside = " ".join(r.stdout.split()).partition("simulator only")
+    assert "joint_backlash:J" in inside and "joint_coupling:J" in outside
 
     r = robocal("simulate", "--effect", "joint_periodic:9", "--out", "bad.csv", cwd=tmp_path)
     assert r.returncode != 0 and not (tmp_path / "bad.csv").exists()

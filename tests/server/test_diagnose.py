@@ -163,3 +163,76 @@ def test_extended_model_predicts_with_time_and_temperature(workdir):
     ev = json.loads((out / "eval.json").read_text())
     assert ev["model"]["rmse"] <= 1.3 * truth["noise_floor_mm"]
     assert "improvement over nominal" in r.stdout
+
+
+def read_predictions(path):
+    rows = [line.split(",") for line in path.read_text().splitlines()[1:]]
+    return {(r[0], r[1]): np.array([float(v) for v in r[2:5]]) for r in rows}
+
+
+def write_poses(src, dst, order, keep_time):
+    """A poses file from a meas.csv: its poses in `order`, with or without the time_s column."""
+    lines = src.read_text().splitlines()
+    head = lines[0].split(",")
+    keep = [i for i, h in enumerate(head) if keep_time or h not in ("time_s", "temp_c")]
+    by_pose = {}
+    for line in lines[1:]:
+        by_pose.setdefault(line.split(",")[0], []).append(line.split(","))
+    ids = list(by_pose)
+    out = [",".join(head[i] for i in keep)]
+    out += [",".join(r[i] for i in keep) for k in order for r in by_pose[ids[k]]]
+    dst.write_text("\n".join(out) + "\n")
+
+
+@pytest.mark.parametrize("seed", range(400, 406))
+def test_backlash_is_found_and_predicted_in_visit_order(workdir, seed):
+    """A backlash on a joint drawn from the seed is named; predict takes the visit order from
+    time_s, else from the file's order."""
+    d, cs = workdir
+    robot = ("irb2600", "kuka-like")[seed % 2]
+    rng = np.random.default_rng(seed)
+    joint = int(rng.integers(1, 7))
+    target = float(np.exp(rng.uniform(np.log(4.0), np.log(25.0))))
+    spec = f"joint_backlash:{joint}"
+    magnitude = aim(cs[robot][0], spec, "joint_backlash", seed, target)
+    report, truth, out = run(workdir, robot, seed, [f"{spec}={magnitude:.6g}"])
+    floor = truth["noise_floor_mm"]
+    ratio = report["baseline"]["holdout_rmse_mm"] / floor
+    assert 3.0 <= ratio <= 30.0, f"premise: geometric-only held-out error {ratio:.1f}x the floor"
+    assert [(e["name"], e.get("joint")) for e in report["effects"]] == [("joint_backlash", joint)], \
+        (spec, magnitude, ratio, report["effects"])
+    found = report["effects"][0]
+    assert found["parameters"]["backlash_deg"] == pytest.approx(magnitude, rel=0.2)
+    assert report["final"]["holdout_rmse_mm"] <= 1.3 * floor
+    assert (out / found["figure"]).stat().st_size > 10_000
+
+    meas = d / f"{robot}-{seed}.csv"
+    m = 100
+    shuffled = rng.permutation(m)
+    write_poses(meas, out / "timed.csv", shuffled, keep_time=True)  # file order != visit order
+    write_poses(meas, out / "untimed.csv", range(m), keep_time=False)  # file order = visit order
+    write_poses(meas, out / "wrong.csv", shuffled, keep_time=False)
+    pred = {}
+    for name in ("timed", "untimed", "wrong"):
+        robocal("predict", out / "model.json", out / f"{name}.csv", "--out", out / f"{name}-pred.csv",
+                cwd=d)
+        pred[name] = read_predictions(out / f"{name}-pred.csv")
+    truth_xyz = read_predictions(write_measured(meas, out / "measured.csv"))
+
+    def rms(p):
+        return np.sqrt(np.mean([np.sum((p[k] - v) ** 2) for k, v in truth_xyz.items()]))
+
+    keys = sorted(pred["timed"])
+    np.testing.assert_allclose([pred["timed"][k] for k in keys], [pred["untimed"][k] for k in keys],
+                               atol=2e-6)
+    assert rms(pred["timed"]) <= 1.3 * floor
+    assert rms(pred["wrong"]) > 2.0 * floor  # the order matters: a shuffle without times is wrong
+
+
+def write_measured(src, dst):
+    """The measured readings of a meas.csv in pred.csv's columns (pose, target, x, y, z)."""
+    lines = src.read_text().splitlines()
+    head = lines[0].split(",")
+    cols = [head.index(c) for c in ("pose", "target", "x", "y", "z")]
+    dst.write_text("\n".join(",".join(line.split(",")[i] for i in cols) for line in lines) + "\n")
+    return dst

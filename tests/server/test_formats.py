@@ -414,3 +414,94 @@ def test_cell_with_bom_is_accepted(tmp_path):
     path = tmp_path / "cell.json"
     path.write_bytes(b"\xef\xbb\xbf" + SPEC_CELL.encode())
     assert isinstance(read_cell(path), Cell)
+
+
+# -- model.json: every effect of the diagnosis vocabulary --------------------------------------
+
+# the keys each effect has always been stored with: files written before must keep loading, and a
+# new effect adds its own line here
+STORED_KEYS = {
+    "joint_periodic": {"name", "joint", "harmonic", "coef"},
+    "joint_scale": {"name", "joint", "coef"},
+    "joint_compliance": {"name", "joint", "gravity", "gravity_terms", "gravity_terms_total", "coef"},
+    "joint_backlash": {"name", "joint", "coef"},
+    "thermal_drift": {"name", "t_ref", "variable", "coef"},
+    "base_shift": {"name", "at_s", "origin", "coef"},
+}
+
+
+def every_effect(seed):
+    """A model with one extension of every kind, as a diagnosis leaves them, and poses to predict."""
+    from server.formats.model_json import ModelFile
+    from solver.diagnosis_report import parameters
+    from solver.effects import Inputs, prepare
+    from solver.kinematics import Layout, translation
+    from solver.vocabulary import KINDS
+
+    rng = np.random.default_rng(seed)
+    cell = default_cell()
+    m, K = 40, len(cell.targets)
+    q = rng.uniform(IRB2600.lower, IRB2600.upper, (m, 6))
+    time_s = np.cumsum(rng.uniform(10, 20, m))[:, None] + 2.0 * np.arange(K)
+    temp_c = 20.0 + time_s / time_s.max() + rng.normal(scale=0.02, size=time_s.shape)
+    inputs = Inputs(q, time_s, temp_c)
+    lay = Layout(IRB2600, np.eye(4), tuple(cell.targets))
+    x = lay.initial(np.array(list(cell.targets.values())))
+    exts, params = [], []
+    for kind in KINDS.values():
+        options = kind.candidates(lay, x, inputs)
+        ext = options[rng.integers(len(options))]
+        if kind.located_in_time:
+            ext.at_s, ext.origin = float(np.median(time_s)), rng.normal(scale=500.0, size=3)
+        ext.coef = rng.normal(scale=1e-3, size=ext.n_params)
+        exts.append(ext)
+        params.append(parameters(ext, prepare(ext, lay, x, inputs) if ext.is_joint else None))
+    base = translation(2500.0, -400.0, 300.0)  # the robot base in the tracker frame
+    model = ModelFile(IRB2600, base, dict(cell.targets), nominal=IRB2600, extensions=exts,
+                      parameters=params)
+    return model, q, time_s, temp_c
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_every_effect_round_trips_through_model_json(tmp_path, seed):
+    from server.formats.model_json import extension_to_json, read_model, write_model
+    from server.workflow import model_predict
+    from solver.vocabulary import KINDS
+
+    assert set(KINDS) == set(STORED_KEYS)
+    model, q, time_s, temp_c = every_effect(seed)
+    write_model(tmp_path / "model.json", model)
+    stored = json.loads((tmp_path / "model.json").read_text())["extensions"]
+    assert [set(e) - {"parameters"} for e in stored] == [STORED_KEYS[e["name"]] for e in stored]
+    back = read_model(tmp_path / "model.json")
+    assert [extension_to_json(e) for e in back.extensions] == [extension_to_json(e) for e in
+                                                               model.extensions]
+    want = model_predict(model, q, time_s, temp_c)
+    np.testing.assert_allclose(model_predict(back, q, time_s, temp_c), want, atol=1e-9)
+    for i in range(len(model.extensions)):  # every extension counts in the prediction
+        model.extensions[i].coef = model.extensions[i].coef * 0.0
+        assert np.abs(model_predict(model, q, time_s, temp_c) - want).max() > 1e-4
+        model.extensions[i] = back.extensions[i]
+
+
+@pytest.mark.parametrize("name, old, new, words", [
+    ("thermal_drift", '"variable": "temp_c"', '"variable": "pressure"', "variable: expected one of"),
+    ("joint_backlash", '"joint": ', '"joint": 7, "was": ', "joint 7 is not one of the robot's"),
+    ("joint_periodic", '"harmonic": ', '"harmonic": 1.5, "was": ', "harmonic: expected an integer"),
+    ("base_shift", '"at_s": ', '"was": ', "at_s"),
+    ("joint_compliance", '"gravity_terms": [', '"gravity_terms": [99, ', "gravity_terms: expected indices"),
+    ("joint_scale", '"coef": [', '"coef": [1.0, ', "expected 1 coefficients"),
+    ("joint_scale", '"name": "joint_scale"', '"name": "joint_wobble"', "unknown extension 'joint_wobble'"),
+])
+def test_bad_extensions_in_a_model_file_are_refused(tmp_path, name, old, new, words):
+    from server.formats.model_json import model_to_json, read_model
+
+    model, *_ = every_effect(0)
+    obj = model_to_json(model)
+    obj["extensions"] = [e for e in obj["extensions"] if e["name"] == name]
+    text = json.dumps(obj, indent=2)
+    assert old in text
+    path = put(tmp_path, "model.json", text.replace(old, new, 1))
+    with pytest.raises(InputError, match=words) as info:
+        read_model(path)
+    assert str(info.value).startswith(f"{path}:") and "extensions[0]" in str(info.value)

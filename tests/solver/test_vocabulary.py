@@ -1,0 +1,69 @@
+"""The diagnosis vocabulary: each effect's class, and backlash's basis from the visit order."""
+
+import numpy as np
+
+from solver.diagnose import candidates
+from solver.diagnosis_report import evidence, parameters
+from solver.effects import Extension, Inputs, joint_basis
+from solver.kinematics import Layout
+from solver.motion import last_motion
+from solver.robot import IRB2600
+from solver.vocabulary import KINDS
+from tests.robots import TARGETS
+
+NAMES = tuple(TARGETS)
+
+
+def data(seed, m=30):
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(IRB2600.lower, IRB2600.upper, (m, 6))
+    time_s = rng.permutation(m)[:, None] * 20.0 + 2.0 * np.arange(len(NAMES))  # visited out of file order
+    temp_c = 20.0 + time_s / time_s.max()
+    lay = Layout(IRB2600, np.eye(4), NAMES)
+    return lay, lay.initial(np.array([TARGETS[n] for n in NAMES])), q, time_s, temp_c
+
+
+def test_every_kind_proposes_candidates_and_backlash_one_per_joint():
+    lay, x, q, time_s, temp_c = data(1)
+    cands = candidates(lay, x, Inputs(q, time_s, temp_c))
+    assert {c.name for c in cands} == set(KINDS)
+    assert "joint_coupling" not in KINDS  # the simulator's wrist coupling stays outside the vocabulary
+    assert [c.joint for c in cands if c.name == "joint_backlash"] == list(range(6))
+    assert all(c.kind is KINDS[c.name] and c.n_params >= 1 for c in cands)
+
+
+def test_backlash_basis_is_the_direction_of_the_last_motion_in_time_order():
+    lay, x, q, time_s, temp_c = data(2)
+    inputs = Inputs(q, time_s, temp_c)
+    order = np.argsort(time_s[:, 0])
+    visited = np.sign(np.diff(q[order], axis=0))
+    for j in range(6):
+        B = joint_basis(Extension("joint_backlash", joint=j), lay, x, inputs)
+        assert B.shape == (30, 1)
+        np.testing.assert_array_equal(B[order[1:], 0], visited[:, j])  # no joint stands still here
+        assert B[order[0], 0] == 0.0  # before its first move the direction is unknown
+    # a fold's poses keep the directions of the whole campaign, not of their own sequence
+    fold = np.arange(0, 30, 3)
+    sub = Inputs(q, time_s, temp_c).subset(fold)
+    B = joint_basis(Extension("joint_backlash", joint=2), lay, x, sub)
+    np.testing.assert_array_equal(B[:, 0], last_motion(q, time_s)[fold, 2])
+    # without times, the file order is the visit order
+    np.testing.assert_array_equal(Inputs(q).motion[1:], np.sign(np.diff(q, axis=0)))
+
+
+def test_a_joint_that_moved_one_way_only_is_no_backlash_candidate():
+    lay, x, q, time_s, temp_c = data(3)
+    q = q[np.argsort(time_s[:, 0])]
+    q[:, 4] = np.linspace(-1.0, 1.0, len(q))  # joint 5 only ever moves up: a constant, its offset
+    cands = candidates(lay, x, Inputs(q))
+    assert [c.joint for c in cands if c.name == "joint_backlash"] == [0, 1, 2, 3, 5]
+
+
+def test_backlash_reads_as_a_lag_in_degrees():
+    ext = Extension("joint_backlash", joint=1, coef=np.array([-np.deg2rad(0.012)]))
+    p = parameters(ext, None)
+    assert set(p) == {"backlash_deg"} and abs(p["backlash_deg"] - 0.012) < 1e-12
+    text = evidence(ext, p, 0.2, 0.02, 9.0, 100)
+    assert "Joint 2" in text and "lags behind" in text and "24.0 mdeg" in text and "0.0200" in text
+    ext.coef = -ext.coef
+    assert "runs ahead of" in evidence(ext, parameters(ext, None), 0.2, 0.02, 9.0, 100)
