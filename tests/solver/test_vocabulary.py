@@ -63,7 +63,8 @@ def test_backlash_reads_as_a_lag_in_degrees():
     ext = Extension("joint_backlash", joint=1, coef=np.array([-np.deg2rad(0.012)]))
     p = parameters(ext, None)
     assert set(p) == {"backlash_deg"} and abs(p["backlash_deg"] - 0.012) < 1e-12
-    text = evidence(ext, p, 0.2, 0.02, 9.0, 100)
+    decision = {"p_value": 0.001, "candidates": 30}
+    text = evidence(ext, p, 0.2, 0.02, decision, 100)
     assert "Joint 2" in text and "lags behind" in text and "24.0 mdeg" in text and "0.0200" in text
     ext.coef = -ext.coef
-    assert "runs ahead of" in evidence(ext, parameters(ext, None), 0.2, 0.02, 9.0, 100)
+    assert "runs ahead of" in evidence(ext, parameters(ext, None), 0.2, 0.02, decision, 100)
