@@ -38,6 +38,8 @@ class Rows:
 
     @staticmethod
     def stack(parts: list[Rows]) -> Rows:
+        if len(parts) == 1:
+            return parts[0]
         return Rows(*(np.concatenate([getattr(p, k) for p in parts])
                       for k in ("J", "G", "r", "pose", "stage")))
 
@@ -69,20 +71,26 @@ def clustered(rows: Rows) -> np.ndarray:
     where each pose weighs much in the fit, are not reported too certain.
     """
     Ai = _bread(rows)
-    GG = rows.G.T @ rows.G
-    P = Ai.shape[0]
-    meat = np.zeros((P, P))
+    C = Ai @ (rows.G.T @ rows.G) @ Ai.T
+    meat = np.zeros_like(Ai)
     order = np.argsort(rows.pose, kind="stable")
     starts = np.flatnonzero(np.r_[True, np.diff(rows.pose[order]) != 0])
-    for blk in np.split(order, starts[1:]):
-        J, G, r = rows.J[blk], rows.G[blk], rows.r[blk]
-        H = J @ Ai @ G.T
-        M = np.eye(len(blk)) - H - H.T + J @ Ai @ GG @ Ai.T @ J.T
-        w, V = np.linalg.eigh(0.5 * (M + M.T))
-        keep = w > ABSORBED
-        u = V[:, keep] @ ((V[:, keep].T @ r) / np.sqrt(w[keep]))
-        score = G.T @ u
-        meat += np.outer(score, score)
+    blocks = np.split(order, starts[1:])
+    # poses with as many rows (all readings present) are done at once
+    for n in {len(b) for b in blocks}:
+        idx = np.array([b for b in blocks if len(b) == n])  # (poses, n)
+        J, G, r = rows.J[idx], rows.G[idx], rows.r[idx]
+        P = J.shape[-1]
+        # one large product each, then the small per-pose ones
+        JA = (J.reshape(-1, P) @ Ai).reshape(J.shape)
+        JC = (J.reshape(-1, P) @ C).reshape(J.shape)
+        H = np.einsum("bip,bjp->bij", JA, G)
+        M = np.eye(n) - H - H.transpose(0, 2, 1) + np.einsum("bip,bjp->bij", JC, J)
+        w, V = np.linalg.eigh(0.5 * (M + M.transpose(0, 2, 1)))
+        inv_root = np.where(w > ABSORBED, 1.0 / np.sqrt(np.clip(w, ABSORBED, None)), 0.0)
+        u = np.einsum("bij,bj->bi", V, inv_root * np.einsum("bji,bj->bi", V, r))
+        score = np.einsum("bnp,bn->bp", G, u)
+        meat += score.T @ score
     return Ai @ meat @ Ai.T
 
 
@@ -128,9 +136,10 @@ def errors_from_rows(rows: Rows, names, column, degrees) -> ParameterErrors:
                            int(len(np.unique(rows.pose))), plain(rows))
 
 
-# central differences over this fraction of each coefficient's standard deviation: small enough
-# to be linear, large enough above rounding
-REL_STEP = 1e-3
+# central differences over these fractions of each coefficient's standard deviation: the first
+# small enough to be linear; the larger ones for entries the parameter formulas round so finely
+# that the first step does not move them
+REL_STEPS = (1e-3, 1e-1, 1.0)
 
 
 def _numbers(values: dict) -> dict[str, np.ndarray]:
@@ -142,6 +151,21 @@ def _numbers(values: dict) -> dict[str, np.ndarray]:
                               for i in items):
             out[k] = np.asarray(items, dtype=float)
     return out
+
+
+def _gradients(values, coef, sd, rel, base: dict) -> dict[str, np.ndarray]:
+    """Central-difference gradients (entries, coefficients) of the entries in base, steps rel x sd."""
+    grads = {k: np.zeros((len(v), len(coef))) for k, v in base.items()}
+    for i in np.flatnonzero(sd > 0):
+        step = np.zeros_like(coef)
+        step[i] = rel * sd[i]
+        up, down = _numbers(values(coef + step)), _numbers(values(coef - step))
+        for k, g in grads.items():
+            d = up[k] - down[k]
+            if k.endswith("_deg"):
+                d = (d + 180.0) % 360.0 - 180.0
+            g[:, i] = d / (2.0 * step[i])
+    return grads
 
 
 def propagate(values, coef, cov) -> dict:
@@ -156,21 +180,11 @@ def propagate(values, coef, cov) -> dict:
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     orig = values(coef)
     base = _numbers(orig)
-    grads = {k: np.zeros((len(v), len(coef))) for k, v in base.items()}
-    for i in np.flatnonzero(sd > 0):
-        h = REL_STEP * sd[i]
-        step = np.zeros_like(coef)
-        step[i] = h
-        up, down = _numbers(values(coef + step)), _numbers(values(coef - step))
-        for k in grads:
-            d = up[k] - down[k]
-            if k.endswith("_deg"):
-                d = (d + 180.0) % 360.0 - 180.0
-            grads[k][:, i] = d / (2.0 * h)
     out = {}
-    for k, g in grads.items():
-        if not np.any(g):
-            continue
-        se = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", g, cov, g), 0.0, None))
-        out[k] = se.tolist() if isinstance(orig[k], (list, tuple, np.ndarray)) else float(se[0])
-    return out
+    for rel in REL_STEPS:
+        todo = {k: v for k, v in base.items() if k not in out}
+        for k, g in _gradients(values, coef, sd, rel, todo).items():
+            if np.any(g):
+                se = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", g, cov, g), 0.0, None))
+                out[k] = se.tolist() if isinstance(orig[k], (list, tuple, np.ndarray)) else float(se[0])
+    return {k: out[k] for k in base if k in out}

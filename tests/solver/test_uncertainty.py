@@ -14,7 +14,7 @@ from solver.extended import fit_extended
 from solver.fit_errors import calibration_errors, effect_uncertainty, extended_errors
 from solver.identify import register
 from solver.robot import IRB2600
-from solver.uncertainty import propagate
+from solver.uncertainty import Rows, clustered, propagate
 from tests.robots import KUKA_LIKE, TARGETS
 
 DRAWS = 40
@@ -101,11 +101,22 @@ def test_clustered_errors_stay_honest_with_per_pose_arm_error(method, poses):
     assert np.median(plain) > 1.15 and plain.max() > 1.6, (np.median(plain), plain.max())
 
 
-def test_effect_parameters_standard_errors_match_the_spread():
-    """A joint-2 compliance extension: its coefficients and its deflection in degrees."""
+def compliance(layout, x0, q):
+    g = gravity_in_base(layout, x0)
+    keep = select_independent(gravity_basis(layout, x0, q, 1, g))
+    return Extension("joint_compliance", joint=1, keep=keep, gravity=g)
+
+
+@pytest.mark.parametrize("spec,make,keys", [
+    ("joint_compliance:2", compliance, {"deflection_rms_deg", "deflection_range_deg"}),
+    ("joint_periodic:3:1", lambda *_: Extension("joint_periodic", joint=2, harmonic=1),
+     {"amplitude_deg", "phase_deg"}),
+])
+def test_effect_parameters_standard_errors_match_the_spread(spec, make, keys):
+    """An effect's coefficients and its parameters in degrees, over repeated campaigns."""
     seed = 21
     vc = VirtualCell.random(IRB2600, TARGETS, seed=seed)
-    vc.effects.extend(make_effects(["joint_compliance:2"], vc, seed))
+    vc.effects.extend(make_effects([spec], vc, seed))
     rng = np.random.default_rng(seed)
     q = vc.sample_poses(60, rng)
     targets = np.array([TARGETS[k] for k in vc.target_names])
@@ -116,19 +127,17 @@ def test_effect_parameters_standard_errors_match_the_spread():
         prob, x0 = register(IRB2600, targets, vc.target_names, q, xyz)
         if ext is None:  # one extension (its gravity terms) for every draw
             free = ident.structural(prob.layout, x0, np.ones(prob.layout.n_params, bool)).free
-            g = gravity_in_base(prob.layout, x0)
-            keep = select_independent(gravity_basis(prob.layout, x0, q, 1, g))
-            ext = Extension("joint_compliance", joint=1, keep=keep, gravity=g)
+            ext = make(prob.layout, x0, q)
         inputs = Inputs(q)
         x, ee, _ = fit_extended(prob, inputs, x0, free, [ext])
         err = extended_errors(prob, inputs, x0, free, x, ee)
         basis = joint_basis(ee[0], prob.layout, x0, inputs)
         p = parameters(ee[0], basis)
         u = effect_uncertainty(err, ee, 0, basis, parameters)
+        assert set(u) == keys  # not the term count or the harmonic
         coef_se = np.sqrt(np.diag(err.block([f"{ee[0].label()}[{i}]" for i in range(ext.n_params)])))
-        values.append([p["deflection_rms_deg"], p["deflection_range_deg"], *ee[0].coef])
-        ses.append([u["deflection_rms_deg"], u["deflection_range_deg"], *coef_se])
-        assert set(u) == {"deflection_rms_deg", "deflection_range_deg"}  # not the term count
+        values.append([p[k] for k in sorted(keys)] + list(ee[0].coef))
+        ses.append([u[k] for k in sorted(keys)] + list(coef_se))
     values, ses = np.array(values), np.array(ses)
     ratio = values.std(axis=0, ddof=1) / np.sqrt(np.mean(ses**2, axis=0))
     assert_honest(ratio)
@@ -141,9 +150,11 @@ def test_propagation_matches_the_analytic_one_and_wraps_phases():
     def values(v):
         return {"amplitude_deg": float(np.degrees(np.hypot(*v))),
                 "phase_deg": float(np.degrees(np.arctan2(v[1], v[0]))),
-                "harmonic": 1, "variable": "time_s", "shift_mm": [v[0], 2 * v[1]]}
+                "harmonic": 1, "variable": "time_s", "shift_mm": [v[0], 2 * v[1]],
+                "rounded_mm": float(np.round(v[0], 5))}  # rounded far below its error
     out = propagate(values, c, cov)
-    assert set(out) == {"amplitude_deg", "phase_deg", "shift_mm"}
+    assert set(out) == {"amplitude_deg", "phase_deg", "shift_mm", "rounded_mm"}
+    assert 0.5 < out["rounded_mm"] / 2e-5 < 2.0
     g_amp = np.degrees(c / np.hypot(*c))
     g_phase = np.degrees(np.array([-c[1], c[0]]) / (c @ c))
     assert out["amplitude_deg"] == pytest.approx(np.sqrt(g_amp @ cov @ g_amp), rel=1e-5)
@@ -162,3 +173,20 @@ def test_held_parameters_have_no_standard_error_and_angles_are_in_degrees():
     i = err.names.index("alpha2")
     assert se["alpha2"] == pytest.approx(np.degrees(err.internal()[i]))
     assert se["a2"] == pytest.approx(err.internal()[err.names.index("a2")])
+
+
+def test_clustered_estimate_is_unbiased_on_a_linear_model_with_uneven_poses():
+    """CR2's defining property: with independent errors of one variance its mean is the exact
+    covariance, however few the poses per parameter and whatever their reading counts."""
+    rng = np.random.default_rng(0)
+    sizes = rng.choice([3, 6, 9], size=14)  # poses missing readings
+    pose = np.repeat(np.arange(len(sizes)), sizes)
+    J = rng.normal(size=(len(pose), 10)) * rng.uniform(0.1, 10.0, size=10)
+    exact = np.linalg.inv(J.T @ J)
+    H = J @ exact @ J.T
+    mean = np.zeros(10)
+    draws = 3000
+    for _ in range(draws):
+        r = (np.eye(len(pose)) - H) @ rng.normal(size=len(pose))
+        mean += np.diag(clustered(Rows(J, J, r, pose, np.zeros(len(pose), int)))) / draws
+    assert mean == pytest.approx(np.diag(exact), rel=0.1)
