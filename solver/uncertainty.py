@@ -17,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 
 CLUSTERED = "pose-clustered sandwich (CR2)"
-PLAIN = "plain s^2 (G'J)^-1"
 # eigenvalues of a pose's residual-maker block below this count as absorbed whole by the fit
 ABSORBED = 1e-9
 
