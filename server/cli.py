@@ -56,6 +56,8 @@ def cmd_calibrate(args) -> None:
     console.print(f"{args.method} on {meas.n_poses} poses, {meas.n_readings} readings "
                   f"in {cal.seconds * 1000:.0f} ms")
     console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
+    console.print(tables.identified_geometry(cal.robot, cell.robot, model.meta["uncertainty"]))
+    console.print(tables.frame_errors(model.meta["uncertainty"], meas.target_names))
     console.print(f"condition number {cal.condition:.3g}; " + ", ".join(
         f"F_{k} {v:.4f} mm^2" for k, v in fit["F_mm2"].items())
         + f"; RMSE(phi) {fit['rmse_phi_mm']:.4f} mm; RMS {fit['rmse_mm']:.4f} mm")
@@ -146,6 +148,7 @@ def _print_diagnosis(report) -> None:
         console.print(f"[bold]{e['name']}[/bold]" + (f" joint {e['joint']}" if "joint" in e else "")
                       + (f" harmonic {e['harmonic']}" if "harmonic" in e else "")
                       + (f" at {e['at_s']:.0f} s" if "at_s" in e else "") + f": {e['evidence']}")
+        console.print("  " + tables.effect_parameters(e["parameters"], e.get("uncertainty")))
     console.print(f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
                   f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)")
 

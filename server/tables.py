@@ -64,3 +64,60 @@ def accuracy(acc: dict, title: str, target_names) -> Table:
 
 def fixed_parameters(fixed: dict) -> str:
     return "; ".join(f"{k} ({v})" for k, v in fixed.items()) or "none"
+
+
+def plus_minus(v: float, se: float | None, sign: str = "") -> str:
+    """A value with its standard error, both to the standard error's second significant digit."""
+    if se is None or not np.isfinite(se):
+        return _f(v)
+    places = int(min(8, max(0, 1 - np.floor(np.log10(se))))) if se > 0 else 4
+    return f"{v:{sign}.{places}f} ± {se:.{places}f}"
+
+
+def identified_geometry(robot, nominal, uncertainty: dict) -> Table:
+    """Each joint's identified parameters as change from nominal ± standard error ('fixed' where
+    not identifiable), in mm and degrees."""
+    se = uncertainty["standard_errors"]
+    t = Table(title="Identified geometry: change from nominal ± standard error "
+                    f"({uncertainty['estimator']}; mm, deg)")
+    kinds = ("theta", "d", "a", "alpha", "beta")
+    for col in ("joint",) + kinds:
+        t.add_column(col, justify="right")
+    names = robot.param_names()
+    delta = robot.param_vector() - nominal.param_vector()
+    by_name = {n: (np.degrees(v) if n.startswith(("theta", "alpha", "beta")) else v)
+               for n, v in zip(names, delta)}
+    for j in range(1, robot.n_joints + 1):
+        cells = []
+        for k in kinds:
+            n = f"{k}{j}"
+            cells.append("" if n not in by_name else "fixed" if se.get(n) is None
+                         else plus_minus(by_name[n], se[n], "+"))
+        t.add_row(str(j), *cells)
+    return t
+
+
+def frame_errors(uncertainty: dict, target_names) -> str:
+    """One line: the base frame's and each SMR's standard errors."""
+    se = uncertainty["standard_errors"]
+
+    def group(names, unit):
+        return "/".join("fixed" if se.get(n) is None else f"{se[n]:.2g}" for n in names) + f" {unit}"
+    smrs = "; ".join(f"{t} {group([f'{t}_{c}' for c in 'xyz'], 'mm')}" for t in target_names)
+    return ("standard errors: base x/y/z " + group(["base_x", "base_y", "base_z"], "mm")
+            + ", rz/ry/rx " + group(["base_rz", "base_ry", "base_rx"], "deg")
+            + f"; SMRs x/y/z (flange frame) {smrs}")
+
+
+def effect_parameters(parameters: dict, uncertainty: dict | None) -> str:
+    """An effect's parameters, each with ± its standard error where it has one."""
+    out = []
+    for k, v in parameters.items():
+        se = (uncertainty or {}).get(k)
+        if isinstance(v, (list, tuple)) and isinstance(se, (list, tuple)):
+            out.append(f"{k} [" + ", ".join(plus_minus(a, b) for a, b in zip(v, se)) + "]")
+        elif isinstance(v, (int, float)) and not isinstance(v, bool) and se is not None:
+            out.append(f"{k} {plus_minus(v, se)}")
+        else:
+            out.append(f"{k} {v}")
+    return ", ".join(out)

@@ -11,12 +11,14 @@ from solver.calibrate import Calibration, calibrate
 from solver.diagnose import diagnose as run_diagnosis
 from solver.effects import Inputs, prepare
 from solver.extended import predict_extended
+from solver.fit_errors import calibration_errors
 from solver.kinematics import Layout, predict
 from solver.measurements import Measurements
 
 from .formats.campaign_csv import read_campaign
 from .formats.cell_json import Cell, default_cell, read_cell
-from .formats.model_json import ModelFile, file_digest, read_model
+from .formats.model_json import (ModelFile, extension_errors, file_digest, read_model,
+                                 uncertainty_to_json)
 
 PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
 
@@ -93,7 +95,9 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         "iterations": cal.iterations,
         "seconds": round(cal.seconds, 4),
     }
-    meta = {"method": cal.method, "data": data, "fit": fit}
+    meta = {"method": cal.method, "data": data, "fit": fit,
+            "uncertainty": uncertainty_to_json(calibration_errors(cal, meas.q, meas.xyz),
+                                               cal.layout.names())}
     if "qp" in cal.details:
         meta["qp"] = cal.details["qp"]
     return ModelFile(cal.robot, cal.base, dict(zip(meas.target_names, cal.targets)),
@@ -191,6 +195,9 @@ def diagnose(cell: Cell, meas: Measurements, log=None):
                       nominal=cell.robot, extensions=d.extensions, parameters=d.parameters,
                       meta={"method": "ls-sum+extensions", "diagnosis": {
                           "final": d.report["final"], "noise_floor_mm": d.report["noise_floor_mm"]}})
+    if d.errors is not None:
+        model.meta["uncertainty"] = uncertainty_to_json(d.errors.parameters, lay.names())
+        model.extension_errors = extension_errors(d.errors)
     return d, model
 
 

@@ -61,6 +61,7 @@ class Diagnosis:
     parameters: list  # per extension, in edge units
     figures: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
+    errors: object = None  # solver.fit_errors.ExtendedErrors: the final model's standard errors
 
 
 def noise_floor(meas: np.ndarray, inputs: Inputs) -> float | None:
@@ -328,9 +329,12 @@ def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=N
     from .diagnosis_report import build_report, figure_series
 
     params, report = build_report(diag, steps, base, final, ee, x, floor, len(cands))
+    from .fit_errors import diagnosis_errors
+
+    errors = diagnosis_errors(diag, x, ee, report, params)  # adds each effect's `uncertainty`
     figures = figure_series(diag, steps, ee, x)
     clock["total"] = time.perf_counter() - t0
     report["seconds"] = {k: round(v, 3) for k, v in clock.items()}
     report["cross_validation"] = {"folds": len(diag.folds), "fits": diag.fits,
                                   "candidates": len(cands)}
-    return Diagnosis(report, prob.layout, x, ee, params, figures, clock)
+    return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors)

@@ -238,13 +238,16 @@ async function pollDiagnosis() {
 const UNITS = [["_ppm_per_c", "ppm/°C"], ["_ppm_per_hour", "ppm/h"], ["_deg", "deg"],
                ["_ppm", "ppm"], ["_mm", "mm"], ["_s", "s"]];
 
-/** An effect's parameters as text, units taken from the key suffixes of the report. */
-function formatParameters(params) {
+/** An effect's parameters as text, each ± its standard error where the report gives one, units
+ * taken from the key suffixes of the report. */
+function formatParameters(params, errors) {
+  const pm = (v, se) => fmt(v) + (typeof se === "number" ? ` ± ${fmt(se)}` : "");
   return Object.entries(params || {}).map(([key, v]) => {
     const [suffix, unit] = UNITS.find(([sfx]) => key.endsWith(sfx)) || ["", ""];
     const label = (suffix ? key.slice(0, -suffix.length) : key).replaceAll("_", " ");
-    const value = Array.isArray(v) ? `(${v.map(fmt).join(", ")})`
-      : typeof v === "number" ? (Number.isInteger(v) ? String(v) : fmt(v)) : String(v);
+    const se = (errors || {})[key];
+    const value = Array.isArray(v) ? `(${v.map((x, i) => pm(x, Array.isArray(se) ? se[i] : null)).join(", ")})`
+      : typeof v === "number" ? (Number.isInteger(v) ? String(v) : pm(v, se)) : String(v);
     return `${label} ${value}${unit ? ` ${unit}` : ""}`;
   }).join("; ");
 }
@@ -282,7 +285,7 @@ async function showDiagnosis(d) {
       const tr = body.insertRow();
       const name = e.name + (e.harmonic ? ` (harmonic ${e.harmonic})` : "")
         + (e.at_s !== undefined && e.at_s !== null ? ` at ${e.at_s.toFixed(0)} s` : "");
-      [name, e.joint ?? "-", e.evidence, formatParameters(e.parameters),
+      [name, e.joint ?? "-", e.evidence, formatParameters(e.parameters, e.uncertainty),
        fmt(e.holdout_rmse_before_mm), fmt(e.holdout_rmse_after_mm)]
         .forEach((v) => { tr.insertCell().textContent = v; });
       tr.cells[2].className = "evidence";

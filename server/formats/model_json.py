@@ -33,6 +33,8 @@ class ModelFile:
     extensions: list = field(default_factory=list)
     meta: dict = field(default_factory=dict)
     parameters: list | None = None  # per extension, its parameters in edge units (for people)
+    # per extension: {"coef_standard_errors": [...], "uncertainty": {parameter: standard error}}
+    extension_errors: list | None = None
 
     def layout(self) -> tuple[Layout, np.ndarray]:
         """The kinematic layout and parameter vector that reproduce this model's predictions."""
@@ -41,9 +43,9 @@ class ModelFile:
         return lay, lay.initial(np.array([self.targets[n] for n in names]))
 
 
-def extension_to_json(ext: Extension, parameters: dict | None = None) -> dict:
+def extension_to_json(ext: Extension, parameters: dict | None = None, errors: dict | None = None) -> dict:
     """An extension as stored: its kind and place (joints from 1), its own fields (the kind's
-    `to_json`), coefficients, readable parameters."""
+    `to_json`), coefficients, readable parameters, standard errors."""
     out = {"name": ext.name}
     if ext.joint is not None:
         out["joint"] = ext.joint + 1
@@ -53,6 +55,7 @@ def extension_to_json(ext: Extension, parameters: dict | None = None) -> dict:
     out["coef"] = np.asarray(ext.coef, dtype=float).tolist()
     if parameters is not None:
         out["parameters"] = parameters
+    out.update(errors or {})
     return out
 
 
@@ -84,6 +87,28 @@ class _Fields:
         at = (*self.at, key)
         return np.array([self.doc.number(v, (*at, i)) for i, v in
                          enumerate(self.doc.array(self._get(key), at))], dtype=float)
+
+
+def uncertainty_to_json(errors, names) -> dict:
+    """The standard errors of the named parameters of a fit (solver.uncertainty.ParameterErrors)
+    as model.json states them (extension coefficients go with their extension)."""
+    se = errors.standard_errors()
+    return {
+        "estimator": errors.estimator,
+        "poses": errors.poses,
+        "units": "mm; degrees for theta, alpha, beta and base_rz, base_ry, base_rx",
+        "frames": "base_x/y/z and base_rz/ry/rx along and about the calibrated base frame's "
+                  "axes; SMR positions in the flange frame",
+        "standard_errors": {n: se[n] for n in names},
+        "null": "held fixed: not identifiable from this model (see fit.fixed_parameters)",
+    }
+
+
+def extension_errors(errors) -> list[dict]:
+    """Per extension (solver.fit_errors.ExtendedErrors), its coefficients' standard errors (in the
+    coefficients' own units) and its parameters' (edge units)."""
+    return [{"coef_standard_errors": c, "uncertainty": u}
+            for c, u in zip(errors.coefficients, errors.effects)]
 
 
 def extension_from_json(obj: dict, doc: JsonDoc, at: tuple, n_joints: int | None = None) -> Extension:
@@ -128,8 +153,9 @@ def model_to_json(model: ModelFile) -> dict:
         "nominal_robot": robot_to_json(model.nominal) if model.nominal is not None else None,
         "base": np.asarray(model.base).round(9).tolist(),
         "targets": {k: np.asarray(v).round(6).tolist() for k, v in model.targets.items()},
-        "extensions": [extension_to_json(e, p) for e, p in
-                       zip(model.extensions, model.parameters or [None] * len(model.extensions))],
+        "extensions": [extension_to_json(e, p, u) for e, p, u in
+                       zip(model.extensions, model.parameters or [None] * len(model.extensions),
+                           model.extension_errors or [None] * len(model.extensions))],
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         **model.meta,
     }
@@ -162,4 +188,8 @@ def read_model(path) -> ModelFile:
                   for i, e in enumerate(doc.array(obj.get("extensions", []), ("extensions",)))]
     meta = {k: v for k, v in obj.items()
             if k not in ("schema", "robot", "nominal_robot", "base", "targets", "extensions")}
-    return ModelFile(robot, base, targets, nominal, list(extensions), meta)
+    stored = obj.get("extensions", [])
+    parameters = [e.get("parameters") for e in stored] if extensions else None
+    errors = [{k: e[k] for k in ("coef_standard_errors", "uncertainty") if k in e}
+              for e in stored] if extensions else None
+    return ModelFile(robot, base, targets, nominal, list(extensions), meta, parameters, errors)

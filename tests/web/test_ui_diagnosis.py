@@ -111,7 +111,7 @@ def test_hidden_effect_is_named_with_its_evidence_and_figure(served, page, tmp_p
     assert "cuts the held-out RMS from" in evidence and "paired t =" in evidence, evidence
     if joint is not None:
         assert evidence.startswith(f"Joint {joint}'s residual rotation"), evidence
-    assert cells[3], "the effect's parameters are shown"
+    assert cells[3] and " ± " in cells[3], "the effect's parameters are shown with their errors"
     before, after = float(cells[4]), float(cells[5])
     assert after < 0.7 * before, cells  # the extension removes most of the held-out error
     state = page.text_content("#d-state")

@@ -1,0 +1,189 @@
+"""Standard errors of identified parameters, honest when the readings of a pose share an error.
+
+A fit solves estimating equations G'r(theta) = 0 over its residual rows (least squares: G = J,
+the identification Jacobian). Linearised, reading errors e move the estimate by -A^-1 G'e with
+A = G'J, so its covariance is A^-1 G' Cov(e) G A^-T. The plain estimate takes Cov(e) = s^2 I,
+every coordinate of every reading independent. On a real arm the readings of one pose share an
+error (repeatability, settling, whatever no model predicts), so the default estimate clusters
+by pose: G' Cov(e) G is estimated by the sum over poses of their scores G_p'r_p G_p'r_p', each
+pose's residuals first scaled up by what the fit absorbed of them (CR2, Bell and McCaffrey
+2002), which makes it unbiased with independent errors as well, however few the poses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+CLUSTERED = "pose-clustered sandwich (CR2)"
+# eigenvalues of a pose's residual-maker block below this count as absorbed whole by the fit
+ABSORBED = 1e-9
+
+
+@dataclass
+class Rows:
+    """The residual rows of a fit: Jacobian, estimating weights, residuals, pose and stage of each.
+
+    A stage is one fit of a staged method (ls-single fits the other SMRs afterwards with the arm
+    held); the plain estimate gives every stage its own residual scale.
+    """
+
+    J: np.ndarray  # (N, P) d r / d theta
+    G: np.ndarray  # (N, P) estimating-equation weights: G'r = 0 at the fit
+    r: np.ndarray  # (N,)
+    pose: np.ndarray  # (N,) int
+    stage: np.ndarray  # (N,) int
+
+    @staticmethod
+    def stack(parts: list[Rows]) -> Rows:
+        if len(parts) == 1:
+            return parts[0]
+        return Rows(*(np.concatenate([getattr(p, k) for p in parts])
+                      for k in ("J", "G", "r", "pose", "stage")))
+
+
+def _bread(rows: Rows) -> np.ndarray:
+    """(G'J)^-1, the map from the scores to the parameters."""
+    return np.linalg.inv(rows.G.T @ rows.J)
+
+
+def plain(rows: Rows) -> np.ndarray:
+    """Covariance with every residual row independent, of one variance per stage."""
+    Ai = _bread(rows)
+    meat = np.zeros_like(Ai)
+    for s in np.unique(rows.stage):
+        on = rows.stage == s
+        G = rows.G[on]
+        p = int(np.count_nonzero(np.any(G != 0, axis=0)))
+        s2 = float(rows.r[on] @ rows.r[on]) / max(int(on.sum()) - p, 1)
+        meat += s2 * (G.T @ G)
+    return Ai @ meat @ Ai.T
+
+
+def clustered(rows: Rows) -> np.ndarray:
+    """Covariance with the rows of each pose sharing any error: CR2 sandwich over poses.
+
+    The fitted residuals are r = (I - H) e with H = J A^-1 G'; with independent errors of one
+    variance, a pose's residuals have covariance s^2 M_p, M_p the pose's block of
+    (I - H)(I - H)'. Scaling them by M_p^-1/2 undoes what the fit absorbed, so small campaigns,
+    where each pose weighs much in the fit, are not reported too certain.
+    """
+    Ai = _bread(rows)
+    C = Ai @ (rows.G.T @ rows.G) @ Ai.T
+    meat = np.zeros_like(Ai)
+    order = np.argsort(rows.pose, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(rows.pose[order]) != 0])
+    blocks = np.split(order, starts[1:])
+    # poses with as many rows (all readings present) are done at once
+    for n in {len(b) for b in blocks}:
+        idx = np.array([b for b in blocks if len(b) == n])  # (poses, n)
+        J, G, r = rows.J[idx], rows.G[idx], rows.r[idx]
+        P = J.shape[-1]
+        # one large product each, then the small per-pose ones
+        JA = (J.reshape(-1, P) @ Ai).reshape(J.shape)
+        JC = (J.reshape(-1, P) @ C).reshape(J.shape)
+        H = np.einsum("bip,bjp->bij", JA, G)
+        M = np.eye(n) - H - H.transpose(0, 2, 1) + np.einsum("bip,bjp->bij", JC, J)
+        w, V = np.linalg.eigh(0.5 * (M + M.transpose(0, 2, 1)))
+        inv_root = np.where(w > ABSORBED, 1.0 / np.sqrt(np.clip(w, ABSORBED, None)), 0.0)
+        u = np.einsum("bij,bj->bi", V, inv_root * np.einsum("bji,bj->bi", V, r))
+        score = np.einsum("bnp,bn->bp", G, u)
+        meat += score.T @ score
+    return Ai @ meat @ Ai.T
+
+
+@dataclass
+class ParameterErrors:
+    """Covariance of a fit's identified parameters and their standard errors in edge units.
+
+    Parameters held fixed (not identifiable) have no column: their standard error is None.
+    """
+
+    names: tuple[str, ...]  # every parameter of the model, in its order
+    column: np.ndarray  # (len(names),) its column in cov, -1 where held fixed
+    cov: np.ndarray  # mm, rad and coefficient units
+    degrees: np.ndarray  # (len(names),) bool: an angle, reported in degrees
+    estimator: str = CLUSTERED
+    poses: int = 0
+    plain_cov: np.ndarray | None = None  # the plain estimate, for comparison
+
+    def internal(self, plain_estimate: bool = False) -> np.ndarray:
+        """Standard errors (mm, rad, coefficient units) per name, NaN where held fixed."""
+        cov = self.plain_cov if plain_estimate else self.cov
+        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        return np.where(self.column >= 0, sd[np.maximum(self.column, 0)], np.nan)
+
+    def standard_errors(self, plain_estimate: bool = False) -> dict[str, float | None]:
+        """Per parameter name, its standard error in mm or degrees; None where held fixed."""
+        sd = self.internal(plain_estimate)
+        sd = np.where(self.degrees, np.degrees(sd), sd)
+        return {n: (None if not np.isfinite(v) else float(v)) for n, v in zip(self.names, sd)}
+
+    def block(self, names) -> np.ndarray:
+        """Covariance of the named parameters (all must be identified)."""
+        idx = [int(self.column[self.names.index(n)]) for n in names]
+        if min(idx, default=0) < 0:
+            raise ValueError("a named parameter is held fixed")
+        return self.cov[np.ix_(idx, idx)]
+
+
+def errors_from_rows(rows: Rows, names, column, degrees) -> ParameterErrors:
+    """Both estimates from a fit's rows; the clustered one is the one reported."""
+    return ParameterErrors(tuple(names), np.asarray(column, dtype=int), clustered(rows),
+                           np.asarray(degrees, dtype=bool), CLUSTERED,
+                           int(len(np.unique(rows.pose))), plain(rows))
+
+
+# central differences over these fractions of each coefficient's standard deviation: the first
+# small enough to be linear; the larger ones for entries the parameter formulas round so finely
+# that the first step does not move them
+REL_STEPS = (1e-3, 1e-1, 1.0)
+
+
+def _numbers(values: dict) -> dict[str, np.ndarray]:
+    """The numeric entries of a parameter dict (numbers or lists of numbers) as float arrays."""
+    out = {}
+    for k, v in values.items():
+        items = v if isinstance(v, (list, tuple, np.ndarray)) else [v]
+        if len(items) and all(isinstance(i, (int, float, np.number)) and not isinstance(i, bool)
+                              for i in items):
+            out[k] = np.asarray(items, dtype=float)
+    return out
+
+
+def _gradients(values, coef, sd, rel, base: dict) -> dict[str, np.ndarray]:
+    """Central-difference gradients (entries, coefficients) of the entries in base, steps rel x sd."""
+    grads = {k: np.zeros((len(v), len(coef))) for k, v in base.items()}
+    for i in np.flatnonzero(sd > 0):
+        step = np.zeros_like(coef)
+        step[i] = rel * sd[i]
+        up, down = _numbers(values(coef + step)), _numbers(values(coef - step))
+        for k, g in grads.items():
+            d = up[k] - down[k]
+            if k.endswith("_deg"):
+                d = (d + 180.0) % 360.0 - 180.0
+            g[:, i] = d / (2.0 * step[i])
+    return grads
+
+
+def propagate(values, coef, cov) -> dict:
+    """Standard errors of the numeric entries of values(coef) (a dict of numbers or lists of
+    numbers) from the covariance of coef, through a central-difference Jacobian.
+
+    Entries that do not move with the coefficients (a harmonic's order, a reference time) are no
+    estimates of them and get none; differences of entries in degrees are wrapped, so a phase
+    near +-180 degrees does not jump.
+    """
+    coef = np.asarray(coef, dtype=float)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    orig = values(coef)
+    base = _numbers(orig)
+    out = {}
+    for rel in REL_STEPS:
+        todo = {k: v for k, v in base.items() if k not in out}
+        for k, g in _gradients(values, coef, sd, rel, todo).items():
+            if np.any(g):
+                se = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", g, cov, g), 0.0, None))
+                out[k] = se.tolist() if isinstance(orig[k], (list, tuple, np.ndarray)) else float(se[0])
+    return {k: out[k] for k in base if k in out}
