@@ -239,7 +239,9 @@ def cmd_bench(args) -> None:
     if args.what == "diagnose":
         from .bench_diagnose import run_diagnose_bench
 
-        result = run_diagnose_bench(poses=args.poses)
+        result = run_diagnose_bench(quick=args.quick, effect_cases=args.cases,
+                                    clean_cases=args.clean, sizes=args.poses,
+                                    workers=args.workers)
     elif args.what == "service":
         from .bench_service import run_service_bench
 
@@ -389,7 +391,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
     b.add_argument("what", choices=("solver", "diagnose", "acquire", "service"))
-    b.add_argument("--poses", type=int, default=100, help="diagnose: poses per campaign")
+    b.add_argument("--poses", type=int, nargs="+", default=[100, 1000],
+                   help="diagnose: sizes of the campaigns timed one at a time")
+    b.add_argument("--quick", action="store_true",
+                   help="diagnose: a short run (10 effect cases, 10 clean campaigns)")
+    b.add_argument("--cases", type=int, help="diagnose: effect cases of the suite (default 60)")
+    b.add_argument("--clean", type=int, help="diagnose: clean campaigns (default 200)")
+    b.add_argument("--workers", type=int, default=2, help="diagnose: processes in the pool")
     b.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000])
     b.add_argument("--no-reference", action="store_true",
                    help="skip the finite-difference scipy reference")

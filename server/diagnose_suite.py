@@ -341,13 +341,15 @@ def summarize(results: list[dict]) -> dict:
     ran = [r for r in results if "skipped" not in r]
     per_type: dict = {}
     per_size: dict = {}
+    per_both: dict = {}
     for r in ran:
+        size = str(r["case"]["poses"])
         for (name, *_), hit in zip(r["hidden"], r["detected"]):
-            for table, key in ((per_type, name), (per_size, str(r["case"]["poses"]))):
+            for table, key in ((per_type, name), (per_size, size), (per_both, f"{name}@{size}")):
                 row = table.setdefault(key, {"hidden": 0, "named": 0})
                 row["hidden"] += 1
                 row["named"] += int(hit)
-    for table in (per_type, per_size):
+    for table in (per_type, per_size, per_both):
         for row in table.values():
             row["rate"] = row["named"] / row["hidden"]
     hidden = sum(len(r["hidden"]) for r in ran)
@@ -357,18 +359,21 @@ def summarize(results: list[dict]) -> dict:
     outlier_ratios = [r["ratio"] for r in ran if r["ratio"] is not None and r["outliers"]]
     oov = [r for r in ran if r["case"]["kind"] == "out_of_vocabulary"]
     unpaid = [r for r in oov if r["named"] and not r.get("payoff", {}).get("pays_off", False)]
-    times = [r["seconds"] for r in ran if r["seconds"] is not None]
-
     def stats(v):
         return {"count": len(v), "median": float(np.median(v)) if v else None,
                 "worst": float(np.max(v)) if v else None}
+
+    times = [r["seconds"] for r in ran if r["seconds"] is not None]
+    by_size = {str(n): stats([r["seconds"] for r in ran if r["case"]["poses"] == n])
+               for n in sorted({r["case"]["poses"] for r in ran})}
 
     return {
         "cases": len(results), "ran": len(ran),
         "skipped": sorted({r["skipped"] for r in results if "skipped" in r}),
         "detection": {"hidden": hidden, "named": sum(sum(r["detected"]) for r in ran),
                       "rate": sum(sum(r["detected"]) for r in ran) / hidden if hidden else None,
-                      "per_effect": per_type, "per_size": per_size},
+                      "per_effect": per_type, "per_size": per_size,
+                      "per_effect_and_size": dict(sorted(per_both.items()))},
         "false_alarms": {"clean_campaigns": len(clean), "with_any_effect": alarms,
                          "rate": alarms / len(clean) if clean else None},
         "extra_effects_named": sum(len(r["extra"]) for r in ran if r["case"]["kind"] != "clean"),
@@ -378,4 +383,5 @@ def summarize(results: list[dict]) -> dict:
                               "named_something": sum(bool(r["named"]) for r in oov),
                               "named_without_payoff": len(unpaid)},
         "seconds_per_case": stats(times),
+        "seconds_per_case_by_size": by_size,
     }

@@ -8,8 +8,6 @@ test campaign, and at most 1% false alarms over 200 clean campaigns (ROBOCAL_SLO
 
 import json
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -26,6 +24,7 @@ from server.diagnose_suite import (
     summarize,
 )
 from server.formats.cell_json import Cell, cell_to_json
+from tests.server.test_diagnose import robocal
 
 SEEDS = range(40)  # the ten kinds in turn, four seeds each
 CLI_SEEDS = (1, 12, 20)  # compliance with outliers / periodic / clean, through the commands
@@ -107,13 +106,6 @@ def test_out_of_vocabulary_named_only_when_it_pays_off(results, summary):
     assert not unpaid, unpaid
 
 
-def robocal(*args, cwd):
-    r = subprocess.run([sys.executable, "-m", "server.cli", *map(str, args)], cwd=cwd,
-                       capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stderr
-    return r
-
-
 @pytest.mark.parametrize("seed", CLI_SEEDS)
 def test_through_the_command_line(tmp_path, results, seed):
     """`robocal simulate` with the suite's flags, then `robocal diagnose`, as in process."""
@@ -144,3 +136,21 @@ def test_false_alarms_over_200_clean_campaigns():
     runs = [run_case(draw_case(seed, "clean")) for seed in range(1000, 1200)]
     alarms = [r["case"]["seed"] for r in runs if r["false_alarm"]]
     assert len(alarms) <= 2, alarms
+
+
+def test_bench_reports_the_suite_and_the_timing():
+    """`robocal bench diagnose`'s JSON: detection per effect and size, false alarms, ratios, time."""
+    from server.bench_diagnose import run_diagnose_bench
+
+    out = run_diagnose_bench(effect_cases=2, clean_cases=1, sizes=(30,), workers=1)
+    json.dumps(out)
+    s = out["summary"]
+    assert out["effect_cases"] == 2 and len(out["cases"]) == 3
+    assert s["detection"]["hidden"] == 2 and set(s["detection"]["per_effect"]) == {
+        "joint_compliance", "joint_periodic"}
+    assert s["false_alarms"]["clean_campaigns"] == 1
+    assert s["holdout_over_floor"]["count"] + s["holdout_over_floor_outlier_cases"]["count"] == 3
+    t = out["timing"]["30"]
+    assert t["seconds"] > 0 and t["target_seconds"] is None and t["met"] is None
+    assert set(out["met"]) >= {"detection_rate_min_0.9", "false_alarm_rate_max_0.01",
+                               "holdout_over_floor_median_max_1.2", "seconds_30_poses"}
