@@ -43,6 +43,27 @@ def cmd_simulate(args) -> None:
                   + (", ".join(e.label() for e in vc.effects) or "none"))
 
 
+def _nonnegative(text: str) -> float:
+    v = float(text)
+    if not np.isfinite(v) or v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number >= 0")
+    return v
+
+
+def _fraction(text: str) -> float:
+    v = _nonnegative(text)
+    if v > 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a fraction between 0 and 1")
+    return v
+
+
+def _positive_int(text: str) -> int:
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive integer")
+    return v
+
+
 def cmd_calibrate(args) -> None:
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
     parse_method(args.method, meas.target_names)
@@ -263,27 +284,6 @@ def _data_arguments(p) -> None:
     p.add_argument("meas", help="meas.csv, or a campaign database (.db)")
     p.add_argument("--cell")
     p.add_argument("--campaign", type=int, help="campaign id when MEAS is a database (default: latest)")
-
-
-def _nonnegative(text: str) -> float:
-    v = float(text)
-    if not np.isfinite(v) or v < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number >= 0")
-    return v
-
-
-def _fraction(text: str) -> float:
-    v = _nonnegative(text)
-    if v > 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a fraction between 0 and 1")
-    return v
-
-
-def _positive_int(text: str) -> int:
-    v = int(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive integer")
-    return v
 
 
 def build_parser() -> argparse.ArgumentParser:
