@@ -125,7 +125,7 @@ def _options(rng, n_poses: int, n_targets: int) -> dict:
     opts = {"noise_scale": float(np.exp(rng.uniform(*np.log(NOISE_SCALE))))}
     if rng.random() < 0.4:
         opts["arm_scatter_deg"] = float(rng.uniform(*SCATTER_DEG))
-    if n_targets > 1 and n_poses >= 60 and rng.random() < 0.25:
+    if n_targets > 1 and n_poses >= 60 and rng.random() < 0.4:
         opts["targets_per_pose"] = 1
     if rng.random() < 0.25:
         opts["beam_break_rate"] = MISSING_RATE
