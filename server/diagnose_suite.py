@@ -46,6 +46,7 @@ KINDS = {
     "out_of_vocabulary": (OOV,),
 }
 
+
 @dataclass
 class Case:
     """One drawn campaign: the cell, its hidden effects and the campaign's options."""
