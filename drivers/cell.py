@@ -17,6 +17,8 @@ AXIS_CLEARANCE_MM = 300.0  # flange near the base z axis: the shoulder singulari
 WRIST_MIN_RAD = np.deg2rad(10.0)  # axes of joints N-2 and N nearly aligned: the wrist singularity
 MOVE_S, PAUSE_S, TARGET_GAP_S = 8.0, 10.0, 2.0  # the seed paper's cycle: move, pause 10 s, measure
 TEMP_NOISE_C = 0.02
+OUTLIER_MM = (0.3, 2.0)  # a mis-lock or a bumped SMR: a reading this far off, in any direction
+EXTRAS_STREAM = 0xCA4B  # scatter, absent SMRs and outliers draw from their own stream per seed
 
 
 @dataclass(frozen=True)
@@ -149,15 +151,16 @@ class VirtualCell:
         raise RuntimeError(f"only {sum(len(f) for f in found)} of {n} poses valid after {drawn} "
                            f"draws (pass rate per check: {rates})")
 
-    def true_points(self, q, time_s=None, temp_c=None) -> np.ndarray:
+    def true_points(self, q, time_s=None, temp_c=None, pose_dq=None) -> np.ndarray:
         """Noise-free SMR centres (m, K, 3) in the tracker frame, with every effect applied.
 
-        time_s and temp_c may be per pose (m,) or per reading (m, K).
+        time_s and temp_c may be per pose (m,) or per reading (m, K); pose_dq (m, N) rad is a
+        joint error the arm makes at each pose beyond what any effect predicts (its scatter).
         """
         q = np.atleast_2d(np.asarray(q, dtype=float))
         m, K = q.shape[0], len(self.target_names)
         if not self.effects:
-            return self._points(q)[0]
+            return self._points(q, pose_dq)[0]
 
         def per_reading(a):  # (m,) or (m, K) -> (m, K)
             return None if a is None else np.broadcast_to(np.reshape(a, (m, -1)), (m, K))
@@ -166,7 +169,7 @@ class VirtualCell:
         out = np.empty((m, K, 3))
         for k in range(K):  # each reading is taken at its own time and temperature
             tk, ck = (None if t is None else t[:, k]), (None if c is None else c[:, k])
-            dq, motion = None, np.broadcast_to(np.eye(4), (m, 4, 4))
+            dq, motion = pose_dq, np.broadcast_to(np.eye(4), (m, 4, 4))
             for effect in self.effects:
                 d = effect.joint_offsets(self, q, tk, ck)
                 if d is not None:
@@ -177,20 +180,30 @@ class VirtualCell:
             out[:, k] = self._points(q, dq, motion)[0][:, k]
         return out
 
-    def measure(self, q, rng, time_s=None, temp_c=None) -> np.ndarray:
-        """Tracker readings (m, K, 3): true points plus isotropic Gaussian noise per the spec."""
-        p = self.true_points(q, time_s, temp_c)
-        sigma = self.tracker.sigma_mm(np.linalg.norm(p, axis=-1))
+    def measure(self, q, rng, time_s=None, temp_c=None, pose_dq=None,
+                noise_scale: float = 1.0) -> np.ndarray:
+        """Tracker readings (m, K, 3): true points plus Gaussian noise, noise_scale x the spec."""
+        p = self.true_points(q, time_s, temp_c, pose_dq)
+        sigma = noise_scale * self.tracker.sigma_mm(np.linalg.norm(p, axis=-1))
         return p + sigma[..., None] * rng.normal(size=p.shape)
 
-    def noise_floor_mm(self, q) -> float:
-        """Expected 3-D RMS of the tracker noise over these poses' readings."""
+    def noise_floor_mm(self, q, noise_scale: float = 1.0) -> float:
+        """Expected 3-D RMS of the tracker noise (noise_scale x spec) over these poses' readings."""
         sigma = self.tracker.sigma_mm(np.linalg.norm(self._points(np.atleast_2d(q))[0], axis=-1))
-        return float(np.sqrt(np.mean(3 * sigma**2)))
+        return float(noise_scale * np.sqrt(np.mean(3 * sigma**2)))
 
-    def campaign(self, n_poses: int, seed: int, beam_break_rate: float = 0.0) -> Measurements:
-        """A measured campaign of n_poses random poses, timed and with the air temperature."""
+    def campaign(self, n_poses: int, seed: int, beam_break_rate: float = 0.0,
+                 arm_scatter_deg: float = 0.0, targets_per_pose: int | None = None,
+                 outlier_rate: float = 0.0, noise_scale: float = 1.0) -> Measurements:
+        """A measured campaign of n_poses random poses, timed and with the air temperature.
+
+        Beyond the tracker's noise (noise_scale x its spec) and beam breaks, a campaign may have
+        the arm's own scatter (a joint error drawn afresh per pose, std arm_scatter_deg per joint,
+        shared by every SMR of the pose), only targets_per_pose random SMRs measured per pose,
+        and a fraction outlier_rate of the readings displaced 0.3-2 mm (listed in the truth).
+        """
         rng = np.random.default_rng(seed)
+        extra = np.random.default_rng([EXTRAS_STREAM, seed])  # rng's draws stay as they were
         q = self.sample_poses(n_poses, rng)
         K = len(self.target_names)
         moves = rng.uniform(MOVE_S - 2, MOVE_S + 2, n_poses)
@@ -207,13 +220,43 @@ class VirtualCell:
         for effect in self.effects:
             if hasattr(effect, "start_campaign"):
                 effect.start_campaign(self, time_s, air)
-        xyz = self.measure(q, rng, time_s, air)
+        pose_dq = None
+        if arm_scatter_deg > 0:
+            pose_dq = np.deg2rad(arm_scatter_deg) * extra.normal(size=q.shape)
+        xyz = self.measure(q, rng, time_s, air, pose_dq, noise_scale)
         broken = rng.random((n_poses, K)) < beam_break_rate
+        if targets_per_pose is not None and targets_per_pose < K:
+            keep = np.argsort(extra.random((n_poses, K)), axis=1)[:, :targets_per_pose]
+            absent = np.ones((n_poses, K), dtype=bool)
+            np.put_along_axis(absent, keep, False, axis=1)
+            broken |= absent
+        outliers = self._displace(xyz, ~broken, outlier_rate, extra) if outlier_rate > 0 else []
         xyz[broken], time_s[broken], temp_c[broken] = np.nan, np.nan, np.nan
         self.last_campaign = {"seed": seed, "n_poses": n_poses, "beam_break_rate": beam_break_rate,
-                              "noise_floor_mm": self.noise_floor_mm(q)}
+                              "noise_floor_mm": self.noise_floor_mm(q, noise_scale)}
+        self.last_campaign.update(arm_scatter_deg=arm_scatter_deg,
+                                  targets_per_pose=targets_per_pose,
+                                  outlier_rate=outlier_rate, noise_scale=noise_scale,
+                                  outliers=outliers)
+        if pose_dq is not None:  # how far the scatter moves the SMRs: part of any model's floor
+            moved = self._points(q, pose_dq)[0] - self._points(q)[0]
+            self.last_campaign["arm_scatter_rms_mm"] = float(np.sqrt(np.mean(np.sum(moved**2, -1))))
         return Measurements([str(i) for i in range(1, n_poses + 1)], q, self.target_names, xyz,
                             time_s, temp_c)
+
+    def _displace(self, xyz, present, rate: float, rng) -> list[dict]:
+        """Move round(rate x present readings), at least one, 0.3-2 mm in random directions."""
+        idx = np.argwhere(present)
+        count = min(len(idx), max(1, round(rate * len(idx))))
+        out = []
+        for i, k in idx[np.sort(rng.choice(len(idx), count, replace=False))]:
+            direction = rng.normal(size=3)
+            offset = rng.uniform(*OUTLIER_MM) * direction / np.linalg.norm(direction)
+            xyz[i, k] += offset
+            out.append({"pose": str(i + 1), "target": self.target_names[k],
+                        "displacement_mm": float(np.linalg.norm(offset)),
+                        "offset_mm": [float(v) for v in offset]})
+        return out
 
     def truth(self) -> dict:
         """The hidden truth, JSON-serialisable: lengths in mm, angles in degrees."""

@@ -29,16 +29,39 @@ def cmd_simulate(args) -> None:
     vc = VirtualCell.random(cell.robot, cell.targets, seed=args.seed,
                             tracker=TrackerSpec(**cell.tracker))
     vc.effects.extend(make_effects(args.effect, vc, args.seed))  # bad specs fail before any output
-    meas = vc.campaign(args.poses, seed=args.seed, beam_break_rate=args.beam_break_rate)
+    meas = vc.campaign(args.poses, seed=args.seed, beam_break_rate=args.beam_break_rate,
+                       arm_scatter_deg=args.arm_scatter_deg, targets_per_pose=args.targets_per_pose,
+                       outlier_rate=args.outlier_rate, noise_scale=args.noise_scale)
     write_campaign(args.out, meas)
     truth = vc.truth()
-    truth["noise_floor_mm"] = vc.noise_floor_mm(meas.q)
+    truth["noise_floor_mm"] = vc.noise_floor_mm(meas.q, args.noise_scale)
     if args.truth_out:
         write_json_atomic(args.truth_out, truth)
     console.print(f"wrote {meas.n_poses} poses x {len(meas.target_names)} targets "
                   f"({meas.n_readings} readings) to {args.out}; "
                   f"tracker noise floor {truth['noise_floor_mm']:.4f} mm RMS; effects: "
                   + (", ".join(e.label() for e in vc.effects) or "none"))
+
+
+def _nonnegative(text: str) -> float:
+    v = float(text)
+    if not np.isfinite(v) or v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number >= 0")
+    return v
+
+
+def _fraction(text: str) -> float:
+    v = _nonnegative(text)
+    if v > 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a fraction between 0 and 1")
+    return v
+
+
+def _positive_int(text: str) -> int:
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive integer")
+    return v
 
 
 def cmd_calibrate(args) -> None:
@@ -240,7 +263,9 @@ def cmd_bench(args) -> None:
     if args.what == "diagnose":
         from .bench_diagnose import run_diagnose_bench
 
-        result = run_diagnose_bench(poses=args.poses)
+        result = run_diagnose_bench(quick=args.quick, effect_cases=args.cases,
+                                    clean_cases=args.clean, sizes=args.poses,
+                                    workers=args.workers)
     elif args.what == "service":
         from .bench_service import run_service_bench
 
@@ -273,6 +298,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--poses", type=int, default=100)
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--beam-break-rate", type=float, default=0.0)
+    s.add_argument("--arm-scatter-deg", type=_nonnegative, default=0.0,
+                   help="the arm's repeatability: a joint error drawn afresh per pose (std, deg "
+                        "per joint), shared by every SMR of the pose")
+    s.add_argument("--targets-per-pose", type=_positive_int, default=None,
+                   help="measure only this many random SMRs per pose (the others absent)")
+    s.add_argument("--outlier-rate", type=_fraction, default=0.0,
+                   help="fraction of readings displaced 0.3-2 mm in a random direction (a "
+                        "mis-lock or a bumped SMR), listed in the truth file")
+    s.add_argument("--noise-scale", type=_nonnegative, default=1.0,
+                   help="tracker noise as a multiple of its spec (default 1)")
     s.add_argument("--out", required=True, help="meas.csv to write")
     s.add_argument("--truth-out", help="also write the simulated truth as JSON")
     from drivers.effects import spec_help
@@ -354,7 +389,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
     b.add_argument("what", choices=("solver", "diagnose", "acquire", "service"))
-    b.add_argument("--poses", type=int, default=100, help="diagnose: poses per campaign")
+    b.add_argument("--poses", type=int, nargs="+", default=[100, 1000],
+                   help="diagnose: sizes of the campaigns timed one at a time")
+    b.add_argument("--quick", action="store_true",
+                   help="diagnose: a short run (10 effect cases, 10 clean campaigns)")
+    b.add_argument("--cases", type=int, help="diagnose: effect cases of the suite (default 60)")
+    b.add_argument("--clean", type=int, help="diagnose: clean campaigns (default 200)")
+    b.add_argument("--workers", type=int, default=2, help="diagnose: processes in the pool")
     b.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000])
     b.add_argument("--no-reference", action="store_true",
                    help="skip the finite-difference scipy reference")

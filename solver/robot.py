@@ -128,4 +128,15 @@ IRB2600 = robot_from_degrees("irb2600", "dh", [
     (0.0, 200.0, 0.0, 0.0, (-400.0, 400.0)),
 ])
 
+# Standard DH, KUKA KR 16-like proportions; axes 2 and 3 parallel (the tests' and the suite's
+# second geometry, not a built-in cell).
+KUKA_LIKE = robot_from_degrees("kuka-like", "dh", [
+    (260.0, 675.0, 0.0, -90.0, (-185.0, 185.0)),
+    (680.0, 0.0, -90.0, 0.0, (-65.0, 140.0)),
+    (35.0, 0.0, 0.0, -90.0, (-210.0, 66.0)),
+    (0.0, 670.0, 0.0, 90.0, (-350.0, 350.0)),
+    (0.0, 0.0, 0.0, -90.0, (-130.0, 130.0)),
+    (0.0, 158.0, 0.0, 0.0, (-350.0, 350.0)),
+])
+
 BUILTIN = {"irb2600": IRB2600}

@@ -226,3 +226,56 @@ def test_other_arms(robot):
     ap = nominal_model_ap(cell, m)
     assert 0.2 <= ap.mean() <= 3.0
     json.dumps(cell.truth())
+
+
+def test_campaign_options_draw_apart_from_the_default_campaign():
+    """Scatter, absent SMRs and outliers leave poses, times and tracker noise draws as they were."""
+    cell = irb_cell(11)
+    plain = cell.campaign(40, seed=3)
+    noisy = cell.campaign(40, seed=3, noise_scale=3.0)
+    other = cell.campaign(40, seed=3, arm_scatter_deg=0.004, targets_per_pose=2, outlier_rate=0.02)
+    for m in (noisy, other):
+        np.testing.assert_array_equal(m.q, plain.q)
+    true = cell.true_points(plain.q)
+    np.testing.assert_allclose(noisy.xyz - true, 3.0 * (plain.xyz - true), atol=1e-9)
+    assert cell.campaign(40, seed=3, noise_scale=2.5).n_readings == 120
+    assert cell.last_campaign["noise_floor_mm"] == pytest.approx(2.5 * cell.noise_floor_mm(plain.q))
+
+
+def test_arm_scatter_moves_each_pose_rigidly_and_afresh():
+    """A joint error per pose moves the flange: SMR-to-SMR distances hold, the SMRs do not."""
+    cell = irb_cell(12)
+    still = cell.campaign(200, seed=4, noise_scale=0.0)
+    moved = cell.campaign(200, seed=4, noise_scale=0.0, arm_scatter_deg=0.004)
+    d = moved.xyz - still.xyz
+    rms = np.sqrt(np.mean(np.sum(d**2, axis=-1)))
+    assert rms == pytest.approx(cell.last_campaign["arm_scatter_rms_mm"])
+    assert 0.05 < rms < 0.5  # 0.004 deg at a reach of 1-3 m
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        gap = [np.linalg.norm(m.xyz[:, i] - m.xyz[:, j], axis=-1) for m in (still, moved)]
+        np.testing.assert_allclose(gap[1], gap[0], atol=1e-6)
+    # consecutive poses share nothing: a per-pose draw, not a drift
+    assert abs(np.corrcoef(d[1:, 0, 0], d[:-1, 0, 0])[0, 1]) < 0.25
+
+
+def test_one_target_per_pose():
+    cell = irb_cell(13)
+    m = cell.campaign(90, seed=5, targets_per_pose=1)
+    assert np.all(m.mask.sum(axis=1) == 1)
+    assert np.all(m.mask.sum(axis=0) > 15)  # each SMR in turn, at random
+    assert cell.truth()["campaign"]["targets_per_pose"] == 1
+
+
+def test_outliers_are_displaced_and_listed():
+    cell = irb_cell(14)
+    clean = cell.campaign(100, seed=6, beam_break_rate=0.1)
+    m = cell.campaign(100, seed=6, beam_break_rate=0.1, outlier_rate=0.02)
+    listed = cell.truth()["campaign"]["outliers"]
+    assert len(listed) == round(0.02 * clean.n_readings)
+    d = np.linalg.norm(np.nan_to_num(m.xyz - clean.xyz), axis=-1)
+    assert np.count_nonzero(d) == len(listed)
+    for o in listed:
+        i, k = int(o["pose"]) - 1, m.target_names.index(o["target"])
+        assert 0.3 <= o["displacement_mm"] <= 2.0
+        np.testing.assert_allclose(m.xyz[i, k] - clean.xyz[i, k], o["offset_mm"], atol=1e-9)
+    json.dumps(cell.truth())
