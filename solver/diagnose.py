@@ -20,6 +20,7 @@ from .extended import fit_extended, predict_extended
 from .identify import Problem, register
 from .kinematics import predict_rows
 from .robot import Robot
+from .screen import screen_readings
 
 T_CRIT = 4.0  # paired t over poses needed to accept an effect
 MIN_GAIN = 0.05  # and at least this fraction of held-out mean squared error removed
@@ -279,10 +280,14 @@ def select(diag: Diagnoser, cands, log=None):
 
 
 def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=None,
-             base_guess=None, log=None) -> Diagnosis:
+             base_guess=None, log=None, screen_outliers=True, pose_ids=None) -> Diagnosis:
     """Baseline geometric calibration, candidate effects, selection and the extended model."""
     t0 = time.perf_counter()
     clock = {}
+    # gross outliers (solver.screen) are missing from here on: fits, noise floor, figures
+    screening = screen_readings(robot, targets, target_names, q, meas, time_s, temp_c,
+                                base_guess) if screen_outliers else None
+    meas = meas if screening is None else screening.apply(meas)
     prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
     st = ident.structural(prob.layout, x0, np.ones(prob.layout.n_params, dtype=bool))
     J = ident.jacobian_rows(prob.layout, x0, q, prob.mask)
@@ -304,6 +309,8 @@ def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=N
     params, report = build_report(diag, steps, base, final, ee, x, floor, len(cands))
     figures = figure_series(diag, steps, ee, x)
     clock["total"] = time.perf_counter() - t0
+    if screening is not None:
+        report["outliers"] = screening.report(pose_ids, target_names)
     report["seconds"] = {k: round(v, 3) for k, v in clock.items()}
     report["cross_validation"] = {"folds": len(diag.folds), "fits": diag.fits,
                                   "candidates": len(cands)}
