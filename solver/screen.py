@@ -20,7 +20,8 @@ Threshold: a reading is gross when its statistic exceeds the level a Gaussian wo
 probability ALPHA over all the readings tested (Bonferroni over readings and kinds of evidence),
 so a clean campaign of any size keeps about the same small chance of any false flag. The scale
 is the larger of the median-based one and the one the 90% quantile implies, so heavy-tailed
-unmodelled error (real arms) raises the scale instead of being called gross.
+unmodelled error (real arms) raises the scale instead of being called gross. The price: beyond
+about 10% of gross readings the scale grows with them and fewer are found (never more).
 """
 
 from __future__ import annotations
@@ -33,8 +34,6 @@ from scipy import stats
 ALPHA = 0.01  # chance of any false flag on a clean campaign, by the Gaussian reference
 MAX_ROUNDS = 6
 TAIL_Q = 0.9  # quantile of |z| that, with the median, sets the robust scale
-# a fit needs a few readings it can trust; beyond this share the campaign is not screened further
-MAX_SHARE = 0.2
 
 
 @dataclass
@@ -212,11 +211,14 @@ def screen(fit, q, meas, time_s=None, temp_c=None, alpha=ALPHA, max_rounds=MAX_R
     have = np.all(np.isfinite(meas), axis=-1)
     excluded = np.zeros_like(have)
     evidence: dict = {}
-    rounds = 0
-    for rounds in range(1, max_rounds + 1):
+
+    def residuals():
         m_now = meas.copy()
         m_now[excluded] = np.nan
-        r = fit(m_now) - meas
+        return fit(m_now) - meas
+
+    for rounds in range(1, max_rounds + 1):
+        r = residuals()
         judge = _Judge(r, meas, have & ~excluded, time_s, temp_c, alpha)
         new = np.zeros_like(have)
         ev = {}
@@ -224,12 +226,11 @@ def screen(fit, q, meas, time_s=None, temp_c=None, alpha=ALPHA, max_rounds=MAX_R
             for k, why in judge.judge_pose(p).items():
                 new[p, k] = True
                 ev[(p, k)] = why
-        if new.sum() > MAX_SHARE * have.sum():
-            # so many disagreeing readings are no gross errors but the campaign's own scatter
-            new[:], ev = False, {}
         if np.array_equal(new, excluded):
             break
         excluded, evidence = new, ev
+    else:  # the set still moved on the last round: residuals of the set kept
+        r = residuals()
     return Screening(excluded, np.linalg.norm(r, axis=-1), evidence,
                      {k: float(v) for k, v in judge.s.items()},
                      {k: float(v) for k, v in judge.T.items()}, rounds)

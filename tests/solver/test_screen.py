@@ -122,3 +122,11 @@ def test_minimax_with_outliers_close_to_without():
         assert held_out(dirty, True) <= 1.2 * clean
         worse.append(held_out(dirty, False) / clean)
     assert max(worse) > 2  # the outliers matter when kept
+
+
+def test_beyond_its_breakdown_it_excludes_no_clean_reading():
+    """With 10-50% of the readings moved the scale grows with them: fewer found, none wrongly."""
+    _, meas = campaign(2, 40)
+    for rate in (0.1, 0.2, 0.5):
+        xyz, moved = displace(meas.xyz, 2, rate)
+        assert not (screen(meas, xyz).excluded & ~moved).any()
