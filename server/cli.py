@@ -258,6 +258,10 @@ def cmd_bench(args) -> None:
         from .bench_diagnose import run_diagnose_bench
 
         result = run_diagnose_bench(poses=args.poses)
+    elif args.what == "outliers":
+        from .bench_screen import run_screen_bench
+
+        result = run_screen_bench()
     elif args.what == "service":
         from .bench_service import run_service_bench
 
@@ -384,7 +388,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=cmd_demo)
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
-    b.add_argument("what", choices=("solver", "diagnose", "acquire", "service"))
+    b.add_argument("what", choices=("solver", "diagnose", "acquire", "service", "outliers"))
     b.add_argument("--poses", type=int, default=100, help="diagnose: poses per campaign")
     b.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000])
     b.add_argument("--no-reference", action="store_true",

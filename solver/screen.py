@@ -136,8 +136,12 @@ def within_pose(r: np.ndarray, keep: np.ndarray) -> np.ndarray:
 class _Judge:
     """The statistics of one round: residuals, scales and thresholds."""
 
-    def __init__(self, r, meas, keep, time_s, temp_c, alpha):
+    def __init__(self, r, meas, keep, time_s, temp_c, alpha, leverage=None):
         self.r = r
+        # a reading the fit used pulled the fit toward itself: its residual, scaled by
+        # 1/sqrt(1 - leverage), is what it would be were it left out (studentized)
+        lev = np.zeros(r.shape[:2]) if leverage is None else np.where(keep, leverage, 0.0)
+        self.rs = r / np.sqrt(1.0 - np.clip(lev, 0.0, 0.99))[..., None]
         self.have = np.all(np.isfinite(r), axis=-1)
         counts = self.have.sum(axis=1)
         multi = counts >= 2
@@ -153,11 +157,13 @@ class _Judge:
         chi3 = stats.chi(3)
         self.T = {"within": float(chi3.isf(a / max(n_multi, 1))),
                   "distance": float(stats.norm.isf(a / (2 * max(n_pairs, 1)))),
-                  "geometric": float(chi3.isf(a / max(n_single, 1)))}
+                  # the arm's own error at a pose may lie along a single direction (with all of
+                  # the three axes' variance): the worst case for a 3-D norm, a 1-D Gaussian
+                  "geometric": float(np.sqrt(3.0) * stats.norm.isf(a / (2 * max(n_single, 1))))}
         self.s = {"within": _scale_1d(self.w[self.have].ravel()),
                   "distance": _scale_1d(np.concatenate([e for e in self.dist.values()]))
                   if self.dist else float("nan"),
-                  "geometric": _scale_1d(r[self.have].ravel())}
+                  "geometric": _scale_1d(self.rs[self.have].ravel())}
 
     def ratio_within(self, p, k, S) -> float:
         """How far reading k of pose p stands from its mates S (excluding k), over the threshold."""
@@ -178,7 +184,7 @@ class _Judge:
         return max((self.ratio_within(p, k, S) for k in S), default=0.0) if len(S) >= 2 else 0.0
 
     def geometric(self, p, k) -> float:
-        return float(np.linalg.norm(self.r[p, k]) / self.s["geometric"])
+        return float(np.linalg.norm(self.rs[p, k]) / self.s["geometric"])
 
     def judge_pose(self, p) -> dict[int, str]:
         """The readings of pose p to exclude, with the evidence for each."""
@@ -204,8 +210,8 @@ class _Judge:
 def screen(fit, q, meas, time_s=None, temp_c=None, alpha=ALPHA, max_rounds=MAX_ROUNDS) -> Screening:
     """Iterated screening of a campaign's readings (m, K, 3) mm.
 
-    fit(meas) -> predictions (m, K, 3) of a geometric model fitted to those readings (NaN =
-    missing), e.g. an ls-sum calibration; it is called once per round.
+    fit(meas) -> (predictions (m, K, 3), leverage (m, K) or None) of a geometric model fitted to
+    those readings (NaN = missing), e.g. an ls-sum calibration; it is called once per round.
     """
     meas = np.asarray(meas, dtype=float)
     have = np.all(np.isfinite(meas), axis=-1)
@@ -215,11 +221,12 @@ def screen(fit, q, meas, time_s=None, temp_c=None, alpha=ALPHA, max_rounds=MAX_R
     def residuals():
         m_now = meas.copy()
         m_now[excluded] = np.nan
-        return fit(m_now) - meas
+        pred, lev = fit(m_now)
+        return pred - meas, lev
 
     for rounds in range(1, max_rounds + 1):
-        r = residuals()
-        judge = _Judge(r, meas, have & ~excluded, time_s, temp_c, alpha)
+        r, lev = residuals()
+        judge = _Judge(r, meas, have & ~excluded, time_s, temp_c, alpha, lev)
         new = np.zeros_like(have)
         ev = {}
         for p in range(meas.shape[0]):
@@ -230,21 +237,34 @@ def screen(fit, q, meas, time_s=None, temp_c=None, alpha=ALPHA, max_rounds=MAX_R
             break
         excluded, evidence = new, ev
     else:  # the set still moved on the last round: residuals of the set kept
-        r = residuals()
+        r, _ = residuals()
     return Screening(excluded, np.linalg.norm(r, axis=-1), evidence,
                      {k: float(v) for k, v in judge.s.items()},
                      {k: float(v) for k, v in judge.T.items()}, rounds)
 
 
+def leverage(J: np.ndarray) -> np.ndarray:
+    """Per reading, the mean diagonal of its 3x3 block of the hat matrix of J (readings x 3, P);
+    parameters the data cannot separate drop out with their null singular values."""
+    J = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)
+    U, sv, _ = np.linalg.svd(J, full_matrices=False)
+    U = U[:, sv > sv[0] * 1e-9]
+    return np.sum(U * U, axis=1).reshape(-1, 3).mean(axis=1)
+
+
 def geometric_fit(robot, targets, target_names, q, base_guess=None):
-    """fit(meas) for screen(): an ls-sum calibration's predictions."""
+    """fit(meas) for screen(): an ls-sum calibration's predictions and its readings' leverage."""
     from .calibrate import calibrate
+    from .identifiability import jacobian_rows
     from .kinematics import predict
 
     def fit(meas):
         cal = calibrate(robot, targets, target_names, q, meas, method="ls-sum",
                         base_guess=base_guess)
-        return predict(cal.layout, cal.x, q)
+        mask = np.all(np.isfinite(meas), axis=-1)
+        lev = np.zeros(mask.shape)
+        lev[mask] = leverage(jacobian_rows(cal.layout, cal.x, q, mask))
+        return predict(cal.layout, cal.x, q), lev
     return fit
 
 

@@ -12,7 +12,7 @@ from drivers.cell import VirtualCell
 from drivers.effects import make_effects
 from server.formats.campaign_csv import write_campaign
 from server.formats.cell_json import default_cell
-from tests.solver.test_screen import displace
+from server.bench_screen import displace
 
 SEED = 21
 

@@ -5,6 +5,7 @@ import pytest
 
 from drivers.cell import VirtualCell
 from server import workflow
+from server.bench_screen import displace
 from server.formats.cell_json import default_cell
 from solver.diagnose import noise_floor
 from solver.effects import Inputs
@@ -12,21 +13,6 @@ from solver.kinematics import predict
 from solver.screen import screen_readings
 
 CELL = default_cell()
-SMALLEST_MM, LARGEST_MM = 0.3, 2.0  # a mis-lock or a bumped SMR
-
-
-def displace(xyz, seed, rate):
-    """Readings (m, K, 3) with a share `rate` of the present ones moved 0.3-2 mm in random
-    directions (drawn from seed), and the mask (m, K) of those moved."""
-    rng = np.random.default_rng([7, seed])
-    have = np.argwhere(np.all(np.isfinite(xyz), axis=-1))
-    pick = have[rng.choice(len(have), max(1, int(round(rate * len(have)))), replace=False)]
-    out, moved = xyz.copy(), np.zeros(xyz.shape[:2], dtype=bool)
-    for p, k in pick:
-        v = rng.normal(size=3)
-        out[p, k] += rng.uniform(SMALLEST_MM, LARGEST_MM) * v / np.linalg.norm(v)
-        moved[p, k] = True
-    return out, moved
 
 
 def campaign(seed, poses, one_smr=False, beam_break_rate=0.0):

@@ -7,7 +7,7 @@ from drivers.cell import VirtualCell
 from server.formats.campaign_csv import write_campaign
 from server.formats.cell_json import default_cell
 from tests.server.api.conftest import wait_for
-from tests.solver.test_screen import displace
+from server.bench_screen import displace
 
 
 def test_jobs_exclude_and_list_gross_outliers(live, tmp_path):
