@@ -288,6 +288,7 @@ def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=N
     screening = screen_readings(robot, targets, target_names, q, meas, time_s, temp_c,
                                 base_guess) if screen_outliers else None
     meas = meas if screening is None else screening.apply(meas)
+    clock["screening"] = time.perf_counter() - t0
     prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
     st = ident.structural(prob.layout, x0, np.ones(prob.layout.n_params, dtype=bool))
     J = ident.jacobian_rows(prob.layout, x0, q, prob.mask)

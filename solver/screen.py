@@ -18,7 +18,10 @@ until the set no longer changes.
 
 Threshold: a reading is gross when its statistic exceeds the level a Gaussian would reach with
 probability ALPHA over all the readings tested (Bonferroni over readings and kinds of evidence),
-so a clean campaign of any size keeps about the same small chance of any false flag. The scale
+so a clean campaign of any size keeps about the same small chance of any false flag: a chi of 3
+degrees of freedom for the within-pose residual (tracker noise is isotropic), a 1-D Gaussian
+carrying all three axes' variance for the geometric residual (studentized by its leverage), as
+the arm's own error at a pose may lie along one direction. The scale
 is the larger of the median-based one and the one the 90% quantile implies, so heavy-tailed
 unmodelled error (real arms) raises the scale instead of being called gross. The price: beyond
 about 10% of gross readings the scale grows with them and fewer are found (never more).
@@ -34,6 +37,7 @@ from scipy import stats
 ALPHA = 0.01  # chance of any false flag on a clean campaign, by the Gaussian reference
 MAX_ROUNDS = 6
 TAIL_Q = 0.9  # quantile of |z| that, with the median, sets the robust scale
+RESOLUTION_MM = 1e-6  # below a nanometre a fit's own rounding, not a reading, sets the scatter
 
 
 @dataclass
@@ -89,7 +93,8 @@ def robust_scale(z: np.ndarray, per_value_q50: float, per_value_q: float) -> flo
     a = np.abs(z[np.isfinite(z)])
     if a.size == 0:
         return float("nan")
-    return float(max(np.median(a) / per_value_q50, np.quantile(a, TAIL_Q) / per_value_q))
+    return float(max(np.median(a) / per_value_q50, np.quantile(a, TAIL_Q) / per_value_q,
+                     RESOLUTION_MM))
 
 
 def _scale_1d(z):
