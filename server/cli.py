@@ -67,7 +67,7 @@ def _positive_int(text: str) -> int:
 def cmd_calibrate(args) -> None:
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
     parse_method(args.method, meas.target_names)
-    cal = workflow.run_method(cell, meas, args.method, qp=args.qp)
+    cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
     model = workflow.model_file(cal, cell, meas, data_path=args.meas)
     write_model(args.out, model)
     if args.recording:
@@ -78,6 +78,7 @@ def cmd_calibrate(args) -> None:
     fit = model.meta["fit"]
     console.print(f"{args.method} on {meas.n_poses} poses, {meas.n_readings} readings "
                   f"in {cal.seconds * 1000:.0f} ms")
+    _print_outliers(cal.details.get("outliers"))
     console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
     console.print(tables.identified_geometry(cal.robot, cell.robot, model.meta["uncertainty"]))
     console.print(tables.frame_errors(model.meta["uncertainty"], meas.target_names))
@@ -125,7 +126,8 @@ def cmd_evaluate(args) -> None:
 
 def cmd_compare(args) -> None:
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
-    rows = workflow.compare(cell, meas)
+    rows = workflow.compare(cell, meas, screen=not args.keep_outliers)
+    _print_outliers(next(iter(rows.values()))[0].details.get("outliers"))
     console.print(tables.table3(rows, meas.target_names))
     for label, (cal, _) in rows.items():
         if "history" in cal.details:
@@ -144,23 +146,41 @@ def cmd_compare(args) -> None:
 
 def cmd_diagnose(args) -> None:
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
-    report, figures, _ = _diagnose_to_files(cell, meas, args.meas, args.out, args.model_out)
+    report, figures, _ = _diagnose_to_files(cell, meas, args.meas, args.out, args.model_out,
+                                            screen=not args.keep_outliers)
     _print_diagnosis(report)
     console.print(f"report written to {args.out}" + (f", model to {args.model_out}" if args.model_out else "")
                   + "".join(f", figure {p}" for p in figures))
 
 
-def _diagnose_to_files(cell, meas, meas_path, report_path, model_path):
+def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=True):
     """Run the diagnosis; write the report, its figures beside it and the extended model."""
     with console.status("diagnosing: cross-validating candidate effects...") as status:
-        d, model = workflow.diagnose(cell, meas, log=lambda msg: status.update(msg.strip()))
+        d, model = workflow.diagnose(cell, meas, log=lambda msg: status.update(msg.strip()),
+                                     screen=screen)
     report, figures = workflow.write_diagnosis(
         d, model, Path(report_path), {"file": Path(meas_path).name, "poses": meas.n_poses,
                                       "readings": meas.n_readings}, model_path)
     return report, figures, d
 
 
+def _print_outliers(outliers) -> None:
+    """The readings screened out as gross errors, one line each (None: screening was off)."""
+    if outliers is None:
+        console.print("gross-outlier screening off: every reading used")
+        return
+    if not outliers:
+        console.print("no gross outlier among the readings")
+        return
+    console.print(f"{len(outliers)} reading{'s' if len(outliers) > 1 else ''} excluded as gross "
+                  "outliers (no plausible model fits them):")
+    for o in outliers:
+        console.print(f"  pose {o['pose']} target {o['target']}: residual {o['residual_mm']:.3f} mm "
+                      f"({o['evidence']})")
+
+
 def _print_diagnosis(report) -> None:
+    _print_outliers(report.get("outliers"))
     floor = report["noise_floor_mm"]
     console.print(f"baseline (geometric) held-out RMS {report['baseline']['holdout_rmse_mm']:.4f} mm, "
                   f"max {report['baseline']['holdout_max_mm']:.4f} mm; noise floor "
@@ -266,6 +286,10 @@ def cmd_bench(args) -> None:
         result = run_diagnose_bench(quick=args.quick, effect_cases=args.cases,
                                     clean_cases=args.clean, sizes=args.poses,
                                     workers=args.workers)
+    elif args.what == "outliers":
+        from .bench_screen import run_screen_bench
+
+        result = run_screen_bench()
     elif args.what == "service":
         from .bench_service import run_service_bench
 
@@ -287,6 +311,12 @@ def _data_arguments(p) -> None:
     p.add_argument("meas", help="meas.csv, or a campaign database (.db)")
     p.add_argument("--cell")
     p.add_argument("--campaign", type=int, help="campaign id when MEAS is a database (default: latest)")
+
+
+def _outlier_argument(p) -> None:
+    p.add_argument("--keep-outliers", action="store_true",
+                   help="use every reading: skip the screening for gross outliers (mis-locks, "
+                        "bumped SMRs) that otherwise excludes them and lists them")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -325,6 +355,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--qp", choices=("primal-dual", "exact"), default="primal-dual",
                    help="minimax's QP subsolver: the paper's primal-dual method or Clarabel")
     c.add_argument("--out", default="model.json")
+    _outlier_argument(c)
     c.add_argument("--recording", help="also write a rerun recording (.rrd) of the calibration")
     c.add_argument("--rerun-viewer", metavar="URL",
                    help="also stream the recording live to a running viewer, e.g. "
@@ -346,12 +377,14 @@ def build_parser() -> argparse.ArgumentParser:
     co = sub.add_parser("compare", help="every method side by side (the paper's Table 3)")
     _data_arguments(co)
     co.add_argument("--json", help="also write the figures as JSON")
+    _outlier_argument(co)
     co.set_defaults(func=cmd_compare)
 
     dg = sub.add_parser("diagnose", help="what the geometric model misses, named and modelled")
     _data_arguments(dg)
     dg.add_argument("--out", default="report.json", help="report (figures are written beside it)")
     dg.add_argument("--model-out", help="the final, extended model.json")
+    _outlier_argument(dg)
     dg.set_defaults(func=cmd_diagnose)
 
     aq = sub.add_parser("acquire", help="run a campaign on the devices (simulated on loopback "
@@ -388,7 +421,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=cmd_demo)
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
-    b.add_argument("what", choices=("solver", "diagnose", "acquire", "service"))
+    b.add_argument("what", choices=("solver", "diagnose", "acquire", "service", "outliers"))
     b.add_argument("--poses", type=int, nargs="+", default=[100, 1000],
                    help="diagnose: sizes of the campaigns timed one at a time")
     b.add_argument("--quick", action="store_true",

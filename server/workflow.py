@@ -14,6 +14,7 @@ from solver.extended import predict_extended
 from solver.fit_errors import calibration_errors
 from solver.kinematics import Layout, predict
 from solver.measurements import Measurements
+from solver.screen import Screening, screen_readings
 
 from .formats.campaign_csv import read_campaign
 from .formats.cell_json import Cell, default_cell, read_cell
@@ -71,16 +72,45 @@ def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurement
     return cell, meas
 
 
-def run_method(cell: Cell, meas: Measurements, method: str, qp="primal-dual") -> Calibration:
+def screen_campaign(cell: Cell, meas: Measurements) -> Screening:
+    """The campaign's gross outliers (solver.screen), judged with the cell's nominal model."""
     targets = np.array([cell.targets[t] for t in meas.target_names])
-    return calibrate(cell.robot, targets, meas.target_names, meas.q, meas.xyz, method=method,
-                     base_guess=cell.base, qp=qp)
+    return screen_readings(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s,
+                           meas.temp_c, cell.base)
+
+
+def without_outliers(meas: Measurements, screening: Screening | None) -> Measurements:
+    """The campaign with the screened-out readings missing (as a beam break would leave them)."""
+    if screening is None or not screening.count:
+        return meas
+    nan = lambda a: None if a is None else np.where(screening.excluded, np.nan, a)  # noqa: E731
+    return Measurements(list(meas.pose_ids), meas.q, meas.target_names,
+                        screening.apply(meas.xyz), nan(meas.time_s), nan(meas.temp_c))
+
+
+def run_method(cell: Cell, meas: Measurements, method: str, qp="primal-dual",
+               screening: Screening | bool = True) -> Calibration:
+    """One method on the campaign; screening True screens out gross outliers first, False keeps
+    every reading, a Screening reuses one already made (compare screens once for all methods)."""
+    if screening is True:
+        screening = screen_campaign(cell, meas)
+    screening = screening or None
+    use = without_outliers(meas, screening)
+    targets = np.array([cell.targets[t] for t in meas.target_names])
+    cal = calibrate(cell.robot, targets, meas.target_names, meas.q, use.xyz, method=method,
+                    base_guess=cell.base, qp=qp)
+    if screening is not None:
+        cal.details["screening"] = screening
+        cal.details["outliers"] = screening.report(meas.pose_ids, meas.target_names)
+    return cal
 
 
 def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None) -> ModelFile:
     """The self-contained model file of a calibration."""
+    screening = cal.details.get("screening")
+    used = without_outliers(meas, screening)
     pred = predict(cal.layout, cal.x, meas.q)
-    acc = metrics.accuracy(pred, meas.xyz, meas.target_names)
+    acc = metrics.accuracy(pred, used.xyz, meas.target_names)
     data = {"poses": meas.n_poses, "readings": meas.n_readings,
             "targets": list(meas.target_names)}
     if data_path is not None:
@@ -95,8 +125,12 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         "iterations": cal.iterations,
         "seconds": round(cal.seconds, 4),
     }
+    if screening is not None:  # the readings the fit left out as gross errors, and why
+        fit["readings_used"] = used.n_readings
+        fit["excluded_readings"] = cal.details["outliers"]
+        fit["screening"] = screening.summary()
     meta = {"method": cal.method, "data": data, "fit": fit,
-            "uncertainty": uncertainty_to_json(calibration_errors(cal, meas.q, meas.xyz),
+            "uncertainty": uncertainty_to_json(calibration_errors(cal, meas.q, used.xyz),
                                                cal.layout.names())}
     if "qp" in cal.details:
         meta["qp"] = cal.details["qp"]
@@ -141,16 +175,20 @@ def paper_methods(target_names) -> list[str]:
     return out
 
 
-def compare(cell: Cell, meas: Measurements, methods=None, qp_solvers=("primal-dual", "exact")):
-    """Every method on the same data: calibrations and their accuracy on that data."""
+def compare(cell: Cell, meas: Measurements, methods=None, qp_solvers=("primal-dual", "exact"),
+            screen=True):
+    """Every method on the same data, screened once for gross outliers (unless screen is False):
+    calibrations and their accuracy on the readings they used."""
+    screening = screen_campaign(cell, meas) if screen else False
+    used = without_outliers(meas, screening or None)
     rows = {}
     for method in methods or paper_methods(meas.target_names):
         solvers = qp_solvers if method == "minimax" else (None,)
         for qp in solvers:
-            cal = run_method(cell, meas, method, qp or "primal-dual")
+            cal = run_method(cell, meas, method, qp or "primal-dual", screening=screening)
             label = method if qp is None or qp == qp_solvers[0] else f"{method} ({qp} QP)"
             pred = predict(cal.layout, cal.x, meas.q)
-            rows[label] = (cal, metrics.accuracy(pred, meas.xyz, meas.target_names))
+            rows[label] = (cal, metrics.accuracy(pred, used.xyz, meas.target_names))
     return rows
 
 
@@ -184,17 +222,19 @@ def _pose_column(a):
     return a[np.arange(len(a)), first]
 
 
-def diagnose(cell: Cell, meas: Measurements, log=None):
+def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
     targets = np.array([cell.targets[t] for t in meas.target_names])
     d = run_diagnosis(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s,
-                      meas.temp_c, base_guess=cell.base, log=log)
+                      meas.temp_c, base_guess=cell.base, log=log, screen_outliers=screen,
+                      pose_ids=meas.pose_ids)
     lay, x = d.layout, d.x
     robot = lay.robot.with_params(x[: lay.n_geo])
     model = ModelFile(robot, lay.base(x), dict(zip(meas.target_names, lay.targets(x))),
                       nominal=cell.robot, extensions=d.extensions, parameters=d.parameters,
                       meta={"method": "ls-sum+extensions", "diagnosis": {
-                          "final": d.report["final"], "noise_floor_mm": d.report["noise_floor_mm"]}})
+                          "final": d.report["final"], "noise_floor_mm": d.report["noise_floor_mm"],
+                          **({"outliers": d.report["outliers"]} if "outliers" in d.report else {})}})
     if d.errors is not None:
         model.meta["uncertainty"] = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
@@ -231,4 +271,5 @@ def _report_order(report, exts):
 
 
 __all__ = ["DataError", "load_cell", "load_campaign", "run_method", "model_file", "model_predict",
-           "compare", "evaluate", "read_model", "paper_methods"]
+           "compare", "evaluate", "read_model", "paper_methods", "screen_campaign",
+           "without_outliers"]

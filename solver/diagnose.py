@@ -23,6 +23,7 @@ from .identify import Problem, register
 from .kinematics import predict_rows
 from .robot import Robot
 from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
+from .screen import screen_readings
 
 MIN_GAIN = 0.02  # an accepted effect removes at least this fraction of the held-out MSE
 T_SIMPLER = 2.0  # candidates the best does not beat by this paired t over poses are its alternatives
@@ -306,10 +307,15 @@ def select(diag: Diagnoser, cands, log=None):
 
 
 def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=None,
-             base_guess=None, log=None) -> Diagnosis:
+             base_guess=None, log=None, screen_outliers=True, pose_ids=None) -> Diagnosis:
     """Baseline geometric calibration, candidate effects, selection and the extended model."""
     t0 = time.perf_counter()
     clock = {}
+    # gross outliers (solver.screen) are missing from here on: fits, noise floor, figures
+    screening = screen_readings(robot, targets, target_names, q, meas, time_s, temp_c,
+                                base_guess) if screen_outliers else None
+    meas = meas if screening is None else screening.apply(meas)
+    clock["screening"] = time.perf_counter() - t0
     prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
     st = ident.structural(prob.layout, x0, np.ones(prob.layout.n_params, dtype=bool))
     J = ident.jacobian_rows(prob.layout, x0, q, prob.mask)
@@ -334,6 +340,8 @@ def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=N
     errors = diagnosis_errors(diag, x, ee, report, params)  # adds each effect's `uncertainty`
     figures = figure_series(diag, steps, ee, x)
     clock["total"] = time.perf_counter() - t0
+    if screening is not None:
+        report["outliers"] = screening.report(pose_ids, target_names)
     report["seconds"] = {k: round(v, 3) for k, v in clock.items()}
     report["cross_validation"] = {"folds": len(diag.folds), "fits": diag.fits,
                                   "candidates": len(cands)}
