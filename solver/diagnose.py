@@ -303,6 +303,11 @@ def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=N
 
     params, report = build_report(diag, steps, base, final, ee, x, floor, len(cands))
     figures = figure_series(diag, steps, ee, x)
+    from .unexplained import unexplained
+
+    left = unexplained(final.resid, prob.layout, x, ee, inputs, floor, base.mse)
+    if left is not None:
+        report["unexplained"] = left
     clock["total"] = time.perf_counter() - t0
     report["seconds"] = {k: round(v, 3) for k, v in clock.items()}
     report["cross_validation"] = {"folds": len(diag.folds), "fits": diag.fits,
