@@ -157,7 +157,7 @@ def _print_unexplained(block) -> None:
         return
     console.print(f"[bold]{block['reading']}[/bold]")
     for c in block["covariates"]:
-        console.print(f"  {c['strength']:.2f}  {c['name']} (through {c['channel']}): {c['reading']}")
+        console.print(f"  {c['strength']:.2f}  {c['name']}: {c['reading']}")
     if "per_pose_share" in block:
         console.print(f"  per pose: {block['per_pose_reading']}")
 

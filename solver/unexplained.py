@@ -339,8 +339,9 @@ def reading(kind: str, j: int | None, channel: str, strength: float) -> str:
         if channel == "rigid":
             return (f"the SMRs move with joint {J}'s angle in a way no joint rotation explains ({pct}): "
                     f"a bent or tilting axis, or link deflection, at joint {J}?")
+        other = int(channel.split()[1])
         return (f"{channel}'s error follows joint {J}'s angle ({pct}): a coupling between joints {J} "
-                f"and {channel.split()[1]} (e.g. a wrist gear coupling)?")
+                f"and {other}" + (" (a wrist gear coupling)?" if min(J, other) >= 4 else "?"))
     if kind == "gravity":
         if own:
             return (f"joint {J}'s error follows the gravity torque it carries ({pct}): compliance "
