@@ -54,18 +54,19 @@ def unexplained(resid: np.ndarray, layout: Layout, x, extensions: list[Extension
         return None
     pose = np.nonzero(mask)[0]
     fields = Fields(layout, x, extensions, inputs, mask)
-    covs = sorted(covariates(fields, r, pose), key=lambda c: -c["strength"])
+    cands = candidate_covariates(fields)
+    covs = ranked(fields, r, pose, cands, MAX_COVARIATES)
     chance = None
     if floor is None:
         if not covs or covs[0]["strength"] < STRONG:
             return None
-        chance = chance_strength(fields, r, pose)
+        chance = chance_strength(fields, r, pose, cands)
         if covs[0]["strength"] <= chance:
             return None
     block = {"holdout_rmse_mm": rmse,
              "share_of_baseline_mse": float(rmse**2 / baseline_mse) if baseline_mse > 0 else None,
              "noise_floor_ratio": None if not floor else rmse / floor,
-             "covariates": covs[:MAX_COVARIATES]}
+             "covariates": covs}
     if chance is not None:
         block["chance_strength"] = chance
     shared = per_pose_share(r, fields.p, pose, floor)
@@ -197,21 +198,55 @@ def candidate_covariates(fields: Fields):
 
 def covariates(fields: Fields, r: np.ndarray, pose: np.ndarray, shuffle=None,
                cands=None) -> list[dict]:
-    """Every covariate with its strength (best channel's cross-validated share) and a reading.
+    """Every covariate with its strength (best channel's cross-validated share) and a reading."""
+    held = HeldOut(fields.Q, r.ravel(), pose_folds(pose))
+    return [entry for entry, _ in scored(fields, held, held, cands or candidate_covariates(fields),
+                                         shuffle)]
+
+
+def ranked(fields: Fields, r: np.ndarray, pose: np.ndarray, cands, count: int) -> list[dict]:
+    """The `count` covariates the remainder depends on most, greedily: each after the first is
+    judged beside those above it, its strength the further share it removes, so that a covariate
+    that only echoes a stronger one (a joint's motion direction follows its angle) drops back."""
+    y, folds = r.ravel(), pose_folds(pose)
+    first = HeldOut(fields.Q, y, folds)
+    held, out, taken = first, [], fields.Q
+    left = list(cands)
+    while left and len(out) < count:
+        results = scored(fields, held, first, left, further=bool(out))
+        if not results:
+            break
+        k = max(range(len(results)), key=lambda i: results[i][0]["strength"])
+        entry, F = results[k]
+        out.append(entry)
+        if entry["strength"] < STRONG:  # nothing much left to take: the rest in this round's order
+            rest = sorted((e for i, (e, _) in enumerate(results) if i != k),
+                          key=lambda e: -e["strength"])
+            out += rest[: count - len(out)]
+            break
+        left = [c for c in left if c[1] != entry["name"]]
+        taken = np.concatenate([taken, F], axis=1)
+        held = HeldOut(taken, y, folds)
+    return out
+
+
+def scored(fields: Fields, held: HeldOut, first: HeldOut, cands, shuffle=None, further=False):
+    """Per covariate, its entry and its best channel's design: the share of first.base that the
+    design removes from what `held` leaves.
 
     A joint's own channel wins unless another explains clearly more (OWN_TIE): neighbouring
     parallel axes give nearly the same field, and the simpler cause is the joint's own error.
     """
-    held = HeldOut(fields.Q, r.ravel(), pose_folds(pose))
     out = []
-    for (kind, j), name, basis in cands or candidate_covariates(fields):
+    for (kind, j), name, basis in cands:
         if shuffle is not None:  # a null draw: the covariate's values dealt to other readings
             basis = basis[shuffle]
-        shares = {}
+        shares, designs = {}, {}
         for chan, unit in fields.channels(kind):
             F = fields.design(basis, unit)
             if F.shape[1]:
-                shares[chan] = held.share(F)
+                designs[chan] = F
+                shares[chan] = (held.base - held.error(F)) / first.base
         if not shares:
             continue
         where = max(shares, key=shares.get)
@@ -219,16 +254,16 @@ def covariates(fields: Fields, r: np.ndarray, pose: np.ndarray, shuffle=None,
         if own in shares and shares[own] >= OWN_TIE * shares[where]:
             where = own
         best = max(shares[where], 0.0)
-        out.append({"name": name, "strength": round(float(best), 4), "channel": where,
-                    "reading": reading(kind, j, where, best)})
+        out.append(({"name": name, "strength": round(float(best), 4), "channel": where,
+                     "reading": reading(kind, j, where, best, further)}, designs[where]))
     return out
 
 
-def chance_strength(fields: Fields, r: np.ndarray, pose: np.ndarray) -> float:
+def chance_strength(fields: Fields, r: np.ndarray, pose: np.ndarray, cands) -> float:
     """The largest strength that covariates dealt at random to the readings reach, over NULL_DRAWS
     draws: what the best of so many covariates and channels scores by chance on this campaign."""
     rng = np.random.default_rng(0)
-    best, cands = 0.0, candidate_covariates(fields)
+    best = 0.0
     for _ in range(NULL_DRAWS):
         covs = covariates(fields, r, pose, shuffle=rng.permutation(len(r)), cands=cands)
         best = max([best] + [c["strength"] for c in covs])
@@ -316,11 +351,12 @@ def per_pose_share(r: np.ndarray, p: np.ndarray, pose: np.ndarray, floor: float 
     return round(float(max(took - dims * floor**2 / 3.0, 0.0) / np.sum(r * r)), 4)
 
 
-def reading(kind: str, j: int | None, channel: str, strength: float) -> str:
-    """One line an engineer can act on: what the remainder follows, and where to look."""
+def reading(kind: str, j: int | None, channel: str, strength: float, further=False) -> str:
+    """One line an engineer can act on: what the remainder follows, and where to look (further:
+    the share is beyond the covariates listed above)."""
     J = None if j is None else j + 1
     own = channel == f"joint {J}"
-    pct = f"{100 * strength:.0f}% of the remaining residual"
+    pct = f"{'a further ' if further else ''}{100 * strength:.0f}% of the remaining residual"
     if strength < STRONG:
         how = {"rigid": "a rigid displacement", "beam": "the beam direction"}.get(channel, channel)
         return f"weak: {pct} follows it on left-out poses (through {how})."
