@@ -324,15 +324,16 @@ class HeldOut:
 
 def per_pose_share(r: np.ndarray, p: np.ndarray, pose: np.ndarray, floor: float | None):
     """Share of the remainder that one rigid motion per pose takes beyond what tracker noise alone
-    would give it (noise of variance floor^2 / 3 per coordinate fills rank-many directions a pose);
-    None without a floor or without a pose of two SMRs."""
+    would give it (noise of variance floor^2 / 3 per coordinate fills rank-many directions a pose),
+    over the poses with two SMRs or more; None without a floor or without such a pose."""
     if floor is None:
         return None
-    took, dims = 0.0, 0
+    took, dims, total = 0.0, 0, 0.0
     for i in np.unique(pose):
         sel = pose == i
         if sel.sum() < 2:
             continue
+        total += float(np.sum(r[sel] ** 2))
         v = p[sel] - p[sel].mean(axis=0)
         A = np.zeros((sel.sum(), 3, 6))
         for a in range(3):
@@ -348,7 +349,7 @@ def per_pose_share(r: np.ndarray, p: np.ndarray, pose: np.ndarray, floor: float 
         dims += U.shape[1]
     if dims == 0:
         return None
-    return round(float(max(took - dims * floor**2 / 3.0, 0.0) / np.sum(r * r)), 4)
+    return round(float(max(took - dims * floor**2 / 3.0, 0.0) / total), 4)
 
 
 def reading(kind: str, j: int | None, channel: str, strength: float, further=False) -> str:
