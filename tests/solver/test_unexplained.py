@@ -202,3 +202,24 @@ def test_per_pose_scatter_is_said_to_dominate(seed):
     assert block["covariates"][0]["strength"] < STRONG
     assert "repeatability" in block["per_pose_reading"]
     assert "per-pose error" in block["reading"]
+
+
+@pytest.mark.parametrize("seed", (21, 24))
+def test_no_block_once_the_hidden_effect_is_named(seed):
+    """An effect of the vocabulary, drawn as tests/server/test_diagnose.py draws it: the diagnosis
+    names it, the final model reaches the floor, and nothing is left to say."""
+    from drivers.effects import make_effects
+    from tests.server.test_diagnose import aim
+    from tests.server.test_diagnose import draw as draw_vocabulary
+
+    spec, name, _, _, target = draw_vocabulary(seed)
+    cell = default_cell()
+    magnitude = aim(cell, spec, name, seed, target)
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=seed)
+    vc.effects.extend(make_effects([f"{spec}={magnitude:.6g}"], vc, seed))
+    meas = vc.campaign(100, seed=seed)
+    targets = np.array([cell.targets[t] for t in meas.target_names])
+    d = diagnose(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s,
+                 meas.temp_c, cell.base)
+    assert [e["name"] for e in d.report["effects"]] == [name]
+    assert "unexplained" not in d.report, d.report["unexplained"]
