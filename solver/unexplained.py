@@ -21,7 +21,7 @@ import numpy as np
 
 from .effects import (Extension, Inputs, gravity_basis, gravity_in_base, joint_basis,
                       point_basis, point_shift)
-from .kinematics import Layout, predict_rows
+from .kinematics import Layout, joint_frames, predict_rows
 
 ABOVE_FLOOR = 1.5  # held-out RMS over the noise floor above which the remainder is reported
 STRONG = 0.1  # a covariate explaining at least this share of the remainder is worth a look
@@ -31,6 +31,7 @@ FOLDS = 10
 ANGLE_DEGREE = 3  # Legendre terms of a joint angle: scale, bow and the S of a low harmonic
 SCALAR_DEGREE = 2  # of time, temperature and distance: drift and its curvature
 GRAVITY_TERMS = 3  # principal components of a joint's gravity-torque basis
+VERTICAL_DEG = 5.0  # a joint axis never further than this from vertical carries no gravity torque
 NULL_DRAWS = 19  # random deals of the covariates: beating all of them is a 5% test
 OWN_TIE = 0.9  # a joint's own channel is preferred when it explains this fraction of the best one
 
@@ -149,21 +150,15 @@ def legendre(v: np.ndarray, degree: int) -> np.ndarray | None:
     return B
 
 
-def gravity_terms(layout: Layout, x, q, joint: int) -> np.ndarray | None:
-    """The few principal components of the gravity-torque basis about a joint: the shapes its
-    torque can take whatever the unknown masses; None if the joint carries no gravity torque."""
-    G = gravity_basis(layout, x, q, joint, gravity_in_base(layout, x))
+def gravity_terms(G: np.ndarray) -> np.ndarray:
+    """The few principal components of a joint's gravity-torque basis G (m, c): the shapes its
+    torque can take whatever the unknown masses."""
     G = G - G.mean(axis=0)
     scale = np.linalg.norm(G, axis=0)
-    live = scale > 1e-9 * max(scale.max(), 1e-300)
-    if not live.any():
-        return None
+    live = scale > 1e-9 * scale.max()
     U, sv, _ = np.linalg.svd(G[:, live] / scale[live], full_matrices=False)
     share = np.cumsum(sv**2) / np.sum(sv**2)
-    k = min(GRAVITY_TERMS, int(np.searchsorted(share, 0.99)) + 1)
-    if sv[0] <= 1e-9 * np.sqrt(len(G)):
-        return None
-    return U[:, :k]
+    return U[:, : min(GRAVITY_TERMS, int(np.searchsorted(share, 0.99)) + 1)]
 
 
 def candidate_covariates(fields: Fields):
@@ -180,10 +175,15 @@ def candidate_covariates(fields: Fields):
         if np.ptp(s) > 0:
             out.append((("motion", j), f"direction of joint {j + 1}'s last motion",
                         (s - s.mean())[pose, None]))
+    g = gravity_in_base(fields.layout, fields.x)
+    frames = joint_frames(Layout(fields.layout.robot, np.eye(4), ()), fields.x, inputs.q)
     for j in range(n):
-        B = gravity_terms(fields.layout, fields.x, inputs.q, j)
-        if B is not None:
-            out.append((("gravity", j), f"gravity torque about joint {j + 1}", B[pose]))
+        # an axis that stays vertical carries no gravity torque: its basis would hold only the
+        # base's tilt, a shape of the pose with nothing of gravity in it
+        if np.abs(frames[j][0][:, :, 2] @ g).min() < np.cos(np.radians(VERTICAL_DEG)):
+            G = gravity_basis(fields.layout, fields.x, inputs.q, j, g)
+            out.append((("gravity", j), f"gravity torque about joint {j + 1}",
+                        gravity_terms(G)[pose]))
     for key, a, name in (("time", inputs.time_s, "time"), ("temperature", inputs.temp_c,
                                                             "air temperature")):
         if a is not None:
@@ -382,7 +382,7 @@ def reading(kind: str, j: int | None, channel: str, strength: float, further=Fal
     if kind == "gravity":
         if own:
             return (f"joint {J}'s error follows the gravity torque it carries ({pct}): compliance "
-                    f"in joint {J} not fully modelled?")
+                    f"in joint {J} that the model does not hold?")
         if channel == "rigid":
             return (f"the SMRs sag with the gravity torque about joint {J} ({pct}): links bending, "
                     f"or compliance across joint {J}'s axis?")
