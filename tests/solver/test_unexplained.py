@@ -223,3 +223,34 @@ def test_no_block_once_the_hidden_effect_is_named(seed):
                  meas.temp_c, cell.base)
     assert [e["name"] for e in d.report["effects"]] == [name]
     assert "unexplained" not in d.report, d.report["unexplained"]
+
+
+class Together:
+    """Two effects at once."""
+
+    def __init__(self, *effects):
+        self.effects = effects
+
+    def joint_offsets(self, cell, q, time_s, temp_c):
+        return sum(e.joint_offsets(cell, q, time_s, temp_c) for e in self.effects)
+
+    def base_motion(self, cell, time_s, temp_c):
+        return None
+
+
+@pytest.mark.parametrize("seed", (400, 401, 402))
+def test_two_hidden_effects_are_the_first_two(seed):
+    """Backlash in one of joints 1-3 and a wrist coupling, sizes from the seed: both lead the list,
+    each judged beside the one above it, and what follows is weak."""
+    rng = np.random.default_rng(seed)
+    joint = int(rng.integers(0, 3))
+    both = Together(Backlash(joint, np.radians(rng.uniform(0.003, 0.006))),
+                    WristCoupling(rng.choice([-1, 1]) * rng.uniform(3e-5, 6e-5)))
+    cell, _, meas = campaign(seed, both)
+    cv, layout, x, exts, inputs, floor = geometric_remainder(cell, meas)
+    covs = unexplained(cv.resid, layout, x, exts, inputs, floor, cv.mse)["covariates"]
+    assert {(c["name"], c["channel"]) for c in covs[:2]} == {
+        (f"direction of joint {joint + 1}'s last motion", f"joint {joint + 1}"),
+        ("joint 4's angle", "joint 5")}, covs[:3]
+    assert covs[2]["strength"] < 0.05, covs[2]
+    assert "a further" in covs[1]["reading"]
