@@ -194,6 +194,18 @@ def _print_diagnosis(report) -> None:
         console.print("  " + tables.effect_parameters(e["parameters"], e.get("uncertainty")))
     console.print(f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
                   f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)")
+    _print_unexplained(report.get("unexplained"))
+
+
+def _print_unexplained(block) -> None:
+    """What the final model leaves, and the covariates it follows most (strength 0..1)."""
+    if not block:
+        return
+    console.print(f"[bold]{block['reading']}[/bold]")
+    for c in block["covariates"]:
+        console.print(f"  {c['strength']:.2f}  {c['name']}: {c['reading']}")
+    if "per_pose_share" in block:
+        console.print(f"  per pose: {block['per_pose_reading']}")
 
 
 

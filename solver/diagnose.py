@@ -339,6 +339,11 @@ def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=N
 
     errors = diagnosis_errors(diag, x, ee, report, params)  # adds each effect's `uncertainty`
     figures = figure_series(diag, steps, ee, x)
+    from .unexplained import unexplained
+
+    left = unexplained(final.resid, prob.layout, x, ee, inputs, floor, base.mse)
+    if left is not None:
+        report["unexplained"] = left
     clock["total"] = time.perf_counter() - t0
     if screening is not None:
         report["outliers"] = screening.report(pose_ids, target_names)

@@ -213,6 +213,7 @@ $("job-form").addEventListener("submit", async (ev) => {
       state.diag = d.id;
       $("diagnosis").hidden = false;
       $("d-effects").replaceChildren();
+      $("d-unexplained").hidden = $("d-outliers").hidden = true;
       $("d-figures").replaceChildren();
       $("d-links").replaceChildren();
       pollDiagnosis();
@@ -238,9 +239,9 @@ async function pollDiagnosis() {
 const UNITS = [["_ppm_per_c", "ppm/°C"], ["_ppm_per_hour", "ppm/h"], ["_deg", "deg"],
                ["_ppm", "ppm"], ["_mm", "mm"], ["_s", "s"]];
 
-/** An effect's parameters as text, each ± its standard error where the report gives one, units
- * taken from the key suffixes of the report. */
-function formatParameters(params, errors) {
+/** An effect's parameters as text, each ± its standard error where `errors` gives one, units
+ * taken from the key suffixes of the report; each value after `sign` ("± " for standard errors). */
+function formatParameters(params, errors = null, sign = "") {
   const pm = (v, se) => fmt(v) + (typeof se === "number" ? ` ± ${fmt(se)}` : "");
   return Object.entries(params || {}).map(([key, v]) => {
     const [suffix, unit] = UNITS.find(([sfx]) => key.endsWith(sfx)) || ["", ""];
@@ -248,8 +249,68 @@ function formatParameters(params, errors) {
     const se = (errors || {})[key];
     const value = Array.isArray(v) ? `(${v.map((x, i) => pm(x, Array.isArray(se) ? se[i] : null)).join(", ")})`
       : typeof v === "number" ? (Number.isInteger(v) ? String(v) : pm(v, se)) : String(v);
-    return `${label} ${value}${unit ? ` ${unit}` : ""}`;
+    return `${label} ${sign}${value}${unit ? ` ${unit}` : ""}`;
   }).join("; ");
+}
+
+/** Optional per-effect keys of the report: [key, column heading, text of its value]. */
+const EFFECT_EXTRAS = [
+  ["uncertainty", "standard error", (v) => formatParameters(v, null, "± ")],
+  ["holdout_gain_interval_mm", "held-out gain interval / mm",
+   (v) => `${fmt(v[0])} to ${fmt(v[1])}`],
+  ["alternatives", "could not be told apart from",
+   (v) => (v.length ? v.map((a) => `${a.label || effectLabel(a)} (held-out RMS `
+     + `${fmt(a.holdout_rmse_mm ?? a.holdout_rmse_after_mm)} mm)`).join("; ") : "none")],
+];
+
+/** A small table: headings, then rows of cell texts. */
+function makeTable(id, headings, rows) {
+  const table = document.createElement("table");
+  table.id = id;
+  const head = table.createTHead().insertRow();
+  headings.forEach((h) => { head.appendChild(document.createElement("th")).textContent = h; });
+  const body = table.createTBody();
+  rows.forEach((row) => {
+    const tr = body.insertRow();
+    row.forEach((v) => { tr.insertCell().textContent = v; });
+  });
+  return table;
+}
+
+/** What the final model leaves unexplained: how much, and the covariates it follows most. */
+function showUnexplained(u) {
+  const box = $("d-unexplained");
+  box.hidden = !u;
+  if (!u) return box.replaceChildren();
+  const title = Object.assign(document.createElement("h3"), { textContent: "Unexplained" });
+  const summary = Object.assign(document.createElement("p"), { id: "u-summary", textContent: u.reading });
+  const table = makeTable("unexplained-table", ["covariate", "strength", "through", "reading"],
+    u.covariates.map((c) => [c.name, fmt(c.strength), c.channel ?? "-", c.reading]));
+  [...table.tBodies[0].rows].forEach((tr, i) => {
+    const bar = document.createElement("meter");  // strength 0..1 at a glance
+    Object.assign(bar, { min: 0, max: 1, value: u.covariates[i].strength });
+    tr.cells[1].prepend(bar, " ");
+    tr.cells[3].className = "evidence";
+  });
+  const parts = [title, summary, table];
+  if (u.per_pose_reading) {
+    parts.push(Object.assign(document.createElement("p"), {
+      id: "u-per-pose", className: u.per_pose_dominates ? "warn" : "muted",
+      textContent: `Per pose: ${u.per_pose_reading}` }));
+  }
+  box.replaceChildren(...parts);
+}
+
+/** Readings excluded as gross errors, by pose and target. */
+function showOutliers(list) {
+  const box = $("d-outliers");
+  box.hidden = !list || !list.length;
+  if (box.hidden) return box.replaceChildren();
+  box.replaceChildren(
+    Object.assign(document.createElement("h3"),
+      { textContent: `Readings excluded as gross errors (${list.length})` }),
+    makeTable("outliers-table", ["pose", "target", "residual / mm"],
+      list.map((o) => [String(o.pose), o.target, fmt(o.residual_mm)])));
 }
 
 /** The name a person reads for an effect of the report: type, joint, harmonic, time. */
@@ -281,18 +342,25 @@ async function showDiagnosis(d) {
     ["effect", "joint", "evidence", "parameters", "held-out RMS before / mm", "after / mm"]
       .forEach((h) => { head.appendChild(document.createElement("th")).textContent = h; });
     const body = table.createTBody();
+    // Optional columns (FORMATS.md section 5), shown only when some effect carries them.
+    const extra = EFFECT_EXTRAS.filter(([key]) => report.effects.some((e) => e[key] !== undefined));
+    extra.forEach(([, h]) => { head.appendChild(document.createElement("th")).textContent = h; });
     report.effects.forEach((e) => {
       const tr = body.insertRow();
       const name = e.name + (e.harmonic ? ` (harmonic ${e.harmonic})` : "")
         + (e.at_s !== undefined && e.at_s !== null ? ` at ${e.at_s.toFixed(0)} s` : "");
       [name, e.joint ?? "-", e.evidence, formatParameters(e.parameters, e.uncertainty),
-       fmt(e.holdout_rmse_before_mm), fmt(e.holdout_rmse_after_mm)]
+       fmt(e.holdout_rmse_before_mm), fmt(e.holdout_rmse_after_mm),
+       ...extra.map(([key, , show]) => (e[key] === undefined ? "-" : show(e[key])))]
         .forEach((v) => { tr.insertCell().textContent = v; });
       tr.cells[2].className = "evidence";
       tr.cells[3].className = "parameters";
+      extra.forEach(([key], k) => { tr.cells[6 + k].className = `extra ${key}`; });
     });
     $("d-effects").replaceChildren(table);
   }
+  showUnexplained(report.unexplained);
+  showOutliers(report.outliers);
   // One figure per effect: its caption names the effect it shows.
   $("d-figures").replaceChildren(...figures.map((fig) => {
     const i = report.effects.findIndex((e) => figureOf(e, fig.name));
