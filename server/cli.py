@@ -78,7 +78,7 @@ def cmd_calibrate(args) -> None:
     fit = model.meta["fit"]
     console.print(f"{args.method} on {meas.n_poses} poses, {meas.n_readings} readings "
                   f"in {cal.seconds * 1000:.0f} ms")
-    _print_outliers(cal.details.get("outliers"))
+    _print_screening(cal)
     console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
     console.print(tables.identified_geometry(cal.robot, cell.robot, model.meta["uncertainty"]))
     console.print(tables.frame_errors(model.meta["uncertainty"], meas.target_names))
@@ -127,7 +127,7 @@ def cmd_evaluate(args) -> None:
 def cmd_compare(args) -> None:
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
     rows = workflow.compare(cell, meas, screen=not args.keep_outliers)
-    _print_outliers(next(iter(rows.values()))[0].details.get("outliers"))
+    _print_screening(next(iter(rows.values()))[0])
     console.print(tables.table3(rows, meas.target_names))
     for label, (cal, _) in rows.items():
         if "history" in cal.details:
@@ -164,10 +164,11 @@ def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=Tr
     return report, figures, d
 
 
-def _print_outliers(outliers) -> None:
+def _print_outliers(outliers, skipped=None) -> None:
     """The readings screened out as gross errors, one line each (None: screening was off)."""
-    if outliers is None:
-        console.print("gross-outlier screening off: every reading used")
+    if outliers is None or skipped:
+        console.print("gross-outlier screening " + (f"skipped ({skipped})" if skipped else "off")
+                      + ": every reading used")
         return
     if not outliers:
         console.print("no gross outlier among the readings")
@@ -177,6 +178,11 @@ def _print_outliers(outliers) -> None:
     for o in outliers:
         console.print(f"  pose {o['pose']} target {o['target']}: residual {o['residual_mm']:.3f} mm "
                       f"({o['evidence']})")
+
+
+def _print_screening(cal) -> None:
+    screening = cal.details.get("screening")
+    _print_outliers(cal.details.get("outliers"), screening.skipped if screening else None)
 
 
 def _print_diagnosis(report) -> None:

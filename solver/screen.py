@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from .identifiability import NotIdentifiable
+
 ALPHA = 0.01  # chance of any false flag on a clean campaign, by the Gaussian reference
 MAX_ROUNDS = 6
 TAIL_Q = 0.9  # quantile of |z| that, with the median, sets the robust scale
@@ -50,6 +52,7 @@ class Screening:
     scales_mm: dict = field(default_factory=dict)
     thresholds: dict = field(default_factory=dict)
     rounds: int = 0
+    skipped: str | None = None  # why nothing could be judged (the data cannot fit the geometry)
 
     @property
     def count(self) -> int:
@@ -75,6 +78,8 @@ class Screening:
 
     def summary(self) -> dict:
         """Counts, scales and thresholds, for a model's fit statistics."""
+        if self.skipped:
+            return {"readings_excluded": 0, "skipped": self.skipped}
         return {"readings_excluded": self.count, "rounds": self.rounds,
                 "scales_mm": {k: round(v, 5) for k, v in self.scales_mm.items() if np.isfinite(v)},
                 "thresholds": {k: round(v, 3) for k, v in self.thresholds.items()
@@ -229,8 +234,12 @@ def screen(fit, q, meas, time_s=None, temp_c=None, alpha=ALPHA, max_rounds=MAX_R
         pred, lev = fit(m_now)
         return pred - meas, lev
 
+    try:
+        first = residuals()
+    except NotIdentifiable as e:  # too few poses for the geometry: a nominal fit may still run
+        return Screening(excluded, np.full(have.shape, np.nan), skipped=str(e))
     for rounds in range(1, max_rounds + 1):
-        r, lev = residuals()
+        r, lev = first if rounds == 1 else residuals()
         judge = _Judge(r, meas, have & ~excluded, time_s, temp_c, alpha, lev)
         new = np.zeros_like(have)
         ev = {}
