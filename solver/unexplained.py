@@ -32,6 +32,7 @@ ANGLE_DEGREE = 3  # Legendre terms of a joint angle: scale, bow and the S of a l
 SCALAR_DEGREE = 2  # of time, temperature and distance: drift and its curvature
 GRAVITY_TERMS = 3  # principal components of a joint's gravity-torque basis
 VERTICAL_DEG = 5.0  # a joint axis never further than this from vertical carries no gravity torque
+TRAINED = 0.8  # share of the readings each fold's fit saw (the diagnosis's 5-fold cross-validation)
 NULL_DRAWS = 19  # random deals of the covariates: beating all of them is a 5% test
 OWN_TIE = 0.9  # a joint's own channel is preferred when it explains this fraction of the best one
 
@@ -41,10 +42,13 @@ def unexplained(resid: np.ndarray, layout: Layout, x, extensions: list[Extension
     """The `unexplained` block of the report (FORMATS.md section 5), or None when nothing is left.
 
     resid: (m, K, 3) held-out residual of the final model (prediction - reading), NaN if missing.
-    With a noise floor the block appears when the held-out RMS exceeds ABOVE_FLOOR times it; with
-    none (one SMR a pose) the floor cannot tell noise from error, so the block appears only when
-    some covariate explains at least STRONG of the remainder on left-out poses and more than any
-    of NULL_DRAWS random deals of the covariates to the readings does (`chance_strength`).
+    With a noise floor the block appears when the held-out RMS exceeds ABOVE_FLOOR times what a
+    correct model reaches held out (`reachable_mm`: the floor, raised by the noise its P fitted
+    columns carry to unseen readings, sqrt(1 + P / readings fitted) as for any least-squares
+    prediction; it matters on small campaigns). With none (one SMR a pose) the floor cannot tell
+    noise from error, so the block appears only when some covariate explains at least STRONG of
+    the remainder on left-out poses and more than any of NULL_DRAWS random deals of the
+    covariates to the readings does (`chance_strength`).
     """
     mask = np.all(np.isfinite(resid), axis=-1)
     r = resid[mask]  # (N, 3)
@@ -55,6 +59,9 @@ def unexplained(resid: np.ndarray, layout: Layout, x, extensions: list[Extension
         return None
     pose = np.nonzero(mask)[0]
     fields = Fields(layout, x, extensions, inputs, mask)
+    reach = None if floor is None else floor * np.sqrt(1.0 + fields.Q.shape[1] / (TRAINED * r.size))
+    if reach is not None and rmse <= ABOVE_FLOOR * reach:
+        return None
     cands = candidate_covariates(fields)
     covs = ranked(fields, r, pose, cands, MAX_COVARIATES)
     chance = None
@@ -67,6 +74,7 @@ def unexplained(resid: np.ndarray, layout: Layout, x, extensions: list[Extension
     block = {"holdout_rmse_mm": rmse,
              "share_of_baseline_mse": float(rmse**2 / baseline_mse) if baseline_mse > 0 else None,
              "noise_floor_ratio": None if not floor else rmse / floor,
+             "reachable_mm": reach,
              "covariates": covs}
     if chance is not None:
         block["chance_strength"] = chance
