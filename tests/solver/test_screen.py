@@ -11,6 +11,7 @@ from solver.diagnose import noise_floor
 from solver.effects import Inputs
 from solver.kinematics import predict
 from solver.screen import screen_readings
+from tests.real import CAMPAIGNS, campaign_files
 
 CELL = default_cell()
 
@@ -83,9 +84,8 @@ def test_two_readings_of_one_pose_or_two_smrs_a_pose():
 
 def test_real_campaigns_keep_their_readings():
     """Real arms leave hundreds of um unmodelled: that is no gross error (none flagged in these)."""
-    for name in ("irb120_wu", "qkm_hl6"):
-        cell, meas = workflow.load_data(f"/work/shared/data/real/{name}/train.csv",
-                                        f"/work/shared/data/real/{name}/cell.json")
+    for name in CAMPAIGNS:
+        cell, meas = workflow.load_data(*campaign_files(name))
         assert workflow.screen_campaign(cell, meas).count <= 0.02 * meas.n_readings
 
 
