@@ -198,6 +198,12 @@ def _print_diagnosis(report) -> None:
                       + (f" harmonic {e['harmonic']}" if "harmonic" in e else "")
                       + (f" at {e['at_s']:.0f} s" if "at_s" in e else "") + f": {e['evidence']}")
         console.print("  " + tables.effect_parameters(e["parameters"], e.get("uncertainty")))
+        lo, hi = e["holdout_gain_interval_mm"]
+        console.print(f"  held-out gain {e['holdout_rmse_before_mm'] - e['holdout_rmse_after_mm']:.4f} mm "
+                      f"(95% interval over poses {lo:.4f} to {hi:.4f} mm)")
+        if e["alternatives"]:
+            console.print("  [yellow]the data cannot tell it from:[/yellow] " + ", ".join(
+                f"{a['label']} (held-out RMS {a['holdout_rmse_mm']:.4f} mm)" for a in e["alternatives"]))
     console.print(f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
                   f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)")
     _print_unexplained(report.get("unexplained"))
@@ -212,7 +218,6 @@ def _print_unexplained(block) -> None:
         console.print(f"  {c['strength']:.2f}  {c['name']}: {c['reading']}")
     if "per_pose_share" in block:
         console.print(f"  per pose: {block['per_pose_reading']}")
-
 
 
 def cmd_acquire(args) -> None:

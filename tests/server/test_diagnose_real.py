@@ -25,5 +25,5 @@ def test_real_campaign_names_joint_2_compliance(name, tmp_path):
     assert first["significance"]["p_value"] < 0.005 and first["uncertainty"]
     for alt in first["alternatives"]:  # named beside it when the data cannot tell them apart
         assert alt["holdout_rmse_mm"] > after
-    assert "joint_compliance joint 2" in out and "held-out RMS" in out
+    assert "joint_compliance joint 2" in out and "held-out gain" in out and "interval" in out
     assert r["outliers"] == []
