@@ -108,7 +108,7 @@ def test_hidden_effect_is_named_with_its_evidence_and_figure(served, page, tmp_p
         assert " at " in cells[0] and cells[0].endswith(" s"), cells
     # The evidence sentence: what the residuals follow, for which joint, and what modelling gains.
     evidence = cells[2]
-    assert "cuts the held-out RMS from" in evidence and "paired t =" in evidence, evidence
+    assert "cuts the held-out RMS from" in evidence and "own null" in evidence, evidence
     if joint is not None:
         assert evidence.startswith(f"Joint {joint}'s residual rotation"), evidence
     assert cells[3] and " ± " in cells[3], "the effect's parameters are shown with their errors"
