@@ -10,10 +10,11 @@ form in the residuals, cheap for many residual vectors at once.
 That makes a per-campaign null distribution affordable: residuals of the current model with a
 random sign per pose (one sign for all readings of a pose, so an error shared by the SMRs of a
 pose stays shared) are what the campaign would look like if the current model were the truth and
-its errors symmetric. Each candidate's gain is standardised by its own null mean and spread (a
-compliance term with twelve columns and a scale error with one are then on the same footing), and
-a candidate is accepted only when its standardised gain exceeds the (1 - alpha) quantile of the
-MAXIMUM over all candidates under the null: the family-wise false-alarm rate is alpha whatever
+its errors symmetric. Each candidate's statistic, the log of the ratio of the cross-validated
+sums of squares without and with it (free of the residuals' scale), is standardised by its own
+null mean and spread (a compliance term with twelve columns and a scale error with one are then
+on the same footing), and a candidate is accepted only when it exceeds the (1 - alpha) quantile of
+the MAXIMUM over all candidates under the null: the family-wise false-alarm rate is alpha whatever
 the number of candidates, and the test keeps its power when the gain sits on a few poses (those
 poses' residuals are large under the null too, but a sign-scrambled copy of them does not line up
 with the candidate's columns as the real one does).
@@ -47,8 +48,8 @@ class Scores:
     pose_sse: np.ndarray  # (m,) its per-pose share
     gain: np.ndarray  # (C,) drop of the cross-validated sum of squares per candidate
     pose_gain: np.ndarray  # (C, m) per pose
-    z: np.ndarray  # (C,) gain standardised by the candidate's own null
-    null_max: np.ndarray  # (B,) maximum over candidates of the standardised null gain
+    z: np.ndarray  # (C,) log error ratio standardised by the candidate's own null
+    null_max: np.ndarray  # (B,) maximum over candidates of the standardised null statistic
 
     def threshold(self, alpha: float = ALPHA) -> float:
         return float(np.quantile(self.null_max, 1.0 - alpha))
