@@ -269,7 +269,9 @@ def select(diag: Diagnoser, cands, log=None):
     while remaining and len(steps) < MAX_EFFECTS:
         trial, A, r, blocks, pose_of_row, scans = diag.linear_system(cv_now.fits["all"], current,
                                                                     remaining)
-        sc = linear_scores(A, r, blocks, pose_of_row, diag.folds, m, seed=len(steps), scans=scans)
+        fresh = linear_scores(A, r, blocks, pose_of_row, diag.folds, m, resamples=0).fresh
+        sc = linear_scores(A, r, blocks, pose_of_row, diag.folds, m, seed=len(steps), scans=scans,
+                           null_residual=fresh)
         thr = sc.threshold()
         n_read = cv_now.n.sum()
         rms = lambda i: float(np.sqrt(max(sc.sse - sc.gain[i], 0.0) / n_read))  # noqa: E731

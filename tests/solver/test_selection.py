@@ -102,3 +102,14 @@ def test_two_effects_at_once():
         lo, hi = e["holdout_gain_interval_mm"]
         assert 0 < lo <= e["holdout_rmse_before_mm"] - e["holdout_rmse_after_mm"] <= hi
         assert e["significance"]["p_value"] < 0.005
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_a_gain_on_few_poses_is_found_on_a_small_campaign(seed):
+    """30 poses: the null drawn from the fresh residual keeps the power that flips of the current
+    model's residual (which still holds the scale error) would lose."""
+    rng = np.random.default_rng(seed)
+    ppm = float(rng.uniform(120, 180))
+    meas = campaign(KUKA_LIKE, 60 + seed, 30, [f"joint_scale:1={ppm}"], noise=3.0)
+    d = run(KUKA_LIKE, meas)
+    assert ("joint_scale", 1) in named(d)
