@@ -106,8 +106,7 @@ def test_two_effects_at_once():
 
 @pytest.mark.parametrize("seed", range(8))
 def test_a_gain_on_few_poses_is_found_on_a_small_campaign(seed):
-    """30 poses: the null drawn from the fresh residual keeps the power that flips of the current
-    model's residual (which still holds the scale error) would lose."""
+    """30 poses at 3x the tracker noise: a scale error seen on the poses of large |q1| is named."""
     rng = np.random.default_rng(seed)
     ppm = float(rng.uniform(120, 180))
     meas = campaign(KUKA_LIKE, 60 + seed, 30, [f"joint_scale:1={ppm}"], noise=3.0)
