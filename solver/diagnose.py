@@ -121,12 +121,15 @@ class Diagnoser:
         """
         out = []
         for e in exts:
-            if e.kind.located_in_time and e.at_s is None:
-                e = Extension(e.name, at_s=self.scan_shift(
-                    [o for o in exts if o is not e], np.arange(self.prob.q.shape[0])),
-                    origin=self.centroid)
-            out.append(e)
+            out.append(self._located(e, [o for o in exts if o is not e]))
         return out
+
+    def _located(self, e, others):
+        """The extension with its time found on all poses beside `others`, if it needs one."""
+        if not (e.kind.located_in_time and e.at_s is None):
+            return e
+        return Extension(e.name, at_s=self.scan_shift(others, np.arange(self.prob.q.shape[0])),
+                         origin=self.centroid)
 
     def fit(self, exts, poses=None, fold="all"):
         self.fits += 1
@@ -223,9 +226,7 @@ class Diagnoser:
         layout, inputs, mask = self.prob.layout, self.inputs, self.prob.mask
         trial = []
         for c in cands:
-            if c.kind.located_in_time and c.at_s is None:
-                c = Extension(c.name, at_s=self.scan_shift(current, np.arange(len(inputs.q))),
-                              origin=self.centroid)
+            c = self._located(c, current)
             trial.append(Extension(**{**c.__dict__, "coef": np.zeros(c.n_params)}))
         exts = list(ee) + trial
         bases = [prepare(e, layout, self.x0, inputs) for e in exts]

@@ -95,9 +95,7 @@ def linear_scores(A: np.ndarray, r: np.ndarray, blocks: list[np.ndarray], pose_o
     J = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)  # spans unchanged; fair rank tests
     cuts = np.cumsum([0] + sizes)
     a = slice(0, sizes[0])
-    rows, P = A.shape
-    dof = max(rows - np.linalg.matrix_rank(J[:, a]), 1)
-    inflate = rows / dof  # fitted residuals are shrunk by the fit: undo it for the null's scale
+    rows = A.shape[0]
     starts = np.flatnonzero(np.r_[True, np.diff(pose_of_row) != 0])
     poses = pose_of_row[starts]
     r0 = r if null_residual is None else null_residual
@@ -110,13 +108,14 @@ def linear_scores(A: np.ndarray, r: np.ndarray, blocks: list[np.ndarray], pose_o
         return G, vv
 
     (Gp, rr), (G0, rr0) = per_pose(r), per_pose(r0)
-    signs = np.sqrt(inflate) * rng.choice([-1.0, 1.0], size=(m, resamples))
+    # the statistics are ratios of sums of squares: a residual's overall scale does not matter
+    signs = rng.choice([-1.0, 1.0], size=(m, resamples))
 
     def products(idx):  # X' R over the poses idx: the observed residual, then every resample
         return np.concatenate([Gp[idx].sum(axis=0)[:, None], G0[idx].T @ signs[idx]], axis=1)
 
     def squares(idx):
-        return np.r_[rr[idx].sum(), np.full(resamples, inflate * rr0[idx].sum())]
+        return np.r_[rr[idx].sum(), np.full(resamples, rr0[idx].sum())]
 
     X_all = products(np.arange(m))  # (P_all, 1+B)
     JJ_all = J.T @ J
