@@ -19,6 +19,7 @@ import numpy as np
 from drivers.campaign import CampaignEngine, Settings
 from drivers.clock import RealClock, VirtualClock
 from drivers.predictor import SmrPredictor
+from drivers.simulated_cell import SimulatedCell, surveyed_base
 
 from . import store
 from .formats.cell_json import Cell, cell_to_json, parse_cell
@@ -68,54 +69,6 @@ class StoreSink:
                                   state=state, reached_deg=list(map(float, q_deg)))
 
 
-class SimulatedCell:
-    """The virtual cell's devices: a simulated tracker and controller on 127.0.0.1 sockets."""
-
-    def __init__(self, cell: Cell, seed: int, clock, beam_break_rate: float = 0.0, effects=(),
-                 expected_s: float = 2000.0):
-        from drivers.abb.sim import SimulatedController, serve_controller
-        from drivers.cell import TrackerSpec, VirtualCell
-        from drivers.tracker.sim import SimulatedTracker, serve_tracker
-        from drivers.world import SimulatedWorld
-
-        from drivers.effects import make_effects
-
-        self.cell = VirtualCell.random(cell.robot, cell.targets, seed=seed,
-                                       tracker=TrackerSpec(**cell.tracker))
-        self.cell.effects.extend(make_effects(list(effects), self.cell, seed))
-        self.world = SimulatedWorld(self.cell, clock)
-        # effects tied to the campaign's time axis (a base shift's moment, thermal T0) learn it
-        # from the expected duration, as VirtualCell.campaign tells them the real one
-        span = np.linspace(0.0, expected_s, 50)[:, None]
-        for e in self.cell.effects:
-            if hasattr(e, "start_campaign"):
-                e.start_campaign(self.cell, span, np.full_like(span, self.world.air_temperature()))
-        self.tracker_device = SimulatedTracker(self.world, clock, beam_break_rate=beam_break_rate,
-                                               seed=seed)
-        self.controller_device = SimulatedController(self.world, cell.robot, clock)
-        self.tracker_server = serve_tracker(self.tracker_device)
-        self.controller_server = serve_controller(self.controller_device)
-
-    def rough_base(self, seed: int) -> np.ndarray:
-        """What a quick survey of the cell gives (see `_surveyed`)."""
-        return _surveyed(self.cell.base, seed)
-
-    def close(self):
-        self.tracker_server.close()
-        self.controller_server.close()
-
-
-def _surveyed(true_base: np.ndarray, seed: int) -> np.ndarray:
-    """The true base some 10 mm and half a degree off, as a quick survey of the cell gives it."""
-    rng = np.random.default_rng([seed, 7])
-    base = true_base.copy()
-    base[:3, 3] += rng.normal(0.0, 6.0, 3)
-    a = np.deg2rad(rng.normal(0.0, 0.3))
-    c, s = np.cos(a), np.sin(a)
-    base[:3, :3] = base[:3, :3] @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return base
-
-
 def base_guess(cell: Cell, seed: int, sim: SimulatedCell | None = None) -> np.ndarray:
     """The cell's `base`, else (simulated cell) the survey guess of the virtual cell of `seed`
     (that of `sim` when it is running)."""
@@ -129,7 +82,7 @@ def base_guess(cell: Cell, seed: int, sim: SimulatedCell | None = None) -> np.nd
 
     true = VirtualCell.random(cell.robot, cell.targets, seed=seed,
                               tracker=TrackerSpec(**cell.tracker))
-    return _surveyed(true.base, seed)
+    return surveyed_base(true.base, seed)
 
 
 def check_options(cell: Cell, opts: AcquireOptions) -> None:
@@ -231,7 +184,8 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
         check_options(cell, opts)
         if cell.simulated:
             clock = VirtualClock()
-            sim = SimulatedCell(cell, opts.seed, clock, opts.beam_break_rate, opts.effects,
+            sim = SimulatedCell(cell.robot, cell.targets, cell.tracker, opts.seed, clock,
+                                opts.beam_break_rate, opts.effects,
                                 expected_s=20.0 * opts.poses)
             stack.callback(sim.close)
         else:

@@ -11,7 +11,9 @@ from fastapi.routing import APIRoute
 
 from . import store
 from .api import ROUTERS, problems
-from .jobs import Acquisitions, Events, Jobs
+from .acquisitions import Acquisitions
+from .events import Events
+from .job_queue import Jobs
 from .security import ensure_token, require_token
 from .settings import Settings
 from .web import mount_web

@@ -6,7 +6,9 @@ from typing import Annotated
 
 from fastapi import Depends, Request
 
-from server.jobs import Acquisitions, Events, Jobs
+from server.acquisitions import Acquisitions
+from server.events import Events
+from server.job_queue import Jobs
 from server.security import require_token
 from server.settings import Settings
 from server.store import Database

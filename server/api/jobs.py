@@ -7,7 +7,7 @@ import json
 from fastapi import APIRouter
 from fastapi.responses import FileResponse
 
-from server.jobs import Job
+from server.job_queue import Job
 
 from .deps import Authorized, JobsDep
 from .schemas import FigurePublic, JobCreate, JobPublic

@@ -11,7 +11,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from server.formats.errors import InputError
-from server.jobs import ControllerUnreachable
+from server.acquisitions import ControllerUnreachable
 from server.store import Conflict, NotFound, StoreError
 
 MEDIA_TYPE = "application/problem+json"

@@ -13,7 +13,7 @@ import pytest
 import server.app
 from server import store
 from server.cli import main as robocal
-from server.jobs import RESTART_REASON, Jobs
+from server.job_queue import RESTART_REASON, Jobs
 from tests.server.api.conftest import serve, settings_for, wait_for
 
 
