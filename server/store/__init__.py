@@ -4,7 +4,8 @@ from .access import (CampaignInfo, JobInfo, PoseInfo, ReadingInfo, campaign_meas
                      create_campaign, create_job, discard_unfinished_pose, export_csv,
                      fail_unfinished_jobs, get_campaign, get_job, import_csv, list_campaigns,
                      list_jobs, update_job, next_unmeasured_pose, planned_poses, pose_readings,
-                     record_missing, record_pose_outcome, record_reading, set_status)
+                     record_missing, record_pose_outcome, record_reading, set_status,
+                     LeaseHeld, take_lease, renew_lease, release_lease)
 from .db import Database, open_database
 from .errors import Conflict, NotFound, StoreError
 
@@ -13,4 +14,5 @@ __all__ = ["JobInfo", "create_job", "fail_unfinished_jobs", "get_job", "list_job
            "StoreError", "campaign_measurements", "create_campaign", "discard_unfinished_pose",
            "export_csv", "get_campaign", "import_csv", "list_campaigns", "next_unmeasured_pose",
            "open_database", "planned_poses", "pose_readings", "record_missing",
-           "record_pose_outcome", "record_reading", "set_status"]
+           "record_pose_outcome", "record_reading", "set_status", "LeaseHeld", "take_lease",
+           "renew_lease", "release_lease"]

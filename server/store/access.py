@@ -9,9 +9,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from sqlalchemy import and_, delete, exists, func, insert, select
+from sqlalchemy import and_, delete, exists, func, insert, or_, select, update
 from sqlalchemy.orm import Session
 
+from drivers import lifecycle
 from server.formats.campaign_csv import read_campaign, write_campaign
 from server.formats.cell_json import parse_cell
 from solver.measurements import Measurements
@@ -23,19 +24,12 @@ from .errors import Conflict, NotFound, StoreError
 from .models import (JOB_KINDS, JOB_STATES, POSE_STATES, STATUSES, Campaign, Job, PlannedPose,
                      PoseOutcome, Reading, utcnow)
 
-# Which status may follow which. A killed run leaves `running` behind; resuming it sets
-# `running` again, which is allowed as a no-op. `failed` (a device fault) may be resumed.
-TRANSITIONS = {
-    "planned": {"running", "aborted"},
-    "running": {"paused", "done", "aborted", "failed"},
-    "paused": {"running", "aborted"},
-    "failed": {"running", "aborted"},
-    "done": set(),
-    "aborted": set(),
-}
+# Which status may follow which is the engine's table (drivers/lifecycle.py): the store persists
+# the engine's state and refuses a jump no request or event makes. Setting the same status again
+# is a no-op.
 # Readings and outcomes arrive only while the engine owns the campaign; a reading already in
-# flight when a pause was requested still lands.
-RECORDING = ("running", "paused")
+# flight when a pause, an abort or an e-stop was asked for still lands.
+RECORDING = ("running", "pausing", "paused", "stopping", "estopped")
 
 
 @dataclass(frozen=True)
@@ -52,6 +46,8 @@ class CampaignInfo:
     notes: str
     n_poses: int
     n_done: int  # poses with an outcome
+    lease_owner: str | None = None  # the process driving it (host:pid:random), if one claimed it
+    lease_expires_at: dt.datetime | None = None
 
 
 @dataclass(frozen=True)
@@ -119,22 +115,69 @@ def list_campaigns(db: Database, *, status: str | None = None) -> list[CampaignI
 
 
 def set_status(db: Database, *, campaign_id: int, status: str) -> str:
-    """Move the campaign to `status` (see TRANSITIONS); the status it had. Same status: no-op."""
+    """Move the campaign to `status` (one step of the life cycle's table); the status it had.
+    Same status: no-op."""
     checks.one_of(status, STATUSES, "status")
     with db.session(write=True) as s:
         campaign = _campaign(s, campaign_id)
         before = campaign.status
         if status == before:
             return before
-        if status not in TRANSITIONS[before]:
-            allowed = ", ".join(sorted(TRANSITIONS[before])) or "nothing (final)"
-            raise Conflict(f"campaign {campaign_id} is {before}; it can go to {allowed}, "
-                           f"not {status}")
+        if not lifecycle.reachable(before, status):
+            after = sorted(set(lifecycle.TRANSITIONS[before].values()))
+            raise Conflict(f"campaign {campaign_id} is {before}; it can go to "
+                           f"{', '.join(after) or 'nothing (final)'}, not {status}")
         if status == "done" and _next_unmeasured(s, campaign_id) is not None:
             raise Conflict(f"campaign {campaign_id} cannot be done: pose "
                            f"{_next_unmeasured(s, campaign_id)} has no outcome yet")
         campaign.status = status
     return before
+
+
+def take_lease(db: Database, *, campaign_id: int, owner: str, ttl_s: float,
+               dead_owner: str | None = None) -> None:
+    """Claim the campaign for `owner` for ttl_s seconds (or renew its claim), in one UPDATE that
+    succeeds only if no one holds it, the claim lapsed, it is owner's, or it is `dead_owner`'s (a
+    holder the caller knows is gone); LeaseHeld naming the holder otherwise."""
+    now = utcnow()
+    free = or_(Campaign.lease_owner.is_(None), Campaign.lease_owner == owner,
+               Campaign.lease_expires_at.is_(None), Campaign.lease_expires_at < now)
+    if dead_owner is not None:
+        free = or_(free, Campaign.lease_owner == dead_owner)
+    with db.session(write=True) as s:
+        done = s.execute(update(Campaign).where(Campaign.id == campaign_id, free).values(
+            lease_owner=owner, lease_expires_at=now + dt.timedelta(seconds=ttl_s)))
+        if done.rowcount == 1:
+            return
+        c = _campaign(s, campaign_id)
+        raise LeaseHeld(f"campaign {campaign_id} is driven by another process ({c.lease_owner}, "
+                        f"claim held until {c.lease_expires_at:%H:%M:%S} UTC); stop it there",
+                        c.lease_owner)
+
+
+def renew_lease(db: Database, *, campaign_id: int, owner: str, ttl_s: float) -> bool:
+    """Extend owner's claim by ttl_s from now; False if it is no longer owner's (never steals)."""
+    with db.session(write=True) as s:
+        done = s.execute(update(Campaign).where(Campaign.id == campaign_id,
+                                                Campaign.lease_owner == owner).values(
+            lease_expires_at=utcnow() + dt.timedelta(seconds=ttl_s)))
+        return done.rowcount == 1
+
+
+def release_lease(db: Database, *, campaign_id: int, owner: str) -> None:
+    """Drop owner's claim (a no-op if it holds none)."""
+    with db.session(write=True) as s:
+        s.execute(update(Campaign).where(Campaign.id == campaign_id,
+                                         Campaign.lease_owner == owner).values(
+            lease_owner=None, lease_expires_at=None))
+
+
+class LeaseHeld(Conflict):
+    """Another live process drives the campaign; `.owner` says which."""
+
+    def __init__(self, message: str, owner: str | None):
+        super().__init__(message)
+        self.owner = owner
 
 
 def planned_poses(db: Database, *, campaign_id: int) -> list[PoseInfo]:
@@ -477,7 +520,8 @@ def _info(s: Session, c: Campaign) -> CampaignInfo:
     n_poses = s.scalar(select(func.count()).where(PlannedPose.campaign_id == c.id))
     n_done = s.scalar(select(func.count()).where(PoseOutcome.campaign_id == c.id))
     return CampaignInfo(c.id, c.name, c.created_at, c.status, c.cell_json,
-                        json.loads(c.settings_json), c.simulated, c.notes, n_poses, n_done)
+                        json.loads(c.settings_json), c.simulated, c.notes, n_poses, n_done,
+                        c.lease_owner, c.lease_expires_at)
 
 
 def _add_campaign(s: Session, *, name, cell_text, settings, simulated, notes, status) -> Campaign:
@@ -540,7 +584,7 @@ def _imported_reading(meas: Measurements, cid: int, i: int, k: int, target: str,
 def _check_recording(campaign: Campaign) -> None:
     if campaign.status not in RECORDING:
         raise Conflict(f"campaign {campaign.id} is {campaign.status}: readings are recorded "
-                       "only while it is running or paused")
+                       f"only while it is {', '.join(RECORDING)}")
 
 
 def _reading_info(r: Reading) -> ReadingInfo:

@@ -17,7 +17,10 @@ from sqlalchemy import (JSON, Boolean, CheckConstraint, DateTime, Float, Foreign
                         UniqueConstraint)
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
-STATUSES = ("planned", "running", "paused", "done", "aborted", "failed")
+from drivers.lifecycle import STATES
+
+# A campaign's status is the engine's life-cycle state (drivers/lifecycle.py), all of them.
+STATUSES = STATES
 POSE_STATES = ("measured", "missing-target", "skipped")
 READING_STATUSES = ("ok", "missing")
 JOB_KINDS = ("calibration", "diagnosis")
@@ -81,6 +84,10 @@ class Campaign(Base):
     settings_json: Mapped[str] = mapped_column(Text, default="{}")  # pause, settle, retries...
     simulated: Mapped[bool] = mapped_column(Boolean, default=False)
     notes: Mapped[str] = mapped_column(Text, default="")
+    # The process that drives the campaign (host:pid:random) and until when its claim holds;
+    # the owner renews it while it runs, so a killed owner's claim lapses.
+    lease_owner: Mapped[str | None] = mapped_column(Text)
+    lease_expires_at: Mapped[dt.datetime | None] = mapped_column(UTCDateTime())
 
 
 class PlannedPose(Base):

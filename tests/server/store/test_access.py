@@ -13,7 +13,7 @@ from server.formats import InputError
 from server.store import (Conflict, NotFound, create_campaign, discard_unfinished_pose,
                           get_campaign, list_campaigns, next_unmeasured_pose, planned_poses,
                           pose_readings, record_missing, record_pose_outcome, record_reading,
-                          set_status)
+                          set_status, take_lease, renew_lease, release_lease, LeaseHeld)
 
 from .conftest import POSES_DEG
 
@@ -62,13 +62,16 @@ def test_create_refuses_bad_input_and_writes_nothing(db, cell_json):
 
 
 def test_status_transitions(db, cell_json):
+    """The store follows the engine's life-cycle table: one request or event per step."""
     cid = create_campaign(db, name="x", cell_json=cell_json, poses_deg=POSES_DEG[:1])
-    with pytest.raises(Conflict, match="planned; it can go to aborted, running"):
+    with pytest.raises(Conflict, match="planned; it can go to aborted, running, not paused"):
         set_status(db, campaign_id=cid, status="paused")
     assert set_status(db, campaign_id=cid, status="running") == "planned"
-    assert set_status(db, campaign_id=cid, status="running") == "running"  # resume after a kill
-    set_status(db, campaign_id=cid, status="paused")
-    set_status(db, campaign_id=cid, status="running")
+    assert set_status(db, campaign_id=cid, status="running") == "running"  # a no-op
+    with pytest.raises(Conflict, match="not paused"):  # only through pausing
+        set_status(db, campaign_id=cid, status="paused")
+    for status in ("pausing", "paused", "estopped", "paused", "running"):  # estop, reset, resume
+        set_status(db, campaign_id=cid, status=status)
     with pytest.raises(Conflict, match="pose 0 has no outcome"):
         set_status(db, campaign_id=cid, status="done")
     measure_pose(db, cid, 0)
@@ -79,6 +82,39 @@ def test_status_transitions(db, cell_json):
         set_status(db, campaign_id=cid, status="finished")
     with pytest.raises(NotFound):
         set_status(db, campaign_id=cid + 1, status="running")
+
+
+def test_every_lifecycle_state_is_storable(db, cell_json):
+    """All nine engine states pass the table's check constraint."""
+    from drivers.lifecycle import STATES
+
+    cid = create_campaign(db, name="x", cell_json=cell_json, poses_deg=POSES_DEG[:1])
+    with db.session(write=True) as s:
+        for state in STATES:
+            s.execute(text("UPDATE campaign SET status = :s WHERE id = :i"), dict(s=state, i=cid))
+    with pytest.raises(IntegrityError):
+        with db.session(write=True) as s:
+            s.execute(text("UPDATE campaign SET status = 'queued' WHERE id = :i"), dict(i=cid))
+
+
+def test_lease_is_taken_atomically_and_lapses(db, cell_json):
+    cid = create_campaign(db, name="x", cell_json=cell_json, poses_deg=POSES_DEG[:1])
+    take_lease(db, campaign_id=cid, owner="h:1:a", ttl_s=30)
+    take_lease(db, campaign_id=cid, owner="h:1:a", ttl_s=30)  # the owner renews
+    with pytest.raises(LeaseHeld, match=r"another process \(h:1:a") as held:
+        take_lease(db, campaign_id=cid, owner="h:2:b", ttl_s=30)
+    assert held.value.owner == "h:1:a"
+    assert not renew_lease(db, campaign_id=cid, owner="h:2:b", ttl_s=30)  # renew never steals
+    take_lease(db, campaign_id=cid, owner="h:2:b", ttl_s=30, dead_owner="h:1:a")  # gone: taken
+    assert get_campaign(db, campaign_id=cid).lease_owner == "h:2:b"
+    assert renew_lease(db, campaign_id=cid, owner="h:2:b", ttl_s=-1)  # now lapsed
+    take_lease(db, campaign_id=cid, owner="h:3:c", ttl_s=30)
+    release_lease(db, campaign_id=cid, owner="h:2:b")  # not h:2:b's any more: a no-op
+    assert get_campaign(db, campaign_id=cid).lease_owner == "h:3:c"
+    release_lease(db, campaign_id=cid, owner="h:3:c")
+    assert get_campaign(db, campaign_id=cid).lease_owner is None
+    with pytest.raises(NotFound):
+        take_lease(db, campaign_id=cid + 1, owner="h:3:c", ttl_s=30)
 
 
 def test_record_reading_is_idempotent(db, running):

@@ -32,7 +32,7 @@ def test_migrations_create_the_schema(tmp_path):
     uniques = {tuple(u["column_names"]) for u in insp.get_unique_constraints("reading")}
     assert ("campaign_id", "pose_index", "target") in uniques
     with db.engine.connect() as c:
-        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0002"
+        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0003"
         # The migration and the models describe the same schema.
         assert compare_metadata(MigrationContext.configure(c, opts={"compare_type": True}),
                                 Base.metadata) == []
@@ -115,7 +115,7 @@ def test_alembic_command_line_with_database_url(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     con = sqlite3.connect(path)
-    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0002",)
+    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0003",)
     assert con.execute("PRAGMA journal_mode").fetchone() == ("wal",)
     con.close()
 
@@ -164,7 +164,32 @@ def test_opening_a_new_file_from_many_places_at_once(tmp_path):
             return c.execute(text("SELECT version_num FROM alembic_version")).all()
 
     with ThreadPoolExecutor(4) as pool:
-        assert list(pool.map(version, range(4))) == [[("0002",)]] * 4
+        assert list(pool.map(version, range(4))) == [[("0003",)]] * 4
     for p in procs:
         _, err = p.communicate(timeout=120)
         assert p.returncode == 0, err
+
+
+def test_migration_0003_widens_the_status_and_keeps_campaigns(tmp_path):
+    """A 0002 store keeps its campaigns through 0003 and back (in-between states mapped)."""
+    path = tmp_path / "old.db"
+    config = alembic_config(path)
+    command.upgrade(config, "0002")
+    con = sqlite3.connect(path)
+    con.execute("INSERT INTO campaign (id, name, created_at, status, cell_json, settings_json, "
+                "simulated, notes) VALUES (1, 'a', '2026-01-01 00:00:00', 'paused', '{}', '{}', "
+                "0, '')")
+    con.commit()
+    with pytest.raises(sqlite3.IntegrityError):
+        con.execute("UPDATE campaign SET status = 'estopped'")
+    con.close()
+    command.upgrade(config, "head")
+    con = sqlite3.connect(path)
+    assert con.execute("SELECT status, lease_owner FROM campaign").fetchall() == [("paused", None)]
+    con.execute("UPDATE campaign SET status = 'estopped'")  # allowed now
+    con.commit()
+    con.close()
+    command.downgrade(config, "0002")
+    con = sqlite3.connect(path)
+    assert con.execute("SELECT status FROM campaign").fetchall() == [("paused",)]
+    con.close()
