@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass
 
@@ -18,12 +20,14 @@ import numpy as np
 
 from drivers.campaign import CampaignEngine, Settings
 from drivers.clock import RealClock, VirtualClock
+from drivers.lifecycle import MOVING, StateError, next_state
 from drivers.predictor import SmrPredictor
 from drivers.simulated_cell import SimulatedCell, surveyed_base
 
 from . import store
 from .formats.cell_json import Cell, cell_to_json, parse_cell
 from .formats.model_json import to_plain
+from .lease import Lease, process_owner
 
 
 class AcquisitionFailed(RuntimeError):
@@ -147,7 +151,14 @@ def _plan(cell: Cell, base, opts: AcquireOptions):
     return np.rad2deg(q), summary
 
 
-UNFINISHED = ("planned", "running", "paused", "failed")
+# Where a run may begin (start or resume); a campaign left moving by a process that is gone is
+# failed first, an e-stopped one waits for an explicit reset.
+RESUMABLE = ("planned", "paused", "failed")
+UNFINISHED = RESUMABLE + MOVING + ("estopped",)
+
+
+class Interrupted(RuntimeError):
+    """Ctrl-C during a run: the arm was e-stopped; the message says how to resume."""
 
 
 def find_unfinished(db, name):
@@ -158,25 +169,51 @@ def find_unfinished(db, name):
     return None
 
 
+def ready_to_run(db, info, *, reset: bool = False, log=None) -> str:
+    """The state a run of `info` begins in (planned, paused or failed), once this process holds
+    its lease: a campaign left moving by a process that is gone is failed, an e-stopped one is
+    reset to paused if `reset`; Conflict if it cannot run."""
+    status = info.status
+    if status in MOVING:  # we hold the lease: whoever drove it is gone
+        (log or (lambda m: None))(f"campaign {info.id} was left {status}; marked failed")
+        store.set_status(db, campaign_id=info.id, status=next_state(status, "fail"))
+        status = "failed"
+    if status == "estopped":
+        if not reset:
+            raise store.Conflict(f"campaign {info.id} ({info.name}) was e-stopped; check the "
+                                 "cell, then resume it with --reset (POST .../reset in the API)")
+        store.set_status(db, campaign_id=info.id, status=next_state(status, "reset"))
+        status = "paused"
+    if status not in RESUMABLE:
+        raise store.Conflict(f"campaign {info.id} is {status}; it cannot run")
+    return status
+
+
 def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, *,
-            campaign_id: int | None = None, on_engine=None, on_event=None) -> dict:
+            campaign_id: int | None = None, on_engine=None, on_event=None,
+            owner: str | None = None, reset: bool = False) -> dict:
     """Run (or resume) a campaign on the cell's devices; a summary with the campaign time.
 
     campaign_id runs that stored campaign (else the latest unfinished one named opts.name, or a
-    new one); on_engine(engine) is called before the run so another thread can pause or stop it;
-    on_event(dict) hears each pose done and each state change.
+    new one); the run holds the campaign's lease for `owner` (default: this process), LeaseHeld
+    if another live process drives it. on_engine(engine) is called before the run so another
+    thread can pause or stop it; on_event(dict) hears each pose done and each state the engine
+    reports (after the store has it). Ctrl-C e-stops the arm and raises Interrupted.
     """
     db = store.open_database(db_path)
+    owner = owner or process_owner()
     name = opts.name or f"campaign-seed{opts.seed}"
     if campaign_id is not None:
         existing = store.get_campaign(db, campaign_id=campaign_id)
-        if existing.status not in UNFINISHED:
-            raise store.Conflict(f"campaign {campaign_id} is {existing.status}; it cannot run")
         name = existing.name
     else:
         existing = find_unfinished(db, name)
+    stopper = _Stopper(log)
     with ExitStack() as stack:
         if existing is not None:
+            stack.enter_context(Lease(db, existing.id, owner, on_lost=stopper.estop, log=log))
+            existing = store.get_campaign(db, campaign_id=existing.id)  # as of the lease
+            state = ready_to_run(db, existing, reset=reset, log=log)
             info = existing
             cell = parse_cell(info.cell_json)
             settings = info.settings or {}
@@ -194,7 +231,8 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
         base = base_guess(cell, opts.seed, sim)
         if existing is None:
             cid, poses_deg = plan_and_store(db, name=name, cell=cell, opts=opts, base=base)
-            start, history, partial = 0, None, {}
+            stack.enter_context(Lease(db, cid, owner, on_lost=stopper.estop, log=log))
+            state, start, history, partial = "planned", 0, None, {}
         else:
             cid = existing.id
             poses_deg = np.array([p.joints_deg for p in store.planned_poses(db, campaign_id=cid)])
@@ -205,33 +243,39 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
             clock.advance_to(_last_time(db, cid) + (30.0 if cell.simulated else
                                                     _since_last_reading(db, cid, start,
                                                                         len(poses_deg))))
-        if store.get_campaign(db, campaign_id=cid).status != "running":
-            store.set_status(db, campaign_id=cid, status="running")
         try:
             tracker, controller = _clients(cell, sim, stack)
         except DeviceUnreachable as e:
-            raise _failed(db, cid, name, start or 0, e, on_event) from e
+            # nothing moved: the campaign keeps its state and can be started again
+            raise AcquisitionFailed(f"campaign {cid} ({name}) did not start: {e}") from e
         names = tuple(sorted(cell.targets))
         predictor = SmrPredictor(cell.robot, np.array([cell.targets[t] for t in names]), names, base)
         settings = Settings(pause_s=opts.pause_s, settle=opts.settle, samples=opts.samples)
         sink = StoreSink(db, cid)
         if progress:
             sink = _Progress(sink, progress, len(poses_deg), start)
-        engine = CampaignEngine(controller, tracker, clock, predictor, sink, settings, log)
+        writer = StateWriter(db, cid, on_event, log)
+        stack.callback(writer.close)  # every state reported is stored before acquire returns
+        engine = CampaignEngine(controller, tracker, clock, predictor, sink, settings, log,
+                                state=state, on_state=writer)
+        stopper.engine = engine
         if on_event:
             sink = engine.sink = _Events(sink, on_event, engine, cid, len(poses_deg), start)
         if on_engine:
             on_engine(engine)
         t0 = clock.now()
         try:
-            stats = engine.run(poses_deg, start=start if start is not None else len(poses_deg),
-                               history=history, partial=partial)
+            stats = _run(engine, poses_deg, start=start if start is not None else len(poses_deg),
+                         history=history, partial=partial)
+        except KeyboardInterrupt:
+            writer.close()
+            raise Interrupted(f"interrupted: STOP sent, campaign {cid} ({name}) {engine.state} "
+                              f"after {engine.stats.poses} poses; its readings are stored, run "
+                              "again with --reset to resume") from None
         except Exception as e:
-            raise _failed(db, cid, name, engine.stats.poses + (start or 0), e, on_event) from e
-        final = "done" if engine.state == "done" else "aborted"
-        _finish(db, cid, final)
-        if on_event:
-            on_event({"type": "campaign.state", "campaign_id": cid, "state": final})
+            raise AcquisitionFailed(f"campaign {cid} ({name}) stopped at pose "
+                                    f"{engine.stats.poses + (start or 0) + 1}: {e}; its readings "
+                                    "are stored, run again to resume") from e
     return {"campaign": cid, "name": name, "resumed_at": start if existing else None,
             "poses": int(len(poses_deg)), "state": engine.state, "measured_poses": stats.poses,
             "readings": stats.readings, "missing": stats.missing, "beam_breaks": stats.beam_breaks,
@@ -243,22 +287,83 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
             "skipped_poses": stats.skipped, "simulated": cell.simulated}
 
 
-def _failed(db, cid, name, pose_index, error, on_event) -> AcquisitionFailed:
-    """Mark the campaign failed and say why to on_event; the one-line error to raise."""
-    _finish(db, cid, "failed")
-    if on_event:
-        on_event({"type": "campaign.state", "campaign_id": cid, "state": "failed",
-                  "detail": f"{type(error).__name__}: {error}"})
-    return AcquisitionFailed(f"campaign {cid} ({name}) stopped at pose {pose_index + 1}: "
-                             f"{error}; its readings are stored, run again to resume")
+# How long Ctrl-C waits for the engine to return after its e-stop.
+INTERRUPT_WAIT_S = 10.0
 
 
-def _finish(db, cid, status) -> None:
-    """Set the final status; a campaign paused in the store (by the API) passes through running,
-    as the engine may finish or fail its last pose after a pause was asked for."""
-    if store.get_campaign(db, campaign_id=cid).status == "paused":
-        store.set_status(db, campaign_id=cid, status="running")
-    store.set_status(db, campaign_id=cid, status=status)
+def _run(engine, poses_deg, **kw):
+    """engine.run on its own thread, so that Ctrl-C lands here, never inside a device exchange
+    or a store commit: it e-stops the engine (STOP first) and waits for the run to return."""
+    out: dict = {}
+
+    def run():
+        try:
+            out["stats"] = engine.run(poses_deg, **kw)
+        except BaseException as e:  # noqa: BLE001 - handed to the caller's thread
+            out["error"] = e
+
+    thread = threading.Thread(target=run, name="robocal-engine", daemon=True)
+    thread.start()
+    try:
+        while thread.is_alive():
+            thread.join(0.2)
+    except KeyboardInterrupt:
+        estop_engine(engine)
+        thread.join(INTERRUPT_WAIT_S)
+        raise
+    if "error" in out:
+        raise out["error"]
+    return out["stats"]
+
+
+class StateWriter:
+    """The engine's on_state: stores each state it reports, in order, on its own thread (neither
+    the engine nor an e-stop waits for the database), then tells on_event."""
+
+    def __init__(self, db, campaign_id, on_event=None, log=None):
+        self.db, self.campaign_id, self.on_event = db, campaign_id, on_event
+        self.log = log or (lambda msg: None)
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix=f"robocal-state-{campaign_id}")
+
+    def __call__(self, old: str, new: str) -> None:
+        try:
+            self._pool.submit(self._write, old, new)
+        except RuntimeError:  # closed: the run is over, the store already has its end
+            self.log(f"campaign {self.campaign_id}: late state {old} -> {new} not stored")
+
+    def _write(self, old, new) -> None:
+        try:
+            store.set_status(self.db, campaign_id=self.campaign_id, status=new)
+        except store.StoreError as e:
+            self.log(f"campaign {self.campaign_id}: state {new} not stored: {e}")
+        if self.on_event:
+            self.on_event({"type": "campaign.state", "campaign_id": self.campaign_id,
+                           "state": new, "was": old})
+
+    def close(self) -> None:
+        """Wait until every state reported so far is stored."""
+        self._pool.shutdown(wait=True)
+
+
+class _Stopper:
+    """E-stops the run's engine once it exists (the lease's on_lost)."""
+
+    def __init__(self, log):
+        self.engine, self.log = None, log or (lambda msg: None)
+
+    def estop(self) -> None:
+        if self.engine is not None:
+            estop_engine(self.engine)
+
+
+def estop_engine(engine) -> bool:
+    """E-stop the engine (state first, then STOP); where its state refuses an e-stop (it has not
+    started yet, or has just ended) latch the controller anyway, so no motion can follow.
+    True if the controller confirmed the stop."""
+    try:
+        return engine.estop()
+    except StateError:
+        return engine.controller.emergency_stop()
 
 
 def _history(db, cid, names, start, cell):
@@ -326,4 +431,4 @@ class _Events:
                        "pose_index": int(pose_index), "pose_state": state,
                        "poses_done": self.done, "poses_total": self.total,
                        "readings": st.readings, "missing": st.missing,
-                       "engine_state": self.engine.state})
+                       "state": self.engine.state})

@@ -1,208 +1,293 @@
-"""The acquisition runner: one campaign at a time on a worker thread (a cell has one arm),
-its running engine reachable from the request threads for pause, resume, abort and e-stop.
+"""The acquisition runner: one campaign at a time on a worker thread (a cell has one arm), its
+running engine reachable from the request threads for pause, resume, abort, reset and e-stop.
 
-Runs are in memory; the campaigns keep their state in the store.
+The state of a campaign is the engine's (drivers/lifecycle.py): while this service runs it, the
+engine's own; otherwise the one the store persisted, moved by the same table. Requests are
+checked against that table (StateError when illegal). The lock here guards a few fields only and
+is never held while a device or the database is called.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, replace
 
-from . import store
-from .acquire import AcquireOptions, acquire
+from drivers import lifecycle
+from drivers.lifecycle import MOVING, StateError
+
+from . import lease, store
+from .acquire import AcquireOptions, acquire, estop_engine
 from .events import Events
 from .formats.cell_json import parse_cell
 from .formats.model_json import to_plain
 
-# A campaign the engine may (re)start: the store resumes planned, paused and failed ones.
-STARTABLE = ("planned", "paused", "failed")
-FINAL = ("done", "aborted")
+# The states in which an engine's run() has ended (or is ending): requests go to the store.
+ENDED = ("estopped", "aborted", "done", "failed")
+# How long a request waits for a run that has just ended to store its last state.
+SETTLE_S = 5.0
 
 
 @dataclass(frozen=True)
 class Run:
-    """What the acquisition worker did with a campaign since this server started."""
+    """What this service's worker did with a campaign since it started (detail, not a state)."""
 
     campaign_id: int
-    state: str  # running, finished, failed, stopped (by abort or estop)
-    stop_requested: str | None = None  # abort or estop
+    active: bool = True  # queued or running on this service's worker
     detail: str | None = None
     summary: dict | None = None
 
 
-class Acquisitions:
-    """Runs acquisitions (simulated or on a cell's real devices) one at a time (a cell has one
-    arm) and holds the running engine, whose controller client is the real one on a real cell,
-    so pause, resume, abort and emergency stop reach it from the request threads."""
+@dataclass(frozen=True)
+class Outcome:
+    """What a request did: the state before and after; for an e-stop, whether the controller
+    confirmed (None: no run here, nothing moved under this service)."""
 
-    def __init__(self, database_url: str, db: store.Database, events: Events | None = None):
+    campaign_id: int | None
+    was: str | None
+    status: str | None
+    confirmed: bool | None = None
+    note: str = ""
+
+
+class Acquisitions:
+    """Runs acquisitions (simulated or on a cell's real devices) one at a time and holds the
+    running engine, whose controller client is the real one on a real cell, so the requests and
+    the e-stop reach it."""
+
+    def __init__(self, database_url: str, db: store.Database, events: Events | None = None, *,
+                 owner: str | None = None):
         self.database_url, self.db = database_url, db
         self.events = events or Events()
+        self.owner = owner or lease.process_owner()
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="robocal-acquire")
-        self._lock = threading.Lock()
+        # E-stops run here: never queued behind requests in the server's thread pool.
+        self.stops = ThreadPoolExecutor(4, thread_name_prefix="robocal-estop")
+        self._lock = threading.Lock()  # guards the fields below; never held over I/O
         self._runs: dict[int, Run] = {}
-        self._current: int | None = None
-        self._engine = None  # the CampaignEngine of self._current, once acquire() built it
-        # Nothing drives a campaign this process did not start: one left running by a stopped
-        # service is failed, so POST .../start resumes it at its next unmeasured pose.
-        for c in store.list_campaigns(db, status="running"):
-            store.set_status(db, campaign_id=c.id, status="failed")
+        self._current: int | None = None  # the campaign on the worker (queued or running)
+        self._engine = None  # its CampaignEngine, once acquire() built it
+        self._cancelled = False  # a stop landed before that engine existed
+        self._future: Future | None = None
+        # Nothing drives a campaign whose process is gone: one left moving is failed, so a
+        # resume continues it at its next unmeasured pose.
+        for c in store.list_campaigns(db):
+            if c.status in MOVING:
+                self.refresh(c)
 
-    def start(self, *, campaign_id: int) -> Run:
-        """Queue the campaign on the worker; Conflict if one is running or it cannot start."""
-        info = store.get_campaign(self.db, campaign_id=campaign_id)
-        if "options" not in (info.settings or {}):
-            raise store.Conflict(f"campaign {campaign_id} has no acquisition settings (its "
-                                 "readings were imported); there is nothing to acquire")
-        if info.status not in STARTABLE:
-            raise store.Conflict(f"campaign {campaign_id} is {info.status}; it can start when "
-                                 f"{', '.join(STARTABLE)}")
+    # -- what the API shows ---------------------------------------------------------------------
+    def refresh(self, info: store.CampaignInfo) -> store.CampaignInfo:
+        """The campaign, failed first if it was left moving by a process that is gone."""
         with self._lock:
-            if self._current is not None:
-                raise store.Conflict(f"campaign {self._current} is running; one at a time")
-            self._current = campaign_id
-            self._runs[campaign_id] = run = Run(campaign_id, "running")
-        self._state(campaign_id, "queued")
-        self._pool.submit(self._run, info)
-        return run
+            ours = self._current == info.id
+        if info.status not in MOVING or ours or self._foreign(info):
+            return info
+        try:
+            lease.claim(self.db, info.id, self.owner)
+        except store.LeaseHeld:
+            return info  # taken meanwhile by a live process
+        try:
+            now = store.get_campaign(self.db, campaign_id=info.id)
+            if now.status in MOVING:
+                store.set_status(self.db, campaign_id=info.id, status="failed")
+                self._publish(info.id, "failed", now.status)
+        finally:
+            store.release_lease(self.db, campaign_id=info.id, owner=self.owner)
+        return store.get_campaign(self.db, campaign_id=info.id)
 
-    def pause(self, *, campaign_id: int) -> str:
-        """Ask the running engine to pause after its current pose; the status it had."""
-        from drivers.campaign import StateError
-
+    def status_of(self, info: store.CampaignInfo) -> str:
+        """The life-cycle state: the live engine's if this service runs the campaign."""
         with self._lock:
-            engine = self._running_engine(campaign_id, "pause")
-            try:
-                engine.pause()
-            except StateError as e:
-                raise store.Conflict(f"campaign {campaign_id}: {e}") from None
-            # Readings of the pose in progress still land: the store records while paused.
-            before = store.set_status(self.db, campaign_id=campaign_id, status="paused")
-        self._state(campaign_id, "pausing")
-        return before
+            engine = self._engine if self._current == info.id else None
+        return info.status if engine is None else engine.state
 
-    def resume(self, *, campaign_id: int) -> str:
-        """Resume a paused engine, or start a campaign paused before this server started."""
-        from drivers.campaign import StateError
-
+    def actions(self, info: store.CampaignInfo, status: str | None = None) -> list[str]:
+        """The actions legal in the campaign's state that this service can carry out."""
+        status = status or self.status_of(info)
+        if self._foreign(info):
+            return []  # another process drives it: ask there
+        acts = lifecycle.allowed(status)
         with self._lock:
-            engine = self._engine if self._current == campaign_id else None
-            if engine is not None:
-                try:
-                    engine.resume()
-                except StateError as e:
-                    raise store.Conflict(f"campaign {campaign_id}: {e}") from None
-                before = store.set_status(self.db, campaign_id=campaign_id, status="running")
-        if engine is None:
-            before = store.get_campaign(self.db, campaign_id=campaign_id).status
-            if before != "paused":
-                raise store.Conflict(f"campaign {campaign_id} is {before}, not paused")
-            self.start(campaign_id=campaign_id)
-            return before
-        self._state(campaign_id, "running")
-        return before
-
-    def stop(self, *, campaign_id: int, how: str) -> str:
-        """Abort (at the next pose) or emergency-stop (the arm halts now); the status it had.
-
-        With no engine running it just marks the campaign aborted in the store (if not final).
-        """
-        from drivers.campaign import StateError
-
-        error = None
-        with self._lock:
-            info = store.get_campaign(self.db, campaign_id=campaign_id)
-            before = info.status
-            if campaign_id in self._runs:
-                self._runs[campaign_id] = replace(self._runs[campaign_id], stop_requested=how)
-            engine = self._engine if self._current == campaign_id else None
-            if engine is not None and how == "estop":
-                try:
-                    engine.emergency_stop()
-                except Exception as e:  # noqa: BLE001 - the state is marked; the caller is told
-                    error = e
-            elif engine is not None:
-                try:
-                    engine.abort()
-                except StateError as e:
-                    raise store.Conflict(f"campaign {campaign_id}: {e}") from None
-            elif before not in FINAL:
-                store.set_status(self.db, campaign_id=campaign_id, status="aborted")
-            elif before == "done" and how != "estop":
-                raise store.Conflict(f"campaign {campaign_id} is done; it cannot be aborted")
-        self._state(campaign_id, "estop" if how == "estop" else "aborting")
-        if error is not None:
-            raise ControllerUnreachable(f"emergency stop of campaign {campaign_id}: the "
-                                        f"controller did not confirm the stop: {error}")
-        return before
-
-    def emergency_stop_all(self) -> int | None:
-        """Emergency-stop whatever runs (nothing if nothing does); the campaign id, if any."""
-        with self._lock:
-            current = self._current
-        if current is not None:
-            self.stop(campaign_id=current, how="estop")
-        return current
+            busy = self._current is not None
+            queued = self._current == info.id and self._engine is None
+        if "options" not in (info.settings or {}) or busy or queued:
+            # imported readings have nothing to acquire; the arm runs one campaign at a time
+            acts = [a for a in acts if a not in ("start", "resume")]
+        return acts
 
     def get(self, campaign_id: int) -> Run | None:
         with self._lock:
             return self._runs.get(campaign_id)
 
-    def shutdown(self) -> None:
-        with self._lock:
-            engine = self._engine
+    # -- requests ---------------------------------------------------------------------------------
+    def request(self, *, campaign_id: int, action: str) -> Outcome:
+        """Start, pause, resume, abort or reset the campaign (see drivers/lifecycle.py);
+        StateError if its state does not allow it, Conflict if this service cannot."""
+        if action == "estop":
+            return self.estop(campaign_id)
+        engine = self._engine_of(campaign_id)
         if engine is not None:
-            try:
-                engine.abort()  # the worker thread should not keep moving the arm after us
-            except Exception:  # noqa: BLE001 - best effort at shutdown
-                pass
-        self._pool.shutdown(wait=False, cancel_futures=True)
+            was = engine.state
+            if action in ("start", "resume") and was == "planned":
+                raise store.Conflict(f"campaign {campaign_id} is starting already")
+            if was not in ENDED:
+                lifecycle.next_state(was, action)  # refused at once, not after the engine waits
+                return Outcome(campaign_id, was, engine.request(action))
+            self._settle(campaign_id)  # the run is ending: let it store its last state
+        info = self.refresh(store.get_campaign(self.db, campaign_id=campaign_id))
+        was = info.status
+        if self._foreign(info):
+            raise store.LeaseHeld(f"campaign {campaign_id} is driven by another process "
+                                  f"({info.lease_owner}); ask there", info.lease_owner)
+        with self._lock:
+            queued = self._current == campaign_id and self._engine is None
+            if queued and action == "abort":
+                self._cancelled = True  # the worker will not start it
+        try:
+            nxt = lifecycle.next_state(was, action)
+        except StateError as e:
+            e.allowed = self.actions(info, was)
+            raise
+        if action in ("start", "resume"):
+            self._launch(info, action)
+            return Outcome(campaign_id, was, was, note=f"{action} queued; the run reports "
+                           "running once the devices answer")
+        store.set_status(self.db, campaign_id=campaign_id, status=nxt)
+        self._publish(campaign_id, nxt, was)
+        return Outcome(campaign_id, was, nxt)
 
-    def _running_engine(self, campaign_id: int, what: str):
-        if self._current != campaign_id or self._engine is None:
-            raise store.Conflict(f"campaign {campaign_id} is not running here; cannot {what}")
-        return self._engine
+    def estop(self, campaign_id: int | None = None) -> Outcome:
+        """Emergency-stop the campaign (None: whatever runs here): the engine's state first,
+        then STOP to the controller, waiting at most its confirmation time. Run it on `stops`."""
+        with self._lock:
+            current, engine = self._current, self._engine
+            cid = current if campaign_id is None else campaign_id
+            queued = cid is not None and cid == current and engine is None
+            if queued:
+                self._cancelled = True  # the worker will not start it
+        if cid is None:
+            return Outcome(None, None, None, note="nothing runs")
+        if queued:
+            status = store.get_campaign(self.db, campaign_id=cid).status
+            return Outcome(cid, status, status, True, "stopped before the arm moved")
+        if cid == current:
+            was = engine.state
+            if was in lifecycle.FINAL:  # the run has just ended: nothing to stop
+                if campaign_id is None:
+                    return Outcome(cid, was, was, note="nothing runs")
+                raise StateError(was, "estop")
+            # the state first, then STOP; where the state refuses (the run has not begun, or
+            # has failed) the controller is latched all the same, so no motion follows
+            confirmed = estop_engine(engine)
+            return Outcome(cid, was, engine.state, confirmed)
+        info = self.refresh(store.get_campaign(self.db, campaign_id=cid))
+        if self._foreign(info):
+            raise store.LeaseHeld(f"campaign {cid} is driven by another process "
+                                  f"({info.lease_owner}); stop it there or with the cell's "
+                                  "hardware e-stop", info.lease_owner)
+        try:
+            nxt = lifecycle.next_state(info.status, "estop")
+        except StateError as e:
+            e.allowed = self.actions(info, info.status)
+            raise
+        if nxt != info.status:
+            store.set_status(self.db, campaign_id=cid, status=nxt)
+            self._publish(cid, nxt, info.status)
+        return Outcome(cid, info.status, nxt, None, "no run here: nothing moved under this service")
+
+    def estop_all(self, timeout_s: float = 1.0) -> Outcome | None:
+        """E-stop whatever runs, from any thread (a signal handler too), waiting at most
+        timeout_s; None if it did not answer in time."""
+        try:
+            return self.stops.submit(self.estop).result(timeout=timeout_s)
+        except FutureTimeout:
+            return None
+
+    def shutdown(self, wait_s: float = SETTLE_S) -> None:
+        """Stop the arm first (an e-stop of the running campaign), then let its run store its
+        last state for at most wait_s."""
+        self.estop_all()
+        with self._lock:
+            future = self._future
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        if future is not None:
+            try:
+                future.result(timeout=wait_s)
+            except Exception:  # noqa: BLE001 - the run's own outcome is recorded by _run
+                pass
+        self.stops.shutdown(wait=False, cancel_futures=True)
+
+    # -- the worker -------------------------------------------------------------------------------
+    def _launch(self, info: store.CampaignInfo, action: str) -> None:
+        if "options" not in (info.settings or {}):
+            raise store.Conflict(f"campaign {info.id} has no acquisition settings (its readings "
+                                 "were imported); there is nothing to acquire")
+        with self._lock:
+            if self._current is not None:
+                raise store.Conflict(f"campaign {self._current} is running; one at a time")
+            self._current, self._engine, self._cancelled = info.id, None, False
+        try:
+            lease.claim(self.db, info.id, self.owner)  # refused if another process drives it
+        except BaseException:
+            with self._lock:
+                self._current = None
+            raise
+        with self._lock:
+            self._runs[info.id] = Run(info.id, detail=f"{action} queued")
+            self._future = self._pool.submit(self._run, info)
+
+    def _engine_of(self, campaign_id: int):
+        with self._lock:
+            return self._engine if self._current == campaign_id else None
+
+    def _settle(self, campaign_id: int) -> None:
+        with self._lock:
+            future = self._future if self._current == campaign_id else None
+        if future is not None:
+            try:
+                future.result(timeout=SETTLE_S)
+            except Exception:  # noqa: BLE001 - recorded by _run
+                pass
+
+    def _foreign(self, info: store.CampaignInfo) -> bool:
+        """True if another live process holds the campaign's lease."""
+        owner = info.lease_owner
+        if owner is None or owner == self.owner or info.lease_expires_at is None:
+            return False
+        return info.lease_expires_at > dt.datetime.now(dt.UTC) and not lease.is_dead(owner)
 
     def _attach(self, engine) -> None:
         with self._lock:
-            cid = self._current
-            if self._runs[cid].stop_requested:
-                raise _Stopped()  # stopped while acquire() was setting up
+            if self._cancelled:
+                raise _Cancelled()  # stopped while acquire() was setting up: nothing moved
             self._engine = engine
-        self._state(cid, "running")
 
-    def _state(self, campaign_id: int, state: str) -> None:
+    def _publish(self, campaign_id: int, state: str, was: str) -> None:
         self.events.publish({"type": "campaign.state", "campaign_id": campaign_id,
-                             "state": state})
+                             "state": state, "was": was})
 
     def _run(self, info: store.CampaignInfo) -> None:
         cid = info.id
         try:
-            with self._lock:
-                # Stopped while queued: do not start at all.
-                if self._runs[cid].stop_requested:
-                    raise _Stopped()
             opts = AcquireOptions(**{**info.settings.get("options", {}), "name": info.name})
             summary = acquire(self.database_url, parse_cell(info.cell_json), opts,
                               campaign_id=cid, on_engine=self._attach,
-                              on_event=self.events.publish)
-            how = self.get(cid).stop_requested
-            change = (dict(state="finished", summary=to_plain(summary))
-                      if summary["state"] == "done" else
-                      dict(state="stopped", detail=f"stopped by {how or 'abort'}",
-                           summary=to_plain(summary)))
-        except Exception as e:  # a fault, or a stop before or during the run
-            how = self.get(cid).stop_requested
-            if how:
-                _mark_aborted(self.db, cid)
-            change = (dict(state="stopped", detail=f"stopped by {how}")
-                      if how else dict(state="failed", detail=f"{type(e).__name__}: {e}"))
+                              on_event=self.events.publish, owner=self.owner)
+            change = dict(detail=f"the run ended {summary['state']}", summary=to_plain(summary))
+        except _Cancelled:
+            change = dict(detail="stopped before the arm moved")
+        except Exception as e:  # a device fault (the engine reported failed), or a refusal
+            change = dict(detail=f"{type(e).__name__}: {e}")
         with self._lock:
-            self._runs[cid] = run = replace(self._runs[cid], **change)
+            self._runs[cid] = run = replace(self._runs[cid], active=False, **change)
             self._current, self._engine = None, None
-        self.events.publish({"type": "campaign.run", "campaign_id": cid, "state": run.state,
+        try:
+            state = store.get_campaign(self.db, campaign_id=cid).status
+        except store.StoreError:
+            state = None
+        self.events.publish({"type": "campaign.run", "campaign_id": cid, "state": state,
                              "detail": run.detail})
 
 
@@ -210,19 +295,8 @@ class ControllerUnreachable(RuntimeError):
     """The controller did not confirm an emergency stop (the hardware e-stop must be used)."""
 
 
-def _mark_aborted(db: store.Database, campaign_id: int) -> None:
-    try:
-        status = store.get_campaign(db, campaign_id=campaign_id).status
-        if status == "paused":
-            store.set_status(db, campaign_id=campaign_id, status="running")
-        if status not in FINAL:
-            store.set_status(db, campaign_id=campaign_id, status="aborted")
-    except store.StoreError:
-        pass
-
-
-class _Stopped(Exception):
+class _Cancelled(Exception):
     """The run was stopped before it began."""
 
 
-__all__ = ["Acquisitions", "ControllerUnreachable", "Run"]
+__all__ = ["Acquisitions", "ControllerUnreachable", "Outcome", "Run"]

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 from contextlib import asynccontextmanager
+
+import uvicorn
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
@@ -11,10 +14,11 @@ from fastapi.routing import APIRoute
 
 from . import store
 from .api import ROUTERS, problems
+from .api.deps import TOKEN_CHECKS
 from .acquisitions import Acquisitions
 from .events import Events
 from .job_queue import Jobs
-from .security import ensure_token, require_token
+from .security import ensure_token
 from .settings import Settings
 from .web import mount_web
 
@@ -72,7 +76,7 @@ def unguarded_routes(app: FastAPI) -> list[str]:
     for route in _api_routes(app.routes):
         if route.methods & MUTATING:
             calls = {d.call for d in _flat(route.dependant)}
-            if require_token not in calls:
+            if not calls & set(TOKEN_CHECKS):
                 bad.append(f"{','.join(sorted(route.methods))} {route.path}")
     return bad
 
@@ -100,10 +104,32 @@ def _flat(dependant):
         yield from _flat(d)
 
 
+# After SIGTERM or Ctrl-C (the arm already stopped) requests in flight get this long to finish.
+GRACE_S = 5.0
+
+
+class Server(uvicorn.Server):
+    """uvicorn's server, but SIGTERM or Ctrl-C stops the arm first: uvicorn runs the app's
+    shutdown only after draining the requests in flight, while the arm would keep moving."""
+
+    def __init__(self, config: uvicorn.Config, app: FastAPI):
+        super().__init__(config)
+        self.app = app
+
+    def handle_exit(self, sig, frame) -> None:
+        acquisitions = getattr(self.app.state, "acquisitions", None)
+        if acquisitions is not None and not self.should_exit:
+            outcome = acquisitions.estop_all()  # waits at most the controller's confirmation
+            if outcome is not None and outcome.campaign_id is not None:
+                print(f"robocal: {signal.Signals(sig).name}: campaign {outcome.campaign_id} "
+                      f"e-stopped (confirmed: {outcome.confirmed})", file=sys.stderr,
+                      flush=True)
+        super().handle_exit(sig, frame)
+
+
 def serve(settings: Settings | None = None) -> None:
     """Run the service with uvicorn on settings.host:port (127.0.0.1 unless told otherwise)."""
-    import uvicorn
-
     settings = settings or Settings()
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
-                log_level="info")
+    app = create_app(settings)
+    Server(uvicorn.Config(app, host=settings.host, port=settings.port, log_level="info",
+                          timeout_graceful_shutdown=GRACE_S), app).run()

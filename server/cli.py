@@ -13,7 +13,8 @@ from solver.calibrate import parse_method
 from solver.identifiability import NotIdentifiable
 
 from . import tables, workflow
-from .acquire import AcquisitionFailed
+from .acquire import AcquisitionFailed, Interrupted
+from .store import StoreError
 from .formats.errors import InputError
 from .formats.model_json import write_json_atomic, write_model
 from .tables import console
@@ -231,7 +232,7 @@ def cmd_acquire(args) -> None:
                           beam_break_rate=args.beam_break_rate)
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=console, transient=True) as progress:
-        summary = acquire(args.db, cell, opts, progress=progress)
+        summary = acquire(args.db, cell, opts, progress=progress, reset=args.reset)
     if summary["resumed_at"] is not None:
         console.print(f"resumed campaign {summary['campaign']} ({summary['name']}) at pose "
                       f"{summary['resumed_at'] + 1}")
@@ -424,6 +425,8 @@ def build_parser() -> argparse.ArgumentParser:
     aq.add_argument("--choose-from", type=int, default=0, metavar="N",
                     help="choose the poses out of N candidates by D-optimality")
     aq.add_argument("--beam-break-rate", type=float, default=0.0)
+    aq.add_argument("--reset", action="store_true",
+                    help="resume an e-stopped campaign (after the cell was checked)")
     aq.set_defaults(func=cmd_acquire)
 
     sv = sub.add_parser("serve", help="the workstation service (REST API), on 127.0.0.1 unless told")
@@ -467,7 +470,10 @@ def main(argv=None) -> int:
         args.effect = ["joint_compliance:2"]
     try:
         args.func(args)
-    except (InputError, workflow.DataError, NotIdentifiable, AcquisitionFailed) as e:
+    except Interrupted as e:  # Ctrl-C of a run: the arm was e-stopped first
+        print(f"robocal: {e}", file=sys.stderr)
+        return 130
+    except (InputError, workflow.DataError, NotIdentifiable, AcquisitionFailed, StoreError) as e:
         print(f"robocal: error: {e}", file=sys.stderr)
         return 1
     except FileNotFoundError as e:

@@ -1,34 +1,46 @@
-"""Campaigns: plan one on a cell (simulated or real), follow its progress, start, abort, e-stop."""
+"""Campaigns: plan one on a cell (simulated or real), follow its progress, and move it through its
+life cycle (start, pause, resume, abort, reset, e-stop), each request checked against the state."""
 
 from __future__ import annotations
 
+import asyncio
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 
 from server import store
 from server.acquire import AcquireOptions
 
 from . import ops
-from .deps import AcquisitionsDep, Authorized, DbDep, SettingsDep
-from .schemas import (CampaignCreate, CampaignDetail, CampaignPublic, EstopPublic, RunPublic,
-                      StopPublic)
+from .deps import AcquisitionsDep, Authorized, AuthorizedNow, DbDep, SettingsDep
+from .problems import problem
+from .schemas import ActionPublic, CampaignCreate, CampaignDetail, CampaignPublic, EstopPublic, \
+    RunPublic
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
-ABORT_NOTE = ("a running acquisition ends after the pose in progress, whose readings are kept; "
-              "one not running is marked aborted at once")
-ESTOP_NOTE = ("STOP sent to the controller (the arm halts where it is) and the campaign aborted; "
-              "one not running is just marked aborted; the cell's hardware e-stop still rules")
+ESTOP_NOTE = ("STOP sent to the controller (the arm halts where it is), the campaign e-stopped; "
+              "POST .../reset, then .../resume, continues it; the cell's hardware e-stop rules")
+# An e-stop is answered within this (502 "unconfirmed" past it), whatever the controller does.
+ESTOP_ANSWER_S = 1.0
+CONFLICT = {409: {"description": "the campaign's state does not allow this action (the body "
+                                 "says its `state` and `allowed_actions`)"}}
 
 
-def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic, run=...):
-    """The campaign as the API shows it; run: its run state read before info (default: now)."""
-    run = acquisitions.get(info.id) if run is ... else run
+def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
+    """The campaign as the API shows it: its life-cycle state and the actions it allows."""
+    run = acquisitions.get(info.id)
+    status = acquisitions.status_of(info)
     extra = {"settings": info.settings} if cls is CampaignDetail else {}
-    return cls(id=info.id, name=info.name, created_at=info.created_at, status=info.status,
-               simulated=info.simulated, notes=info.notes, poses_total=info.n_poses,
-               poses_done=info.n_done, run=None if run is None else RunPublic(
-                   state=run.state, stop_requested=run.stop_requested, detail=run.detail,
-                   summary=run.summary), **extra)
+    return cls(id=info.id, name=info.name, created_at=info.created_at, status=status,
+               actions=acquisitions.actions(info, status), simulated=info.simulated,
+               notes=info.notes, poses_total=info.n_poses, poses_done=info.n_done,
+               run=None if run is None else RunPublic(active=run.active, detail=run.detail,
+                                                      summary=run.summary), **extra)
+
+
+def _acted(outcome, db, acquisitions, note: str) -> ActionPublic:
+    info = store.get_campaign(db, campaign_id=outcome.campaign_id)
+    return ActionPublic(id=info.id, status=outcome.status, was=outcome.was,
+                        actions=acquisitions.actions(info), note=outcome.note or note)
 
 
 @router.post("", status_code=201, dependencies=[Authorized])
@@ -46,64 +58,80 @@ def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
 def list_campaigns(db: DbDep, acquisitions: AcquisitionsDep,
                    status: str | None = None) -> list[CampaignPublic]:
     """Every campaign, oldest first (or those with this status)."""
-    return [_public(c, acquisitions) for c in store.list_campaigns(db, status=status)]
+    return [_public(acquisitions.refresh(c), acquisitions)
+            for c in store.list_campaigns(db, status=status)]
 
 
 @router.get("/{campaign_id}")
 def get_campaign(campaign_id: int, db: DbDep, acquisitions: AcquisitionsDep) -> CampaignDetail:
-    """One campaign with its live state: status and poses done of total, from the store."""
-    # the run first: a run that ends in between then shows with the status it left behind
-    run = acquisitions.get(campaign_id)
-    return _public(store.get_campaign(db, campaign_id=campaign_id), acquisitions, CampaignDetail,
-                   run=run)
+    """One campaign with its state, the actions it allows, and its poses done of total."""
+    info = acquisitions.refresh(store.get_campaign(db, campaign_id=campaign_id))
+    return _public(info, acquisitions, CampaignDetail)
 
 
-@router.post("/{campaign_id}/start", status_code=202, dependencies=[Authorized])
-def start_campaign(campaign_id: int, db: DbDep,
-                   acquisitions: AcquisitionsDep) -> CampaignPublic:
-    """Run (or resume) the acquisition on the worker thread; poll GET for progress."""
-    acquisitions.start(campaign_id=campaign_id)
-    return _public(store.get_campaign(db, campaign_id=campaign_id), acquisitions)
+def _action(name: str, doc: str, note: str, status_code: int = 200):
+    def route(campaign_id: int, db: DbDep, acquisitions: AcquisitionsDep) -> ActionPublic:
+        outcome = acquisitions.request(campaign_id=campaign_id, action=name)
+        return _acted(outcome, db, acquisitions, note)
+
+    route.__name__ = f"{name}_campaign"
+    route.__doc__ = doc
+    router.post(f"/{{campaign_id}}/{name}", status_code=status_code, dependencies=[Authorized],
+                responses=CONFLICT)(route)
 
 
-@router.post("/{campaign_id}/pause", dependencies=[Authorized])
-def pause_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
-    """Pause the running acquisition after its current pose (409 if it is not running here)."""
-    was = acquisitions.pause(campaign_id=campaign_id)
-    return StopPublic(id=campaign_id, status="paused", was=was,
-                      note="the engine pauses after the pose in progress; POST .../resume")
+_action("start", "Run the acquisition on the worker thread (planned); poll GET for progress.",
+        "queued", 202)
+_action("pause", "Pause the run after its current pose (running).",
+        "the engine pauses after the pose in progress; POST .../resume")
+_action("resume", "Resume: the live engine (pausing, paused), or a new run from the next "
+        "unmeasured pose (paused, failed).", "resumed", 202)
+_action("abort", "Abort: a run ends after the pose in progress; final, the readings stay.",
+        "aborted after the pose in progress; the readings stay")
+_action("reset", "Bring an e-stopped (or failed) campaign back to paused, after the cell was "
+        "checked; POST .../resume then continues it at its next unmeasured pose.",
+        "reset to paused; POST .../resume continues it")
 
 
-@router.post("/{campaign_id}/resume", status_code=202, dependencies=[Authorized])
-def resume_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
-    """Resume a paused campaign (the live engine, or a new run from its next unmeasured pose)."""
-    was = acquisitions.resume(campaign_id=campaign_id)
-    return StopPublic(id=campaign_id, status="running", was=was, note="resumed")
+async def _estop(request: Request, campaign_id: int | None):
+    """The e-stop on the event loop: the work on the acquisitions' own stop threads (never the
+    server's thread pool), answered within ESTOP_ANSWER_S."""
+    acquisitions = request.app.state.acquisitions
+    future = acquisitions.stops.submit(acquisitions.estop, campaign_id)
+    try:
+        outcome = await asyncio.wait_for(asyncio.wrap_future(future), ESTOP_ANSWER_S)
+    except TimeoutError:
+        return problem(request, 502, f"unconfirmed: the controller did not confirm the stop "
+                       f"within {ESTOP_ANSWER_S:g} s; use the cell's hardware e-stop",
+                       campaign_id=campaign_id, confirmed=False)
+    if outcome.confirmed is False:
+        return problem(request, 502, "unconfirmed: the controller did not confirm the stop; "
+                       "use the cell's hardware e-stop", campaign_id=outcome.campaign_id,
+                       state=outcome.status, confirmed=False)
+    note = outcome.note or ESTOP_NOTE
+    return EstopPublic(campaign_id=outcome.campaign_id, status=outcome.status, was=outcome.was,
+                       confirmed=outcome.confirmed, note=note)
 
 
-@router.post("/{campaign_id}/abort", dependencies=[Authorized])
-def abort_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
-    """Abort the campaign after the pose in progress (final: readings stay, no resume)."""
-    was = acquisitions.stop(campaign_id=campaign_id, how="abort")
-    return StopPublic(id=campaign_id, status="aborted", was=was, note=ABORT_NOTE)
+ESTOP_RESPONSES = {**CONFLICT, 502: {"description": "unconfirmed: the controller did not "
+                                                    "confirm the stop within 1 s"}}
 
 
-@router.post("/{campaign_id}/estop", dependencies=[Authorized])
-def estop_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
-    """Emergency stop: the controller halts the arm now and the campaign is aborted."""
-    was = acquisitions.stop(campaign_id=campaign_id, how="estop")
-    return StopPublic(id=campaign_id, status="aborted", was=was, note=ESTOP_NOTE)
+@router.post("/{campaign_id}/estop", dependencies=[AuthorizedNow], responses=ESTOP_RESPONSES)
+async def estop_campaign(campaign_id: int, request: Request) -> EstopPublic:
+    """Emergency stop: the campaign is e-stopped and the controller halts the arm now (200 once
+    it confirmed; 502 if it did not within 1 s)."""
+    return await _estop(request, campaign_id)
 
 
 estop_router = APIRouter(tags=["campaigns"])
 
 
-@estop_router.post("/estop", dependencies=[Authorized])
-def estop_all(acquisitions: AcquisitionsDep) -> EstopPublic:
-    """Emergency stop whatever campaign runs (none: nothing to do); the cell's hardware e-stop
-    still rules."""
-    cid = acquisitions.emergency_stop_all()
-    return EstopPublic(campaign_id=cid, note=ESTOP_NOTE if cid is not None else "nothing runs")
+@estop_router.post("/estop", dependencies=[AuthorizedNow], responses=ESTOP_RESPONSES)
+async def estop_all(request: Request) -> EstopPublic:
+    """Emergency stop whatever campaign runs here (none: nothing to do); the cell's hardware
+    e-stop still rules."""
+    return await _estop(request, None)
 
 
 __all__ = ["estop_router", "router"]

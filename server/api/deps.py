@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Annotated
 
 from fastapi import Depends, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from server.acquisitions import Acquisitions
 from server.events import Events
@@ -39,5 +40,17 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 JobsDep = Annotated[Jobs, Depends(get_jobs)]
 AcquisitionsDep = Annotated[Acquisitions, Depends(get_acquisitions)]
 EventsDep = Annotated[Events, Depends(get_events)]
-# Every POST / PUT / PATCH / DELETE route lists this; create_app refuses to build otherwise.
+async def require_token_now(
+        request: Request,
+        credentials: Annotated[HTTPAuthorizationCredentials | None,
+                               Depends(HTTPBearer(auto_error=False))]) -> None:
+    """require_token on the event loop, for the e-stop routes: a sync dependency would wait for
+    a thread of the server's pool, behind every request in it."""
+    require_token(request, credentials)
+
+
+# Every POST / PUT / PATCH / DELETE route lists one of these; create_app refuses to build
+# otherwise.
 Authorized = Depends(require_token)
+AuthorizedNow = Depends(require_token_now)
+TOKEN_CHECKS = (require_token, require_token_now)

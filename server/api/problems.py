@@ -10,6 +10,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from drivers.lifecycle import StateError
 from server.formats.errors import InputError
 from server.acquisitions import ControllerUnreachable
 from server.store import Conflict, NotFound, StoreError
@@ -41,6 +42,11 @@ def install(app: FastAPI) -> None:
     async def input_error(request: Request, exc: InputError):
         # The uploaded file's own line and column, so the user can fix it in an editor.
         return problem(request, 422, str(exc), file=exc.path, line=exc.line, column=exc.column)
+
+    @app.exception_handler(StateError)
+    async def state_error(request: Request, exc: StateError):
+        # The campaign's state does not allow the action: say the state and what it allows.
+        return problem(request, 409, str(exc), state=exc.state, allowed_actions=exc.allowed)
 
     # Store and device errors map to one status each; the store and the solver front ends raise
     # ValueError for bad arguments only. A 502 means the arm may still move: said loudly.

@@ -7,6 +7,8 @@ from typing import Literal
 
 from pydantic import BaseModel, Field
 
+from drivers.lifecycle import ACTIONS, STATES
+
 
 class CellPublic(BaseModel):
     id: str
@@ -31,19 +33,24 @@ class CampaignCreate(BaseModel):
 
 
 class RunPublic(BaseModel):
-    """The acquisition worker's view of the campaign since the server started."""
+    """What this service's acquisition worker did with the campaign since the server started
+    (detail only: the campaign's state is `status`)."""
 
-    state: Literal["running", "finished", "failed", "stopped"]
-    stop_requested: str | None = None
+    active: bool = Field(description="queued or running on this service's worker")
     detail: str | None = None
     summary: dict | None = None
+
+
+ACTIONS_FIELD = Field(description="the actions its state allows that this service can carry "
+                      "out now (start, pause, resume, abort, estop, reset)")
 
 
 class CampaignPublic(BaseModel):
     id: int
     name: str
     created_at: dt.datetime
-    status: str
+    status: Literal[STATES] = Field(description="the engine's life-cycle state")
+    actions: list[Literal[ACTIONS]] = ACTIONS_FIELD
     simulated: bool
     notes: str
     poses_total: int
@@ -55,15 +62,22 @@ class CampaignDetail(CampaignPublic):
     settings: dict
 
 
-class StopPublic(BaseModel):
+class ActionPublic(BaseModel):
+    """What a request to a campaign did: its state before and now, and what it allows now."""
+
     id: int
-    status: str
-    was: str
+    status: Literal[STATES]
+    was: Literal[STATES]
+    actions: list[Literal[ACTIONS]] = ACTIONS_FIELD
     note: str
 
 
 class EstopPublic(BaseModel):
     campaign_id: int | None
+    status: Literal[STATES] | None = None
+    was: Literal[STATES] | None = None
+    confirmed: bool | None = Field(None, description="the controller confirmed the stop (null: "
+                                   "no run of this service was moving the arm)")
     note: str
 
 
