@@ -50,6 +50,7 @@ class Outcome:
     status: str | None
     confirmed: bool | None = None
     note: str = ""
+    actions: tuple[str, ...] = ()  # what the campaign allows now
 
 
 class Acquisitions:
@@ -110,7 +111,7 @@ class Acquisitions:
             return []  # another process drives it: ask there
         acts = lifecycle.allowed(status)
         with self._lock:
-            busy = self._current is not None
+            busy = self._current not in (None, info.id)  # the arm runs another campaign
             queued = self._current == info.id and self._engine is None
         if "options" not in (info.settings or {}) or busy or queued:
             # imported readings have nothing to acquire; the arm runs one campaign at a time
@@ -161,6 +162,16 @@ class Acquisitions:
     def estop(self, campaign_id: int | None = None) -> Outcome:
         """Emergency-stop the campaign (None: whatever runs here): the engine's state first,
         then STOP to the controller, waiting at most its confirmation time. Run it on `stops`."""
+        outcome = self._estop(campaign_id)
+        if outcome.campaign_id is None:
+            return outcome
+        try:  # after the stop: what the campaign allows now
+            info = store.get_campaign(self.db, campaign_id=outcome.campaign_id)
+        except store.StoreError:
+            return outcome
+        return replace(outcome, actions=tuple(self.actions(info)))
+
+    def _estop(self, campaign_id: int | None) -> Outcome:
         with self._lock:
             current, engine = self._current, self._engine
             cid = current if campaign_id is None else campaign_id

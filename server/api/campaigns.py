@@ -110,7 +110,7 @@ async def _estop(request: Request, campaign_id: int | None):
                        state=outcome.status, confirmed=False)
     note = outcome.note or ESTOP_NOTE
     return EstopPublic(campaign_id=outcome.campaign_id, status=outcome.status, was=outcome.was,
-                       confirmed=outcome.confirmed, note=note)
+                       confirmed=outcome.confirmed, actions=list(outcome.actions), note=note)
 
 
 ESTOP_RESPONSES = {**CONFLICT, 502: {"description": "unconfirmed: the controller did not "

@@ -10,6 +10,8 @@ from server import store
 
 from . import ops
 from .deps import Authorized, DbDep, SettingsDep
+from drivers.lifecycle import allowed
+
 from .schemas import CampaignPublic, ReadingPublic
 
 router = APIRouter(tags=["measurements"])
@@ -48,5 +50,6 @@ async def import_readings(request: Request, db: DbDep, settings: SettingsDep,
                                   cell=cell, name=name or filename)
     info = store.get_campaign(db, campaign_id=cid)
     return CampaignPublic(id=info.id, name=info.name, created_at=info.created_at,
-                          status=info.status, simulated=info.simulated, notes=info.notes,
+                          status=info.status, actions=allowed(info.status),
+                          simulated=info.simulated, notes=info.notes,
                           poses_total=info.n_poses, poses_done=info.n_done)

@@ -10,14 +10,14 @@ from dataclasses import asdict
 from pathlib import Path
 
 from server import store
-from server.acquire import AcquireOptions, base_guess, check_options, plan_and_store
+from server.acquire import (UNFINISHED, AcquireOptions, base_guess, check_options,
+                            plan_and_store)
 from server.formats.cell_json import Cell, cell_to_json, default_cell, parse_cell
 from server.formats.errors import InputError
 from server.formats.files import atomic_write_text
 
 DEFAULT_CELL = "default"
 CELL_ID = re.compile(r"[0-9a-f]{16}")
-UNFINISHED = ("planned", "running", "paused", "failed")
 
 
 # --- cells -------------------------------------------------------------------------------------

@@ -78,6 +78,7 @@ class EstopPublic(BaseModel):
     was: Literal[STATES] | None = None
     confirmed: bool | None = Field(None, description="the controller confirmed the stop (null: "
                                    "no run of this service was moving the arm)")
+    actions: list[Literal[ACTIONS]] = ACTIONS_FIELD
     note: str
 
 

@@ -23,9 +23,9 @@ def test_simulated_campaign_runs_then_calibrates_to_a_model(live):
     assert r.status_code == 202, r.text
     done = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
                     lambda j: j["status"] not in ("planned", "running")
-                    and (j["run"] or {}).get("state") != "running")
-    assert done["status"] == "done", done
-    assert done["poses_done"] == 20 and done["run"]["state"] == "finished"
+                    and not (j["run"] or {}).get("active"))
+    assert done["status"] == "done" and done["actions"] == [], done
+    assert done["poses_done"] == 20 and done["run"]["detail"] == "the run ended done"
     assert done["run"]["summary"]["measured_poses"] == 20
 
     readings = c.get(f"/api/campaigns/{cid}/measurements").json()
@@ -124,11 +124,13 @@ def test_malformed_csv_is_422_with_its_line_and_imports_nothing(live):
 def test_abort_marks_the_campaign_and_it_cannot_start(live):
     c = live.client
     cid = c.post("/api/campaigns", json={"poses": 5}).json()["id"]
-    r = c.post(f"/api/campaigns/{cid}/estop")
+    r = c.post(f"/api/campaigns/{cid}/estop")  # nothing moves: the table has no e-stop here
+    assert r.status_code == 409 and r.json()["state"] == "planned", r.text
+    r = c.post(f"/api/campaigns/{cid}/abort")
     assert r.status_code == 200 and r.json()["was"] == "planned", r.text
     assert c.get(f"/api/campaigns/{cid}").json()["status"] == "aborted"
     assert c.post(f"/api/campaigns/{cid}/start").status_code == 409
-    assert c.post(f"/api/campaigns/{cid}/abort").status_code == 200  # already aborted: no-op
+    assert c.post(f"/api/campaigns/{cid}/abort").status_code == 409  # final
     # The name is free again for a new campaign; an unfinished namesake is refused.
     assert c.post("/api/campaigns", json={"poses": 5}).status_code == 201
     assert c.post("/api/campaigns", json={"poses": 5}).status_code == 409
@@ -176,8 +178,9 @@ def test_abort_stops_a_running_acquisition_at_its_next_reading(live):
     wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(), lambda j: j["poses_done"] >= 2)
     r = c.post(f"/api/campaigns/{cid}/abort")
     assert r.status_code == 200 and r.json()["was"] == "running", r.text
+    assert r.json()["status"] in ("stopping", "aborted"), r.text
     j = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
-                 lambda j: j["run"]["state"] != "running")
-    assert j["status"] == "aborted" and j["run"]["state"] == "stopped", j
+                 lambda j: not j["run"]["active"])
+    assert j["status"] == "aborted" and j["run"]["detail"] == "the run ended aborted", j
     assert 2 <= j["poses_done"] < 400
     assert [x["id"] for x in c.get("/api/campaigns").json()] == [cid]  # no namesake planned

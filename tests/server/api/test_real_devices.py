@@ -13,6 +13,7 @@ import pytest
 
 from drivers.abb.sim import SimulatedController, serve_controller
 from drivers.cell import VirtualCell
+from drivers.lifecycle import MOVING
 from drivers.clock import RealClock
 from drivers.tracker.sim import SimulatedTracker, serve_tracker
 from drivers.world import SimulatedWorld
@@ -68,7 +69,7 @@ def cell_json(devices: Devices, *, tracker_port=None, controller_port=None) -> d
 
 
 class FailedEvents:
-    """Reads /api/events on a thread until `count` campaigns have failed; their details."""
+    """Reads /api/events on a thread until `count` runs have ended with a detail; those."""
 
     def __init__(self, url, count):
         self.details: dict[int, str] = {}
@@ -84,8 +85,8 @@ class FailedEvents:
                 self._connected.set()
                 for line in r.iter_lines():
                     event = json.loads(line[5:]) if line.startswith("data:") else {}
-                    if event.get("type") == "campaign.state" and event["state"] == "failed":
-                        self.details[event["campaign_id"]] = event.get("detail")
+                    if event.get("type") == "campaign.run" and event.get("detail"):
+                        self.details[event["campaign_id"]] = event["detail"]
                     if len(self.details) == self.count:
                         return  # hang up: an open stream would hold the server's shutdown
         except httpx.HTTPError:
@@ -98,8 +99,8 @@ class FailedEvents:
 def finished(c, cid, timeout=90.0) -> dict:
     """The campaign once its run has ended (status and run are read apart: wait for both)."""
     return wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
-                    lambda j: (j["run"] or {}).get("state") not in (None, "running")
-                    and j["status"] not in ("planned", "running"),
+                    lambda j: j["run"] is not None and not j["run"]["active"]
+                    and j["status"] not in MOVING,
                     timeout=timeout, interval=0.05)
 
 
@@ -125,7 +126,7 @@ def test_campaign_on_real_devices_survives_a_lost_controller_resumes_and_calibra
     port = devices.controller_server.port
     devices.controller_server.close()
     failed = finished(c, cid)
-    assert failed["status"] == "failed" and failed["run"]["state"] == "failed", failed
+    assert failed["status"] == "failed" and "resume" in failed["actions"], failed
     assert f"socket://127.0.0.1:{port}" in failed["run"]["detail"], failed["run"]["detail"]
     kept = len(c.get(f"/api/campaigns/{cid}/measurements").json())
     assert kept >= 9 and 3 <= failed["poses_done"] < RUN["poses"]
@@ -133,9 +134,10 @@ def test_campaign_on_real_devices_survives_a_lost_controller_resumes_and_calibra
     # Back on the same address: the campaign resumes at its next pose and keeps what it had.
     wait_for(devices.world.moving, lambda moving: not moving, timeout=10, interval=0.02)
     devices.serve_controller(port)
-    assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
+    assert c.post(f"/api/campaigns/{cid}/start").status_code == 409  # failed: resume it
+    assert c.post(f"/api/campaigns/{cid}/resume").status_code == 202
     done = finished(c, cid)
-    assert done["status"] == "done" and done["run"]["state"] == "finished", done
+    assert done["status"] == "done" and done["run"]["detail"] == "the run ended done", done
     assert done["run"]["summary"]["simulated"] is False
     assert done["run"]["summary"]["resumed_at"] == failed["poses_done"]
     readings = c.get(f"/api/campaigns/{cid}/measurements").json()
@@ -162,9 +164,10 @@ def test_estop_reaches_the_real_controller(live, devices):
     sent = len(devices.controller.received)
     r = c.post("/api/estop")
     assert r.status_code == 200 and r.json()["campaign_id"] == cid, r.text
+    assert r.json()["status"] == "estopped" and r.json()["confirmed"] is True, r.text
     assert any(" STOP" in line for line in devices.controller.received[sent:])
     stopped = finished(c, cid)
-    assert stopped["status"] == "aborted" and stopped["run"]["state"] == "stopped", stopped
+    assert stopped["status"] == "estopped" and stopped["actions"] == ["abort", "estop", "reset"]
     assert len(devices.controller.moves) < RUN["poses"]
 
 
@@ -179,8 +182,11 @@ def test_unreachable_devices_fail_the_campaign_with_their_address(live, devices)
         cell_id = c.post("/api/cells", json=doc).json()["id"]
         cid = c.post("/api/campaigns", json={"name": where, "cell_id": cell_id, **RUN}).json()["id"]
         assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
-        failed = finished(c, cid, timeout=30)
-        assert failed["status"] == "failed", (failed["status"], failed["run"])
+        # nothing moved: the campaign stays planned (start it again), the run says why
+        failed = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
+                          lambda j: j["run"] is not None and not j["run"]["active"],
+                          timeout=30, interval=0.05)
+        assert failed["status"] == "planned" and "start" in failed["actions"], failed
         assert expect in failed["run"]["detail"] and "does not answer" in failed["run"]["detail"]
         assert failed["poses_done"] == 0 and devices.controller.moves == []
         detail = wait_for(lambda: events.details.get(cid), lambda d: d is not None, timeout=10)

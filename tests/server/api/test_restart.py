@@ -45,9 +45,11 @@ def test_kill_dash_nine_mid_campaign_then_resume(tmp_path):
     assert again is None  # the token is shown once, at the very first start
     try:
         with httpx.Client(headers=auth, timeout=30) as c:
-            done_before = c.get(f"{url}/campaigns/{cid}").json()["poses_done"]
-            assert 20 <= done_before < 150
-            assert c.post(f"{url}/campaigns/{cid}/start").status_code == 202
+            left = c.get(f"{url}/campaigns/{cid}").json()
+            # the killed process is gone: its running campaign is failed, resumable
+            assert 20 <= left["poses_done"] < 150 and left["status"] == "failed", left
+            assert left["actions"] == ["resume", "abort", "reset"]
+            assert c.post(f"{url}/campaigns/{cid}/resume").status_code == 202
             deadline = time.monotonic() + 300
             while c.get(f"{url}/campaigns/{cid}").json()["status"] != "done":
                 assert time.monotonic() < deadline
