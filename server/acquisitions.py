@@ -119,10 +119,8 @@ class Acquisitions:
                 self._runs[campaign_id] = replace(self._runs[campaign_id], stop_requested=how)
             engine = self._engine if self._current == campaign_id else None
             if engine is not None and how == "estop":
-                try:
-                    engine.emergency_stop()
-                except Exception as e:  # noqa: BLE001 - the state is marked; the caller is told
-                    error = e
+                if not engine.estop():  # the state is marked; the caller is told
+                    error = getattr(engine.controller, "last_stop_error", None) or "no reply"
             elif engine is not None:
                 try:
                     engine.abort()
