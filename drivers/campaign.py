@@ -143,26 +143,20 @@ class CampaignEngine:
         """Apply a user action (lifecycle.ACTIONS); the new state. StateError if not allowed.
 
         estop stops the arm even when the state refuses it (then raises); reset clears the
-        controller's stop latch.
+        controller's stop latch. start and resume only move the state: run() does the work.
         """
         if action not in lifecycle.ACTIONS:
             raise ValueError(f"unknown action {action!r}; one of {', '.join(lifecycle.ACTIONS)}")
         if action == "estop":
-            self._halted_on_fault = False  # the latch is now the user's: only reset clears it
-            try:
-                with self._cond:
-                    self._apply("estop")
-            finally:
-                self._stop_arm()
-                self._tell()
+            self._estop(strict=True)
             return self._state
         with self._cond:
             if action == "reset":
                 lifecycle.next_state(self._state, action)  # an illegal reset is refused at once
                 self._wait_until_run_returned(action)
+                self._halted_on_fault = False
             new = self._apply(action)
         if action == "reset":
-            self._halted_on_fault = False
             _clear_stop(self.controller)
         self._tell()
         return new
@@ -183,20 +177,28 @@ class CampaignEngine:
         """Stop the arm now: the state goes estopped first (when the state allows; the arm is
         stopped whatever the state), then the controller's emergency stop. Never waits for the
         engine's thread; True if the controller confirmed the stop."""
-        self._halted_on_fault = False  # the latch is now the user's: only reset clears it
-        with self._cond:
-            try:
-                self._apply("estop")
-            except StateError as e:
-                self.log(f"emergency stop: {e}; the arm is stopped all the same")
-        ok = self._stop_arm()
-        self._tell()
-        return ok
+        return self._estop(strict=False)
 
     def reset(self) -> str:
         """After an e-stop or a fault: paused, and the controller's stop latch cleared; run()
         continues the campaign."""
         return self.request("reset")
+
+    def _estop(self, strict: bool) -> bool:
+        refused = None
+        with self._cond:
+            self._halted_on_fault = False  # the latch is now the user's: only reset clears it
+            try:
+                self._apply("estop")
+            except StateError as e:
+                refused = e
+        ok = self._stop_arm()
+        self._tell()
+        if refused is not None:
+            if strict:
+                raise refused
+            self.log(f"emergency stop: {refused}; the arm is stopped all the same")
+        return ok
 
     # -- the state, under self._cond ------------------------------------------------------------
     def _apply(self, request: str) -> str:
@@ -307,9 +309,9 @@ class CampaignEngine:
         except Exception as e:
             with self._cond:
                 stopped = self._estops != epoch
-                failed = not stopped and "fail" in lifecycle.TRANSITIONS[self._state]
-                if failed:
+                if not stopped and "fail" in lifecycle.TRANSITIONS[self._state]:
                     self._apply("fail")
+                    self._halted_on_fault = True  # the halt below is ours to clear on resume
             if stopped:  # the e-stop cut the message off (a refused MOVEJ, a halted move)
                 self.log(f"emergency stop: the run ended ({type(e).__name__}: {e})")
                 return self.stats
@@ -317,7 +319,6 @@ class CampaignEngine:
             # a later run resumes at the next unmeasured pose
             try:
                 _emergency_stop(self.controller)
-                self._halted_on_fault = True
             except Exception:  # noqa: BLE001 - the original error is the one to report
                 pass
             self._tell()
@@ -344,9 +345,9 @@ class CampaignEngine:
                 raise StateError(self._state, "start")
             self._active = True
             epoch = self._estops
-        if self._halted_on_fault:  # the engine's own halt after a fault; an e-stop needs reset
+            clear, self._halted_on_fault = self._halted_on_fault, False
+        if clear:  # the engine's own halt after a fault; an e-stop's latch needs reset
             _clear_stop(self.controller)
-            self._halted_on_fault = False
         self._tell()
         return epoch
 

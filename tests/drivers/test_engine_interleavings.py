@@ -548,3 +548,17 @@ def test_an_estopped_campaign_runs_again_only_after_reset():
     with pytest.raises(StateError, match="cannot start a campaign that is estopped"):
         rig.engine.run(POSES, **rig.resume_args())
     assert rig.cell.stopped
+
+
+def test_a_user_estop_after_a_fault_keeps_its_latch_until_reset():
+    rig = Rig()
+    rig.at_message = lambda j, msg: j == 9 and setattr(rig.cell, "fail", "controller")
+    assert isinstance(rig.run().get("error"), Fault) and rig.engine.state == "failed"
+    rig.at_message = None
+    assert rig.request("estop") is True and rig.engine.state == "failed"  # stopped all the same
+    moves = len(rig.entries("MOVEJ"))
+    assert isinstance(rig.run(**rig.resume_args()).get("error"), Latched)
+    assert len(rig.entries("MOVEJ")) == moves  # the engine's resume did not clear the user's stop
+    assert rig.engine.reset() == "paused"
+    assert "error" not in rig.run(**rig.resume_args())
+    check_complete(rig)
