@@ -1,33 +1,31 @@
-"""The measure-move handshake: move, settle, predict, aim, measure, store each reading at once.
+"""The campaign engine: runs a plan's messages on the devices and alone owns the campaign's state.
 
-The engine drives a controller and a tracker (duck-typed: the clients in drivers/abb and
+The plan (drivers/plan.py) says what to do: move, settle, aim, measure, save, checkpoint. The
+engine executes it on a controller and a tracker (duck-typed: the clients in drivers/abb and
 drivers/tracker, or anything with the same methods) on a clock, hands every reading to a sink as
-soon as it arrives (the store commits it), and owns the campaign's state machine. It knows
+soon as it arrives (the store commits it), and moves the campaign's state only through
+drivers/lifecycle.py. Pause, resume, abort, e-stop and reset are safe from any thread. It knows
 nothing of HTTP or SQL.
 """
 
 from __future__ import annotations
 
 import threading
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import lifecycle
+from .lifecycle import StateError
+from .plan import Aim, Checkpoint, Measure, Move, Save, Settle, campaign_plan
 from .predictor import SmrPredictor
 
-# state -> requests allowed in it, and the state each leads to
-TRANSITIONS = {
-    "idle": {"start": "running"},
-    "running": {"pause": "pausing", "abort": "aborting", "finish": "done", "fail": "failed"},
-    "pausing": {"paused": "paused", "abort": "aborting", "fail": "failed", "finish": "done"},
-    "paused": {"resume": "running", "abort": "aborted"},
-    "aborting": {"aborted": "aborted", "fail": "failed"},
-    "done": {}, "aborted": {}, "failed": {},
-}
-
-
-class StateError(RuntimeError):
-    """A request the campaign's current state does not allow."""
+# Real seconds between re-checks of a paused run's state: the condition's notify wakes it at
+# once; this bounds the wait even if a clock is virtual or a notify were ever missed.
+WAKE_S = 0.5
+# Real seconds reset() waits for a run cut off by an e-stop to return before refusing.
+RESET_WAIT_S = 2.0
 
 
 @dataclass
@@ -67,133 +65,433 @@ class Stats:
     settle_s: list = field(default_factory=list)
 
 
+class EngineBusy(StateError):
+    """A request that needs the engine's run to have returned (it is still ending its message)."""
+
+    def __init__(self, state: str, action: str, why: str):
+        super().__init__(state, action)
+        self.args = (f"cannot {action} the campaign now: {why}",)
+
+
 def _code(exc) -> str | None:
     return getattr(exc, "code", None)
 
 
+# --- SHIM: delete at merge, once drivers/abb/client.py has emergency_stop/clear_stop (contract 1)
+def _emergency_stop(controller) -> bool:
+    stop = getattr(controller, "emergency_stop", None)
+    if stop is not None:
+        return bool(stop())
+    controller.stop()  # today's client: raises if the controller did not confirm
+    return True
+
+
+def _clear_stop(controller) -> None:
+    clear = getattr(controller, "clear_stop", None)
+    if clear is not None:
+        clear()
+# --- end SHIM
+
+
+@dataclass
+class _Pose:
+    """The engine's work on one pose, carried from its Move to its Save."""
+
+    index: int
+    q_deg: np.ndarray
+    measured: dict  # target -> xyz mm: readings stored before the run, then this run's
+    q_rad: np.ndarray | None = None
+    predicted: np.ndarray | None = None
+    skipped: bool = False
+    aims: dict = field(default_factory=dict)  # target -> (aim xyz, locked on it)
+
+
 class CampaignEngine:
-    """Runs planned poses through the handshake; pause, resume, abort and emergency stop are safe
-    to call from another thread."""
+    """Runs a campaign's plan through the measure-move handshake and owns its life-cycle state.
+
+    request()/pause()/resume()/abort()/estop()/reset() are safe from any thread; on_state(old,
+    new) hears every transition (outside the engine's lock, in order); trace(message) hears each
+    plan message just before it executes (tests inject requests and faults there).
+    """
 
     def __init__(self, controller, tracker, clock, predictor: SmrPredictor, sink,
-                 settings: Settings | None = None, log=None):
+                 settings: Settings | None = None, log=None, *, state: str = "planned",
+                 on_state=None, trace=None):
+        if state not in lifecycle.STATES:
+            raise ValueError(f"unknown campaign state {state!r}")
         self.controller, self.tracker, self.clock = controller, tracker, clock
         self.predictor, self.sink = predictor, sink
         self.settings = settings or Settings()
         self.log = log or (lambda msg: None)
-        self.state = "idle"
+        self.on_state, self.trace = on_state, trace
         self.stats = Stats()
-        self._lock = threading.Lock()
-        self._resume = threading.Event()
+        self._state = state
+        self._cond = threading.Condition()  # guards _state, _estops, _active, _pending
+        self._estops = 0  # e-stops so far: a run ends at once when the count changes under it
+        self._active = False  # a run() is executing
+        self._halted_on_fault = False  # the engine latched the controller itself after a fault
+        self._pending = deque()  # transitions not yet told to on_state
+        self._telling = threading.RLock()  # one teller at a time: on_state hears them in order
 
-    # -- state machine ------------------------------------------------------------------------
-    def _go(self, request: str) -> None:
-        with self._lock:
-            nxt = TRANSITIONS[self.state].get(request)
-            if nxt is None:
-                raise StateError(f"cannot {request} a campaign that is {self.state}")
-            self.state = nxt
+    @property
+    def state(self) -> str:
+        """The campaign's life-cycle state (drivers/lifecycle.py STATES)."""
+        return self._state
 
-    def pause(self) -> None:
-        self._go("pause")
+    # -- requests (any thread) ------------------------------------------------------------------
+    def request(self, action: str) -> str:
+        """Apply a user action (lifecycle.ACTIONS); the new state. StateError if not allowed.
 
-    def resume(self) -> None:
-        self._go("resume")
-        self._resume.set()
-
-    def abort(self) -> None:
-        self._go("abort")
-        self._resume.set()
-
-    def emergency_stop(self) -> None:
-        """Stop the arm now, whatever the state, and abort."""
-        try:
-            self.controller.stop()
-        finally:
-            with self._lock:
-                if self.state not in ("done", "aborted", "failed"):
-                    self.state = "aborting" if self.state != "paused" else "aborted"
-            self._resume.set()
-
-    def _checkpoint(self) -> bool:
-        """Between poses: honour pause and abort; False when the run must end."""
-        if self.state == "pausing":
-            self._go("paused")
-            self._resume.clear()
-            self._resume.wait()
-        if self.state == "aborting":
-            self._go("aborted")
-        return self.state == "running"
-
-    # -- the handshake --------------------------------------------------------------------------
-    def run(self, poses_deg, start: int = 0, history=None, partial=None) -> Stats:
-        """Measure poses[start:].
-
-        On resume, history = (q rad, meas) of the poses already measured, and partial = {target:
-        xyz} the readings already stored for pose `start` (cut off mid-pose): those are kept, not
-        measured again.
+        estop stops the arm even when the state refuses it (then raises); reset clears the
+        controller's stop latch. start and resume only move the state: run() does the work.
         """
-        self._go("start")
-        names = self.predictor.names
-        q_done = [] if history is None else list(history[0])
-        m_done = [] if history is None else list(history[1])
-        if q_done:
-            self.predictor.update(np.array(q_done), np.array(m_done))
-        try:
-            for i in range(start, len(poses_deg)):
-                if not self._checkpoint():
-                    break
-                q_rad, row = self._pose(i, np.asarray(poses_deg[i], dtype=float), names,
-                                        (partial or {}) if i == start else {})
-                q_done.append(q_rad)
-                m_done.append(row)
-                self.predictor.update(np.array(q_done), np.array(m_done))
-            else:
-                self._go("finish")
-        except Exception:
-            # a device fault: halt the arm and end; every reading so far is already stored, and a
-            # later run resumes at the next unmeasured pose
-            with self._lock:
-                self.state = "failed"
+        if action not in lifecycle.ACTIONS:
+            raise ValueError(f"unknown action {action!r}; one of {', '.join(lifecycle.ACTIONS)}")
+        if action == "estop":
+            self._estop(strict=True)
+            return self._state
+        with self._cond:
+            if action == "reset":
+                lifecycle.next_state(self._state, action)  # an illegal reset is refused at once
+                self._wait_until_run_returned(action)
+                self._halted_on_fault = False
+            new = self._apply(action)
+        if action == "reset":
+            _clear_stop(self.controller)
+        self._tell()
+        return new
+
+    def pause(self) -> str:
+        """Pause before the next pose (the pose in progress completes)."""
+        return self.request("pause")
+
+    def resume(self) -> str:
+        """Continue a paused run (or cancel a pause not reached yet)."""
+        return self.request("resume")
+
+    def abort(self) -> str:
+        """End the campaign before the next pose (at once if paused)."""
+        return self.request("abort")
+
+    def estop(self) -> bool:
+        """Stop the arm now: the state goes estopped first (when the state allows; the arm is
+        stopped whatever the state), then the controller's emergency stop. Never waits for the
+        engine's thread; True if the controller confirmed the stop."""
+        return self._estop(strict=False)
+
+    def reset(self) -> str:
+        """After an e-stop or a fault: paused, and the controller's stop latch cleared; run()
+        continues the campaign."""
+        return self.request("reset")
+
+    def _estop(self, strict: bool) -> bool:
+        refused = None
+        with self._cond:
+            self._halted_on_fault = False  # the latch is now the user's: only reset clears it
             try:
-                self.controller.stop()
+                self._apply("estop")
+            except StateError as e:
+                refused = e
+        ok = self._stop_arm()
+        self._tell()
+        if refused is not None:
+            if strict:
+                raise refused
+            self.log(f"emergency stop: {refused}; the arm is stopped all the same")
+        return ok
+
+    # -- the state, under self._cond ------------------------------------------------------------
+    def _apply(self, request: str) -> str:
+        """Move the state by `request` (caller holds self._cond); StateError if not allowed."""
+        old = self._state
+        new = lifecycle.next_state(old, request)
+        self._state = new
+        if request == "estop":
+            self._estops += 1
+        self._pending.append((old, new))
+        self._cond.notify_all()
+        return new
+
+    def _event(self, event: str, epoch: int) -> bool:
+        """The engine reports `event` (paused, stopped, finish, fail) if it still applies."""
+        with self._cond:
+            if self._estops != epoch or event not in lifecycle.TRANSITIONS[self._state]:
+                return False
+            self._apply(event)
+        self._tell()
+        return True
+
+    def _wait_until_run_returned(self, action: str) -> None:
+        # an e-stop cut the run off mid-message; it returns as soon as that message does
+        if not self._cond.wait_for(lambda: not self._active, RESET_WAIT_S):
+            raise EngineBusy(self._state, action, "the run cut off by the e-stop is still ending "
+                                                  "its last device request; try again")
+
+    def _tell(self) -> None:
+        """Tell on_state every pending transition, in order, outside the engine's lock.
+
+        Never blocks on a listener: if another thread is telling, it tells ours too (a request
+        may return before its transition is heard; engine.state is the truth).
+        """
+        while True:
+            if not self._telling.acquire(blocking=False):
+                return
+            try:
+                while True:
+                    with self._cond:
+                        if not self._pending:
+                            break
+                        old, new = self._pending.popleft()
+                    if self.on_state is not None:
+                        try:
+                            self.on_state(old, new)
+                        except Exception as e:  # noqa: BLE001 - a listener cannot stop the engine
+                            self.log(f"state {old} -> {new}: listener failed: {e}")
+            finally:
+                self._telling.release()
+            with self._cond:
+                if not self._pending:  # else one was queued as we let go: tell it too
+                    return
+
+    def _stop_arm(self) -> bool:
+        try:
+            return _emergency_stop(self.controller)
+        except Exception as e:  # noqa: BLE001 - an e-stop reports, it does not raise
+            self.log(f"emergency stop: the controller did not confirm: {e}")
+            return False
+
+    # -- running a plan (the engine's thread) ---------------------------------------------------
+    def run(self, poses_deg, start: int = 0, history=None, partial=None) -> Stats:
+        """Measure poses[start:]; returns when the campaign is done, aborted or e-stopped.
+
+        Runs from planned (start), paused or failed (resume). On resume, history = (q rad, meas)
+        of the poses already measured, and partial = {target: xyz} the readings already stored
+        for pose `start` (cut off mid-pose): those are kept, not measured again. A device fault
+        fails the campaign, halts the arm and re-raises; an e-stop returns without raising.
+        """
+        names = tuple(self.predictor.names)
+        stored = dict(partial or {})
+        plan = campaign_plan(poses_deg, names, start, stored)
+        epoch = self._begin()
+        try:
+            q_done = [] if history is None else list(history[0])
+            m_done = [] if history is None else list(history[1])
+            if q_done:
+                self.predictor.update(np.array(q_done), np.array(m_done))
+            work = None
+            for msg in plan:
+                if self.trace is not None:
+                    self.trace(msg)
+                if isinstance(msg, Checkpoint):
+                    if not self._checkpoint(epoch):
+                        break
+                    continue
+                if not self._may_go_on(epoch):
+                    break
+                if isinstance(msg, Move):
+                    work = self._move(msg, stored if msg.pose == start else {}, epoch)
+                    if work is None:
+                        break
+                elif isinstance(msg, Settle):
+                    if not work.skipped:
+                        self._settle(work.predicted[0])
+                elif isinstance(msg, Aim):
+                    self._aim(msg, work, names)
+                elif isinstance(msg, Measure):
+                    self._measure(msg, work)
+                elif isinstance(msg, Save):
+                    q_rad, row = self._save(work, names)
+                    q_done.append(q_rad)
+                    m_done.append(row)
+                    self.predictor.update(np.array(q_done), np.array(m_done))
+            else:
+                self._event("finish", epoch)
+        except Exception as e:
+            with self._cond:
+                stopped = self._estops != epoch
+                if not stopped and "fail" in lifecycle.TRANSITIONS[self._state]:
+                    self._apply("fail")
+                    self._halted_on_fault = True  # the halt below is ours to clear on resume
+            if stopped:  # the e-stop cut the message off (a refused MOVEJ, a halted move)
+                self.log(f"emergency stop: the run ended ({type(e).__name__}: {e})")
+                return self.stats
+            # a device fault: halt the arm and end; every reading so far is already stored, and
+            # a later run resumes at the next unmeasured pose
+            try:
+                _emergency_stop(self.controller)
             except Exception:  # noqa: BLE001 - the original error is the one to report
                 pass
+            self._tell()
             raise
+        except BaseException:  # Ctrl-C: the arm must not keep moving on its own
+            self.estop()
+            raise
+        finally:
+            with self._cond:
+                self._active = False
+                self._cond.notify_all()
         return self.stats
 
-    def _pose(self, i, q_deg, names, stored):
+    def _begin(self) -> int:
+        """Start or resume; the e-stop count this run lives under."""
+        with self._cond:
+            if self._active:
+                raise EngineBusy(self._state, "start", "a run is already executing")
+            if self._state == "planned":
+                self._apply("start")
+            elif self._state in ("paused", "failed"):
+                self._apply("resume")
+            elif self._state != "running":  # running: resumed by request before this run
+                raise StateError(self._state, "start")
+            self._active = True
+            epoch = self._estops
+            clear, self._halted_on_fault = self._halted_on_fault, False
+        if clear:  # the engine's own halt after a fault; an e-stop's latch needs reset
+            _clear_stop(self.controller)
+        self._tell()
+        return epoch
+
+    def _may_go_on(self, epoch: int) -> bool:
+        """Caller holds nothing: True while the run may execute its next message."""
+        with self._cond:
+            return self._estops == epoch and self._state in lifecycle.MOVING
+
+    def _checkpoint(self, epoch: int) -> bool:
+        """Between poses: honour pause and abort; False when the run must end.
+
+        The state is read and waited on under one condition, so a resume landing at any moment
+        (even between reaching the pause and waiting) is seen: no request can be lost.
+        """
+        while True:
+            with self._cond:
+                state = self._state
+                if self._estops != epoch:
+                    return False
+                if state == "running":
+                    return True
+                if state == "paused":
+                    self._cond.wait(WAKE_S)
+                    continue
+                if state not in ("pausing", "stopping"):
+                    return False  # aborted (while paused), estopped
+            if state == "stopping":
+                self._event("stopped", epoch)
+                return False
+            self._event("paused", epoch)
+
+    # -- the handshake --------------------------------------------------------------------------
+    def _move(self, msg: Move, stored: dict, epoch: int) -> _Pose | None:
+        i, q_deg = msg.pose, np.asarray(msg.q_deg, dtype=float)
+        work = _Pose(i, q_deg, {n: np.asarray(v, dtype=float) for n, v in stored.items()})
+        # A pause or an abort never lets a new move begin (it takes effect here as at a
+        # checkpoint). This is the last look before motion: an e-stop landing after it is
+        # caught by the controller's latch, checked under the same lock as the MOVEJ write.
+        while True:
+            if not self._checkpoint(epoch):
+                return None
+            with self._cond:
+                if self._estops != epoch:
+                    return None
+                if self._state == "running":
+                    break
         try:
             self.controller.move_abs_j(q_deg)
         except ValueError as e:  # the controller client refused the target: nothing moved
             self.log(f"pose {i}: skipped, {e}")
-            self.sink.pose_done(pose_index=i, state="skipped", q_deg=q_deg)
-            self.stats.skipped += 1
-            return np.deg2rad(q_deg), np.full((len(names), 3), np.nan)
+            work.skipped = True
+            return work
         self.controller.wait_in_position(self.clock)
-        q_rad = np.deg2rad(np.asarray(self.controller.joints(), dtype=float))
-        predicted = self.predictor.predict(q_rad)
-        self._settle(predicted[0])
-        measured = {n: np.asarray(v, dtype=float) for n, v in stored.items()}
-        row = np.array([measured.get(n, np.full(3, np.nan)) for n in names])
-        for k, name in enumerate(names):
-            if name in stored:
+        work.q_rad = np.deg2rad(np.asarray(self.controller.joints(), dtype=float))
+        work.predicted = self.predictor.predict(work.q_rad)
+        return work
+
+    def _aim(self, msg: Aim, work: _Pose, names) -> None:
+        if work.skipped:
+            return
+        aim = self.predictor.correct(work.predicted, work.measured)[names.index(msg.target)]
+        self.stats.aimed += 1
+        if msg.pose >= 10:
+            self.stats.aimed_after_10 += 1
+        work.aims[msg.target] = (aim, self._lock_on(msg.pose, aim, 0))
+
+    def _lock_on(self, i: int, aim, attempt: int) -> bool:
+        """Point at aim, search only if not locked; True once locked."""
+        s = self.settings
+        try:
+            locked = self.tracker.point(aim)
+            if locked and attempt == 0:
+                self.stats.locked_first_try += 1
+                if i >= 10:
+                    self.stats.locked_after_10 += 1
+            if locked:
+                return True
+            self.stats.searched += 1
+            radius = s.search_radius_mm if attempt == 0 else s.wide_search_radius_mm
+            return bool(self.tracker.search(radius))
+        except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
+            code = _code(e)
+            if code is None:
+                raise
+            if code == "BEAM_BROKEN":
+                self.stats.beam_breaks += 1
+            return False
+
+    def _measure(self, msg: Measure, work: _Pose) -> None:
+        """Measure; after a beam break, a failed search or an inaccurate reading, aim again."""
+        if work.skipped:
+            return
+        s, i, name = self.settings, msg.pose, msg.target
+        aim, locked = work.aims[name]
+        m = None
+        for attempt in range(s.retries + 1):
+            if attempt > 0:
+                locked = self._lock_on(i, aim, attempt)
+            if not locked:
                 continue
-            aim = self.predictor.correct(predicted, measured)[k]
-            m = self._measure_target(i, aim)
-            if m is None:
-                self.stats.missing += 1
-                self.log(f"pose {i}: target {name} missing")
+            try:
+                reading = self.tracker.measure(s.samples)
+            except Exception as e:  # noqa: BLE001
+                code = _code(e)
+                if code is None:
+                    raise
+                if code == "BEAM_BROKEN":
+                    self.stats.beam_breaks += 1
                 continue
-            measured[name] = np.asarray(m.mean_mm, dtype=float)
-            row[k] = measured[name]
-            self.sink.reading(pose_index=i, target=name, measurement=m, time_s=self.clock.now(),
-                              weather=self._weather())
+            if getattr(reading, "status", "OK") not in ("OK", None):
+                continue  # inaccurate: the target moved while measured; try again
+            m = reading
+            break
+        if m is None:
+            self.stats.missing += 1
+            self.log(f"pose {i}: target {name} missing")
+            return
+        work.measured[name] = np.asarray(m.mean_mm, dtype=float)
+        time_s = self.clock.now()
+        try:
+            weather = self._weather()
+        except Exception:
+            # the reading is good: store it before the fault ends the run, so a resumed run
+            # neither loses it nor measures it twice
+            self.sink.reading(pose_index=i, target=name, measurement=m, time_s=time_s,
+                              weather=None)
             self.stats.readings += 1
-        state = "measured" if len(measured) == len(names) else "missing-target"
-        self.sink.pose_done(pose_index=i, state=state, q_deg=np.rad2deg(q_rad))
+            raise
+        self.sink.reading(pose_index=i, target=name, measurement=m, time_s=time_s,
+                          weather=weather)
+        self.stats.readings += 1
+
+    def _save(self, work: _Pose, names):
+        """The pose's outcome to the sink; its joints (rad) and readings for the predictor."""
+        i = work.index
+        if work.skipped:
+            self.sink.pose_done(pose_index=i, state="skipped", q_deg=work.q_deg)
+            self.stats.skipped += 1
+            return np.deg2rad(work.q_deg), np.full((len(names), 3), np.nan)
+        row = np.array([work.measured.get(n, np.full(3, np.nan)) for n in names])
+        state = "measured" if len(work.measured) == len(names) else "missing-target"
+        self.sink.pose_done(pose_index=i, state=state, q_deg=np.rad2deg(work.q_rad))
         self.stats.poses += 1
-        return q_rad, row
+        return work.q_rad, row
 
     def _settle(self, first_aim) -> None:
         s = self.settings
@@ -224,40 +522,6 @@ class CampaignEngine:
                 raise
             return None
 
-    def _measure_target(self, i, aim):
-        """Point, search only if not found, measure; after a beam break search again and retry."""
-        s = self.settings
-        self.stats.aimed += 1
-        if i >= 10:
-            self.stats.aimed_after_10 += 1
-        first = True
-        for attempt in range(s.retries + 1):
-            try:
-                locked = self.tracker.point(aim)
-                if locked and first:
-                    self.stats.locked_first_try += 1
-                    if i >= 10:
-                        self.stats.locked_after_10 += 1
-                if not locked:
-                    self.stats.searched += 1
-                    radius = s.search_radius_mm if attempt == 0 else s.wide_search_radius_mm
-                    if not self.tracker.search(radius):
-                        first = False
-                        continue
-                first = False
-                m = self.tracker.measure(s.samples)
-                if getattr(m, "status", "OK") not in ("OK", None):
-                    continue  # inaccurate: the target moved while measured; try again
-                return m
-            except Exception as e:  # noqa: BLE001
-                code = _code(e)
-                if code is None:
-                    raise
-                first = False
-                if code == "BEAM_BROKEN":
-                    self.stats.beam_breaks += 1
-        return None
-
     def _weather(self):
         try:
             return self.tracker.weather()
@@ -265,3 +529,6 @@ class CampaignEngine:
             if _code(e) is None:
                 raise
             return None
+
+
+__all__ = ["CampaignEngine", "EngineBusy", "Settings", "StateError", "Stats"]

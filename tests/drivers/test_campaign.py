@@ -8,6 +8,7 @@ import pytest
 from drivers.campaign import CampaignEngine, Settings, StateError
 from drivers.cell import VirtualCell
 from drivers.clock import VirtualClock
+from drivers.plan import Measure
 from drivers.predictor import SmrPredictor
 from drivers.world import SimulatedWorld
 from solver.robot import IRB2600
@@ -22,9 +23,11 @@ class DeviceError(Exception):
 
 class Controller:
     def __init__(self, world):
-        self.world, self.commands = world, []
+        self.world, self.commands, self.latched = world, [], False
 
     def move_abs_j(self, q_deg):
+        if self.latched:
+            raise RuntimeError("stop latched: no motion until clear_stop")
         self.commands.append(np.asarray(q_deg, float))
         return self.world.command_move(np.deg2rad(q_deg))
 
@@ -35,8 +38,17 @@ class Controller:
     def joints(self):
         return np.rad2deg(self.world.joints())
 
-    def stop(self):
+    @property
+    def stopped(self):
+        return self.latched
+
+    def emergency_stop(self):
+        self.latched = True
         self.world.stop()
+        return True
+
+    def clear_stop(self):
+        self.latched = False
 
 
 class Tracker:
@@ -140,3 +152,23 @@ def test_state_machine_refuses_illegal_requests():
     eng.run(poses)
     with pytest.raises(StateError):
         eng.pause()
+
+
+def test_estop_mid_campaign_reset_and_run_again_completes_with_every_reading_once():
+    eng, poses, sink, clock = setup(n=12)
+    target = eng.predictor.names[1]
+    eng.trace = lambda msg: msg == Measure(5, target) and eng.estop()
+    stats = eng.run(poses)
+    assert eng.state == "estopped" and stats.poses == 5 and eng.controller.latched
+    assert len(eng.controller.commands) == 6  # pose 5 was reached; nothing moved after the stop
+    assert eng.reset() == "paused" and not eng.controller.latched
+    eng.trace = None
+    done = len(sink.poses)
+    partial = {t: xyz for (p, t), xyz in sink.readings.items() if p == done}
+    rows = [[sink.readings[(p, t)] for t in eng.predictor.names] for p in range(done)]
+    eng.run(poses, start=done, history=(np.deg2rad(poses[:done]), np.array(rows)),
+            partial=partial)
+    assert eng.state == "done" and len(sink.readings) == 12 * 3  # the sink refuses duplicates
+    assert [p for p, _ in sink.poses] == list(range(12))
+    # pose 5 is moved to again (the arm may have been moved by hand) but its first reading kept
+    assert len(eng.controller.commands) == 13
