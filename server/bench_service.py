@@ -1,12 +1,15 @@
-"""Service benchmark: `robocal demo` end to end, and the live-state endpoint's latency under load."""
+"""Service benchmark: `robocal demo` end to end, the live-state endpoint's latency under load, and
+the emergency stop's latency against a stalled controller."""
 
 from __future__ import annotations
 
+import logging
 import subprocess
 import sys
 import tempfile
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -120,6 +123,81 @@ def latency_under_load(poses: int = 100, requests: int = 400) -> dict:
             "calibration_job": job["state"], "during_job": during}
 
 
+STOP_BOUND_MS = 100.0  # issue 11: stop request to STOP on the wire
+
+
+def _until(predicate, what: str, timeout: float = 10.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value is not None:
+            return value
+        time.sleep(0.001)
+    raise TimeoutError(what)
+
+
+def stop_latency(stops: int = 100) -> dict:
+    """Time from emergency_stop() to STOP received by the simulated controller on 127.0.0.1, each
+    stop against a controller stalled mid-move while a STATUS waits for its reply on another
+    thread: p50 and max of `stops`, and how long emergency_stop took to return."""
+    from drivers.abb.client import ControllerClient, ControllerError
+    from drivers.abb.sim import SimulatedController, serve_controller
+    from drivers.cell import VirtualCell
+    from drivers.clock import VirtualClock
+    from drivers.world import SimulatedWorld
+
+    from .formats import default_cell
+
+    cell, clock = default_cell(), VirtualClock()
+    targets = {k: v.tolist() for k, v in cell.targets.items()}
+    world = SimulatedWorld(VirtualCell.random(cell.robot, targets, seed=1), clock)
+    device = SimulatedController(world, cell.robot, clock)
+    on_wire, returned, confirmed = [], [], 0
+    quiet = logging.getLogger("drivers.abb.client")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)  # the 100 STATUS that fail are the design here
+    with _restore_level(quiet, level), serve_controller(device) as server, \
+            ControllerClient(server.url, cell.robot, timeout_s=2.0, retries=0) as client:
+        for i in range(stops):
+            server.resume()
+            client.clear_stop()
+            client.move_abs_j([60.0 if i % 2 else -60.0, 0, 0, 0, 0, 0])  # the arm is moving
+            since = time.monotonic()
+            server.stall()
+            stuck = threading.Thread(target=_swallow(client.status, ControllerError), daemon=True)
+            stuck.start()
+            _until(lambda: device.first_arrival("STATUS", since), "STATUS in flight")
+            t0 = time.monotonic()
+            confirmed += client.emergency_stop(confirm_s=1.0)
+            returned.append(time.monotonic() - t0)
+            on_wire.append(_until(lambda: device.first_arrival("STOP", t0), "STOP") - t0)
+            server.drop_connections()  # frees the stalled STATUS (it fails; the next reconnects)
+            stuck.join(timeout=10)
+    wire_ms, back_ms = np.array(on_wire) * 1000, np.array(returned) * 1000
+    return {"stops": stops, "controller": "simulated, stalled mid-move, STATUS in flight, 127.0.0.1",
+            "p50_ms": float(np.percentile(wire_ms, 50)), "max_ms": float(wire_ms.max()),
+            "bound_ms": STOP_BOUND_MS, "met": bool(wire_ms.max() <= STOP_BOUND_MS),
+            "confirmed": confirmed, "returned_p50_ms": float(np.percentile(back_ms, 50)),
+            "returned_max_ms": float(back_ms.max())}
+
+
+@contextmanager
+def _restore_level(logger, level):
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def _swallow(call, errors):
+    def run():
+        try:
+            call()
+        except errors:
+            pass
+    return run
+
+
 def demo_time() -> dict:
     """Wall time of `robocal demo` in a fresh folder (a subprocess, as a user runs it)."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -135,4 +213,7 @@ def run_service_bench() -> dict:
     print("[bench] robocal demo", file=sys.stderr, flush=True)
     demo = demo_time()
     print("[bench] live-state latency under load", file=sys.stderr, flush=True)
-    return {"benchmark": "service", "demo": demo, "live_state_latency": latency_under_load()}
+    live = latency_under_load()
+    print("[bench] stop latency against a stalled controller", file=sys.stderr, flush=True)
+    return {"benchmark": "service", "demo": demo, "live_state_latency": live,
+            "stop_latency": stop_latency()}

@@ -7,7 +7,8 @@ import re
 from dataclasses import dataclass
 
 VERSION = 1
-MAX_LINE = 80  # a RAPID string holds at most 80 characters
+MAX_LINE = 80  # a RAPID string holds at most 80 characters: the most a request may take
+MAX_REPLY = 200  # RAPID writes replies from rawbytes: room for a HELLO with its limit table
 MAX_ID = 99999  # exact in RAPID's num, and short enough to keep a 6-axis MOVEJ under MAX_LINE
 MAX_JOINTS = 6  # jointtarget.robax; a 7th value would not fit in MAX_LINE at 4 decimals
 ANGLE_DECIMALS = 4
@@ -68,6 +69,7 @@ class HelloInfo:
     name: str
     version: int
     n_joints: int
+    limits_deg: tuple[tuple[float, float], ...] | None = None  # per joint (lo, hi); None: not sent
 
 
 @dataclass(frozen=True)
@@ -81,10 +83,10 @@ class Status:
 
 # --- lines --------------------------------------------------------------------------------------
 
-def _check_line(line: str) -> str:
+def _check_line(line: str, limit: int = MAX_LINE) -> str:
     line = line.rstrip("\r\n")
-    if len(line) > MAX_LINE:
-        raise ProtocolError(f"line of {len(line)} characters, at most {MAX_LINE}")
+    if len(line) > limit:
+        raise ProtocolError(f"line of {len(line)} characters, at most {limit}")
     if not line.isascii() or not line.isprintable():
         raise ProtocolError("non-printable or non-ASCII characters")
     return line
@@ -194,7 +196,7 @@ def encode_reply(reply: Reply | ErrorReply) -> str:
         message = _clean_message(reply.message, MAX_LINE - len(head) - 1)
         return f"{head} {message}" if message else head
     line = " ".join([f"#{reply.id}", "OK", *reply.fields])
-    _check_line(line)
+    _check_line(line, MAX_REPLY)
     if "#" in line[1:] or any(not f or f != f.strip() or " " in f for f in reply.fields):
         raise ProtocolError(f"bad reply fields {reply.fields!r}")
     return line
@@ -202,7 +204,7 @@ def encode_reply(reply: Reply | ErrorReply) -> str:
 
 def parse_reply(line: str, expect_id: int | None = None) -> Reply | ErrorReply:
     """A reply line as the client reads it; raises WrongIdError if it answers another request."""
-    tokens = _check_line(line).split()
+    tokens = _check_line(line, MAX_REPLY).split()
     if len(tokens) < 2:
         raise ProtocolError(f"not a reply: {line[:20]!r}")
     reply_id = _parse_id(tokens[0])
@@ -226,21 +228,43 @@ def _expect(fields, n: int, what: str) -> None:
         raise ProtocolError(f"{what}: expected {n} fields, got {len(fields)}")
 
 
+def format_limit(value_deg: float) -> str:
+    """A joint limit in degrees: 4 decimals, trailing zeros dropped ("155", "-179.5")."""
+    text = format_number(value_deg, ANGLE_DECIMALS).rstrip("0").rstrip(".")
+    return "0" if text in ("", "-") else text
+
+
 def hello_fields(info: HelloInfo) -> tuple[str, ...]:
     if not _NAME.fullmatch(info.name):
         raise ProtocolError(f"controller name {info.name!r} must match {_NAME.pattern}")
-    return (info.name, str(info.version), str(info.n_joints))
+    head = (info.name, str(info.version), str(info.n_joints))
+    if info.limits_deg is None:
+        return head
+    if len(info.limits_deg) != info.n_joints:
+        raise ProtocolError(f"{len(info.limits_deg)} limit pairs for {info.n_joints} joints")
+    return head + tuple(format_limit(v) for pair in info.limits_deg for v in pair)
 
 
 def parse_hello(fields) -> HelloInfo:
-    _expect(fields, 3, "HELLO")
-    name, version, n = fields
+    """`<name> <version> <n_joints>`, optionally followed by `<lo> <hi>` per joint (degrees)."""
+    if len(fields) < 3:
+        raise ProtocolError(f"HELLO: expected at least 3 fields, got {len(fields)}")
+    name, version, n = fields[:3]
     if not _NAME.fullmatch(name):
         raise ProtocolError(f"bad controller name {name[:16]!r}")
     n_joints = parse_int(n)
     if not 1 <= n_joints <= MAX_JOINTS:
         raise ProtocolError(f"joint count {n_joints} outside 1..{MAX_JOINTS}")
-    return HelloInfo(name, parse_int(version), n_joints)
+    rest = fields[3:]
+    if not rest:
+        return HelloInfo(name, parse_int(version), n_joints)
+    _expect(rest, 2 * n_joints, "HELLO limits")
+    values = [parse_number(f) for f in rest]
+    limits = tuple(zip(values[0::2], values[1::2], strict=True))
+    for i, (lo, hi) in enumerate(limits, start=1):
+        if not lo < hi:
+            raise ProtocolError(f"HELLO: joint {i} limits [{lo:g}, {hi:g}] are empty")
+    return HelloInfo(name, parse_int(version), n_joints, limits)
 
 
 def duration_fields(duration_s: float) -> tuple[str, ...]:

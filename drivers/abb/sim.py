@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
+import time
 
 import numpy as np
 
@@ -16,12 +17,18 @@ class SimulatedController:
     """The controller's side of the protocol: one request line in, one reply line out.
 
     Independent of the client (its own limit check), and of networking: tests drive
-    `handle_line` directly. `received` logs every line that reached it, in order.
+    `handle_line` directly. `received` logs every line it handled, in order; `arrivals` every
+    line its server read off a connection, handled or not (a stalled or mute controller still
+    receives), with the time.monotonic() of its arrival. HELLO reports the robot's joint limits
+    unless report_limits is False (a controller from before that extension).
     """
 
-    def __init__(self, world, robot, clock, name: str = "IRB2600-SIM"):
+    def __init__(self, world, robot, clock, name: str = "IRB2600-SIM", *,
+                 report_limits: bool = True):
         self.world, self.robot, self.clock, self.name = world, robot, clock, name
+        self.report_limits = report_limits
         self.received: list[str] = []
+        self.arrivals: list[tuple[float, str]] = []
         self.moves: list[tuple[float, int, tuple[float, ...], float]] = []  # (t, id, q_deg, s)
         self._fault: int | None = None
         self._move_id = 0
@@ -39,6 +46,20 @@ class SimulatedController:
                 return p.encode_reply(p.ErrorReply(exc.request_id or 0, "BAD_REQUEST", str(exc)))
             reply = getattr(self, f"_do_{req.command.lower()}")(req)
             return p.encode_reply(reply)
+
+    def arrived(self, line: str) -> None:
+        """Log a line as it comes off the wire (the server calls this before anything else)."""
+        with self._lock:
+            self.arrivals.append((time.monotonic(), line.rstrip("\r\n")))
+
+    def first_arrival(self, command: str, since: float = float("-inf")) -> float | None:
+        """The monotonic time the first `command` request arrived at or after `since`."""
+        with self._lock:
+            for t, line in self.arrivals:
+                tokens = line.split()
+                if t >= since and len(tokens) >= 2 and tokens[1] == command:
+                    return t
+        return None
 
     def fault(self, code: int) -> None:
         """Enter FAULT (halting any move) until a RESET; HELLO does not clear it."""
@@ -64,7 +85,11 @@ class SimulatedController:
         return p.Status(state, self._move_id)
 
     def _do_hello(self, req):
-        info = p.HelloInfo(self.name, p.VERSION, self.robot.n_joints)
+        limits = None
+        if self.report_limits:
+            limits = tuple(zip(np.rad2deg(self.robot.lower).tolist(),
+                               np.rad2deg(self.robot.upper).tolist(), strict=True))
+        info = p.HelloInfo(self.name, p.VERSION, self.robot.n_joints, limits)
         return p.Reply(req.id, p.hello_fields(info))
 
     def _do_status(self, req):
@@ -116,6 +141,10 @@ class ControllerServer:
         self._garbage_next: bytes | None = None
         self._garbage_on_connect: bytes | None = None
         self._drop_next: bool | None = None
+        self._stalled: set[asyncio.StreamWriter] = set()
+        self._mute = False
+        self._refuse_until = 0.0  # time.monotonic(): connections before it are reset at once
+        self._quiet_until = 0.0  # time.monotonic(): no request is handled before it
         self._server = self._loop.run_until_complete(
             asyncio.start_server(self._serve, host, port))
         self.port: int = self._server.sockets[0].getsockname()[1]
@@ -154,6 +183,35 @@ class ControllerServer:
         """Reset every open connection now (a pulled cable, a controller restart)."""
         asyncio.run_coroutine_threadsafe(self._abort_all(), self._loop).result(timeout=5)
 
+    def stall(self) -> None:
+        """The connections open now stop answering (a hung task mid-move): their lines still
+        arrive (logged in device.arrivals) but are neither executed nor answered. New
+        connections are served."""
+        with self._lock:
+            self._stalled |= self._writers
+
+    def mute(self) -> None:
+        """Every connection, open or new, is accepted and read but never answered or executed."""
+        with self._lock:
+            self._mute = True
+
+    def reconnecting(self, refuse_s: float = 0.0, slow_s: float = 0.0) -> None:
+        """A controller restarting: every connection is dropped now; for refuse_s a new one is
+        reset as soon as it is accepted; then for slow_s more, requests (HELLO included) are
+        read and logged at once but executed and answered only once that time is over."""
+        now = time.monotonic()
+        with self._lock:
+            self._refuse_until = now + refuse_s
+            self._quiet_until = now + refuse_s + slow_s
+        self.drop_connections()
+
+    def resume(self) -> None:
+        """End stall, mute and reconnecting: every connection is served again."""
+        with self._lock:
+            self._stalled.clear()
+            self._mute = False
+            self._refuse_until = self._quiet_until = 0.0
+
     # --- serving --------------------------------------------------------------------------------
 
     async def _abort_all(self) -> None:
@@ -168,8 +226,18 @@ class ControllerServer:
             garbage, self._garbage_next = self._garbage_next, None
         return drop, silent, garbage
 
+    def _deaf(self, writer) -> bool:
+        with self._lock:
+            return self._mute or writer in self._stalled
+
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        self._writers.add(writer)
+        with self._lock:
+            refused = time.monotonic() < self._refuse_until
+            if not refused:
+                self._writers.add(writer)
+        if refused:
+            writer.transport.abort()
+            return
         try:
             with self._lock:
                 hello_noise = self._garbage_on_connect
@@ -179,6 +247,15 @@ class ControllerServer:
                 raw = await reader.readline()
                 if not raw.endswith(b"\n"):
                     break  # EOF, possibly after a partial line
+                self.device.arrived(raw.decode("ascii", errors="replace"))
+                if self._deaf(writer):
+                    continue
+                with self._lock:
+                    quiet = self._quiet_until - time.monotonic()
+                if quiet > 0:
+                    await asyncio.sleep(quiet)
+                    if self._deaf(writer):
+                        continue
                 drop, silent, garbage = self._take_faults()
                 if drop is False:
                     break
@@ -192,7 +269,9 @@ class ControllerServer:
         except (ConnectionError, ValueError):  # reset by the peer; a line over the stream limit
             pass
         finally:
-            self._writers.discard(writer)
+            with self._lock:
+                self._writers.discard(writer)
+                self._stalled.discard(writer)
             writer.transport.abort()
 
     def close(self) -> None:

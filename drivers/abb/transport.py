@@ -8,6 +8,9 @@ import time
 import serial
 
 MAX_BUFFER = 1024  # a peer that never sends a newline must not grow our buffer forever
+# What a port raises once it is gone; closed by another thread (the client's reader may be
+# blocked in read() when the connection is closed), pyserial's socket can also raise these.
+_PORT_GONE = (serial.SerialException, OSError, AttributeError, TypeError, ValueError)
 
 
 class TransportClosed(ConnectionError):
@@ -28,6 +31,11 @@ class LineTransport:
         except (serial.SerialException, OSError, ValueError) as exc:
             raise TransportClosed(f"cannot open {url}: {exc}") from exc
         self._buffer = bytearray()
+        sock = getattr(self._port, "_socket", None)
+        if sock is not None:
+            # No Nagle: a STOP written while a request waits for its reply would otherwise sit
+            # in our buffer until the controller acknowledges that request (~40 ms delayed ACK).
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
     @property
     def is_open(self) -> bool:
@@ -46,14 +54,14 @@ class LineTransport:
         self._buffer.clear()
         try:
             self._port.reset_input_buffer()
-        except (serial.SerialException, OSError) as exc:
+        except _PORT_GONE as exc:
             raise TransportClosed(str(exc)) from exc
 
     def write_line(self, text: str) -> None:
         try:
             self._port.write(text.encode("ascii") + b"\n")
             self._port.flush()
-        except (serial.SerialException, OSError, AttributeError) as exc:
+        except _PORT_GONE as exc:
             raise TransportClosed(str(exc)) from exc
 
     def read_line(self, deadline: float) -> str | None:
@@ -76,7 +84,7 @@ class LineTransport:
                 chunk = self._port.read(1)  # blocks until a byte arrives or the time is up
                 if chunk and self._port.in_waiting:
                     chunk += self._port.read(self._port.in_waiting)
-            except (serial.SerialException, OSError, AttributeError) as exc:
+            except _PORT_GONE as exc:
                 raise TransportClosed(str(exc)) from exc
             self._buffer += chunk
 

@@ -91,7 +91,33 @@ def parse_cell(text: str, path="<cell>") -> Cell:
         raise doc.error(("devices",), "a cell with real devices needs a `base` guess (4x4, the "
                                       "robot base in the tracker frame, to within about 10 mm)",
                         key=True)
+    if devices is not None:
+        _within_builtin(doc, root["robot"], robot)
     return Cell(robot, targets, base, tracker, payload, devices)
+
+
+def _builtin_named(name: str) -> Robot | None:
+    """The built-in robot an inline robot's name designates ("IRB 2600", "irb-2600"), if any."""
+    return BUILTIN.get(re.sub(r"[^a-z0-9]", "", name.lower()))
+
+
+def _within_builtin(doc: JsonDoc, value, robot: Robot) -> None:
+    """A real arm is never driven beyond its built-in model's limits, whatever the upload says."""
+    model = _builtin_named(robot.name) if isinstance(value, dict) else None
+    if model is None:
+        return
+    if robot.n_joints != model.n_joints:
+        raise doc.error(("robot", "joints"), f"names the built-in {model.name}, which has "
+                                             f"{model.n_joints} joints, not {robot.n_joints}")
+    tol = 1e-4  # degrees: the controller protocol's resolution
+    for i, (mine, theirs) in enumerate(zip(robot.joints, model.joints)):
+        lo, hi = _deg(mine.limits[0]), _deg(mine.limits[1])
+        blo, bhi = _deg(theirs.limits[0]), _deg(theirs.limits[1])
+        if lo < blo - tol or hi > bhi + tol:
+            raise doc.error(("robot", "joints", i, "limits"),
+                            f"[{lo:g}, {hi:g}] deg exceeds the built-in {model.name}'s "
+                            f"[{blo:g}, {bhi:g}] for joint {i + 1}; a cell with real devices "
+                            "may only narrow a built-in robot's limits")
 
 
 def _robot(doc: JsonDoc, value) -> Robot:

@@ -2,6 +2,7 @@ MODULE RobocalServer
     !*************************************************************************************
     ! RobocalServer: the controller side of the robocal line protocol, version 1
     ! (drivers/abb/PROTOCOL.md). A TCP server: robocal connects with socket://IP:PORT.
+    ! Sockets need Socket Messaging; moves use MoveAbsJ \Conc (see Behaviour).
     !
     ! Controller configuration
     !   - RobotWare 6 (IRC5): option 616-1 PC Interface, which includes Socket Messaging.
@@ -12,9 +13,10 @@ MODULE RobocalServer
     !     service port; for the WAN port use the address set under Configuration >
     !     Communication > IP Setting (and allow the port in the firewall manager, if set).
     !   - SERVER_PORT: ports 1025..4999 are free for user sockets.
-    !   - LIM_LO / LIM_HI: the same joint limits as robocal's robot model (solver/robot.py),
-    !     and inside the controller's own axis limits (MOC: Arm > Upper/Lower Joint Bound),
-    !     so that this check refuses a target before the motion system would stop on it.
+    !   - LIM_LO / LIM_HI: inside the controller's own axis limits (MOC: Arm > Upper/Lower
+    !     Joint Bound), so that this check refuses a target before the motion system would
+    !     stop on it. HELLO reports them: robocal refuses to drive a cell whose robot model
+    !     allows more, and checks every move against the tighter of the two.
     !   - CONTROLLER_NAME: a label for this cell, [A-Za-z0-9_.-], at most 32 characters.
     !
     ! Loading and running
@@ -28,8 +30,15 @@ MODULE RobocalServer
     !   4. In robocal: ControllerClient("socket://192.168.125.1:1025", robot).
     !
     ! Behaviour
-    !   - One client at a time. A client silent for IDLE_TIMEOUT_S seconds is dropped so
-    !     that a client that vanished cannot lock out the next one.
+    !   - One client at a time; the newest connection wins. While serving a client the
+    !     server polls for a new connection every POLL_S; one that arrives pre-empts the
+    !     old client (closed, after the lines it sent were handled in order). A client that
+    !     hangs, or vanished without closing, cannot lock out the next one, and a STOP sent
+    !     on a new connection (with no HELLO first) is handled within about 2 x POLL_S.
+    !     A client silent for IDLE_TIMEOUT_S seconds is dropped as well.
+    !   - STOP is never queued behind motion: no handler waits for the arm (MoveAbsJ
+    !     \Conc), so a STOP on the open connection is handled as soon as it is read, and
+    !     always: also in FAULT, also before HELLO.
     !   - Moves: MoveAbsJ \Conc to the target, total time \T = the expected duration
     !     (largest joint travel / AXIS_SPEED, plus ACCEL_S), zone fine, tool0.
     !   - A client disconnecting during a move does not stop the move.
@@ -47,6 +56,8 @@ MODULE RobocalServer
     LOCAL CONST string SERVER_IP := "192.168.125.1";
     LOCAL CONST num SERVER_PORT := 1025;
     LOCAL CONST num IDLE_TIMEOUT_S := 60;
+    ! Receive and accept poll, seconds: how long a STOP on a new connection may wait.
+    LOCAL CONST num POLL_S := 0.05;
 
     ! Joint limits, degrees: ABB IRB 2600 data sheet, as in solver/robot.py IRB2600.
     LOCAL CONST num LIM_LO{6} := [-180, -95, -180, -400, -120, -400];
@@ -63,8 +74,14 @@ MODULE RobocalServer
     LOCAL CONST string CR := "\0D";
 
     LOCAL VAR socketdev serverSocket;
-    LOCAL VAR socketdev clientSocket;
+    ! Two client sockets: the one served (current = 1: socketA, 2: socketB) and the spare
+    ! that accepts a newer client, which then pre-empts it (socketdev cannot be assigned).
+    LOCAL VAR socketdev socketA;
+    LOCAL VAR socketdev socketB;
+    LOCAL VAR num current := 1;
     LOCAL VAR string rxBuf := "";
+    LOCAL VAR bool rxOverflow := FALSE;
+    LOCAL VAR clock idleClock;
     LOCAL VAR intnum faultIntno;
 
     ! The state reported by STATUS (see CurrentState)
@@ -81,15 +98,19 @@ MODULE RobocalServer
     PROC main()
         InitServer;
         WHILE TRUE DO
-            SocketAccept serverSocket, clientSocket \Time:=WAIT_MAX;
-            rxBuf := "";
+            IF current = 1 THEN
+                SocketAccept serverSocket, socketA \Time:=WAIT_MAX;
+            ELSE
+                SocketAccept serverSocket, socketB \Time:=WAIT_MAX;
+            ENDIF
             ServeClient;
         ENDWHILE
     ENDPROC
 
     LOCAL PROC InitServer()
         ! Closing first lets the program be restarted from main while sockets are open.
-        SocketClose clientSocket;
+        SocketClose socketA;
+        SocketClose socketB;
         SocketClose serverSocket;
         SocketCreate serverSocket;
         SocketBind serverSocket, SERVER_IP, SERVER_PORT;
@@ -99,40 +120,88 @@ MODULE RobocalServer
         IError MOTION_ERR, TYPE_ERR, faultIntno;
     ENDPROC
 
+    ! Serve the current client until it leaves or idles out; a newer client pre-empts it.
     LOCAL PROC ServeClient()
         VAR string line;
-        VAR bool overflow;
 
+        StartClient;
         WHILE TRUE DO
-            ReadLine line, overflow;
-            IF overflow THEN
-                SendLine 0, "ERR BAD_REQUEST line too long";
-            ELSE
-                HandleLine line;
+            IF ReadLine(line) THEN
+                ClkReset idleClock;
+                ClkStart idleClock;
+                IF rxOverflow THEN
+                    rxOverflow := FALSE;
+                    SendLine 0, "ERR BAD_REQUEST line too long";
+                ELSE
+                    HandleLine line;
+                ENDIF
+            ELSEIF NewClient() THEN
+                ! The newest connection wins: the old client is hung or gone, and the new
+                ! one may carry a STOP that must not wait for it.
+                CloseClient;
+                current := 3 - current;
+                StartClient;
+            ELSEIF ClkRead(idleClock) > IDLE_TIMEOUT_S THEN
+                CloseClient;
+                RETURN;
             ENDIF
         ENDWHILE
     ERROR
-        IF ERRNO = ERR_SOCK_CLOSED OR ERRNO = ERR_SOCK_TIMEOUT THEN
-            ! The client left, or was idle too long: back to main to accept the next one.
-            SocketClose clientSocket;
+        IF ERRNO = ERR_SOCK_CLOSED THEN
+            ! The client left: back to main to accept the next one.
+            CloseClient;
             RETURN;
         ENDIF
         RAISE;
     ENDPROC
 
-    ! The next line from the client, without LF (and CR). overflow: the line was longer
-    ! than a RAPID string; its end is returned and must be refused.
-    LOCAL PROC ReadLine(INOUT string line, INOUT bool overflow)
+    LOCAL PROC StartClient()
+        rxBuf := "";
+        rxOverflow := FALSE;
+        ClkReset idleClock;
+        ClkStart idleClock;
+    ENDPROC
+
+    LOCAL PROC CloseClient()
+        IF current = 1 THEN
+            SocketClose socketA;
+        ELSE
+            SocketClose socketB;
+        ENDIF
+    ENDPROC
+
+    ! TRUE if another client connected within POLL_S (accepted into the spare socket).
+    LOCAL FUNC bool NewClient()
+        IF current = 1 THEN
+            SocketAccept serverSocket, socketB \Time:=POLL_S;
+        ELSE
+            SocketAccept serverSocket, socketA \Time:=POLL_S;
+        ENDIF
+        RETURN TRUE;
+    ERROR
+        IF ERRNO = ERR_SOCK_TIMEOUT THEN
+            RETURN FALSE;
+        ENDIF
+        RAISE;
+    ENDFUNC
+
+    ! The next line from the client, without LF (and CR), or FALSE if none is complete
+    ! within POLL_S (what arrived stays in rxBuf). rxOverflow: the line was longer than a
+    ! RAPID string; its end is returned and must be refused.
+    LOCAL FUNC bool ReadLine(INOUT string line)
         VAR string chunk;
         VAR num nl;
 
-        overflow := FALSE;
         nl := FindChar(rxBuf, 1, LF);
         WHILE nl > StrLen(rxBuf) DO
             ! \Str receives what has arrived, at most 80 characters; lines may be split.
-            SocketReceive clientSocket \Str:=chunk \Time:=IDLE_TIMEOUT_S;
+            IF current = 1 THEN
+                SocketReceive socketA \Str:=chunk \Time:=POLL_S;
+            ELSE
+                SocketReceive socketB \Str:=chunk \Time:=POLL_S;
+            ENDIF
             IF StrLen(rxBuf) + StrLen(chunk) > 80 THEN
-                overflow := TRUE;
+                rxOverflow := TRUE;
                 rxBuf := chunk;
             ELSE
                 rxBuf := rxBuf + chunk;
@@ -155,7 +224,13 @@ MODULE RobocalServer
                 line := StrPart(line, 1, StrLen(line) - 1);
             ENDIF
         ENDIF
-    ENDPROC
+        RETURN TRUE;
+    ERROR
+        IF ERRNO = ERR_SOCK_TIMEOUT THEN
+            RETURN FALSE;
+        ENDIF
+        RAISE;
+    ENDFUNC
 
     ! "#<id> <COMMAND> [values]" -> the command's handler; every request gets one reply.
     LOCAL PROC HandleLine(string line)
@@ -178,7 +253,7 @@ MODULE RobocalServer
         IF tok <> "" THEN
             SendLine id, "ERR BAD_REQUEST unexpected arguments";
         ELSEIF cmd = "HELLO" THEN
-            SendLine id, "OK " + CONTROLLER_NAME + " " + PROTOCOL_VERSION + " " + NumToStr(N_JOINTS, 0);
+            SendHello id;
         ELSEIF cmd = "STATUS" THEN
             DoStatus id;
         ELSEIF cmd = "JOINTS" THEN
@@ -420,6 +495,29 @@ MODULE RobocalServer
         RETURN StrFind(s, start, set);
     ENDFUNC
 
+    ! HELLO's reply carries the limit table: longer than a string, so packed piece by piece.
+    LOCAL PROC SendHello(num id)
+        VAR rawbytes raw;
+        VAR num i;
+
+        ClearRawBytes raw;
+        PackRawBytes "#" + NumToStr(id, 0) + " OK " + CONTROLLER_NAME, raw, 1 \ASCII;
+        PackRawBytes " " + PROTOCOL_VERSION + " " + NumToStr(N_JOINTS, 0), raw, RawBytesLen(raw) + 1 \ASCII;
+        FOR i FROM 1 TO N_JOINTS DO
+            PackRawBytes " " + NumToStr(LIM_LO{i}, 4) + " " + NumToStr(LIM_HI{i}, 4), raw, RawBytesLen(raw) + 1 \ASCII;
+        ENDFOR
+        PackRawBytes LF, raw, RawBytesLen(raw) + 1 \ASCII;
+        ClientSend raw;
+    ENDPROC
+
+    LOCAL PROC ClientSend(VAR rawbytes raw)
+        IF current = 1 THEN
+            SocketSend socketA \RawData:=raw;
+        ELSE
+            SocketSend socketB \RawData:=raw;
+        ENDIF
+    ENDPROC
+
     ! "#<id> <body>" + LF in one send, so a reply is never split by us.
     LOCAL PROC SendLine(num id, string body)
         VAR rawbytes raw;
@@ -429,7 +527,7 @@ MODULE RobocalServer
         PackRawBytes "#" + NumToStr(id, 0) + " ", raw, 1 \ASCII;
         PackRawBytes body, raw, RawBytesLen(raw) + 1 \ASCII;
         PackRawBytes LF, raw, RawBytesLen(raw) + 1 \ASCII;
-        SocketSend clientSocket \RawData:=raw;
+        ClientSend raw;
     ENDPROC
 
     ! A motion error while we run: FAULT until RESET. Code = domain * 10000 + number,

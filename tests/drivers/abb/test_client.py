@@ -49,7 +49,8 @@ def within_limits(values) -> bool:
 
 def test_move_poll_joints_cycle(client, device, clock):
     wall = time.monotonic()
-    assert client.info == p.HelloInfo("IRB2600-SIM", 1, 6)
+    limits = tuple(zip(LO.round(4).tolist(), HI.round(4).tolist(), strict=True))
+    assert client.info == p.HelloInfo("IRB2600-SIM", 1, 6, limits)
     assert client.status().state == "IDLE"
     duration = client.move_abs_j(TARGET)
     assert duration == pytest.approx(0.6 + 90 / 360, abs=1e-3)
@@ -108,6 +109,7 @@ def test_the_check_guards_the_wire_itself(client, device):
 
 
 def test_the_controller_refuses_what_a_looser_model_allows(server, device):
+    device.report_limits = False  # a controller that does not say its limits at HELLO
     wide = Robot("wide", "dh", tuple(Joint(j.a, j.d, j.theta, j.alpha, (-7.0, 7.0))
                                      for j in IRB2600.joints))
     with ControllerClient(server.url, wide, timeout_s=1.0) as c:

@@ -78,7 +78,7 @@ BAD_REPLIES = [
     "ok",
     "#5",
     "#5 O",  # partial
-    "#5 OK 3.4" + "2" * 80,  # too long
+    "#5 OK 3.4" + "2" * p.MAX_REPLY,  # too long
     "#5 YES",
     "#5 ERR",
     "#5 ERR NOPE something",
@@ -196,7 +196,7 @@ def test_encode_error_reply_is_sanitised_and_fits():
 
 
 def test_encode_reply_refuses_bad_fields():
-    for fields in [("a b",), ("",), ("#3",), ("x" * 80,)]:
+    for fields in [("a b",), ("",), ("#3",), ("x" * p.MAX_REPLY,)]:
         with pytest.raises(p.ProtocolError):
             p.encode_reply(p.Reply(1, fields))
     with pytest.raises(p.ProtocolError):

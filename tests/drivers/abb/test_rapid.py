@@ -106,3 +106,27 @@ def test_every_local_routine_is_used():
     w = words()
     for name in defined:
         assert w.count(name) >= 2, name
+
+
+def routine(name):
+    start = re.search(rf"(PROC|FUNC \w+) {name}\(", SOURCE).start()
+    return SOURCE[start:SOURCE.index("END", SOURCE.index(")", start))]
+
+
+def test_hello_reports_the_limit_table():
+    body = routine("SendHello")
+    assert "FOR i FROM 1 TO N_JOINTS DO" in body
+    assert "NumToStr(LIM_LO{i}, 4)" in body and "NumToStr(LIM_HI{i}, 4)" in body
+    assert "SendHello id;" in SOURCE
+
+
+def test_a_new_connection_preempts_a_hung_client():
+    serve = SOURCE[SOURCE.index("PROC ServeClient"):SOURCE.index("PROC StartClient")]
+    # Lines of the served client first, then a newer client takes over: a STOP sent on a new
+    # connection waits at most one receive poll and one accept poll.
+    assert serve.index("ReadLine(line)") < serve.index("NewClient()") < serve.index("current := 3 - current")
+    assert float(const("POLL_S")) <= 0.05
+    assert routine("NewClient").count("\\Time:=POLL_S") == 2
+    assert routine("ReadLine").count("\\Time:=POLL_S") == 2
+    assert "WAIT_MAX" not in serve
+

@@ -23,7 +23,8 @@ def status(device):
 
 
 def test_hello_and_idle(device):
-    assert p.parse_hello(ask(device, "#1 HELLO").fields) == p.HelloInfo("IRB2600-SIM", 1, 6)
+    limits = tuple(zip(LO.round(4).tolist(), HI.round(4).tolist(), strict=True))
+    assert p.parse_hello(ask(device, "#1 HELLO").fields) == p.HelloInfo("IRB2600-SIM", 1, 6, limits)
     assert status(device) == p.Status("IDLE", 0)
     assert device.received == ["#1 HELLO", "#1 STATUS"]
 
