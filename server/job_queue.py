@@ -190,8 +190,9 @@ class Jobs:
             left = self.call_timeout_s - (time.monotonic() - t0)
             try:
                 return call(target, args, max(left, 0.0), children=self._calls, lock=self._lock)
-            except TimeoutError as e:
-                raise CallTimedOut(f"the computation {e}") from None
+            except TimeoutError:
+                raise CallTimedOut("the computation exceeded its wall-clock limit of "
+                                   f"{self.call_timeout_s:g} s") from None
         finally:
             self._call_slots.release()
 
@@ -308,9 +309,11 @@ class Jobs:
             self._killing.setdefault(
                 job_id, f"exceeded its wall-clock limit of {self.timeout_s:g} s")
         child.kill()
+        killed = time.monotonic() - child.started - self.timeout_s
         code = child.reap()
-        log.info("job %d killed %.1f ms after its wall-clock limit (%s)", job_id,
-                 (time.monotonic() - child.started - self.timeout_s) * 1000, exit_reason(code))
+        log.info("job %d killed %.1f ms after its wall-clock limit, gone after %.1f ms (%s)",
+                 job_id, killed * 1000, (time.monotonic() - child.started - self.timeout_s) * 1000,
+                 exit_reason(code))
         self._finish(job_id, child)
 
     def _forward(self, child: Child) -> None:
