@@ -46,7 +46,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # Jobs() fails the jobs a previous process left queued or running.
         app.state.jobs = Jobs(db, settings.models_dir, settings.job_workers,
                               recordings_dir=settings.recordings_dir, reports_dir=reports_dir,
-                              events=events, viewer_url=settings.rerun_viewer_url)
+                              events=events, viewer_url=settings.rerun_viewer_url,
+                              timeout_s=settings.job_timeout_s,
+                              call_timeout_s=settings.call_timeout_s,
+                              call_workers=settings.call_workers)
         app.state.acquisitions = Acquisitions(settings.database, db, events)
         try:
             yield

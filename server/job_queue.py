@@ -1,13 +1,15 @@
-"""Calibration and diagnosis jobs: checked, kept in the store, run in the worker processes of
-server.worker, their changes reported on the event bus. A restart fails the ones it cut off."""
+"""Calibration and diagnosis jobs: checked, kept in the store, each run in its own worker
+process (server.processes) under a wall-clock limit, cancellable, their changes reported on the
+event bus. A restart fails the ones it cut off."""
 
 from __future__ import annotations
 
-import signal
+import logging
+import os
 import threading
-from concurrent.futures import Future, ThreadPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
-from functools import partial
+import time
+from collections import deque
+from multiprocessing.connection import wait
 from pathlib import Path
 
 from solver.calibrate import parse_method
@@ -16,15 +18,43 @@ from . import store
 from .events import Events
 from .formats.cell_json import parse_cell
 from .formats.model_json import model_to_json
-from .worker import JobSetup, WorkerPool, campaign_data, job_event, one_line
+from .processes import Child, call, exit_reason, one_line, warm_up
+from .worker import JobSetup, campaign_data, job_event, run_job
 from .workflow import model_file, run_method
 
 JOB_STATES = ("queued", "running", "done", "failed")
 JOB_KINDS = ("calibration", "diagnosis")
 RESTART_REASON = "service stopped while running"
+CANCELLED = "cancelled"
+# Defaults of the settings job_timeout_s, call_timeout_s and call_workers.
+JOB_TIMEOUT_S = 900.0
+CALL_TIMEOUT_S = 60.0
+CALL_WORKERS = 4
+# How long a cancel waits for the worker it killed to be reaped and its job marked.
+CANCEL_WAIT_S = 5.0
 
+log = logging.getLogger("robocal.jobs")
 
 Job = store.JobInfo
+
+
+class DuplicateJob(store.Conflict):
+    """A calibration of this campaign with this method is already queued or running."""
+
+    def __init__(self, message: str, job_id: int):
+        super().__init__(message)
+        self.job_id = job_id
+
+    def __reduce__(self):
+        return type(self), (str(self), self.job_id)
+
+
+class CallTimedOut(TimeoutError):
+    """A request's computation ran past its wall-clock limit and was killed."""
+
+
+class Busy(RuntimeError):
+    """Every worker for requests stayed busy for the whole limit."""
 
 
 def check_job(db: store.Database, *, kind: str, campaign_id: int, method: str) -> None:
@@ -45,6 +75,17 @@ def check_method(db: store.Database, *, campaign_id: int, method: str) -> None:
     check_job(db, kind="calibration", campaign_id=campaign_id, method=method)
 
 
+def check_duplicate(db: store.Database, *, kind: str, campaign_id: int, method: str) -> None:
+    """DuplicateJob if the same calibration (campaign and method) is queued or running."""
+    if kind != "calibration":
+        return
+    for state in ("running", "queued"):
+        for job in store.list_jobs(db, state=state):
+            if (job.kind, job.campaign_id, job.method) == (kind, campaign_id, method):
+                raise DuplicateJob(f"campaign {campaign_id} already has {kind} job {job.id} "
+                                   f"({method}) {state}; cancel it or wait for it", job.id)
+
+
 def calibrate_campaign(db: store.Database, *, campaign_id: int, method: str) -> dict:
     """Fit `method` to a stored campaign; the model.json object."""
     cell, meas = campaign_data(db, campaign_id)
@@ -56,45 +97,104 @@ def calibrate_campaign(db: store.Database, *, campaign_id: int, method: str) -> 
 class Jobs:
     """Calibration and diagnosis jobs, kept in the store: queued -> running -> done | failed.
 
-    They run in a pool of worker processes (server.worker), so a job's numpy and Python never
-    hold the service's GIL; each worker writes its job's steps to the store and reports them,
-    and a thread here forwards the reports to the event bus. A worker that dies fails its job.
+    Each runs in a worker process of its own (server.processes), at most `workers` at once and
+    the rest queued, so a job's numpy and Python never hold the service's GIL and one job can be
+    killed without touching another: past `timeout_s` of wall clock, on cancel, or when the
+    service stops. The worker writes its job's steps to the store and reports them; a thread
+    here (the supervisor) starts workers, forwards their reports to the event bus, enforces the
+    limits and fails the job of a worker that died. `call` runs a request's computation (an
+    evaluation, a chart) in a short-lived worker of the same kind, under its own limit.
     """
 
-    pool_kind = WorkerPool.kind
+    pool_kind = "process-per-job:forkserver"
 
     def __init__(self, db: store.Database, models_dir: Path, workers: int = 2, *,
                  recordings_dir: Path | None = None, reports_dir: Path | None = None,
-                 events: Events | None = None, viewer_url: str | None = None):
+                 events: Events | None = None, viewer_url: str | None = None,
+                 timeout_s: float = JOB_TIMEOUT_S, call_timeout_s: float = CALL_TIMEOUT_S,
+                 call_workers: int = CALL_WORKERS):
         self.db, self.models_dir, self.workers = db, Path(models_dir), workers
+        self.timeout_s, self.call_timeout_s = float(timeout_s), float(call_timeout_s)
         self.recordings_dir = Path(recordings_dir or self.models_dir.parent / "recordings")
         self.reports_dir = Path(reports_dir or self.models_dir.parent / "reports")
         self.events = events or Events()
         self._setup = JobSetup(db.engine.url.render_as_string(hide_password=False),
                                self.models_dir, self.recordings_dir, self.reports_dir, viewer_url)
         self._lock = threading.Lock()
-        self._pool: WorkerPool | None = None  # made at the first job, again after a crash
-        # Handing a job to the pool may wait seconds for the fork server to start (first job):
-        # not on the request's thread. One thread keeps the jobs in order.
-        self._sender = ThreadPoolExecutor(1, thread_name_prefix="robocal-job-send")
+        self._changed = threading.Condition(self._lock)  # a running job ended
         self._closing = False
-        self._in_flight: set[int] = set()
-        self._pids: dict[int, int] = {}  # job id -> the worker process running it
-        self._resent: set[int] = set()  # jobs sent again after a crash they never started in
+        self._queue: deque[int] = deque()
+        self._running: dict[int, Child | None] = {}  # None while its process starts
+        self._killing: dict[int, str] = {}  # job id -> why the service kills it
+        self._call_slots = threading.BoundedSemaphore(call_workers)
+        self._calls: set[Child] = set()
+        self._wake_r, self._wake_w = os.pipe()
         # Nothing runs a job this process did not queue: fail those a stop cut off.
         for job_id in store.fail_unfinished_jobs(db, reason=RESTART_REASON):
             self._publish(store.get_job(db, job_id=job_id))
+        self._supervisor = threading.Thread(target=self._supervise, name="robocal-jobs",
+                                            daemon=True)
+        self._supervisor.start()
+        # The fork server imports the solver once (seconds): now, not in the first request.
+        threading.Thread(target=warm_up, name="robocal-fork-server", daemon=True).start()
+
+    # --- the API's verbs ------------------------------------------------------------------------
 
     def submit(self, *, campaign_id: int, method: str = "minimax",
                kind: str = "calibration") -> Job:
-        """Check and queue a job; the job as queued."""
+        """Check and queue a job; the job as queued. DuplicateJob (a Conflict) if the same
+        calibration is queued or running."""
         if kind == "diagnosis":
             method = "diagnose"
         check_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
-        job = store.create_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
+        with self._lock:  # the check and the insert together: two clicks make one job
+            if self._closing:
+                raise store.Conflict("the service is stopping; no new jobs")
+            check_duplicate(self.db, kind=kind, campaign_id=campaign_id, method=method)
+            job = store.create_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
+            self._queue.append(job.id)
         self._publish(job)
-        self._send(job.id)
+        self._wake()
         return job
+
+    def cancel(self, job_id: int) -> Job:
+        """Take a queued job off the queue, or kill the process of a running one; both end
+        failed with reason "cancelled". Conflict if it is already done or failed."""
+        with self._lock:
+            job = self.get(job_id)
+            if job_id in self._queue:
+                self._queue.remove(job_id)
+            elif job_id in self._running:
+                self._killing.setdefault(job_id, CANCELLED)
+                child = self._running[job_id]
+                if child is not None:
+                    child.kill()
+                self._changed.wait_for(lambda: job_id not in self._running, CANCEL_WAIT_S)
+                return self.get(job_id)
+            elif job.state in ("done", "failed"):
+                raise store.Conflict(f"job {job_id} is already {job.state}"
+                                     + (f" ({job.reason})" if job.reason else ""))
+        self._fail(job_id, CANCELLED)
+        return self.get(job_id)
+
+    def call(self, target, *args):
+        """target(*args, report) in a short-lived worker process: its result or its exception.
+        CallTimedOut past call_timeout_s (the worker killed); Busy if no worker frees up."""
+        t0 = time.monotonic()
+        if not self._call_slots.acquire(timeout=self.call_timeout_s):
+            raise Busy(f"every worker for requests stayed busy for {self.call_timeout_s:g} s; "
+                       "try again later")
+        try:
+            if self._closing:
+                raise Busy("the service is stopping")
+            left = self.call_timeout_s - (time.monotonic() - t0)
+            try:
+                return call(target, args, max(left, 0.0), children=self._calls, lock=self._lock)
+            except TimeoutError:
+                raise CallTimedOut("the computation exceeded its wall-clock limit of "
+                                   f"{self.call_timeout_s:g} s") from None
+        finally:
+            self._call_slots.release()
 
     def get(self, job_id: int) -> Job:
         return store.get_job(self.db, job_id=job_id)
@@ -105,7 +205,8 @@ class Jobs:
     def worker_pid(self, job_id: int) -> int | None:
         """The pid of the worker process running this job (None unless it runs)."""
         with self._lock:
-            return self._pids.get(job_id)
+            child = self._running.get(job_id)
+            return None if child is None else child.pid
 
     def result_path(self, job_id: int, what: str) -> Path:
         """A file a done job wrote (model, recording, report); NotFound / Conflict otherwise."""
@@ -133,93 +234,117 @@ class Jobs:
         return figures[name]
 
     def shutdown(self) -> None:
-        """End the workers, then fail the jobs they had (a job cannot outlive the service)."""
+        """Kill every worker, then fail the jobs they had and those queued (a job cannot
+        outlive the service)."""
         with self._lock:
+            if self._closing:
+                return
             self._closing = True
-            pool, self._pool = self._pool, None
-            cut_off = sorted(self._in_flight)
-        self._sender.shutdown(wait=False, cancel_futures=True)
-        if pool is not None:
-            pool.close()
+            children = [c for c in self._running.values() if c is not None] + list(self._calls)
+            cut_off = sorted(self._running) + list(self._queue)
+            self._queue.clear()
+        for child in children:
+            child.kill()
+        self._wake()
+        self._supervisor.join(timeout=10)
+        for child in children:
+            child.reap()
         for job_id in cut_off:
             self._fail(job_id, RESTART_REASON)
+        os.close(self._wake_w)
+        os.close(self._wake_r)
+
+    # --- the supervisor thread ------------------------------------------------------------------
+
+    def _supervise(self) -> None:
+        while True:
+            with self._lock:
+                if self._closing:
+                    return
+                starting = []
+                while self._queue and len(self._running) < self.workers:
+                    job_id = self._queue.popleft()
+                    self._running[job_id] = None
+                    starting.append(job_id)
+            for job_id in starting:
+                self._start(job_id)
+            with self._lock:
+                children = {j: c for j, c in self._running.items() if c is not None}
+            now = time.monotonic()
+            deadlines = [c.started + self.timeout_s for c in children.values()]
+            timeout = max(0.0, min(deadlines) - now) if deadlines else None
+            handles = [self._wake_r] + [c.answers for c in children.values() if not c.ended] \
+                + [c.sentinel for c in children.values()]
+            try:
+                ready = set(wait(handles, timeout))
+            except OSError:
+                return  # the wake pipe closed under us: shutdown
+            if self._wake_r in ready:
+                os.read(self._wake_r, 4096)
+            now = time.monotonic()
+            for job_id, child in children.items():
+                if child.answers in ready:
+                    self._forward(child)
+                if child.sentinel in ready:
+                    self._finish(job_id, child)
+                elif now >= child.started + self.timeout_s:
+                    self._overrun(job_id, child, now)
+
+    def _start(self, job_id: int) -> None:
+        try:
+            child = Child(run_job, (self._setup, job_id), name=f"robocal-job-{job_id}")
+        except Exception as e:  # noqa: BLE001 - the job says why it cannot run
+            with self._lock:
+                self._running.pop(job_id, None)
+                self._changed.notify_all()
+            self._fail(job_id, f"no worker process could take it: {one_line(e)}")
+            return
+        with self._lock:
+            self._running[job_id] = child
+            if job_id in self._killing or self._closing:
+                child.kill()  # cancelled (or the service stops) while its process started
+
+    def _overrun(self, job_id: int, child: Child, now: float) -> None:
+        with self._lock:
+            self._killing.setdefault(
+                job_id, f"exceeded its wall-clock limit of {self.timeout_s:g} s")
+        child.kill()
+        killed = time.monotonic() - child.started - self.timeout_s
+        code = child.reap()
+        log.info("job %d killed %.1f ms after its wall-clock limit, gone after %.1f ms (%s)",
+                 job_id, killed * 1000, (time.monotonic() - child.started - self.timeout_s) * 1000,
+                 exit_reason(code))
+        self._finish(job_id, child)
+
+    def _forward(self, child: Child) -> None:
+        for kind, message in child.messages():
+            if kind == "report":
+                self.events.publish(message)
+
+    def _finish(self, job_id: int, child: Child) -> None:
+        # The worker wrote done or failed itself unless it was killed or died.
+        self._forward(child)
+        code = child.reap()
+        with self._lock:
+            reason = self._killing.pop(job_id, None)
+            closing = self._closing
+        if not closing:
+            self._fail(job_id, reason or f"its worker process died ({exit_reason(code)})")
+        with self._lock:
+            self._running.pop(job_id, None)
+            self._changed.notify_all()
+        self._wake()  # a slot is free
+
+    # --- helpers --------------------------------------------------------------------------------
+
+    def _wake(self) -> None:
+        try:
+            os.write(self._wake_w, b"x")
+        except OSError:
+            pass  # shut down
 
     def _publish(self, job: Job) -> None:
         self.events.publish(job_event(job))
-
-    def _send(self, job_id: int) -> None:
-        with self._lock:
-            if self._closing:
-                return  # left queued: the next start fails it
-            self._in_flight.add(job_id)
-            self._sender.submit(self._dispatch, job_id)
-
-    def _dispatch(self, job_id: int) -> None:
-        try:
-            pool = self._current_pool()
-            try:
-                future = pool.submit(self._setup, job_id)
-            except BrokenProcessPool:  # a worker died while idle: that pool refuses work
-                self._retire(pool)
-                pool = self._current_pool()
-                future = pool.submit(self._setup, job_id)
-        except Exception as e:  # noqa: BLE001 - the job says why it cannot run
-            if not self._closing:  # else shutdown() fails it
-                with self._lock:
-                    self._in_flight.discard(job_id)
-                self._fail(job_id, f"no worker process could take it: {one_line(e)}")
-            return
-        future.add_done_callback(partial(self._finished, job_id, pool))
-
-    def _current_pool(self) -> WorkerPool:
-        with self._lock:
-            if self._closing:
-                raise RuntimeError("the job pool is shut down")
-            if self._pool is None:
-                self._pool = WorkerPool(self.workers, self._reported)
-            return self._pool
-
-    def _reported(self, job_id: int, pid: int, event: dict) -> None:
-        with self._lock:
-            if event["state"] == "running":
-                self._pids[job_id] = pid
-            else:
-                self._pids.pop(job_id, None)
-        self.events.publish(event)
-
-    def _finished(self, job_id: int, pool: WorkerPool, future: Future) -> None:
-        # In the pool's thread: the worker wrote done or failed itself unless the call broke.
-        error = None if future.cancelled() else future.exception()
-        with self._lock:
-            self._in_flight.discard(job_id)
-            pid = self._pids.pop(job_id, None)
-            if self._closing or error is None:
-                return
-        if not isinstance(error, BrokenProcessPool):
-            self._fail(job_id, f"the worker could not run the job: {one_line(error)}")
-            return
-        self._retire(pool)
-        code, state = pool.died.get(pid), self.get(job_id).state
-        if state == "queued" and job_id not in self._resent:
-            self._resent.add(job_id)  # it never started: another job's worker died
-            self._send(job_id)
-        elif state == "queued":
-            self._fail(job_id, "worker processes died before it could start; see the "
-                               "service's log")
-        elif pid is None:
-            self._fail(job_id, "a worker process died while it ran")
-        elif code is None:
-            self._fail(job_id, "stopped: another job's worker process died, which ends the "
-                               "whole pool")
-        else:
-            self._fail(job_id, f"its worker process died ({_exit_reason(code)})")
-
-    def _retire(self, pool: WorkerPool) -> None:
-        # A broken pool stays broken: the next job gets a new one (and a new report queue).
-        with self._lock:
-            if self._pool is pool:
-                self._pool = None
-        pool.close()
 
     def _fail(self, job_id: int, reason: str) -> None:
         try:
@@ -231,13 +356,5 @@ class Jobs:
             pass  # it went done or failed meanwhile, or the store is closing: nothing to mark
 
 
-def _exit_reason(code: int) -> str:
-    if code < 0:
-        try:
-            return f"killed by {signal.Signals(-code).name}"
-        except ValueError:
-            return f"killed by signal {-code}"
-    return f"exit code {code}"
-
-
-__all__ = ["Job", "Jobs", "RESTART_REASON", "calibrate_campaign", "check_job", "check_method"]
+__all__ = ["Busy", "CANCELLED", "CallTimedOut", "DuplicateJob", "Job", "Jobs", "RESTART_REASON",
+           "calibrate_campaign", "check_job", "check_method"]

@@ -28,6 +28,12 @@ class Settings(BaseSettings):
     # Worker processes for calibration and diagnosis jobs, each running one job at a time
     # (CPU-bound numpy); jobs beyond them wait queued.
     job_workers: int = Field(2, ge=1, le=64)
+    # Wall clock a job may run before its worker process is killed and the job failed.
+    job_timeout_s: float = Field(900.0, gt=0)
+    # Evaluations and charts run in short-lived worker processes: this many at once, each
+    # killed (504) past its limit.
+    call_workers: int = Field(4, ge=1, le=64)
+    call_timeout_s: float = Field(60.0, gt=0)
     # A running rerun viewer to stream calibration recordings to live, e.g.
     # rerun+http://127.0.0.1:9876/proxy; the .rrd files are written either way.
     rerun_viewer_url: str | None = None

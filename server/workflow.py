@@ -11,6 +11,7 @@ from solver.calibrate import Calibration, calibrate
 from solver.diagnose import diagnose as run_diagnosis
 from solver.effects import Inputs, prepare
 from solver.extended import predict_extended
+from solver.finite import require_inputs
 from solver.fit_errors import calibration_errors
 from solver.kinematics import Layout, predict
 from solver.measurements import Measurements
@@ -200,6 +201,7 @@ def evaluate(model: ModelFile, meas: Measurements) -> dict:
                         f"({', '.join(model.targets)})")
     if model.robot.n_joints != meas.q.shape[1]:
         raise DataError("the data's joint count differs from the model's robot")
+    require_inputs(meas.q, meas.xyz)  # before any arithmetic on them: no overflow warnings
     names = meas.target_names
     order = [list(model.targets).index(t) for t in names]
     pred = model_predict(model, meas.q, _pose_column(meas.time_s), _pose_column(meas.temp_c))

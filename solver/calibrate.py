@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import identifiability as ident
+from .finite import require_inputs
 from .identify import fit_targets, pose_fit, pose_residuals, pose_weight, register, start_fit
 from .kinematics import Layout, predict_with_jacobian
 from .minimax import minimax
@@ -66,6 +67,7 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
     """
     t0 = time.perf_counter()
     name, rows = parse_method(method, list(target_names))
+    require_inputs(q, meas, targets, base_guess)
     if name == "ls-pose" and len(target_names) < 3:
         raise ValueError("ls-pose needs at least three targets")
     if name == "nominal":

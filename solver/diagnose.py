@@ -18,6 +18,7 @@ from . import identifiability as ident
 from . import vocabulary
 from .effects import Extension, Inputs, point_shift, prepare
 from .extended import extension_rows, fit_extended, predict_extended
+from .finite import finite, require_inputs
 from .motion import visit_order
 from .identify import Problem, register
 from .kinematics import predict_rows
@@ -84,7 +85,7 @@ def noise_floor(meas: np.ndarray, inputs: Inputs) -> float | None:
             ok = np.isfinite(d) & np.all(np.isfinite(A), axis=1)
             if ok.sum() < 10:
                 continue
-            coef, *_ = np.linalg.lstsq(A[ok], d[ok], rcond=None)
+            coef, *_ = np.linalg.lstsq(finite(A[ok], "the noise floor's design"), finite(d[ok], "the noise floor's distances"), rcond=None)
             r = d[ok] - A[ok] @ coef
             var.append(np.sum(r * r) / (ok.sum() - A.shape[1]) / 2.0)
     return float(np.sqrt(3.0 * np.mean(var))) if var else None
@@ -184,7 +185,7 @@ class Diagnoser:
         r = predict_extended(self.prob.layout, x, ee, sub)[mask] - meas[mask]  # (N, 3)
         idx = np.flatnonzero(self.free)
         _, Jt = predict_rows(self.prob.layout, x, sub.q, mask, idx)  # (P, N, 3)
-        Q, _ = np.linalg.qr(Jt.reshape(len(idx), -1).T)
+        Q, _ = np.linalg.qr(finite(Jt.reshape(len(idx), -1).T, "an effect's Jacobian"))
         Q = Q.reshape(-1, 3, Q.shape[1])  # (N, 3, P)
         t = sub.time_s[mask]
         order = np.argsort(t, kind="stable")
@@ -209,7 +210,7 @@ class Diagnoser:
             G = ZZ[n] - QZ[n].T @ QZ[n]
             b = Zr[n] - QZ[n].T @ Qr
             try:
-                gain = float(b @ np.linalg.solve(G + 1e-12 * np.trace(G) * np.eye(6), b))
+                gain = float(b @ np.linalg.solve(finite(G + 1e-12 * np.trace(G) * np.eye(6), "a time shift's normal matrix"), finite(b, "a time shift's gradient")))
             except np.linalg.LinAlgError:
                 continue
             if gain > best:
@@ -313,6 +314,7 @@ def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=N
              base_guess=None, log=None, screen_outliers=True, pose_ids=None) -> Diagnosis:
     """Baseline geometric calibration, candidate effects, selection and the extended model."""
     t0 = time.perf_counter()
+    require_inputs(q, meas, targets, base_guess)
     clock = {}
     # gross outliers (solver.screen) are missing from here on: fits, noise floor, figures
     screening = screen_readings(robot, targets, target_names, q, meas, time_s, temp_c,

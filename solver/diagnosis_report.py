@@ -6,6 +6,7 @@ import numpy as np
 
 from .effects import Extension, joint_basis, joint_offsets, point_shift, prepare
 from .extended import predict_extended
+from .finite import finite
 from .kinematics import predict_rows
 
 
@@ -78,7 +79,7 @@ def figure_series(diag, steps, exts, x) -> list[dict]:
     dq = joint_offsets(exts, bases, layout.robot.n_joints)
     idx = np.flatnonzero(diag.free)
     p, Jt, Jq = predict_rows(layout, x, inputs.q, mask, idx, dq=dq, joint_cols=True)
-    Q, _ = np.linalg.qr(Jt.reshape(len(idx), -1).T)
+    Q, _ = np.linalg.qr(finite(Jt.reshape(len(idx), -1).T, "an effect's Jacobian"))
     meas = prob.meas[mask]
     r_after = predict_extended(layout, x, exts, inputs, bases)[mask] - meas
     out = []

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .finite import finite
 from .kinematics import Layout, joint_frames
 from .motion import last_motion
 
@@ -109,7 +110,7 @@ def select_independent(B: np.ndarray, tol: float = 1e-6) -> np.ndarray:
     live = np.flatnonzero(norms > tol * max(norms.max(), 1e-300))
     if len(live) == 0:
         return keep
-    _, R, piv = qr(A[:, live] / norms[live], mode="economic", pivoting=True)
+    _, R, piv = qr(finite(A[:, live] / norms[live], "an effect's basis"), mode="economic", pivoting=True)
     rank = int(np.sum(np.abs(np.diag(R)) > tol * abs(R[0, 0])))
     keep[live[piv[:rank]]] = True
     return keep

@@ -7,6 +7,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from .finite import finite
 from .kinematics import Layout, predict_rows, predict_with_jacobian
 
 # Singular values of the unit-norm Jacobian columns below this fraction of the largest count as
@@ -73,7 +74,8 @@ def choose_free(R: np.ndarray, order, candidates: np.ndarray, tol: float) -> np.
     live = [c for c, n in zip(cols, norms) if n > 0]
     if not live:
         return np.zeros(R.shape[1], dtype=bool)
-    s = np.linalg.svd(R[:, live] / np.linalg.norm(R[:, live], axis=0), compute_uv=False)
+    s = np.linalg.svd(finite(R[:, live] / np.linalg.norm(R[:, live], axis=0),
+                             "the identification Jacobian"), compute_uv=False)
     rank = int(np.sum(s > tol * s[0]))
     kept = np.zeros(R.shape[1], dtype=bool)
     basis = np.zeros((R.shape[0], 0))
@@ -97,7 +99,9 @@ def _explain(R: np.ndarray, j: int, kept: np.ndarray, names) -> str:
     """Name the kept parameters that the redundant column j is mostly made of."""
     idx = np.flatnonzero(kept)
     A = R[:, idx] / np.linalg.norm(R[:, idx], axis=0)
-    coef, *_ = np.linalg.lstsq(A, R[:, j] / np.linalg.norm(R[:, j]), rcond=None)
+    coef, *_ = np.linalg.lstsq(finite(A, "the identification Jacobian"),
+                              finite(R[:, j] / np.linalg.norm(R[:, j]), "a parameter's column"),
+                              rcond=None)
     top = idx[np.argsort(-np.abs(coef))[:3]]
     top = [names[i] for i, c in zip(top, np.sort(-np.abs(coef))[:3]) if -c > 0.05]
     return "redundant with " + ", ".join(top) if top else "no effect on the measured SMRs"
@@ -137,7 +141,7 @@ def _structural(robot, names, targets, candidates, rows, weight) -> Identifiabil
         J = J[:, list(rows)].reshape(-1, layout.n_params)
     else:
         J = pose_residuals(p, p, J, weight)[1].reshape(-1, layout.n_params)
-    R = np.linalg.qr(J, mode="r")
+    R = np.linalg.qr(finite(J, "the identification Jacobian"), mode="r")
     kept = choose_free(R, preference_order(layout), candidates, STRUCTURAL_TOL)
     names_ = layout.names()
     fixed = {names_[j]: _explain(R, j, kept, names_) for j in np.flatnonzero(candidates & ~kept)}
@@ -149,7 +153,7 @@ def condition_number(J: np.ndarray) -> float:
     """Condition number of J after scaling every column to unit norm."""
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
-    s = np.linalg.svd(J / norms, compute_uv=False)
+    s = np.linalg.svd(finite(J / norms, "the identification Jacobian"), compute_uv=False)
     return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
 
 
@@ -169,7 +173,7 @@ def check_data(A: np.ndarray, free: np.ndarray, names, n_rows: int, n_poses: int
         dead = [names[i] for i, n in zip(idx, norms) if n == 0]
         raise NotIdentifiable("the data does not move with: " + ", ".join(dead))
     As = A / np.outer(norms, norms)
-    s = np.sqrt(np.clip(np.linalg.eigvalsh(As)[::-1], 0.0, None))
+    s = np.sqrt(np.clip(np.linalg.eigvalsh(finite(As, "the normal matrix"))[::-1], 0.0, None))
     cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
     if cond > MAX_CONDITION:
         V = np.linalg.eigh(As)[1]

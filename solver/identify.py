@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .finite import finite, require_inputs
 from .kinematics import Layout, predict, predict_rows
 from .lm import Normal, damped_step, levenberg_marquardt, scaled
 from .normal import PointNormal
@@ -66,6 +68,7 @@ def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None,
     the closed-form base and fit base and SMRs with everything else.
     """
     targets = np.asarray(targets, dtype=float)
+    require_inputs(q, meas, targets, base_guess)
     if base_guess is None:
         lay0 = Layout(robot, np.eye(4), tuple(names))
         some = spread(len(q), REGISTER_POSES)
@@ -132,7 +135,7 @@ class SumOfSquares:
         """Move the start by the Gauss-Newton step of ne, the normal equations of a subset of
         the poses there, if they identify the free parameters well; whether it moved."""
         As, gs, d = scaled(ne.A, ne.g)
-        w = np.linalg.eigvalsh(As)
+        w = np.linalg.eigvalsh(finite(As, "the normal matrix"))
         if w[0] <= w[-1] / START_CONDITION ** 2:
             return False
         self.x0[self.idx] += damped_step(As, gs, d)
@@ -221,7 +224,7 @@ def pose_residuals(pred, meas, J, weight):
     ebar = e.mean(axis=1)
     dd = np.einsum("mki,mki->m", d, d)
     M = dd[:, None, None] * np.eye(3) - np.einsum("mki,mkj->mij", d, d)
-    Minv = np.linalg.inv(M)
+    Minv = np.linalg.inv(finite(M, "the pose fit's normal matrix"))
     w = np.einsum("mij,mj->mi", Minv, np.cross(d, e - ebar[:, None, :]).sum(axis=1))
     Jbar = J.mean(axis=1)
     # d x J for each parameter column: cross along axis -2 of (m, K, 3, P)

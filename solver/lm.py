@@ -20,6 +20,8 @@ from typing import Callable
 
 import numpy as np
 
+from .finite import finite
+
 # A step whose actual decrease is within this fraction of the predicted one keeps its Jacobian.
 REUSE_RHO = 0.9
 # A Jacobian taken where the cost was within this fraction of the current one certifies a minimum.
@@ -74,7 +76,8 @@ def scaled(A: np.ndarray, g: np.ndarray):
 
 def damped_step(As: np.ndarray, gs: np.ndarray, d: np.ndarray, lam: float = LAMBDA0) -> np.ndarray:
     """The Levenberg-Marquardt step -(A + lam diag(A))^-1 g from scaled(A, g)."""
-    return -np.linalg.solve(As + lam * np.eye(len(d)), gs) / d
+    return -np.linalg.solve(finite(As + lam * np.eye(len(d)), "the normal equations"),
+                            finite(gs, "the gradient")) / d
 
 
 def near_by_cost(cost_at_jacobian: float, cost: float) -> bool:

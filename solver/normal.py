@@ -19,6 +19,7 @@ import math
 import numpy as np
 from scipy.linalg.blas import dsyrk
 
+from .finite import finite
 from .kinematics import Layout, predict
 from .lm import Normal
 from .rigid import kabsch
@@ -136,7 +137,7 @@ def smr_frame(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Frame at the SMRs' centroid along their principal axes: ([V | centroid] (3, 4), t in it)."""
     c = t.mean(axis=0)
     d = t - c
-    _, V = np.linalg.eigh(d.T @ d)
+    _, V = np.linalg.eigh(finite(d.T @ d, "the SMR frame's scatter"))
     if np.linalg.det(V) < 0:
         V[:, 0] = -V[:, 0]
     return np.column_stack([V, c]), d @ V
@@ -235,7 +236,7 @@ class PointNormal:
         Usum = np.zeros((len(tc), 6, ng))  # per SMR, the sum of U over the poses that measured it
         if self.full.any():
             Uf = U if self.full.all() else U[:, :, self.full]
-            C = dsyrk(1.0, Uf.reshape(ng + 1, -1).T, trans=1)  # fills the upper triangle only
+            C = dsyrk(1.0, finite(Uf.reshape(ng + 1, -1).T, "the twists"), trans=1)  # fills the upper triangle only
             C += C.T
             C.flat[:: ng + 2] *= 0.5
             A += C[:ng, :ng]
@@ -243,7 +244,7 @@ class PointNormal:
             Usum += Uf[:ng].sum(axis=2).T * inv[:, None]
         for present, sel in self.partial:
             Us = U[:ng, :, sel]
-            wv, V = np.linalg.eigh(_weight(tc[present]))
+            wv, V = np.linalg.eigh(finite(_weight(tc[present]), "the SMR weight"))
             W = np.matmul((V * np.sqrt(np.clip(wv, 0.0, None))).T * inv, Us).reshape(ng, -1)
             A += W @ W.T
             g += Us.reshape(ng, -1) @ b[:, sel].ravel()

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .finite import finite
+
 # Relative gain an exchange must bring to be taken: stops cycling between equal designs.
 EXCHANGE_TOL = 1e-9
 MAX_SWEEPS = 50
@@ -29,13 +31,13 @@ def information(J_per_pose: np.ndarray) -> np.ndarray:
 
 
 def _log_det(M: np.ndarray) -> np.ndarray:
-    sign, ld = np.linalg.slogdet(M)
+    sign, ld = np.linalg.slogdet(finite(M, "the information matrix"))
     return np.where(sign > 0, ld, -np.inf)
 
 
 def _o5(M: np.ndarray) -> np.ndarray:
     # eigenvalues of J'J are the squared singular values: sigma_min^2 / sigma_max
-    lam = np.linalg.eigvalsh(M)
+    lam = np.linalg.eigvalsh(finite(M, "the information matrix"))
     return np.clip(lam[..., 0], 0.0, None) / np.sqrt(lam[..., -1])
 
 
@@ -47,7 +49,7 @@ def _scores(criterion: str, M: np.ndarray, J: np.ndarray, A: np.ndarray) -> np.n
     if criterion == "O5":
         return _o5(M + A)
     # determinant lemma: log det(M + J'J) = log det M + log det(I + J M^-1 J'), rows << P
-    G = J @ np.linalg.inv(M)
+    G = J @ np.linalg.inv(finite(M, "the information matrix"))
     S = np.eye(J.shape[1]) + G @ J.transpose(0, 2, 1)
     return _log_det(M[None])[0] + _log_det(S)
 
@@ -98,7 +100,7 @@ def observability_indices(J: np.ndarray) -> dict[str, float]:
     J = J.reshape(-1, J.shape[-1])
     rows, P = J.shape
     s = np.zeros(P)
-    sv = np.linalg.svd(J, compute_uv=False)
+    sv = np.linalg.svd(finite(J, "the identification Jacobian"), compute_uv=False)
     s[: sv.size] = sv
     with np.errstate(divide="ignore"):
         logs = np.log(s)

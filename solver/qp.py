@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .finite import finite
+
 
 @dataclass
 class QPSolution:
@@ -48,8 +50,8 @@ def primal_dual(H, g, F, phi, A, c, tol=1e-10, max_iter=20000) -> QPSolution:
     K, L = g.shape[0], A.shape[0]
     G = np.vstack([g, A])
     b = np.concatenate([F - phi, c])
-    chol = np.linalg.cholesky(H)
-    W = np.linalg.solve(chol, G.T)  # H^-1 = chol^-T chol^-1, so G H^-1 G' = W' W
+    chol = np.linalg.cholesky(finite(H, "the QP's Hessian"))
+    W = np.linalg.solve(chol, finite(G.T, "the QP's constraints"))  # H^-1 = chol^-T chol^-1, so G H^-1 G' = W' W
     Q = W.T @ W
     # Rescaling a constraint row leaves the QP unchanged and evens out the dual's curvature.
     s = np.ones(K + L)
@@ -58,7 +60,7 @@ def primal_dual(H, g, F, phi, A, c, tol=1e-10, max_iter=20000) -> QPSolution:
         s[K:] = np.sqrt(ref / np.maximum(np.diag(Q)[K:], 1e-300 * ref))
     Q = Q * s[:, None] * s[None, :]
     b = b * s
-    step = 1.0 / max(np.linalg.eigvalsh(Q)[-1], 1e-300)
+    step = 1.0 / max(np.linalg.eigvalsh(finite(Q, "the QP's dual Hessian"))[-1], 1e-300)
 
     def project(v):
         return np.concatenate([project_simplex(v[:K]), np.maximum(v[K:], 0.0)])
@@ -82,7 +84,7 @@ def primal_dual(H, g, F, phi, A, c, tol=1e-10, max_iter=20000) -> QPSolution:
             viol = float(np.max(lin[K:], initial=0.0))
             if primal - dual <= tol * scale and viol <= tol * scale:
                 break
-    dx = -np.linalg.solve(chol.T, W @ (s * nu))
+    dx = -np.linalg.solve(chol.T, finite(W @ (s * nu), "the QP's step"))
     return QPSolution(dx, _dphi(dx, g, F, phi), nu[:K], s[K:] * nu[K:], it)
 
 

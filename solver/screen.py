@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from .finite import finite, require_inputs
 from .identifiability import NotIdentifiable
 
 ALPHA = 0.01  # chance of any false flag on a clean campaign, by the Gaussian reference
@@ -127,7 +128,7 @@ def distance_residuals(meas, keep, time_s=None, temp_c=None) -> dict:
                 A, cols = A[:, :1], cols[:1]
             if ok.sum() < 3:
                 continue
-            coef, *_ = np.linalg.lstsq(A[ok], d[ok], rcond=None)
+            coef, *_ = np.linalg.lstsq(finite(A[ok], "the screening's drift design"), finite(d[ok], "the screening's distances"), rcond=None)
             out[(i, j)] = d - A @ coef
     return out
 
@@ -261,7 +262,7 @@ def leverage(J: np.ndarray) -> np.ndarray:
     """Per reading, the mean diagonal of its 3x3 block of the hat matrix of J (readings x 3, P);
     parameters the data cannot separate drop out with their null singular values."""
     J = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)
-    U, sv, _ = np.linalg.svd(J, full_matrices=False)
+    U, sv, _ = np.linalg.svd(finite(J, "the screening's Jacobian"), full_matrices=False)
     U = U[:, sv > sv[0] * 1e-9]
     return np.sum(U * U, axis=1).reshape(-1, 3).mean(axis=1)
 
@@ -285,5 +286,6 @@ def geometric_fit(robot, targets, target_names, q, base_guess=None):
 def screen_readings(robot, targets, target_names, q, meas, time_s=None, temp_c=None,
                     base_guess=None, alpha=ALPHA) -> Screening:
     """Screen a campaign with the geometric (ls-sum) model: the one call the commands make."""
+    require_inputs(q, meas, targets, base_guess)
     return screen(geometric_fit(robot, targets, target_names, q, base_guess), q, meas,
                   time_s, temp_c, alpha)

@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .finite import finite
+
 ALPHA = 0.003  # nominal family-wise false-alarm rate per round of selection
 RESAMPLES = 2000  # sign-flip resamples of the null (0.997 quantile from its 6 largest)
 RANK_TOL = 1e-9
@@ -43,7 +45,7 @@ def _pinv_sym(G: np.ndarray) -> np.ndarray:
     """Pseudo-inverse of a symmetric positive semi-definite Gram matrix, rank-truncated."""
     if G.shape[0] == 0:
         return G
-    w, V = np.linalg.eigh(G)
+    w, V = np.linalg.eigh(finite(G, "the information matrix"))
     keep = w > RANK_TOL * max(w[-1], 1e-300)
     return (V[:, keep] / w[keep]) @ V[:, keep].T
 

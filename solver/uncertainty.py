@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .finite import finite
+
 CLUSTERED = "pose-clustered sandwich (CR2)"
 # eigenvalues of a pose's residual-maker block below this count as absorbed whole by the fit
 ABSORBED = 1e-9
@@ -45,7 +47,7 @@ class Rows:
 
 def _bread(rows: Rows) -> np.ndarray:
     """(G'J)^-1, the map from the scores to the parameters."""
-    return np.linalg.inv(rows.G.T @ rows.J)
+    return np.linalg.inv(finite(rows.G.T @ rows.J, "the covariance's bread"))
 
 
 def plain(rows: Rows) -> np.ndarray:
@@ -85,7 +87,7 @@ def clustered(rows: Rows) -> np.ndarray:
         JC = (J.reshape(-1, P) @ C).reshape(J.shape)
         H = np.einsum("bip,bjp->bij", JA, G)
         M = np.eye(n) - H - H.transpose(0, 2, 1) + np.einsum("bip,bjp->bij", JC, J)
-        w, V = np.linalg.eigh(0.5 * (M + M.transpose(0, 2, 1)))
+        w, V = np.linalg.eigh(finite(0.5 * (M + M.transpose(0, 2, 1)), "the residual-maker blocks"))
         inv_root = np.where(w > ABSORBED, 1.0 / np.sqrt(np.clip(w, ABSORBED, None)), 0.0)
         u = np.einsum("bij,bj->bi", V, inv_root * np.einsum("bji,bj->bi", V, r))
         score = np.einsum("bnp,bn->bp", G, u)

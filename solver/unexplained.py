@@ -21,6 +21,7 @@ import numpy as np
 
 from .effects import (Extension, Inputs, gravity_basis, gravity_in_base, joint_basis,
                       point_basis, point_shift)
+from .finite import finite
 from .kinematics import Layout, joint_frames, predict_rows
 
 ABOVE_FLOOR = 1.5  # held-out RMS over the noise floor above which the remainder is reported
@@ -116,7 +117,7 @@ class Fields:
                 _, J = point_shift(e, s, p, origin if origin is not None else self.centroid)
                 cols.append(J.reshape(J.shape[0], -1).T)
         A = np.concatenate(cols, axis=1)
-        U, sv, _ = np.linalg.svd(A, full_matrices=False)
+        U, sv, _ = np.linalg.svd(finite(A, "the residual basis"), full_matrices=False)
         self.Q = U[:, sv > 1e-9 * sv[0]]
 
     def channels(self, kind: str) -> list[tuple[str, np.ndarray]]:
@@ -164,7 +165,8 @@ def gravity_terms(G: np.ndarray) -> np.ndarray:
     G = G - G.mean(axis=0)
     scale = np.linalg.norm(G, axis=0)
     live = scale > 1e-9 * scale.max()
-    U, sv, _ = np.linalg.svd(G[:, live] / scale[live], full_matrices=False)
+    U, sv, _ = np.linalg.svd(finite(G[:, live] / scale[live], "the residual design"),
+                          full_matrices=False)
     share = np.cumsum(sv**2) / np.sum(sv**2)
     return U[:, : min(GRAVITY_TERMS, int(np.searchsorted(share, 0.99)) + 1)]
 
@@ -302,7 +304,7 @@ class HeldOut:
         self.parts = []
         for t in self.tests:
             Qt = Q[t]
-            inv = np.linalg.pinv(self.QtQ - Qt.T @ Qt)
+            inv = np.linalg.pinv(finite(self.QtQ - Qt.T @ Qt, "the held-out Gram matrix"))
             self.parts.append((inv, inv @ (self.Qty - Qt.T @ y[t])))
         self.base = self.error(None)
 
@@ -318,7 +320,7 @@ class HeldOut:
                 Ft = F[t]
                 Gqf = QF - Qt.T @ Ft
                 S = FF - Ft.T @ Ft - Gqf.T @ inv @ Gqf
-                cf = np.linalg.lstsq(S, Fy - Ft.T @ yt - Gqf.T @ cq, rcond=1e-10)[0]
+                cf = np.linalg.lstsq(finite(S, "the held-out system"), Fy - Ft.T @ yt - Gqf.T @ cq, rcond=1e-10)[0]
                 pred = Qt @ (cq - inv @ (Gqf @ cf)) + Ft @ cf
             e = yt - pred
             err += float(e @ e)
@@ -350,7 +352,7 @@ def per_pose_share(r: np.ndarray, p: np.ndarray, pose: np.ndarray, floor: float 
             A[:, a, a] = 1.0
             A[:, :, 3 + a] = np.cross(e, v)
         A = A.reshape(-1, 6)
-        U, sv, _ = np.linalg.svd(A, full_matrices=False)
+        U, sv, _ = np.linalg.svd(finite(A, "the residual basis"), full_matrices=False)
         U = U[:, sv > 1e-9 * sv[0]]
         proj = U.T @ r[sel].ravel()
         took += float(proj @ proj)

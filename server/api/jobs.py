@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import json
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 from fastapi.responses import FileResponse
 
-from server.job_queue import Job
+from server.job_queue import DuplicateJob, Job
 
+from . import problems
 from .deps import Authorized, JobsDep
 from .schemas import FigurePublic, JobCreate, JobPublic
 
@@ -30,10 +31,30 @@ def _public(job: Job) -> JobPublic:
                      finished_at=job.finished_at, **urls)
 
 
-@router.post("", status_code=202, dependencies=[Authorized])
-def create_job(body: JobCreate, jobs: JobsDep) -> JobPublic:
-    """Queue a calibration or diagnosis of a done campaign; poll GET /jobs/{id} or /api/events."""
-    return _public(jobs.submit(campaign_id=body.campaign_id, method=body.method, kind=body.kind))
+PROBLEM = {"content": {"application/problem+json": {}}}
+
+
+@router.post("", status_code=202, dependencies=[Authorized],
+             responses={409: {"description": "The campaign is not done, or the same "
+                              "calibration (campaign and method) is queued or running; "
+                              "`job_id` names that job", **PROBLEM}})
+def create_job(body: JobCreate, jobs: JobsDep, request: Request) -> JobPublic:
+    """Queue a calibration or diagnosis of a done campaign; poll GET /jobs/{id} or /api/events.
+    A second calibration of a campaign with the same method while one is queued or running is
+    refused (409); another method is accepted."""
+    try:
+        return _public(jobs.submit(campaign_id=body.campaign_id, method=body.method,
+                                   kind=body.kind))
+    except DuplicateJob as e:
+        return problems.problem(request, 409, str(e), job_id=e.job_id)
+
+
+@router.post("/{job_id}/cancel", dependencies=[Authorized],
+             responses={409: {"description": "The job is already done or failed", **PROBLEM}})
+def cancel_job(job_id: int, jobs: JobsDep) -> JobPublic:
+    """Cancel a job: a queued one leaves the queue, a running one's worker process is killed;
+    either ends failed with reason "cancelled" (409 if it already ended)."""
+    return _public(jobs.cancel(job_id))
 
 
 @router.get("")

@@ -1,0 +1,228 @@
+"""Jobs under limits: a wall-clock limit that kills, cancel of queued and running jobs, one job
+killed while another runs on, duplicate calibrations refused, heavy reads in bounded workers,
+and numerics that refuse non-finite data instead of hanging the service."""
+
+from __future__ import annotations
+
+import logging
+import sqlite3
+import time
+
+import pytest
+
+import server.app
+from server.cli import main as robocal
+from server.job_queue import CANCELLED, Jobs
+from tests.server.api.conftest import serve, settings_for, wait_for
+
+
+class SpiedJobs(Jobs):
+    """Jobs that the test can reach (for the worker pids)."""
+
+    made: list[Jobs] = []
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        SpiedJobs.made.append(self)
+
+
+@pytest.fixture(scope="module")
+def csv_text(tmp_path_factory):
+    path = tmp_path_factory.mktemp("sim") / "meas.csv"
+    assert robocal(["simulate", "--poses", "60", "--seed", "3", "--out", str(path)]) == 0
+    return path.read_text()
+
+
+def served(tmp_path, **settings):
+    """A live server with these settings; its Jobs is the last of SpiedJobs.made."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(server.app, "Jobs", SpiedJobs)
+        yield from serve(settings_for(tmp_path).model_copy(update=settings))
+
+
+@pytest.fixture
+def make_live(tmp_path):
+    """make_live(**settings): a live server with these settings, stopped after the test."""
+    servers = []
+
+    def make(**settings):
+        servers.append(served(tmp_path, **settings))
+        return next(servers[-1])
+
+    yield make
+    for s in servers:
+        next(s, None)  # runs the rest of serve(): stops the server
+
+
+@pytest.fixture
+def one_worker(make_live):
+    return make_live(job_workers=1)
+
+
+@pytest.fixture
+def two_workers(make_live):
+    return make_live(job_workers=2)
+
+
+def campaign(live, csv_text) -> int:
+    r = live.client.post("/api/measurements/import", content=csv_text)
+    assert r.status_code == 201, r.text
+    return r.json()["id"]
+
+
+def queue(live, cid: int, **body) -> dict:
+    r = live.client.post("/api/jobs", json={"campaign_id": cid, **body})
+    assert r.status_code == 202, r.text
+    return r.json()
+
+
+def running_pid(job_id: int) -> int:
+    jobs = SpiedJobs.made[-1]
+    return wait_for(lambda: jobs.worker_pid(job_id), lambda pid: pid is not None, timeout=60,
+                    interval=0.01)
+
+
+def finished(live, job_id: int, timeout=120) -> dict:
+    return wait_for(lambda: live.client.get(f"/api/jobs/{job_id}").json(),
+                    lambda j: j["state"] in ("done", "failed"), timeout=timeout, interval=0.02)
+
+
+def gone(pid: int) -> bool:
+    """The process has exited (a zombie waiting for its reaper counts as gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+def test_a_job_past_its_wall_clock_limit_is_killed_and_failed_with_the_reason(
+        make_live, csv_text, caplog):
+    live = make_live(job_timeout_s=1.5)
+    c = live.client
+    cid = campaign(live, csv_text)
+    caplog.set_level(logging.INFO, logger="robocal.jobs")
+    job = queue(live, cid, kind="diagnosis")  # a diagnosis takes longer than 1.5 s
+    pid = running_pid(job["id"])
+    # The service keeps answering while the job runs: the work is in another process.
+    answers = []
+    while not gone(pid):
+        t0 = time.perf_counter()
+        assert c.get("/api/jobs").status_code == 200
+        assert c.get("/api/campaigns").status_code == 200
+        answers.append(time.perf_counter() - t0)
+        time.sleep(0.05)
+    job = wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(),
+                   lambda j: j["state"] == "failed", timeout=10, interval=0.02)
+    assert job["reason"] == "exceeded its wall-clock limit of 1.5 s", job
+    killed = [r.getMessage() for r in caplog.records if "after its wall-clock limit" in r.message]
+    assert len(killed) == 1, killed
+    print(f"\n{killed[0]}; {len(answers)} health+list reads while it ran, slowest "
+          f"{max(answers) * 1000:.0f} ms")
+
+
+def test_cancel_a_queued_and_a_running_job(one_worker, csv_text):
+    c = one_worker.client
+    cid = campaign(one_worker, csv_text)
+    first = queue(one_worker, cid, kind="diagnosis")
+    second = queue(one_worker, cid, method="ls-sum")  # waits: one worker
+    pid = running_pid(first["id"])
+    assert one_worker.anonymous.post(f"/api/jobs/{second['id']}/cancel").status_code == 401
+
+    r = c.post(f"/api/jobs/{second['id']}/cancel")
+    assert r.status_code == 200, r.text
+    assert (r.json()["state"], r.json()["reason"], r.json()["started_at"]) == \
+        ("failed", CANCELLED, None)
+
+    t0 = time.perf_counter()
+    r = c.post(f"/api/jobs/{first['id']}/cancel")
+    print(f"\ncancel of a running job answered in {(time.perf_counter() - t0) * 1000:.0f} ms")
+    assert r.status_code == 200, r.text
+    assert (r.json()["state"], r.json()["reason"]) == ("failed", CANCELLED)
+    assert gone(pid)
+
+    again = c.post(f"/api/jobs/{first['id']}/cancel")
+    assert again.status_code == 409, again.text
+    assert again.headers["content-type"] == "application/problem+json"
+    assert "already failed" in again.json()["detail"]
+    assert c.post("/api/jobs/999999/cancel").status_code == 404
+    # The queue goes on: a new job runs to the end.
+    assert finished(one_worker, queue(one_worker, cid, method="ls-sum")["id"])["state"] == "done"
+
+
+def test_killing_one_job_leaves_the_other_running(two_workers, csv_text):
+    cid = campaign(two_workers, csv_text)
+    doomed = queue(two_workers, cid, kind="diagnosis")
+    other = queue(two_workers, cid, method="minimax")
+    doomed_pid, other_pid = running_pid(doomed["id"]), running_pid(other["id"])
+    assert doomed_pid != other_pid
+    assert two_workers.client.post(f"/api/jobs/{doomed['id']}/cancel").json()["state"] == \
+        "failed"
+    assert not gone(other_pid) or finished(two_workers, other["id"])["state"] == "done"
+    assert finished(two_workers, other["id"])["state"] == "done"
+    assert finished(two_workers, doomed["id"])["reason"] == CANCELLED
+
+
+def test_a_duplicate_calibration_is_refused_while_queued_or_running(one_worker, csv_text):
+    c = one_worker.client
+    cid = campaign(one_worker, csv_text)
+    blocker = queue(one_worker, cid, kind="diagnosis")  # holds the one worker
+    first = queue(one_worker, cid, method="minimax")  # queued behind it
+    r = c.post("/api/jobs", json={"campaign_id": cid, "method": "minimax"})
+    assert r.status_code == 409, r.text
+    assert r.headers["content-type"] == "application/problem+json"
+    assert r.json()["job_id"] == first["id"] and f"job {first['id']}" in r.json()["detail"]
+    other = queue(one_worker, cid, method="ls-sum")  # another method is accepted
+    for job in (blocker, first, other):
+        c.post(f"/api/jobs/{job['id']}/cancel")
+    # Once the first has ended, the same calibration may be asked for again.
+    assert c.post("/api/jobs", json={"campaign_id": cid, "method": "minimax"}).status_code == 202
+
+
+def test_a_chart_past_its_limit_answers_504_and_the_service_goes_on(make_live, csv_text):
+    live = make_live(call_timeout_s=0.2)
+    c = live.client
+    job = finished(live, queue(live, campaign(live, csv_text), method="ls-sum")["id"])
+    assert job["state"] == "done", job
+    t0 = time.perf_counter()
+    r = c.get(f"/api/charts/jobs/{job['id']}/table3")  # every method: far beyond 0.2 s
+    took = time.perf_counter() - t0
+    print(f"\ntable3 under a 0.2 s limit answered {r.status_code} in {took * 1000:.0f} ms")
+    assert r.status_code == 504, r.text
+    assert r.headers["content-type"] == "application/problem+json"
+    assert "wall-clock limit of 0.2 s" in r.json()["detail"]
+    assert not SpiedJobs.made[-1]._calls  # its worker is gone
+    assert c.get("/api/jobs").status_code == 200
+
+
+def poison(database: str, campaign_id: int) -> None:
+    """Put x = 1e308 into one stored reading, as an import without bounds once let through."""
+    with sqlite3.connect(database) as con:
+        rid = con.execute("SELECT min(id) FROM reading WHERE campaign_id = ?",
+                          (campaign_id,)).fetchone()[0]
+        con.execute("UPDATE reading SET x = 1e308 WHERE id = ?", (rid,))
+
+
+def test_a_non_finite_campaign_is_refused_quickly_everywhere(two_workers, csv_text):
+    c = two_workers.client
+    good = campaign(two_workers, csv_text)
+    model = finished(two_workers, queue(two_workers, good, method="ls-sum")["id"])
+    assert model["state"] == "done", model
+    bad = campaign(two_workers, csv_text)
+    poison(two_workers.settings.database, bad)
+
+    t0 = time.perf_counter()
+    r = c.get(f"/api/models/{model['id']}/evaluate", params={"campaign_id": bad})
+    took = time.perf_counter() - t0
+    print(f"\nevaluate of a 1e308 campaign: {r.status_code} in {took * 1000:.0f} ms")
+    assert r.status_code == 422, r.text
+    assert "1e+308 mm is beyond" in r.json()["detail"]
+    assert took < 1.0
+    ok = c.get(f"/api/models/{model['id']}/evaluate", params={"campaign_id": good})
+    assert ok.status_code == 200 and ok.json()["model"]["ap"]["max"] > 0
+
+    for body in ({"method": "minimax"}, {"method": "ls-sum"}, {"method": "ls-pose"},
+                 {"method": "ls-single:A"}, {"kind": "diagnosis"}):
+        job = finished(two_workers, queue(two_workers, bad, **body)["id"], timeout=60)
+        assert job["state"] == "failed", job
+        assert "NonFinite" in job["reason"] and "beyond" in job["reason"], job
