@@ -473,6 +473,9 @@ def main(argv=None) -> int:
     except Interrupted as e:  # Ctrl-C of a run: the arm was e-stopped first
         print(f"robocal: {e}", file=sys.stderr)
         return 130
+    except KeyboardInterrupt:  # before or after any motion
+        print("robocal: interrupted", file=sys.stderr)
+        return 130
     except (InputError, workflow.DataError, NotIdentifiable, AcquisitionFailed, StoreError) as e:
         print(f"robocal: error: {e}", file=sys.stderr)
         return 1
