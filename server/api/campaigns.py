@@ -7,11 +7,13 @@ from fastapi import APIRouter
 
 from server import store
 from server.acquire import AcquireOptions
+from server.campaign_planning import check_plan_size, plan_in_worker
 
 from . import ops
-from .deps import AcquisitionsDep, Authorized, DbDep, SettingsDep
+from .deps import AcquisitionsDep, Authorized, DbDep, JobsDep, SettingsDep
 from .schemas import (CampaignCreate, CampaignDetail, CampaignPublic, EstopPublic, RunPublic,
                       StopPublic)
+from .worker_calls import CALL_PROBLEMS, run_call
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
 ABORT_NOTE = ("a running acquisition ends after the pose in progress, whose readings are kept; "
@@ -31,14 +33,18 @@ def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic, run=...)
                    summary=run.summary), **extra)
 
 
-@router.post("", status_code=201, dependencies=[Authorized])
+@router.post("", status_code=201, dependencies=[Authorized], responses=CALL_PROBLEMS)
 def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
-                    acquisitions: AcquisitionsDep) -> CampaignDetail:
+                    acquisitions: AcquisitionsDep, jobs: JobsDep) -> CampaignDetail:
     """Plan a campaign on the cell (stored `planned`; POST .../start runs it): on its real devices
-    if the cell has `devices`, else on the simulated ones."""
+    if the cell has `devices`, else on the simulated ones. A D-optimal choice beyond the
+    planning bounds is refused at once (422); the planning runs in a worker process under the
+    request limit (504 past it)."""
     cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
     opts = AcquireOptions(**body.model_dump(exclude={"cell_id"}))
-    cid = ops.plan_campaign(db, cell=cell, opts=opts)
+    check_plan_size(opts)
+    cid = run_call(jobs, plan_in_worker, db.engine.url.render_as_string(hide_password=False),
+                   cell, opts)
     return _public(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)
 
 
