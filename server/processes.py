@@ -22,7 +22,7 @@ from multiprocessing.connection import Connection
 # the modules below once (the solver, matplotlib, rerun for the recordings); children forked from
 # it start in milliseconds with them loaded, as a job gets a fresh process each time.
 START_METHOD = "forkserver"
-PRELOAD = ["server.worker", "server.charts", "server.recording"]
+PRELOAD = ["server.worker", "server.charts", "server.recording", "server.api.ops"]
 # Jobs are batch work: the API and a running acquisition (a robot and a tracker waiting on it)
 # get the CPU first.
 NICENESS = 10

@@ -40,6 +40,10 @@ def load_campaign(path, cell: Cell) -> Measurements:
     if unknown:
         raise DataError(f"{path}: target {unknown[0]!r} is not among the cell's targets "
                         f"({', '.join(cell.targets)})")
+    try:
+        require_inputs(meas.q, meas.xyz)
+    except ValueError as e:
+        raise DataError(f"{path}: {e}") from None
     return meas
 
 

@@ -9,12 +9,14 @@ from fastapi import APIRouter, Request
 
 from server import store
 from server.acquire import AcquireOptions
+from server.campaign_planning import check_plan_size, plan_in_worker
 
 from . import ops
-from .deps import AcquisitionsDep, Authorized, AuthorizedNow, DbDep, SettingsDep
+from .deps import AcquisitionsDep, Authorized, AuthorizedNow, DbDep, JobsDep, SettingsDep
 from .problems import problem
 from .schemas import ActionPublic, CampaignCreate, CampaignDetail, CampaignPublic, EstopPublic, \
     RunPublic
+from .worker_calls import CALL_PROBLEMS, run_call
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
 ESTOP_NOTE = ("STOP sent to the controller (the arm halts where it is), the campaign e-stopped; "
@@ -43,14 +45,18 @@ def _acted(outcome, db, acquisitions, note: str) -> ActionPublic:
                         actions=acquisitions.actions(info), note=outcome.note or note)
 
 
-@router.post("", status_code=201, dependencies=[Authorized])
+@router.post("", status_code=201, dependencies=[Authorized], responses=CALL_PROBLEMS)
 def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
-                    acquisitions: AcquisitionsDep) -> CampaignDetail:
+                    acquisitions: AcquisitionsDep, jobs: JobsDep) -> CampaignDetail:
     """Plan a campaign on the cell (stored `planned`; POST .../start runs it): on its real devices
-    if the cell has `devices`, else on the simulated ones."""
+    if the cell has `devices`, else on the simulated ones. A D-optimal choice beyond the
+    planning bounds is refused at once (422); the planning runs in a worker process under the
+    request limit (504 past it)."""
     cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
     opts = AcquireOptions(**body.model_dump(exclude={"cell_id"}))
-    cid = ops.plan_campaign(db, cell=cell, opts=opts)
+    check_plan_size(opts)
+    cid = run_call(jobs, plan_in_worker, db.engine.url.render_as_string(hide_password=False),
+                   cell, opts)
     return _public(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)
 
 

@@ -5,14 +5,19 @@ and numerics that refuse non-finite data instead of hanging the service."""
 from __future__ import annotations
 
 import logging
+import os
 import sqlite3
+import subprocess
+import sys
 import time
 
+import httpx
 import pytest
 
 import server.app
 from server.cli import main as robocal
 from server.job_queue import CANCELLED, Jobs
+from server.security import ensure_token
 from tests.server.api.conftest import serve, settings_for, wait_for
 
 
@@ -226,3 +231,72 @@ def test_a_non_finite_campaign_is_refused_quickly_everywhere(two_workers, csv_te
         job = finished(two_workers, queue(two_workers, bad, **body)["id"], timeout=60)
         assert job["state"] == "failed", job
         assert "NonFinite" in job["reason"] and "beyond" in job["reason"], job
+
+
+def test_an_oversized_plan_is_refused_at_once_and_a_bounded_one_plans(one_worker):
+    c = one_worker.client
+    t0 = time.perf_counter()
+    r = c.post("/api/campaigns", json={"poses": 20, "choose_from": 12586})
+    took = time.perf_counter() - t0
+    print(f"\nchoose_from 12586: {r.status_code} in {took * 1000:.0f} ms")
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"].startswith("choose_from: 12586 candidates is more than")
+    assert c.post("/api/campaigns", json={"poses": 100, "choose_from": 2000}).status_code == 422
+    assert c.get("/api/campaigns").json() == []  # nothing half-planned was stored
+    r = c.post("/api/campaigns", json={"poses": 10, "choose_from": 200, "name": "chosen"})
+    assert r.status_code == 201, r.text
+    assert (r.json()["poses_total"], r.json()["status"]) == (10, "planned")
+    again = c.post("/api/campaigns", json={"poses": 10, "choose_from": 200, "name": "chosen"})
+    assert again.status_code == 409, again.text  # the worker's Conflict crosses back as one
+
+
+def test_workers_die_with_a_killed_service(tmp_path, csv_text):
+    """SIGKILL of the service: its job's worker process ends within about a second."""
+    settings = settings_for(tmp_path)
+    token = ensure_token(settings.token_file)
+    env = {**os.environ, "ROBOCAL_DATABASE": settings.database,
+           "ROBOCAL_DATA_DIR": str(settings.data_dir), "ROBOCAL_PORT": str(settings.port)}
+    service = subprocess.Popen([sys.executable, "-m", "server.cli", "serve"], env=env,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        url = f"http://127.0.0.1:{settings.port}"
+        with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"},
+                          timeout=30) as c:
+            wait_for(lambda: _answers(c), bool, timeout=60, interval=0.1)
+            cid = c.post("/api/measurements/import", content=csv_text).json()["id"]
+            job = c.post("/api/jobs", json={"campaign_id": cid, "kind": "diagnosis"}).json()
+            wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json()["state"],
+                     lambda s: s != "queued", timeout=60, interval=0.02)
+            workers = wait_for(lambda: _grandchildren(service.pid), bool, timeout=10,
+                               interval=0.02)
+        service.kill()
+        t0 = time.monotonic()
+        wait_for(lambda: all(gone(pid) for pid in workers), bool, timeout=10, interval=0.01)
+        took = time.monotonic() - t0
+        print(f"\nworker(s) {workers} gone {took * 1000:.0f} ms after SIGKILL of the service")
+        assert took < 1.5
+    finally:
+        service.kill()
+        service.wait(timeout=10)
+
+
+def _answers(client) -> bool:
+    try:
+        return client.get("/api/jobs").status_code == 200
+    except httpx.TransportError:
+        return False
+
+
+def _grandchildren(pid: int) -> list[int]:
+    """The live processes whose parent's parent is pid (the fork server's children)."""
+    parents = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except (FileNotFoundError, ProcessLookupError):
+                continue
+            if fields[0] != "Z":
+                parents[int(entry)] = int(fields[1])
+    return sorted(p for p, pp in parents.items() if parents.get(pp) == pid)

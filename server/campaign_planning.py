@@ -1,0 +1,41 @@
+"""Planning a campaign for the API: its size bounded up front, the planning itself (random
+candidates, the D-optimal choice, the ordering) run in a worker process under the request
+limit (Jobs.call), so an oversized plan is refused at once and none can hold the service."""
+
+from __future__ import annotations
+
+from .acquire import AcquireOptions
+from .formats.cell_json import Cell
+
+# The D-optimal exchange costs about poses x candidates x parameters; at these bounds it plans
+# in a few seconds (20 of 2000 candidates: 3 s on a busy two-core machine).
+MAX_CANDIDATES = 2000
+MAX_CHOICE_WORK = 40_000  # poses x candidates
+
+
+class PlanTooLarge(ValueError):
+    """A plan whose planning would take too long for a request; names the fields."""
+
+
+def check_plan_size(opts: AcquireOptions) -> None:
+    """PlanTooLarge unless the D-optimal choice fits the bounds above."""
+    if not opts.choose_from:
+        return
+    if opts.choose_from > MAX_CANDIDATES:
+        raise PlanTooLarge(f"choose_from: {opts.choose_from} candidates is more than the "
+                           f"{MAX_CANDIDATES} a plan may choose from")
+    if opts.poses * opts.choose_from > MAX_CHOICE_WORK:
+        raise PlanTooLarge(f"poses x choose_from: {opts.poses} x {opts.choose_from} is more than "
+                           f"{MAX_CHOICE_WORK}; choose fewer poses or from fewer candidates")
+
+
+def plan_in_worker(database_url: str, cell: Cell, opts: AcquireOptions, report=None) -> int:
+    """In a worker process: plan and store the campaign (server.api.ops.plan_campaign); its id."""
+    from . import store
+    from .api.ops import plan_campaign
+
+    db = store.open_database(database_url)
+    try:
+        return plan_campaign(db, cell=cell, opts=opts)
+    finally:
+        db.close()
