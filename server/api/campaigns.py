@@ -9,7 +9,7 @@ from server import store
 from server.acquire import AcquireOptions
 
 from . import ops
-from .deps import AcquisitionsDep, Authorized, DbDep, SettingsDep
+from .deps import AcquisitionsDep, Authorized, CampaignId, CampaignStatus, DbDep, SettingsDep
 from .schemas import (CampaignCreate, CampaignDetail, CampaignPublic, EstopPublic, RunPublic,
                       StopPublic)
 
@@ -44,13 +44,13 @@ def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
 
 @router.get("")
 def list_campaigns(db: DbDep, acquisitions: AcquisitionsDep,
-                   status: str | None = None) -> list[CampaignPublic]:
+                   status: CampaignStatus | None = None) -> list[CampaignPublic]:
     """Every campaign, oldest first (or those with this status)."""
     return [_public(c, acquisitions) for c in store.list_campaigns(db, status=status)]
 
 
 @router.get("/{campaign_id}")
-def get_campaign(campaign_id: int, db: DbDep, acquisitions: AcquisitionsDep) -> CampaignDetail:
+def get_campaign(campaign_id: CampaignId, db: DbDep, acquisitions: AcquisitionsDep) -> CampaignDetail:
     """One campaign with its live state: status and poses done of total, from the store."""
     # the run first: a run that ends in between then shows with the status it left behind
     run = acquisitions.get(campaign_id)
@@ -59,7 +59,7 @@ def get_campaign(campaign_id: int, db: DbDep, acquisitions: AcquisitionsDep) -> 
 
 
 @router.post("/{campaign_id}/start", status_code=202, dependencies=[Authorized])
-def start_campaign(campaign_id: int, db: DbDep,
+def start_campaign(campaign_id: CampaignId, db: DbDep,
                    acquisitions: AcquisitionsDep) -> CampaignPublic:
     """Run (or resume) the acquisition on the worker thread; poll GET for progress."""
     acquisitions.start(campaign_id=campaign_id)
@@ -67,7 +67,7 @@ def start_campaign(campaign_id: int, db: DbDep,
 
 
 @router.post("/{campaign_id}/pause", dependencies=[Authorized])
-def pause_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
+def pause_campaign(campaign_id: CampaignId, acquisitions: AcquisitionsDep) -> StopPublic:
     """Pause the running acquisition after its current pose (409 if it is not running here)."""
     was = acquisitions.pause(campaign_id=campaign_id)
     return StopPublic(id=campaign_id, status="paused", was=was,
@@ -75,21 +75,21 @@ def pause_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPubli
 
 
 @router.post("/{campaign_id}/resume", status_code=202, dependencies=[Authorized])
-def resume_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
+def resume_campaign(campaign_id: CampaignId, acquisitions: AcquisitionsDep) -> StopPublic:
     """Resume a paused campaign (the live engine, or a new run from its next unmeasured pose)."""
     was = acquisitions.resume(campaign_id=campaign_id)
     return StopPublic(id=campaign_id, status="running", was=was, note="resumed")
 
 
 @router.post("/{campaign_id}/abort", dependencies=[Authorized])
-def abort_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
+def abort_campaign(campaign_id: CampaignId, acquisitions: AcquisitionsDep) -> StopPublic:
     """Abort the campaign after the pose in progress (final: readings stay, no resume)."""
     was = acquisitions.stop(campaign_id=campaign_id, how="abort")
     return StopPublic(id=campaign_id, status="aborted", was=was, note=ABORT_NOTE)
 
 
 @router.post("/{campaign_id}/estop", dependencies=[Authorized])
-def estop_campaign(campaign_id: int, acquisitions: AcquisitionsDep) -> StopPublic:
+def estop_campaign(campaign_id: CampaignId, acquisitions: AcquisitionsDep) -> StopPublic:
     """Emergency stop: the controller halts the arm now and the campaign is aborted."""
     was = acquisitions.stop(campaign_id=campaign_id, how="estop")
     return StopPublic(id=campaign_id, status="aborted", was=was, note=ESTOP_NOTE)

@@ -18,7 +18,7 @@ from server.workflow import compare, model_predict, paper_methods, run_method
 from solver import metrics
 from solver.kinematics import predict
 
-from .deps import DbDep, JobsDep
+from .deps import DbDep, JobId, JobsDep
 
 router = APIRouter(prefix="/charts", tags=["charts"])
 PNG = {200: {"content": {"image/png": {}}}}
@@ -70,7 +70,7 @@ def _finite(a: np.ndarray) -> np.ndarray:
 
 
 @router.get("/jobs/{job_id}/boxplot.png", response_class=Response, responses=PNG)
-def boxplot(job_id: int, db: DbDep, jobs: JobsDep) -> Response:
+def boxplot(job_id: JobId, db: DbDep, jobs: JobsDep) -> Response:
     """AP error per SMR before (nominal) and after calibration, as the paper's Figures 2-6."""
     e = _errors(db, jobs, job_id)
     fig = Figure(figsize=(8, 4.5), constrained_layout=True)
@@ -94,7 +94,7 @@ def boxplot(job_id: int, db: DbDep, jobs: JobsDep) -> Response:
 
 
 @router.get("/jobs/{job_id}/errors.png", response_class=Response, responses=PNG)
-def errors(job_id: int, db: DbDep, jobs: JobsDep) -> Response:
+def errors(job_id: JobId, db: DbDep, jobs: JobsDep) -> Response:
     """AP error per pose (worst SMR of the pose) before and after calibration."""
     e = _errors(db, jobs, job_id)
     fig = Figure(figsize=(8, 4.5), constrained_layout=True)
@@ -120,7 +120,7 @@ def _num(v) -> float | None:
 
 
 @router.get("/jobs/{job_id}/table3")
-def table3(job_id: int, db: DbDep, jobs: JobsDep) -> dict:
+def table3(job_id: JobId, db: DbDep, jobs: JobsDep) -> dict:
     """The paper's Table 3 for the job's campaign: every method on its data, side by side."""
     job = jobs.get(job_id)
     cell, meas = _campaign(db, job)
