@@ -18,10 +18,11 @@ PROBLEM = "application/problem+json"
 class EventReader:
     """Reads /api/events on a thread over a real socket; the events seen so far."""
 
-    def __init__(self, url):
+    def __init__(self, url, token):
         self.events: list[tuple[str, dict]] = []
         self.connected = threading.Event()
-        self._client = httpx.Client(base_url=url, timeout=httpx.Timeout(30, read=None))
+        self._client = httpx.Client(base_url=url, timeout=httpx.Timeout(30, read=None),
+                                    headers={"Authorization": f"Bearer {token}"})
         self._thread = threading.Thread(target=self._read, daemon=True)
         self._thread.start()
         assert self.connected.wait(10), "no event stream"
@@ -55,7 +56,7 @@ class EventReader:
 
 def test_events_pause_resume_and_estop_a_running_campaign(live):
     c = live.client
-    reader = EventReader(live.url)
+    reader = EventReader(live.url, live.token)
     try:
         cid = c.post("/api/campaigns", json={"name": "live", "poses": 40, "seed": 1}).json()["id"]
         assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
