@@ -7,18 +7,17 @@ import sys
 from contextlib import asynccontextmanager
 
 import uvicorn
-
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.routing import APIRoute
 
 from . import store
-from .api import ROUTERS, problems
+from .api import OPEN_ROUTERS, ROUTERS, problems
 from .api.deps import TOKEN_CHECKS
 from .acquisitions import Acquisitions
 from .events import Events
 from .job_queue import Jobs
-from .security import ensure_token
+from .security import ensure_token, require_reader
 from .settings import Settings
 from .web import mount_web
 
@@ -67,20 +66,44 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins,
                            allow_methods=["*"], allow_headers=["Authorization", "Content-Type"])
     for router in ROUTERS:
+        document_errors(router)
+        # Reads need the token too (unless reads are open on loopback); writes list their own.
+        app.include_router(router, prefix=API_PREFIX, dependencies=[Depends(require_reader)])
+    for router in OPEN_ROUTERS:
         app.include_router(router, prefix=API_PREFIX)
     check_authorized(app)
     mount_web(app)  # last: a mount at / hides any route added after it
     return app
 
 
+def document_errors(router) -> None:
+    """Add to each route's OpenAPI the problem-details answers it can give: 401 (the token),
+    404/409/422 (the store and validation), 413 on writes, 502 where a device is driven. A
+    route's own `responses=` entries win."""
+    for route in router.routes:
+        if not isinstance(route, APIRoute):
+            continue
+        extra = {**problems.UNAUTHORIZED, **problems.READ_ERRORS}
+        if route.methods & MUTATING:
+            extra.update(problems.WRITE_ERRORS)
+            if route.path.startswith(("/campaigns", "/estop")):
+                extra.update(problems.DEVICE_ERRORS)
+        route.responses = {**extra, **route.responses}
+
+
 def unguarded_routes(app: FastAPI) -> list[str]:
-    """Mutating routes that do not require the token (should be none)."""
+    """Routes that do not require the token (should be none): every mutating route needs
+    require_token, every read require_reader, except the open ones (GET /api/health)."""
+    open_paths = {API_PREFIX + r.path for router in OPEN_ROUTERS for r in router.routes}
     bad = []
     for route in _api_routes(app.routes):
+        calls = {d.call for d in _flat(route.dependant)}
         if route.methods & MUTATING:
-            calls = {d.call for d in _flat(route.dependant)}
-            if not calls & set(TOKEN_CHECKS):
-                bad.append(f"{','.join(sorted(route.methods))} {route.path}")
+            guarded = bool(calls & set(TOKEN_CHECKS))
+        else:
+            guarded = route.path in open_paths or bool(calls & {*TOKEN_CHECKS, require_reader})
+        if not guarded:
+            bad.append(f"{','.join(sorted(route.methods))} {route.path}")
     return bad
 
 
@@ -88,14 +111,19 @@ def _api_routes(routes):
     for route in routes:
         if isinstance(route, APIRoute):
             yield route
-        # FastAPI >= 0.16x keeps included routers as lazy wrappers around the original router.
-        inner = getattr(route, "original_router", None)
-        if inner is not None:
-            yield from _api_routes(inner.routes)
+        # FastAPI >= 0.16x keeps included routers as lazy wrappers around the original router;
+        # their effective routes carry the dependencies and prefix given at include_router.
+        candidates = getattr(route, "effective_candidates", None)
+        if candidates is not None:
+            for c in candidates():
+                if hasattr(c, "effective_candidates"):
+                    yield from _api_routes([c])
+                elif hasattr(c, "dependant"):
+                    yield c
 
 
 def check_authorized(app: FastAPI) -> None:
-    """Refuse to build an app where a mutating route forgot the token: fail closed."""
+    """Refuse to build an app where a route forgot the token: fail closed."""
     bad = unguarded_routes(app)
     if bad:
         raise RuntimeError(f"routes without require_token: {', '.join(bad)}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import ipaddress
 import os
 import secrets
 from pathlib import Path
@@ -68,8 +69,37 @@ def require_token(request: Request,
         raise _unauthorized("the bearer token is not this service's")
 
 
+def reads_open(settings) -> bool:
+    """Whether reads go without the token: asked for, and only on a loopback host."""
+    return bool(settings.open_reads) and is_loopback(settings.host)
+
+
+def is_loopback(host: str) -> bool:
+    """Whether the service listens only on this machine (127.0.0.0/8, ::1, localhost)."""
+    if host.strip().lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+async def require_reader(request: Request,
+                   credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
+                   ) -> None:
+    """Refuse (401) a read without the token, unless reads are open (see reads_open); async, so
+    the e-stop routes it also guards never wait for a thread of the server's pool."""
+    if reads_open(request.app.state.settings):
+        return
+    if credentials is None or credentials.scheme.lower() != "bearer":
+        raise _unauthorized("reading the cell's data needs 'Authorization: Bearer <token>' "
+                            "(the token `robocal serve` printed at first start)")
+    require_token(request, credentials)
+
+
 def _unauthorized(detail: str) -> HTTPException:
     return HTTPException(401, detail, headers={"WWW-Authenticate": "Bearer"})
 
 
 TokenDep = Depends(require_token)
+ReaderDep = Depends(require_reader)

@@ -34,6 +34,11 @@ class Settings(BaseSettings):
     # killed (504) past its limit.
     call_workers: int = Field(4, ge=1, le=64)
     call_timeout_s: float = Field(60.0, gt=0)
+    # Reads (GET) need the token like writes do, so that a shop network sees none of the cell's
+    # data; true opens them, and only when `host` is a loopback address (a single-user bench).
+    open_reads: bool = False
+    # The largest request body (a cell.json or meas.csv upload); beyond it the answer is 413.
+    max_upload_bytes: int = Field(32 * 1024 * 1024, ge=1024, le=1024 ** 3)
     # A running rerun viewer to stream calibration recordings to live, e.g.
     # rerun+http://127.0.0.1:9876/proxy; the .rrd files are written either way.
     rerun_viewer_url: str | None = None

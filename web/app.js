@@ -20,8 +20,9 @@ function say(text, ok = false) {
   say.timer = setTimeout(() => { m.hidden = true; }, ok ? 3000 : 10000);
 }
 
-/** Call the API; the JSON body, or throw with the problem-detail message. */
-async function api(method, path, body, raw = false, contentType = "application/json") {
+/** Call the API with the tab's token (reads need it too); the Response, or throw with the
+ * problem-detail message. The token goes only in the Authorization header, never in a URL. */
+async function request(method, path, body, raw = false, contentType = "application/json") {
   const headers = { Accept: "application/json" };
   const token = sessionStorage.getItem(TOKEN_KEY);
   if (token) headers.Authorization = `Bearer ${token}`;
@@ -31,19 +32,50 @@ async function api(method, path, body, raw = false, contentType = "application/j
   const r = await fetch(`/api${path}`, {
     method, headers, body: body === undefined ? undefined : raw ? body : JSON.stringify(body),
   });
-  const type = r.headers.get("content-type") || "";
-  const data = type.includes("json") ? await r.json() : await r.text();
   if (!r.ok) {
+    const type = r.headers.get("content-type") || "";
+    const data = type.includes("json") ? await r.json() : { detail: await r.text() };
     // RFC 9457 problem details: the API's own words are the useful part.
     const detail = (data && data.detail) || r.statusText;
     throw new Error(`${method} /api${path}: ${r.status} ${data.title || r.statusText}: ${detail}`);
   }
-  return data;
+  return r;
 }
+
+/** Call the API; the JSON (or text) body. */
+async function api(method, path, body, raw = false, contentType = "application/json") {
+  const r = await request(method, path, body, raw, contentType);
+  const type = r.headers.get("content-type") || "";
+  return type.includes("json") ? r.json() : r.text();
+}
+
+/** An <img> of an API picture: fetched with the token (an src URL cannot carry it). */
+async function showImage(img, url) {
+  try {
+    const blob = await (await request("GET", url.replace(/^\/api/, ""))).blob();
+    if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+    img.src = URL.createObjectURL(blob);
+  } catch (e) { say(e.message); }
+}
+
+// Download links to the API (model, recording, report) keep their /api href for people to
+// read, but are fetched with the token and saved from memory.
+document.addEventListener("click", async (ev) => {
+  const a = ev.target.closest("a[href^='/api/']");
+  if (!a) return;
+  ev.preventDefault();
+  try {
+    const blob = await (await request("GET", a.getAttribute("href").slice(4))).blob();
+    const save = Object.assign(document.createElement("a"), {
+      href: URL.createObjectURL(blob), download: a.getAttribute("download") || "" });
+    save.click();
+    setTimeout(() => URL.revokeObjectURL(save.href), 10000);
+  } catch (e) { say(e.message); }
+});
 
 function showTokenState() {
   $("token-state").textContent = sessionStorage.getItem(TOKEN_KEY)
-    ? "token set for this tab" : "no token: reading works, changes are refused";
+    ? "token set for this tab" : "no token: the service answers nothing without it";
 }
 
 $("token-form").addEventListener("submit", (ev) => {
@@ -52,6 +84,7 @@ $("token-form").addEventListener("submit", (ev) => {
   if (t) sessionStorage.setItem(TOKEN_KEY, t); else sessionStorage.removeItem(TOKEN_KEY);
   $("token").value = "";
   showTokenState();
+  loadCells();  // the first load, without a token, was refused
 });
 
 /** A cell's picker label: simulated, or the real devices a campaign on it will drive. */
@@ -166,12 +199,17 @@ async function pollCampaign() {
   state.campaignTimer = setTimeout(pollCampaign, POLL_MS);
 }
 
-/** The last few readings of the campaign, newest last. */
+/** The last few readings of the campaign, newest last: the total from a one-reading page,
+ * then the last page (readings come in pages). */
 async function pollReadings(id) {
   try {
-    const all = await api("GET", `/campaigns/${id}/measurements`);
+    const first = await request("GET", `/campaigns/${id}/measurements?limit=1`);
+    const total = Number(first.headers.get("X-Total-Count") || 0);
+    const offset = Math.max(0, total - READINGS_SHOWN);
+    const rows = total ? await api("GET",
+      `/campaigns/${id}/measurements?offset=${offset}&limit=${READINGS_SHOWN}`) : [];
     if (id !== state.campaign) return;
-    renderReadings(all.slice(-READINGS_SHOWN), all.length);
+    renderReadings(rows, total);
   } catch (e) { say(e.message); }
 }
 
@@ -367,7 +405,7 @@ async function showDiagnosis(d) {
     const e = report.effects[i];
     const el = document.createElement("figure");
     const img = el.appendChild(document.createElement("img"));
-    img.src = fig.url;
+    showImage(img, fig.url);
     img.alt = e ? `residuals against ${effectLabel(e)}, before and after` : fig.name;
     el.appendChild(document.createElement("figcaption")).textContent = e
       ? `Effect ${i + 1}: ${effectLabel(e)}. Residuals before and after, with what the effect `
@@ -412,8 +450,8 @@ function showResults(j) {
     $("recording-link").setAttribute("download", `job-${j.id}.rrd`);
   }
   const charts = `/api/charts/jobs/${j.id}`;
-  $("boxplot").src = `${charts}/boxplot.png`;
-  $("errors").src = `${charts}/errors.png`;
+  showImage($("boxplot"), `${charts}/boxplot.png`);
+  showImage($("errors"), `${charts}/errors.png`);
   $("table3").innerHTML = '<p class="muted">computing every method on this campaign...</p>';
   api("GET", `${charts.slice(4)}/table3`).then(renderTable3)
     .catch((e) => { $("table3").textContent = e.message; });
@@ -451,4 +489,4 @@ function renderTable3(t) {
 }
 
 showTokenState();
-loadCells();
+if (sessionStorage.getItem(TOKEN_KEY)) loadCells();

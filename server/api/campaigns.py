@@ -12,7 +12,8 @@ from server.acquire import AcquireOptions
 from server.campaign_planning import check_plan_size, plan_in_worker
 
 from . import ops
-from .deps import AcquisitionsDep, Authorized, AuthorizedNow, DbDep, JobsDep, SettingsDep
+from .deps import (AcquisitionsDep, Authorized, AuthorizedNow, CampaignId, CampaignStatus, DbDep,
+                   JobsDep, SettingsDep)
 from .problems import problem
 from .schemas import ActionPublic, CampaignCreate, CampaignDetail, CampaignPublic, EstopPublic, \
     RunPublic
@@ -62,21 +63,21 @@ def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
 
 @router.get("")
 def list_campaigns(db: DbDep, acquisitions: AcquisitionsDep,
-                   status: str | None = None) -> list[CampaignPublic]:
+                   status: CampaignStatus | None = None) -> list[CampaignPublic]:
     """Every campaign, oldest first (or those with this status)."""
     return [_public(acquisitions.refresh(c), acquisitions)
             for c in store.list_campaigns(db, status=status)]
 
 
 @router.get("/{campaign_id}")
-def get_campaign(campaign_id: int, db: DbDep, acquisitions: AcquisitionsDep) -> CampaignDetail:
+def get_campaign(campaign_id: CampaignId, db: DbDep, acquisitions: AcquisitionsDep) -> CampaignDetail:
     """One campaign with its state, the actions it allows, and its poses done of total."""
     info = acquisitions.refresh(store.get_campaign(db, campaign_id=campaign_id))
     return _public(info, acquisitions, CampaignDetail)
 
 
 def _action(name: str, doc: str, note: str, status_code: int = 200):
-    def route(campaign_id: int, db: DbDep, acquisitions: AcquisitionsDep) -> ActionPublic:
+    def route(campaign_id: CampaignId, db: DbDep, acquisitions: AcquisitionsDep) -> ActionPublic:
         outcome = acquisitions.request(campaign_id=campaign_id, action=name)
         return _acted(outcome, db, acquisitions, note)
 
@@ -124,7 +125,7 @@ ESTOP_RESPONSES = {**CONFLICT, 502: {"description": "unconfirmed: the controller
 
 
 @router.post("/{campaign_id}/estop", dependencies=[AuthorizedNow], responses=ESTOP_RESPONSES)
-async def estop_campaign(campaign_id: int, request: Request) -> EstopPublic:
+async def estop_campaign(campaign_id: CampaignId, request: Request) -> EstopPublic:
     """Emergency stop: the campaign is e-stopped and the controller halts the arm now (200 once
     it confirmed; 502 if it did not within 1 s)."""
     return await _estop(request, campaign_id)

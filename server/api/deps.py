@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
-from fastapi import Depends, Request
+from fastapi import Depends, Path, Query, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from server.acquisitions import Acquisitions
@@ -13,6 +13,7 @@ from server.job_queue import Jobs
 from server.security import require_token
 from server.settings import Settings
 from server.store import Database
+from server.store.models import STATUSES
 
 
 def get_db(request: Request) -> Database:
@@ -54,3 +55,10 @@ async def require_token_now(
 Authorized = Depends(require_token)
 AuthorizedNow = Depends(require_token_now)
 TOKEN_CHECKS = (require_token, require_token_now)
+
+# Ids are SQLite rowids: 1 .. 2**63 - 1; anything else is a 422, never an overflow in the store.
+MAX_ID = 2**63 - 1
+CampaignId = Annotated[int, Path(ge=1, le=MAX_ID, description="a campaign's id")]
+JobId = Annotated[int, Path(ge=1, le=MAX_ID, description="a job's id")]
+CampaignQuery = Annotated[int, Query(ge=1, le=MAX_ID, description="a campaign's id")]
+CampaignStatus = Literal[STATUSES]  # the store's statuses, listed in the OpenAPI

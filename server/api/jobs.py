@@ -10,7 +10,7 @@ from fastapi.responses import FileResponse
 from server.job_queue import DuplicateJob, Job
 
 from . import problems
-from .deps import Authorized, JobsDep
+from .deps import Authorized, JobId, JobsDep
 from .schemas import FigurePublic, JobCreate, JobPublic
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
@@ -51,7 +51,7 @@ def create_job(body: JobCreate, jobs: JobsDep, request: Request) -> JobPublic:
 
 @router.post("/{job_id}/cancel", dependencies=[Authorized],
              responses={409: {"description": "The job is already done or failed", **PROBLEM}})
-def cancel_job(job_id: int, jobs: JobsDep) -> JobPublic:
+def cancel_job(job_id: JobId, jobs: JobsDep) -> JobPublic:
     """Cancel a job: a queued one leaves the queue, a running one's worker process is killed;
     either ends failed with reason "cancelled" (409 if it already ended)."""
     return _public(jobs.cancel(job_id))
@@ -64,27 +64,27 @@ def list_jobs(jobs: JobsDep) -> list[JobPublic]:
 
 
 @router.get("/{job_id}")
-def get_job(job_id: int, jobs: JobsDep) -> JobPublic:
+def get_job(job_id: JobId, jobs: JobsDep) -> JobPublic:
     """One job's state and progress, and the reason if it failed."""
     return _public(jobs.get(job_id))
 
 
 @router.get("/{job_id}/recording", response_class=FileResponse,
             responses={200: {"content": {"application/octet-stream": {}}}})
-def get_recording(job_id: int, jobs: JobsDep) -> FileResponse:
+def get_recording(job_id: JobId, jobs: JobsDep) -> FileResponse:
     """The Rerun recording (.rrd) of a done calibration (404 none, 409 not done)."""
     return FileResponse(jobs.result_path(job_id, "recording"),
                         media_type="application/octet-stream", filename=f"job-{job_id}.rrd")
 
 
 @router.get("/{job_id}/report")
-def get_report(job_id: int, jobs: JobsDep) -> dict:
+def get_report(job_id: JobId, jobs: JobsDep) -> dict:
     """The report.json of a done diagnosis (404 none, 409 not done)."""
     return json.loads(jobs.result_path(job_id, "report").read_text())
 
 
 @router.get("/{job_id}/figures")
-def list_figures(job_id: int, jobs: JobsDep) -> list[FigurePublic]:
+def list_figures(job_id: JobId, jobs: JobsDep) -> list[FigurePublic]:
     """The figures of a done diagnosis, one PNG per effect found."""
     jobs.result_path(job_id, "report")
     names = [p.rsplit("/", 1)[-1] for p in jobs.get(job_id).results.get("figures", [])]
@@ -93,6 +93,6 @@ def list_figures(job_id: int, jobs: JobsDep) -> list[FigurePublic]:
 
 @router.get("/{job_id}/figures/{name}", response_class=FileResponse,
             responses={200: {"content": {"image/png": {}}}})
-def get_figure(job_id: int, name: str, jobs: JobsDep) -> FileResponse:
+def get_figure(job_id: JobId, name: str, jobs: JobsDep) -> FileResponse:
     """One figure of a done diagnosis, by the name the list gives."""
     return FileResponse(jobs.figure_path(job_id, name), media_type="image/png")

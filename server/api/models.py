@@ -9,7 +9,7 @@ from server import charts, store
 from server.formats.cell_json import parse_cell
 from solver.finite import require_inputs
 
-from .deps import DbDep, JobsDep
+from .deps import CampaignQuery, DbDep, JobId, JobsDep
 from .worker_calls import CALL_PROBLEMS, run_call
 
 router = APIRouter(prefix="/models", tags=["models"])
@@ -17,14 +17,14 @@ router = APIRouter(prefix="/models", tags=["models"])
 
 @router.get("/{job_id}", response_class=FileResponse,
             responses={200: {"content": {"application/json": {}}}})
-def get_model(job_id: int, jobs: JobsDep) -> FileResponse:
+def get_model(job_id: JobId, jobs: JobsDep) -> FileResponse:
     """The model.json of a done job (404 no job, 409 not done)."""
     return FileResponse(jobs.model_path(job_id), media_type="application/json",
                         filename=f"job-{job_id}.model.json")
 
 
 @router.get("/{job_id}/evaluate", responses=CALL_PROBLEMS)
-def evaluate_model(job_id: int, campaign_id: int, jobs: JobsDep, db: DbDep) -> dict:
+def evaluate_model(job_id: JobId, campaign_id: CampaignQuery, jobs: JobsDep, db: DbDep) -> dict:
     """Accuracy of a job's model on a campaign's readings, next to the nominal model (computed
     in a worker process under a wall-clock limit: 504 past it)."""
     path = jobs.model_path(job_id)

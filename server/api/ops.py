@@ -68,24 +68,6 @@ def plan_campaign(db: store.Database, *, cell: Cell, opts: AcquireOptions) -> in
 
 # --- readings and files ------------------------------------------------------------------------
 
-def campaign_readings(db: store.Database, *,
-                      campaign_id: int) -> list[tuple[str, store.ReadingInfo]]:
-    """Every stored reading with its pose label, in plan order."""
-    out = []
-    for pose in store.planned_poses(db, campaign_id=campaign_id):
-        for r in store.pose_readings(db, campaign_id=campaign_id, pose_index=pose.index).values():
-            out.append((pose.label, r))
-    return out
-
-
-def export_campaign_csv(db: store.Database, *, campaign_id: int) -> str:
-    """The campaign as meas.csv text."""
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "meas.csv"
-        store.export_csv(db, campaign_id=campaign_id, path=path)
-        return path.read_text()
-
-
 def import_campaign_csv(db: store.Database, *, data: bytes, filename: str, cell: Cell,
                         name: str) -> int:
     """Store an uploaded meas.csv as a done campaign; InputError naming `filename`:line:column."""

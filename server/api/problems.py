@@ -5,6 +5,7 @@ from __future__ import annotations
 from http import HTTPStatus
 
 from fastapi import FastAPI, Request
+from pydantic import BaseModel, ConfigDict
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -18,6 +19,36 @@ from server.store import Conflict, NotFound, StoreError
 MEDIA_TYPE = "application/problem+json"
 
 
+class Problem(BaseModel):
+    """An RFC 9457 problem-details body; some refusals add members (errors, file, line, state)."""
+
+    model_config = ConfigDict(extra="allow")
+    type: str = "about:blank"
+    title: str
+    status: int
+    detail: str
+    instance: str
+
+
+def problem_response(description: str) -> dict:
+    """An OpenAPI `responses` entry for a problem-details answer."""
+    return {"description": description,
+            "content": {MEDIA_TYPE: {"schema": Problem.model_json_schema()}}}
+
+
+# What every route may answer besides its success (server.app adds them to each route's
+# OpenAPI): statuses by which routes can give them.
+UNAUTHORIZED = {401: problem_response("no or wrong bearer token")}
+READ_ERRORS = {404: problem_response("no such resource"),
+               409: problem_response("the resource is not in a state that allows this"),
+               422: problem_response("the request (or an uploaded file) is invalid; the "
+                                     "detail names the field, or the file's line and column")}
+WRITE_ERRORS = {400: problem_response("the body is not valid JSON"),
+                413: problem_response("the request body is larger than max_upload_bytes")}
+DEVICE_ERRORS = {502: problem_response("a device (controller, tracker) did not answer as it "
+                                       "must; the arm may still move")}
+
+
 def problem(request: Request, status: int, detail: str, headers=None, **extra) -> JSONResponse:
     """A problem-details response."""
     body = {"type": "about:blank", "title": HTTPStatus(status).phrase, "status": status,
@@ -26,8 +57,43 @@ def problem(request: Request, status: int, detail: str, headers=None, **extra) -
                         media_type=MEDIA_TYPE)
 
 
+class UploadLimit:
+    """Refuse (413, problem details) a request body over the limit: at once when its
+    Content-Length says so, else as soon as the streamed bytes pass it, so no upload is held in
+    memory beyond the limit."""
+
+    def __init__(self, app, max_bytes: int):
+        self.app, self.max_bytes = app, max_bytes
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        length = dict(scope["headers"]).get(b"content-length", b"")
+        if length.isdigit() and int(length) > self.max_bytes:
+            response = problem(Request(scope), 413, too_large(self.max_bytes))
+            return await response(scope, receive, send)
+        seen = 0
+
+        async def counted():
+            nonlocal seen
+            message = await receive()
+            seen += len(message.get("body", b""))
+            if seen > self.max_bytes:
+                # Raised inside the route's body read: the exception handlers answer it.
+                raise StarletteHTTPException(413, too_large(self.max_bytes))
+            return message
+
+        await self.app(scope, counted, send)
+
+
+def too_large(max_bytes: int) -> str:
+    return (f"the request body is larger than {max_bytes} bytes (setting max_upload_bytes, "
+            "env ROBOCAL_MAX_UPLOAD_BYTES); split the file")
+
+
 def install(app: FastAPI) -> None:
     """Register the handlers that turn every refusal into a problem-details body."""
+    app.add_middleware(UploadLimit, max_bytes=app.state.settings.max_upload_bytes)
 
     @app.exception_handler(StarletteHTTPException)
     async def http_error(request: Request, exc: StarletteHTTPException):

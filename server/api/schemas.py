@@ -7,7 +7,16 @@ from typing import Literal
 
 from pydantic import BaseModel, Field
 
+# Ids are SQLite rowids.
+MAX_ID = 2**63 - 1
+# A name or label: printable, no control characters (NUL, newline, escape, DEL, U+2028/9), so
+# that it cannot break a CSV row, a log line or a terminal.
+_CTRL = r"\x00-\x1f\x7f-\x9f\u2028\u2029"
+PRINTABLE = rf"^[^{_CTRL}]*[^\s{_CTRL}][^{_CTRL}]*$"  # and not blank
+METHOD = r"^(minimax|ls-sum|ls-pose|nominal|ls-single(:[A-Za-z][A-Za-z0-9_]{0,15})?)$"
+
 from drivers.lifecycle import ACTIONS, STATES
+from server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
 
 
 class CellPublic(BaseModel):
@@ -20,14 +29,16 @@ class CampaignCreate(BaseModel):
     """A campaign to plan (as `robocal acquire` plans it), on the cell's real devices if it has
     `devices`, else on the simulated ones."""
 
-    name: str | None = Field(None, min_length=1, max_length=200)
-    cell_id: str = "default"
+    name: str | None = Field(None, min_length=1, max_length=200, pattern=PRINTABLE)
+    cell_id: str = Field("default", max_length=64)
     poses: int = Field(20, ge=3, le=5000)
-    seed: int = Field(0, ge=0)
+    seed: int = Field(0, ge=0, le=2**32 - 1)
     settle: Literal["fixed", "adaptive"] = "fixed"
     pause_s: float = Field(10.0, ge=0.0, le=600.0)
     order: bool = False
-    choose_from: int = Field(0, ge=0, le=100_000)
+    choose_from: int = Field(0, ge=0, le=MAX_CANDIDATES, description=(
+        "choose `poses` of this many candidates by D-optimality (0: no choice); "
+        f"poses x choose_from at most {MAX_CHOICE_WORK}"))
     beam_break_rate: float = Field(0.0, ge=0.0, lt=1.0, description="simulated cell only")
     samples: int = Field(1000, ge=1, le=100_000)
 
@@ -96,9 +107,9 @@ class ReadingPublic(BaseModel):
 
 
 class JobCreate(BaseModel):
-    campaign_id: int
+    campaign_id: int = Field(ge=1, le=MAX_ID)
     kind: Literal["calibration", "diagnosis"] = "calibration"
-    method: str = Field("minimax", description="minimax, ls-sum, ls-single[:T], ls-pose, nominal "
+    method: str = Field("minimax", pattern=METHOD, description="minimax, ls-sum, ls-single[:T], ls-pose, nominal "
                         "(calibration only)")
 
 

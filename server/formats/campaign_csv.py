@@ -10,8 +10,10 @@ import numpy as np
 from solver.measurements import Measurements
 from solver.robot import Robot
 
+from .cell_json import TARGET_NAME
 from .csv_table import Row, Table
 from .files import atomic_write_text
+from .limits import COORD_MAX_MM, TEMP_RANGE_C, TIME_MAX_S
 
 # Rows of one pose come from one controller reading; anything beyond print rounding is a mix-up.
 SAME_POSE_TOL_DEG = 1e-6
@@ -19,6 +21,12 @@ SAME_POSE_TOL_DEG = 1e-6
 LIMIT_TOL_DEG = 1e-6
 MEASURED = ("x", "y", "z")
 EXTRAS = ("time_s", "temp_c")
+# Each column's range and why: no finite-but-absurd value may reach the numerics.
+BOUNDS = {
+    **{c: ((-COORD_MAX_MM, COORD_MAX_MM), "mm (beyond any tracker's range)") for c in MEASURED},
+    "time_s": ((-TIME_MAX_S, TIME_MAX_S), "s (30 years)"),
+    "temp_c": (TEMP_RANGE_C, "degC (air at the tracker)"),
+}
 
 
 def joint_columns(robot: Robot) -> list[str]:
@@ -83,14 +91,17 @@ def read_campaign(path, robot: Robot) -> Measurements:
     for row in t.rows:
         k, _ = poses.add(row)
         target = t.text(row, "target")
+        if not TARGET_NAME.fullmatch(target):
+            raise t.error(row, "target", f"{target!r} is not a target name (a letter, then up "
+                                         "to 15 letters, digits or '_', as in cell.json)")
         key = (poses.ids[k], target)
         if key in seen:
             raise t.error(row, "target", f"target {target!r} of pose {key[0]!r} is already "
                                          f"on line {seen[key].line}")
         seen[key] = row
-        xyz = [t.number(row, c) for c in MEASURED]
+        xyz = [t.number(row, c, None, *BOUNDS[c]) for c in MEASURED]
         # A blank time or temperature means "not recorded" (NaN), unlike a blank coordinate.
-        more = [t.number(row, c, blank=np.nan) for c in extras]
+        more = [t.number(row, c, np.nan, *BOUNDS[c]) for c in extras]
         readings.append((k, target, xyz, more))
 
     names = tuple(sorted({r[1] for r in readings}))
@@ -126,7 +137,7 @@ def read_poses(path, robot: Robot):
             raise t.error(row, "pose", f"pose {poses.ids[k]!r} is already on line {first.line}")
         if new:
             for c in extras:
-                values[c].append(t.number(row, c, blank=np.nan))
+                values[c].append(t.number(row, c, np.nan, *BOUNDS[c]))
     arrays = {c: np.array(v, dtype=float) for c, v in values.items()}
     return list(poses.ids), poses.q_rad(), arrays.get("time_s"), arrays.get("temp_c")
 

@@ -141,7 +141,7 @@ def _targets(doc: JsonDoc, value) -> dict[str, np.ndarray]:
             raise doc.error((*at, name), f"target name {name!r} must be a letter followed by up to "
                                          "15 letters, digits or '_'", key=True)
         doc.array(xyz, (*at, name), 3)
-        targets[name] = np.array([doc.number(v, (*at, name, i)) for i, v in enumerate(xyz)])
+        targets[name] = np.array([doc.coordinate(v, (*at, name, i)) for i, v in enumerate(xyz)])
     return targets
 
 
@@ -149,7 +149,7 @@ def _base(doc: JsonDoc, value) -> np.ndarray:
     at = ("base",)
     doc.array(value, at, 4)
     rows = [doc.array(r, (*at, i), 4) for i, r in enumerate(value)]
-    T = np.array([[doc.number(v, (*at, i, j)) for j, v in enumerate(r)] for i, r in enumerate(rows)])
+    T = np.array([[doc.coordinate(v, (*at, i, j)) for j, v in enumerate(r)] for i, r in enumerate(rows)])
     if np.max(np.abs(T[3] - [0, 0, 0, 1])) > 1e-9:
         raise doc.error((*at, 3), "the last row of a homogeneous transform must be [0, 0, 0, 1]")
     R = T[:3, :3]
@@ -251,10 +251,10 @@ def robot_from_json(obj, doc: JsonDoc | None = None, at: tuple = ()) -> Robot:
     for i, row in enumerate(rows):
         jat = (*at, "joints", i)
         doc.object(row, jat, JOINT_KEYS)
-        a, d, theta, alpha = (doc.number(doc.require(row, k, jat), (*jat, k))
-                              for k in ("a", "d", "theta", "alpha"))
+        a, d = (doc.coordinate(doc.require(row, k, jat), (*jat, k)) for k in ("a", "d"))
+        theta, alpha = (doc.angle(doc.require(row, k, jat), (*jat, k)) for k in ("theta", "alpha"))
         lo, hi = _limits(doc, row.get("limits"), (*jat, "limits"))
-        beta = doc.number(row["beta"], (*jat, "beta")) if "beta" in row else 0.0
+        beta = doc.angle(row["beta"], (*jat, "beta")) if "beta" in row else 0.0
         joints.append(Joint(a=a, d=d, theta=_rad(theta), alpha=_rad(alpha),
                             limits=(_rad(lo), _rad(hi)), beta=_rad(beta)))
         has_beta.append("beta" in row)
@@ -271,7 +271,7 @@ def _limits(doc: JsonDoc, value, at: tuple) -> tuple[float, float]:
     if value is None:
         return DEFAULT_LIMITS_DEG
     doc.array(value, at, 2)
-    lo, hi = (doc.number(v, (*at, i)) for i, v in enumerate(value))
+    lo, hi = (doc.angle(v, (*at, i)) for i, v in enumerate(value))
     if not lo < hi:
         raise doc.error(at, f"lower limit {lo:g} must be below upper limit {hi:g}")
     return lo, hi

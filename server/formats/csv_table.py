@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 from .errors import InputError
 from .files import read_text
+from .limits import CSV_ROWS_MAX, NUMBER_MAX, bad_text
 
 # Plain decimal notation only: float() would also take '1_000', 'nan' and 'infinity'.
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
@@ -52,6 +53,9 @@ class Table:
             for fields in reader:
                 # Blank lines (often trailing) carry nothing; skip rather than refuse them.
                 if fields and not (len(fields) == 1 and not fields[0].strip()):
+                    if len(records) > CSV_ROWS_MAX:  # the header plus CSV_ROWS_MAX rows
+                        raise InputError(self.path, start, None,
+                                         f"more than {CSV_ROWS_MAX} data rows; split the file")
                     records.append((start, fields))
                 start = reader.line_num + 1
         except csv.Error as e:
@@ -114,18 +118,23 @@ class Table:
         return InputError(self.path, row.line, self._index[name] + 1, f"column '{name}': {message}")
 
     def text(self, row: Row, name: str) -> str:
-        """The stripped, non-empty string in column `name`."""
+        """The stripped, non-empty string in column `name`, free of control characters."""
         value = row.fields[self._index[name]].strip()
         if not value:
             raise self.error(row, name, "empty field")
+        why = bad_text(value)
+        if why:
+            raise self.error(row, name, f"the value {why}")
         return value
 
     def raw(self, row: Row, name: str) -> str:
         """The stripped string in column `name`, possibly empty."""
         return row.fields[self._index[name]].strip()
 
-    def number(self, row: Row, name: str, blank: float | None = None) -> float:
-        """The finite number in column `name`; an empty field gives `blank` if that is not None."""
+    def number(self, row: Row, name: str, blank: float | None = None,
+               bounds: tuple[float, float] = (-NUMBER_MAX, NUMBER_MAX), what: str = "") -> float:
+        """The finite number in column `name` within bounds (`what` says why those); an empty
+        field gives `blank` if that is not None."""
         s = row.fields[self._index[name]].strip()
         if not s:
             if blank is not None:
@@ -133,9 +142,11 @@ class Table:
             raise self.error(row, name, "empty field, expected a number")
         if _NUMBER.fullmatch(s):
             value = float(s)
-            if math.isfinite(value):
+            lo, hi = bounds
+            if math.isfinite(value) and lo <= value <= hi:
                 return value
-            raise self.error(row, name, f"{s!r} is out of range")
+            raise self.error(row, name, f"{s} is out of range [{lo:g}, {hi:g}]"
+                                        f"{' ' + what if what else ''}")
         if s.lower().lstrip("+-") in _NOT_FINITE:
             raise self.error(row, name, f"{s!r} is not a finite number")
         raise self.error(row, name, f"{s!r} is not a number")

@@ -6,15 +6,20 @@ import os
 import tempfile
 
 from .errors import InputError
+from .limits import FILE_BYTES_MAX
 
 
 def read_text(path) -> str:
-    """The file's content as UTF-8 text (a leading BOM dropped); InputError if unreadable."""
+    """The file's content as UTF-8 text (a leading BOM dropped); InputError if unreadable or
+    larger than FILE_BYTES_MAX."""
     try:
         with open(path, "rb") as f:
-            data = f.read()
+            data = f.read(FILE_BYTES_MAX + 1)
     except OSError as e:
         raise InputError(path, None, None, f"cannot read the file: {e.strerror or e}") from None
+    if len(data) > FILE_BYTES_MAX:
+        raise InputError(path, None, None, f"the file is larger than {FILE_BYTES_MAX >> 20} MiB; "
+                                           "split it")
     # Strip the BOM ourselves so that error offsets index `data` directly.
     data = data.removeprefix(b"\xef\xbb\xbf")
     try:

@@ -9,6 +9,7 @@ import math
 import json_source_map
 
 from .errors import InputError
+from .limits import ANGLE_MAX_DEG, COORD_MAX_MM, NUMBER_MAX, bad_text
 
 
 def field_name(at: tuple) -> str:
@@ -100,7 +101,10 @@ class JsonDoc:
             raise self.error(at, f"expected {length} elements, got {len(value)}")
         return value
 
-    def number(self, value, at: tuple, minimum: float | None = None) -> float:
+    def number(self, value, at: tuple, minimum: float | None = None,
+               limit: float = NUMBER_MAX, what: str = "") -> float:
+        """A finite number with |x| <= limit (`what` says why that limit, e.g. the tracker's
+        range); at least `minimum` if given."""
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.error(at, f"expected a number, got {_kind(value)}")
         try:
@@ -109,9 +113,20 @@ class JsonDoc:
             x = math.inf
         if not math.isfinite(x):
             raise self.error(at, f"{value} is not a finite number")
+        if not -limit <= x <= limit:
+            raise self.error(at, f"{value} is out of range: |value| must be at most {limit:g}"
+                                 f"{' ' + what if what else ''}")
         if minimum is not None and x < minimum:
             raise self.error(at, f"{value} is below the minimum {minimum:g}")
         return x
+
+    def coordinate(self, value, at: tuple) -> float:
+        """A length or position in mm, within the instrument's range."""
+        return self.number(value, at, limit=COORD_MAX_MM, what="mm (beyond any tracker's range)")
+
+    def angle(self, value, at: tuple) -> float:
+        """An angle in degrees, within three turns."""
+        return self.number(value, at, limit=ANGLE_MAX_DEG, what="deg (three turns)")
 
     def integer(self, value, at: tuple, lo: int, hi: int) -> int:
         x = self.number(value, at)
@@ -122,6 +137,9 @@ class JsonDoc:
     def string(self, value, at: tuple) -> str:
         if not isinstance(value, str) or not value.strip():
             raise self.error(at, f"expected a non-empty string, got {_kind(value)}")
+        why = bad_text(value)
+        if why:
+            raise self.error(at, f"the string {why}")
         return value
 
 

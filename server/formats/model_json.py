@@ -15,7 +15,7 @@ from solver.kinematics import Layout
 from solver.robot import Robot
 from solver.vocabulary import KINDS
 
-from .cell_json import robot_from_json, robot_to_json
+from .cell_json import TARGET_NAME, robot_from_json, robot_to_json
 from .files import atomic_write_text, read_text
 from .json_doc import JsonDoc
 
@@ -176,12 +176,15 @@ def read_model(path) -> ModelFile:
     if obj.get("nominal_robot") is not None:
         nominal = robot_from_json(obj["nominal_robot"], doc, ("nominal_robot",))
     rows = doc.array(doc.require(obj, "base", ()), ("base",), 4)
-    base = np.array([[doc.number(v, ("base", i, j)) for j, v in
+    base = np.array([[doc.coordinate(v, ("base", i, j)) for j, v in
                       enumerate(doc.array(r, ("base", i), 4))] for i, r in enumerate(rows)])
     targets = {}
     for k, v in doc.object(doc.require(obj, "targets", ()), ("targets",)).items():
         at = ("targets", k)
-        targets[k] = np.array([doc.number(c, (*at, i)) for i, c in enumerate(doc.array(v, at, 3))])
+        if not TARGET_NAME.fullmatch(k):
+            raise doc.error(at, f"target name {k!r} must be a letter followed by up to 15 "
+                                "letters, digits or '_'", key=True)
+        targets[k] = np.array([doc.coordinate(c, (*at, i)) for i, c in enumerate(doc.array(v, at, 3))])
     if not targets:
         raise doc.error(("targets",), "at least one target is needed")
     extensions = [extension_from_json(e, doc, ("extensions", i), robot.n_joints)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import csv
 import datetime as dt
+import io
 import json
 import os
 from collections.abc import Mapping, Sequence
@@ -353,11 +355,19 @@ def export_csv(db: Database, *, campaign_id: int, path, robot: Robot | None = No
     write_campaign(path, meas)
 
 
+# Rows per write transaction of an import: each commits in a few milliseconds, so a campaign
+# recording readings at the same time never waits near the busy timeout for the write lock.
+IMPORT_CHUNK = 2000
+
+
 def import_csv(db: Database, *, path, cell_json: str | Mapping, name: str,
                robot: Robot | None = None, notes: str = "") -> int:
     """Store a `meas.csv` as a `done` campaign; its id. All or nothing: InputError on a bad file
     (or cell), and then nothing is written.
 
+    The whole file is checked first; then the campaign is written in short transactions
+    (IMPORT_CHUNK rows each), marked `failed` ("import in progress") until the last one turns
+    it `done`; a write that fails removes what was written.
     Joints are the file's (planned = reached); a target absent at a pose is recorded missing.
     """
     cell, cell_text = checks.cell_text(cell_json)
@@ -367,20 +377,99 @@ def import_csv(db: Database, *, path, cell_json: str | Mapping, name: str,
     mask = meas.mask
     settings = {"source": "csv", "file": os.path.basename(os.fspath(path))}
     with db.session(write=True) as s:
+        # `failed` until complete: a process killed mid-import leaves a campaign that says so,
+        # never one that looks done with readings missing.
         campaign = _add_campaign(s, name=name, cell_text=cell_text, settings=settings,
-                                 simulated=False, notes=notes, status="done")
+                                 simulated=False, notes=IMPORTING, status="failed")
         cid = campaign.id
-        _add_plan(s, cid, meas.pose_ids, q)
-        readings, outcomes = [], []
-        for i in range(meas.n_poses):
-            for k, target in enumerate(meas.target_names):
-                readings.append(_imported_reading(meas, cid, i, k, target, mask[i, k]))
-            outcomes.append(dict(campaign_id=cid, pose_index=i, reached_deg=q[i].tolist(),
-                                 state="measured" if mask[i].all() else "missing-target",
-                                 detail="imported"))
-        s.execute(insert(Reading), readings)
-        s.execute(insert(PoseOutcome), outcomes)
+    step = max(1, IMPORT_CHUNK // len(meas.target_names))  # poses per transaction
+    try:
+        for start in range(0, meas.n_poses, step):
+            stop = min(meas.n_poses, start + step)
+            with db.session(write=True) as s:
+                _add_plan(s, cid, meas.pose_ids[start:stop], q[start:stop], first=start)
+                s.execute(insert(Reading), [
+                    _imported_reading(meas, cid, i, k, target, mask[i, k])
+                    for i in range(start, stop) for k, target in enumerate(meas.target_names)])
+                s.execute(insert(PoseOutcome), [
+                    dict(campaign_id=cid, pose_index=i, reached_deg=q[i].tolist(),
+                         state="measured" if mask[i].all() else "missing-target",
+                         detail="imported") for i in range(start, stop)])
+        with db.session(write=True) as s:
+            done = _campaign(s, cid)
+            done.status, done.notes = "done", str(notes)
+    except BaseException:
+        with db.session(write=True) as s:
+            for table in (Reading, PoseOutcome, PlannedPose):
+                s.execute(delete(table).where(table.campaign_id == cid))
+            s.execute(delete(Campaign).where(Campaign.id == cid))
+        raise
     return cid
+
+
+def export_lines(db: Database, *, campaign_id: int, chunk: int = 5000):
+    """The campaign's meas.csv, line by line (the text export_csv writes), read in short
+    transactions of `chunk` readings so that any size streams in bounded memory; Conflict if it
+    has no readings."""
+    with db.session() as s:
+        campaign = _campaign(s, campaign_id)
+        ok = and_(Reading.campaign_id == campaign_id, Reading.status == "ok")
+        if not s.scalar(select(func.count()).where(ok)):
+            raise Conflict(f"campaign {campaign_id} has no readings to export yet")
+        extras = [c for c, col in (("time_s", Reading.time_s), ("temp_c", Reading.temp_c))
+                  if s.scalar(select(func.count()).where(ok, col.is_not(None)))]
+        n_joints = parse_cell(campaign.cell_json).robot.n_joints
+    yield ",".join(["pose", *[f"q{i}" for i in range(1, n_joints + 1)], "target", "x", "y", "z",
+                    *extras]) + "\n"
+    after = (-1, "")  # keyset: (pose_index, target) of the last line written
+    on = and_(PlannedPose.campaign_id == Reading.campaign_id,
+              PlannedPose.pose_index == Reading.pose_index)
+    done = and_(PoseOutcome.campaign_id == Reading.campaign_id,
+                PoseOutcome.pose_index == Reading.pose_index)
+    while True:
+        with db.session() as s:
+            rows = s.execute(
+                select(Reading.pose_index, Reading.target, Reading.x, Reading.y, Reading.z,
+                       Reading.time_s, Reading.temp_c, PlannedPose.label,
+                       PlannedPose.joints_deg, PoseOutcome.reached_deg)
+                .join(PlannedPose, on).outerjoin(PoseOutcome, done)
+                .where(Reading.campaign_id == campaign_id, Reading.status == "ok",
+                       (Reading.pose_index > after[0])
+                       | ((Reading.pose_index == after[0]) & (Reading.target > after[1])))
+                .order_by(Reading.pose_index, Reading.target).limit(chunk)).all()
+        if not rows:
+            return
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        for r in rows:
+            q = r.reached_deg if r.reached_deg is not None else r.joints_deg
+            more = {"time_s": r.time_s, "temp_c": r.temp_c}
+            w.writerow([r.label, *["%.9f" % v for v in q], r.target,
+                        *["%.6f" % v for v in (r.x, r.y, r.z)],
+                        *["" if more[c] is None else "%.6f" % more[c] for c in extras]])
+        yield buf.getvalue()
+        after = (rows[-1].pose_index, rows[-1].target)
+
+
+IMPORTING = "import in progress (or interrupted: delete and import again)"
+
+
+def readings_page(db: Database, *, campaign_id: int, offset: int = 0,
+                  limit: int = 1000) -> tuple[int, list[tuple[str, ReadingInfo]]]:
+    """(total, page): the campaign's readings in plan order (pose, then arrival), with their pose
+    labels, `limit` of them from `offset`; one bounded query, whatever the campaign's size."""
+    if offset < 0 or limit < 1:
+        raise ValueError("offset must be >= 0 and limit >= 1")
+    with db.session() as s:
+        _campaign(s, campaign_id)
+        total = s.scalar(select(func.count()).where(Reading.campaign_id == campaign_id))
+        on = and_(PlannedPose.campaign_id == Reading.campaign_id,
+                  PlannedPose.pose_index == Reading.pose_index)
+        rows = s.execute(select(PlannedPose.label, Reading).join(PlannedPose, on)
+                         .where(Reading.campaign_id == campaign_id)
+                         .order_by(Reading.pose_index, Reading.id)
+                         .offset(offset).limit(limit)).all()
+        return total, [(label, _reading_info(r)) for label, r in rows]
 
 
 # --- jobs --------------------------------------------------------------------------------------
@@ -538,9 +627,9 @@ def _add_campaign(s: Session, *, name, cell_text, settings, simulated, notes, st
     return campaign
 
 
-def _add_plan(s: Session, campaign_id: int, labels, q_deg: np.ndarray) -> None:
+def _add_plan(s: Session, campaign_id: int, labels, q_deg: np.ndarray, first: int = 0) -> None:
     s.execute(insert(PlannedPose), [
-        dict(campaign_id=campaign_id, pose_index=i, label=str(label),
+        dict(campaign_id=campaign_id, pose_index=first + i, label=str(label),
              joints_deg=[float(v) for v in q_deg[i]])
         for i, label in enumerate(labels)])
 

@@ -14,6 +14,11 @@ from tests.server.api.conftest import wait_for
 from tests.web.conftest import shot as _shot
 
 
+def _get(served, url, **kw):
+    """GET with the token: reads need it."""
+    return httpx.get(url, headers={"Authorization": f"Bearer {served.token}"}, **kw)
+
+
 def _done_job(served, poses=20, method="ls-sum"):
     """A done calibration job made through the API; its id."""
     with httpx.Client(base_url=served.url, timeout=60,
@@ -33,24 +38,25 @@ def test_chart_endpoints_answer_png_and_table3(served):
     job = _done_job(served)
     base = f"{served.url}/api/charts/jobs/{job}"
     for name in ("boxplot.png", "errors.png"):
-        r = httpx.get(f"{base}/{name}", timeout=60)
+        r = _get(served, f"{base}/{name}", timeout=60)
         assert r.status_code == 200 and r.headers["content-type"] == "image/png", r.text
         assert r.content.startswith(b"\x89PNG")
-    t = httpx.get(f"{base}/table3", timeout=120).json()
+    t = _get(served, f"{base}/table3", timeout=120).json()
     assert t["targets"] == ["A", "B", "C"] and t["poses"] == 20
     assert t["columns"][0] == "nominal" and "ls-sum" in t["columns"]
     ap_max = next(r["values"] for r in t["rows"] if r["label"] == "AP max / mm")
     col = dict(zip(t["columns"], ap_max))
     assert col["ls-sum"] < col["nominal"]  # calibrating must beat the nominal model
-    missing = httpx.get(f"{served.url}/api/charts/jobs/999/boxplot.png")
+    missing = _get(served, f"{served.url}/api/charts/jobs/999/boxplot.png")
     assert missing.status_code == 404 and missing.json()["detail"] == "no job 999"
 
 
 def test_page_is_served_and_api_still_answers(served):
-    r = httpx.get(f"{served.url}/")
+    r = httpx.get(f"{served.url}/")  # the page and its files need no token
     assert r.status_code == 200 and "<title>robocal</title>" in r.text
     assert httpx.get(f"{served.url}/app.js").status_code == 200
-    assert httpx.get(f"{served.url}/api/campaigns").json() == []  # the mount shadows nothing
+    assert httpx.get(f"{served.url}/api/campaigns").status_code == 401  # the data does
+    assert _get(served, f"{served.url}/api/campaigns").json() == []  # the mount shadows nothing
     r = httpx.post(f"{served.url}/api/no-such-route")  # a 404 problem, not the file server's 405
     assert r.status_code == 404 and r.headers["content-type"] == "application/problem+json"
     assert r.json()["detail"] == "no API route POST /api/no-such-route"
@@ -89,7 +95,7 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
 
     # A control the API may lack (pause, today) must show the API's problem detail, not fail
     # silently; once the route exists it answers for a done campaign with a 2xx or a 409.
-    paths = httpx.get(f"{served.url}/openapi.json").json()["paths"]
+    paths = _get(served, f"{served.url}/openapi.json").json()["paths"]
     page.click(".controls button[data-action=pause]")
     page.wait_for_selector("#message:not([hidden])")
     message = page.text_content("#message")
@@ -111,7 +117,7 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
     assert page.locator("#table3-table tbody tr").count() >= 5
     href = page.get_attribute("#model-link", "href")
     assert href.startswith("/api/models/")
-    model = httpx.get(served.url + href).json()
+    model = _get(served, served.url + href).json()
     assert model["method"] == "minimax"
     rrd = page.get_attribute("#recording-link", "href")
     assert rrd.startswith("/api/jobs/") and rrd.endswith("/recording")
@@ -150,12 +156,12 @@ def test_cell_picker_upload_and_refusal(served, page):
     message = page.text_content("#message")
     assert "422" in message and "POST /api/cells" in message, message
     # The default cell, sent back, is a valid upload: it becomes an id in the picker, selected.
-    cell = httpx.get(f"{served.url}/api/cells/default").json()["cell"]
+    cell = _get(served, f"{served.url}/api/cells/default").json()["cell"]
     page.fill("#cell-json", json.dumps(cell, indent=2))
     page.click("#cell-upload-btn")
     page.wait_for_function("document.getElementById('c-cell').options.length === 2")
     chosen = page.input_value("#c-cell")
-    assert chosen != "default" and chosen in httpx.get(f"{served.url}/api/cells").json()
+    assert chosen != "default" and chosen in _get(served, f"{served.url}/api/cells").json()
     page.click("#create")
     page.wait_for_selector("#progress:not([hidden])")
     assert "on cell " + chosen in page.text_content("#message")

@@ -156,7 +156,7 @@ def test_validation_errors_are_problem_details(live):
     r = live.client.post("/api/campaigns", json={"poses": 1})
     assert r.status_code == 422 and r.headers["content-type"] == PROBLEM
     assert r.json()["errors"][0]["loc"] == ["body", "poses"]
-    r = live.anonymous.get("/api/campaigns/12345")
+    r = live.client.get("/api/campaigns/12345")
     assert r.status_code == 404 and r.json()["detail"] == "no campaign 12345"
 
 

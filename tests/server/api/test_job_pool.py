@@ -66,7 +66,8 @@ def job_events(live, body: dict) -> tuple[int, list[dict]]:
     """Queue a job while reading /api/events; the job's id and its events up to the last."""
     seen, kind = [], None
     # Read on this thread, so that leaving closes the stream at once (the server waits for it).
-    with httpx.Client(base_url=live.url, timeout=httpx.Timeout(30, read=60)) as c, \
+    with httpx.Client(base_url=live.url, timeout=httpx.Timeout(30, read=60),
+                      headers={"Authorization": f"Bearer {live.token}"}) as c, \
             c.stream("GET", "/api/events") as stream:
         job_id = live.client.post("/api/jobs", json=body).json()["id"]
         for line in stream.iter_lines():

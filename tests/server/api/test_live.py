@@ -19,10 +19,11 @@ PROBLEM = "application/problem+json"
 class EventReader:
     """Reads /api/events on a thread over a real socket; the events seen so far."""
 
-    def __init__(self, url):
+    def __init__(self, url, token):
         self.events: list[tuple[str, dict]] = []
         self.connected = threading.Event()
-        self._client = httpx.Client(base_url=url, timeout=httpx.Timeout(30, read=None))
+        self._client = httpx.Client(base_url=url, timeout=httpx.Timeout(30, read=None),
+                                    headers={"Authorization": f"Bearer {token}"})
         self._thread = threading.Thread(target=self._read, daemon=True)
         self._thread.start()
         assert self.connected.wait(10), "no event stream"
@@ -67,7 +68,7 @@ def test_pause_resume_estop_reset_resume_completes(live):
     """Events carry the engine's states; e-stop mid-campaign, reset, resume: the campaign
     completes with every reading once, those before the e-stop kept."""
     c = live.client
-    reader = EventReader(live.url)
+    reader = EventReader(live.url, live.token)
     try:
         cid = c.post("/api/campaigns", json={"name": "live", "poses": 40, "seed": 1}).json()["id"]
         r = c.post(f"/api/campaigns/{cid}/start")

@@ -71,10 +71,11 @@ def cell_json(devices: Devices, *, tracker_port=None, controller_port=None) -> d
 class FailedEvents:
     """Reads /api/events on a thread until `count` runs have ended with a detail; those."""
 
-    def __init__(self, url, count):
+    def __init__(self, url, count, token):
         self.details: dict[int, str] = {}
         self.count = count
-        self._client = httpx.Client(base_url=url, timeout=httpx.Timeout(30, read=None))
+        self._client = httpx.Client(base_url=url, timeout=httpx.Timeout(30, read=None),
+                                    headers={"Authorization": f"Bearer {token}"})
         self._connected = threading.Event()
         threading.Thread(target=self._read, daemon=True).start()
         assert self._connected.wait(10), "no event stream"
@@ -174,7 +175,7 @@ def test_estop_reaches_the_real_controller(live, devices):
 def test_unreachable_devices_fail_the_campaign_with_their_address(live, devices):
     c = live.client
     nobody = free_port()  # nothing listens there: connection refused
-    events = FailedEvents(live.url, count=2)
+    events = FailedEvents(live.url, count=2, token=live.token)
     for where, doc, expect in (
             ("tracker", cell_json(devices, tracker_port=nobody), f"tracker at 127.0.0.1:{nobody}"),
             ("controller", cell_json(devices, controller_port=nobody),

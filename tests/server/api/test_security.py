@@ -5,8 +5,10 @@ import hashlib
 import pytest
 
 from server.app import MUTATING, _api_routes, create_app
-from server.security import ensure_token, reset_token
+from server.security import ensure_token, reads_open, reset_token
 from server.settings import Settings
+
+from .conftest import serve, settings_for
 
 PROBLEM = "application/problem+json"
 
@@ -24,7 +26,7 @@ def concrete(path):
 def test_every_mutating_route_answers_401_without_the_token(live):
     schema = live.anonymous.get("/openapi.json").json()
     ops = mutating_operations(schema)
-    app_ops = {(m, "/api" + r.path) for r in _api_routes(create_app(live.settings).routes)
+    app_ops = {(m, r.path) for r in _api_routes(create_app(live.settings).routes)
                for m in r.methods & MUTATING}
     assert set(ops) == app_ops and len(ops) >= 7  # the schema hides none of the app's routes
     for method, path in ops:
@@ -36,13 +38,65 @@ def test_every_mutating_route_answers_401_without_the_token(live):
             assert r.json()["status"] == 401 and r.json()["detail"]
         assert schema["paths"][path][method.lower()]["security"] == [{"HTTPBearer": []}]
     # Nothing was created by the refused requests.
-    assert live.anonymous.get("/api/campaigns").json() == []
+    assert live.client.get("/api/campaigns").json() == []
 
 
-def test_reads_need_no_token_and_the_token_opens_writes(live):
-    assert live.anonymous.get("/api/cells").json() == ["default"]
+def test_every_read_answers_401_without_the_token_but_the_page_and_health(live):
+    schema = live.anonymous.get("/openapi.json").json()
+    reads = [p for p, ops in schema["paths"].items() if "get" in ops]
+    assert len(reads) >= 15
+    for path in reads:
+        for headers in ({}, {"Authorization": "Bearer wrong"}):
+            r = live.anonymous.get(concrete(path), headers=headers)
+            if path == "/api/health":
+                assert r.status_code == 200 and r.json() == {"status": "ok"}
+                continue
+            assert r.status_code == 401, (path, headers, r.text)
+            assert r.headers["content-type"] == PROBLEM
+            assert r.headers["www-authenticate"] == "Bearer"
+        if path != "/api/health":
+            assert schema["paths"][path]["get"]["security"] == [{"HTTPBearer": []}]
+            assert "401" in schema["paths"][path]["get"]["responses"]
+    # The event stream too (a browser's EventSource could not send the header: the page reads
+    # it with fetch()).
+    with live.anonymous.stream("GET", "/api/events") as r:
+        assert r.status_code == 401
+    assert live.anonymous.get("/").status_code == 200
+    assert live.anonymous.get("/app.js").status_code == 200
+    assert live.client.get("/api/cells").json() == ["default"]
     r = live.client.post("/api/campaigns", json={"poses": 5, "seed": 1})
     assert r.status_code == 201, r.text
+
+
+def test_open_reads_only_on_a_loopback_host(tmp_path):
+    assert reads_open(Settings(open_reads=True, host="127.0.0.1"))
+    assert reads_open(Settings(open_reads=True, host="::1"))
+    assert reads_open(Settings(open_reads=True, host="localhost"))
+    for host in ("0.0.0.0", "192.168.1.20", "::", "cell-pc.example"):
+        assert not reads_open(Settings(open_reads=True, host=host)), host
+    assert not reads_open(Settings(host="127.0.0.1"))  # closed by default
+    for live in serve(settings_for(tmp_path).model_copy(update={"open_reads": True})):
+        assert live.anonymous.get("/api/cells").json() == ["default"]
+        # Writes stay closed.
+        assert live.anonymous.post("/api/campaigns", json={"poses": 5}).status_code == 401
+
+
+def test_an_unguarded_read_route_is_refused_at_build_time(monkeypatch):
+    from fastapi import APIRouter
+
+    from server import app as app_module
+
+    leak = APIRouter()
+
+    @leak.get("/leak")
+    def leak_route() -> dict:
+        return {}
+
+    # Included like the open health router: a read without the token must be named.
+    monkeypatch.setattr(app_module, "OPEN_ROUTERS", ())
+    app = app_module.FastAPI()
+    app.include_router(leak, prefix="/api")
+    assert app_module.unguarded_routes(app) == ["GET /api/leak"]
 
 
 def test_token_is_stored_only_as_its_sha256(tmp_path):
@@ -89,5 +143,5 @@ def test_an_unguarded_mutating_route_is_refused_at_build(tmp_path, monkeypatch):
     extra = APIRouter()
     extra.delete("/oops")(lambda: None)
     monkeypatch.setattr(app_module, "ROUTERS", (*app_module.ROUTERS, extra))
-    with pytest.raises(RuntimeError, match="DELETE /oops"):
+    with pytest.raises(RuntimeError, match="DELETE /api/oops"):
         create_app(Settings(database=str(tmp_path / "x.db"), data_dir=tmp_path))
