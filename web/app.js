@@ -4,10 +4,12 @@
 
 const TOKEN_KEY = "robocal.token";
 const POLL_MS = 400;
-const TERMINAL = new Set(["done", "aborted", "failed"]);
+// Final campaign states (drivers/lifecycle.py): nothing more can happen, so polling stops.
+const FINAL = new Set(["done", "aborted"]);
+const BUSY_JOB = new Set(["queued", "running"]);
 const $ = (id) => document.getElementById(id);
-const state = { campaign: null, job: null, diag: null, campaignTimer: null, jobTimer: null,
-                diagTimer: null };
+const state = { campaign: null, status: null, job: null, diag: null, campaignTimer: null,
+                jobTimer: null, diagTimer: null, failureShown: null };
 const READINGS_SHOWN = 6;  // the latest readings table keeps this many rows
 
 /** Show a message at the corner (an error unless ok). */
@@ -133,7 +135,6 @@ $("m-import-btn").addEventListener("click", async () => {
   try {
     const c = await api("POST", `/measurements/import?${query}`, await file.text(), true, "text/csv");
     useCampaign(c);
-    $("start").disabled = true;
     await pollReadings(c.id);
     say(`${file.name} imported as campaign ${c.id} (${c.poses_done} poses)`, true);
   } catch (e) { say(e.message); }
@@ -149,28 +150,32 @@ $("campaign-form").addEventListener("submit", async (ev) => {
   try {
     const c = await api("POST", "/campaigns", body);
     useCampaign(c);
-    $("start").disabled = false;
-    $("calibrate").disabled = true;
     say(`campaign ${c.id} planned on cell ${body.cell_id}`, true);
   } catch (e) { say(e.message); }
 });
 
-$("start").addEventListener("click", async () => {
-  try {
-    showCampaign(await api("POST", `/campaigns/${state.campaign}/start`));
-    $("start").disabled = true;
-    pollCampaign();
-  } catch (e) { say(e.message); }
-});
-
-document.querySelectorAll(".controls button").forEach((b) => b.addEventListener("click", async () => {
+// Every campaign button asks for one life-cycle action; which are enabled follows the actions the
+// API reports for the campaign's state, so a click the state does not allow cannot be made.
+document.querySelectorAll("button[data-action]").forEach((b) => b.addEventListener("click", async () => {
   const action = b.dataset.action;
+  b.disabled = true;  // no double click while the request is out; the next poll re-enables
   try {
     const r = await api("POST", `/campaigns/${state.campaign}/${action}`);
     say(`${action}: ${r.status || "ok"}${r.note ? ` (${r.note})` : ""}`, true);
   } catch (e) { say(e.message); }
   pollCampaign();  // the action may have changed the state either way
 }));
+
+// The header's emergency stop: whatever campaign runs, whichever page state this is.
+$("estop-all").addEventListener("click", async () => {
+  try {
+    const r = await api("POST", "/estop");
+    say(r.campaign_id === null || r.campaign_id === undefined ? "emergency stop: nothing runs"
+      : `emergency stop: campaign ${r.campaign_id} stopped${r.note ? ` (${r.note})` : ""}`,
+    true);
+  } catch (e) { say(e.message); }
+  if (state.campaign !== null) pollCampaign();
+});
 
 function showCampaign(c) {
   $("progress").hidden = false;
@@ -182,8 +187,31 @@ function showCampaign(c) {
   $("p-bar").max = c.poses_total || 1;
   $("p-bar").value = c.poses_done;
   $("p-count").textContent = `${c.poses_done} / ${c.poses_total} poses`;
-  $("calibrate").disabled = c.status !== "done";
-  if (["planned", "paused", "failed"].includes(c.status)) $("start").disabled = false;
+  const actions = new Set(c.actions || []);
+  document.querySelectorAll("button[data-action]").forEach((b) => {
+    b.disabled = !actions.has(b.dataset.action);
+  });
+  // A failed device is an error a person must see, once per failure.
+  const detail = c.detail || (c.run && c.run.detail) || "";
+  $("p-run").className = c.status === "failed" ? "error" : "muted";
+  if (c.status === "failed" && state.failureShown !== `${c.id}:${detail}`) {
+    state.failureShown = `${c.id}:${detail}`;
+    say(`campaign ${c.id} failed${detail ? `: ${detail}` : ""}`);
+  }
+  state.status = c.status;
+  refreshCalibrate();
+}
+
+/** Calibrate only a done campaign, and not while a calibration of it is queued or running. */
+async function refreshCalibrate() {
+  const id = state.campaign;
+  if (state.status !== "done") { $("calibrate").disabled = true; return; }
+  try {
+    const jobs = await api("GET", "/jobs");
+    if (id !== state.campaign) return;
+    $("calibrate").disabled = jobs.some((j) => j.campaign_id === id && j.kind === "calibration"
+                                              && BUSY_JOB.has(j.state));
+  } catch (e) { $("calibrate").disabled = false; }  // the API refuses a duplicate anyway (409)
 }
 
 async function pollCampaign() {
@@ -194,7 +222,7 @@ async function pollCampaign() {
     if (id !== state.campaign) return;  // another campaign was created meanwhile
     showCampaign(c);
     await pollReadings(id);
-    if (TERMINAL.has(c.status) && !(c.run && c.run.state === "running")) return;
+    if (FINAL.has(c.status)) return;
   } catch (e) { say(e.message); }
   state.campaignTimer = setTimeout(pollCampaign, POLL_MS);
 }
@@ -236,6 +264,7 @@ function renderReadings(rows, total) {
 
 $("job-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
+  $("calibrate").disabled = true;  // until this job ends: no duplicate on a second click
   try {
     const j = await api("POST", "/jobs", { campaign_id: state.campaign, method: $("j-method").value });
     state.job = j.id;
@@ -256,7 +285,7 @@ $("job-form").addEventListener("submit", async (ev) => {
       $("d-links").replaceChildren();
       pollDiagnosis();
     }
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e.message); refreshCalibrate(); }
 });
 
 async function pollDiagnosis() {
@@ -432,6 +461,7 @@ async function pollJob() {
     const j = await api("GET", `/jobs/${id}`);
     if (id !== state.job) return;
     showJob(j);
+    if (!BUSY_JOB.has(j.state)) refreshCalibrate();
     if (j.state === "done") return showResults(j);
     if (j.state === "failed") return say(`job ${j.id} failed: ${j.reason}`);
   } catch (e) { say(e.message); }
