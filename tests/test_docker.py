@@ -179,16 +179,18 @@ def test_image_serves_on_loopback_keeps_its_data_and_starts_offline(image, volum
                    "-e", f"ROBOCAL_PORT={port}")
         containers.append(ctr)
 
-        def cells():
-            r = httpx.get(f"{url}/api/cells", timeout=5)
+        def health():
+            r = httpx.get(f"{url}/api/health", timeout=5)  # open; the data needs the token
             assert r.status_code == 200, r.text
             return r.json()
 
-        assert _wait(cells, f"GET /api/cells of {ctr}") == ["default"]
+        assert _wait(health, f"GET /api/health of {ctr}") == {"status": "ok"}
         logs = _docker("logs", ctr).stdout + _docker("logs", ctr).stderr
         tokens = re.findall(r"API token \(shown once, keep it\): (\S+)", logs)
         assert len(tokens) == 1, logs[-2000:]
         auth = {"Authorization": f"Bearer {tokens[0]}"}
+        assert httpx.get(f"{url}/api/cells").status_code == 401
+        assert httpx.get(f"{url}/api/cells", headers=auth).json() == ["default"]
         assert httpx.post(f"{url}/api/campaigns", json={"poses": 5}).status_code == 401
         r = httpx.post(f"{url}/api/campaigns", json={"poses": 5, "name": "kept"}, headers=auth)
         assert r.status_code == 201, r.text
@@ -203,8 +205,9 @@ def test_image_serves_on_loopback_keeps_its_data_and_starts_offline(image, volum
         ctr = _run(image, volume, "--network", "host", "-e", "ROBOCAL_HOST=127.0.0.1",
                    "-e", f"ROBOCAL_PORT={port}")
         containers.append(ctr)
-        _wait(cells, f"GET /api/cells of {ctr}")
-        assert [c["name"] for c in httpx.get(f"{url}/api/campaigns").json()] == ["kept"]
+        _wait(health, f"GET /api/health of {ctr}")
+        assert [c["name"] for c in httpx.get(f"{url}/api/campaigns", headers=auth).json()] == [
+            "kept"]
         assert httpx.post(f"{url}/api/campaigns", json={"poses": 5},
                           headers=auth).status_code == 201
         assert "API token" not in _docker("logs", ctr).stdout + _docker("logs", ctr).stderr
@@ -214,8 +217,9 @@ def test_image_serves_on_loopback_keeps_its_data_and_starts_offline(image, volum
         _docker("rm", "-f", containers.pop())
         ctr = _run(image, volume, "--network", "none")
         containers.append(ctr)
-        probe = ("import urllib.request; print(urllib.request.urlopen("
-                 "'http://127.0.0.1:8000/api/campaigns', timeout=4).read().decode())")
+        probe = ("import urllib.request; print(urllib.request.urlopen(urllib.request.Request("
+                 f"'http://127.0.0.1:8000/api/campaigns', headers={auth!r}), timeout=4)"
+                 ".read().decode())")
         got = _wait(lambda: json.loads(_docker("exec", ctr, "python3", "-c", probe).stdout),
                     f"the offline container {ctr}")
         assert len(got) == 2
