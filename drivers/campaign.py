@@ -77,20 +77,6 @@ def _code(exc) -> str | None:
     return getattr(exc, "code", None)
 
 
-# --- SHIM: delete at merge, once drivers/abb/client.py has emergency_stop/clear_stop (contract 1)
-def _emergency_stop(controller) -> bool:
-    stop = getattr(controller, "emergency_stop", None)
-    if stop is not None:
-        return bool(stop())
-    controller.stop()  # today's client: raises if the controller did not confirm
-    return True
-
-
-def _clear_stop(controller) -> None:
-    clear = getattr(controller, "clear_stop", None)
-    if clear is not None:
-        clear()
-# --- end SHIM
 
 
 @dataclass
@@ -157,7 +143,7 @@ class CampaignEngine:
                 self._halted_on_fault = False
             new = self._apply(action)
         if action == "reset":
-            _clear_stop(self.controller)
+            self.controller.clear_stop()
         self._tell()
         return new
 
@@ -255,7 +241,7 @@ class CampaignEngine:
 
     def _stop_arm(self) -> bool:
         try:
-            return _emergency_stop(self.controller)
+            return bool(self.controller.emergency_stop())
         except Exception as e:  # noqa: BLE001 - an e-stop reports, it does not raise
             self.log(f"emergency stop: the controller did not confirm: {e}")
             return False
@@ -318,7 +304,7 @@ class CampaignEngine:
             # a device fault: halt the arm and end; every reading so far is already stored, and
             # a later run resumes at the next unmeasured pose
             try:
-                _emergency_stop(self.controller)
+                self.controller.emergency_stop()
             except Exception:  # noqa: BLE001 - the original error is the one to report
                 pass
             self._tell()
@@ -347,7 +333,7 @@ class CampaignEngine:
             epoch = self._estops
             clear, self._halted_on_fault = self._halted_on_fault, False
         if clear:  # the engine's own halt after a fault; an e-stop's latch needs reset
-            _clear_stop(self.controller)
+            self.controller.clear_stop()
         self._tell()
         return epoch
 

@@ -105,8 +105,19 @@ def plan_and_store(db, *, name: str, cell: Cell, opts: AcquireOptions, base):
     poses_deg, plan = _plan(cell, base, opts)
     return store.create_campaign(db, name=name, cell_json=json.dumps(cell_to_json(cell)),
                                  poses_deg=poses_deg.tolist(), simulated=cell.simulated,
-                                 settings={"options": asdict(opts), "plan": to_plain(plan),
+                                 settings={"options": asdict(opts),
+                                           "plan": _undefined_as_null(to_plain(plan)),
                                            "base_guess": np.asarray(base).tolist()}), poses_deg
+
+
+def _undefined_as_null(value):
+    """The plan summary with inf and NaN as null: a plan too small to determine the parameters
+    has log det -inf and condition inf, which JSON cannot hold."""
+    if isinstance(value, dict):
+        return {k: _undefined_as_null(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_undefined_as_null(v) for v in value]
+    return None if isinstance(value, float) and not np.isfinite(value) else value
 
 
 def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
