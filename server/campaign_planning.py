@@ -13,6 +13,10 @@ MAX_CANDIDATES = 2000
 MAX_CHOICE_WORK = 40_000  # poses x candidates
 
 
+# Above this many poses, ordering them (a shortest-path tour) takes seconds.
+ORDER_INLINE_POSES = 500
+
+
 class PlanTooLarge(ValueError):
     """A plan whose planning would take too long for a request; names the fields."""
 
@@ -27,6 +31,12 @@ def check_plan_size(opts: AcquireOptions) -> None:
     if opts.poses * opts.choose_from > MAX_CHOICE_WORK:
         raise PlanTooLarge(f"poses x choose_from: {opts.poses} x {opts.choose_from} is more than "
                            f"{MAX_CHOICE_WORK}; choose fewer poses or from fewer candidates")
+
+
+def plans_long(opts: AcquireOptions) -> bool:
+    """Whether planning may take seconds (a D-optimal choice, a long tour): then in a worker;
+    random poses alone plan in well under a second, in the request."""
+    return bool(opts.choose_from) or (opts.order and opts.poses > ORDER_INLINE_POSES)
 
 
 def plan_in_worker(database_url: str, cell: Cell, opts: AcquireOptions, report=None) -> int:

@@ -57,10 +57,16 @@ def exit_reason(code: int | None) -> str:
 
 
 def warm_up() -> None:
-    """Start the fork server (it imports PRELOAD: seconds) so the first child starts at once."""
-    from multiprocessing import forkserver
+    """Start the fork server and wait for it to import PRELOAD (seconds), by running one child,
+    so that the first job or request does not pay for it."""
+    try:
+        call(_nothing, (), timeout=600, name="robocal-warm-up")
+    except Exception:  # noqa: BLE001 - a failure here shows again, named, at the first job
+        pass
 
-    forkserver.ensure_running()
+
+def _nothing(report=None) -> None:
+    """A child that does nothing (warm_up's)."""
 
 
 class Child:

@@ -9,7 +9,7 @@ from fastapi import APIRouter, Request
 
 from server import store
 from server.acquire import AcquireOptions
-from server.campaign_planning import check_plan_size, plan_in_worker
+from server.campaign_planning import check_plan_size, plan_in_worker, plans_long
 
 from . import ops
 from .deps import (AcquisitionsDep, Authorized, AuthorizedNow, CampaignId, CampaignStatus, DbDep,
@@ -51,13 +51,16 @@ def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
                     acquisitions: AcquisitionsDep, jobs: JobsDep) -> CampaignDetail:
     """Plan a campaign on the cell (stored `planned`; POST .../start runs it): on its real devices
     if the cell has `devices`, else on the simulated ones. A D-optimal choice beyond the
-    planning bounds is refused at once (422); the planning runs in a worker process under the
-    request limit (504 past it)."""
+    planning bounds is refused at once (422); a long planning (D-optimal choice, long tour) runs
+    in a worker process under the request limit (504 past it)."""
     cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
     opts = AcquireOptions(**body.model_dump(exclude={"cell_id"}))
     check_plan_size(opts)
-    cid = run_call(jobs, plan_in_worker, db.engine.url.render_as_string(hide_password=False),
-                   cell, opts)
+    if plans_long(opts):
+        cid = run_call(jobs, plan_in_worker, db.engine.url.render_as_string(hide_password=False),
+                       cell, opts)
+    else:
+        cid = ops.plan_campaign(db, cell=cell, opts=opts)
     return _public(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)
 
 

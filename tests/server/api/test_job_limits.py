@@ -101,13 +101,21 @@ def gone(pid: int) -> bool:
         return True
 
 
+@pytest.fixture(scope="module")
+def long_csv_text(tmp_path_factory):
+    path = tmp_path_factory.mktemp("sim") / "meas.csv"
+    assert robocal(["simulate", "--poses", "400", "--seed", "5", "--effect", "thermal_drift",
+                    "--out", str(path)]) == 0
+    return path.read_text()
+
+
 def test_a_job_past_its_wall_clock_limit_is_killed_and_failed_with_the_reason(
-        make_live, csv_text, caplog):
-    live = make_live(job_timeout_s=1.5)
+        make_live, long_csv_text, caplog):
+    live = make_live(job_timeout_s=0.5)
     c = live.client
-    cid = campaign(live, csv_text)
+    cid = campaign(live, long_csv_text)
     caplog.set_level(logging.INFO, logger="robocal.jobs")
-    job = queue(live, cid, kind="diagnosis")  # a diagnosis takes longer than 1.5 s
+    job = queue(live, cid, kind="diagnosis")  # 400 poses with a drift: seconds, not 0.5 s
     pid = running_pid(job["id"])
     # The service keeps answering while the job runs: the work is in another process.
     answers = []
@@ -119,7 +127,7 @@ def test_a_job_past_its_wall_clock_limit_is_killed_and_failed_with_the_reason(
         time.sleep(0.05)
     job = wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(),
                    lambda j: j["state"] == "failed", timeout=10, interval=0.02)
-    assert job["reason"] == "exceeded its wall-clock limit of 1.5 s", job
+    assert job["reason"] == "exceeded its wall-clock limit of 0.5 s", job
     killed = [r.getMessage() for r in caplog.records if "after its wall-clock limit" in r.message]
     assert len(killed) == 1, killed
     print(f"\n{killed[0]}; {len(answers)} health+list reads while it ran, slowest "
