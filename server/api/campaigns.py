@@ -41,9 +41,11 @@ def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
 
 
 def _acted(outcome, db, acquisitions, note: str) -> ActionPublic:
+    """The campaign after the request, in the state the request left it in."""
     info = store.get_campaign(db, campaign_id=outcome.campaign_id)
-    return ActionPublic(id=info.id, status=outcome.status, was=outcome.was,
-                        actions=acquisitions.actions(info), note=outcome.note or note)
+    now = _public(info, acquisitions).model_dump()
+    now.update(status=outcome.status, actions=acquisitions.actions(info, outcome.status))
+    return ActionPublic(**now, was=outcome.was, note=outcome.note or note)
 
 
 @router.post("", status_code=201, dependencies=[Authorized], responses=CALL_PROBLEMS)

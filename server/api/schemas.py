@@ -73,13 +73,10 @@ class CampaignDetail(CampaignPublic):
     settings: dict
 
 
-class ActionPublic(BaseModel):
-    """What a request to a campaign did: its state before and now, and what it allows now."""
+class ActionPublic(CampaignPublic):
+    """The campaign after a request: its state before (`was`) and now, what it allows now."""
 
-    id: int
-    status: Literal[STATES]
     was: Literal[STATES]
-    actions: list[Literal[ACTIONS]] = ACTIONS_FIELD
     note: str
 
 

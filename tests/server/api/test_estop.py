@@ -16,6 +16,7 @@ import httpx
 
 from drivers.lifecycle import allowed
 from tests.server.api.conftest import serve, settings_for, wait_for
+from tests.server.api.test_sigterm import Wire
 from tests.server.api.test_real_devices import cell_json, devices  # noqa: F401 - a fixture
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -97,14 +98,17 @@ def test_estop_answers_within_100_ms_under_60_heavy_reads(live, devices):
     started.wait()
     time.sleep(0.3)  # the reads are in flight, the server's thread pool full
     in_flight = 60 - len(answered)
+    wire = Wire(devices.controller)
     with httpx.Client(base_url=live.url, headers=c.headers, timeout=30) as h:
-        t0 = time.perf_counter()
+        t0, m0 = time.perf_counter(), time.monotonic()
         r = h.post(f"/api/campaigns/{cid}/estop")
         took = time.perf_counter() - t0
+    on_wire = wire.first("STOP", after=m0)
     for t in threads:
         t.join(timeout=300)
     reads = sorted(s for _, s in answered)
-    print(f"\ne-stop answered in {took * 1000:.1f} ms with {in_flight} of 60 Table 3 reads in "
+    print(f"\ne-stop: STOP on the wire after {(on_wire - m0) * 1000:.1f} ms, answered in "
+          f"{took * 1000:.1f} ms with {in_flight} of 60 Table 3 reads in "
           f"flight (reads took {reads[0]:.2f}-{reads[-1]:.2f} s, median {reads[30]:.2f} s); "
           f"with no load {min(idle) * 1000:.1f}-{max(idle) * 1000:.1f} ms; load average "
           f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
