@@ -182,8 +182,8 @@ function showCampaign(c) {
   $("p-id").textContent = c.id;
   $("p-name").textContent = c.name;
   $("p-status").textContent = c.status;
-  $("p-run").textContent = c.run
-    ? `worker: ${c.run.state}${c.run.detail ? ` (${c.run.detail})` : ""}` : "";
+  $("p-run").textContent = c.run && c.run.detail
+    ? `${c.run.active ? "run" : "last run"}: ${c.run.detail}` : "";
   $("p-bar").max = c.poses_total || 1;
   $("p-bar").value = c.poses_done;
   $("p-count").textContent = `${c.poses_done} / ${c.poses_total} poses`;
