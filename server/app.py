@@ -22,6 +22,7 @@ from .settings import Settings
 from .web import mount_web
 
 API_PREFIX = "/api"
+SWITCH_INTERVAL_S = 0.0005
 MUTATING = {"POST", "PUT", "PATCH", "DELETE"}
 
 
@@ -161,6 +162,9 @@ class Server(uvicorn.Server):
 def serve(settings: Settings | None = None) -> None:
     """Run the service with uvicorn on settings.host:port (127.0.0.1 unless told otherwise)."""
     settings = settings or Settings()
+    # A thread waiting for the GIL gets it after at most this long: the e-stop's threads must
+    # not queue behind request threads for the default 5 ms per turn.
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     app = create_app(settings)
     Server(uvicorn.Config(app, host=settings.host, port=settings.port, log_level="info",
                           timeout_graceful_shutdown=GRACE_S), app).run()

@@ -9,6 +9,7 @@ import os
 import threading
 import time
 from collections import deque
+from contextlib import contextmanager
 from multiprocessing.connection import wait
 from pathlib import Path
 
@@ -127,6 +128,7 @@ class Jobs:
         self._running: dict[int, Child | None] = {}  # None while its process starts
         self._killing: dict[int, str] = {}  # job id -> why the service kills it
         self._call_slots = threading.BoundedSemaphore(call_workers)
+        self._slot_held = threading.local()
         self._calls: set[Child] = set()
         self._wake_r, self._wake_w = os.pipe()
         # Nothing runs a job this process did not queue: fail those a stop cut off.
@@ -177,14 +179,29 @@ class Jobs:
         self._fail(job_id, CANCELLED)
         return self.get(job_id)
 
+    @contextmanager
+    def call_slot(self):
+        """Hold one of the call_workers slots (Busy if none frees up in call_timeout_s): a route
+        takes it before loading its inputs, so at most that many requests do heavy work at once
+        and the rest wait without the GIL (the e-stop's thread must get it at once)."""
+        if getattr(self._slot_held, "held", False):
+            yield  # this thread holds one already (the route took it; call() is inside)
+            return
+        if not self._call_slots.acquire(timeout=self.call_timeout_s):
+            raise Busy(f"every worker for requests stayed busy for {self.call_timeout_s:g} s; "
+                       "try again later")
+        self._slot_held.held = True
+        try:
+            yield
+        finally:
+            self._slot_held.held = False
+            self._call_slots.release()
+
     def call(self, target, *args):
         """target(*args, report) in a short-lived worker process: its result or its exception.
         CallTimedOut past call_timeout_s (the worker killed); Busy if no worker frees up."""
         t0 = time.monotonic()
-        if not self._call_slots.acquire(timeout=self.call_timeout_s):
-            raise Busy(f"every worker for requests stayed busy for {self.call_timeout_s:g} s; "
-                       "try again later")
-        try:
+        with self.call_slot():
             if self._closing:
                 raise Busy("the service is stopping")
             left = self.call_timeout_s - (time.monotonic() - t0)
@@ -193,8 +210,6 @@ class Jobs:
             except TimeoutError:
                 raise CallTimedOut("the computation exceeded its wall-clock limit of "
                                    f"{self.call_timeout_s:g} s") from None
-        finally:
-            self._call_slots.release()
 
     def get(self, job_id: int) -> Job:
         return store.get_job(self.db, job_id=job_id)

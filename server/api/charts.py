@@ -12,7 +12,7 @@ from server.formats.cell_json import parse_cell
 from solver.finite import require_inputs
 
 from .deps import DbDep, JobId, JobsDep
-from .worker_calls import CALL_PROBLEMS, run_call
+from .worker_calls import CALL_PROBLEMS, call_slot, run_call
 
 router = APIRouter(prefix="/charts", tags=["charts"])
 PNG = {200: {"content": {"image/png": {}}}, **CALL_PROBLEMS}
@@ -40,22 +40,25 @@ def _png(data: bytes) -> Response:
 @router.get("/jobs/{job_id}/boxplot.png", response_class=Response, responses=PNG)
 def boxplot(job_id: JobId, db: DbDep, jobs: JobsDep) -> Response:
     """AP error per SMR before (nominal) and after calibration, as the paper's Figures 2-6."""
-    path, cell_json, meas, job = _inputs(db, jobs, job_id)
-    return _png(run_call(jobs, charts.boxplot_png, job_id, path, cell_json, meas, job.method))
+    with call_slot(jobs):
+        path, cell_json, meas, job = _inputs(db, jobs, job_id)
+        return _png(run_call(jobs, charts.boxplot_png, job_id, path, cell_json, meas, job.method))
 
 
 @router.get("/jobs/{job_id}/errors.png", response_class=Response, responses=PNG)
 def errors(job_id: JobId, db: DbDep, jobs: JobsDep) -> Response:
     """AP error per pose (worst SMR of the pose) before and after calibration."""
-    path, cell_json, meas, job = _inputs(db, jobs, job_id)
-    return _png(run_call(jobs, charts.errors_png, job_id, path, cell_json, meas, job.method))
+    with call_slot(jobs):
+        path, cell_json, meas, job = _inputs(db, jobs, job_id)
+        return _png(run_call(jobs, charts.errors_png, job_id, path, cell_json, meas, job.method))
 
 
 @router.get("/jobs/{job_id}/table3", responses=CALL_PROBLEMS)
 def table3(job_id: JobId, db: DbDep, jobs: JobsDep) -> dict:
     """The paper's Table 3 for the job's campaign: every method on its data, side by side."""
-    _, cell_json, meas, job = _inputs(db, jobs, job_id, model=False)
-    table = run_call(jobs, charts.table3, cell_json, meas)
+    with call_slot(jobs):  # loading the readings is heavy too: at most call_workers at once
+        _, cell_json, meas, job = _inputs(db, jobs, job_id, model=False)
+        table = run_call(jobs, charts.table3, cell_json, meas)
     return {"job_id": job_id, "campaign_id": job.campaign_id, "method": job.method, **table}
 
 

@@ -10,7 +10,7 @@ from server.formats.cell_json import parse_cell
 from solver.finite import require_inputs
 
 from .deps import CampaignQuery, DbDep, JobId, JobsDep
-from .worker_calls import CALL_PROBLEMS, run_call
+from .worker_calls import CALL_PROBLEMS, call_slot, run_call
 
 router = APIRouter(prefix="/models", tags=["models"])
 
@@ -28,7 +28,8 @@ def evaluate_model(job_id: JobId, campaign_id: CampaignQuery, jobs: JobsDep, db:
     """Accuracy of a job's model on a campaign's readings, next to the nominal model (computed
     in a worker process under a wall-clock limit: 504 past it)."""
     path = jobs.model_path(job_id)
-    cell = parse_cell(store.get_campaign(db, campaign_id=campaign_id).cell_json)
-    meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
-    require_inputs(meas.q, meas.xyz)  # a non-finite campaign: 422 at once, no worker needed
-    return run_call(jobs, charts.evaluation, path, meas)
+    with call_slot(jobs):  # loading the readings is heavy too: at most call_workers at once
+        cell = parse_cell(store.get_campaign(db, campaign_id=campaign_id).cell_json)
+        meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
+        require_inputs(meas.q, meas.xyz)  # a non-finite campaign: 422 at once, no worker
+        return run_call(jobs, charts.evaluation, path, meas)

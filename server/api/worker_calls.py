@@ -3,6 +3,8 @@ problems: 504 past the wall-clock limit, 503 when no worker frees up or one died
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 from fastapi import HTTPException
 
 from server.job_queue import Busy, CallTimedOut, Jobs
@@ -16,6 +18,16 @@ CALL_PROBLEMS = {
           "content": PROBLEM},
 }
 RETRY_AFTER_S = 5
+
+
+@contextmanager
+def call_slot(jobs: Jobs):
+    """Hold a worker slot while a route loads its inputs and computes (503 if none frees up)."""
+    try:
+        with jobs.call_slot():
+            yield
+    except Busy as e:
+        raise HTTPException(503, str(e), headers={"Retry-After": str(RETRY_AFTER_S)}) from None
 
 
 def run_call(jobs: Jobs, target, *args):

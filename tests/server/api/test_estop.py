@@ -15,8 +15,8 @@ from pathlib import Path
 import httpx
 
 from drivers.lifecycle import allowed
-from tests.server.api.conftest import serve, settings_for, wait_for
-from tests.server.api.test_sigterm import Wire
+from tests.server.api.conftest import free_port, serve, settings_for, wait_for
+from tests.server.api.test_sigterm import Wire, start_service
 from tests.server.api.test_real_devices import cell_json, devices  # noqa: F401 - a fixture
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -65,8 +65,20 @@ def test_moving_states_refuse_what_the_table_refuses(live, devices):
     assert r.json()["confirmed"] is True
 
 
-def test_estop_answers_within_100_ms_under_60_heavy_reads(live, devices):
-    c = live.client
+def test_estop_answers_within_100_ms_under_60_heavy_reads(tmp_path, devices):
+    # The service in its own process, as in production: the readers and the simulated devices
+    # here do not share its interpreter.
+    port = free_port()
+    proc, token, _ = start_service(tmp_path, port)
+    try:
+        _estop_under_reads(f"http://127.0.0.1:{port}", token, devices)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def _estop_under_reads(url, token, devices):
+    c = httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=30)
     # The heavy reads: Table 3 (every method of the paper) of a calibrated simulated campaign.
     sim = c.post("/api/campaigns", json={"name": "data", "poses": 40, "seed": 4}).json()["id"]
     c.post(f"/api/campaigns/{sim}/start")
@@ -76,7 +88,7 @@ def test_estop_answers_within_100_ms_under_60_heavy_reads(live, devices):
     wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(), lambda j: j["state"] == "done",
              timeout=120)
     cid = running_campaign(c, devices, "stop")
-    with httpx.Client(base_url=live.url, headers=c.headers, timeout=30) as h:
+    with httpx.Client(base_url=url, headers=c.headers, timeout=30) as h:
         idle = []
         for _ in range(5):  # the same route, refused (no e-stop in planned), with no load
             t0 = time.perf_counter()
@@ -86,7 +98,7 @@ def test_estop_answers_within_100_ms_under_60_heavy_reads(live, devices):
     answered, started = [], threading.Barrier(61, timeout=30)
 
     def heavy():
-        with httpx.Client(base_url=live.url, headers=c.headers, timeout=120) as h:
+        with httpx.Client(base_url=url, headers=c.headers, timeout=120) as h:
             started.wait()
             t0 = time.perf_counter()
             r = h.get(f"/api/charts/jobs/{job['id']}/table3")
@@ -99,7 +111,7 @@ def test_estop_answers_within_100_ms_under_60_heavy_reads(live, devices):
     time.sleep(0.3)  # the reads are in flight, the server's thread pool full
     in_flight = 60 - len(answered)
     wire = Wire(devices.controller)
-    with httpx.Client(base_url=live.url, headers=c.headers, timeout=30) as h:
+    with httpx.Client(base_url=url, headers=c.headers, timeout=30) as h:
         t0, m0 = time.perf_counter(), time.monotonic()
         r = h.post(f"/api/campaigns/{cid}/estop")
         took = time.perf_counter() - t0
