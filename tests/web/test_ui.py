@@ -8,7 +8,6 @@ import json
 import time
 
 import httpx
-import pytest
 
 from tests.server.api.conftest import wait_for
 from tests.web.conftest import shot as _shot
