@@ -106,3 +106,15 @@ def test_small_plans_answer_inline_and_oversized_ones_are_refused(make_live):
     print(f"422 for 100 of 2000 in {took * 1000:.0f} ms")
     assert r.status_code == 422 and r.json()["detail"].startswith("poses x choose_from"), r.text
     assert c.get("/api/jobs").json() == []  # refused before any job was queued
+
+
+def test_a_planning_job_has_no_charts(make_live):
+    c = make_live().client
+    job = post_plan(c, poses=10, choose_from=100)[0].json()
+    for chart in ("table3", "boxplot.png", "errors.png"):
+        r = c.get(f"/api/charts/jobs/{job['id']}/{chart}")
+        assert r.status_code in (404, 409), r.text  # 409 while it is not done (no model)
+    wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json()["state"], lambda s: s in ENDED,
+             timeout=120)
+    r = c.get(f"/api/charts/jobs/{job['id']}/table3")
+    assert r.status_code == 404 and "no charts" in r.json()["detail"], r.text

@@ -127,7 +127,6 @@ def test_two_writers_wait_for_each_other(tmp_path, cell_json):
 
     from server.store import create_campaign, set_status
 
-
     path = tmp_path / "store.db"
     with open_database(path) as db:
         cids = [create_campaign(db, name=f"c{i}", cell_json=cell_json, poses_deg=POSES_DEG)
