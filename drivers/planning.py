@@ -164,21 +164,29 @@ def candidate_jacobians(robot: Robot, base_in_tracker, targets, q) -> np.ndarray
 
 def plan_campaign(robot: Robot, base_in_tracker, targets, n_candidates: int, rng, k=None,
                   criterion: str = "D", start=None, speeds=None, acceptance_deg: float = 60.0,
-                  floor_mm: float = 150.0, bounds=None, order: bool = True) -> tuple[np.ndarray, dict]:
+                  floor_mm: float = 150.0, bounds=None, order: bool = True,
+                  progress=None) -> tuple[np.ndarray, dict]:
     """Valid random candidates -> optionally the k best by `criterion` -> ordered (unless not
-    asked: the paper measures in plan order); (q, summary)."""
+    asked: the paper measures in plan order); (q, summary). progress(fraction in 0..1), if
+    given, is called as the planning advances (mostly the D-optimal exchange)."""
     # The summary compares move time in candidate order with the planned order, and the chosen
     # poses' observability with the first k candidates (a random choice of the same size).
+    # Shares of the work: drawing candidates and their Jacobians, the choice, the ordering.
+    step = progress or (lambda fraction: None)
     cand = plan_poses(robot, base_in_tracker, targets, n_candidates, rng, acceptance_deg,
                       floor_mm, bounds)
+    step(0.05)
     J = obs.unit_columns(candidate_jacobians(robot, base_in_tracker, targets, cand))
+    step(0.1)
     if k is None:
         chosen = np.arange(n_candidates)
         random_ = chosen
     else:
-        chosen = obs.select_poses(J, k, criterion)
+        chosen = obs.select_poses(J, k, criterion, progress=lambda f: step(0.1 + 0.8 * f))
         random_ = np.arange(k)  # candidates are i.i.d. random, so any k of them are a random choice
+    step(0.9)
     perm = order_poses(cand[chosen], start, speeds) if order else np.arange(len(chosen))
+    step(0.95)
     q = cand[chosen][perm]
     summary = {
         "n_candidates": n_candidates,

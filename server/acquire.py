@@ -100,9 +100,10 @@ def check_options(cell: Cell, opts: AcquireOptions) -> None:
                          "devices are real")
 
 
-def plan_and_store(db, *, name: str, cell: Cell, opts: AcquireOptions, base):
-    """Plan the campaign's poses from the base guess and store it `planned`; (id, poses deg)."""
-    poses_deg, plan = _plan(cell, base, opts)
+def plan_and_store(db, *, name: str, cell: Cell, opts: AcquireOptions, base, progress=None):
+    """Plan the campaign's poses from the base guess and store it `planned`; (id, poses deg).
+    progress(fraction), if given, follows the planning (drivers.planning.plan_campaign)."""
+    poses_deg, plan = _plan(cell, base, opts, progress)
     return store.create_campaign(db, name=name, cell_json=json.dumps(cell_to_json(cell)),
                                  poses_deg=poses_deg.tolist(), simulated=cell.simulated,
                                  settings={"options": asdict(opts),
@@ -149,7 +150,7 @@ def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
     return tracker, controller
 
 
-def _plan(cell: Cell, base, opts: AcquireOptions):
+def _plan(cell: Cell, base, opts: AcquireOptions, progress=None):
     from drivers.planning import plan_campaign
 
     targets = np.array(list(cell.targets.values()))
@@ -157,7 +158,8 @@ def _plan(cell: Cell, base, opts: AcquireOptions):
     n_cand = max(opts.choose_from, opts.poses)
     q, summary = plan_campaign(cell.robot, base, targets, n_cand, rng,
                                k=opts.poses if opts.choose_from else None,
-                               start=np.zeros(cell.robot.n_joints), order=opts.order)
+                               start=np.zeros(cell.robot.n_joints), order=opts.order,
+                               progress=progress)
     summary["ordered"] = opts.order
     return np.rad2deg(q), summary
 

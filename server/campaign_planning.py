@@ -1,11 +1,10 @@
-"""Planning a campaign for the API: its size bounded up front, the planning itself (random
-candidates, the D-optimal choice, the ordering) run in a worker process under the request
-limit (Jobs.call), so an oversized plan is refused at once and none can hold the service."""
+"""Planning a campaign for the API: its size bounded up front, and which plans take long enough
+(a D-optimal choice, a long tour) to run as a planning job (Jobs.submit_planning) rather than in
+the request, so an oversized plan is refused at once and none can hold the service."""
 
 from __future__ import annotations
 
 from .acquire import AcquireOptions
-from .formats.cell_json import Cell
 
 # The D-optimal exchange costs about poses x candidates x parameters; at these bounds it plans
 # in a few seconds (20 of 2000 candidates: 3 s on a busy two-core machine).
@@ -34,18 +33,6 @@ def check_plan_size(opts: AcquireOptions) -> None:
 
 
 def plans_long(opts: AcquireOptions) -> bool:
-    """Whether planning may take seconds (a D-optimal choice, a long tour): then in a worker;
+    """Whether planning may take seconds (a D-optimal choice, a long tour): then as a job;
     random poses alone plan in well under a second, in the request."""
     return bool(opts.choose_from) or (opts.order and opts.poses > ORDER_INLINE_POSES)
-
-
-def plan_in_worker(database_url: str, cell: Cell, opts: AcquireOptions, report=None) -> int:
-    """In a worker process: plan and store the campaign (server.api.ops.plan_campaign); its id."""
-    from . import store
-    from .api.ops import plan_campaign
-
-    db = store.open_database(database_url)
-    try:
-        return plan_campaign(db, cell=cell, opts=opts)
-    finally:
-        db.close()

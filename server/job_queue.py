@@ -1,4 +1,4 @@
-"""Calibration and diagnosis jobs: checked, kept in the store, each run in its own worker
+"""Calibration, diagnosis and planning jobs: checked, kept in the store, each run in its own worker
 process (server.processes) under a wall-clock limit, cancellable, their changes reported on the
 event bus. A restart fails the ones it cut off."""
 
@@ -20,11 +20,11 @@ from .events import Events
 from .formats.cell_json import parse_cell
 from .formats.model_json import model_to_json
 from .processes import Child, call, exit_reason, one_line, warm_up
-from .worker import JobSetup, campaign_data, job_event, run_job
+from .worker import JobSetup, campaign_data, job_event, run_job, run_planning
 from .workflow import model_file, run_method
 
 JOB_STATES = ("queued", "running", "done", "failed")
-JOB_KINDS = ("calibration", "diagnosis")
+JOB_KINDS = ("calibration", "diagnosis")  # of a done campaign; planning makes one
 RESTART_REASON = "service stopped while running"
 CANCELLED = "cancelled"
 # Defaults of the settings job_timeout_s, call_timeout_s and call_workers.
@@ -127,6 +127,8 @@ class Jobs:
         self._queue: deque[int] = deque()
         self._running: dict[int, Child | None] = {}  # None while its process starts
         self._killing: dict[int, str] = {}  # job id -> why the service kills it
+        # A queued planning job's cell and options, for its worker (a restart fails the job).
+        self._plans: dict[int, tuple] = {}
         self._call_slots = threading.BoundedSemaphore(call_workers)
         self._slot_held = threading.local()
         self._calls: set[Child] = set()
@@ -159,6 +161,20 @@ class Jobs:
         self._wake()
         return job
 
+    def submit_planning(self, *, cell, opts) -> Job:
+        """Queue the planning of a campaign (stored `planned` by the job); the job as queued.
+        The caller checked the plan's size (server.campaign_planning.check_plan_size)."""
+        method = f"{opts.poses} of {opts.choose_from}" if opts.choose_from else f"{opts.poses}"
+        with self._lock:
+            if self._closing:
+                raise store.Conflict("the service is stopping; no new jobs")
+            job = store.create_job(self.db, kind="planning", campaign_id=None, method=method)
+            self._plans[job.id] = (cell, opts)
+            self._queue.append(job.id)
+        self._publish(job)
+        self._wake()
+        return job
+
     def cancel(self, job_id: int) -> Job:
         """Take a queued job off the queue, or kill the process of a running one; both end
         failed with reason "cancelled". Conflict if it is already done or failed."""
@@ -166,6 +182,7 @@ class Jobs:
             job = self.get(job_id)
             if job_id in self._queue:
                 self._queue.remove(job_id)
+                self._plans.pop(job_id, None)
             elif job_id in self._running:
                 self._killing.setdefault(job_id, CANCELLED)
                 child = self._running[job_id]
@@ -258,6 +275,7 @@ class Jobs:
             children = [c for c in self._running.values() if c is not None] + list(self._calls)
             cut_off = sorted(self._running) + list(self._queue)
             self._queue.clear()
+            self._plans.clear()
         for child in children:
             child.kill()
         self._wake()
@@ -306,8 +324,12 @@ class Jobs:
                     self._overrun(job_id, child, now)
 
     def _start(self, job_id: int) -> None:
+        with self._lock:
+            plan = self._plans.pop(job_id, None)
+        target, args = ((run_job, (self._setup, job_id)) if plan is None
+                        else (run_planning, (self._setup, job_id, *plan)))
         try:
-            child = Child(run_job, (self._setup, job_id), name=f"robocal-job-{job_id}")
+            child = Child(target, args, name=f"robocal-job-{job_id}")
         except Exception as e:  # noqa: BLE001 - the job says why it cannot run
             with self._lock:
                 self._running.pop(job_id, None)

@@ -1,4 +1,4 @@
-"""A calibration or diagnosis job, run in its own worker process (server.processes): it writes
+"""A calibration, diagnosis or planning job, run in its own worker process (server.processes): it writes
 its job's state to the store itself and reports each change to the service, which publishes it.
 
 Only picklable things cross to a worker (a JobSetup and a job id); it opens the store itself.
@@ -49,6 +49,33 @@ def run_job(setup: JobSetup, job_id: int, report: Report) -> None:
         _update(db, report, job_id, state="failed", reason=one_line(e))
         return
     _update(db, report, job_id, state="done", results=results)
+
+
+# A planning job writes its progress when it rose by this much (each is a write to the store).
+PROGRESS_STEP = 0.02
+
+
+def run_planning(setup: JobSetup, job_id: int, cell, opts, report: Report) -> None:
+    """Plan a campaign (server.api.ops.plan_campaign) and store it `planned`: the job done with
+    results {"campaign": id}, or failed with the reason (a name clash: the Conflict's text)."""
+    from .api.ops import plan_campaign
+
+    db = _database(setup.database_url)
+    _update(db, report, job_id, state="running")
+    shown = [0.0]
+
+    def progress(fraction: float) -> None:
+        fraction = min(max(float(fraction), 0.0), 0.99)  # done, not the planning, says 1
+        if fraction - shown[0] >= PROGRESS_STEP:
+            shown[0] = fraction
+            _update(db, report, job_id, progress=fraction)
+
+    try:
+        cid = plan_campaign(db, cell=cell, opts=opts, progress=progress)
+    except Exception as e:  # the reason is the job's result, not a server error
+        _update(db, report, job_id, state="failed", reason=one_line(e))
+        return
+    _update(db, report, job_id, state="done", campaign_id=cid, results={"campaign": cid})
 
 
 def _database(url: str) -> store.Database:

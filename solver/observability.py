@@ -54,8 +54,10 @@ def _scores(criterion: str, M: np.ndarray, J: np.ndarray, A: np.ndarray) -> np.n
     return _log_det(M[None])[0] + _log_det(S)
 
 
-def select_poses(J_per_pose: np.ndarray, k: int, criterion: str = "D") -> np.ndarray:
-    """Sorted indices of k poses maximising "D" (log det J'J) or "O5": greedy + Fedorov exchange."""
+def select_poses(J_per_pose: np.ndarray, k: int, criterion: str = "D",
+                 progress=None) -> np.ndarray:
+    """Sorted indices of k poses maximising "D" (log det J'J) or "O5": greedy + Fedorov exchange;
+    progress(fraction) after each greedy pick and exchange sweep, if given."""
     # O5 = sigma_min^2 / sigma_max, Nahvi & Nahvi's noise-amplification index. Columns get unit
     # norm over all candidates, so the choice does not depend on the parameters' units.
     if criterion not in CRITERIA:
@@ -76,8 +78,14 @@ def select_poses(J_per_pose: np.ndarray, k: int, criterion: str = "D") -> np.nda
         chosen.append(j)
         free[j] = False
         M = M + A[j]
+        if progress is not None:
+            progress(0.5 * len(chosen) / k)
     best = float(CRITERIA[criterion](M[None])[0])
-    for _ in range(MAX_SWEEPS):
+    for sweep in range(MAX_SWEEPS):
+        # The exchange stops when a sweep finds nothing better; until then, each sweep closes
+        # half of what is left, so the fraction rises without knowing how many will come.
+        if progress is not None:
+            progress(1.0 - 0.5 ** (sweep + 2))
         improved = False
         for pos in range(k):
             rest = M - A[chosen[pos]]

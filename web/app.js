@@ -147,12 +147,30 @@ $("campaign-form").addEventListener("submit", async (ev) => {
     settle: $("c-settle").value, cell_id: $("c-cell").value || "default",
   };
   if ($("c-name").value.trim()) body.name = $("c-name").value.trim();
+  if (Number($("c-choose").value) > 0) body.choose_from = Number($("c-choose").value);
   try {
-    const c = await api("POST", "/campaigns", body);
+    const r = await request("POST", "/campaigns", body);
+    // 202: a planning that takes seconds (a D-optimal choice) is a job; follow it to its campaign.
+    const c = r.status === 202 ? await planned(await r.json()) : await r.json();
     useCampaign(c);
     say(`campaign ${c.id} planned on cell ${body.cell_id}`, true);
   } catch (e) { say(e.message); }
 });
+
+/** Follow a planning job until it is done (its campaign) or failed (throws its reason). */
+async function planned(job) {
+  const shown = $("c-planning");
+  shown.hidden = false;
+  try {
+    for (;;) {
+      shown.textContent = `planning... ${Math.round(job.progress * 100)} %`;
+      if (job.state === "done") return await api("GET", `/campaigns/${job.campaign_id}`);
+      if (job.state === "failed") throw new Error(`planning job ${job.id} failed: ${job.reason}`);
+      await new Promise((ok) => setTimeout(ok, POLL_MS));
+      job = await api("GET", `/jobs/${job.id}`);
+    }
+  } finally { shown.hidden = true; }
+}
 
 // Every campaign button asks for one life-cycle action; which are enabled follows the actions the
 // API reports for the campaign's state, so a click the state does not allow cannot be made.

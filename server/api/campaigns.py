@@ -6,18 +6,19 @@ from __future__ import annotations
 import asyncio
 
 from fastapi import APIRouter, Request
+from fastapi.responses import JSONResponse
 
 from server import store
 from server.acquire import AcquireOptions
-from server.campaign_planning import check_plan_size, plan_in_worker, plans_long
+from server.campaign_planning import check_plan_size, plans_long
 
 from . import ops
+from .jobs import public_job
 from .deps import (AcquisitionsDep, Authorized, AuthorizedNow, CampaignId, CampaignStatus, DbDep,
                    JobsDep, SettingsDep)
 from .problems import problem
 from .schemas import ActionPublic, CampaignCreate, CampaignDetail, CampaignPublic, EstopPublic, \
-    RunPublic
-from .worker_calls import CALL_PROBLEMS, run_call
+    JobPublic, RunPublic
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
 ESTOP_NOTE = ("STOP sent to the controller (the arm halts where it is), the campaign e-stopped; "
@@ -48,21 +49,30 @@ def _acted(outcome, db, acquisitions, note: str) -> ActionPublic:
     return ActionPublic(**now, was=outcome.was, note=outcome.note or note)
 
 
-@router.post("", status_code=201, dependencies=[Authorized], responses=CALL_PROBLEMS)
+PLANNING_JOB = {202: {
+    "model": JobPublic,
+    "description": "A planning that may take seconds (a D-optimal choice, a long tour) is "
+                   "queued as a `planning` job: follow it at `Location` (GET /api/jobs/{id}, "
+                   "progress 0..1); it ends done with `campaign_url`, or failed with the reason",
+    "headers": {"Location": {"description": "the planning job", "schema": {"type": "string"}}}}}
+
+
+@router.post("", status_code=201, dependencies=[Authorized], response_model=CampaignDetail,
+             responses=PLANNING_JOB)
 def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
-                    acquisitions: AcquisitionsDep, jobs: JobsDep) -> CampaignDetail:
+                    acquisitions: AcquisitionsDep, jobs: JobsDep):
     """Plan a campaign on the cell (stored `planned`; POST .../start runs it): on its real devices
-    if the cell has `devices`, else on the simulated ones. A D-optimal choice beyond the
-    planning bounds is refused at once (422); a long planning (D-optimal choice, long tour) runs
-    in a worker process under the request limit (504 past it)."""
+    if the cell has `devices`, else on the simulated ones. Random poses are planned at once
+    (201, the campaign); a D-optimal choice or a long tour is queued as a planning job (202, the
+    job); a D-optimal choice beyond the planning bounds is refused at once (422)."""
     cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
     opts = AcquireOptions(**body.model_dump(exclude={"cell_id"}))
     check_plan_size(opts)
     if plans_long(opts):
-        cid = run_call(jobs, plan_in_worker, db.engine.url.render_as_string(hide_password=False),
-                       cell, opts)
-    else:
-        cid = ops.plan_campaign(db, cell=cell, opts=opts)
+        job = public_job(jobs.submit_planning(cell=cell, opts=opts))
+        return JSONResponse(job.model_dump(mode="json"), status_code=202,
+                            headers={"Location": f"/api/jobs/{job.id}"})
+    cid = ops.plan_campaign(db, cell=cell, opts=opts)
     return _public(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)
 
 

@@ -23,6 +23,8 @@ def _inputs(db, jobs, job_id: int, model: bool = True) -> tuple:
     missing job or campaign answers at once (NotFound / Conflict through jobs.model_path)."""
     path = jobs.model_path(job_id) if model else None
     job = jobs.get(job_id)
+    if job.kind == "planning":
+        raise store.NotFound(f"job {job_id} planned a campaign; it has no charts")
     info = store.get_campaign(db, campaign_id=job.campaign_id)
     cell = parse_cell(info.cell_json, f"<campaign {job.campaign_id} cell>")
     meas = store.campaign_measurements(db, campaign_id=job.campaign_id, robot=cell.robot)

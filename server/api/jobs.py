@@ -1,4 +1,5 @@
-"""Jobs: calibrations and diagnoses of done campaigns, queued -> running -> done | failed."""
+"""Jobs: calibrations and diagnoses of done campaigns, and the planning of new ones (POST
+/api/campaigns answers 202 with one), queued -> running -> done | failed."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from .schemas import FigurePublic, JobCreate, JobPublic
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
 
-def _public(job: Job) -> JobPublic:
+def public_job(job: Job) -> JobPublic:
     done = job.state == "done"
     urls = {}
     if done:
@@ -24,7 +25,9 @@ def _public(job: Job) -> JobPublic:
         urls = dict(model_url=f"/api/models/{job.id}" if "model" in job.results else None,
                     recording_url=f"{base}/recording" if "recording" in job.results else None,
                     report_url=f"{base}/report" if "report" in job.results else None,
-                    figures_url=f"{base}/figures" if "report" in job.results else None)
+                    figures_url=f"{base}/figures" if "report" in job.results else None,
+                    campaign_url=(f"/api/campaigns/{job.results['campaign']}"
+                                  if "campaign" in job.results else None))
     return JobPublic(id=job.id, kind=job.kind, campaign_id=job.campaign_id, method=job.method,
                      state=job.state, reason=job.reason, progress=job.progress,
                      created_at=job.created_at, started_at=job.started_at,
@@ -43,7 +46,7 @@ def create_job(body: JobCreate, jobs: JobsDep, request: Request) -> JobPublic:
     A second calibration of a campaign with the same method while one is queued or running is
     refused (409); another method is accepted."""
     try:
-        return _public(jobs.submit(campaign_id=body.campaign_id, method=body.method,
+        return public_job(jobs.submit(campaign_id=body.campaign_id, method=body.method,
                                    kind=body.kind))
     except DuplicateJob as e:
         return problems.problem(request, 409, str(e), job_id=e.job_id)
@@ -54,19 +57,19 @@ def create_job(body: JobCreate, jobs: JobsDep, request: Request) -> JobPublic:
 def cancel_job(job_id: JobId, jobs: JobsDep) -> JobPublic:
     """Cancel a job: a queued one leaves the queue, a running one's worker process is killed;
     either ends failed with reason "cancelled" (409 if it already ended)."""
-    return _public(jobs.cancel(job_id))
+    return public_job(jobs.cancel(job_id))
 
 
 @router.get("")
 def list_jobs(jobs: JobsDep) -> list[JobPublic]:
     """Every job in the store, oldest first."""
-    return [_public(j) for j in jobs.list()]
+    return [public_job(j) for j in jobs.list()]
 
 
 @router.get("/{job_id}")
 def get_job(job_id: JobId, jobs: JobsDep) -> JobPublic:
     """One job's state and progress, and the reason if it failed."""
-    return _public(jobs.get(job_id))
+    return public_job(jobs.get(job_id))
 
 
 @router.get("/{job_id}/recording", response_class=FileResponse,

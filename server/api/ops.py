@@ -52,9 +52,10 @@ def list_cells(*, cells_dir: Path) -> list[str]:
 
 # --- campaigns ---------------------------------------------------------------------------------
 
-def plan_campaign(db: store.Database, *, cell: Cell, opts: AcquireOptions) -> int:
+def plan_campaign(db: store.Database, *, cell: Cell, opts: AcquireOptions, progress=None) -> int:
     """Plan a campaign on the cell (simulated or real) exactly as `robocal acquire` would, and
-    store it `planned`; ValueError for options the cell cannot have."""
+    store it `planned`; ValueError for options the cell cannot have. progress(fraction), if
+    given, follows the planning."""
     check_options(cell, opts)
     name = opts.name or f"campaign-seed{opts.seed}"
     # acquire() resumes the latest unfinished campaign of a name, so names must not collide.
@@ -62,7 +63,8 @@ def plan_campaign(db: store.Database, *, cell: Cell, opts: AcquireOptions) -> in
     if clash:
         raise store.Conflict(f"campaign {clash[-1]} is already named {name!r} and unfinished")
     opts = AcquireOptions(**{**asdict(opts), "name": name})
-    cid, _ = plan_and_store(db, name=name, cell=cell, opts=opts, base=base_guess(cell, opts.seed))
+    cid, _ = plan_and_store(db, name=name, cell=cell, opts=opts, base=base_guess(cell, opts.seed),
+                            progress=progress)
     return cid
 
 

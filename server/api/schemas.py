@@ -112,8 +112,8 @@ class JobCreate(BaseModel):
 
 class JobPublic(BaseModel):
     id: int
-    kind: Literal["calibration", "diagnosis"]
-    campaign_id: int
+    kind: Literal["calibration", "diagnosis", "planning"]
+    campaign_id: int | None = Field(description="a planning job's: none until it planned one")
     method: str
     state: Literal["queued", "running", "done", "failed"]
     reason: str | None
@@ -125,6 +125,7 @@ class JobPublic(BaseModel):
     recording_url: str | None = None
     report_url: str | None = None
     figures_url: str | None = None
+    campaign_url: str | None = None
 
 
 class FigurePublic(BaseModel):

@@ -477,7 +477,7 @@ def readings_page(db: Database, *, campaign_id: int, offset: int = 0,
 # queued -> running -> done | failed; a queued job may fail without running (a restart).
 JOB_TRANSITIONS = {"queued": {"running", "failed"}, "running": {"done", "failed"},
                    "done": set(), "failed": set()}
-JOB_FIELDS = ("progress", "reason", "results")
+JOB_FIELDS = ("progress", "reason", "results", "campaign_id")  # campaign: a planning job's
 
 
 @dataclass(frozen=True)
@@ -486,7 +486,7 @@ class JobInfo:
 
     id: int
     kind: str
-    campaign_id: int
+    campaign_id: int | None  # None for a planning job until it planned its campaign
     method: str
     state: str
     reason: str | None
@@ -497,11 +497,14 @@ class JobInfo:
     results: dict
 
 
-def create_job(db: Database, *, kind: str, campaign_id: int, method: str) -> JobInfo:
-    """Store a queued job on an existing campaign; the job."""
+def create_job(db: Database, *, kind: str, campaign_id: int | None, method: str) -> JobInfo:
+    """Store a queued job on an existing campaign (none for a planning job); the job."""
     checks.one_of(kind, JOB_KINDS, "kind")
+    if (campaign_id is None) != (kind == "planning"):
+        raise ValueError("a planning job has no campaign yet; every other job has one")
     with db.session(write=True) as s:
-        _campaign(s, campaign_id)
+        if campaign_id is not None:
+            _campaign(s, campaign_id)
         job = Job(kind=kind, campaign_id=campaign_id, method=str(method), state="queued",
                   progress=0.0, results={}, created_at=utcnow())
         s.add(job)

@@ -23,7 +23,7 @@ from drivers.lifecycle import STATES
 STATUSES = STATES
 POSE_STATES = ("measured", "missing-target", "skipped")
 READING_STATUSES = ("ok", "missing")
-JOB_KINDS = ("calibration", "diagnosis")
+JOB_KINDS = ("calibration", "diagnosis", "planning")
 JOB_STATES = ("queued", "running", "done", "failed")
 
 # SQLite alters a table by copying it (Alembic batch mode), which can only drop or change
@@ -168,7 +168,8 @@ class PoseOutcome(Base):
 
 
 class Job(Base):
-    """Work on a stored campaign (a calibration or a diagnosis), kept so a restart can tell."""
+    """Work on a stored campaign (a calibration or a diagnosis), or the planning of a new one
+    (no campaign until it is planned), kept so a restart can tell."""
 
     __tablename__ = "job"
     __table_args__ = (
@@ -179,7 +180,7 @@ class Job(Base):
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     kind: Mapped[str] = mapped_column(String(16))
-    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    campaign_id: Mapped[int | None] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
     method: Mapped[str] = mapped_column(Text)
     state: Mapped[str] = mapped_column(String(16), default="queued")
     reason: Mapped[str | None] = mapped_column(Text)

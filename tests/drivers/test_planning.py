@@ -130,6 +130,21 @@ def test_plan_campaign_chooses_and_orders():
     assert q_all.shape == (30, 6) and s_all["criterion"] is None
 
 
+def test_the_planning_reports_rising_progress_and_plans_the_same():
+    base = cell().base
+    seen = []
+    q, _ = plan_campaign(IRB2600, base, TARGETS, 200, np.random.default_rng(6), k=20,
+                         progress=seen.append)
+    q_quiet, _ = plan_campaign(IRB2600, base, TARGETS, 200, np.random.default_rng(6), k=20)
+    np.testing.assert_array_equal(q, q_quiet)  # reporting changes nothing
+    assert seen == sorted(seen) and 0 < seen[0] and seen[-1] < 1  # done is the caller's to say
+    assert len([f for f in seen if 0.1 < f < 0.9]) >= 20  # each greedy pick and sweep
+    J = candidate_jacobians(IRB2600, base, T, q_quiet)
+    picks = []
+    select_poses(J, 5, progress=picks.append)
+    assert picks[:5] == [0.1, 0.2, 0.3, 0.4, 0.5] and picks[-1] < 1
+
+
 def held_out_rms(c, q, idx, held, draws):
     """RMS (mm) over noise draws of an ls-sum calibration from poses q[idx] predicting `held`."""
     true = c.true_points(held)

@@ -253,10 +253,12 @@ def test_an_oversized_plan_is_refused_at_once_and_a_bounded_one_plans(one_worker
     assert r.status_code == 422 and r.json()["detail"].startswith("poses x choose_from"), r.text
     assert c.get("/api/campaigns").json() == []  # nothing half-planned was stored
     r = c.post("/api/campaigns", json={"poses": 10, "choose_from": 200, "name": "chosen"})
-    assert r.status_code == 201, r.text
-    assert (r.json()["poses_total"], r.json()["status"]) == (10, "planned")
-    again = c.post("/api/campaigns", json={"poses": 10, "choose_from": 200, "name": "chosen"})
-    assert again.status_code == 409, again.text  # the worker's Conflict crosses back as one
+    assert r.status_code == 202, r.text  # a planning job (tests/server/api/test_planning_jobs.py)
+    job = wait_for(lambda: c.get(r.headers["location"]).json(),
+                   lambda j: j["state"] in ("done", "failed"), timeout=120)
+    assert job["state"] == "done", job
+    info = c.get(job["campaign_url"]).json()
+    assert (info["poses_total"], info["status"]) == (10, "planned")
 
 
 def test_workers_die_with_a_killed_service(tmp_path, csv_text):

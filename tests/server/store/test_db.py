@@ -17,6 +17,7 @@ from sqlalchemy import inspect, text
 from server.store import open_database, record_reading
 from server.store.db import alembic_config, database_url
 from server.store.models import Base
+from tests.server.store.conftest import POSES_DEG
 
 ROOT = Path(__file__).resolve().parents[3]
 TABLES = {"alembic_version", "campaign", "planned_pose", "reading", "pose_outcome", "job"}
@@ -32,7 +33,7 @@ def test_migrations_create_the_schema(tmp_path):
     uniques = {tuple(u["column_names"]) for u in insp.get_unique_constraints("reading")}
     assert ("campaign_id", "pose_index", "target") in uniques
     with db.engine.connect() as c:
-        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0003"
+        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0004"
         # The migration and the models describe the same schema.
         assert compare_metadata(MigrationContext.configure(c, opts={"compare_type": True}),
                                 Base.metadata) == []
@@ -115,7 +116,7 @@ def test_alembic_command_line_with_database_url(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     con = sqlite3.connect(path)
-    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0003",)
+    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0004",)
     assert con.execute("PRAGMA journal_mode").fetchone() == ("wal",)
     con.close()
 
@@ -125,8 +126,6 @@ def test_two_writers_wait_for_each_other(tmp_path, cell_json):
     from concurrent.futures import ThreadPoolExecutor
 
     from server.store import create_campaign, set_status
-
-    from .conftest import POSES_DEG
 
     path = tmp_path / "store.db"
     with open_database(path) as db:
@@ -164,7 +163,7 @@ def test_opening_a_new_file_from_many_places_at_once(tmp_path):
             return c.execute(text("SELECT version_num FROM alembic_version")).all()
 
     with ThreadPoolExecutor(4) as pool:
-        assert list(pool.map(version, range(4))) == [[("0003",)]] * 4
+        assert list(pool.map(version, range(4))) == [[("0004",)]] * 4
     for p in procs:
         _, err = p.communicate(timeout=120)
         assert p.returncode == 0, err
@@ -193,3 +192,52 @@ def test_migration_0003_widens_the_status_and_keeps_campaigns(tmp_path):
     con = sqlite3.connect(path)
     assert con.execute("SELECT status FROM campaign").fetchall() == [("paused",)]
     con.close()
+
+
+def test_migration_0004_adds_planning_jobs_and_keeps_jobs(tmp_path):
+    """A 0003 store keeps its jobs through 0004 (planning jobs, no campaign until planned) and
+    back (the planning jobs dropped, the others kept)."""
+    path = tmp_path / "old.db"
+    config = alembic_config(path)
+    command.upgrade(config, "0003")
+    con = sqlite3.connect(path)
+    con.execute("INSERT INTO campaign (id, name, created_at, status, cell_json, settings_json, "
+                "simulated, notes) VALUES (1, 'a', '2026-01-01 00:00:00', 'done', '{}', '{}', "
+                "0, '')")
+    job = ("INSERT INTO job (kind, campaign_id, method, state, progress, created_at, results) "
+           "VALUES (?, ?, 'm', 'done', 1.0, '2026-01-01 00:00:00', '{}')")
+    con.execute(job, ("diagnosis", 1))
+    con.commit()
+    for kind, campaign in (("planning", None), ("diagnosis", None)):
+        with pytest.raises(sqlite3.IntegrityError):
+            con.execute(job, (kind, campaign))
+    con.close()
+    command.upgrade(config, "head")
+    con = sqlite3.connect(path)
+    con.execute(job, ("planning", None))  # allowed now
+    con.commit()
+    with pytest.raises(sqlite3.IntegrityError):
+        con.execute(job, ("survey", 1))
+    assert con.execute("SELECT kind, campaign_id FROM job ORDER BY id").fetchall() == [
+        ("diagnosis", 1), ("planning", None)]
+    con.close()
+    command.downgrade(config, "0003")
+    con = sqlite3.connect(path)
+    assert con.execute("SELECT kind, campaign_id FROM job").fetchall() == [("diagnosis", 1)]
+    con.close()
+
+
+def test_a_planning_job_has_no_campaign_until_it_planned_one(tmp_path, cell_json):
+    from server import store
+
+    db = open_database(tmp_path / "store.db")
+    job = store.create_job(db, kind="planning", campaign_id=None, method="20 of 2000")
+    assert (job.kind, job.campaign_id, job.state) == ("planning", None, "queued")
+    with pytest.raises(ValueError, match="planning job has no campaign"):
+        store.create_job(db, kind="diagnosis", campaign_id=None, method="diagnose")
+    cid = store.create_campaign(db, name="p", cell_json=cell_json, poses_deg=POSES_DEG)
+    store.update_job(db, job_id=job.id, state="running")
+    done = store.update_job(db, job_id=job.id, state="done", campaign_id=cid,
+                            results={"campaign": cid})
+    assert (done.campaign_id, done.results, done.progress) == (cid, {"campaign": cid}, 1.0)
+    db.close()
