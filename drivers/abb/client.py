@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solver.robot import BUILTIN
+
 from . import protocol as p
 from .transport import LineTransport, TransportClosed
 
@@ -198,6 +200,7 @@ class ControllerClient:
         # Private read-only copies: the limits cannot widen under us after construction; HELLO
         # may only tighten them to the controller's own.
         self._cell_lower, self._cell_upper = _frozen(robot.lower), _frozen(robot.upper)
+        self._robot_name = getattr(robot, "name", "")
         self._lower, self._upper = self._cell_lower, self._cell_upper
         self._link: _Link | None = None
         self._lock = threading.RLock()  # one request, with its retries and reconnects
@@ -276,10 +279,19 @@ class ControllerClient:
     def _tightened(self, info: p.HelloInfo) -> tuple[np.ndarray, np.ndarray]:
         """The cell's limits within the controller's; ControllerError if the cell's exceed them."""
         if info.limits_deg is None:
-            log.warning("controller %s does not report its joint limits; using the cell's",
-                        info.name)
-            return self._cell_lower, self._cell_upper
-        ctrl = np.array(info.limits_deg)
+            # never the uploaded cell's limits alone: a built-in robot's, else refuse
+            builtin = BUILTIN.get(self._robot_name)
+            if builtin is None:
+                raise ControllerError(
+                    f"controller {info.name} does not report its joint limits at HELLO and the "
+                    f"cell's robot {self._robot_name!r} is not a built-in one; an uploaded cell's "
+                    "limits alone are never trusted: load the current RAPID module "
+                    "(drivers/abb/rapid) or name a built-in robot")
+            log.warning("controller %s does not report its joint limits; using the built-in "
+                        "%s's", info.name, self._robot_name)
+            ctrl = np.rad2deg(np.column_stack([builtin.lower, builtin.upper]))
+        else:
+            ctrl = np.array(info.limits_deg)
         cell_lo, cell_hi = np.rad2deg(self._cell_lower), np.rad2deg(self._cell_upper)
         for i in range(self.n_joints):
             if cell_lo[i] < ctrl[i, 0] - LIMIT_TOL_DEG or cell_hi[i] > ctrl[i, 1] + LIMIT_TOL_DEG:

@@ -108,12 +108,15 @@ def test_the_check_guards_the_wire_itself(client, device):
     assert device.received == before
 
 
-def test_the_controller_refuses_what_a_looser_model_allows(server, device):
+def test_a_controller_without_limits_is_refused_unless_the_robot_is_built_in(server, device):
     device.report_limits = False  # a controller that does not say its limits at HELLO
     wide = Robot("wide", "dh", tuple(Joint(j.a, j.d, j.theta, j.alpha, (-7.0, 7.0))
                                      for j in IRB2600.joints))
-    with ControllerClient(server.url, wide, timeout_s=1.0) as c:
-        with pytest.raises(LimitError, match="controller refused"):
+    with pytest.raises(ControllerError, match="does not report its joint limits"):
+        ControllerClient(server.url, wide, timeout_s=1.0)
+    # a built-in robot: its own limits stand in for the controller's
+    with ControllerClient(server.url, IRB2600, timeout_s=1.0) as c:
+        with pytest.raises(LimitError, match="outside"):
             c.move_abs_j([0, 200, 0, 0, 0, 0])
     assert device.moves == []
 
