@@ -193,17 +193,19 @@ def test_a_duplicate_calibration_is_refused_while_queued_or_running(one_worker, 
 
 
 def test_a_chart_past_its_limit_answers_504_and_the_service_goes_on(make_live, csv_text):
-    live = make_live(call_timeout_s=0.2)
+    # Table 3 of 60 poses is every method of the paper: some 0.1 s of numerics alone on a fast
+    # machine, plus starting the worker; a 20 ms limit is far below it on any machine.
+    live = make_live(call_timeout_s=0.02)
     c = live.client
     job = finished(live, queue(live, campaign(live, csv_text), method="ls-sum")["id"])
     assert job["state"] == "done", job
     t0 = time.perf_counter()
-    r = c.get(f"/api/charts/jobs/{job['id']}/table3")  # every method: far beyond 0.2 s
+    r = c.get(f"/api/charts/jobs/{job['id']}/table3")
     took = time.perf_counter() - t0
-    print(f"\ntable3 under a 0.2 s limit answered {r.status_code} in {took * 1000:.0f} ms")
+    print(f"\ntable3 under a 0.02 s limit answered {r.status_code} in {took * 1000:.0f} ms")
     assert r.status_code == 504, r.text
     assert r.headers["content-type"] == "application/problem+json"
-    assert "wall-clock limit of 0.2 s" in r.json()["detail"]
+    assert "wall-clock limit of 0.02 s" in r.json()["detail"]
     assert not SpiedJobs.made[-1]._calls  # its worker is gone
     assert c.get("/api/jobs").status_code == 200
 
