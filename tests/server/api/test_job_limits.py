@@ -16,26 +16,10 @@ import pytest
 
 import server.app
 from server.cli import main as robocal
-from server.job_queue import CANCELLED, Jobs
+from server.job_queue import CANCELLED
 from server.security import ensure_token
 from tests.server.api.conftest import serve, settings_for, wait_for
-
-
-class SpiedJobs(Jobs):
-    """Jobs that the test can reach (for the worker pids)."""
-
-    made: list[Jobs] = []
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        SpiedJobs.made.append(self)
-
-
-@pytest.fixture(scope="module")
-def csv_text(tmp_path_factory):
-    path = tmp_path_factory.mktemp("sim") / "meas.csv"
-    assert robocal(["simulate", "--poses", "60", "--seed", "3", "--out", str(path)]) == 0
-    return path.read_text()
+from tests.server.api.test_job_pool import SpiedJobs, csv_text  # noqa: F401 - a fixture
 
 
 def served(tmp_path, **settings):
