@@ -9,18 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
-from solver.calibrate import parse_method
-from solver.identifiability import NotIdentifiable
-
-from . import tables, workflow
-from .acquire import AcquisitionFailed, Interrupted
-from .store import StoreError
-from .formats.errors import InputError
-from .formats.model_json import write_json_atomic, write_model
-from .tables import console
 
 
 def cmd_simulate(args) -> None:
+    from . import workflow
+    from .formats.model_json import write_json_atomic
+    from .tables import console
     from drivers.cell import TrackerSpec, VirtualCell
     from drivers.effects import make_effects
 
@@ -66,6 +60,12 @@ def _positive_int(text: str) -> int:
 
 
 def cmd_calibrate(args) -> None:
+    from solver.calibrate import parse_method
+
+    from . import tables, workflow
+    from .formats.model_json import write_model
+    from .tables import console
+
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
     parse_method(args.method, meas.target_names)
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
@@ -96,6 +96,8 @@ def cmd_calibrate(args) -> None:
 
 
 def cmd_predict(args) -> None:
+    from . import workflow
+    from .tables import console
     from .formats.campaign_csv import read_poses, write_predictions
 
     model = workflow.read_model(args.model)
@@ -109,6 +111,10 @@ def cmd_predict(args) -> None:
 
 
 def cmd_evaluate(args) -> None:
+    from . import tables, workflow
+    from .formats.model_json import write_json_atomic
+    from .tables import console
+
     model = workflow.read_model(args.model)
     from .formats.cell_json import Cell
 
@@ -126,6 +132,10 @@ def cmd_evaluate(args) -> None:
 
 
 def cmd_compare(args) -> None:
+    from . import tables, workflow
+    from .formats.model_json import write_json_atomic
+    from .tables import console
+
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
     rows = workflow.compare(cell, meas, screen=not args.keep_outliers)
     _print_screening(next(iter(rows.values()))[0])
@@ -146,6 +156,9 @@ def cmd_compare(args) -> None:
 
 
 def cmd_diagnose(args) -> None:
+    from . import workflow
+    from .tables import console
+
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
     report, figures, _ = _diagnose_to_files(cell, meas, args.meas, args.out, args.model_out,
                                             screen=not args.keep_outliers)
@@ -156,6 +169,9 @@ def cmd_diagnose(args) -> None:
 
 def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=True):
     """Run the diagnosis; write the report, its figures beside it and the extended model."""
+    from . import workflow
+    from .tables import console
+
     with console.status("diagnosing: cross-validating candidate effects...") as status:
         d, model = workflow.diagnose(cell, meas, log=lambda msg: status.update(msg.strip()),
                                      screen=screen)
@@ -167,6 +183,8 @@ def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=Tr
 
 def _print_outliers(outliers, skipped=None) -> None:
     """The readings screened out as gross errors, one line each (None: screening was off)."""
+    from .tables import console
+
     if outliers is None or skipped:
         console.print("gross-outlier screening " + (f"skipped ({skipped})" if skipped else "off")
                       + ": every reading used")
@@ -187,6 +205,9 @@ def _print_screening(cal) -> None:
 
 
 def _print_diagnosis(report) -> None:
+    from . import tables
+    from .tables import console
+
     _print_outliers(report.get("outliers"))
     floor = report["noise_floor_mm"]
     console.print(f"baseline (geometric) held-out RMS {report['baseline']['holdout_rmse_mm']:.4f} mm, "
@@ -212,6 +233,8 @@ def _print_diagnosis(report) -> None:
 
 def _print_unexplained(block) -> None:
     """What the final model leaves, and the covariates it follows most (strength 0..1)."""
+    from .tables import console
+
     if not block:
         return
     console.print(f"[bold]{block['reading']}[/bold]")
@@ -222,6 +245,8 @@ def _print_unexplained(block) -> None:
 
 
 def cmd_acquire(args) -> None:
+    from . import workflow
+    from .tables import console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from .acquire import AcquireOptions, acquire
@@ -257,6 +282,9 @@ def cmd_serve(args) -> None:
 
 
 def cmd_demo(args) -> None:
+    from . import tables, workflow
+    from .formats.model_json import write_model
+    from .tables import console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from .acquire import AcquireOptions, acquire
@@ -470,21 +498,31 @@ def main(argv=None) -> int:
         args.effect = ["joint_compliance:2"]
     try:
         args.func(args)
-    except Interrupted as e:  # Ctrl-C of a run: the arm was e-stopped first
-        print(f"robocal: {e}", file=sys.stderr)
-        return 130
     except KeyboardInterrupt:  # before or after any motion
         print("robocal: interrupted", file=sys.stderr)
         return 130
-    except (InputError, workflow.DataError, NotIdentifiable, AcquisitionFailed, StoreError) as e:
-        print(f"robocal: error: {e}", file=sys.stderr)
-        return 1
-    except FileNotFoundError as e:
-        print(f"robocal: error: {e.filename}: no such file", file=sys.stderr)
-        return 1
-    except ValueError as e:
-        print(f"robocal: error: {e}", file=sys.stderr)
-        return 1
+    except Exception as e:  # noqa: BLE001 - the expected kinds get one line; others propagate
+        # imported here, not at the top: `robocal --help` must not wait for scipy and the store
+        from solver.identifiability import NotIdentifiable
+
+        from .acquire import AcquisitionFailed, Interrupted
+        from .formats.errors import InputError
+        from .store import StoreError
+        from .workflow import DataError
+
+        if isinstance(e, Interrupted):  # Ctrl-C of a run: the arm was e-stopped first
+            print(f"robocal: {e}", file=sys.stderr)
+            return 130
+        if isinstance(e, (InputError, DataError, NotIdentifiable, AcquisitionFailed, StoreError)):
+            print(f"robocal: error: {e}", file=sys.stderr)
+            return 1
+        if isinstance(e, FileNotFoundError):
+            print(f"robocal: error: {e.filename}: no such file", file=sys.stderr)
+            return 1
+        if isinstance(e, ValueError):
+            print(f"robocal: error: {e}", file=sys.stderr)
+            return 1
+        raise
     return 0
 
 
