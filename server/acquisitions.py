@@ -169,7 +169,8 @@ class Acquisitions:
             info = store.get_campaign(self.db, campaign_id=outcome.campaign_id)
         except store.StoreError:
             return outcome
-        return replace(outcome, actions=tuple(self.actions(info)))
+        # the stop's own state: the store may not have caught up with the engine yet
+        return replace(outcome, actions=tuple(self.actions(info, outcome.status)))
 
     def _estop(self, campaign_id: int | None) -> Outcome:
         with self._lock:

@@ -86,7 +86,9 @@ def test_hidden_effect_is_named_with_its_evidence_and_figure(served, page, tmp_p
     page.click("#m-import-btn")
     page.wait_for_function("document.getElementById('p-status').textContent === 'done'")
     assert page.text_content("#p-count") == f"{POSES} / {POSES} poses"
-    assert page.is_disabled("#start") and page.is_enabled("#calibrate")
+    # the page asks the job list before it enables Calibrate: wait for that answer
+    page.wait_for_function("!document.getElementById('calibrate').disabled")
+    assert page.is_disabled("#start")
     assert csv.name in page.text_content("#p-name")
 
     page.select_option("#j-method", "ls-sum")
