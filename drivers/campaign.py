@@ -77,8 +77,6 @@ def _code(exc) -> str | None:
     return getattr(exc, "code", None)
 
 
-
-
 @dataclass
 class _Pose:
     """The engine's work on one pose, carried from its Move to its Save."""
@@ -100,9 +98,20 @@ class CampaignEngine:
     plan message just before it executes (tests inject requests and faults there).
     """
 
-    def __init__(self, controller, tracker, clock, predictor: SmrPredictor, sink,
-                 settings: Settings | None = None, log=None, *, state: str = "planned",
-                 on_state=None, trace=None):
+    def __init__(
+        self,
+        controller,
+        tracker,
+        clock,
+        predictor: SmrPredictor,
+        sink,
+        settings: Settings | None = None,
+        log=None,
+        *,
+        state: str = "planned",
+        on_state=None,
+        trace=None,
+    ):
         if state not in lifecycle.STATES:
             raise ValueError(f"unknown campaign state {state!r}")
         self.controller, self.tracker, self.clock = controller, tracker, clock
@@ -210,8 +219,11 @@ class CampaignEngine:
     def _wait_until_run_returned(self, action: str) -> None:
         # an e-stop cut the run off mid-message; it returns as soon as that message does
         if not self._cond.wait_for(lambda: not self._active, RESET_WAIT_S):
-            raise EngineBusy(self._state, action, "the run cut off by the e-stop is still ending "
-                                                  "its last device request; try again")
+            raise EngineBusy(
+                self._state,
+                action,
+                "the run cut off by the e-stop is still ending its last device request; try again",
+            )
 
     def _tell(self) -> None:
         """Tell on_state every pending transition, in order, outside the engine's lock.
@@ -458,12 +470,10 @@ class CampaignEngine:
         except Exception:
             # the reading is good: store it before the fault ends the run, so a resumed run
             # neither loses it nor measures it twice
-            self.sink.reading(pose_index=i, target=name, measurement=m, time_s=time_s,
-                              weather=None)
+            self.sink.reading(pose_index=i, target=name, measurement=m, time_s=time_s, weather=None)
             self.stats.readings += 1
             raise
-        self.sink.reading(pose_index=i, target=name, measurement=m, time_s=time_s,
-                          weather=weather)
+        self.sink.reading(pose_index=i, target=name, measurement=m, time_s=time_s, weather=weather)
         self.stats.readings += 1
 
     def _save(self, work: _Pose, names):
@@ -500,7 +510,9 @@ class CampaignEngine:
 
     def _try_measure(self, aim, samples):
         try:
-            if not self.tracker.point(aim) and not self.tracker.search(self.settings.search_radius_mm):
+            if not self.tracker.point(aim) and not self.tracker.search(
+                self.settings.search_radius_mm
+            ):
                 return None
             return self.tracker.measure(samples)
         except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate

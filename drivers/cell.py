@@ -6,10 +6,9 @@ from dataclasses import asdict, dataclass, field
 from typing import Protocol
 
 import numpy as np
-
-from solver.kinematics import Layout, flange_frames, rot, translation
-from solver.measurements import Measurements
-from solver.robot import Robot
+from robocal.solver.kinematics import Layout, flange_frames, rot, translation
+from robocal.solver.measurements import Measurements
+from robocal.solver.robot import Robot
 
 LIMIT_MARGIN_RAD = np.deg2rad(2.0)
 MIN_RANGE_MM = 1000.0  # trackers are specified from about 1 m; closer, the head cannot follow
@@ -45,8 +44,13 @@ class GeometricErrors:
 
     def sigmas(self, param_names) -> np.ndarray:
         """Standard deviations (mm, rad) in the order of `Robot.param_names`."""
-        by_kind = {"a": self.length_mm, "d": self.length_mm, "theta": np.deg2rad(self.theta_deg),
-                   "alpha": np.deg2rad(self.alpha_deg), "beta": np.deg2rad(self.beta_deg)}
+        by_kind = {
+            "a": self.length_mm,
+            "d": self.length_mm,
+            "theta": np.deg2rad(self.theta_deg),
+            "alpha": np.deg2rad(self.alpha_deg),
+            "beta": np.deg2rad(self.beta_deg),
+        }
         return np.array([by_kind[n.rstrip("0123456789")] for n in param_names])
 
 
@@ -87,10 +91,17 @@ class VirtualCell:
     last_campaign: dict | None = None
 
     @classmethod
-    def random(cls, robot: Robot, targets: dict, seed: int,
-               errors: GeometricErrors = GeometricErrors(), tracker: TrackerSpec = TrackerSpec(),
-               acceptance_rad: float = np.deg2rad(60.0), floor_clearance_mm: float = 150.0,
-               effects=()) -> VirtualCell:
+    def random(
+        cls,
+        robot: Robot,
+        targets: dict,
+        seed: int,
+        errors: GeometricErrors = GeometricErrors(),
+        tracker: TrackerSpec = TrackerSpec(),
+        acceptance_rad: float = np.deg2rad(60.0),
+        floor_clearance_mm: float = 150.0,
+        effects=(),
+    ) -> VirtualCell:
         """A cell whose true geometry, SMR positions and tracker placement are drawn from `seed`."""
         rng = np.random.default_rng(seed)
         names = tuple(targets)
@@ -98,9 +109,19 @@ class VirtualCell:
         p0 = robot.param_vector()
         p_true = p0 + errors.sigmas(robot.param_names()) * rng.normal(size=p0.size)
         true_t = nominal_t + rng.normal(scale=errors.smr_mm, size=nominal_t.shape)
-        return cls(robot, robot.with_params(p_true), names, nominal_t, true_t,
-                   random_tracker_placement(rng), tracker, acceptance_rad, floor_clearance_mm,
-                   list(effects), seed)
+        return cls(
+            robot,
+            robot.with_params(p_true),
+            names,
+            nominal_t,
+            true_t,
+            random_tracker_placement(rng),
+            tracker,
+            acceptance_rad,
+            floor_clearance_mm,
+            list(effects),
+            seed,
+        )
 
     def _points(self, q, dq=None, motion=None, record=False):
         """SMR centres in the tracker frame; in the base frame SMRs, flange R and o; joint axes."""
@@ -148,8 +169,10 @@ class VirtualCell:
                 return np.concatenate(found)[:n]
         drawn = max_batches * batch
         rates = ", ".join(f"{k} {v / drawn:.0%}" for k, v in passed.items())
-        raise RuntimeError(f"only {sum(len(f) for f in found)} of {n} poses valid after {drawn} "
-                           f"draws (pass rate per check: {rates})")
+        raise RuntimeError(
+            f"only {sum(len(f) for f in found)} of {n} poses valid after {drawn} "
+            f"draws (pass rate per check: {rates})"
+        )
 
     def true_points(self, q, time_s=None, temp_c=None, pose_dq=None) -> np.ndarray:
         """Noise-free SMR centres (m, K, 3) in the tracker frame, with every effect applied.
@@ -180,8 +203,9 @@ class VirtualCell:
             out[:, k] = self._points(q, dq, motion)[0][:, k]
         return out
 
-    def measure(self, q, rng, time_s=None, temp_c=None, pose_dq=None,
-                noise_scale: float = 1.0) -> np.ndarray:
+    def measure(
+        self, q, rng, time_s=None, temp_c=None, pose_dq=None, noise_scale: float = 1.0
+    ) -> np.ndarray:
         """Tracker readings (m, K, 3): true points plus Gaussian noise, noise_scale x the spec."""
         p = self.true_points(q, time_s, temp_c, pose_dq)
         sigma = noise_scale * self.tracker.sigma_mm(np.linalg.norm(p, axis=-1))
@@ -192,9 +216,16 @@ class VirtualCell:
         sigma = self.tracker.sigma_mm(np.linalg.norm(self._points(np.atleast_2d(q))[0], axis=-1))
         return float(noise_scale * np.sqrt(np.mean(3 * sigma**2)))
 
-    def campaign(self, n_poses: int, seed: int, beam_break_rate: float = 0.0,
-                 arm_scatter_deg: float = 0.0, targets_per_pose: int | None = None,
-                 outlier_rate: float = 0.0, noise_scale: float = 1.0) -> Measurements:
+    def campaign(
+        self,
+        n_poses: int,
+        seed: int,
+        beam_break_rate: float = 0.0,
+        arm_scatter_deg: float = 0.0,
+        targets_per_pose: int | None = None,
+        outlier_rate: float = 0.0,
+        noise_scale: float = 1.0,
+    ) -> Measurements:
         """A measured campaign of n_poses random poses, timed and with the air temperature.
 
         Beyond the tracker's noise (noise_scale x its spec) and beam breaks, a campaign may have
@@ -208,8 +239,9 @@ class VirtualCell:
         K = len(self.target_names)
         moves = rng.uniform(MOVE_S - 2, MOVE_S + 2, n_poses)
         arrive = np.cumsum(moves) + PAUSE_S * np.arange(n_poses)
-        time_s = (arrive[:, None] + 1.0 + TARGET_GAP_S * np.arange(K)
-                  + rng.uniform(0, 0.5, (n_poses, K)))
+        time_s = (
+            arrive[:, None] + 1.0 + TARGET_GAP_S * np.arange(K) + rng.uniform(0, 0.5, (n_poses, K))
+        )
         # air: a slow drift of a few tenths of a degree over the campaign; the sensor adds noise
         drift = rng.uniform(0.2, 0.5) * rng.choice([-1.0, 1.0])
         air = rng.normal(20.0, 0.3) + drift * time_s / time_s.max()
@@ -232,17 +264,25 @@ class VirtualCell:
             broken |= absent
         outliers = self._displace(xyz, ~broken, outlier_rate, extra) if outlier_rate > 0 else []
         xyz[broken], time_s[broken], temp_c[broken] = np.nan, np.nan, np.nan
-        self.last_campaign = {"seed": seed, "n_poses": n_poses, "beam_break_rate": beam_break_rate,
-                              "noise_floor_mm": self.noise_floor_mm(q, noise_scale)}
-        self.last_campaign.update(arm_scatter_deg=arm_scatter_deg,
-                                  targets_per_pose=targets_per_pose,
-                                  outlier_rate=outlier_rate, noise_scale=noise_scale,
-                                  outliers=outliers)
+        self.last_campaign = {
+            "seed": seed,
+            "n_poses": n_poses,
+            "beam_break_rate": beam_break_rate,
+            "noise_floor_mm": self.noise_floor_mm(q, noise_scale),
+        }
+        self.last_campaign.update(
+            arm_scatter_deg=arm_scatter_deg,
+            targets_per_pose=targets_per_pose,
+            outlier_rate=outlier_rate,
+            noise_scale=noise_scale,
+            outliers=outliers,
+        )
         if pose_dq is not None:  # how far the scatter moves the SMRs: part of any model's floor
             moved = self._points(q, pose_dq)[0] - self._points(q)[0]
             self.last_campaign["arm_scatter_rms_mm"] = float(np.sqrt(np.mean(np.sum(moved**2, -1))))
-        return Measurements([str(i) for i in range(1, n_poses + 1)], q, self.target_names, xyz,
-                            time_s, temp_c)
+        return Measurements(
+            [str(i) for i in range(1, n_poses + 1)], q, self.target_names, xyz, time_s, temp_c
+        )
 
     def _displace(self, xyz, present, rate: float, rng) -> list[dict]:
         """Move round(rate x present readings), at least one, 0.3-2 mm in random directions."""
@@ -253,16 +293,24 @@ class VirtualCell:
             direction = rng.normal(size=3)
             offset = rng.uniform(*OUTLIER_MM) * direction / np.linalg.norm(direction)
             xyz[i, k] += offset
-            out.append({"pose": str(i + 1), "target": self.target_names[k],
-                        "displacement_mm": float(np.linalg.norm(offset)),
-                        "offset_mm": [float(v) for v in offset]})
+            out.append(
+                {
+                    "pose": str(i + 1),
+                    "target": self.target_names[k],
+                    "displacement_mm": float(np.linalg.norm(offset)),
+                    "offset_mm": [float(v) for v in offset],
+                }
+            )
         return out
 
     def truth(self) -> dict:
         """The hidden truth, JSON-serialisable: lengths in mm, angles in degrees."""
+
         def params(robot):
-            return {n: float(np.rad2deg(v) if n.startswith(("theta", "alpha", "beta")) else v)
-                    for n, v in zip(robot.param_names(), robot.param_vector())}
+            return {
+                n: float(np.rad2deg(v) if n.startswith(("theta", "alpha", "beta")) else v)
+                for n, v in zip(robot.param_names(), robot.param_vector())
+            }
 
         def targets(t):
             return {n: [float(v) for v in row] for n, row in zip(self.target_names, t)}
@@ -280,8 +328,10 @@ class VirtualCell:
             "tracker": asdict(self.tracker),
             "acceptance_deg": float(np.rad2deg(self.acceptance_rad)),
             "floor_clearance_mm": float(self.floor_clearance_mm),
-            "effects": [e.describe() if hasattr(e, "describe") else {"name": type(e).__name__}
-                        for e in self.effects],
+            "effects": [
+                e.describe() if hasattr(e, "describe") else {"name": type(e).__name__}
+                for e in self.effects
+            ],
             "campaign": last or None,
             "noise_floor_mm": last.get("noise_floor_mm"),
         }

@@ -5,9 +5,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from solver.kinematics import Layout, flange_frames, translation
-from solver.robot import Robot
+from robocal.solver.kinematics import Layout, flange_frames, translation
+from robocal.solver.robot import Robot
 
 G = 9.81  # m/s^2, along -z of the robot base frame (a floor-mounted arm)
 REFERENCE_TEMP_C = 20.0  # ISO 1 reference temperature: zero growth until a campaign sets T0
@@ -23,7 +22,9 @@ def link_frames(robot: Robot, q):
     axes = np.stack([a for op, a, _ in rec if op.kind == "r" and op.joint >= 0], axis=1)
     points = np.stack([o for op, _, o in rec if op.kind == "r" and op.joint >= 0], axis=1)
     R, o = [], []
-    for j in range(1, n + 1):  # the convention's frame J (the flange for J = N): the arm cut after J
+    for j in range(
+        1, n + 1
+    ):  # the convention's frame J (the flange for J = N): the arm cut after J
         sub = Robot(robot.name, robot.convention, robot.joints[:j], robot.parallel[:j])
         sl = Layout(sub, np.eye(4), ())
         Rj, oj = flange_frames(sl, sl.initial(np.zeros((0, 3))), q[:, :j])
@@ -45,7 +46,9 @@ class MassModel:
         """Per link 5 kg + 25 kg/m of length, x U(0.5, 1.5), near the link; a 2-20 kg payload."""
         n = robot.n_joints
         _, points, R, o = link_frames(robot, np.zeros((1, n)))
-        ends = np.vstack([points[0, 1:], o[0, -1:]])  # a link runs from its axis to the next (flange)
+        ends = np.vstack(
+            [points[0, 1:], o[0, -1:]]
+        )  # a link runs from its axis to the next (flange)
         links, masses, cogs = [], [], []
         for j in range(n):
             start, end = (R[0, j].T @ (p - o[0, j]) for p in (points[0, j], ends[j]))  # link frame
@@ -84,12 +87,17 @@ class MassModel:
         return tau
 
     def describe(self) -> dict:
-        bodies = [{"link": int(j) + 1, "mass_kg": float(mk), "cog_mm": [float(v) for v in c]}
-                  for j, mk, c in zip(self.link[:-1], self.mass_kg[:-1], self.cog_mm[:-1])]
-        return {"frames": "each link's cog in the convention's frame of its joint (frame J); "
-                          "the payload's in the flange frame",
-                "links": bodies, "payload_kg": float(self.mass_kg[-1]),
-                "payload_cog_mm": [float(v) for v in self.cog_mm[-1]]}
+        bodies = [
+            {"link": int(j) + 1, "mass_kg": float(mk), "cog_mm": [float(v) for v in c]}
+            for j, mk, c in zip(self.link[:-1], self.mass_kg[:-1], self.cog_mm[:-1])
+        ]
+        return {
+            "frames": "each link's cog in the convention's frame of its joint (frame J); "
+            "the payload's in the flange frame",
+            "links": bodies,
+            "payload_kg": float(self.mass_kg[-1]),
+            "payload_cog_mm": [float(v) for v in self.cog_mm[-1]],
+        }
 
 
 class _Effect:
@@ -130,9 +138,14 @@ class _Effect:
 
     def describe(self) -> dict:
         """Name, joint (from 1), harmonic, magnitude and unit, and the drawn hidden parameters."""
-        return {"name": self.name, "joint": None if self.joint is None else self.joint + 1,
-                "harmonic": self.harmonic, "magnitude": self.magnitude, "unit": self.unit,
-                **self.hidden()}
+        return {
+            "name": self.name,
+            "joint": None if self.joint is None else self.joint + 1,
+            "harmonic": self.harmonic,
+            "magnitude": self.magnitude,
+            "unit": self.unit,
+            **self.hidden(),
+        }
 
     def hidden(self) -> dict:
         return {}
@@ -149,7 +162,9 @@ class JointCompliance(_Effect):
         self.mass = MassModel.random(cell.true_robot, rng)
 
     def joint_offsets(self, cell, q, time_s, temp_c):
-        return self._dq(q, 1e-6 * self.magnitude * self.mass.torques(cell.true_robot, q)[:, self.joint])
+        return self._dq(
+            q, 1e-6 * self.magnitude * self.mass.torques(cell.true_robot, q)[:, self.joint]
+        )
 
     def hidden(self) -> dict:
         return self.mass.describe()
@@ -162,7 +177,9 @@ class JointPeriodic(_Effect):
     law = "dq = A sin(K q + phase), K 1 or 2 drawn if omitted"
 
     def __init__(self, cell, rng, magnitude, joint, harmonic=None):
-        super().__init__(magnitude, joint, int(rng.integers(1, 3)) if harmonic is None else harmonic)
+        super().__init__(
+            magnitude, joint, int(rng.integers(1, 3)) if harmonic is None else harmonic
+        )
         self.phase = rng.uniform(0.0, 2 * np.pi)
 
     def joint_offsets(self, cell, q, time_s, temp_c):
@@ -243,10 +260,13 @@ class BaseShift(_Effect):
         return np.where(after[:, None, None], self.motion, np.eye(4))
 
     def hidden(self) -> dict:
-        return {"at_s": self.at_s, "at_fraction": float(self.fraction),
-                "translation_mm": [float(v) for v in self.magnitude * self.direction],
-                "rotation_axis": [float(v) for v in self.axis],
-                "rotation_deg": float(np.rad2deg(self.magnitude / 2000.0))}
+        return {
+            "at_s": self.at_s,
+            "at_fraction": float(self.fraction),
+            "translation_mm": [float(v) for v in self.magnitude * self.direction],
+            "rotation_axis": [float(v) for v in self.axis],
+            "rotation_deg": float(np.rad2deg(self.magnitude / 2000.0)),
+        }
 
 
 class JointBacklash(_Effect):
@@ -312,8 +332,18 @@ def _rotation(axis, angle) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
-EFFECTS = {e.name: e for e in (JointCompliance, JointPeriodic, JointScale, ThermalDrift, BaseShift,
-                               JointBacklash, JointCoupling)}
+EFFECTS = {
+    e.name: e
+    for e in (
+        JointCompliance,
+        JointPeriodic,
+        JointScale,
+        ThermalDrift,
+        BaseShift,
+        JointBacklash,
+        JointCoupling,
+    )
+}
 SPEC_HELP = "NAME[:JOINT[:HARMONIC]][=MAGNITUDE]"
 
 
@@ -323,7 +353,9 @@ def make_effect(spec: str, cell, rng):
     name, *fields = [f.strip() for f in head.split(":")]
     cls = EFFECTS.get(name)
     if cls is None:
-        raise ValueError(f"effect {spec!r}: unknown effect {name!r}; choose from {', '.join(EFFECTS)}")
+        raise ValueError(
+            f"effect {spec!r}: unknown effect {name!r}; choose from {', '.join(EFFECTS)}"
+        )
     n = cell.true_robot.n_joints
     allowed = int(cls.takes_joint) + int(cls.takes_harmonic)
     if len(fields) > allowed:
@@ -335,22 +367,26 @@ def make_effect(spec: str, cell, rng):
             raise ValueError(f"effect {spec!r}: {name} needs a joint, 1 to {n} ({_grammar(cls)})")
         joint = _integer(spec, "joint", fields[0])
         if not 1 <= joint <= n:
-            raise ValueError(f"effect {spec!r}: joint {joint} is not one of the robot's "
-                             f"joints 1 to {n}")
+            raise ValueError(
+                f"effect {spec!r}: joint {joint} is not one of the robot's joints 1 to {n}"
+            )
         if joint < cls.first_joint:
             raise ValueError(f"effect {spec!r}: {name} acts on joints {cls.first_joint} to {n}")
         joint -= 1
     if len(fields) > 1:
         harmonic = _integer(spec, "harmonic", fields[1])
         if harmonic < 1:
-            raise ValueError(f"effect {spec!r}: the harmonic must be a positive integer, not {harmonic}")
+            raise ValueError(
+                f"effect {spec!r}: the harmonic must be a positive integer, not {harmonic}"
+            )
     magnitude = cls.default
     if eq:
         try:
             magnitude = float(mag_text)
         except ValueError:
-            raise ValueError(f"effect {spec!r}: magnitude {mag_text.strip()!r} is not a number "
-                             f"(in {cls.unit})") from None
+            raise ValueError(
+                f"effect {spec!r}: magnitude {mag_text.strip()!r} is not a number (in {cls.unit})"
+            ) from None
         if not math.isfinite(magnitude):
             raise ValueError(f"effect {spec!r}: magnitude must be finite")
         if magnitude < 0 and not cls.signed:
@@ -365,19 +401,28 @@ def make_effects(specs, cell, seed: int) -> list:
 
 
 def _grammar(cls) -> str:
-    return cls.name + (":JOINT" if cls.takes_joint else "") + ("[:HARMONIC]" if cls.takes_harmonic
-                                                               else "") + f"[=MAGNITUDE in {cls.unit}]"
+    return (
+        cls.name
+        + (":JOINT" if cls.takes_joint else "")
+        + ("[:HARMONIC]" if cls.takes_harmonic else "")
+        + f"[=MAGNITUDE in {cls.unit}]"
+    )
 
 
 def spec_help(diagnosed) -> str:
     """Every effect's spec, law and default, those outside `diagnosed` (names) marked simulator-only."""
+
     def one(cls):
         head = cls.name + (":J" if cls.takes_joint else "") + ("[:K]" if cls.takes_harmonic else "")
         return f"{head} ({cls.law}, default {cls.default:g} {cls.unit})"
+
     inside = [one(c) for c in EFFECTS.values() if c.name in diagnosed]
     outside = [one(c) for c in EFFECTS.values() if c.name not in diagnosed]
-    return "; ".join(inside) + ("; simulator only, outside the diagnosis vocabulary: "
-                                + "; ".join(outside) if outside else "")
+    return "; ".join(inside) + (
+        "; simulator only, outside the diagnosis vocabulary: " + "; ".join(outside)
+        if outside
+        else ""
+    )
 
 
 def _integer(spec, what, text) -> int:

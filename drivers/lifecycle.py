@@ -7,8 +7,17 @@ else invents states.
 
 from __future__ import annotations
 
-STATES = ("planned", "running", "pausing", "paused", "stopping", "aborted", "estopped",
-          "failed", "done")
+STATES = (
+    "planned",
+    "running",
+    "pausing",
+    "paused",
+    "stopping",
+    "aborted",
+    "estopped",
+    "failed",
+    "done",
+)
 # What a person or the API may ask for, in the order a user interface shows them.
 ACTIONS = ("start", "pause", "resume", "abort", "estop", "reset")
 # What only the engine reports: it reached a pause or an abort between poses, ran out of poses,
@@ -19,11 +28,22 @@ FINAL = ("aborted", "done")
 # state -> {request or event: next state}
 TRANSITIONS: dict[str, dict[str, str]] = {
     "planned": {"start": "running", "abort": "aborted"},
-    "running": {"pause": "pausing", "abort": "stopping", "estop": "estopped",
-                "finish": "done", "fail": "failed"},
+    "running": {
+        "pause": "pausing",
+        "abort": "stopping",
+        "estop": "estopped",
+        "finish": "done",
+        "fail": "failed",
+    },
     # resume before the pause is reached cancels it: no request is lost in between
-    "pausing": {"resume": "running", "abort": "stopping", "estop": "estopped",
-                "paused": "paused", "finish": "done", "fail": "failed"},
+    "pausing": {
+        "resume": "running",
+        "abort": "stopping",
+        "estop": "estopped",
+        "paused": "paused",
+        "finish": "done",
+        "fail": "failed",
+    },
     "paused": {"resume": "running", "abort": "aborted", "estop": "estopped"},
     "stopping": {"estop": "estopped", "stopped": "aborted", "finish": "done", "fail": "failed"},
     # an e-stop latches: the arm moves again only after an explicit reset (then paused, resumable)

@@ -62,8 +62,12 @@ class Save:
 Message = Checkpoint | Move | Settle | Aim | Measure | Save
 
 
-def campaign_plan(poses_deg, target_names: Sequence[str], start: int = 0,
-                  partial: Mapping[str, object] | None = None) -> Iterator[Message]:
+def campaign_plan(
+    poses_deg,
+    target_names: Sequence[str],
+    start: int = 0,
+    partial: Mapping[str, object] | None = None,
+) -> Iterator[Message]:
     """The messages that measure poses_deg[start:]; targets in `partial` (already read at pose
     `start`, cut off mid-pose) are not aimed at or measured again."""
     poses = np.asarray(poses_deg, dtype=float)

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-
-from solver import observability as obs
-from solver.identifiability import structural
-from solver.kinematics import Layout, predict, predict_rows
-from solver.robot import Robot
+from robocal.solver import observability as obs
+from robocal.solver.identifiability import structural
+from robocal.solver.kinematics import Layout, predict, predict_rows
+from robocal.solver.robot import Robot
 
 from .cell import LIMIT_MARGIN_RAD, VirtualCell
 from .world import ACCEL_S, DEFAULT_SPEEDS_DEG_S
@@ -21,16 +20,31 @@ def _targets(targets) -> tuple[tuple[str, ...], np.ndarray]:
     return tuple(f"T{i + 1}" for i in range(len(t))), t
 
 
-def pose_checks(robot: Robot, base_in_tracker, targets, q, acceptance_deg: float = 60.0,
-                floor_mm: float = 150.0, bounds=None) -> dict[str, np.ndarray]:
+def pose_checks(
+    robot: Robot,
+    base_in_tracker,
+    targets,
+    q,
+    acceptance_deg: float = 60.0,
+    floor_mm: float = 150.0,
+    bounds=None,
+) -> dict[str, np.ndarray]:
     """Per constraint, which poses (m,) pass: the virtual cell's checks, plus SMRs inside `bounds`.
 
     bounds: optional ((xmin, ymin, zmin), (xmax, ymax, zmax)), mm in the robot base frame.
     """
     names, t = _targets(targets)
     # A cell whose "true" arm is the model we plan with: its pose_checks are the rules.
-    cell = VirtualCell(robot, robot, names, t, t, np.asarray(base_in_tracker, dtype=float),
-                       acceptance_rad=np.deg2rad(acceptance_deg), floor_clearance_mm=floor_mm)
+    cell = VirtualCell(
+        robot,
+        robot,
+        names,
+        t,
+        t,
+        np.asarray(base_in_tracker, dtype=float),
+        acceptance_rad=np.deg2rad(acceptance_deg),
+        floor_clearance_mm=floor_mm,
+    )
     q = np.atleast_2d(np.asarray(q, dtype=float))
     checks = cell.pose_checks(q)
     if bounds is not None:
@@ -41,8 +55,17 @@ def pose_checks(robot: Robot, base_in_tracker, targets, q, acceptance_deg: float
     return checks
 
 
-def plan_poses(robot: Robot, base_in_tracker, targets, n: int, rng, acceptance_deg: float = 60.0,
-               floor_mm: float = 150.0, bounds=None, max_batches: int = 50) -> np.ndarray:
+def plan_poses(
+    robot: Robot,
+    base_in_tracker,
+    targets,
+    n: int,
+    rng,
+    acceptance_deg: float = 60.0,
+    floor_mm: float = 150.0,
+    bounds=None,
+    max_batches: int = 50,
+) -> np.ndarray:
     """n poses (n, N) rad, uniform within the limits, meeting every check on the nominal model."""
     lo, hi = robot.lower + LIMIT_MARGIN_RAD, robot.upper - LIMIT_MARGIN_RAD
     batch = max(1024, 4 * n)
@@ -58,8 +81,10 @@ def plan_poses(robot: Robot, base_in_tracker, targets, n: int, rng, acceptance_d
             return np.concatenate(found)[:n]
     drawn = max_batches * batch
     rates = ", ".join(f"{k} {v / drawn:.1%}" for k, v in passed.items())
-    raise RuntimeError(f"constraints too tight: only {count} of {n} poses valid after {drawn} "
-                       f"draws (pass rate per check: {rates})")
+    raise RuntimeError(
+        f"constraints too tight: only {count} of {n} poses valid after {drawn} "
+        f"draws (pass rate per check: {rates})"
+    )
 
 
 def default_speeds(n_joints: int) -> np.ndarray:
@@ -108,13 +133,13 @@ def _two_opt(D: np.ndarray, path: np.ndarray) -> np.ndarray:
         improved = False
         for i in range(1, L - 1):
             a, b = path[i - 1], path[i]
-            c = path[i + 1:]  # candidate segment ends j = i+1 .. L-1
+            c = path[i + 1 :]  # candidate segment ends j = i+1 .. L-1
             delta = D[a, c] - D[a, b]
-            d = path[i + 2:]  # the pose after each end, none after the last
+            d = path[i + 2 :]  # the pose after each end, none after the last
             delta[:-1] += D[b, d] - D[c[:-1], d]
             j = int(np.argmin(delta))
             if delta[j] < -1e-9:
-                path[i:i + j + 2] = path[i:i + j + 2][::-1].copy()
+                path[i : i + j + 2] = path[i : i + j + 2][::-1].copy()
                 improved = True
     return path
 
@@ -162,10 +187,22 @@ def candidate_jacobians(robot: Robot, base_in_tracker, targets, q) -> np.ndarray
     return Jt.reshape(len(cols), len(q), 3 * len(names)).transpose(1, 2, 0)
 
 
-def plan_campaign(robot: Robot, base_in_tracker, targets, n_candidates: int, rng, k=None,
-                  criterion: str = "D", start=None, speeds=None, acceptance_deg: float = 60.0,
-                  floor_mm: float = 150.0, bounds=None, order: bool = True,
-                  progress=None) -> tuple[np.ndarray, dict]:
+def plan_campaign(
+    robot: Robot,
+    base_in_tracker,
+    targets,
+    n_candidates: int,
+    rng,
+    k=None,
+    criterion: str = "D",
+    start=None,
+    speeds=None,
+    acceptance_deg: float = 60.0,
+    floor_mm: float = 150.0,
+    bounds=None,
+    order: bool = True,
+    progress=None,
+) -> tuple[np.ndarray, dict]:
     """Valid random candidates -> optionally the k best by `criterion` -> ordered (unless not
     asked: the paper measures in plan order); (q, summary). progress(fraction in 0..1), if
     given, is called as the planning advances (mostly the D-optimal exchange)."""
@@ -173,8 +210,9 @@ def plan_campaign(robot: Robot, base_in_tracker, targets, n_candidates: int, rng
     # poses' observability with the first k candidates (a random choice of the same size).
     # Shares of the work: drawing candidates and their Jacobians, the choice, the ordering.
     step = progress or (lambda fraction: None)
-    cand = plan_poses(robot, base_in_tracker, targets, n_candidates, rng, acceptance_deg,
-                      floor_mm, bounds)
+    cand = plan_poses(
+        robot, base_in_tracker, targets, n_candidates, rng, acceptance_deg, floor_mm, bounds
+    )
     step(0.05)
     J = obs.unit_columns(candidate_jacobians(robot, base_in_tracker, targets, cand))
     step(0.1)
@@ -192,9 +230,13 @@ def plan_campaign(robot: Robot, base_in_tracker, targets, n_candidates: int, rng
         "n_candidates": n_candidates,
         "n_poses": len(q),
         "criterion": criterion if k is not None else None,
-        "move_time_s": {"before": total_move_time(cand[chosen], None, start, speeds),
-                        "after": total_move_time(q, None, start, speeds)},
-        "observability": {"random": obs.observability_indices(J[random_]),
-                          "chosen": obs.observability_indices(J[chosen])},
+        "move_time_s": {
+            "before": total_move_time(cand[chosen], None, start, speeds),
+            "after": total_move_time(q, None, start, speeds),
+        },
+        "observability": {
+            "random": obs.observability_indices(J[random_]),
+            "chosen": obs.observability_indices(J[chosen]),
+        },
     }
     return q, summary

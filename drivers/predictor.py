@@ -9,12 +9,11 @@ there: the flange's pose error is common to all its SMRs.
 from __future__ import annotations
 
 import numpy as np
-
-from solver.calibrate import calibrate
-from solver.identifiability import NotIdentifiable
-from solver.identify import register
-from solver.kinematics import Layout, predict
-from solver.robot import Robot
+from robocal.solver.calibrate import calibrate
+from robocal.solver.identifiability import NotIdentifiable
+from robocal.solver.identify import register
+from robocal.solver.kinematics import Layout, predict
+from robocal.solver.robot import Robot
 
 MIN_REGISTER_POSES = 3
 MIN_CALIBRATE_POSES = 7
@@ -45,20 +44,36 @@ class SmrPredictor:
     def update(self, q, meas) -> str:
         """Refit from all readings so far (q (m, n) rad, meas (m, K, 3) NaN where missing)."""
         m = int(np.sum(np.any(np.all(np.isfinite(meas), axis=-1), axis=1)))
-        if m < MIN_REGISTER_POSES or m - self._fitted_at < (1 if m < 2 * MIN_CALIBRATE_POSES else REFIT_EVERY):
+        if m < MIN_REGISTER_POSES or m - self._fitted_at < (
+            1 if m < 2 * MIN_CALIBRATE_POSES else REFIT_EVERY
+        ):
             return self.stage
         self._fitted_at = m
         if m >= MIN_CALIBRATE_POSES and len(self.names) * m * 3 > 2 * self.layout.n_params:
             try:
-                cal = calibrate(self.robot, self.targets, self.names, q, meas, method="ls-sum",
-                                base_guess=self.layout.base(self.x))
+                cal = calibrate(
+                    self.robot,
+                    self.targets,
+                    self.names,
+                    q,
+                    meas,
+                    method="ls-sum",
+                    base_guess=self.layout.base(self.x),
+                )
                 self.layout, self.x, self.stage = cal.layout, cal.x, "calibrated"
                 return self.stage
             except (NotIdentifiable, np.linalg.LinAlgError):
                 pass
-        prob, x = register(self.robot, self.targets, self.names, q, meas,
-                           None if self.stage == "nominal" and self._base_is_identity() else
-                           self.layout.base(self.x))
+        prob, x = register(
+            self.robot,
+            self.targets,
+            self.names,
+            q,
+            meas,
+            None
+            if self.stage == "nominal" and self._base_is_identity()
+            else self.layout.base(self.x),
+        )
         self.layout, self.x, self.stage = prob.layout, x, "registered"
         return self.stage
 

@@ -15,8 +15,17 @@ from .world import SimulatedWorld
 class SimulatedCell:
     """The virtual cell's devices: a simulated tracker and controller on 127.0.0.1 sockets."""
 
-    def __init__(self, robot, targets: dict, tracker: dict, seed: int, clock,
-                 beam_break_rate: float = 0.0, effects=(), expected_s: float = 2000.0):
+    def __init__(
+        self,
+        robot,
+        targets: dict,
+        tracker: dict,
+        seed: int,
+        clock,
+        beam_break_rate: float = 0.0,
+        effects=(),
+        expected_s: float = 2000.0,
+    ):
         self.cell = VirtualCell.random(robot, targets, seed=seed, tracker=TrackerSpec(**tracker))
         self.cell.effects.extend(make_effects(list(effects), self.cell, seed))
         self.world = SimulatedWorld(self.cell, clock)
@@ -26,8 +35,9 @@ class SimulatedCell:
         for e in self.cell.effects:
             if hasattr(e, "start_campaign"):
                 e.start_campaign(self.cell, span, np.full_like(span, self.world.air_temperature()))
-        self.tracker_device = SimulatedTracker(self.world, clock, beam_break_rate=beam_break_rate,
-                                               seed=seed)
+        self.tracker_device = SimulatedTracker(
+            self.world, clock, beam_break_rate=beam_break_rate, seed=seed
+        )
         self.controller_device = SimulatedController(self.world, robot, clock)
         self.tracker_server = serve_tracker(self.tracker_device)
         self.controller_server = serve_controller(self.controller_device)

@@ -20,8 +20,15 @@ ACCEL_S = 0.6  # ramp up and down: a move lasts at least this long
 class SimulatedWorld:
     """Where the true arm is at any time, and where its SMRs are."""
 
-    def __init__(self, cell: VirtualCell, clock, q_home=None, speeds_deg_s=None,
-                 air_c: float = 20.0, air_drift_c_per_h: float = 0.3):
+    def __init__(
+        self,
+        cell: VirtualCell,
+        clock,
+        q_home=None,
+        speeds_deg_s=None,
+        air_c: float = 20.0,
+        air_drift_c_per_h: float = 0.3,
+    ):
         self.cell, self.clock = cell, clock
         n = cell.true_robot.n_joints
         speeds = speeds_deg_s or (DEFAULT_SPEEDS_DEG_S + (360.0,) * n)[:n]

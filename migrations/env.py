@@ -6,9 +6,8 @@ import os
 from logging.config import fileConfig
 
 from alembic import context
-
-from server.store.db import make_engine
-from server.store.models import Base
+from robocal.server.store.db import make_engine
+from robocal.server.store.models import Base
 
 config = context.config
 target_metadata = Base.metadata
@@ -19,14 +18,18 @@ if config.config_file_name is not None:  # the command line; open_database leave
 def _url():
     # In code: the URL given to alembic_config. On the command line: DATABASE_URL, as the server
     # reads it, else alembic.ini's sqlalchemy.url.
-    return (config.attributes.get("url") or os.environ.get("DATABASE_URL")
-            or config.get_main_option("sqlalchemy.url"))
+    return (
+        config.attributes.get("url")
+        or os.environ.get("DATABASE_URL")
+        or config.get_main_option("sqlalchemy.url")
+    )
 
 
 def _configure(**kwargs) -> None:
     # SQLite cannot ALTER most things; batch mode rebuilds the table instead (copy and swap).
-    context.configure(target_metadata=target_metadata, render_as_batch=True,
-                      compare_type=True, **kwargs)
+    context.configure(
+        target_metadata=target_metadata, render_as_batch=True, compare_type=True, **kwargs
+    )
 
 
 def run_offline() -> None:

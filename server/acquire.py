@@ -17,12 +17,11 @@ from contextlib import ExitStack
 from dataclasses import asdict, dataclass
 
 import numpy as np
-
-from drivers.campaign import CampaignEngine, Settings
-from drivers.clock import RealClock, VirtualClock
-from drivers.lifecycle import MOVING, StateError, next_state
-from drivers.predictor import SmrPredictor
-from drivers.simulated_cell import SimulatedCell, surveyed_base
+from robocal.drivers.campaign import CampaignEngine, Settings
+from robocal.drivers.clock import RealClock, VirtualClock
+from robocal.drivers.lifecycle import MOVING, StateError, next_state
+from robocal.drivers.predictor import SmrPredictor
+from robocal.drivers.simulated_cell import SimulatedCell, surveyed_base
 
 from . import store
 from .formats.cell_json import Cell, cell_to_json, parse_cell
@@ -61,16 +60,35 @@ class StoreSink:
         self.db, self.campaign_id = db, campaign_id
 
     def reading(self, *, pose_index, target, measurement, time_s, weather):
-        w = {} if weather is None else {"temp_c": getattr(weather, "temp_c", None),
-                                        "pressure_hpa": getattr(weather, "pressure_hpa", None),
-                                        "humidity_pct": getattr(weather, "humidity_pct", None)}
-        store.record_reading(self.db, campaign_id=self.campaign_id, pose_index=pose_index,
-                             target=target, xyz=measurement.mean_mm, std=measurement.std_mm,
-                             samples=measurement.samples, time_s=time_s, **w)
+        w = (
+            {}
+            if weather is None
+            else {
+                "temp_c": getattr(weather, "temp_c", None),
+                "pressure_hpa": getattr(weather, "pressure_hpa", None),
+                "humidity_pct": getattr(weather, "humidity_pct", None),
+            }
+        )
+        store.record_reading(
+            self.db,
+            campaign_id=self.campaign_id,
+            pose_index=pose_index,
+            target=target,
+            xyz=measurement.mean_mm,
+            std=measurement.std_mm,
+            samples=measurement.samples,
+            time_s=time_s,
+            **w,
+        )
 
     def pose_done(self, *, pose_index, state, q_deg):
-        store.record_pose_outcome(self.db, campaign_id=self.campaign_id, pose_index=pose_index,
-                                  state=state, reached_deg=list(map(float, q_deg)))
+        store.record_pose_outcome(
+            self.db,
+            campaign_id=self.campaign_id,
+            pose_index=pose_index,
+            state=state,
+            reached_deg=list(map(float, q_deg)),
+        )
 
 
 def base_guess(cell: Cell, seed: int, sim: SimulatedCell | None = None) -> np.ndarray:
@@ -82,10 +100,11 @@ def base_guess(cell: Cell, seed: int, sim: SimulatedCell | None = None) -> np.nd
         raise ValueError("a cell with real devices needs a `base` guess")
     if sim is not None:
         return sim.rough_base(seed)
-    from drivers.cell import TrackerSpec, VirtualCell
+    from robocal.drivers.cell import TrackerSpec, VirtualCell
 
-    true = VirtualCell.random(cell.robot, cell.targets, seed=seed,
-                              tracker=TrackerSpec(**cell.tracker))
+    true = VirtualCell.random(
+        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(**cell.tracker)
+    )
     return surveyed_base(true.base, seed)
 
 
@@ -93,22 +112,31 @@ def check_options(cell: Cell, opts: AcquireOptions) -> None:
     """Refuse simulation-only options on a real cell (ValueError naming them)."""
     if cell.simulated:
         return
-    bad = [n for n, v in (("beam_break_rate", opts.beam_break_rate), ("effects", opts.effects))
-           if v]
+    bad = [
+        n for n, v in (("beam_break_rate", opts.beam_break_rate), ("effects", opts.effects)) if v
+    ]
     if bad:
-        raise ValueError(f"{', '.join(bad)}: only the simulated cell has them; this cell's "
-                         "devices are real")
+        raise ValueError(
+            f"{', '.join(bad)}: only the simulated cell has them; this cell's devices are real"
+        )
 
 
 def plan_and_store(db, *, name: str, cell: Cell, opts: AcquireOptions, base, progress=None):
     """Plan the campaign's poses from the base guess and store it `planned`; (id, poses deg).
     progress(fraction), if given, follows the planning (drivers.planning.plan_campaign)."""
     poses_deg, plan = _plan(cell, base, opts, progress)
-    return store.create_campaign(db, name=name, cell_json=json.dumps(cell_to_json(cell)),
-                                 poses_deg=poses_deg.tolist(), simulated=cell.simulated,
-                                 settings={"options": asdict(opts),
-                                           "plan": _undefined_as_null(to_plain(plan)),
-                                           "base_guess": np.asarray(base).tolist()}), poses_deg
+    return store.create_campaign(
+        db,
+        name=name,
+        cell_json=json.dumps(cell_to_json(cell)),
+        poses_deg=poses_deg.tolist(),
+        simulated=cell.simulated,
+        settings={
+            "options": asdict(opts),
+            "plan": _undefined_as_null(to_plain(plan)),
+            "base_guess": np.asarray(base).tolist(),
+        },
+    ), poses_deg
 
 
 def _undefined_as_null(value):
@@ -124,9 +152,9 @@ def _undefined_as_null(value):
 def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
     """(tracker, controller) clients: of the simulated devices, else of the cell's real ones,
     each asked once so that a wrong address fails the run before the arm moves."""
-    from drivers.abb.client import ControllerClient, ControllerError
-    from drivers.tracker.client import TrackerClient
-    from drivers.tracker.protocol import ProtocolError, TrackerError
+    from robocal.drivers.abb.client import ControllerClient, ControllerError
+    from robocal.drivers.tracker.client import TrackerClient
+    from robocal.drivers.tracker.protocol import ProtocolError, TrackerError
 
     if sim is not None:
         tracker = TrackerClient("127.0.0.1", sim.tracker_server.port)
@@ -142,8 +170,9 @@ def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
     except (OSError, TrackerError, ProtocolError) as e:
         raise DeviceUnreachable(f"tracker at {d.tracker_address()} does not answer: {e}") from e
     try:
-        controller = ControllerClient(d.controller_url, cell.robot,
-                                      timeout_s=d.controller_timeout_s, baudrate=d.baudrate)
+        controller = ControllerClient(
+            d.controller_url, cell.robot, timeout_s=d.controller_timeout_s, baudrate=d.baudrate
+        )
     except (ControllerError, OSError) as e:
         raise DeviceUnreachable(f"controller at {d.controller_url} does not answer: {e}") from e
     stack.callback(controller.close)
@@ -151,15 +180,22 @@ def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
 
 
 def _plan(cell: Cell, base, opts: AcquireOptions, progress=None):
-    from drivers.planning import plan_campaign
+    from robocal.drivers.planning import plan_campaign
 
     targets = np.array(list(cell.targets.values()))
     rng = np.random.default_rng(opts.seed)
     n_cand = max(opts.choose_from, opts.poses)
-    q, summary = plan_campaign(cell.robot, base, targets, n_cand, rng,
-                               k=opts.poses if opts.choose_from else None,
-                               start=np.zeros(cell.robot.n_joints), order=opts.order,
-                               progress=progress)
+    q, summary = plan_campaign(
+        cell.robot,
+        base,
+        targets,
+        n_cand,
+        rng,
+        k=opts.poses if opts.choose_from else None,
+        start=np.zeros(cell.robot.n_joints),
+        order=opts.order,
+        progress=progress,
+    )
     summary["ordered"] = opts.order
     return np.rad2deg(q), summary
 
@@ -193,8 +229,10 @@ def ready_to_run(db, info, *, reset: bool = False, log=None) -> str:
         status = "failed"
     if status == "estopped":
         if not reset:
-            raise store.Conflict(f"campaign {info.id} ({info.name}) was e-stopped; check the "
-                                 "cell, then resume it with --reset (POST .../reset in the API)")
+            raise store.Conflict(
+                f"campaign {info.id} ({info.name}) was e-stopped; check the "
+                "cell, then resume it with --reset (POST .../reset in the API)"
+            )
         store.set_status(db, campaign_id=info.id, status=next_state(status, "reset"))
         status = "paused"
     if status not in RESUMABLE:
@@ -202,9 +240,19 @@ def ready_to_run(db, info, *, reset: bool = False, log=None) -> str:
     return status
 
 
-def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, *,
-            campaign_id: int | None = None, on_engine=None, on_event=None,
-            owner: str | None = None, reset: bool = False) -> dict:
+def acquire(
+    db_path,
+    cell: Cell,
+    opts: AcquireOptions,
+    progress=None,
+    log=None,
+    *,
+    campaign_id: int | None = None,
+    on_engine=None,
+    on_event=None,
+    owner: str | None = None,
+    reset: bool = False,
+) -> dict:
     """Run (or resume) a campaign on the cell's devices; a summary with the campaign time.
 
     campaign_id runs that stored campaign (else the latest unfinished one named opts.name, or a
@@ -234,9 +282,16 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
         check_options(cell, opts)
         if cell.simulated:
             clock = VirtualClock()
-            sim = SimulatedCell(cell.robot, cell.targets, cell.tracker, opts.seed, clock,
-                                opts.beam_break_rate, opts.effects,
-                                expected_s=20.0 * opts.poses)
+            sim = SimulatedCell(
+                cell.robot,
+                cell.targets,
+                cell.tracker,
+                opts.seed,
+                clock,
+                opts.beam_break_rate,
+                opts.effects,
+                expected_s=20.0 * opts.poses,
+            )
             stack.callback(sim.close)
         else:
             # the real arm and tracker take real time: the pause must really wait
@@ -253,24 +308,28 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
             names = tuple(sorted(cell.targets))
             history, partial = _history(db, cid, names, start, cell)
             base = np.array(settings.get("base_guess", base))
-            clock.advance_to(_last_time(db, cid) + (30.0 if cell.simulated else
-                                                    _since_last_reading(db, cid, start,
-                                                                        len(poses_deg))))
+            clock.advance_to(
+                _last_time(db, cid)
+                + (30.0 if cell.simulated else _since_last_reading(db, cid, start, len(poses_deg)))
+            )
         try:
             tracker, controller = _clients(cell, sim, stack)
         except DeviceUnreachable as e:
             # nothing moved: the campaign keeps its state and can be started again
             raise AcquisitionFailed(f"campaign {cid} ({name}) did not start: {e}") from e
         names = tuple(sorted(cell.targets))
-        predictor = SmrPredictor(cell.robot, np.array([cell.targets[t] for t in names]), names, base)
+        predictor = SmrPredictor(
+            cell.robot, np.array([cell.targets[t] for t in names]), names, base
+        )
         settings = Settings(pause_s=opts.pause_s, settle=opts.settle, samples=opts.samples)
         sink = StoreSink(db, cid)
         if progress:
             sink = _Progress(sink, progress, len(poses_deg), start)
         writer = StateWriter(db, cid, on_event, log)
         stack.callback(writer.close)  # every state reported is stored before acquire returns
-        engine = CampaignEngine(controller, tracker, clock, predictor, sink, settings, log,
-                                state=state, on_state=writer)
+        engine = CampaignEngine(
+            controller, tracker, clock, predictor, sink, settings, log, state=state, on_state=writer
+        )
         stopper.engine = engine
         if on_event:
             sink = engine.sink = _Events(sink, on_event, engine, cid, len(poses_deg), start)
@@ -278,26 +337,46 @@ def acquire(db_path, cell: Cell, opts: AcquireOptions, progress=None, log=None, 
             on_engine(engine)
         t0 = clock.now()
         try:
-            stats = _run(engine, poses_deg, start=start if start is not None else len(poses_deg),
-                         history=history, partial=partial)
+            stats = _run(
+                engine,
+                poses_deg,
+                start=start if start is not None else len(poses_deg),
+                history=history,
+                partial=partial,
+            )
         except KeyboardInterrupt:
             writer.close()
-            raise Interrupted(f"interrupted: STOP sent, campaign {cid} ({name}) {engine.state} "
-                              f"after {engine.stats.poses} poses; its readings are stored, run "
-                              "again with --reset to resume") from None
+            raise Interrupted(
+                f"interrupted: STOP sent, campaign {cid} ({name}) {engine.state} "
+                f"after {engine.stats.poses} poses; its readings are stored, run "
+                "again with --reset to resume"
+            ) from None
         except Exception as e:
-            raise AcquisitionFailed(f"campaign {cid} ({name}) stopped at pose "
-                                    f"{engine.stats.poses + (start or 0) + 1}: {e}; its readings "
-                                    "are stored, run again to resume") from e
-    return {"campaign": cid, "name": name, "resumed_at": start if existing else None,
-            "poses": int(len(poses_deg)), "state": engine.state, "measured_poses": stats.poses,
-            "readings": stats.readings, "missing": stats.missing, "beam_breaks": stats.beam_breaks,
-            "searched": stats.searched,
-            "locked_without_search_after_10": (stats.locked_after_10 / stats.aimed_after_10
-                                               if stats.aimed_after_10 else None),
-            "campaign_s": clock.now() - t0 if existing is None else None,
-            "campaign_end_s": clock.now(), "predictor": predictor.stage,
-            "skipped_poses": stats.skipped, "simulated": cell.simulated}
+            raise AcquisitionFailed(
+                f"campaign {cid} ({name}) stopped at pose "
+                f"{engine.stats.poses + (start or 0) + 1}: {e}; its readings "
+                "are stored, run again to resume"
+            ) from e
+    return {
+        "campaign": cid,
+        "name": name,
+        "resumed_at": start if existing else None,
+        "poses": int(len(poses_deg)),
+        "state": engine.state,
+        "measured_poses": stats.poses,
+        "readings": stats.readings,
+        "missing": stats.missing,
+        "beam_breaks": stats.beam_breaks,
+        "searched": stats.searched,
+        "locked_without_search_after_10": (
+            stats.locked_after_10 / stats.aimed_after_10 if stats.aimed_after_10 else None
+        ),
+        "campaign_s": clock.now() - t0 if existing is None else None,
+        "campaign_end_s": clock.now(),
+        "predictor": predictor.stage,
+        "skipped_poses": stats.skipped,
+        "simulated": cell.simulated,
+    }
 
 
 # How long Ctrl-C waits for the engine to return after its e-stop.
@@ -350,8 +429,14 @@ class StateWriter:
         except store.StoreError as e:
             self.log(f"campaign {self.campaign_id}: state {new} not stored: {e}")
         if self.on_event:
-            self.on_event({"type": "campaign.state", "campaign_id": self.campaign_id,
-                           "state": new, "was": old})
+            self.on_event(
+                {
+                    "type": "campaign.state",
+                    "campaign_id": self.campaign_id,
+                    "state": new,
+                    "was": old,
+                }
+            )
 
     def close(self) -> None:
         """Wait until every state reported so far is stored."""
@@ -398,8 +483,11 @@ def _partial(db, cid, pose_index) -> dict:
 def _since_last_reading(db, cid, start, n_poses) -> float:
     """Wall seconds since the last stored reading (0 if none): the real gap of a resumed run."""
     at = n_poses - 1 if start is None else start  # the last readings are on this pose or before
-    last = [r.created_at for i in {max(at - 1, 0), at}
-            for r in store.pose_readings(db, campaign_id=cid, pose_index=i).values()]
+    last = [
+        r.created_at
+        for i in {max(at - 1, 0), at}
+        for r in store.pose_readings(db, campaign_id=cid, pose_index=i).values()
+    ]
     if not last:
         return 0.0
     return max(0.0, (dt.datetime.now(dt.timezone.utc) - max(last)).total_seconds())
@@ -440,8 +528,16 @@ class _Events:
         self.sink.pose_done(pose_index=pose_index, state=state, q_deg=q_deg)
         self.done += 1
         st = self.engine.stats
-        self.on_event({"type": "campaign.pose", "campaign_id": self.campaign_id,
-                       "pose_index": int(pose_index), "pose_state": state,
-                       "poses_done": self.done, "poses_total": self.total,
-                       "readings": st.readings, "missing": st.missing,
-                       "state": self.engine.state})
+        self.on_event(
+            {
+                "type": "campaign.pose",
+                "campaign_id": self.campaign_id,
+                "pose_index": int(pose_index),
+                "pose_state": state,
+                "poses_done": self.done,
+                "poses_total": self.total,
+                "readings": st.readings,
+                "missing": st.missing,
+                "state": self.engine.state,
+            }
+        )

@@ -15,8 +15,8 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, replace
 
-from drivers import lifecycle
-from drivers.lifecycle import MOVING, StateError
+from robocal.drivers import lifecycle
+from robocal.drivers.lifecycle import MOVING, StateError
 
 from . import lease, store
 from .acquire import AcquireOptions, acquire, estop_engine
@@ -58,8 +58,14 @@ class Acquisitions:
     running engine, whose controller client is the real one on a real cell, so the requests and
     the e-stop reach it."""
 
-    def __init__(self, database_url: str, db: store.Database, events: Events | None = None, *,
-                 owner: str | None = None):
+    def __init__(
+        self,
+        database_url: str,
+        db: store.Database,
+        events: Events | None = None,
+        *,
+        owner: str | None = None,
+    ):
         self.database_url, self.db = database_url, db
         self.events = events or Events()
         self.owner = owner or lease.process_owner()
@@ -140,8 +146,11 @@ class Acquisitions:
         info = self.refresh(store.get_campaign(self.db, campaign_id=campaign_id))
         was = info.status
         if self._foreign(info):
-            raise store.LeaseHeld(f"campaign {campaign_id} is driven by another process "
-                                  f"({info.lease_owner}); ask there", info.lease_owner)
+            raise store.LeaseHeld(
+                f"campaign {campaign_id} is driven by another process "
+                f"({info.lease_owner}); ask there",
+                info.lease_owner,
+            )
         with self._lock:
             queued = self._current == campaign_id and self._engine is None
             if queued and action == "abort":
@@ -153,8 +162,12 @@ class Acquisitions:
             raise
         if action in ("start", "resume"):
             self._launch(info, action)
-            return Outcome(campaign_id, was, was, note=f"{action} queued; the run reports "
-                           "running once the devices answer")
+            return Outcome(
+                campaign_id,
+                was,
+                was,
+                note=f"{action} queued; the run reports running once the devices answer",
+            )
         store.set_status(self.db, campaign_id=campaign_id, status=nxt)
         self._publish(campaign_id, nxt, was)
         return Outcome(campaign_id, was, nxt)
@@ -196,9 +209,12 @@ class Acquisitions:
             return Outcome(cid, was, engine.state, confirmed)
         info = self.refresh(store.get_campaign(self.db, campaign_id=cid))
         if self._foreign(info):
-            raise store.LeaseHeld(f"campaign {cid} is driven by another process "
-                                  f"({info.lease_owner}); stop it there or with the cell's "
-                                  "hardware e-stop", info.lease_owner)
+            raise store.LeaseHeld(
+                f"campaign {cid} is driven by another process "
+                f"({info.lease_owner}); stop it there or with the cell's "
+                "hardware e-stop",
+                info.lease_owner,
+            )
         try:
             nxt = lifecycle.next_state(info.status, "estop")
         except StateError as e:
@@ -234,8 +250,10 @@ class Acquisitions:
     # -- the worker -------------------------------------------------------------------------------
     def _launch(self, info: store.CampaignInfo, action: str) -> None:
         if "options" not in (info.settings or {}):
-            raise store.Conflict(f"campaign {info.id} has no acquisition settings (its readings "
-                                 "were imported); there is nothing to acquire")
+            raise store.Conflict(
+                f"campaign {info.id} has no acquisition settings (its readings "
+                "were imported); there is nothing to acquire"
+            )
         with self._lock:
             if self._current is not None:
                 raise store.Conflict(f"campaign {self._current} is running; one at a time")
@@ -277,16 +295,23 @@ class Acquisitions:
             self._engine = engine
 
     def _publish(self, campaign_id: int, state: str, was: str) -> None:
-        self.events.publish({"type": "campaign.state", "campaign_id": campaign_id,
-                             "state": state, "was": was})
+        self.events.publish(
+            {"type": "campaign.state", "campaign_id": campaign_id, "state": state, "was": was}
+        )
 
     def _run(self, info: store.CampaignInfo) -> None:
         cid = info.id
         try:
             opts = AcquireOptions(**{**info.settings.get("options", {}), "name": info.name})
-            summary = acquire(self.database_url, parse_cell(info.cell_json), opts,
-                              campaign_id=cid, on_engine=self._attach,
-                              on_event=self.events.publish, owner=self.owner)
+            summary = acquire(
+                self.database_url,
+                parse_cell(info.cell_json),
+                opts,
+                campaign_id=cid,
+                on_engine=self._attach,
+                on_event=self.events.publish,
+                owner=self.owner,
+            )
             change = dict(detail=f"the run ended {summary['state']}", summary=to_plain(summary))
         except _Cancelled:
             change = dict(detail="stopped before the arm moved")
@@ -299,8 +324,9 @@ class Acquisitions:
             state = store.get_campaign(self.db, campaign_id=cid).status
         except store.StoreError:
             state = None
-        self.events.publish({"type": "campaign.run", "campaign_id": cid, "state": state,
-                             "detail": run.detail})
+        self.events.publish(
+            {"type": "campaign.run", "campaign_id": cid, "state": state, "detail": run.detail}
+        )
 
 
 class ControllerUnreachable(RuntimeError):

@@ -12,9 +12,9 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.routing import APIRoute
 
 from . import store
+from .acquisitions import Acquisitions
 from .api import OPEN_ROUTERS, ROUTERS, problems
 from .api.deps import TOKEN_CHECKS
-from .acquisitions import Acquisitions
 from .events import Events
 from .job_queue import Jobs
 from .security import ensure_token, require_reader
@@ -35,8 +35,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         token = ensure_token(settings.token_file)
         if token is not None:
             # Shown this once only: the file keeps just its sha256.
-            print(f"robocal: API token (shown once, keep it): {token}", file=sys.stderr,
-                  flush=True)
+            print(f"robocal: API token (shown once, keep it): {token}", file=sys.stderr, flush=True)
         reports_dir = settings.data_dir / "reports"
         for d in (settings.models_dir, settings.recordings_dir, settings.cells_dir, reports_dir):
             d.mkdir(parents=True, exist_ok=True)
@@ -44,12 +43,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.state.db = db
         app.state.events = events = Events()
         # Jobs() fails the jobs a previous process left queued or running.
-        app.state.jobs = Jobs(db, settings.models_dir, settings.job_workers,
-                              recordings_dir=settings.recordings_dir, reports_dir=reports_dir,
-                              events=events, viewer_url=settings.rerun_viewer_url,
-                              timeout_s=settings.job_timeout_s,
-                              call_timeout_s=settings.call_timeout_s,
-                              call_workers=settings.call_workers)
+        app.state.jobs = Jobs(
+            db,
+            settings.models_dir,
+            settings.job_workers,
+            recordings_dir=settings.recordings_dir,
+            reports_dir=reports_dir,
+            events=events,
+            viewer_url=settings.rerun_viewer_url,
+            timeout_s=settings.job_timeout_s,
+            call_timeout_s=settings.call_timeout_s,
+            call_workers=settings.call_workers,
+        )
         app.state.acquisitions = Acquisitions(settings.database, db, events)
         try:
             yield
@@ -59,13 +64,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             app.state.jobs.shutdown()
             db.close()
 
-    app = FastAPI(title="robocal", summary="Robot calibration workstation", version="0.1.0",
-                  lifespan=lifespan)
+    app = FastAPI(
+        title="robocal", summary="Robot calibration workstation", version="0.1.0", lifespan=lifespan
+    )
     app.state.settings = settings
     problems.install(app)
     if settings.cors_origins:  # closed unless origins are listed
-        app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins,
-                           allow_methods=["*"], allow_headers=["Authorization", "Content-Type"])
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=settings.cors_origins,
+            allow_methods=["*"],
+            allow_headers=["Authorization", "Content-Type"],
+        )
     for router in ROUTERS:
         document_errors(router)
         # Reads need the token too (unless reads are open on loopback); writes list their own.
@@ -153,9 +163,12 @@ class Server(uvicorn.Server):
         if acquisitions is not None and not self.should_exit:
             outcome = acquisitions.estop_all()  # waits at most the controller's confirmation
             if outcome is not None and outcome.campaign_id is not None:
-                print(f"robocal: {signal.Signals(sig).name}: campaign {outcome.campaign_id} "
-                      f"e-stopped (confirmed: {outcome.confirmed})", file=sys.stderr,
-                      flush=True)
+                print(
+                    f"robocal: {signal.Signals(sig).name}: campaign {outcome.campaign_id} "
+                    f"e-stopped (confirmed: {outcome.confirmed})",
+                    file=sys.stderr,
+                    flush=True,
+                )
         super().handle_exit(sig, frame)
 
 
@@ -166,5 +179,13 @@ def serve(settings: Settings | None = None) -> None:
     # not queue behind request threads for the default 5 ms per turn.
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     app = create_app(settings)
-    Server(uvicorn.Config(app, host=settings.host, port=settings.port, log_level="info",
-                          timeout_graceful_shutdown=GRACE_S), app).run()
+    Server(
+        uvicorn.Config(
+            app,
+            host=settings.host,
+            port=settings.port,
+            log_level="info",
+            timeout_graceful_shutdown=GRACE_S,
+        ),
+        app,
+    ).run()

@@ -9,18 +9,20 @@ import time
 
 import numpy as np
 import scipy
+from robocal.solver.calibrate import calibrate
+from robocal.solver.identifiability import structural
+from robocal.solver.identify import least_squares_fit, register
+from robocal.solver.kinematics import predict
+from robocal.solver.minimax import default_epsilon, measured_distances
 from scipy.optimize import least_squares, minimize
-
-from solver.calibrate import calibrate
-from solver.identifiability import structural
-from solver.identify import least_squares_fit, register
-from solver.kinematics import predict
-from solver.minimax import default_epsilon, measured_distances
 
 SEED = 0
 GOALS = {"ls_sum_100_poses_ms_max": 20, "minimax_100_poses_ms_max": 100, "speedup_min": 20}
-OURS = {"ls_sum": ("ls-sum", "primal-dual"), "minimax": ("minimax", "primal-dual"),
-        "minimax_exact": ("minimax", "exact")}
+OURS = {
+    "ls_sum": ("ls-sum", "primal-dual"),
+    "minimax": ("minimax", "primal-dual"),
+    "minimax_exact": ("minimax", "exact"),
+}
 
 
 def _log(msg: str) -> None:
@@ -74,9 +76,11 @@ def _best_of(n: int, fn, budget_s: float = 60.0):
 
 def _campaign(cell, m: int, seed: int):
     """A simulated campaign of m poses on the virtual cell (fixed seed)."""
-    from drivers.cell import TrackerSpec, VirtualCell
+    from robocal.drivers.cell import TrackerSpec, VirtualCell
 
-    vc = VirtualCell.random(cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(**cell.tracker))
+    vc = VirtualCell.random(
+        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(**cell.tracker)
+    )
     return vc.campaign(m, seed=seed)
 
 
@@ -102,16 +106,21 @@ def _ours(robot, targets, names, q, xyz, m: int, repeats: int, reference_ls=None
     reference_ls: the reference's ls-sum run, timed in turn with ours; returns (ours, its best
     run's result or None).
     """
-    calibrate(robot, targets, names, q, xyz, method="ls-sum")  # untimed warm-up: a first large run is slower
+    calibrate(
+        robot, targets, names, q, xyz, method="ls-sum"
+    )  # untimed warm-up: a first large run is slower
     out, ref = {}, None
     for key, (method, qp) in OURS.items():
+
         def ours():
             return calibrate(robot, targets, names, q, xyz, method=method, qp=qp)
 
         if method == "ls-sum":
             # with the fit alone on the registered problem, to set against the reference's solve stage
             prob, x0, free = _setup(robot, targets, names, q, xyz)
-            fns = [ours, lambda: least_squares_fit(prob, x0, free)] + ([reference_ls] if reference_ls else [])
+            fns = [ours, lambda: least_squares_fit(prob, x0, free)] + (
+                [reference_ls] if reference_ls else []
+            )
             best, n = _in_turns(repeats, fns, [BURST, BURST, 1][: len(fns)])
             (secs, cal, cold), (solve, _, _) = best[:2]
             if reference_ls:
@@ -119,19 +128,36 @@ def _ours(robot, targets, names, q, xyz, m: int, repeats: int, reference_ls=None
                 ref[0]["repeats"] = n
         else:
             secs, cal, n = _best_of(max(1, repeats // 10), ours)
-        r = {"seconds": secs, "repeats": n, "calibrate_seconds": cal.seconds, "F": cal.F.tolist(),
-             "free_parameters": int(len(cal.x) - len(cal.fixed)), "iterations": cal.iterations}
+        r = {
+            "seconds": secs,
+            "repeats": n,
+            "calibrate_seconds": cal.seconds,
+            "F": cal.F.tolist(),
+            "free_parameters": int(len(cal.x) - len(cal.fixed)),
+            "iterations": cal.iterations,
+        }
         if method == "ls-sum":
-            r.update(solve_seconds=solve, objective=float(cal.F.sum()), repeats=n * BURST,
-                     first_of_burst_seconds=cold)
+            r.update(
+                solve_seconds=solve,
+                objective=float(cal.F.sum()),
+                repeats=n * BURST,
+                first_of_burst_seconds=cold,
+            )
         else:
             d = cal.details
-            r.update(objective=float(cal.F.max()), sqp_seconds=d["sqp_seconds"],
-                     qp_iterations=d["qp_iterations"], converged=d["converged"], message=d["message"],
-                     max_constraint_violation_mm2=_violation(cal.targets, xyz))
+            r.update(
+                objective=float(cal.F.max()),
+                sqp_seconds=d["sqp_seconds"],
+                qp_iterations=d["qp_iterations"],
+                converged=d["converged"],
+                message=d["message"],
+                max_constraint_violation_mm2=_violation(cal.targets, xyz),
+            )
         out[key] = r
-        _log(f"  ours {key}: {secs * 1000:.1f} ms, objective {r['objective']:.6g} mm^2, "
-             f"{cal.iterations} iterations")
+        _log(
+            f"  ours {key}: {secs * 1000:.1f} ms, objective {r['objective']:.6g} mm^2, "
+            f"{cal.iterations} iterations"
+        )
     return out, ref
 
 
@@ -158,14 +184,30 @@ def _reference_ls(prob, x0, free):
     model = _Counted(prob, x0, free)
     mask = prob.mask
     t0 = time.perf_counter()
-    res = least_squares(lambda z: model.residuals(z)[mask].ravel(), x0[model.idx], jac="2-point",
-                        method="trf", x_scale="jac")
+    res = least_squares(
+        lambda z: model.residuals(z)[mask].ravel(),
+        x0[model.idx],
+        jac="2-point",
+        method="trf",
+        x_scale="jac",
+    )
     secs = time.perf_counter() - t0
     x = model.x(res.x)
     F = prob.sum_squares(x)
-    return x, {"solve_seconds": secs, "objective": float(F.sum()), "F": F.tolist(),
-               "nfev": int(res.nfev), "njev": int(res.njev), "model_evaluations": model.calls,
-               "status": int(res.status), "message": res.message}, res.jac
+    return (
+        x,
+        {
+            "solve_seconds": secs,
+            "objective": float(F.sum()),
+            "F": F.tolist(),
+            "nfev": int(res.nfev),
+            "njev": int(res.njev),
+            "model_evaluations": model.calls,
+            "status": int(res.status),
+            "message": res.message,
+        },
+        res.jac,
+    )
 
 
 def _reference_minimax(prob, x_ls, free, jac) -> tuple[np.ndarray, dict]:
@@ -200,15 +242,28 @@ def _reference_minimax(prob, x_ls, free, jac) -> tuple[np.ndarray, dict]:
     v0 = np.zeros(len(idx) + 1)
     v0[-1] = 1.0
     t0 = time.perf_counter()
-    res = minimize(lambda v: v[-1], v0, method="SLSQP", options={"maxiter": 1000, "ftol": 1e-10},
-                   constraints=[{"type": "ineq", "fun": constraints}])
+    res = minimize(
+        lambda v: v[-1],
+        v0,
+        method="SLSQP",
+        options={"maxiter": 1000, "ftol": 1e-10},
+        constraints=[{"type": "ineq", "fun": constraints}],
+    )
     secs = time.perf_counter() - t0
     x = x_of(res.x)
     F = prob.sum_squares(x)
-    return x, {"sqp_seconds": secs, "objective": float(F.max()), "F": F.tolist(), "nit": int(res.nit),
-               "nfev": int(res.nfev), "njev": int(res.njev), "model_evaluations": model.calls,
-               "success": bool(res.success), "message": res.message,
-               "max_constraint_violation_mm2": _violation(lay.targets(x), prob.meas)}
+    return x, {
+        "sqp_seconds": secs,
+        "objective": float(F.max()),
+        "F": F.tolist(),
+        "nit": int(res.nit),
+        "nfev": int(res.nfev),
+        "njev": int(res.njev),
+        "model_evaluations": model.calls,
+        "success": bool(res.success),
+        "message": res.message,
+        "max_constraint_violation_mm2": _violation(lay.targets(x), prob.meas),
+    }
 
 
 def _reference_ls_run(robot, targets, names, q, xyz):
@@ -235,34 +290,53 @@ def _reference(m: int, ls_run) -> dict:
 
     _, mm, mm_runs = _best_of(3 if m <= 100 else 1, run_mm)
     mm["repeats"] = mm_runs
-    best = {"setup_seconds": ls["setup_seconds"], "free_parameters": int(free.sum()),
-            "ls_sum": ls, "minimax": mm}
+    best = {
+        "setup_seconds": ls["setup_seconds"],
+        "free_parameters": int(free.sum()),
+        "ls_sum": ls,
+        "minimax": mm,
+    }
     ls, mm = best["ls_sum"], best["minimax"]
-    _log(f"  reference ls_sum: {ls['seconds']:.3f} s, objective {ls['objective']:.6g} mm^2, "
-         f"{ls['model_evaluations']} model evaluations")
-    _log(f"  reference minimax: {mm['seconds']:.3f} s (SLSQP {mm['sqp_seconds']:.3f} s, "
-         f"{mm['nit']} iterations), objective {mm['objective']:.6g} mm^2, "
-         f"{mm['model_evaluations']} model evaluations, {mm['message']}")
+    _log(
+        f"  reference ls_sum: {ls['seconds']:.3f} s, objective {ls['objective']:.6g} mm^2, "
+        f"{ls['model_evaluations']} model evaluations"
+    )
+    _log(
+        f"  reference minimax: {mm['seconds']:.3f} s (SLSQP {mm['sqp_seconds']:.3f} s, "
+        f"{mm['nit']} iterations), objective {mm['objective']:.6g} mm^2, "
+        f"{mm['model_evaluations']} model evaluations, {mm['message']}"
+    )
     return best
 
 
 def _compare(ours: dict, ref: dict) -> dict:
     """Speed ratios reference/ours and relative objective differences (ours - ref) / ref."""
-    ratio = {"ls_sum": ref["ls_sum"]["seconds"] / ours["ls_sum"]["seconds"],
-             "minimax": ref["minimax"]["seconds"] / ours["minimax"]["seconds"],
-             "minimax_exact": ref["minimax"]["seconds"] / ours["minimax_exact"]["seconds"],
-             "ls_sum_solve_stage": ref["ls_sum"]["solve_seconds"] / ours["ls_sum"]["solve_seconds"],
-             "minimax_sqp_stage": ref["minimax"]["sqp_seconds"] / ours["minimax"]["sqp_seconds"],
-             "minimax_exact_sqp_stage": ref["minimax"]["sqp_seconds"] / ours["minimax_exact"]["sqp_seconds"]}
-    rel = {k: (ours[k]["objective"] - ref[r]["objective"]) / ref[r]["objective"]
-           for k, r in (("ls_sum", "ls_sum"), ("minimax", "minimax"), ("minimax_exact", "minimax"))}
+    ratio = {
+        "ls_sum": ref["ls_sum"]["seconds"] / ours["ls_sum"]["seconds"],
+        "minimax": ref["minimax"]["seconds"] / ours["minimax"]["seconds"],
+        "minimax_exact": ref["minimax"]["seconds"] / ours["minimax_exact"]["seconds"],
+        "ls_sum_solve_stage": ref["ls_sum"]["solve_seconds"] / ours["ls_sum"]["solve_seconds"],
+        "minimax_sqp_stage": ref["minimax"]["sqp_seconds"] / ours["minimax"]["sqp_seconds"],
+        "minimax_exact_sqp_stage": ref["minimax"]["sqp_seconds"]
+        / ours["minimax_exact"]["sqp_seconds"],
+    }
+    rel = {
+        k: (ours[k]["objective"] - ref[r]["objective"]) / ref[r]["objective"]
+        for k, r in (("ls_sum", "ls_sum"), ("minimax", "minimax"), ("minimax_exact", "minimax"))
+    }
     return {"speedup": ratio, "objective_rel_diff": rel}
 
 
 def _machine() -> dict:
     """What the figures were measured on."""
-    return {"cpu_count": os.cpu_count(), "machine": platform.machine(), "processor": platform.processor(),
-            "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__}
+    return {
+        "cpu_count": os.cpu_count(),
+        "machine": platform.machine(),
+        "processor": platform.processor(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+    }
 
 
 def _goals(sizes: dict) -> dict:
@@ -277,19 +351,29 @@ def _goals(sizes: dict) -> dict:
         "ls_sum_100_poses_ms": at100["ls_sum"]["seconds"] * 1000 if at100 else None,
         "minimax_100_poses_ms": at100["minimax"]["seconds"] * 1000 if at100 else None,
         "speedup_min": min((r[k] for r in ratios for k in ("ls_sum", "minimax")), default=None),
-        "speedup_min_solve_stage": min((r[k] for r in ratios
-                                        for k in ("ls_sum_solve_stage", "minimax_sqp_stage")), default=None),
+        "speedup_min_solve_stage": min(
+            (r[k] for r in ratios for k in ("ls_sum_solve_stage", "minimax_sqp_stage")),
+            default=None,
+        ),
     }
-    ls_ms, mm_ms, speedup = (achieved[k] for k in
-                             ("ls_sum_100_poses_ms", "minimax_100_poses_ms", "speedup_min"))
-    met = {"ls_sum_100_poses_ms_max": None if ls_ms is None else ls_ms <= GOALS["ls_sum_100_poses_ms_max"],
-           "minimax_100_poses_ms_max": None if mm_ms is None else mm_ms <= GOALS["minimax_100_poses_ms_max"],
-           "speedup_min": None if speedup is None else speedup >= GOALS["speedup_min"]}
+    ls_ms, mm_ms, speedup = (
+        achieved[k] for k in ("ls_sum_100_poses_ms", "minimax_100_poses_ms", "speedup_min")
+    )
+    met = {
+        "ls_sum_100_poses_ms_max": None
+        if ls_ms is None
+        else ls_ms <= GOALS["ls_sum_100_poses_ms_max"],
+        "minimax_100_poses_ms_max": None
+        if mm_ms is None
+        else mm_ms <= GOALS["minimax_100_poses_ms_max"],
+        "speedup_min": None if speedup is None else speedup >= GOALS["speedup_min"],
+    }
     return {"targets": dict(GOALS), "achieved": achieved, "met": met}
 
 
-def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=10000, seed=SEED,
-                     repeats=None) -> dict:
+def run_solver_bench(
+    sizes=(100, 1000, 10000), reference=True, reference_max=10000, seed=SEED, repeats=None
+) -> dict:
     """Time our solvers and scipy's finite-difference reference on virtual-cell campaigns of each size."""
     from .formats.cell_json import default_cell
 
@@ -304,23 +388,37 @@ def run_solver_bench(sizes=(100, 1000, 10000), reference=True, reference_max=100
         args = (cell.robot, targets, meas.target_names, meas.q, meas.xyz)
         with_ref = reference and m <= reference_max
         ours, ls_run = _ours(*args, m, n, (lambda: _reference_ls_run(*args)) if with_ref else None)
-        entry = {"poses": int(m), "readings": meas.n_readings, "ours": ours,
-                 "ours_seconds_per_pose": {k: v["seconds"] / m for k, v in ours.items()}}
+        entry = {
+            "poses": int(m),
+            "readings": meas.n_readings,
+            "ours": ours,
+            "ours_seconds_per_pose": {k: v["seconds"] / m for k, v in ours.items()},
+        }
         if with_ref:
             entry["reference"] = _reference(m, ls_run)
             entry["comparison"] = _compare(ours, entry["reference"])
-            _log("  speedup " + ", ".join(f"{k} {v:.1f}x"
-                                          for k, v in entry["comparison"]["speedup"].items()))
+            _log(
+                "  speedup "
+                + ", ".join(f"{k} {v:.1f}x" for k, v in entry["comparison"]["speedup"].items())
+            )
         results[str(m)] = entry
-    return {"benchmark": "solver", "machine": _machine(),
-            "cell": {"robot": cell.robot.name, "targets": {k: v.tolist() for k, v in zip(names, targets)},
-                     "seed": seed},
-            "reference": {"ls_sum": "scipy.optimize.least_squares(method='trf', jac='2-point', "
-                                    "x_scale='jac')",
-                          "minimax": "scipy.optimize.minimize(method='SLSQP') on the epigraph form, "
-                                     "finite-difference derivatives, started from the reference ls-sum",
-                          "seconds": "register + structural + solve (ours: the whole calibrate() call)",
-                          "timing": f"ls-sum: ours and the reference in turns, ours {BURST} times in a row "
-                                    "per reference run; the fastest of each side (first_of_burst_seconds: "
-                                    "ours' fastest run right after a reference run, caches cold)"},
-            "sizes": results, **_goals(results)}
+    return {
+        "benchmark": "solver",
+        "machine": _machine(),
+        "cell": {
+            "robot": cell.robot.name,
+            "targets": {k: v.tolist() for k, v in zip(names, targets)},
+            "seed": seed,
+        },
+        "reference": {
+            "ls_sum": "scipy.optimize.least_squares(method='trf', jac='2-point', x_scale='jac')",
+            "minimax": "scipy.optimize.minimize(method='SLSQP') on the epigraph form, "
+            "finite-difference derivatives, started from the reference ls-sum",
+            "seconds": "register + structural + solve (ours: the whole calibrate() call)",
+            "timing": f"ls-sum: ours and the reference in turns, ours {BURST} times in a row "
+            "per reference run; the fastest of each side (first_of_burst_seconds: "
+            "ours' fastest run right after a reference run, caches cold)",
+        },
+        "sizes": results,
+        **_goals(results),
+    }

@@ -39,8 +39,10 @@ def _line(r) -> str:
         return f"{head}: skipped ({r['skipped']})"
     named = ", ".join(":".join(str(v) for v in n if v is not None) for n in r["named"]) or "nothing"
     ratio = f", held-out/floor {r['ratio']:.2f}" if r["ratio"] is not None else ""
-    return (f"{head}: {c['poses']} poses, {', '.join(c['effects']) or 'clean'}; named {named}"
-            f"{ratio} ({r['wall_seconds']:.1f} s)")
+    return (
+        f"{head}: {c['poses']} poses, {', '.join(c['effects']) or 'clean'}; named {named}"
+        f"{ratio} ({r['wall_seconds']:.1f} s)"
+    )
 
 
 def run_suite(pairs, workers: int = 2, log=None) -> list[dict]:
@@ -68,9 +70,9 @@ def run_suite(pairs, workers: int = 2, log=None) -> list[dict]:
 
 def time_campaign(poses: int, seed: int = 0) -> dict:
     """Wall time of one diagnosis of a campaign of that size (the IRB 2600, one hidden effect)."""
-    from drivers.cell import VirtualCell
-    from drivers.effects import make_effects
-    from solver.diagnose import diagnose
+    from robocal.drivers.cell import VirtualCell
+    from robocal.drivers.effects import make_effects
+    from robocal.solver.diagnose import diagnose
 
     from .formats.cell_json import default_cell
 
@@ -80,21 +82,32 @@ def time_campaign(poses: int, seed: int = 0) -> dict:
     meas = vc.campaign(poses, seed=seed)
     targets = np.array([cell.targets[t] for t in meas.target_names])
     t0, c0 = time.perf_counter(), time.process_time()
-    d = diagnose(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s,
-                 meas.temp_c)
+    d = diagnose(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s, meas.temp_c)
     wall = time.perf_counter() - t0
     target = TARGET_S.get(poses)
-    return {"poses": poses, "effect": TIMED_EFFECT, "seconds": wall,
-            "cpu_seconds": time.process_time() - c0, "stages_seconds": d.report["seconds"],
-            "fits": d.report["cross_validation"]["fits"],
-            "effects_named": [e["name"] + (f":{e['joint']}" if "joint" in e else "")
-                              for e in d.report["effects"]],
-            "target_seconds": target, "met": None if target is None else wall <= target}
+    return {
+        "poses": poses,
+        "effect": TIMED_EFFECT,
+        "seconds": wall,
+        "cpu_seconds": time.process_time() - c0,
+        "stages_seconds": d.report["seconds"],
+        "fits": d.report["cross_validation"]["fits"],
+        "effects_named": [
+            e["name"] + (f":{e['joint']}" if "joint" in e else "") for e in d.report["effects"]
+        ],
+        "target_seconds": target,
+        "met": None if target is None else wall <= target,
+    }
 
 
-def run_diagnose_bench(quick: bool = False, effect_cases: int | None = None,
-                       clean_cases: int | None = None, sizes=(100, 1000), workers: int = 2,
-                       seed: int = 0) -> dict:
+def run_diagnose_bench(
+    quick: bool = False,
+    effect_cases: int | None = None,
+    clean_cases: int | None = None,
+    sizes=(100, 1000),
+    workers: int = 2,
+    seed: int = 0,
+) -> dict:
     """The suite's figures (detection per effect and size, false alarms, held-out/floor) and timing."""
     counts = dict(QUICK if quick else FULL)
     if effect_cases is not None:
@@ -117,20 +130,29 @@ def run_diagnose_bench(quick: bool = False, effect_cases: int | None = None,
         timing[str(poses)] = time_campaign(poses, seed)
     summary = summarize(results)
     return {
-        "benchmark": "diagnose", "quick": quick, "seed": seed, "workers": workers,
-        "cpu_count": os.cpu_count(), **counts, "suite_seconds": suite_s,
+        "benchmark": "diagnose",
+        "quick": quick,
+        "seed": seed,
+        "workers": workers,
+        "cpu_count": os.cpu_count(),
+        **counts,
+        "suite_seconds": suite_s,
         "summary": summary,
         "timing": timing,
         "met": {
             "detection_rate_min_0.9": _at_least(summary["detection"]["rate"], 0.9),
             "false_alarm_rate_max_0.01": _at_most(summary["false_alarms"]["rate"], 0.01),
-            "holdout_over_floor_median_max_1.2": _at_most(summary["holdout_over_floor"]["median"],
-                                                          1.2),
+            "holdout_over_floor_median_max_1.2": _at_most(
+                summary["holdout_over_floor"]["median"], 1.2
+            ),
             "outlier_cases_median_max_1.5": _at_most(
-                summary["holdout_over_floor_outlier_cases"]["median"], 1.5),
+                summary["holdout_over_floor_outlier_cases"]["median"], 1.5
+            ),
             "out_of_vocabulary_named_only_if_it_pays": (
-                None if not summary["out_of_vocabulary"]["cases"]
-                else summary["out_of_vocabulary"]["named_without_payoff"] == 0),
+                None
+                if not summary["out_of_vocabulary"]["cases"]
+                else summary["out_of_vocabulary"]["named_without_payoff"] == 0
+            ),
             **{f"seconds_{k}_poses": v["met"] for k, v in timing.items()},
         },
         "cases": results,

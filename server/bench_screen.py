@@ -27,12 +27,13 @@ def displace(xyz, seed, rate):
 def drawn_campaign(cell, seed):
     """A campaign whose size, tracker noise (1-6x the spec), per-pose arm scatter, SMRs a pose
     and missing readings are drawn from the seed; returns (readings, measurements, description)."""
-    from drivers.cell import TrackerSpec, VirtualCell
+    from robocal.drivers.cell import TrackerSpec, VirtualCell
 
     rng = np.random.default_rng([99, seed])
     poses, noise = int(rng.choice([30, 40, 60, 100])), float(rng.uniform(1, 6))
-    vc = VirtualCell.random(cell.robot, cell.targets, seed=seed,
-                            tracker=TrackerSpec(10 * noise, 2.5 * noise))
+    vc = VirtualCell.random(
+        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(10 * noise, 2.5 * noise)
+    )
     one, scatter = bool(rng.random() < 0.25), bool(rng.random() < 0.5)
     breaks = 0.1 if rng.random() < 0.3 else 0.0
     meas = vc.campaign(poses, seed=seed, beam_break_rate=breaks)
@@ -46,13 +47,22 @@ def drawn_campaign(cell, seed):
         drop = np.ones(xyz.shape[:2], dtype=bool)
         drop[np.arange(poses), keep] = False
         xyz[drop] = np.nan
-    return xyz, meas, {"poses": poses, "noise_x_spec": round(noise, 2), "one_smr": one,
-                       "arm_scatter": scatter, "missing": breaks}
+    return (
+        xyz,
+        meas,
+        {
+            "poses": poses,
+            "noise_x_spec": round(noise, 2),
+            "one_smr": one,
+            "arm_scatter": scatter,
+            "missing": breaks,
+        },
+    )
 
 
 def run_screen_bench(clean: int = 480, dirty: int = 240, rate: float = 0.03) -> dict:
     """Screen `clean` campaigns (any exclusion is false) and `dirty` ones with `rate` moved."""
-    from solver.screen import screen_readings
+    from robocal.solver.screen import screen_readings
 
     from .formats.cell_json import default_cell
 
@@ -70,18 +80,28 @@ def run_screen_bench(clean: int = 480, dirty: int = 240, rate: float = 0.03) -> 
                 clean_xyz = xyz
                 xyz, moved = displace(xyz, seed, share)
             targets = np.array([cell.targets[t] for t in meas.target_names])
-            s = screen_readings(cell.robot, targets, meas.target_names, meas.q, xyz,
-                                meas.time_s, meas.temp_c)
+            s = screen_readings(
+                cell.robot, targets, meas.target_names, meas.q, xyz, meas.time_s, meas.temp_c
+            )
             wrong = int((s.excluded & ~moved).sum())
             flagged += wrong > 0
             false += wrong
             found += int((s.excluded & moved).sum())
             total += int(moved.sum())
             for p, k in np.argwhere(moved & ~s.excluded):
-                missed.append({"seed": seed, **about, "moved_mm": round(float(
-                    np.linalg.norm(xyz[p, k] - clean_xyz[p, k])), 3)})
-        out[label] = {"campaigns": n, "with_a_false_flag": flagged,
-                      "false_flag_rate": flagged / n, "clean_readings_excluded": false}
+                missed.append(
+                    {
+                        "seed": seed,
+                        **about,
+                        "moved_mm": round(float(np.linalg.norm(xyz[p, k] - clean_xyz[p, k])), 3),
+                    }
+                )
+        out[label] = {
+            "campaigns": n,
+            "with_a_false_flag": flagged,
+            "false_flag_rate": flagged / n,
+            "clean_readings_excluded": false,
+        }
         if share:
             out[label].update(outlier_rate=share, outliers=total, found=found, missed=missed)
     out["seconds"] = round(time.perf_counter() - t0, 1)

@@ -24,8 +24,9 @@ def _serve(settings):
     from .app import create_app
 
     app = create_app(settings)
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=settings.port,
-                                           log_level="warning"))
+    server = uvicorn.Server(
+        uvicorn.Config(app, host="127.0.0.1", port=settings.port, log_level="warning")
+    )
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     while not server.started:
@@ -59,8 +60,12 @@ def _timed_get(client, url) -> float:
 
 def _stats(seconds) -> dict:
     ms = np.array(seconds) * 1000
-    return {"requests": len(ms), "p50_ms": float(np.percentile(ms, 50)),
-            "p99_ms": float(np.percentile(ms, 99)), "max_ms": float(ms.max())}
+    return {
+        "requests": len(ms),
+        "p50_ms": float(np.percentile(ms, 50)),
+        "p99_ms": float(np.percentile(ms, 99)),
+        "max_ms": float(ms.max()),
+    }
 
 
 def _during_job(c, campaign_id: int, cap: int = 5000) -> dict:
@@ -76,8 +81,12 @@ def _during_job(c, campaign_id: int, cap: int = 5000) -> dict:
         if len(lat) % 20 == 0 and c.get(f"/api/jobs/{job['id']}").json()["state"] != "running":
             break
     job = _wait(c, f"/api/jobs/{job['id']}", lambda b: b["state"] in ("done", "failed"))
-    return {"idle": _stats(idle), **_stats(lat), "job_s": time.perf_counter() - t0,
-            "job": job["state"]}
+    return {
+        "idle": _stats(idle),
+        **_stats(lat),
+        "job_s": time.perf_counter() - t0,
+        "job": job["state"],
+    }
 
 
 def latency_under_load(poses: int = 100, requests: int = 400) -> dict:
@@ -89,21 +98,29 @@ def latency_under_load(poses: int = 100, requests: int = 400) -> dict:
     from .settings import Settings
 
     with tempfile.TemporaryDirectory() as tmp:
-        settings = Settings(database=str(Path(tmp) / "b.db"), data_dir=Path(tmp) / "data",
-                            port=_free_port())
+        settings = Settings(
+            database=str(Path(tmp) / "b.db"), data_dir=Path(tmp) / "data", port=_free_port()
+        )
         token = ensure_token(settings.token_file)
         server, thread, app = _serve(settings)
         auth = {"Authorization": f"Bearer {token}"}
         try:
-            with httpx.Client(base_url=f"http://127.0.0.1:{settings.port}", headers=auth,
-                              timeout=30.0) as c:
+            with httpx.Client(
+                base_url=f"http://127.0.0.1:{settings.port}", headers=auth, timeout=30.0
+            ) as c:
                 # a finished campaign to calibrate while the next one runs
-                first = c.post("/api/campaigns", json={"poses": 60, "seed": 1, "name": "done"}).json()
+                first = c.post(
+                    "/api/campaigns", json={"poses": 60, "seed": 1, "name": "done"}
+                ).json()
                 c.post(f"/api/campaigns/{first['id']}/start")
                 _wait(c, f"/api/campaigns/{first['id']}", lambda b: b["status"] == "done")
-                live = c.post("/api/campaigns", json={"poses": poses, "seed": 2, "name": "live"}).json()
+                live = c.post(
+                    "/api/campaigns", json={"poses": poses, "seed": 2, "name": "live"}
+                ).json()
                 c.post(f"/api/campaigns/{live['id']}/start")
-                job = c.post("/api/jobs", json={"campaign_id": first["id"], "method": "minimax"}).json()
+                job = c.post(
+                    "/api/jobs", json={"campaign_id": first["id"], "method": "minimax"}
+                ).json()
                 lat, busy = [], 0
                 for _ in range(requests):
                     t0 = time.perf_counter()
@@ -112,15 +129,24 @@ def latency_under_load(poses: int = 100, requests: int = 400) -> dict:
                     busy += body["status"] == "running"
                 _wait(c, f"/api/campaigns/{live['id']}", lambda b: b["status"] == "done")
                 job = _wait(c, f"/api/jobs/{job['id']}", lambda b: b["state"] in ("done", "failed"))
-                during = {"pool": app.state.jobs.pool_kind, "workers": settings.job_workers,
-                          **_during_job(c, live["id"])}
+                during = {
+                    "pool": app.state.jobs.pool_kind,
+                    "workers": settings.job_workers,
+                    **_during_job(c, live["id"]),
+                }
         finally:
             server.should_exit = True
             thread.join(timeout=10)
     ms = np.array(lat) * 1000
-    return {"requests": requests, "while_running": busy, "p50_ms": float(np.percentile(ms, 50)),
-            "p99_ms": float(np.percentile(ms, 99)), "max_ms": float(ms.max()),
-            "calibration_job": job["state"], "during_job": during}
+    return {
+        "requests": requests,
+        "while_running": busy,
+        "p50_ms": float(np.percentile(ms, 50)),
+        "p99_ms": float(np.percentile(ms, 99)),
+        "max_ms": float(ms.max()),
+        "calibration_job": job["state"],
+        "during_job": during,
+    }
 
 
 STOP_BOUND_MS = 100.0  # issue 11: stop request to STOP on the wire
@@ -140,11 +166,11 @@ def stop_latency(stops: int = 100) -> dict:
     """Time from emergency_stop() to STOP received by the simulated controller on 127.0.0.1, each
     stop against a controller stalled mid-move while a STATUS waits for its reply on another
     thread: p50 and max of `stops`, and how long emergency_stop took to return."""
-    from drivers.abb.client import ControllerClient, ControllerError
-    from drivers.abb.sim import SimulatedController, serve_controller
-    from drivers.cell import VirtualCell
-    from drivers.clock import VirtualClock
-    from drivers.world import SimulatedWorld
+    from robocal.drivers.abb.client import ControllerClient, ControllerError
+    from robocal.drivers.abb.sim import SimulatedController, serve_controller
+    from robocal.drivers.cell import VirtualCell
+    from robocal.drivers.clock import VirtualClock
+    from robocal.drivers.world import SimulatedWorld
 
     from .formats import default_cell
 
@@ -153,11 +179,14 @@ def stop_latency(stops: int = 100) -> dict:
     world = SimulatedWorld(VirtualCell.random(cell.robot, targets, seed=1), clock)
     device = SimulatedController(world, cell.robot, clock)
     on_wire, returned, confirmed = [], [], 0
-    quiet = logging.getLogger("drivers.abb.client")
+    quiet = logging.getLogger("robocal.drivers.abb.client")
     level = quiet.level
     quiet.setLevel(logging.CRITICAL)  # the 100 STATUS that fail are the design here
-    with _restore_level(quiet, level), serve_controller(device) as server, \
-            ControllerClient(server.url, cell.robot, timeout_s=2.0, retries=0) as client:
+    with (
+        _restore_level(quiet, level),
+        serve_controller(device) as server,
+        ControllerClient(server.url, cell.robot, timeout_s=2.0, retries=0) as client,
+    ):
         for i in range(stops):
             server.resume()
             client.clear_stop()
@@ -174,11 +203,17 @@ def stop_latency(stops: int = 100) -> dict:
             server.drop_connections()  # frees the stalled STATUS (it fails; the next reconnects)
             stuck.join(timeout=10)
     wire_ms, back_ms = np.array(on_wire) * 1000, np.array(returned) * 1000
-    return {"stops": stops, "controller": "simulated, stalled mid-move, STATUS in flight, 127.0.0.1",
-            "p50_ms": float(np.percentile(wire_ms, 50)), "max_ms": float(wire_ms.max()),
-            "bound_ms": STOP_BOUND_MS, "met": bool(wire_ms.max() <= STOP_BOUND_MS),
-            "confirmed": confirmed, "returned_p50_ms": float(np.percentile(back_ms, 50)),
-            "returned_max_ms": float(back_ms.max())}
+    return {
+        "stops": stops,
+        "controller": "simulated, stalled mid-move, STATUS in flight, 127.0.0.1",
+        "p50_ms": float(np.percentile(wire_ms, 50)),
+        "max_ms": float(wire_ms.max()),
+        "bound_ms": STOP_BOUND_MS,
+        "met": bool(wire_ms.max() <= STOP_BOUND_MS),
+        "confirmed": confirmed,
+        "returned_p50_ms": float(np.percentile(back_ms, 50)),
+        "returned_max_ms": float(back_ms.max()),
+    }
 
 
 @contextmanager
@@ -195,6 +230,7 @@ def _swallow(call, errors):
             call()
         except errors:
             pass
+
     return run
 
 
@@ -202,11 +238,20 @@ def demo_time() -> dict:
     """Wall time of `robocal demo` in a fresh folder (a subprocess, as a user runs it)."""
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        r = subprocess.run([sys.executable, "-m", "server.cli", "demo", "--out", "demo"], cwd=tmp,
-                           capture_output=True, text=True, timeout=900)
+        r = subprocess.run(
+            [sys.executable, "-m", "robocal.server.cli", "demo", "--out", "demo"],
+            cwd=tmp,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
         wall = time.perf_counter() - t0
-    return {"seconds": wall, "exit": r.returncode, "target_s": DEMO_TARGET_S,
-            "met": r.returncode == 0 and wall <= DEMO_TARGET_S}
+    return {
+        "seconds": wall,
+        "exit": r.returncode,
+        "target_s": DEMO_TARGET_S,
+        "met": r.returncode == 0 and wall <= DEMO_TARGET_S,
+    }
 
 
 def run_service_bench() -> dict:
@@ -215,5 +260,9 @@ def run_service_bench() -> dict:
     print("[bench] live-state latency under load", file=sys.stderr, flush=True)
     live = latency_under_load()
     print("[bench] stop latency against a stalled controller", file=sys.stderr, flush=True)
-    return {"benchmark": "service", "demo": demo, "live_state_latency": live,
-            "stop_latency": stop_latency()}
+    return {
+        "benchmark": "service",
+        "demo": demo,
+        "live_state_latency": live,
+        "stop_latency": stop_latency(),
+    }

@@ -25,11 +25,15 @@ def check_plan_size(opts: AcquireOptions) -> None:
     if not opts.choose_from:
         return
     if opts.choose_from > MAX_CANDIDATES:
-        raise PlanTooLarge(f"choose_from: {opts.choose_from} candidates is more than the "
-                           f"{MAX_CANDIDATES} a plan may choose from")
+        raise PlanTooLarge(
+            f"choose_from: {opts.choose_from} candidates is more than the "
+            f"{MAX_CANDIDATES} a plan may choose from"
+        )
     if opts.poses * opts.choose_from > MAX_CHOICE_WORK:
-        raise PlanTooLarge(f"poses x choose_from: {opts.poses} x {opts.choose_from} is more than "
-                           f"{MAX_CHOICE_WORK}; choose fewer poses or from fewer candidates")
+        raise PlanTooLarge(
+            f"poses x choose_from: {opts.poses} x {opts.choose_from} is more than "
+            f"{MAX_CHOICE_WORK}; choose fewer poses or from fewer candidates"
+        )
 
 
 def plans_long(opts: AcquireOptions) -> bool:

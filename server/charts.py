@@ -14,10 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-
-from solver import metrics
-from solver.kinematics import predict
-from solver.measurements import Measurements
+from robocal.solver import metrics
+from robocal.solver.kinematics import predict
+from robocal.solver.measurements import Measurements
 
 from .formats.cell_json import parse_cell
 from .formats.model_json import read_model
@@ -42,8 +41,12 @@ def _errors(model_path, cell_json: str, meas: Measurements, method: str) -> _Err
     after = model_predict(model, meas.q)[:, order]
     nominal = run_method(cell, meas, "nominal")
     before = predict(nominal.layout, nominal.x, meas.q)
-    return _Errors(method, tuple(names), metrics.position_errors(before, meas.xyz),
-                   metrics.position_errors(after, meas.xyz))
+    return _Errors(
+        method,
+        tuple(names),
+        metrics.position_errors(before, meas.xyz),
+        metrics.position_errors(after, meas.xyz),
+    )
 
 
 def _png(fig: Figure) -> bytes:
@@ -57,8 +60,9 @@ def _finite(a: np.ndarray) -> np.ndarray:
     return a[np.isfinite(a)]
 
 
-def boxplot_png(job_id: int, model_path, cell_json: str, meas: Measurements, method: str,
-                report=None) -> bytes:
+def boxplot_png(
+    job_id: int, model_path, cell_json: str, meas: Measurements, method: str, report=None
+) -> bytes:
     """AP error per SMR before (nominal) and after calibration, as the paper's Figures 2-6."""
     e = _errors(model_path, cell_json, meas, method)
     fig = Figure(figsize=(8, 4.5), constrained_layout=True)
@@ -81,8 +85,9 @@ def boxplot_png(job_id: int, model_path, cell_json: str, meas: Measurements, met
     return _png(fig)
 
 
-def errors_png(job_id: int, model_path, cell_json: str, meas: Measurements, method: str,
-               report=None) -> bytes:
+def errors_png(
+    job_id: int, model_path, cell_json: str, meas: Measurements, method: str, report=None
+) -> bytes:
     """AP error per pose (worst SMR of the pose) before and after calibration."""
     e = _errors(model_path, cell_json, meas, method)
     fig = Figure(figsize=(8, 4.5), constrained_layout=True)
@@ -114,18 +119,25 @@ def table3(cell_json: str, meas: Measurements, report=None) -> dict:
     rows = compare(cell, meas, paper_methods(meas.target_names))
     accs = [acc for _, acc in rows.values()]
     table = [(f"F_{n} / mm^2", [a["F"][n] for a in accs]) for n in meas.target_names]
-    table += [("max F_i / mm^2", [max(a["F"].values()) for a in accs]),
-              ("RMSE(phi) / mm", [a["rmse_phi"] for a in accs]),
-              ("AP mean / mm", [a["ap"]["mean"] for a in accs]),
-              ("AP std / mm", [a["ap"]["std"] for a in accs]),
-              ("AP max / mm", [a["ap"]["max"] for a in accs])]
+    table += [
+        ("max F_i / mm^2", [max(a["F"].values()) for a in accs]),
+        ("RMSE(phi) / mm", [a["rmse_phi"] for a in accs]),
+        ("AP mean / mm", [a["ap"]["mean"] for a in accs]),
+        ("AP std / mm", [a["ap"]["std"] for a in accs]),
+        ("AP max / mm", [a["ap"]["max"] for a in accs]),
+    ]
     if "ao_log" in accs[0]:
-        table += [("AO' mean / deg", [a["ao_log"]["mean"] for a in accs]),
-                  ("AO' max / deg", [a["ao_log"]["max"] for a in accs])]
+        table += [
+            ("AO' mean / deg", [a["ao_log"]["mean"] for a in accs]),
+            ("AO' max / deg", [a["ao_log"]["max"] for a in accs]),
+        ]
     table.append(("time / ms", [cal.seconds * 1000 for cal, _ in rows.values()]))
-    return {"poses": meas.n_poses, "targets": list(meas.target_names), "columns": list(rows),
-            "rows": [{"label": label, "values": [_num(v) for v in values]}
-                     for label, values in table]}
+    return {
+        "poses": meas.n_poses,
+        "targets": list(meas.target_names),
+        "columns": list(rows),
+        "rows": [{"label": label, "values": [_num(v) for v in values]} for label, values in table],
+    }
 
 
 def evaluation(model_path, meas: Measurements, report=None) -> dict:

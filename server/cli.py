@@ -10,32 +10,40 @@ from pathlib import Path
 import numpy as np
 
 
-
 def cmd_simulate(args) -> None:
+    from robocal.drivers.cell import TrackerSpec, VirtualCell
+    from robocal.drivers.effects import make_effects
+
     from . import workflow
+    from .formats.campaign_csv import write_campaign
     from .formats.model_json import write_json_atomic
     from .tables import console
-    from drivers.cell import TrackerSpec, VirtualCell
-    from drivers.effects import make_effects
-
-    from .formats.campaign_csv import write_campaign
 
     cell = workflow.load_cell(args.cell)
-    vc = VirtualCell.random(cell.robot, cell.targets, seed=args.seed,
-                            tracker=TrackerSpec(**cell.tracker))
+    vc = VirtualCell.random(
+        cell.robot, cell.targets, seed=args.seed, tracker=TrackerSpec(**cell.tracker)
+    )
     vc.effects.extend(make_effects(args.effect, vc, args.seed))  # bad specs fail before any output
-    meas = vc.campaign(args.poses, seed=args.seed, beam_break_rate=args.beam_break_rate,
-                       arm_scatter_deg=args.arm_scatter_deg, targets_per_pose=args.targets_per_pose,
-                       outlier_rate=args.outlier_rate, noise_scale=args.noise_scale)
+    meas = vc.campaign(
+        args.poses,
+        seed=args.seed,
+        beam_break_rate=args.beam_break_rate,
+        arm_scatter_deg=args.arm_scatter_deg,
+        targets_per_pose=args.targets_per_pose,
+        outlier_rate=args.outlier_rate,
+        noise_scale=args.noise_scale,
+    )
     write_campaign(args.out, meas)
     truth = vc.truth()
     truth["noise_floor_mm"] = vc.noise_floor_mm(meas.q, args.noise_scale)
     if args.truth_out:
         write_json_atomic(args.truth_out, truth)
-    console.print(f"wrote {meas.n_poses} poses x {len(meas.target_names)} targets "
-                  f"({meas.n_readings} readings) to {args.out}; "
-                  f"tracker noise floor {truth['noise_floor_mm']:.4f} mm RMS; effects: "
-                  + (", ".join(e.label() for e in vc.effects) or "none"))
+    console.print(
+        f"wrote {meas.n_poses} poses x {len(meas.target_names)} targets "
+        f"({meas.n_readings} readings) to {args.out}; "
+        f"tracker noise floor {truth['noise_floor_mm']:.4f} mm RMS; effects: "
+        + (", ".join(e.label() for e in vc.effects) or "none")
+    )
 
 
 def _nonnegative(text: str) -> float:
@@ -60,7 +68,7 @@ def _positive_int(text: str) -> int:
 
 
 def cmd_calibrate(args) -> None:
-    from solver.calibrate import parse_method
+    from robocal.solver.calibrate import parse_method
 
     from . import tables, workflow
     from .formats.model_json import write_model
@@ -74,31 +82,40 @@ def cmd_calibrate(args) -> None:
     if args.recording:
         from .recording import record_calibration
 
-        record_calibration(args.recording, cell=cell, meas=meas, calibration=cal,
-                           viewer_url=args.rerun_viewer)
+        record_calibration(
+            args.recording, cell=cell, meas=meas, calibration=cal, viewer_url=args.rerun_viewer
+        )
     fit = model.meta["fit"]
-    console.print(f"{args.method} on {meas.n_poses} poses, {meas.n_readings} readings "
-                  f"in {cal.seconds * 1000:.0f} ms")
+    console.print(
+        f"{args.method} on {meas.n_poses} poses, {meas.n_readings} readings "
+        f"in {cal.seconds * 1000:.0f} ms"
+    )
     _print_screening(cal)
     console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
     console.print(tables.identified_geometry(cal.robot, cell.robot, model.meta["uncertainty"]))
     console.print(tables.frame_errors(model.meta["uncertainty"], meas.target_names))
-    console.print(f"condition number {cal.condition:.3g}; " + ", ".join(
-        f"F_{k} {v:.4f} mm^2" for k, v in fit["F_mm2"].items())
-        + f"; RMSE(phi) {fit['rmse_phi_mm']:.4f} mm; RMS {fit['rmse_mm']:.4f} mm")
+    console.print(
+        f"condition number {cal.condition:.3g}; "
+        + ", ".join(f"F_{k} {v:.4f} mm^2" for k, v in fit["F_mm2"].items())
+        + f"; RMSE(phi) {fit['rmse_phi_mm']:.4f} mm; RMS {fit['rmse_mm']:.4f} mm"
+    )
     if "history" in cal.details:
         d = cal.details
-        console.print(f"SQP ({d['qp']} QP): {cal.iterations} iterations, "
-                      f"{d['qp_iterations']} QP iterations, max F_i "
-                      f"{d['history'][0]:.5f} -> {d['history'][-1]:.5f} mm^2 ({d['message']})")
-    console.print(f"model written to {args.out}"
-                  + (f", rerun recording to {args.recording}" if args.recording else ""))
+        console.print(
+            f"SQP ({d['qp']} QP): {cal.iterations} iterations, "
+            f"{d['qp_iterations']} QP iterations, max F_i "
+            f"{d['history'][0]:.5f} -> {d['history'][-1]:.5f} mm^2 ({d['message']})"
+        )
+    console.print(
+        f"model written to {args.out}"
+        + (f", rerun recording to {args.recording}" if args.recording else "")
+    )
 
 
 def cmd_predict(args) -> None:
     from . import workflow
-    from .tables import console
     from .formats.campaign_csv import read_poses, write_predictions
+    from .tables import console
 
     model = workflow.read_model(args.model)
     pose_ids, q, time_s, temp_c = read_poses(args.poses, model.robot)
@@ -121,12 +138,19 @@ def cmd_evaluate(args) -> None:
     meas = workflow.load_campaign(args.meas, Cell(model.robot, model.targets, None, {}, None))
     res = workflow.evaluate(model, meas)
     if "nominal" in res:
-        console.print(tables.accuracy(res["nominal"], "Nominal model (base and SMRs fitted)",
-                                      meas.target_names))
+        console.print(
+            tables.accuracy(
+                res["nominal"], "Nominal model (base and SMRs fitted)", meas.target_names
+            )
+        )
     console.print(tables.accuracy(res["model"], f"Model {args.model}", meas.target_names))
     if "improvement_pct" in res:
-        console.print("improvement over nominal: " + ", ".join(
-            f"{k} {v:.1f}%" for k, v in res["improvement_pct"].items() if np.isfinite(v)))
+        console.print(
+            "improvement over nominal: "
+            + ", ".join(
+                f"{k} {v:.1f}%" for k, v in res["improvement_pct"].items() if np.isfinite(v)
+            )
+        )
     if args.json:
         write_json_atomic(args.json, res)
 
@@ -143,16 +167,27 @@ def cmd_compare(args) -> None:
     for label, (cal, _) in rows.items():
         if "history" in cal.details:
             d = cal.details
-            console.print(f"{label}: {cal.iterations} SQP iterations, {d['qp_iterations']} QP "
-                          f"iterations, {d['sqp_seconds'] * 1000:.1f} ms, final max F_i "
-                          f"{cal.F.max():.6f} mm^2")
+            console.print(
+                f"{label}: {cal.iterations} SQP iterations, {d['qp_iterations']} QP "
+                f"iterations, {d['sqp_seconds'] * 1000:.1f} ms, final max F_i "
+                f"{cal.F.max():.6f} mm^2"
+            )
     worst = {k: max(acc["F"].values()) for k, (_, acc) in rows.items()}
     best = [k for k, v in worst.items() if v <= min(worst.values()) * (1 + 1e-9)]
     console.print(f"smallest max F_i: {', '.join(best)}")
     if args.json:
-        write_json_atomic(args.json, {k: {"F": acc["F"], "rmse_phi": acc["rmse_phi"],
-                                          "accuracy": acc, "seconds": cal.seconds}
-                                      for k, (cal, acc) in rows.items()})
+        write_json_atomic(
+            args.json,
+            {
+                k: {
+                    "F": acc["F"],
+                    "rmse_phi": acc["rmse_phi"],
+                    "accuracy": acc,
+                    "seconds": cal.seconds,
+                }
+                for k, (cal, acc) in rows.items()
+            },
+        )
 
 
 def cmd_diagnose(args) -> None:
@@ -160,11 +195,15 @@ def cmd_diagnose(args) -> None:
     from .tables import console
 
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
-    report, figures, _ = _diagnose_to_files(cell, meas, args.meas, args.out, args.model_out,
-                                            screen=not args.keep_outliers)
+    report, figures, _ = _diagnose_to_files(
+        cell, meas, args.meas, args.out, args.model_out, screen=not args.keep_outliers
+    )
     _print_diagnosis(report)
-    console.print(f"report written to {args.out}" + (f", model to {args.model_out}" if args.model_out else "")
-                  + "".join(f", figure {p}" for p in figures))
+    console.print(
+        f"report written to {args.out}"
+        + (f", model to {args.model_out}" if args.model_out else "")
+        + "".join(f", figure {p}" for p in figures)
+    )
 
 
 def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=True):
@@ -173,11 +212,16 @@ def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=Tr
     from .tables import console
 
     with console.status("diagnosing: cross-validating candidate effects...") as status:
-        d, model = workflow.diagnose(cell, meas, log=lambda msg: status.update(msg.strip()),
-                                     screen=screen)
+        d, model = workflow.diagnose(
+            cell, meas, log=lambda msg: status.update(msg.strip()), screen=screen
+        )
     report, figures = workflow.write_diagnosis(
-        d, model, Path(report_path), {"file": Path(meas_path).name, "poses": meas.n_poses,
-                                      "readings": meas.n_readings}, model_path)
+        d,
+        model,
+        Path(report_path),
+        {"file": Path(meas_path).name, "poses": meas.n_poses, "readings": meas.n_readings},
+        model_path,
+    )
     return report, figures, d
 
 
@@ -186,17 +230,24 @@ def _print_outliers(outliers, skipped=None) -> None:
     from .tables import console
 
     if outliers is None or skipped:
-        console.print("gross-outlier screening " + (f"skipped ({skipped})" if skipped else "off")
-                      + ": every reading used")
+        console.print(
+            "gross-outlier screening "
+            + (f"skipped ({skipped})" if skipped else "off")
+            + ": every reading used"
+        )
         return
     if not outliers:
         console.print("no gross outlier among the readings")
         return
-    console.print(f"{len(outliers)} reading{'s' if len(outliers) > 1 else ''} excluded as gross "
-                  "outliers (no plausible model fits them):")
+    console.print(
+        f"{len(outliers)} reading{'s' if len(outliers) > 1 else ''} excluded as gross "
+        "outliers (no plausible model fits them):"
+    )
     for o in outliers:
-        console.print(f"  pose {o['pose']} target {o['target']}: residual {o['residual_mm']:.3f} mm "
-                      f"({o['evidence']})")
+        console.print(
+            f"  pose {o['pose']} target {o['target']}: residual {o['residual_mm']:.3f} mm "
+            f"({o['evidence']})"
+        )
 
 
 def _print_screening(cal) -> None:
@@ -210,24 +261,39 @@ def _print_diagnosis(report) -> None:
 
     _print_outliers(report.get("outliers"))
     floor = report["noise_floor_mm"]
-    console.print(f"baseline (geometric) held-out RMS {report['baseline']['holdout_rmse_mm']:.4f} mm, "
-                  f"max {report['baseline']['holdout_max_mm']:.4f} mm; noise floor "
-                  + (f"{floor:.4f} mm" if floor else "unknown (one SMR)"))
+    console.print(
+        f"baseline (geometric) held-out RMS {report['baseline']['holdout_rmse_mm']:.4f} mm, "
+        f"max {report['baseline']['holdout_max_mm']:.4f} mm; noise floor "
+        + (f"{floor:.4f} mm" if floor else "unknown (one SMR)")
+    )
     if not report["effects"]:
         console.print("no effect beyond geometry pays off on held-out poses")
     for e in report["effects"]:
-        console.print(f"[bold]{e['name']}[/bold]" + (f" joint {e['joint']}" if "joint" in e else "")
-                      + (f" harmonic {e['harmonic']}" if "harmonic" in e else "")
-                      + (f" at {e['at_s']:.0f} s" if "at_s" in e else "") + f": {e['evidence']}")
+        console.print(
+            f"[bold]{e['name']}[/bold]"
+            + (f" joint {e['joint']}" if "joint" in e else "")
+            + (f" harmonic {e['harmonic']}" if "harmonic" in e else "")
+            + (f" at {e['at_s']:.0f} s" if "at_s" in e else "")
+            + f": {e['evidence']}"
+        )
         console.print("  " + tables.effect_parameters(e["parameters"], e.get("uncertainty")))
         lo, hi = e["holdout_gain_interval_mm"]
-        console.print(f"  held-out gain {e['holdout_rmse_before_mm'] - e['holdout_rmse_after_mm']:.4f} mm "
-                      f"(95% interval over poses {lo:.4f} to {hi:.4f} mm)")
+        console.print(
+            f"  held-out gain {e['holdout_rmse_before_mm'] - e['holdout_rmse_after_mm']:.4f} mm "
+            f"(95% interval over poses {lo:.4f} to {hi:.4f} mm)"
+        )
         if e["alternatives"]:
-            console.print("  [yellow]the data cannot tell it from:[/yellow] " + ", ".join(
-                f"{a['label']} (held-out RMS {a['holdout_rmse_mm']:.4f} mm)" for a in e["alternatives"]))
-    console.print(f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
-                  f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)")
+            console.print(
+                "  [yellow]the data cannot tell it from:[/yellow] "
+                + ", ".join(
+                    f"{a['label']} (held-out RMS {a['holdout_rmse_mm']:.4f} mm)"
+                    for a in e["alternatives"]
+                )
+            )
+    console.print(
+        f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
+        f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)"
+    )
     _print_unexplained(report.get("unexplained"))
 
 
@@ -245,49 +311,84 @@ def _print_unexplained(block) -> None:
 
 
 def cmd_acquire(args) -> None:
-    from . import workflow
-    from .tables import console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from . import workflow
     from .acquire import AcquireOptions, acquire
+    from .tables import console
 
     cell = workflow.load_cell(args.cell)
-    opts = AcquireOptions(poses=args.poses, seed=args.seed, name=args.name, settle=args.settle,
-                          pause_s=args.pause, order=args.order, choose_from=args.choose_from,
-                          beam_break_rate=args.beam_break_rate)
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), console=console, transient=True) as progress:
+    opts = AcquireOptions(
+        poses=args.poses,
+        seed=args.seed,
+        name=args.name,
+        settle=args.settle,
+        pause_s=args.pause,
+        order=args.order,
+        choose_from=args.choose_from,
+        beam_break_rate=args.beam_break_rate,
+    )
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+    ) as progress:
         summary = acquire(args.db, cell, opts, progress=progress, reset=args.reset)
     if summary["resumed_at"] is not None:
-        console.print(f"resumed campaign {summary['campaign']} ({summary['name']}) at pose "
-                      f"{summary['resumed_at'] + 1}")
+        console.print(
+            f"resumed campaign {summary['campaign']} ({summary['name']}) at pose "
+            f"{summary['resumed_at'] + 1}"
+        )
     locked = summary["locked_without_search_after_10"]
-    console.print(f"campaign {summary['campaign']} {summary['state']}: {summary['measured_poses']} poses "
-                  f"measured now, {summary['readings']} readings, {summary['missing']} missing, "
-                  f"{summary['beam_breaks']} beam breaks"
-                  + (f"; {'simulated ' if summary.get('simulated', True) else ''}campaign time "
-                     f"{summary['campaign_s'] / 60:.1f} min" if summary["campaign_s"] is not None else "")
-                  + (f"; locked without search after pose 10: {100 * locked:.1f}%" if locked is not None else ""))
-    console.print(f"stored in {args.db}; calibrate with: robocal calibrate {args.db} "
-                  f"--campaign {summary['campaign']}")
+    console.print(
+        f"campaign {summary['campaign']} {summary['state']}: {summary['measured_poses']} poses "
+        f"measured now, {summary['readings']} readings, {summary['missing']} missing, "
+        f"{summary['beam_breaks']} beam breaks"
+        + (
+            f"; {'simulated ' if summary.get('simulated', True) else ''}campaign time "
+            f"{summary['campaign_s'] / 60:.1f} min"
+            if summary["campaign_s"] is not None
+            else ""
+        )
+        + (
+            f"; locked without search after pose 10: {100 * locked:.1f}%"
+            if locked is not None
+            else ""
+        )
+    )
+    console.print(
+        f"stored in {args.db}; calibrate with: robocal calibrate {args.db} "
+        f"--campaign {summary['campaign']}"
+    )
 
 
 def cmd_serve(args) -> None:
     from .app import serve
     from .settings import Settings
 
-    overrides = {k: v for k, v in (("database", args.db), ("host", args.host), ("port", args.port),
-                                   ("data_dir", args.data_dir)) if v is not None}
+    overrides = {
+        k: v
+        for k, v in (
+            ("database", args.db),
+            ("host", args.host),
+            ("port", args.port),
+            ("data_dir", args.data_dir),
+        )
+        if v is not None
+    }
     serve(Settings(**overrides))
 
 
 def cmd_demo(args) -> None:
-    from . import tables, workflow
-    from .formats.model_json import write_model
-    from .tables import console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+    from . import tables, workflow
     from .acquire import AcquireOptions, acquire
+    from .formats.model_json import write_model
+    from .tables import console
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -295,16 +396,26 @@ def cmd_demo(args) -> None:
     for f in out.glob("robocal.db*"):  # a fresh campaign each run
         f.unlink()
     cell = workflow.load_cell(None)
-    opts = AcquireOptions(poses=args.poses + args.holdout, seed=args.seed, name="demo",
-                          effects=tuple(args.effect))
-    console.print(f"acquiring {opts.poses} poses on the simulated IRB 2600 cell (tracker and "
-                  f"controller on 127.0.0.1, virtual clock; hidden effects: "
-                  f"{', '.join(args.effect) or 'none'}) into {db}")
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  console=console, transient=True) as progress:
+    opts = AcquireOptions(
+        poses=args.poses + args.holdout, seed=args.seed, name="demo", effects=tuple(args.effect)
+    )
+    console.print(
+        f"acquiring {opts.poses} poses on the simulated IRB 2600 cell (tracker and "
+        f"controller on 127.0.0.1, virtual clock; hidden effects: "
+        f"{', '.join(args.effect) or 'none'}) into {db}"
+    )
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        console=console,
+        transient=True,
+    ) as progress:
         summary = acquire(db, cell, opts, progress=progress)
-    console.print(f"campaign done: {summary['readings']} readings, simulated campaign time "
-                  f"{summary['campaign_s'] / 60:.1f} min")
+    console.print(
+        f"campaign done: {summary['readings']} readings, simulated campaign time "
+        f"{summary['campaign_s'] / 60:.1f} min"
+    )
     cell, meas = workflow.load_data(db)
     cal_meas = meas.subset(np.arange(args.poses))
     hold = meas.subset(np.arange(args.poses, meas.n_poses))
@@ -314,30 +425,48 @@ def cmd_demo(args) -> None:
     model = workflow.model_file(cal, cell, cal_meas)
     write_model(out / "model.json", model)
     geo = workflow.evaluate(model, hold)
-    report, figures, diagnosis = _diagnose_to_files(cell, cal_meas, db, out / "report.json",
-                                                    out / "model-extended.json")
+    report, figures, diagnosis = _diagnose_to_files(
+        cell, cal_meas, db, out / "report.json", out / "model-extended.json"
+    )
     _print_diagnosis(report)
     from .recording import record_calibration
 
-    record_calibration(out / "calibration.rrd", cell=cell, meas=cal_meas, calibration=cal,
-                       nominal=rows["nominal"][0], diagnosis=diagnosis)
+    record_calibration(
+        out / "calibration.rrd",
+        cell=cell,
+        meas=cal_meas,
+        calibration=cal,
+        nominal=rows["nominal"][0],
+        diagnosis=diagnosis,
+    )
     ext = workflow.evaluate(workflow.read_model(out / "model-extended.json"), hold)
-    console.print(tables.accuracy(ext["model"], f"extended model on the {args.holdout} held-out poses",
-                                  hold.target_names))
-    console.print(f"held-out RMS: nominal {geo['nominal']['rmse']:.4f} mm, minimax "
-                  f"{geo['model']['rmse']:.4f} mm, extended {ext['model']['rmse']:.4f} mm")
-    console.print(f"files in {out}: robocal.db (the campaign), model.json (minimax), "
-                  f"model-extended.json, report.json, calibration.rrd (open with `uv run rerun "
-                  f"{out / 'calibration.rrd'}`)" + "".join(f", {p.name}" for p in figures))
+    console.print(
+        tables.accuracy(
+            ext["model"], f"extended model on the {args.holdout} held-out poses", hold.target_names
+        )
+    )
+    console.print(
+        f"held-out RMS: nominal {geo['nominal']['rmse']:.4f} mm, minimax "
+        f"{geo['model']['rmse']:.4f} mm, extended {ext['model']['rmse']:.4f} mm"
+    )
+    console.print(
+        f"files in {out}: robocal.db (the campaign), model.json (minimax), "
+        f"model-extended.json, report.json, calibration.rrd (open with `uv run rerun "
+        f"{out / 'calibration.rrd'}`)" + "".join(f", {p.name}" for p in figures)
+    )
 
 
 def cmd_bench(args) -> None:
     if args.what == "diagnose":
         from .bench_diagnose import run_diagnose_bench
 
-        result = run_diagnose_bench(quick=args.quick, effect_cases=args.cases,
-                                    clean_cases=args.clean, sizes=args.poses,
-                                    workers=args.workers)
+        result = run_diagnose_bench(
+            quick=args.quick,
+            effect_cases=args.cases,
+            clean_cases=args.clean,
+            sizes=args.poses,
+            workers=args.workers,
+        )
     elif args.what == "outliers":
         from .bench_screen import run_screen_bench
 
@@ -353,8 +482,9 @@ def cmd_bench(args) -> None:
     else:
         from .bench import run_solver_bench
 
-        result = run_solver_bench(sizes=args.sizes, reference=not args.no_reference,
-                                  reference_max=args.reference_max)
+        result = run_solver_bench(
+            sizes=args.sizes, reference=not args.no_reference, reference_max=args.reference_max
+        )
     print(json.dumps(result, indent=2))
 
 
@@ -362,17 +492,24 @@ def _data_arguments(p) -> None:
     """A campaign to read: a meas.csv or a database (with its campaign id), and the cell."""
     p.add_argument("meas", help="meas.csv, or a campaign database (.db)")
     p.add_argument("--cell")
-    p.add_argument("--campaign", type=int, help="campaign id when MEAS is a database (default: latest)")
+    p.add_argument(
+        "--campaign", type=int, help="campaign id when MEAS is a database (default: latest)"
+    )
 
 
 def _outlier_argument(p) -> None:
-    p.add_argument("--keep-outliers", action="store_true",
-                   help="use every reading: skip the screening for gross outliers (mis-locks, "
-                        "bumped SMRs) that otherwise excludes them and lists them")
+    p.add_argument(
+        "--keep-outliers",
+        action="store_true",
+        help="use every reading: skip the screening for gross outliers (mis-locks, "
+        "bumped SMRs) that otherwise excludes them and lists them",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="robocal", description="Robot calibration with a laser tracker.")
+    p = argparse.ArgumentParser(
+        prog="robocal", description="Robot calibration with a laser tracker."
+    )
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("simulate", help="a campaign from the virtual cell")
@@ -380,38 +517,69 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--poses", type=int, default=100)
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--beam-break-rate", type=float, default=0.0)
-    s.add_argument("--arm-scatter-deg", type=_nonnegative, default=0.0,
-                   help="the arm's repeatability: a joint error drawn afresh per pose (std, deg "
-                        "per joint), shared by every SMR of the pose")
-    s.add_argument("--targets-per-pose", type=_positive_int, default=None,
-                   help="measure only this many random SMRs per pose (the others absent)")
-    s.add_argument("--outlier-rate", type=_fraction, default=0.0,
-                   help="fraction of readings displaced 0.3-2 mm in a random direction (a "
-                        "mis-lock or a bumped SMR), listed in the truth file")
-    s.add_argument("--noise-scale", type=_nonnegative, default=1.0,
-                   help="tracker noise as a multiple of its spec (default 1)")
+    s.add_argument(
+        "--arm-scatter-deg",
+        type=_nonnegative,
+        default=0.0,
+        help="the arm's repeatability: a joint error drawn afresh per pose (std, deg "
+        "per joint), shared by every SMR of the pose",
+    )
+    s.add_argument(
+        "--targets-per-pose",
+        type=_positive_int,
+        default=None,
+        help="measure only this many random SMRs per pose (the others absent)",
+    )
+    s.add_argument(
+        "--outlier-rate",
+        type=_fraction,
+        default=0.0,
+        help="fraction of readings displaced 0.3-2 mm in a random direction (a "
+        "mis-lock or a bumped SMR), listed in the truth file",
+    )
+    s.add_argument(
+        "--noise-scale",
+        type=_nonnegative,
+        default=1.0,
+        help="tracker noise as a multiple of its spec (default 1)",
+    )
     s.add_argument("--out", required=True, help="meas.csv to write")
     s.add_argument("--truth-out", help="also write the simulated truth as JSON")
-    from drivers.effects import spec_help
-    from solver.vocabulary import KINDS
+    from robocal.drivers.effects import spec_help
+    from robocal.solver.vocabulary import KINDS
 
-    s.add_argument("--effect", action="append", default=[], metavar="SPEC", help=(
-        "add a physical effect, NAME[:JOINT[:HARMONIC]][=MAGNITUDE], joints from 1; repeatable. "
-        + spec_help(KINDS)))
+    s.add_argument(
+        "--effect",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help=(
+            "add a physical effect, NAME[:JOINT[:HARMONIC]][=MAGNITUDE], joints from 1; repeatable. "
+            + spec_help(KINDS)
+        ),
+    )
     s.set_defaults(func=cmd_simulate)
 
     c = sub.add_parser("calibrate", help="identify a model from a campaign")
     _data_arguments(c)
-    c.add_argument("--method", default="minimax",
-                   help="minimax (default), ls-sum, ls-single:A, ls-pose")
-    c.add_argument("--qp", choices=("primal-dual", "exact"), default="primal-dual",
-                   help="minimax's QP subsolver: the paper's primal-dual method or Clarabel")
+    c.add_argument(
+        "--method", default="minimax", help="minimax (default), ls-sum, ls-single:A, ls-pose"
+    )
+    c.add_argument(
+        "--qp",
+        choices=("primal-dual", "exact"),
+        default="primal-dual",
+        help="minimax's QP subsolver: the paper's primal-dual method or Clarabel",
+    )
     c.add_argument("--out", default="model.json")
     _outlier_argument(c)
     c.add_argument("--recording", help="also write a rerun recording (.rrd) of the calibration")
-    c.add_argument("--rerun-viewer", metavar="URL",
-                   help="also stream the recording live to a running viewer, e.g. "
-                        "rerun+http://127.0.0.1:9876/proxy")
+    c.add_argument(
+        "--rerun-viewer",
+        metavar="URL",
+        help="also stream the recording live to a running viewer, e.g. "
+        "rerun+http://127.0.0.1:9876/proxy",
+    )
     c.set_defaults(func=cmd_calibrate)
 
     pr = sub.add_parser("predict", help="SMR positions a model predicts for poses")
@@ -439,29 +607,48 @@ def build_parser() -> argparse.ArgumentParser:
     _outlier_argument(dg)
     dg.set_defaults(func=cmd_diagnose)
 
-    aq = sub.add_parser("acquire", help="run a campaign on the devices (simulated on loopback "
-                                        "sockets by default), storing every reading as it arrives")
+    aq = sub.add_parser(
+        "acquire",
+        help="run a campaign on the devices (simulated on loopback "
+        "sockets by default), storing every reading as it arrives",
+    )
     aq.add_argument("--db", default="robocal.db", help="SQLite database (created if absent)")
     aq.add_argument("--cell")
     aq.add_argument("--poses", type=int, default=100)
     aq.add_argument("--seed", type=int, default=0)
     aq.add_argument("--name", help="campaign name; an unfinished campaign of that name is resumed")
-    aq.add_argument("--settle", choices=("fixed", "adaptive"), default="fixed",
-                    help="fixed pause (the paper's 10 s) or end it once readings agree")
+    aq.add_argument(
+        "--settle",
+        choices=("fixed", "adaptive"),
+        default="fixed",
+        help="fixed pause (the paper's 10 s) or end it once readings agree",
+    )
     aq.add_argument("--pause", type=float, default=10.0, help="pause at each pose, s")
     aq.add_argument("--order", action="store_true", help="order poses to shorten the motion")
-    aq.add_argument("--choose-from", type=int, default=0, metavar="N",
-                    help="choose the poses out of N candidates by D-optimality")
+    aq.add_argument(
+        "--choose-from",
+        type=int,
+        default=0,
+        metavar="N",
+        help="choose the poses out of N candidates by D-optimality",
+    )
     aq.add_argument("--beam-break-rate", type=float, default=0.0)
-    aq.add_argument("--reset", action="store_true",
-                    help="resume an e-stopped campaign (after the cell was checked)")
+    aq.add_argument(
+        "--reset",
+        action="store_true",
+        help="resume an e-stopped campaign (after the cell was checked)",
+    )
     aq.set_defaults(func=cmd_acquire)
 
-    sv = sub.add_parser("serve", help="the workstation service (REST API), on 127.0.0.1 unless told")
+    sv = sub.add_parser(
+        "serve", help="the workstation service (REST API), on 127.0.0.1 unless told"
+    )
     sv.add_argument("--db", help="database file or URL (default robocal.db, or ROBOCAL_DATABASE)")
     sv.add_argument("--host", help="address to listen on (default 127.0.0.1)")
     sv.add_argument("--port", type=int, help="port (default 8000)")
-    sv.add_argument("--data-dir", help="models, recordings and the token hash (default robocal-data)")
+    sv.add_argument(
+        "--data-dir", help="models, recordings and the token hash (default robocal-data)"
+    )
     sv.set_defaults(func=cmd_serve)
 
     d = sub.add_parser("demo", help="simulate, calibrate with every method, evaluate held-out")
@@ -469,25 +656,42 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--poses", type=int, default=100)
     d.add_argument("--holdout", type=int, default=50)
     d.add_argument("--seed", type=int, default=1)
-    d.add_argument("--effect", action="append", metavar="SPEC",
-                   help="hidden effects of the simulated arm (default: joint_compliance:2); "
-                        "see `simulate --help`")
+    d.add_argument(
+        "--effect",
+        action="append",
+        metavar="SPEC",
+        help="hidden effects of the simulated arm (default: joint_compliance:2); "
+        "see `simulate --help`",
+    )
     d.set_defaults(func=cmd_demo)
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
     b.add_argument("what", choices=("solver", "diagnose", "acquire", "service", "outliers"))
-    b.add_argument("--poses", type=int, nargs="+", default=[100, 1000],
-                   help="diagnose: sizes of the campaigns timed one at a time")
-    b.add_argument("--quick", action="store_true",
-                   help="diagnose: a short run (10 effect cases, 10 clean campaigns)")
+    b.add_argument(
+        "--poses",
+        type=int,
+        nargs="+",
+        default=[100, 1000],
+        help="diagnose: sizes of the campaigns timed one at a time",
+    )
+    b.add_argument(
+        "--quick",
+        action="store_true",
+        help="diagnose: a short run (10 effect cases, 10 clean campaigns)",
+    )
     b.add_argument("--cases", type=int, help="diagnose: effect cases of the suite (default 60)")
     b.add_argument("--clean", type=int, help="diagnose: clean campaigns (default 200)")
     b.add_argument("--workers", type=int, default=2, help="diagnose: processes in the pool")
     b.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000])
-    b.add_argument("--no-reference", action="store_true",
-                   help="skip the finite-difference scipy reference")
-    b.add_argument("--reference-max", type=int, default=10000,
-                   help="largest pose count for which to run the reference")
+    b.add_argument(
+        "--no-reference", action="store_true", help="skip the finite-difference scipy reference"
+    )
+    b.add_argument(
+        "--reference-max",
+        type=int,
+        default=10000,
+        help="largest pose count for which to run the reference",
+    )
     b.set_defaults(func=cmd_bench)
     return p
 
@@ -503,7 +707,7 @@ def main(argv=None) -> int:
         return 130
     except Exception as e:  # noqa: BLE001 - the expected kinds get one line; others propagate
         # imported here, not at the top: `robocal --help` must not wait for scipy and the store
-        from solver.identifiability import NotIdentifiable
+        from robocal.solver.identifiability import NotIdentifiable
 
         from .acquire import AcquisitionFailed, Interrupted
         from .formats.errors import InputError

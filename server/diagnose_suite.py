@@ -16,11 +16,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from drivers.cell import TrackerSpec, VirtualCell
-from drivers.effects import EFFECTS, make_effects
-from server.formats.cell_json import Cell, default_cell
-from solver.robot import KUKA_LIKE, Robot, robot_from_degrees
+from robocal.drivers.cell import TrackerSpec, VirtualCell
+from robocal.drivers.effects import EFFECTS, make_effects
+from robocal.server.formats.cell_json import Cell, default_cell
+from robocal.solver.robot import KUKA_LIKE, Robot, robot_from_degrees
 
 SUITE_STREAM = 0x5017E
 SIZES = (30, 40, 60, 100)
@@ -69,8 +68,12 @@ class Case:
 
     def cell(self) -> VirtualCell:
         """The virtual cell, with the hidden effects, exactly as `robocal simulate` builds it."""
-        vc = VirtualCell.random(self.robot, self.targets, seed=self.cell_seed,
-                                tracker=TrackerSpec(**Cell(self.robot, self.targets).tracker))
+        vc = VirtualCell.random(
+            self.robot,
+            self.targets,
+            seed=self.cell_seed,
+            tracker=TrackerSpec(**Cell(self.robot, self.targets).tracker),
+        )
         vc.effects.extend(make_effects(self.specs, vc, self.cell_seed))
         return vc
 
@@ -85,22 +88,40 @@ class Case:
         return args
 
     def describe(self) -> dict:
-        return {"seed": self.seed, "kind": self.kind, "robot": self.robot.name,
-                "targets": len(self.targets), "poses": self.n_poses, "cell_seed": self.cell_seed,
-                "options": self.options, "effects": list(self.specs),
-                "multiples": [round(m, 2) for m in self.multiples], "skip": self.skip}
+        return {
+            "seed": self.seed,
+            "kind": self.kind,
+            "robot": self.robot.name,
+            "targets": len(self.targets),
+            "poses": self.n_poses,
+            "cell_seed": self.cell_seed,
+            "options": self.options,
+            "effects": list(self.specs),
+            "multiples": [round(m, 2) for m in self.multiples],
+            "skip": self.skip,
+        }
 
 
 def random_arm(rng, name: str) -> Robot:
     """A plausible 6R industrial arm in standard DH: vertical base axis, parallel 2 and 3, wrist."""
-    return robot_from_degrees(name, "dh", [
-        (rng.uniform(0, 350), rng.uniform(350, 800), 0.0, -90.0, (-180.0, 180.0)),
-        (rng.uniform(500, 1100), 0.0, -90.0, 0.0, (-rng.uniform(60, 95), rng.uniform(130, 155))),
-        (rng.uniform(0, 200), 0.0, 0.0, -90.0, (-180.0, rng.uniform(60, 75))),
-        (0.0, rng.uniform(500, 1200), 0.0, 90.0, (-350.0, 350.0)),
-        (0.0, 0.0, 0.0, -90.0, (-rng.uniform(115, 130), rng.uniform(115, 130))),
-        (0.0, rng.uniform(80, 250), 0.0, 0.0, (-350.0, 350.0)),
-    ])
+    return robot_from_degrees(
+        name,
+        "dh",
+        [
+            (rng.uniform(0, 350), rng.uniform(350, 800), 0.0, -90.0, (-180.0, 180.0)),
+            (
+                rng.uniform(500, 1100),
+                0.0,
+                -90.0,
+                0.0,
+                (-rng.uniform(60, 95), rng.uniform(130, 155)),
+            ),
+            (rng.uniform(0, 200), 0.0, 0.0, -90.0, (-180.0, rng.uniform(60, 75))),
+            (0.0, rng.uniform(500, 1200), 0.0, 90.0, (-350.0, 350.0)),
+            (0.0, 0.0, 0.0, -90.0, (-rng.uniform(115, 130), rng.uniform(115, 130))),
+            (0.0, rng.uniform(80, 250), 0.0, 0.0, (-350.0, 350.0)),
+        ],
+    )
 
 
 def smr_ring(rng) -> dict:
@@ -108,8 +129,9 @@ def smr_ring(rng) -> dict:
     k = int(rng.integers(1, 5))
     r, z = rng.uniform(40, 120), rng.uniform(20, 60)
     angle = rng.uniform(0, 2 * np.pi) + 2 * np.pi * np.arange(k) / k + rng.uniform(-0.2, 0.2, k)
-    return {chr(ord("A") + i): np.array([r * np.cos(a), r * np.sin(a), z])
-            for i, a in enumerate(angle)}
+    return {
+        chr(ord("A") + i): np.array([r * np.cos(a), r * np.sin(a), z]) for i, a in enumerate(angle)
+    }
 
 
 def _robot_and_targets(rng, seed: int):
@@ -138,8 +160,11 @@ def _options(rng, n_poses: int, n_targets: int) -> dict:
 def _concrete(template: str, rng, n_joints: int) -> str:
     """A spec template with its joint (J any, G 2 or 3) and harmonic (H) drawn."""
     name, *fields = template.split(":")
-    draw = {"J": lambda: rng.integers(1, n_joints + 1), "G": lambda: rng.choice(COMPLIANCE_JOINTS),
-            "H": lambda: rng.integers(1, 3)}
+    draw = {
+        "J": lambda: rng.integers(1, n_joints + 1),
+        "G": lambda: rng.choice(COMPLIANCE_JOINTS),
+        "H": lambda: rng.integers(1, 3),
+    }
     return ":".join([name] + [str(int(draw[f]())) if f in draw else f for f in fields])
 
 
@@ -161,12 +186,24 @@ def draw_case(seed: int, kind: str, aim: bool = True) -> Case:
     cell_seed = int(rng.integers(0, 2**31))
     templates = [_concrete(t, rng, robot.n_joints) for t in KINDS[kind]]
     multiples = [float(np.exp(rng.uniform(*np.log(MULTIPLE)))) for _ in templates]
-    case = Case(seed, kind, robot, targets, cell_seed, n_poses, options, tuple(templates),
-                [_hidden(t) for t in templates if kind != "out_of_vocabulary"], multiples)
+    case = Case(
+        seed,
+        kind,
+        robot,
+        targets,
+        cell_seed,
+        n_poses,
+        options,
+        tuple(templates),
+        [_hidden(t) for t in templates if kind != "out_of_vocabulary"],
+        multiples,
+    )
     missing = sorted({_hidden(t)[0] for t in templates} - set(EFFECTS))
     if missing:
-        case.skip = (f"{', '.join(missing)} not in drivers.effects.EFFECTS yet (another branch "
-                     f"adds it); the case runs once merged")
+        case.skip = (
+            f"{', '.join(missing)} not in drivers.effects.EFFECTS yet (another branch "
+            f"adds it); the case runs once merged"
+        )
         return case
     if aim and templates:
         case.specs = tuple(aim_magnitudes(case, templates, multiples))
@@ -180,19 +217,29 @@ def aim_magnitudes(case: Case, templates, multiples) -> list[str]:
     share comes from a noise-free probe campaign of the same cell (geometric fit on 100 random
     poses, held out on 50), where it grows linearly with the magnitude.
     """
-    from solver.calibrate import calibrate
-    from solver.kinematics import predict
+    from robocal.solver.calibrate import calibrate
+    from robocal.solver.kinematics import predict
 
-    probe = Case(case.seed, case.kind, case.robot, case.targets, case.cell_seed, PROBE_POSES, {},
-                 tuple(templates))
+    probe = Case(
+        case.seed,
+        case.kind,
+        case.robot,
+        case.targets,
+        case.cell_seed,
+        PROBE_POSES,
+        {},
+        tuple(templates),
+    )
     vc = probe.cell()  # every effect at its default: the hidden draws are those of the final specs
     effects = list(vc.effects)
     scatter = case.options.get("arm_scatter_deg", 0.0)
     probe_seed = case.cell_seed + 1
     vc.effects = []
     meas = vc.campaign(PROBE_POSES, probe_seed, arm_scatter_deg=scatter, noise_scale=0.0)
-    floor = np.hypot(vc.noise_floor_mm(meas.q, case.options.get("noise_scale", 1.0)),
-                     vc.last_campaign.get("arm_scatter_rms_mm", 0.0))
+    floor = np.hypot(
+        vc.noise_floor_mm(meas.q, case.options.get("noise_scale", 1.0)),
+        vc.last_campaign.get("arm_scatter_rms_mm", 0.0),
+    )
     split = np.random.default_rng(probe_seed).permutation(PROBE_POSES)
     fit_on, held = np.sort(split[:PROBE_FIT]), np.sort(split[PROBE_FIT:])
     names = vc.target_names
@@ -201,8 +248,9 @@ def aim_magnitudes(case: Case, templates, multiples) -> list[str]:
     for template, effect, multiple in zip(templates, effects, multiples):
         vc.effects = [effect]
         meas = vc.campaign(PROBE_POSES, probe_seed, noise_scale=0.0)
-        fit = calibrate(case.robot, nominal, names, meas.q[fit_on], meas.xyz[fit_on],
-                        method="ls-sum")
+        fit = calibrate(
+            case.robot, nominal, names, meas.q[fit_on], meas.xyz[fit_on], method="ls-sum"
+        )
         err = predict(fit.layout, fit.x, meas.q[held]) - meas.xyz[held]
         share = float(np.sqrt(np.nanmean(np.sum(err**2, axis=-1))))
         magnitude = effect.magnitude * floor * np.sqrt(multiple**2 - 1.0) / max(share, 1e-12)
@@ -217,10 +265,10 @@ def suite(seeds, kinds=tuple(KINDS)) -> list[tuple[int, str]]:
 
 def _diagnoser(case: Case, meas, xyz):
     """A Diagnoser set up on this data as `diagnose()` sets up its own."""
-    from solver import identifiability as ident
-    from solver.diagnose import Diagnoser
-    from solver.effects import Inputs
-    from solver.identify import register
+    from robocal.solver import identifiability as ident
+    from robocal.solver.diagnose import Diagnoser
+    from robocal.solver.effects import Inputs
+    from robocal.solver.identify import register
 
     nominal = np.array([case.targets[t] for t in meas.target_names])
     prob, x0 = register(case.robot, nominal, meas.target_names, meas.q, xyz)
@@ -230,14 +278,18 @@ def _diagnoser(case: Case, meas, xyz):
 
 def true_extensions(case: Case, diag) -> list | None:
     """The hidden effects as the diagnosis's own candidates (None if any lies outside them)."""
-    from solver.diagnose import candidates
+    from robocal.solver.diagnose import candidates
 
     cands = candidates(diag.prob.layout, diag.x0, diag.inputs)
     out = []
     for name, joint, harmonic in case.hidden:
-        match = [c for c in cands if c.name == name
-                 and (joint is None or c.joint == joint - 1)
-                 and (harmonic is None or c.harmonic == harmonic)]
+        match = [
+            c
+            for c in cands
+            if c.name == name
+            and (joint is None or c.joint == joint - 1)
+            and (harmonic is None or c.harmonic == harmonic)
+        ]
         if not match:
             return None
         out.append(match[0])
@@ -260,15 +312,17 @@ def named_effects(report) -> list[tuple]:
 def is_named(hidden, named) -> bool:
     """The report names the hidden effect: same effect, joint and (periodic) harmonic."""
     name, joint, harmonic = hidden
-    return any(n == name and (joint is None or j == joint) and (harmonic is None or h == harmonic)
-               for n, j, h in named)
+    return any(
+        n == name and (joint is None or j == joint) and (harmonic is None or h == harmonic)
+        for n, j, h in named
+    )
 
 
 def run_case(case: Case) -> dict:
     """Simulate the case, diagnose it in process and score it."""
     import time
 
-    from solver.diagnose import diagnose
+    from robocal.solver.diagnose import diagnose
 
     if case.skip:
         return {"case": case.describe(), "skipped": case.skip}
@@ -282,8 +336,15 @@ def run_case(case: Case) -> dict:
     return score(case, vc, meas, truth, d.report, d, seconds)
 
 
-def score(case: Case, vc: VirtualCell, meas, truth: dict, report: dict, diagnosis=None,
-          seconds: float | None = None) -> dict:
+def score(
+    case: Case,
+    vc: VirtualCell,
+    meas,
+    truth: dict,
+    report: dict,
+    diagnosis=None,
+    seconds: float | None = None,
+) -> dict:
     """Detection, false alarm, held-out/floor ratio and (out of vocabulary) payoff of one report.
 
     The achievable floor is the held-out RMS of the TRUE model structure under the same
@@ -299,17 +360,24 @@ def score(case: Case, vc: VirtualCell, meas, truth: dict, report: dict, diagnosi
         floor = diag.cross_validate(exts).rmse if exts else geometric
     named = named_effects(report)
     final = report["final"]["holdout_rmse_mm"]
-    out = {"case": case.describe(), "named": [list(n) for n in named],
-           "hidden": [list(h) for h in case.hidden],
-           "detected": [is_named(h, named) for h in case.hidden],
-           "extra": [list(n) for n in named if not any(is_named(h, [n]) for h in case.hidden)],
-           "false_alarm": case.kind == "clean" and bool(named),
-           "outliers": len(outliers), "noise_floor_mm": truth["noise_floor_mm"],
-           "arm_scatter_rms_mm": truth.get("arm_scatter_rms_mm"),
-           "baseline_holdout_rmse_mm": report["baseline"]["holdout_rmse_mm"],
-           "final_holdout_rmse_mm": final, "floor_mm": floor, "geometric_floor_mm": geometric,
-           "ratio": None if floor is None else final / floor, "ratio_geometric": final / geometric,
-           "seconds": seconds}
+    out = {
+        "case": case.describe(),
+        "named": [list(n) for n in named],
+        "hidden": [list(h) for h in case.hidden],
+        "detected": [is_named(h, named) for h in case.hidden],
+        "extra": [list(n) for n in named if not any(is_named(h, [n]) for h in case.hidden)],
+        "false_alarm": case.kind == "clean" and bool(named),
+        "outliers": len(outliers),
+        "noise_floor_mm": truth["noise_floor_mm"],
+        "arm_scatter_rms_mm": truth.get("arm_scatter_rms_mm"),
+        "baseline_holdout_rmse_mm": report["baseline"]["holdout_rmse_mm"],
+        "final_holdout_rmse_mm": final,
+        "floor_mm": floor,
+        "geometric_floor_mm": geometric,
+        "ratio": None if floor is None else final / floor,
+        "ratio_geometric": final / geometric,
+        "seconds": seconds,
+    }
     if case.out_of_vocabulary and named and diagnosis is not None:
         out["payoff"] = payoff(case, vc, diag, diagnosis)
     return out
@@ -320,8 +388,8 @@ def payoff(case: Case, vc: VirtualCell, diag, diagnosis) -> dict:
 
     Both are fitted on the whole diagnosed campaign (geometry without the simulated outliers).
     """
-    from solver.effects import Inputs
-    from solver.extended import predict_extended
+    from robocal.solver.effects import Inputs
+    from robocal.solver.extended import predict_extended
 
     opts = {k: v for k, v in case.options.items() if k in ("noise_scale", "arm_scatter_deg")}
     test = vc.campaign(100, case.cell_seed + 2, **opts)
@@ -360,29 +428,45 @@ def summarize(results: list[dict]) -> dict:
     outlier_ratios = [r["ratio"] for r in ran if r["ratio"] is not None and r["outliers"]]
     oov = [r for r in ran if r["case"]["kind"] == "out_of_vocabulary"]
     unpaid = [r for r in oov if r["named"] and not r.get("payoff", {}).get("pays_off", False)]
+
     def stats(v):
-        return {"count": len(v), "median": float(np.median(v)) if v else None,
-                "worst": float(np.max(v)) if v else None}
+        return {
+            "count": len(v),
+            "median": float(np.median(v)) if v else None,
+            "worst": float(np.max(v)) if v else None,
+        }
 
     times = [r["seconds"] for r in ran if r["seconds"] is not None]
-    by_size = {str(n): stats([r["seconds"] for r in ran if r["case"]["poses"] == n])
-               for n in sorted({r["case"]["poses"] for r in ran})}
+    by_size = {
+        str(n): stats([r["seconds"] for r in ran if r["case"]["poses"] == n])
+        for n in sorted({r["case"]["poses"] for r in ran})
+    }
 
     return {
-        "cases": len(results), "ran": len(ran),
+        "cases": len(results),
+        "ran": len(ran),
         "skipped": sorted({r["skipped"] for r in results if "skipped" in r}),
-        "detection": {"hidden": hidden, "named": sum(sum(r["detected"]) for r in ran),
-                      "rate": sum(sum(r["detected"]) for r in ran) / hidden if hidden else None,
-                      "per_effect": per_type, "per_size": per_size,
-                      "per_effect_and_size": dict(sorted(per_both.items()))},
-        "false_alarms": {"clean_campaigns": len(clean), "with_any_effect": alarms,
-                         "rate": alarms / len(clean) if clean else None},
+        "detection": {
+            "hidden": hidden,
+            "named": sum(sum(r["detected"]) for r in ran),
+            "rate": sum(sum(r["detected"]) for r in ran) / hidden if hidden else None,
+            "per_effect": per_type,
+            "per_size": per_size,
+            "per_effect_and_size": dict(sorted(per_both.items())),
+        },
+        "false_alarms": {
+            "clean_campaigns": len(clean),
+            "with_any_effect": alarms,
+            "rate": alarms / len(clean) if clean else None,
+        },
         "extra_effects_named": sum(len(r["extra"]) for r in ran if r["case"]["kind"] != "clean"),
         "holdout_over_floor": stats(ratios),
         "holdout_over_floor_outlier_cases": stats(outlier_ratios),
-        "out_of_vocabulary": {"cases": len(oov),
-                              "named_something": sum(bool(r["named"]) for r in oov),
-                              "named_without_payoff": len(unpaid)},
+        "out_of_vocabulary": {
+            "cases": len(oov),
+            "named_something": sum(bool(r["named"]) for r in oov),
+            "named_without_payoff": len(unpaid),
+        },
         "seconds_per_case": stats(times),
         "seconds_per_case_by_size": by_size,
     }

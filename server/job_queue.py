@@ -13,7 +13,7 @@ from contextlib import contextmanager
 from multiprocessing.connection import wait
 from pathlib import Path
 
-from solver.calibrate import parse_method
+from robocal.solver.calibrate import parse_method
 
 from . import store
 from .events import Events
@@ -64,8 +64,9 @@ def check_job(db: store.Database, *, kind: str, campaign_id: int, method: str) -
         raise ValueError(f"kind must be one of {', '.join(JOB_KINDS)}, not {kind!r}")
     info = store.get_campaign(db, campaign_id=campaign_id)
     if info.status != "done":
-        raise store.Conflict(f"campaign {campaign_id} is {info.status}; {kind} needs a done "
-                             "campaign")
+        raise store.Conflict(
+            f"campaign {campaign_id} is {info.status}; {kind} needs a done campaign"
+        )
     if kind == "calibration":
         targets = sorted(parse_cell(info.cell_json, f"<campaign {campaign_id} cell>").targets)
         parse_method(method, targets)
@@ -83,8 +84,11 @@ def check_duplicate(db: store.Database, *, kind: str, campaign_id: int, method: 
     for state in ("running", "queued"):
         for job in store.list_jobs(db, state=state):
             if (job.kind, job.campaign_id, job.method) == (kind, campaign_id, method):
-                raise DuplicateJob(f"campaign {campaign_id} already has {kind} job {job.id} "
-                                   f"({method}) {state}; cancel it or wait for it", job.id)
+                raise DuplicateJob(
+                    f"campaign {campaign_id} already has {kind} job {job.id} "
+                    f"({method}) {state}; cancel it or wait for it",
+                    job.id,
+                )
 
 
 def calibrate_campaign(db: store.Database, *, campaign_id: int, method: str) -> dict:
@@ -109,18 +113,32 @@ class Jobs:
 
     pool_kind = "process-per-job:forkserver"
 
-    def __init__(self, db: store.Database, models_dir: Path, workers: int = 2, *,
-                 recordings_dir: Path | None = None, reports_dir: Path | None = None,
-                 events: Events | None = None, viewer_url: str | None = None,
-                 timeout_s: float = JOB_TIMEOUT_S, call_timeout_s: float = CALL_TIMEOUT_S,
-                 call_workers: int = CALL_WORKERS):
+    def __init__(
+        self,
+        db: store.Database,
+        models_dir: Path,
+        workers: int = 2,
+        *,
+        recordings_dir: Path | None = None,
+        reports_dir: Path | None = None,
+        events: Events | None = None,
+        viewer_url: str | None = None,
+        timeout_s: float = JOB_TIMEOUT_S,
+        call_timeout_s: float = CALL_TIMEOUT_S,
+        call_workers: int = CALL_WORKERS,
+    ):
         self.db, self.models_dir, self.workers = db, Path(models_dir), workers
         self.timeout_s, self.call_timeout_s = float(timeout_s), float(call_timeout_s)
         self.recordings_dir = Path(recordings_dir or self.models_dir.parent / "recordings")
         self.reports_dir = Path(reports_dir or self.models_dir.parent / "reports")
         self.events = events or Events()
-        self._setup = JobSetup(db.engine.url.render_as_string(hide_password=False),
-                               self.models_dir, self.recordings_dir, self.reports_dir, viewer_url)
+        self._setup = JobSetup(
+            db.engine.url.render_as_string(hide_password=False),
+            self.models_dir,
+            self.recordings_dir,
+            self.reports_dir,
+            viewer_url,
+        )
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)  # a running job ended
         self._closing = False
@@ -136,16 +154,18 @@ class Jobs:
         # Nothing runs a job this process did not queue: fail those a stop cut off.
         for job_id in store.fail_unfinished_jobs(db, reason=RESTART_REASON):
             self._publish(store.get_job(db, job_id=job_id))
-        self._supervisor = threading.Thread(target=self._supervise, name="robocal-jobs",
-                                            daemon=True)
+        self._supervisor = threading.Thread(
+            target=self._supervise, name="robocal-jobs", daemon=True
+        )
         self._supervisor.start()
         # The fork server imports the solver once (seconds): now, not in the first request.
         threading.Thread(target=warm_up, name="robocal-fork-server", daemon=True).start()
 
     # --- the API's verbs ------------------------------------------------------------------------
 
-    def submit(self, *, campaign_id: int, method: str = "minimax",
-               kind: str = "calibration") -> Job:
+    def submit(
+        self, *, campaign_id: int, method: str = "minimax", kind: str = "calibration"
+    ) -> Job:
         """Check and queue a job; the job as queued. DuplicateJob (a Conflict) if the same
         calibration is queued or running."""
         if kind == "diagnosis":
@@ -191,8 +211,10 @@ class Jobs:
                 self._changed.wait_for(lambda: job_id not in self._running, CANCEL_WAIT_S)
                 return self.get(job_id)
             elif job.state in ("done", "failed"):
-                raise store.Conflict(f"job {job_id} is already {job.state}"
-                                     + (f" ({job.reason})" if job.reason else ""))
+                raise store.Conflict(
+                    f"job {job_id} is already {job.state}"
+                    + (f" ({job.reason})" if job.reason else "")
+                )
         self._fail(job_id, CANCELLED)
         return self.get(job_id)
 
@@ -205,8 +227,10 @@ class Jobs:
             yield  # this thread holds one already (the route took it; call() is inside)
             return
         if not self._call_slots.acquire(timeout=self.call_timeout_s):
-            raise Busy(f"every worker for requests stayed busy for {self.call_timeout_s:g} s; "
-                       "try again later")
+            raise Busy(
+                f"every worker for requests stayed busy for {self.call_timeout_s:g} s; "
+                "try again later"
+            )
         self._slot_held.held = True
         try:
             yield
@@ -225,8 +249,9 @@ class Jobs:
             try:
                 return call(target, args, max(left, 0.0), children=self._calls, lock=self._lock)
             except TimeoutError:
-                raise CallTimedOut("the computation exceeded its wall-clock limit of "
-                                   f"{self.call_timeout_s:g} s") from None
+                raise CallTimedOut(
+                    f"the computation exceeded its wall-clock limit of {self.call_timeout_s:g} s"
+                ) from None
 
     def get(self, job_id: int) -> Job:
         return store.get_job(self.db, job_id=job_id)
@@ -244,8 +269,11 @@ class Jobs:
         """A file a done job wrote (model, recording, report); NotFound / Conflict otherwise."""
         job = self.get(job_id)
         if job.state != "done":
-            raise store.Conflict(f"job {job_id} is {job.state}"
-                                 + (f": {job.reason}" if job.reason else "") + f"; no {what}")
+            raise store.Conflict(
+                f"job {job_id} is {job.state}"
+                + (f": {job.reason}" if job.reason else "")
+                + f"; no {what}"
+            )
         path = job.results.get(what)
         if path is None:
             raise store.NotFound(f"job {job_id} ({job.kind}) has no {what}")
@@ -306,8 +334,11 @@ class Jobs:
             now = time.monotonic()
             deadlines = [c.started + self.timeout_s for c in children.values()]
             timeout = max(0.0, min(deadlines) - now) if deadlines else None
-            handles = [self._wake_r] + [c.answers for c in children.values() if not c.ended] \
+            handles = (
+                [self._wake_r]
+                + [c.answers for c in children.values() if not c.ended]
                 + [c.sentinel for c in children.values()]
+            )
             try:
                 ready = set(wait(handles, timeout))
             except OSError:
@@ -326,8 +357,11 @@ class Jobs:
     def _start(self, job_id: int) -> None:
         with self._lock:
             plan = self._plans.pop(job_id, None)
-        target, args = ((run_job, (self._setup, job_id)) if plan is None
-                        else (run_planning, (self._setup, job_id, *plan)))
+        target, args = (
+            (run_job, (self._setup, job_id))
+            if plan is None
+            else (run_planning, (self._setup, job_id, *plan))
+        )
         try:
             child = Child(target, args, name=f"robocal-job-{job_id}")
         except Exception as e:  # noqa: BLE001 - the job says why it cannot run
@@ -344,13 +378,18 @@ class Jobs:
     def _overrun(self, job_id: int, child: Child, now: float) -> None:
         with self._lock:
             self._killing.setdefault(
-                job_id, f"exceeded its wall-clock limit of {self.timeout_s:g} s")
+                job_id, f"exceeded its wall-clock limit of {self.timeout_s:g} s"
+            )
         child.kill()
         killed = time.monotonic() - child.started - self.timeout_s
         code = child.reap()
-        log.info("job %d killed %.1f ms after its wall-clock limit, gone after %.1f ms (%s)",
-                 job_id, killed * 1000, (time.monotonic() - child.started - self.timeout_s) * 1000,
-                 exit_reason(code))
+        log.info(
+            "job %d killed %.1f ms after its wall-clock limit, gone after %.1f ms (%s)",
+            job_id,
+            killed * 1000,
+            (time.monotonic() - child.started - self.timeout_s) * 1000,
+            exit_reason(code),
+        )
         self._finish(job_id, child)
 
     def _forward(self, child: Child) -> None:
@@ -387,11 +426,22 @@ class Jobs:
         try:
             job = self.get(job_id)
             if job.state not in ("done", "failed"):
-                self._publish(store.update_job(self.db, job_id=job_id, state="failed",
-                                               reason=reason))
+                self._publish(
+                    store.update_job(self.db, job_id=job_id, state="failed", reason=reason)
+                )
         except store.StoreError:
             pass  # it went done or failed meanwhile, or the store is closing: nothing to mark
 
 
-__all__ = ["Busy", "CANCELLED", "CallTimedOut", "DuplicateJob", "Job", "Jobs", "RESTART_REASON",
-           "calibrate_campaign", "check_job", "check_method"]
+__all__ = [
+    "Busy",
+    "CANCELLED",
+    "CallTimedOut",
+    "DuplicateJob",
+    "Job",
+    "Jobs",
+    "RESTART_REASON",
+    "calibrate_campaign",
+    "check_job",
+    "check_method",
+]

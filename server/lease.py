@@ -41,16 +41,30 @@ def is_dead(owner: str | None) -> bool:
 def claim(db: store.Database, campaign_id: int, owner: str, ttl_s: float = LEASE_S) -> None:
     """Take the campaign for `owner` (LeaseHeld if another live process has it)."""
     holder = store.get_campaign(db, campaign_id=campaign_id).lease_owner
-    store.take_lease(db, campaign_id=campaign_id, owner=owner, ttl_s=ttl_s,
-                     dead_owner=holder if holder != owner and is_dead(holder) else None)
+    store.take_lease(
+        db,
+        campaign_id=campaign_id,
+        owner=owner,
+        ttl_s=ttl_s,
+        dead_owner=holder if holder != owner and is_dead(holder) else None,
+    )
 
 
 class Lease:
     """The claim on a campaign while a run lasts: taken at start, renewed on a timer thread,
     released at the end; on_lost() is called if another process took it (we stalled past it)."""
 
-    def __init__(self, db: store.Database, campaign_id: int, owner: str, *,
-                 ttl_s: float = LEASE_S, every_s: float = RENEW_EVERY_S, on_lost=None, log=None):
+    def __init__(
+        self,
+        db: store.Database,
+        campaign_id: int,
+        owner: str,
+        *,
+        ttl_s: float = LEASE_S,
+        every_s: float = RENEW_EVERY_S,
+        on_lost=None,
+        log=None,
+    ):
         self.db, self.campaign_id, self.owner = db, campaign_id, owner
         self.ttl_s, self.every_s = ttl_s, every_s
         self.on_lost = on_lost or (lambda: None)
@@ -60,8 +74,9 @@ class Lease:
 
     def __enter__(self) -> Lease:
         claim(self.db, self.campaign_id, self.owner, self.ttl_s)
-        self._thread = threading.Thread(target=self._renew, daemon=True,
-                                        name=f"robocal-lease-{self.campaign_id}")
+        self._thread = threading.Thread(
+            target=self._renew, daemon=True, name=f"robocal-lease-{self.campaign_id}"
+        )
         self._thread.start()
         return self
 
@@ -77,8 +92,9 @@ class Lease:
     def _renew(self) -> None:
         while not self._stop.wait(self.every_s):
             try:
-                held = store.renew_lease(self.db, campaign_id=self.campaign_id,
-                                         owner=self.owner, ttl_s=self.ttl_s)
+                held = store.renew_lease(
+                    self.db, campaign_id=self.campaign_id, owner=self.owner, ttl_s=self.ttl_s
+                )
             except Exception as e:  # noqa: BLE001 - a busy database: try again next time
                 self.log(f"lease of campaign {self.campaign_id} not renewed: {e}")
                 continue

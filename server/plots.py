@@ -14,12 +14,20 @@ import matplotlib.pyplot as plt  # noqa: E402
 def effect_figure(series: dict, path: Path) -> Path:
     """One PNG: residual signature against the effect's variable, before and after, with the fitted law."""
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(10, 4), sharey=True, constrained_layout=True)
-    for ax, key, title in ((ax0, "before", "before: fitted without it"),
-                           (ax1, "after", "after: with " + series["label"])):
+    for ax, key, title in (
+        (ax0, "before", "before: fitted without it"),
+        (ax1, "after", "after: with " + series["label"]),
+    ):
         ax.scatter(series["x"], series[key], s=14, alpha=0.7, label="residual per pose")
         if key == "before":
-            ax.scatter(series["x"], series["expected"], s=10, marker="x", color="red",
-                       label="fitted effect, less what geometry absorbs")
+            ax.scatter(
+                series["x"],
+                series["expected"],
+                s=10,
+                marker="x",
+                color="red",
+                label="fitted effect, less what geometry absorbs",
+            )
         ax.axhline(0.0, color="grey", lw=0.8)
         ax.set_title(title)
         ax.set_xlabel(series["x_label"])
@@ -39,6 +47,7 @@ def write_figures(figures: list[dict], report_path) -> list[Path]:
     out = []
     for i, series in enumerate(figures, start=1):
         stem = series["label"].replace("(", "_").replace(")", "").replace(",", "_").replace("=", "")
-        out.append(effect_figure(series, report_path.with_name(
-            f"{report_path.stem}_{i}_{stem}.png")))
+        out.append(
+            effect_figure(series, report_path.with_name(f"{report_path.stem}_{i}_{stem}.png"))
+        )
     return out

@@ -22,7 +22,12 @@ from multiprocessing.connection import Connection
 # the modules below once (the solver, matplotlib, rerun for the recordings); children forked from
 # it start in milliseconds with them loaded, as a job gets a fresh process each time.
 START_METHOD = "forkserver"
-PRELOAD = ["server.worker", "server.charts", "server.recording", "server.api.ops"]
+PRELOAD = [
+    "robocal.server.worker",
+    "robocal.server.charts",
+    "robocal.server.recording",
+    "robocal.server.api.ops",
+]
 # Jobs are batch work: the API and a running acquisition (a robot and a tracker waiting on it)
 # get the CPU first.
 NICENESS = 10
@@ -77,8 +82,9 @@ class Child:
         # the child reads end-of-file the moment the service exits, however it exits.
         self.answers, answer_end = _context.Pipe(duplex=False)
         lifeline_end, self._lifeline = _context.Pipe(duplex=False)
-        self.process = _context.Process(target=_main, name=name, daemon=True,
-                                        args=(target, args, answer_end, lifeline_end))
+        self.process = _context.Process(
+            target=_main, name=name, daemon=True, args=(target, args, answer_end, lifeline_end)
+        )
         try:
             self.process.start()
         finally:
@@ -124,8 +130,14 @@ class Child:
         return code
 
 
-def call(target, args: tuple, timeout: float, name: str = "robocal-call",
-         children: set | None = None, lock: threading.Lock | None = None):
+def call(
+    target,
+    args: tuple,
+    timeout: float,
+    name: str = "robocal-call",
+    children: set | None = None,
+    lock: threading.Lock | None = None,
+):
     """target(*args, report) in a child; its result, or its exception re-raised here.
 
     TimeoutError after `timeout` s (the child is killed); WorkerDied if it died without an
@@ -144,8 +156,10 @@ def call(target, args: tuple, timeout: float, name: str = "robocal-call",
                 kind, value = child.answers.recv() if ready else (None, None)
             except (EOFError, OSError):
                 child.reap()
-                raise WorkerDied(f"the worker process ended without an answer "
-                                 f"({exit_reason(child.process.exitcode)})") from None
+                raise WorkerDied(
+                    f"the worker process ended without an answer "
+                    f"({exit_reason(child.process.exitcode)})"
+                ) from None
             if kind is None:
                 raise TimeoutError(f"exceeded its wall-clock limit of {timeout:g} s")
             if kind != "report":
@@ -162,6 +176,7 @@ def call(target, args: tuple, timeout: float, name: str = "robocal-call",
 
 
 # --- in the child -------------------------------------------------------------------------------
+
 
 def _main(target, args: tuple, answers: Connection, lifeline: Connection) -> None:
     # Ctrl-C is the service's to handle: it ends its workers itself on the way out.

@@ -13,10 +13,9 @@ import numpy as np
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 
 import rerun as rr  # noqa: E402
-
-from solver.calibrate import Calibration  # noqa: E402
-from solver.kinematics import flange_frames, joint_frames, predict  # noqa: E402
-from solver.measurements import Measurements  # noqa: E402
+from robocal.solver.calibrate import Calibration  # noqa: E402
+from robocal.solver.kinematics import flange_frames, joint_frames, predict  # noqa: E402
+from robocal.solver.measurements import Measurements  # noqa: E402
 
 from .formats.cell_json import Cell  # noqa: E402
 
@@ -60,19 +59,34 @@ def _log_diagnosis(rec: rr.RecordingStream, figures: list[dict]) -> None:
                 y = np.asarray(fig[key], dtype=float)
                 # scatter apart from the PNG: data units and pixels should not share one 2-D space
                 ok = np.isfinite(x) & np.isfinite(y)
-                scatter = rr.Points2D(np.stack([x[ok], y[ok]], axis=1), colors=color,
-                                      radii=rr.Radius.ui_points(3.0))
+                scatter = rr.Points2D(
+                    np.stack([x[ok], y[ok]], axis=1), colors=color, radii=rr.Radius.ui_points(3.0)
+                )
                 rec.log(f"{root}/scatter/{key}", scatter, static=True)
-            rec.log(f"{root}/axes", rr.TextDocument(
-                f"{fig['label']}\n\nx: {fig['x_label']}\ny: {fig['y_label']}"), static=True)
+            rec.log(
+                f"{root}/axes",
+                rr.TextDocument(f"{fig['label']}\n\nx: {fig['x_label']}\ny: {fig['y_label']}"),
+                static=True,
+            )
             png = effect_figure(fig, Path(tmp) / f"{i}.png")
-            rec.log(f"{root}/figure", rr.EncodedImage(contents=png.read_bytes(),
-                                                      media_type="image/png"), static=True)
+            rec.log(
+                f"{root}/figure",
+                rr.EncodedImage(contents=png.read_bytes(), media_type="image/png"),
+                static=True,
+            )
 
 
-def record_calibration(path, *, cell: Cell, meas: Measurements, calibration: Calibration,
-                       nominal: Calibration | None = None, diagnosis=None,
-                       magnify: float = 100.0, viewer_url: str | None = None) -> Path:
+def record_calibration(
+    path,
+    *,
+    cell: Cell,
+    meas: Measurements,
+    calibration: Calibration,
+    nominal: Calibration | None = None,
+    diagnosis=None,
+    magnify: float = 100.0,
+    viewer_url: str | None = None,
+) -> Path:
     """Write a .rrd of a calibration: per pose (timeline "pose") arm, SMRs, errors; the solver's history.
 
     With viewer_url (a running viewer's gRPC address, e.g. rerun+http://127.0.0.1:9876/proxy)
@@ -99,11 +113,13 @@ def record_calibration(path, *, cell: Cell, meas: Measurements, calibration: Cal
         rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(viewer_url))
     else:
         rec.save(path)
-    summary = (f"# Calibration\n\nmethod: {calibration.method}\n\nposes: {meas.n_poses}, "
-               f"readings: {meas.n_readings}, targets: {', '.join(names)}\n\n"
-               f"RMS error before: {np.sqrt(np.nanmean(rms['before'] ** 2)):.4f} mm, "
-               f"after: {np.sqrt(np.nanmean(rms['after'] ** 2)):.4f} mm\n\n"
-               f"error arrows magnified x{magnify:g}")
+    summary = (
+        f"# Calibration\n\nmethod: {calibration.method}\n\nposes: {meas.n_poses}, "
+        f"readings: {meas.n_readings}, targets: {', '.join(names)}\n\n"
+        f"RMS error before: {np.sqrt(np.nanmean(rms['before'] ** 2)):.4f} mm, "
+        f"after: {np.sqrt(np.nanmean(rms['after'] ** 2)):.4f} mm\n\n"
+        f"error arrows magnified x{magnify:g}"
+    )
     rec.log("summary", rr.TextDocument(summary, media_type=rr.MediaType.MARKDOWN), static=True)
     for k, color in (("before", BEFORE), ("after", AFTER)):
         rec.log(f"errors/rms/{k}", rr.SeriesLines(colors=color, names=f"RMS {k} / mm"), static=True)
@@ -112,21 +128,36 @@ def record_calibration(path, *, cell: Cell, meas: Measurements, calibration: Cal
         rec.set_time("pose", sequence=i)
         ok = np.all(np.isfinite(xyz[i]), axis=-1)
         labels = [n for n, good in zip(names, ok) if good]
-        rec.log("world/smr/measured", rr.Points3D(xyz[i][ok], labels=labels, colors=MEASURED,
-                                                  radii=rr.Radius.ui_points(5.0)))
+        rec.log(
+            "world/smr/measured",
+            rr.Points3D(xyz[i][ok], labels=labels, colors=MEASURED, radii=rr.Radius.ui_points(5.0)),
+        )
         for k, color in (("before", BEFORE), ("after", AFTER)):
             pts, R = chain[k]
             # the chain to the flange, then the flange to each SMR it carries (the tool)
             strips = [pts[i]] + [np.stack([pts[i, -1], p]) for p in pred[k][i]]
-            rec.log(f"world/arm/{k}", rr.LineStrips3D(strips, colors=ARM[k],
-                                                      radii=rr.Radius.ui_points(2.0)))
-            rec.log(f"world/arm/{k}/flange", rr.Transform3D(translation=pts[i, -1], mat3x3=R[i]),
-                    rr.TransformAxes3D(axis_length=100.0))
-            rec.log(f"world/smr/{k}", rr.Points3D(pred[k][i], labels=names, colors=color,
-                                                  radii=rr.Radius.ui_points(4.0)))
-            rec.log(f"world/error_vectors/{k}", rr.Arrows3D(
-                origins=xyz[i][ok], vectors=magnify * err[k][i][ok], colors=color,
-                radii=rr.Radius.ui_points(1.5)))
+            rec.log(
+                f"world/arm/{k}",
+                rr.LineStrips3D(strips, colors=ARM[k], radii=rr.Radius.ui_points(2.0)),
+            )
+            rec.log(
+                f"world/arm/{k}/flange",
+                rr.Transform3D(translation=pts[i, -1], mat3x3=R[i]),
+                rr.TransformAxes3D(axis_length=100.0),
+            )
+            rec.log(
+                f"world/smr/{k}",
+                rr.Points3D(pred[k][i], labels=names, colors=color, radii=rr.Radius.ui_points(4.0)),
+            )
+            rec.log(
+                f"world/error_vectors/{k}",
+                rr.Arrows3D(
+                    origins=xyz[i][ok],
+                    vectors=magnify * err[k][i][ok],
+                    colors=color,
+                    radii=rr.Radius.ui_points(1.5),
+                ),
+            )
             if np.isfinite(rms[k][i]):
                 rec.log(f"errors/rms/{k}", rr.Scalars(rms[k][i]))
 

@@ -17,8 +17,9 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 # password hash only helps against low-entropy secrets that a dictionary can enumerate).
 TOKEN_BYTES = 32
 
-_bearer = HTTPBearer(auto_error=False,
-                     description="The token `robocal serve` printed at first start")
+_bearer = HTTPBearer(
+    auto_error=False, description="The token `robocal serve` printed at first start"
+)
 
 
 def token_digest(token: str) -> str:
@@ -56,13 +57,15 @@ def stored_digest(path: Path) -> str:
         return ""
 
 
-def require_token(request: Request,
-                  credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
-                  ) -> None:
+def require_token(
+    request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
+) -> None:
     """Refuse (401) a request without the service's bearer token."""
     if credentials is None or credentials.scheme.lower() != "bearer":
-        raise _unauthorized("this request changes state or moves the robot: it needs "
-                            "'Authorization: Bearer <token>'")
+        raise _unauthorized(
+            "this request changes state or moves the robot: it needs "
+            "'Authorization: Bearer <token>'"
+        )
     # Read each time so deleting or rotating the file takes effect without a restart.
     expected = stored_digest(request.app.state.settings.token_file)
     if not expected or not hmac.compare_digest(token_digest(credentials.credentials), expected):
@@ -84,16 +87,18 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-async def require_reader(request: Request,
-                   credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
-                   ) -> None:
+async def require_reader(
+    request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
+) -> None:
     """Refuse (401) a read without the token, unless reads are open (see reads_open); async, so
     the e-stop routes it also guards never wait for a thread of the server's pool."""
     if reads_open(request.app.state.settings):
         return
     if credentials is None or credentials.scheme.lower() != "bearer":
-        raise _unauthorized("reading the cell's data needs 'Authorization: Bearer <token>' "
-                            "(the token `robocal serve` printed at first start)")
+        raise _unauthorized(
+            "reading the cell's data needs 'Authorization: Bearer <token>' "
+            "(the token `robocal serve` printed at first start)"
+        )
     require_token(request, credentials)
 
 

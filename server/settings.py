@@ -11,13 +11,13 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 class Settings(BaseSettings):
     """Where the service keeps its data, where it listens, and who may call it from a browser."""
 
-    model_config = SettingsConfigDict(env_prefix="ROBOCAL_", populate_by_name=True,
-                                      extra="ignore")
+    model_config = SettingsConfigDict(env_prefix="ROBOCAL_", populate_by_name=True, extra="ignore")
 
     # A SQLAlchemy URL or a plain SQLite file path; DATABASE_URL is honoured as hosting platforms
     # set it, but ROBOCAL_DATABASE wins so a stray platform variable cannot redirect a cell's data.
-    database: str = Field("robocal.db", validation_alias=AliasChoices(
-        "ROBOCAL_DATABASE", "DATABASE_URL", "database"))
+    database: str = Field(
+        "robocal.db", validation_alias=AliasChoices("ROBOCAL_DATABASE", "DATABASE_URL", "database")
+    )
     # Loopback only unless told otherwise: the API can command a robot to move.
     host: str = "127.0.0.1"
     port: int = Field(8000, ge=0, le=65535)
@@ -38,7 +38,7 @@ class Settings(BaseSettings):
     # data; true opens them, and only when `host` is a loopback address (a single-user bench).
     open_reads: bool = False
     # The largest request body (a cell.json or meas.csv upload); beyond it the answer is 413.
-    max_upload_bytes: int = Field(32 * 1024 * 1024, ge=1024, le=1024 ** 3)
+    max_upload_bytes: int = Field(32 * 1024 * 1024, ge=1024, le=1024**3)
     # A running rerun viewer to stream calibration recordings to live, e.g.
     # rerun+http://127.0.0.1:9876/proxy; the .rrd files are written either way.
     rerun_viewer_url: str | None = None

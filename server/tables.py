@@ -15,7 +15,7 @@ console = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
 def _f(v, digits=4) -> str:
     if v is None or not np.isfinite(v):
         return "-"
-    return f"{v:.{digits}g}" if abs(v) >= 10 ** digits or abs(v) < 1e-3 else f"{v:.{digits}f}"
+    return f"{v:.{digits}g}" if abs(v) >= 10**digits or abs(v) < 1e-3 else f"{v:.{digits}f}"
 
 
 def table3(rows: dict, target_names) -> Table:
@@ -26,8 +26,9 @@ def table3(rows: dict, target_names) -> Table:
         t.add_column(label, justify="right")
     for i, name in enumerate(target_names):
         t.add_row(f"F_{name} / mm^2", *[_f(acc["F"][name]) for _, acc in rows.values()])
-    t.add_row("max F_i / mm^2", *[_f(max(acc["F"].values())) for _, acc in rows.values()],
-              style="bold")
+    t.add_row(
+        "max F_i / mm^2", *[_f(max(acc["F"].values())) for _, acc in rows.values()], style="bold"
+    )
     t.add_row("RMSE(phi) / mm", *[_f(acc["rmse_phi"]) for _, acc in rows.values()])
     t.add_row("AP mean / mm", *[_f(acc["ap"]["mean"]) for _, acc in rows.values()])
     t.add_row("AP std / mm", *[_f(acc["ap"]["std"]) for _, acc in rows.values()])
@@ -36,8 +37,9 @@ def table3(rows: dict, target_names) -> Table:
         t.add_row("AO' mean / deg", *[_f(acc["ao_log"]["mean"]) for _, acc in rows.values()])
         t.add_row("AO' max / deg", *[_f(acc["ao_log"]["max"]) for _, acc in rows.values()])
         for c in "abc":
-            t.add_row(f"AO {c} mean / deg",
-                      *[_f(acc["ao_euler"][c]["mean"]) for _, acc in rows.values()])
+            t.add_row(
+                f"AO {c} mean / deg", *[_f(acc["ao_euler"][c]["mean"]) for _, acc in rows.values()]
+            )
     t.add_row("time / ms", *[f"{cal.seconds * 1000:.0f}" for cal, _ in rows.values()])
     return t
 
@@ -57,8 +59,9 @@ def accuracy(acc: dict, title: str, target_names) -> Table:
             s = acc["ao_euler"][c]
             t.add_row(f"AO {c} (Euler) / deg", *[_f(s[k]) for k in ("mean", "std", "max", "rms")])
         s = acc["ao_log"]
-        t.add_row("AO' (log) / deg", *[_f(s[k]) for k in ("mean", "std", "max", "rms")],
-                  style="bold")
+        t.add_row(
+            "AO' (log) / deg", *[_f(s[k]) for k in ("mean", "std", "max", "rms")], style="bold"
+        )
     return t
 
 
@@ -78,21 +81,30 @@ def identified_geometry(robot, nominal, uncertainty: dict) -> Table:
     """Each joint's identified parameters as change from nominal ± standard error ('fixed' where
     not identifiable), in mm and degrees."""
     se = uncertainty["standard_errors"]
-    t = Table(title="Identified geometry: change from nominal ± standard error "
-                    f"({uncertainty['estimator']}; mm, deg)")
+    t = Table(
+        title="Identified geometry: change from nominal ± standard error "
+        f"({uncertainty['estimator']}; mm, deg)"
+    )
     kinds = ("theta", "d", "a", "alpha", "beta")
     for col in ("joint",) + kinds:
         t.add_column(col, justify="right")
     names = robot.param_names()
     delta = robot.param_vector() - nominal.param_vector()
-    by_name = {n: (np.degrees(v) if n.startswith(("theta", "alpha", "beta")) else v)
-               for n, v in zip(names, delta)}
+    by_name = {
+        n: (np.degrees(v) if n.startswith(("theta", "alpha", "beta")) else v)
+        for n, v in zip(names, delta)
+    }
     for j in range(1, robot.n_joints + 1):
         cells = []
         for k in kinds:
             n = f"{k}{j}"
-            cells.append("" if n not in by_name else "fixed" if se.get(n) is None
-                         else plus_minus(by_name[n], se[n], "+"))
+            cells.append(
+                ""
+                if n not in by_name
+                else "fixed"
+                if se.get(n) is None
+                else plus_minus(by_name[n], se[n], "+")
+            )
         t.add_row(str(j), *cells)
     return t
 
@@ -102,11 +114,18 @@ def frame_errors(uncertainty: dict, target_names) -> str:
     se = uncertainty["standard_errors"]
 
     def group(names, unit):
-        return "/".join("fixed" if se.get(n) is None else f"{se[n]:.2g}" for n in names) + f" {unit}"
+        return (
+            "/".join("fixed" if se.get(n) is None else f"{se[n]:.2g}" for n in names) + f" {unit}"
+        )
+
     smrs = "; ".join(f"{t} {group([f'{t}_{c}' for c in 'xyz'], 'mm')}" for t in target_names)
-    return ("standard errors: base x/y/z " + group(["base_x", "base_y", "base_z"], "mm")
-            + ", rz/ry/rx " + group(["base_rz", "base_ry", "base_rx"], "deg")
-            + f"; SMRs x/y/z (flange frame) {smrs}")
+    return (
+        "standard errors: base x/y/z "
+        + group(["base_x", "base_y", "base_z"], "mm")
+        + ", rz/ry/rx "
+        + group(["base_rz", "base_ry", "base_rx"], "deg")
+        + f"; SMRs x/y/z (flange frame) {smrs}"
+    )
 
 
 def effect_parameters(parameters: dict, uncertainty: dict | None) -> str:

@@ -21,8 +21,11 @@ class _Page(StaticFiles):
             # every path, so the router never gets to say it).
             allowed = _allowed_methods(scope["app"], "/" + path)
             if allowed:
-                raise HTTPException(405, f"/{path} allows {', '.join(allowed)}, not "
-                                         f"{scope['method']}", headers={"Allow": ", ".join(allowed)})
+                raise HTTPException(
+                    405,
+                    f"/{path} allows {', '.join(allowed)}, not {scope['method']}",
+                    headers={"Allow": ", ".join(allowed)},
+                )
             # Without this, POST /api/<missing> would answer 405 from the file server.
             raise HTTPException(404, f"no API route {scope['method']} /{path}")
         return await super().get_response(path, scope)

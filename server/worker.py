@@ -34,8 +34,15 @@ class JobSetup:
 
 def job_event(job: store.JobInfo) -> dict:
     """The `job` event of the SSE bus for a job's current state."""
-    return {"type": "job", "job_id": job.id, "kind": job.kind, "campaign_id": job.campaign_id,
-            "state": job.state, "progress": job.progress, "reason": job.reason}
+    return {
+        "type": "job",
+        "job_id": job.id,
+        "kind": job.kind,
+        "campaign_id": job.campaign_id,
+        "state": job.state,
+        "progress": job.progress,
+        "reason": job.reason,
+    }
 
 
 def run_job(setup: JobSetup, job_id: int, report: Report) -> None:
@@ -101,8 +108,7 @@ def campaign_data(db: store.Database, campaign_id: int):
     return cell, meas
 
 
-def _calibrate(db: store.Database, report: Report, setup: JobSetup,
-               job: store.JobInfo) -> dict:
+def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.JobInfo) -> dict:
     from .recording import record_calibration  # rerun is heavy; load it with the first job
 
     cell, meas = campaign_data(db, job.campaign_id)
@@ -113,13 +119,17 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup,
     path = setup.models_dir / f"job-{job.id}.model.json"
     write_json_atomic(path, model)
     _update(db, report, job.id, progress=0.5, results={"model": str(path)})
-    rrd = record_calibration(setup.recordings_dir / f"job-{job.id}.rrd", cell=cell, meas=meas,
-                             calibration=cal, viewer_url=setup.viewer_url)
+    rrd = record_calibration(
+        setup.recordings_dir / f"job-{job.id}.rrd",
+        cell=cell,
+        meas=meas,
+        calibration=cal,
+        viewer_url=setup.viewer_url,
+    )
     return {"model": str(path), "recording": str(rrd)}
 
 
-def _diagnose(db: store.Database, report: Report, setup: JobSetup,
-              job: store.JobInfo) -> dict:
+def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.JobInfo) -> dict:
     from .workflow import diagnose, write_diagnosis
 
     cell, meas = campaign_data(db, job.campaign_id)
@@ -129,8 +139,12 @@ def _diagnose(db: store.Database, report: Report, setup: JobSetup,
     report_path = setup.reports_dir / f"job-{job.id}" / "report.json"
     path = setup.models_dir / f"job-{job.id}.model.json"
     d.report = to_plain(d.report)
-    _, figures = write_diagnosis(d, model, report_path, {
-        "campaign": job.campaign_id, "poses": meas.n_poses, "readings": meas.n_readings}, path,
-        list_figures=True)
-    return {"model": str(path), "report": str(report_path),
-            "figures": [str(p) for p in figures]}
+    _, figures = write_diagnosis(
+        d,
+        model,
+        report_path,
+        {"campaign": job.campaign_id, "poses": meas.n_poses, "readings": meas.n_readings},
+        path,
+        list_figures=True,
+    )
+    return {"model": str(path), "report": str(report_path), "figures": [str(p) for p in figures]}

@@ -5,22 +5,26 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-
-from solver import metrics
-from solver.calibrate import Calibration, calibrate
-from solver.diagnose import diagnose as run_diagnosis
-from solver.effects import Inputs, prepare
-from solver.extended import predict_extended
-from solver.finite import require_inputs
-from solver.fit_errors import calibration_errors
-from solver.kinematics import Layout, predict
-from solver.measurements import Measurements
-from solver.screen import Screening, screen_readings
+from robocal.solver import metrics
+from robocal.solver.calibrate import Calibration, calibrate
+from robocal.solver.diagnose import diagnose as run_diagnosis
+from robocal.solver.effects import Inputs, prepare
+from robocal.solver.extended import predict_extended
+from robocal.solver.finite import require_inputs
+from robocal.solver.fit_errors import calibration_errors
+from robocal.solver.kinematics import Layout, predict
+from robocal.solver.measurements import Measurements
+from robocal.solver.screen import Screening, screen_readings
 
 from .formats.campaign_csv import read_campaign
 from .formats.cell_json import Cell, default_cell, read_cell
-from .formats.model_json import (ModelFile, extension_errors, file_digest, read_model,
-                                 uncertainty_to_json)
+from .formats.model_json import (
+    ModelFile,
+    extension_errors,
+    file_digest,
+    read_model,
+    uncertainty_to_json,
+)
 
 PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
 
@@ -38,8 +42,10 @@ def load_campaign(path, cell: Cell) -> Measurements:
     meas = read_campaign(path, cell.robot)
     unknown = [t for t in meas.target_names if t not in cell.targets]
     if unknown:
-        raise DataError(f"{path}: target {unknown[0]!r} is not among the cell's targets "
-                        f"({', '.join(cell.targets)})")
+        raise DataError(
+            f"{path}: target {unknown[0]!r} is not among the cell's targets "
+            f"({', '.join(cell.targets)})"
+        )
     try:
         require_inputs(meas.q, meas.xyz)
     except ValueError as e:
@@ -80,8 +86,16 @@ def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurement
 def screen_campaign(cell: Cell, meas: Measurements) -> Screening:
     """The campaign's gross outliers (solver.screen), judged with the cell's nominal model."""
     targets = np.array([cell.targets[t] for t in meas.target_names])
-    return screen_readings(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s,
-                           meas.temp_c, cell.base)
+    return screen_readings(
+        cell.robot,
+        targets,
+        meas.target_names,
+        meas.q,
+        meas.xyz,
+        meas.time_s,
+        meas.temp_c,
+        cell.base,
+    )
 
 
 def without_outliers(meas: Measurements, screening: Screening | None) -> Measurements:
@@ -89,12 +103,23 @@ def without_outliers(meas: Measurements, screening: Screening | None) -> Measure
     if screening is None or not screening.count:
         return meas
     nan = lambda a: None if a is None else np.where(screening.excluded, np.nan, a)  # noqa: E731
-    return Measurements(list(meas.pose_ids), meas.q, meas.target_names,
-                        screening.apply(meas.xyz), nan(meas.time_s), nan(meas.temp_c))
+    return Measurements(
+        list(meas.pose_ids),
+        meas.q,
+        meas.target_names,
+        screening.apply(meas.xyz),
+        nan(meas.time_s),
+        nan(meas.temp_c),
+    )
 
 
-def run_method(cell: Cell, meas: Measurements, method: str, qp="primal-dual",
-               screening: Screening | bool = True) -> Calibration:
+def run_method(
+    cell: Cell,
+    meas: Measurements,
+    method: str,
+    qp="primal-dual",
+    screening: Screening | bool = True,
+) -> Calibration:
     """One method on the campaign; screening True screens out gross outliers first, False keeps
     every reading, a Screening reuses one already made (compare screens once for all methods)."""
     if screening is True:
@@ -102,8 +127,16 @@ def run_method(cell: Cell, meas: Measurements, method: str, qp="primal-dual",
     screening = screening or None
     use = without_outliers(meas, screening)
     targets = np.array([cell.targets[t] for t in meas.target_names])
-    cal = calibrate(cell.robot, targets, meas.target_names, meas.q, use.xyz, method=method,
-                    base_guess=cell.base, qp=qp)
+    cal = calibrate(
+        cell.robot,
+        targets,
+        meas.target_names,
+        meas.q,
+        use.xyz,
+        method=method,
+        base_guess=cell.base,
+        qp=qp,
+    )
     if screening is not None:
         cal.details["screening"] = screening
         cal.details["outliers"] = screening.report(meas.pose_ids, meas.target_names)
@@ -116,8 +149,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     used = without_outliers(meas, screening)
     pred = predict(cal.layout, cal.x, meas.q)
     acc = metrics.accuracy(pred, used.xyz, meas.target_names)
-    data = {"poses": meas.n_poses, "readings": meas.n_readings,
-            "targets": list(meas.target_names)}
+    data = {"poses": meas.n_poses, "readings": meas.n_readings, "targets": list(meas.target_names)}
     if data_path is not None:
         data.update(file=Path(data_path).name, sha256=file_digest(data_path))
     fit = {
@@ -134,13 +166,23 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         fit["readings_used"] = used.n_readings
         fit["excluded_readings"] = cal.details["outliers"]
         fit["screening"] = screening.summary()
-    meta = {"method": cal.method, "data": data, "fit": fit,
-            "uncertainty": uncertainty_to_json(calibration_errors(cal, meas.q, used.xyz),
-                                               cal.layout.names())}
+    meta = {
+        "method": cal.method,
+        "data": data,
+        "fit": fit,
+        "uncertainty": uncertainty_to_json(
+            calibration_errors(cal, meas.q, used.xyz), cal.layout.names()
+        ),
+    }
     if "qp" in cal.details:
         meta["qp"] = cal.details["qp"]
-    return ModelFile(cal.robot, cal.base, dict(zip(meas.target_names, cal.targets)),
-                     nominal=cell.robot, meta=meta)
+    return ModelFile(
+        cal.robot,
+        cal.base,
+        dict(zip(meas.target_names, cal.targets)),
+        nominal=cell.robot,
+        meta=meta,
+    )
 
 
 def model_predict(model: ModelFile, q, time_s=None, temp_c=None) -> np.ndarray:
@@ -180,8 +222,9 @@ def paper_methods(target_names) -> list[str]:
     return out
 
 
-def compare(cell: Cell, meas: Measurements, methods=None, qp_solvers=("primal-dual", "exact"),
-            screen=True):
+def compare(
+    cell: Cell, meas: Measurements, methods=None, qp_solvers=("primal-dual", "exact"), screen=True
+):
     """Every method on the same data, screened once for gross outliers (unless screen is False):
     calibrations and their accuracy on the readings they used."""
     screening = screen_campaign(cell, meas) if screen else False
@@ -201,8 +244,9 @@ def evaluate(model: ModelFile, meas: Measurements) -> dict:
     """Accuracy of a model on measured data, next to the nominal model fitted to the same data."""
     unknown = [t for t in meas.target_names if t not in model.targets]
     if unknown:
-        raise DataError(f"target {unknown[0]!r} of the data is not in the model "
-                        f"({', '.join(model.targets)})")
+        raise DataError(
+            f"target {unknown[0]!r} of the data is not in the model ({', '.join(model.targets)})"
+        )
     if model.robot.n_joints != meas.q.shape[1]:
         raise DataError("the data's joint count differs from the model's robot")
     require_inputs(meas.q, meas.xyz)  # before any arithmetic on them: no overflow warnings
@@ -231,24 +275,46 @@ def _pose_column(a):
 def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
     targets = np.array([cell.targets[t] for t in meas.target_names])
-    d = run_diagnosis(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s,
-                      meas.temp_c, base_guess=cell.base, log=log, screen_outliers=screen,
-                      pose_ids=meas.pose_ids)
+    d = run_diagnosis(
+        cell.robot,
+        targets,
+        meas.target_names,
+        meas.q,
+        meas.xyz,
+        meas.time_s,
+        meas.temp_c,
+        base_guess=cell.base,
+        log=log,
+        screen_outliers=screen,
+        pose_ids=meas.pose_ids,
+    )
     lay, x = d.layout, d.x
     robot = lay.robot.with_params(x[: lay.n_geo])
-    model = ModelFile(robot, lay.base(x), dict(zip(meas.target_names, lay.targets(x))),
-                      nominal=cell.robot, extensions=d.extensions, parameters=d.parameters,
-                      meta={"method": "ls-sum+extensions", "diagnosis": {
-                          "final": d.report["final"], "noise_floor_mm": d.report["noise_floor_mm"],
-                          **({"outliers": d.report["outliers"]} if "outliers" in d.report else {})}})
+    model = ModelFile(
+        robot,
+        lay.base(x),
+        dict(zip(meas.target_names, lay.targets(x))),
+        nominal=cell.robot,
+        extensions=d.extensions,
+        parameters=d.parameters,
+        meta={
+            "method": "ls-sum+extensions",
+            "diagnosis": {
+                "final": d.report["final"],
+                "noise_floor_mm": d.report["noise_floor_mm"],
+                **({"outliers": d.report["outliers"]} if "outliers" in d.report else {}),
+            },
+        },
+    )
     if d.errors is not None:
         model.meta["uncertainty"] = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
     return d, model
 
 
-def write_diagnosis(d, model: ModelFile, report_path: Path, data: dict, model_path=None,
-                    list_figures=False):
+def write_diagnosis(
+    d, model: ModelFile, report_path: Path, data: dict, model_path=None, list_figures=False
+):
     """Write the report (each effect naming its figure; with list_figures, every figure in
     `figures`), its figures beside it and the model. Returns (report, figure paths)."""
     from .formats.model_json import write_json_atomic, write_model
@@ -270,12 +336,25 @@ def write_diagnosis(d, model: ModelFile, report_path: Path, data: dict, model_pa
 
 def _report_order(report, exts):
     """The extensions in the report's order (most important first)."""
+
     def key(e):
         return (e["name"], e.get("joint"), e.get("harmonic"))
+
     index = {(x.name, None if x.joint is None else x.joint + 1, x.harmonic): x for x in exts}
     return [index[key(e)] for e in report["effects"]]
 
 
-__all__ = ["DataError", "load_cell", "load_campaign", "run_method", "model_file", "model_predict",
-           "compare", "evaluate", "read_model", "paper_methods", "screen_campaign",
-           "without_outliers"]
+__all__ = [
+    "DataError",
+    "load_cell",
+    "load_campaign",
+    "run_method",
+    "model_file",
+    "model_predict",
+    "compare",
+    "evaluate",
+    "read_model",
+    "paper_methods",
+    "screen_campaign",
+    "without_outliers",
+]

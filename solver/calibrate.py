@@ -48,19 +48,32 @@ def parse_method(method: str, target_names) -> tuple[str, list[int]]:
     """Method name and the targets it fits: `ls-single:B` fits B only."""
     name, _, arg = method.partition(":")
     if name not in METHODS:
-        raise ValueError(f"unknown method {method!r}: choose from minimax, ls-sum, ls-single:T, ls-pose")
+        raise ValueError(
+            f"unknown method {method!r}: choose from minimax, ls-sum, ls-single:T, ls-pose"
+        )
     if name == "ls-single":
         arg = arg or target_names[0]
         if arg not in target_names:
-            raise ValueError(f"method {method!r}: no target {arg!r} in the data ({', '.join(target_names)})")
+            raise ValueError(
+                f"method {method!r}: no target {arg!r} in the data ({', '.join(target_names)})"
+            )
         return name, [list(target_names).index(arg)]
     if arg:
         raise ValueError(f"method {name!r} takes no ':' argument")
     return name, list(range(len(target_names)))
 
 
-def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", base_guess=None,
-              qp="primal-dual", epsilon=None) -> Calibration:
+def calibrate(
+    robot: Robot,
+    targets,
+    target_names,
+    q,
+    meas,
+    method="minimax",
+    base_guess=None,
+    qp="primal-dual",
+    epsilon=None,
+) -> Calibration:
     """Fit geometry, base frame and SMR positions to measurements with the chosen method.
 
     q: (m, n) joint readings in rad; meas: (m, K, 3) mm with NaN for missing readings.
@@ -73,7 +86,9 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
     if name == "nominal":
         prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
         F = prob.sum_squares(x0)
-        return Calibration(method, prob.layout, x0, {}, float("nan"), F, time.perf_counter() - t0, 0)
+        return Calibration(
+            method, prob.layout, x0, {}, float("nan"), F, time.perf_counter() - t0, 0
+        )
     # which parameters the model can identify does not depend on where the base is
     lay = Layout(robot, np.eye(4), tuple(target_names))
     x0 = lay.initial(targets)
@@ -91,34 +106,48 @@ def calibrate(robot: Robot, targets, target_names, q, meas, method="minimax", ba
         full = np.all(prob.mask, axis=1)
         p, J, _ = predict_with_jacobian(lay, x0, q[full])
         Jd = pose_residuals(p, p, J, weight)[1].reshape(-1, lay.n_params)
-        cond = ident.check_data(ident.gram(Jd, st.free), st.free, lay.names(), Jd.shape[0],
-                                int(full.sum()))
+        cond = ident.check_data(
+            ident.gram(Jd, st.free), st.free, lay.names(), Jd.shape[0], int(full.sum())
+        )
         x, res = pose_fit(prob, x0, st.free, weight)
         x = fit_targets(prob, x, range(len(target_names)))
         details["pose_weight_mm_per_rad"] = weight
     else:
         fit, first = start_fit(robot, targets, target_names, q, meas, st.free, rows, base_guess)
         prob = fit.prob
-        cond = ident.check_data(first.A, st.free, lay.names(), 3 * int(fit.mask.sum()),
-                                prob.q.shape[0])
+        cond = ident.check_data(
+            first.A, st.free, lay.names(), 3 * int(fit.mask.sum()), prob.q.shape[0]
+        )
         x, res = fit.fit(first)
         details["start"] = fit.start
         if name == "ls-single":
             x = fit_targets(prob, x, [k for k in range(len(target_names)) if k not in rows])
     iters = res.iterations
-    details["lm"] = {"iterations": res.iterations, "evaluations": res.nfev,
-                     "jacobians": res.njev, "message": res.message}
+    details["lm"] = {
+        "iterations": res.iterations,
+        "evaluations": res.nfev,
+        "jacobians": res.njev,
+        "message": res.message,
+    }
     if name == "minimax":
         details["ls_sum_F"] = prob.sum_squares(x).tolist()
         mm = minimax(prob, x, st.free, rows=rows, qp=qp, epsilon=epsilon)
         x = mm.x
         iters = mm.iterations
-        details.update(history=mm.history, qp=qp, qp_iterations=mm.qp_iterations,
-                       converged=mm.converged, message=mm.message, lam=mm.lam.tolist(),
-                       mu=mm.mu.tolist(), constraints=mm.constraints.tolist(),
-                       sqp_seconds=mm.seconds)
+        details.update(
+            history=mm.history,
+            qp=qp,
+            qp_iterations=mm.qp_iterations,
+            converged=mm.converged,
+            message=mm.message,
+            lam=mm.lam.tolist(),
+            mu=mm.mu.tolist(),
+            constraints=mm.constraints.tolist(),
+            sqp_seconds=mm.seconds,
+        )
     # ls-sum's last residuals, when the fit kept them, are those of x over every target
     F = fit.per_target(res.r) if name == "ls-sum" and res.r is not None else prob.sum_squares(x)
     prob, x = prob.rebased(x)
-    return Calibration(method, prob.layout, x, st.fixed, cond, F,
-                       time.perf_counter() - t0, iters, details)
+    return Calibration(
+        method, prob.layout, x, st.fixed, cond, F, time.perf_counter() - t0, iters, details
+    )

@@ -19,15 +19,17 @@ from . import vocabulary
 from .effects import Extension, Inputs, point_shift, prepare
 from .extended import extension_rows, fit_extended, predict_extended
 from .finite import finite, require_inputs
-from .motion import visit_order
 from .identify import Problem, register
 from .kinematics import predict_rows
+from .motion import visit_order
 from .robot import Robot
-from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
 from .screen import screen_readings
+from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
 
 MIN_GAIN = 0.02  # an accepted effect removes at least this fraction of the held-out MSE
-T_SIMPLER = 2.0  # candidates the best does not beat by this paired t over poses are its alternatives
+T_SIMPLER = (
+    2.0  # candidates the best does not beat by this paired t over poses are its alternatives
+)
 MAX_EFFECTS = 4
 FOLDS = 5
 
@@ -41,7 +43,9 @@ class CV:
     maxerr: float
     exts: list  # extensions as fitted on all data (with coefficients)
     fits: dict = field(default_factory=dict)  # fold (or "all") -> (x, extensions) fitted there
-    resid: np.ndarray | None = None  # (m, K, 3) held-out residual (prediction - reading), NaN if missing
+    resid: np.ndarray | None = (
+        None  # (m, K, 3) held-out residual (prediction - reading), NaN if missing
+    )
 
     @property
     def mse(self) -> float:
@@ -85,7 +89,11 @@ def noise_floor(meas: np.ndarray, inputs: Inputs) -> float | None:
             ok = np.isfinite(d) & np.all(np.isfinite(A), axis=1)
             if ok.sum() < 10:
                 continue
-            coef, *_ = np.linalg.lstsq(finite(A[ok], "the noise floor's design"), finite(d[ok], "the noise floor's distances"), rcond=None)
+            coef, *_ = np.linalg.lstsq(
+                finite(A[ok], "the noise floor's design"),
+                finite(d[ok], "the noise floor's distances"),
+                rcond=None,
+            )
             r = d[ok] - A[ok] @ coef
             var.append(np.sum(r * r) / (ok.sum() - A.shape[1]) / 2.0)
     return float(np.sqrt(3.0 * np.mean(var))) if var else None
@@ -129,8 +137,11 @@ class Diagnoser:
         """The extension with its time found on all poses beside `others`, if it needs one."""
         if not (e.kind.located_in_time and e.at_s is None):
             return e
-        return Extension(e.name, at_s=self.scan_shift(others, np.arange(self.prob.q.shape[0])),
-                         origin=self.centroid)
+        return Extension(
+            e.name,
+            at_s=self.scan_shift(others, np.arange(self.prob.q.shape[0])),
+            origin=self.centroid,
+        )
 
     def fit(self, exts, poses=None, fold="all"):
         self.fits += 1
@@ -139,10 +150,13 @@ class Diagnoser:
         if fold in self.warm:
             # the current model's fit on the same poses: only the new extension starts from zero
             start, known = self.warm[fold]
-            exts = [Extension(**{**e.__dict__, "coef": k.coef}) if i < len(known) else e
-                    for i, (e, k) in enumerate(zip(exts, known + [None] * len(exts)))]
-        x, ee, _ = fit_extended(self.prob, self.inputs, self.x0, self.free, exts, poses,
-                                start=start)
+            exts = [
+                Extension(**{**e.__dict__, "coef": k.coef}) if i < len(known) else e
+                for i, (e, k) in enumerate(zip(exts, known + [None] * len(exts)))
+            ]
+        x, ee, _ = fit_extended(
+            self.prob, self.inputs, self.x0, self.free, exts, poses, start=start
+        )
         return x, ee
 
     def residuals(self, x, exts, poses):
@@ -210,7 +224,13 @@ class Diagnoser:
             G = ZZ[n] - QZ[n].T @ QZ[n]
             b = Zr[n] - QZ[n].T @ Qr
             try:
-                gain = float(b @ np.linalg.solve(finite(G + 1e-12 * np.trace(G) * np.eye(6), "a time shift's normal matrix"), finite(b, "a time shift's gradient")))
+                gain = float(
+                    b
+                    @ np.linalg.solve(
+                        finite(G + 1e-12 * np.trace(G) * np.eye(6), "a time shift's normal matrix"),
+                        finite(b, "a time shift's gradient"),
+                    )
+                )
             except np.linalg.LinAlgError:
                 continue
             if gain > best:
@@ -269,18 +289,30 @@ def select(diag: Diagnoser, cands, log=None):
     remaining = list(cands)
     m = diag.prob.q.shape[0]
     while remaining and len(steps) < MAX_EFFECTS:
-        trial, A, r, blocks, pose_of_row, scans = diag.linear_system(cv_now.fits["all"], current,
-                                                                    remaining)
+        trial, A, r, blocks, pose_of_row, scans = diag.linear_system(
+            cv_now.fits["all"], current, remaining
+        )
         fresh = linear_scores(A, r, blocks, pose_of_row, diag.folds, m, resamples=0).fresh
-        sc = linear_scores(A, r, blocks, pose_of_row, diag.folds, m, seed=len(steps), scans=scans,
-                           null_residual=fresh)
+        sc = linear_scores(
+            A,
+            r,
+            blocks,
+            pose_of_row,
+            diag.folds,
+            m,
+            seed=len(steps),
+            scans=scans,
+            null_residual=fresh,
+        )
         thr = sc.threshold()
         n_read = cv_now.n.sum()
         rms = lambda i: float(np.sqrt(max(sc.sse - sc.gain[i], 0.0) / n_read))  # noqa: E731
         if log:
             for i, c in enumerate(trial):
-                log(f"  {c.label()}: held-out RMS {rms(i):.4f} mm (z = {sc.z[i]:.1f}, "
-                    f"threshold {thr:.1f})")
+                log(
+                    f"  {c.label()}: held-out RMS {rms(i):.4f} mm (z = {sc.z[i]:.1f}, "
+                    f"threshold {thr:.1f})"
+                )
         ok = [i for i in range(len(trial)) if sc.z[i] > thr and sc.gain[i] > MIN_GAIN * sc.sse]
         if not ok:
             break
@@ -288,21 +320,36 @@ def select(diag: Diagnoser, cands, log=None):
         cv = diag.cross_validate(current + [trial[best]])
         if cv.mse >= cv_now.mse:
             break  # the linear picture promised a gain the fitted model does not keep
-        alternatives = [{"name": trial[i].name, "label": trial[i].label(),
-                         **({} if trial[i].joint is None else {"joint": trial[i].joint + 1}),
-                         **({} if trial[i].harmonic is None else {"harmonic": trial[i].harmonic}),
-                         "holdout_rmse_mm": rms(i)}
-                        for i in ok if i != best and paired_t(sc.pose_sse - sc.pose_gain[i],
-                                                              sc.pose_sse - sc.pose_gain[best]) < T_SIMPLER]
-        decision = {"z": float(sc.z[best]), "threshold": thr, "p_value": sc.p_value(best),
-                    "candidates": len(trial), "alternatives": alternatives,
-                    "holdout_gain_interval_mm": rmse_gain_interval(cv_now.sq, cv.sq, cv.n)}
+        alternatives = [
+            {
+                "name": trial[i].name,
+                "label": trial[i].label(),
+                **({} if trial[i].joint is None else {"joint": trial[i].joint + 1}),
+                **({} if trial[i].harmonic is None else {"harmonic": trial[i].harmonic}),
+                "holdout_rmse_mm": rms(i),
+            }
+            for i in ok
+            if i != best
+            and paired_t(sc.pose_sse - sc.pose_gain[i], sc.pose_sse - sc.pose_gain[best])
+            < T_SIMPLER
+        ]
+        decision = {
+            "z": float(sc.z[best]),
+            "threshold": thr,
+            "p_value": sc.p_value(best),
+            "candidates": len(trial),
+            "alternatives": alternatives,
+            "holdout_gain_interval_mm": rmse_gain_interval(cv_now.sq, cv.sq, cv.n),
+        }
         c = trial[best]
         steps.append((cv.exts[-1], cv_now, cv, decision))
         current = current + [c if c.kind.located_in_time else cv.exts[-1]]
         # the same joint's other candidates of the same kind stay: two effects may share a joint
-        remaining = [r for r in remaining if not (r.name == c.name and r.joint == c.joint
-                                                  and r.harmonic == c.harmonic)]
+        remaining = [
+            r
+            for r in remaining
+            if not (r.name == c.name and r.joint == c.joint and r.harmonic == c.harmonic)
+        ]
         if c.kind.once:
             remaining = [r for r in remaining if r.name != c.name]
         cv_now = cv
@@ -310,15 +357,29 @@ def select(diag: Diagnoser, cands, log=None):
     return steps, base, cv_now
 
 
-def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=None,
-             base_guess=None, log=None, screen_outliers=True, pose_ids=None) -> Diagnosis:
+def diagnose(
+    robot: Robot,
+    targets,
+    target_names,
+    q,
+    meas,
+    time_s=None,
+    temp_c=None,
+    base_guess=None,
+    log=None,
+    screen_outliers=True,
+    pose_ids=None,
+) -> Diagnosis:
     """Baseline geometric calibration, candidate effects, selection and the extended model."""
     t0 = time.perf_counter()
     require_inputs(q, meas, targets, base_guess)
     clock = {}
     # gross outliers (solver.screen) are missing from here on: fits, noise floor, figures
-    screening = screen_readings(robot, targets, target_names, q, meas, time_s, temp_c,
-                                base_guess) if screen_outliers else None
+    screening = (
+        screen_readings(robot, targets, target_names, q, meas, time_s, temp_c, base_guess)
+        if screen_outliers
+        else None
+    )
     meas = meas if screening is None else screening.apply(meas)
     clock["screening"] = time.perf_counter() - t0
     prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
@@ -353,6 +414,9 @@ def diagnose(robot: Robot, targets, target_names, q, meas, time_s=None, temp_c=N
     if screening is not None:
         report["outliers"] = screening.report(pose_ids, target_names)
     report["seconds"] = {k: round(v, 3) for k, v in clock.items()}
-    report["cross_validation"] = {"folds": len(diag.folds), "fits": diag.fits,
-                                  "candidates": len(cands)}
+    report["cross_validation"] = {
+        "folds": len(diag.folds),
+        "fits": diag.fits,
+        "candidates": len(cands),
+    }
     return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors)

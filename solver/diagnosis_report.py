@@ -17,9 +17,11 @@ def parameters(ext: Extension, basis: np.ndarray | None) -> dict:
 
 def evidence(ext: Extension, p: dict, before: float, after: float, decision: dict, m: int) -> str:
     """One sentence a person can check against the figure."""
-    gain = (f"modelling it cuts the held-out RMS from {before:.4f} to {after:.4f} mm over {m} poses "
-            f"(p = {decision['p_value']:.4f} against this campaign's own null, "
-            f"{decision['candidates']} candidates tried)")
+    gain = (
+        f"modelling it cuts the held-out RMS from {before:.4f} to {after:.4f} mm over {m} poses "
+        f"(p = {decision['p_value']:.4f} against this campaign's own null, "
+        f"{decision['candidates']} candidates tried)"
+    )
     return ext.kind.evidence(ext, p, gain)
 
 
@@ -41,20 +43,33 @@ def build_report(diag, steps, base, final, exts, x, floor, n_candidates):
         if fitted.joint is not None:
             e["joint"] = fitted.joint + 1
         e.update({k: getattr(fitted, k) for k in fitted.kind.report_keys})
-        e.update(evidence=evidence(fitted, p, before.rmse, after.rmse, decision, m),
-                 holdout_rmse_before_mm=before.rmse, holdout_rmse_after_mm=after.rmse,
-                 holdout_max_before_mm=before.maxerr, holdout_max_after_mm=after.maxerr,
-                 holdout_gain_interval_mm=list(decision["holdout_gain_interval_mm"]),
-                 significance={k: decision[k] for k in ("z", "threshold", "p_value")},
-                 alternatives=decision["alternatives"], parameters=p)
+        e.update(
+            evidence=evidence(fitted, p, before.rmse, after.rmse, decision, m),
+            holdout_rmse_before_mm=before.rmse,
+            holdout_rmse_after_mm=after.rmse,
+            holdout_max_before_mm=before.maxerr,
+            holdout_max_after_mm=after.maxerr,
+            holdout_gain_interval_mm=list(decision["holdout_gain_interval_mm"]),
+            significance={k: decision[k] for k in ("z", "threshold", "p_value")},
+            alternatives=decision["alternatives"],
+            parameters=p,
+        )
         effects.append(e)
     effects.sort(key=lambda e: e["holdout_rmse_after_mm"] - e["holdout_rmse_before_mm"])
     return params, {
         "schema": 1,
         "noise_floor_mm": floor,
-        "baseline": {"model": "geometric", "holdout_rmse_mm": base.rmse, "holdout_max_mm": base.maxerr},
+        "baseline": {
+            "model": "geometric",
+            "holdout_rmse_mm": base.rmse,
+            "holdout_max_mm": base.maxerr,
+        },
         "effects": effects,
-        "final": {"model": _label(exts), "holdout_rmse_mm": final.rmse, "holdout_max_mm": final.maxerr},
+        "final": {
+            "model": _label(exts),
+            "holdout_rmse_mm": final.rmse,
+            "holdout_max_mm": final.maxerr,
+        },
         "poses": m,
         "readings": int(diag.prob.mask.sum()),
         "candidates_tested": n_candidates,
@@ -93,11 +108,20 @@ def figure_series(diag, steps, exts, x) -> list[dict]:
         xb, eb, _ = fit_extended(prob, inputs, diag.x0, diag.free, others)
         r_before = predict_extended(layout, xb, eb, inputs)[mask] - meas
         sig = _signature(ext, Jq, p, layout, x, pose, m)
-        series = {"name": ext.name, "label": ext.label(), "before": sig(r_before),
-                  "after": sig(r_after), "expected": sig(-D_res)}
+        series = {
+            "name": ext.name,
+            "label": ext.label(),
+            "before": sig(r_before),
+            "after": sig(r_after),
+            "expected": sig(-D_res),
+        }
         series.update(ext.kind.figure(ext, inputs, series["expected"]))
-        out.append({k: np.asarray(v, dtype=float) if k in ("x", "before", "after", "expected")
-                    else v for k, v in series.items()})
+        out.append(
+            {
+                k: np.asarray(v, dtype=float) if k in ("x", "before", "after", "expected") else v
+                for k, v in series.items()
+            }
+        )
     return out
 
 
@@ -110,4 +134,5 @@ def _signature(ext, Jq, p, layout, x, pose, m):
         num = np.bincount(pose, np.einsum("nc,nc->n", g, r), minlength=m)
         den = np.bincount(pose, np.einsum("nc,nc->n", g, g), minlength=m)
         return -scale * num / np.where(den > 0, den, np.nan)
+
     return sig

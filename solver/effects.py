@@ -110,7 +110,9 @@ def select_independent(B: np.ndarray, tol: float = 1e-6) -> np.ndarray:
     live = np.flatnonzero(norms > tol * max(norms.max(), 1e-300))
     if len(live) == 0:
         return keep
-    _, R, piv = qr(finite(A[:, live] / norms[live], "an effect's basis"), mode="economic", pivoting=True)
+    _, R, piv = qr(
+        finite(A[:, live] / norms[live], "an effect's basis"), mode="economic", pivoting=True
+    )
     rank = int(np.sum(np.abs(np.diag(R)) > tol * abs(R[0, 0])))
     keep[live[piv[:rank]]] = True
     return keep
@@ -132,7 +134,9 @@ def point_basis(ext: Extension, layout: Layout, x, inputs: Inputs):
 
 def prepare(ext: Extension, layout: Layout, x, inputs: Inputs) -> np.ndarray:
     """The extension's basis on this data: (m, P) for joint extensions, (m, K) for point ones."""
-    return joint_basis(ext, layout, x, inputs) if ext.is_joint else point_basis(ext, layout, x, inputs)
+    return (
+        joint_basis(ext, layout, x, inputs) if ext.is_joint else point_basis(ext, layout, x, inputs)
+    )
 
 
 def joint_offsets(exts, bases, n_joints: int) -> np.ndarray | None:

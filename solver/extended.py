@@ -43,8 +43,9 @@ def extension_rows(layout, x, exts, bases, inputs, mask, idx):
     return p + moved, np.concatenate(blocks, axis=0)
 
 
-def fit_extended(prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_iter=50,
-                 start=None):
+def fit_extended(
+    prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_iter=50, start=None
+):
     """Fit free geometric parameters and every extension's coefficients on the given poses.
 
     Returns (x, exts with fitted coef, LMResult). Bases are evaluated at x0 and held; the fit
@@ -60,8 +61,9 @@ def fit_extended(prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_
     idx = np.flatnonzero(free)
     sizes = [e.n_params for e in exts]
     x = np.array(x0 if start is None else start, dtype=float)
-    z0 = np.concatenate([x[idx]] + [np.zeros(n) if len(e.coef) != n else e.coef
-                                    for e, n in zip(exts, sizes)])
+    z0 = np.concatenate(
+        [x[idx]] + [np.zeros(n) if len(e.coef) != n else e.coef for e, n in zip(exts, sizes)]
+    )
 
     def unpack(z):
         xx = x.copy()

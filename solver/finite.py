@@ -38,8 +38,10 @@ def require_measured(what: str, meas, limit: float | None = None) -> None:
         big = np.abs(a) > limit
     if big.any():
         worst = float(np.nanmax(np.abs(a)))
-        raise NonFinite(f"{what}: a coordinate of {worst:.3g} mm is beyond {limit:.0g} mm; "
-                        "no instrument measures that far")
+        raise NonFinite(
+            f"{what}: a coordinate of {worst:.3g} mm is beyond {limit:.0g} mm; "
+            "no instrument measures that far"
+        )
 
 
 def require_inputs(q, meas, targets=None, base_guess=None) -> None:

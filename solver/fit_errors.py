@@ -62,12 +62,14 @@ def calibration_errors(cal: Calibration, q, meas) -> ParameterErrors:
     if name == "nominal":
         free = np.r_[np.arange(lay.base_slice.start, lay.base_slice.stop), smr(rows)]
     else:
-        free = np.array([i for i, n in enumerate(names)
-                         if n not in cal.fixed and i not in smr(others)], dtype=int)
+        free = np.array(
+            [i for i, n in enumerate(names) if n not in cal.fixed and i not in smr(others)],
+            dtype=int,
+        )
     column = np.full(len(names), -1)
     if name == "ls-pose":
         parts, cols = _pose_stages(cal, q, meas, mask, free)
-        column[cols[len(free):]] = np.arange(len(free), len(cols))  # the SMRs of the second stage
+        column[cols[len(free) :]] = np.arange(len(free), len(cols))  # the SMRs of the second stage
         column[free[free < ts]] = np.flatnonzero(free < ts)
     else:
         cols = np.r_[free, smr(others)].astype(int)
@@ -76,8 +78,9 @@ def calibration_errors(cal: Calibration, q, meas) -> ParameterErrors:
         sel[rows] = True
         parts = [point_rows(lay, x, q, meas, mask & sel, cols, _in(cols, free), weight)]
         if others:
-            parts.append(point_rows(lay, x, q, meas, mask & ~sel, cols, _in(cols, smr(others)),
-                                    stage=1))
+            parts.append(
+                point_rows(lay, x, q, meas, mask & ~sel, cols, _in(cols, smr(others)), stage=1)
+            )
         column[cols] = np.arange(len(cols))
     return errors_from_rows(Rows.stack(parts), names, column, angles(lay))
 
@@ -100,7 +103,9 @@ def _pose_stages(cal: Calibration, q, meas, mask, free):
     n1 = len(free)
     J1 = np.zeros((r.size, len(cols)))
     J1[:, :n1] = Jr.reshape(-1, n1)
-    first = Rows(J1, J1.copy(), r.ravel(), np.repeat(np.flatnonzero(full), 6), np.zeros(r.size, int))
+    first = Rows(
+        J1, J1.copy(), r.ravel(), np.repeat(np.flatnonzero(full), 6), np.zeros(r.size, int)
+    )
     # the second stage sees the arm's free entries and its own SMR columns, not stage one's SMRs
     arm = np.r_[free[free < lay.target_slice.start], tcols]
     second = point_rows(lay, cal.x, q, meas, mask, arm, _in(arm, tcols), stage=1)
@@ -116,7 +121,9 @@ def coef_names(exts) -> list[str]:
     return [f"{e.label()}[{i}]" for e in exts for i in range(e.n_params)]
 
 
-def extended_errors(prob: Problem, inputs: Inputs, x0, free, x, exts: list[Extension]) -> ParameterErrors:
+def extended_errors(
+    prob: Problem, inputs: Inputs, x0, free, x, exts: list[Extension]
+) -> ParameterErrors:
     """Standard errors of the extended model fitted on every pose (geometry, base, SMRs and each
     extension's coefficients), with the bases evaluated at x0 as fit_extended holds them."""
     lay = prob.layout
@@ -125,8 +132,13 @@ def extended_errors(prob: Problem, inputs: Inputs, x0, free, x, exts: list[Exten
     bases = [prepare(e, lay, x0, inputs) for e in exts]
     p, Jt = extended_rows(lay, np.asarray(x, dtype=float), exts, bases, inputs, mask, idx)
     J = Jt.reshape(Jt.shape[0], -1).T
-    rows = Rows(J, J, (p - prob.meas[mask]).ravel(), np.repeat(np.nonzero(mask)[0], 3),
-                np.zeros(len(J), int))
+    rows = Rows(
+        J,
+        J,
+        (p - prob.meas[mask]).ravel(),
+        np.repeat(np.nonzero(mask)[0], 3),
+        np.zeros(len(J), int),
+    )
     names = list(lay.names()) + coef_names(exts)
     n_coef = len(names) - lay.n_params
     column = np.r_[np.full(lay.n_params, -1), np.arange(len(idx), len(idx) + n_coef)]
@@ -148,6 +160,7 @@ def effect_uncertainty(errors: ParameterErrors, exts, i: int, basis, parameters)
         e = copy.copy(ext)
         e.coef = c
         return parameters(e, basis)
+
     return propagate(values, ext.coef, coef_covariance(errors, exts, i))
 
 
@@ -176,10 +189,14 @@ def diagnosis_errors(diag, x, exts, report: dict, params: list) -> ExtendedError
         basis = joint_basis(ext, lay, diag.x0, diag.inputs) if ext.is_joint else None
         u = effect_uncertainty(errors, exts, i, basis, parameters)
         effects.append(u)
-        e = next((e for e in report["effects"] if e.get("parameters") == p and "uncertainty" not in e),
-                 None)
+        e = next(
+            (e for e in report["effects"] if e.get("parameters") == p and "uncertainty" not in e),
+            None,
+        )
         if e is not None:
             e["uncertainty"] = u
-    coefs = [np.sqrt(np.clip(np.diag(coef_covariance(errors, exts, i)), 0.0, None)).tolist()
-             for i in range(len(exts))]
+    coefs = [
+        np.sqrt(np.clip(np.diag(coef_covariance(errors, exts, i)), 0.0, None)).tolist()
+        for i in range(len(exts))
+    ]
     return ExtendedErrors(errors, effects, coefs)

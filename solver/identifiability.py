@@ -42,8 +42,9 @@ def preference_order(layout: Layout) -> list[int]:
     """
     names = layout.names()
     geo = list(range(layout.n_geo))
-    late = [i for i in geo if names[i].startswith("d") and
-            layout.robot.parallel[int(names[i][1:]) - 1]]
+    late = [
+        i for i in geo if names[i].startswith("d") and layout.robot.parallel[int(names[i][1:]) - 1]
+    ]
     early = [i for i in geo if i not in late]
     base = list(range(layout.base_slice.start, layout.base_slice.stop))
     tgt = list(range(layout.target_slice.start, layout.target_slice.stop))
@@ -74,8 +75,10 @@ def choose_free(R: np.ndarray, order, candidates: np.ndarray, tol: float) -> np.
     live = [c for c, n in zip(cols, norms) if n > 0]
     if not live:
         return np.zeros(R.shape[1], dtype=bool)
-    s = np.linalg.svd(finite(R[:, live] / np.linalg.norm(R[:, live], axis=0),
-                             "the identification Jacobian"), compute_uv=False)
+    s = np.linalg.svd(
+        finite(R[:, live] / np.linalg.norm(R[:, live], axis=0), "the identification Jacobian"),
+        compute_uv=False,
+    )
     rank = int(np.sum(s > tol * s[0]))
     kept = np.zeros(R.shape[1], dtype=bool)
     basis = np.zeros((R.shape[0], 0))
@@ -99,9 +102,11 @@ def _explain(R: np.ndarray, j: int, kept: np.ndarray, names) -> str:
     """Name the kept parameters that the redundant column j is mostly made of."""
     idx = np.flatnonzero(kept)
     A = R[:, idx] / np.linalg.norm(R[:, idx], axis=0)
-    coef, *_ = np.linalg.lstsq(finite(A, "the identification Jacobian"),
-                              finite(R[:, j] / np.linalg.norm(R[:, j]), "a parameter's column"),
-                              rcond=None)
+    coef, *_ = np.linalg.lstsq(
+        finite(A, "the identification Jacobian"),
+        finite(R[:, j] / np.linalg.norm(R[:, j]), "a parameter's column"),
+        rcond=None,
+    )
     top = idx[np.argsort(-np.abs(coef))[:3]]
     top = [names[i] for i, c in zip(top, np.sort(-np.abs(coef))[:3]) if -c > 0.05]
     return "redundant with " + ", ".join(top) if top else "no effect on the measured SMRs"
@@ -113,7 +118,9 @@ def jacobian_rows(layout: Layout, x, q, mask) -> np.ndarray:
     return Jt.reshape(layout.n_params, -1).T
 
 
-def structural(layout: Layout, x, candidates: np.ndarray, rows=None, pose_weight=None) -> Identifiability:
+def structural(
+    layout: Layout, x, candidates: np.ndarray, rows=None, pose_weight=None
+) -> Identifiability:
     """Redundancies of the model itself, found on a rich set of random poses within the limits.
 
     Rows are the coordinates of the SMRs in `rows` (default all) or, with pose_weight, the
@@ -123,8 +130,14 @@ def structural(layout: Layout, x, candidates: np.ndarray, rows=None, pose_weight
     rows = tuple(range(K)) if rows is None else tuple(rows)
     targets = tuple(np.round(layout.targets(x), 3).ravel())
     weight = None if pose_weight is None else round(float(pose_weight), 6)
-    return _structural(layout.robot, layout.target_names, targets,
-                       np.asarray(candidates, dtype=bool).tobytes(), rows, weight)
+    return _structural(
+        layout.robot,
+        layout.target_names,
+        targets,
+        np.asarray(candidates, dtype=bool).tobytes(),
+        rows,
+        weight,
+    )
 
 
 @lru_cache(maxsize=64)
@@ -167,7 +180,8 @@ def check_data(A: np.ndarray, free: np.ndarray, names, n_rows: int, n_poses: int
     if n_rows < len(idx):
         raise NotIdentifiable(
             f"{n_poses} poses give {n_rows} equations for {len(idx)} parameters: "
-            f"measure at least {int(np.ceil(len(idx) / max(1, n_rows // max(n_poses, 1))))} poses")
+            f"measure at least {int(np.ceil(len(idx) / max(1, n_rows // max(n_poses, 1))))} poses"
+        )
     norms = np.sqrt(np.diag(A))
     if not norms.all():
         dead = [names[i] for i, n in zip(idx, norms) if n == 0]
@@ -182,7 +196,8 @@ def check_data(A: np.ndarray, free: np.ndarray, names, n_rows: int, n_poses: int
         worst = [names[idx[i]] for i in np.argsort(-score)[:4] if score[i] > 0.2]
         raise NotIdentifiable(
             f"the poses cannot separate {', '.join(worst)} (condition number {cond:.3g}): "
-            "measure more poses, spread over the joint ranges")
+            "measure more poses, spread over the joint ranges"
+        )
     return cond
 
 

@@ -115,7 +115,10 @@ class SumOfSquares:
     def near(self, za, zb) -> bool:
         """The Jacobian at za stands for the one at zb: it changes by ~1e-4 of itself in between."""
         dz = np.abs(np.asarray(zb) - np.asarray(za))
-        return dz[self.angle].max(initial=0.0) <= NEAR_RAD and dz[~self.angle].max(initial=0.0) <= NEAR_MM
+        return (
+            dz[self.angle].max(initial=0.0) <= NEAR_RAD
+            and dz[~self.angle].max(initial=0.0) <= NEAR_MM
+        )
 
     def full(self, z) -> np.ndarray:
         x = self.x0.copy()
@@ -136,7 +139,7 @@ class SumOfSquares:
         the poses there, if they identify the free parameters well; whether it moved."""
         As, gs, d = scaled(ne.A, ne.g)
         w = np.linalg.eigvalsh(finite(As, "the normal matrix"))
-        if w[0] <= w[-1] / START_CONDITION ** 2:
+        if w[0] <= w[-1] / START_CONDITION**2:
             return False
         self.x0[self.idx] += damped_step(As, gs, d)
         return True
@@ -151,9 +154,15 @@ class SumOfSquares:
             prob = self.prob
             subset = PointNormal(prob.layout, prob.q[sub], self.mask[sub], prob.meas[sub], self.idx)
             self.start = {"poses": len(subset.q), "stepped": self.step_from(subset(self.x0))}
-        res = levenberg_marquardt(None, self.x0[self.idx], normal=self.normal, first=first,
-                                  residual=lambda z: self.points.residual(self.full(z)),
-                                  max_iter=max_iter, near=self.near)
+        res = levenberg_marquardt(
+            None,
+            self.x0[self.idx],
+            normal=self.normal,
+            first=first,
+            residual=lambda z: self.points.residual(self.full(z)),
+            max_iter=max_iter,
+            near=self.near,
+        )
         return self.full(res.x), res
 
 
@@ -167,7 +176,9 @@ def start_fit(robot: Robot, targets, names, q, meas, free, rows=None, base_guess
     taken once, there.
     """
     q, meas = np.asarray(q, dtype=float), np.asarray(meas, dtype=float)
-    lay = Layout(robot, np.eye(4) if base_guess is None else np.asarray(base_guess, float), tuple(names))
+    lay = Layout(
+        robot, np.eye(4) if base_guess is None else np.asarray(base_guess, float), tuple(names)
+    )
     x0 = lay.initial(targets)
     mask = selected(np.all(np.isfinite(meas), axis=-1), rows)
     sub = start_poses(len(q))

@@ -55,10 +55,17 @@ def layout_shape(robot: Robot, target_names: tuple[str, ...]):
     """A layout's geometric parameter count, parameter names and elementary motions (cached:
     layouts are made for every fit and rebasing)."""
     n_geo = len(robot.param_names())
-    names = tuple(robot.param_names() + list(BASE_NAMES)
-                  + [f"{t}_{c}" for t in target_names for c in "xyz"])
-    base = (Op("t", 0, n_geo), Op("t", 1, n_geo + 1), Op("t", 2, n_geo + 2),
-            Op("r", 2, n_geo + 3), Op("r", 1, n_geo + 4), Op("r", 0, n_geo + 5))
+    names = tuple(
+        robot.param_names() + list(BASE_NAMES) + [f"{t}_{c}" for t in target_names for c in "xyz"]
+    )
+    base = (
+        Op("t", 0, n_geo),
+        Op("t", 1, n_geo + 1),
+        Op("t", 2, n_geo + 2),
+        Op("r", 2, n_geo + 3),
+        Op("r", 1, n_geo + 4),
+        Op("r", 0, n_geo + 5),
+    )
     return n_geo, names, base + joint_ops(robot)
 
 
@@ -282,4 +289,4 @@ def predict_rows(layout: Layout, x, q, mask, cols, dq=None, joint_cols=False):
     else:
         p, Jf = full[mask], Jf[:, mask]
     Jt = Jf[: len(cols)]
-    return (p, Jt, Jf[len(cols):]) if joint_cols else (p, Jt)
+    return (p, Jt, Jf[len(cols) :]) if joint_cols else (p, Jt)

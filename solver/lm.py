@@ -76,8 +76,12 @@ def scaled(A: np.ndarray, g: np.ndarray):
 
 def damped_step(As: np.ndarray, gs: np.ndarray, d: np.ndarray, lam: float = LAMBDA0) -> np.ndarray:
     """The Levenberg-Marquardt step -(A + lam diag(A))^-1 g from scaled(A, g)."""
-    return -np.linalg.solve(finite(As + lam * np.eye(len(d)), "the normal equations"),
-                            finite(gs, "the gradient")) / d
+    return (
+        -np.linalg.solve(
+            finite(As + lam * np.eye(len(d)), "the normal equations"), finite(gs, "the gradient")
+        )
+        / d
+    )
 
 
 def near_by_cost(cost_at_jacobian: float, cost: float) -> bool:
@@ -85,8 +89,17 @@ def near_by_cost(cost_at_jacobian: float, cost: float) -> bool:
     return cost_at_jacobian - cost <= NEAR * cost_at_jacobian
 
 
-def levenberg_marquardt(fun, x0, residual=None, max_iter=100, ftol=1e-8, xtol=1e-12,
-                        normal=None, first: Normal | None = None, near=None) -> LMResult:
+def levenberg_marquardt(
+    fun,
+    x0,
+    residual=None,
+    max_iter=100,
+    ftol=1e-8,
+    xtol=1e-12,
+    normal=None,
+    first: Normal | None = None,
+    near=None,
+) -> LMResult:
     """Minimise ||r(x)||^2.
 
     Either fun(x) -> (r, Jt) or normal(x) -> Normal; residual(x) -> r evaluates a trial step

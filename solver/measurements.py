@@ -39,12 +39,24 @@ class Measurements:
         if idx.dtype == bool:
             idx = np.flatnonzero(idx)
         pick = lambda a: None if a is None else a[idx]  # noqa: E731
-        return Measurements([self.pose_ids[i] for i in idx], self.q[idx], self.target_names,
-                            self.xyz[idx], pick(self.time_s), pick(self.temp_c))
+        return Measurements(
+            [self.pose_ids[i] for i in idx],
+            self.q[idx],
+            self.target_names,
+            self.xyz[idx],
+            pick(self.time_s),
+            pick(self.temp_c),
+        )
 
     def select_targets(self, names) -> Measurements:
         """The campaign keeping only the named targets."""
         cols = [self.target_names.index(n) for n in names]
         pick = lambda a: None if a is None else a[:, cols]  # noqa: E731
-        return Measurements(list(self.pose_ids), self.q, tuple(names), self.xyz[:, cols],
-                            pick(self.time_s), pick(self.temp_c))
+        return Measurements(
+            list(self.pose_ids),
+            self.q,
+            tuple(names),
+            self.xyz[:, cols],
+            pick(self.time_s),
+            pick(self.temp_c),
+        )

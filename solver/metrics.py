@@ -135,8 +135,13 @@ def stats(values) -> dict:
     v = v[np.isfinite(v)]
     n = int(v.size)
     if n == 0:
-        return {"mean": float("nan"), "std": float("nan"), "max": float("nan"),
-                "rms": float("nan"), "n": 0}
+        return {
+            "mean": float("nan"),
+            "std": float("nan"),
+            "max": float("nan"),
+            "rms": float("nan"),
+            "n": 0,
+        }
     return {
         "mean": float(v.mean()),
         "std": float(v.std(ddof=1)) if n > 1 else float("nan"),

@@ -122,8 +122,9 @@ def _merit(F, c, rho):
     return float(np.max(F) + rho * np.sum(np.maximum(c, 0.0)))
 
 
-def minimax(prob: Problem, x0, free, rows=None, qp="primal-dual", epsilon=None,
-            max_iter=100, tol=1e-10) -> MinimaxResult:
+def minimax(
+    prob: Problem, x0, free, rows=None, qp="primal-dual", epsilon=None, max_iter=100, tol=1e-10
+) -> MinimaxResult:
     """SQP on the epigraph form (eq. 16-18) from x0 (the ls-sum solution, eq. 32).
 
     The Hessian starts at the Gauss-Newton Hessian of the Lagrangian with equal SMR weights
@@ -180,5 +181,6 @@ def minimax(prob: Problem, x0, free, rows=None, qp="primal-dual", epsilon=None,
         if sHs > 0 and sy > 0:
             H = H + np.outer(y, y) / sy - np.outer(Hs, Hs) / sHs
         history.append(float(np.max(F)))
-    return MinimaxResult(obj.x(z), F, history, it, qp_iters, time.perf_counter() - t0,
-                         lam, mu, converged, message, c)
+    return MinimaxResult(
+        obj.x(z), F, history, it, qp_iters, time.perf_counter() - t0, lam, mu, converged, message, c
+    )

@@ -43,7 +43,9 @@ def _pass(ops, x, q, where: dict, M: np.ndarray, U: np.ndarray | None) -> None:
     xs = np.asarray(x, dtype=float).tolist()
     moving = [op for op in ops if op.joint >= 0]
     if moving:
-        amount = q.T[[op.joint for op in moving]] + np.array([xs[op.param] for op in moving])[:, None]
+        amount = (
+            q.T[[op.joint for op in moving]] + np.array([xs[op.param] for op in moving])[:, None]
+        )
         cos, sin = np.cos(amount), np.sin(amount)
         row = {id(op): i for i, op in enumerate(moving)}
     for op in reversed(ops):
@@ -163,8 +165,13 @@ class PointNormal:
         codes = self.mask @ (1 << np.arange(K))
         full = (1 << K) - 1
         self.full = codes == full
-        self.partial = [] if self.full.all() else [
-            (self.mask[codes == c][0], codes == c) for c in np.unique(codes) if c and c != full]
+        self.partial = (
+            []
+            if self.full.all()
+            else [
+                (self.mask[codes == c][0], codes == c) for c in np.unique(codes) if c and c != full
+            ]
+        )
         self.n_k = self.mask.sum(axis=0)
         # each SMR column's target and axis
         self.tk_k, self.tk_ax = np.divmod(self.tcols - ts, 3)
@@ -236,7 +243,9 @@ class PointNormal:
         Usum = np.zeros((len(tc), 6, ng))  # per SMR, the sum of U over the poses that measured it
         if self.full.any():
             Uf = U if self.full.all() else U[:, :, self.full]
-            C = dsyrk(1.0, finite(Uf.reshape(ng + 1, -1).T, "the twists"), trans=1)  # fills the upper triangle only
+            C = dsyrk(
+                1.0, finite(Uf.reshape(ng + 1, -1).T, "the twists"), trans=1
+            )  # fills the upper triangle only
             C += C.T
             C.flat[:: ng + 2] *= 0.5
             A += C[:ng, :ng]
@@ -250,7 +259,9 @@ class PointNormal:
             g += Us.reshape(ng, -1) @ b[:, sel].ravel()
             Usum[present] += Us.sum(axis=2).T * inv[:, None]
         A, g = self._with_targets(A, g, tc, start, Usum, rho)
-        return Normal(float(np.einsum("ikm,ikm->", r, r)), A, g, _Jt(self, tc, start, R, U[:ng], inv))
+        return Normal(
+            float(np.einsum("ikm,ikm->", r, r)), A, g, _Jt(self, tc, start, R, U[:ng], inv)
+        )
 
     def _with_targets(self, A, g, tc, start, Usum, rho):
         """Add the SMR columns (identity in the flange frame) and order as the caller's cols."""
@@ -261,8 +272,9 @@ class PointNormal:
         gg[:ng] = g
         V = start[:, :3]
         # row (k, ax): sum over poses of c' (v + w x t_k) with c = V[ax], the flange axis in the SMR frame
-        rows = (np.einsum("kic,ai->kac", Usum[:, :3], V)
-                + np.einsum("kic,kai->kac", Usum[:, 3:], np.einsum("ijl,kj,al->kai", LEVI, tc, V)))
+        rows = np.einsum("kic,ai->kac", Usum[:, :3], V) + np.einsum(
+            "kic,kai->kac", Usum[:, 3:], np.einsum("ijl,kj,al->kai", LEVI, tc, V)
+        )
         k, ax = self.tk_k, self.tk_ax
         j = np.arange(ng, ng + nt)
         full[j, j] = self.n_k[k]

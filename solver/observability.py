@@ -54,8 +54,7 @@ def _scores(criterion: str, M: np.ndarray, J: np.ndarray, A: np.ndarray) -> np.n
     return _log_det(M[None])[0] + _log_det(S)
 
 
-def select_poses(J_per_pose: np.ndarray, k: int, criterion: str = "D",
-                 progress=None) -> np.ndarray:
+def select_poses(J_per_pose: np.ndarray, k: int, criterion: str = "D", progress=None) -> np.ndarray:
     """Sorted indices of k poses maximising "D" (log det J'J) or "O5": greedy + Fedorov exchange;
     progress(fraction) after each greedy pick and exchange sweep, if given."""
     # O5 = sigma_min^2 / sigma_max, Nahvi & Nahvi's noise-amplification index. Columns get unit

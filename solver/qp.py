@@ -51,7 +51,9 @@ def primal_dual(H, g, F, phi, A, c, tol=1e-10, max_iter=20000) -> QPSolution:
     G = np.vstack([g, A])
     b = np.concatenate([F - phi, c])
     chol = np.linalg.cholesky(finite(H, "the QP's Hessian"))
-    W = np.linalg.solve(chol, finite(G.T, "the QP's constraints"))  # H^-1 = chol^-T chol^-1, so G H^-1 G' = W' W
+    W = np.linalg.solve(
+        chol, finite(G.T, "the QP's constraints")
+    )  # H^-1 = chol^-T chol^-1, so G H^-1 G' = W' W
     Q = W.T @ W
     # Rescaling a constraint row leaves the QP unchanged and evens out the dual's curvature.
     s = np.ones(K + L)
@@ -100,8 +102,14 @@ def exact(H, g, F, phi, A, c) -> QPSolution:
     qv[n] = 1.0
     Gi = np.vstack([np.hstack([g, -np.ones((K, 1))]), np.hstack([A, np.zeros((L, 1))])])
     hi = np.concatenate([phi - F, -c])
-    sol = solve_problem(Problem(csc_matrix(P), qv, csc_matrix(Gi), hi), solver="clarabel", verbose=False,
-                        tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
+    sol = solve_problem(
+        Problem(csc_matrix(P), qv, csc_matrix(Gi), hi),
+        solver="clarabel",
+        verbose=False,
+        tol_gap_abs=1e-12,
+        tol_gap_rel=1e-12,
+        tol_feas=1e-12,
+    )
     if not sol.found:
         raise RuntimeError("the QP solver found no solution of the SQP subproblem")
     dx = sol.x[:n]

@@ -111,32 +111,45 @@ def detect_parallel(convention: str, joints) -> tuple[bool, ...]:
 def robot_from_degrees(name: str, convention: str, rows) -> Robot:
     """A robot from rows of (a, d, theta_deg, alpha_deg, (lo_deg, hi_deg))."""
     joints = tuple(
-        Joint(a=float(a), d=float(d), theta=np.deg2rad(t), alpha=np.deg2rad(al),
-              limits=(np.deg2rad(lim[0]), np.deg2rad(lim[1])))
+        Joint(
+            a=float(a),
+            d=float(d),
+            theta=np.deg2rad(t),
+            alpha=np.deg2rad(al),
+            limits=(np.deg2rad(lim[0]), np.deg2rad(lim[1])),
+        )
         for a, d, t, al, lim in rows
     )
     return Robot(name, convention, joints)
 
 
 # The seed paper's Table 2 (standard DH, mm and degrees); limits from ABB's IRB 2600 data sheet.
-IRB2600 = robot_from_degrees("irb2600", "dh", [
-    (150.0, 445.0, 0.0, -90.0, (-180.0, 180.0)),
-    (900.0, 0.0, -90.0, 0.0, (-95.0, 155.0)),
-    (150.0, 0.0, 0.0, -90.0, (-180.0, 75.0)),
-    (0.0, 938.0, 0.0, 90.0, (-400.0, 400.0)),
-    (0.0, 0.0, 180.0, 90.0, (-120.0, 120.0)),
-    (0.0, 200.0, 0.0, 0.0, (-400.0, 400.0)),
-])
+IRB2600 = robot_from_degrees(
+    "irb2600",
+    "dh",
+    [
+        (150.0, 445.0, 0.0, -90.0, (-180.0, 180.0)),
+        (900.0, 0.0, -90.0, 0.0, (-95.0, 155.0)),
+        (150.0, 0.0, 0.0, -90.0, (-180.0, 75.0)),
+        (0.0, 938.0, 0.0, 90.0, (-400.0, 400.0)),
+        (0.0, 0.0, 180.0, 90.0, (-120.0, 120.0)),
+        (0.0, 200.0, 0.0, 0.0, (-400.0, 400.0)),
+    ],
+)
 
 # Standard DH, KUKA KR 16-like proportions; axes 2 and 3 parallel (the tests' and the suite's
 # second geometry, not a built-in cell).
-KUKA_LIKE = robot_from_degrees("kuka-like", "dh", [
-    (260.0, 675.0, 0.0, -90.0, (-185.0, 185.0)),
-    (680.0, 0.0, -90.0, 0.0, (-65.0, 140.0)),
-    (35.0, 0.0, 0.0, -90.0, (-210.0, 66.0)),
-    (0.0, 670.0, 0.0, 90.0, (-350.0, 350.0)),
-    (0.0, 0.0, 0.0, -90.0, (-130.0, 130.0)),
-    (0.0, 158.0, 0.0, 0.0, (-350.0, 350.0)),
-])
+KUKA_LIKE = robot_from_degrees(
+    "kuka-like",
+    "dh",
+    [
+        (260.0, 675.0, 0.0, -90.0, (-185.0, 185.0)),
+        (680.0, 0.0, -90.0, 0.0, (-65.0, 140.0)),
+        (35.0, 0.0, 0.0, -90.0, (-210.0, 66.0)),
+        (0.0, 670.0, 0.0, 90.0, (-350.0, 350.0)),
+        (0.0, 0.0, 0.0, -90.0, (-130.0, 130.0)),
+        (0.0, 158.0, 0.0, 0.0, (-350.0, 350.0)),
+    ],
+)
 
 BUILTIN = {"irb2600": IRB2600}

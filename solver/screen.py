@@ -48,8 +48,12 @@ class Screening:
     """Readings judged gross and the figures behind the judgement."""
 
     excluded: np.ndarray  # (m, K) bool
-    residual_mm: np.ndarray  # (m, K) |geometric residual| under the fit without the excluded, NaN if missing
-    evidence: dict = field(default_factory=dict)  # (pose, target) -> "distance" | "within-pose" | "geometric"
+    residual_mm: (
+        np.ndarray
+    )  # (m, K) |geometric residual| under the fit without the excluded, NaN if missing
+    evidence: dict = field(
+        default_factory=dict
+    )  # (pose, target) -> "distance" | "within-pose" | "geometric"
     scales_mm: dict = field(default_factory=dict)
     thresholds: dict = field(default_factory=dict)
     rounds: int = 0
@@ -73,23 +77,37 @@ class Screening:
             pid = pose_ids[p] if pose_ids is not None else p + 1
             if isinstance(pid, str) and pid.lstrip("-").isdigit():
                 pid = int(pid)
-            out.append({"pose": pid, "target": target_names[k] if target_names is not None else k,
-                        "residual_mm": round(res, 4), "evidence": why})
+            out.append(
+                {
+                    "pose": pid,
+                    "target": target_names[k] if target_names is not None else k,
+                    "residual_mm": round(res, 4),
+                    "evidence": why,
+                }
+            )
         return out
 
     def summary(self) -> dict:
         """Counts, scales and thresholds, for a model's fit statistics."""
         if self.skipped:
             return {"readings_excluded": 0, "skipped": self.skipped}
-        return {"readings_excluded": self.count, "rounds": self.rounds,
-                "scales_mm": {k: round(v, 5) for k, v in self.scales_mm.items() if np.isfinite(v)},
-                "thresholds": {k: round(v, 3) for k, v in self.thresholds.items()
-                               if np.isfinite(self.scales_mm.get(k, np.nan))}}
+        return {
+            "readings_excluded": self.count,
+            "rounds": self.rounds,
+            "scales_mm": {k: round(v, 5) for k, v in self.scales_mm.items() if np.isfinite(v)},
+            "thresholds": {
+                k: round(v, 3)
+                for k, v in self.thresholds.items()
+                if np.isfinite(self.scales_mm.get(k, np.nan))
+            },
+        }
 
     def listing(self) -> list[tuple[int, int, float, str]]:
         """(pose index, target index, residual mm, evidence) per excluded reading, largest first."""
-        rows = [(int(p), int(k), float(self.residual_mm[p, k]), self.evidence.get((p, k), ""))
-                for p, k in zip(*np.nonzero(self.excluded))]
+        rows = [
+            (int(p), int(k), float(self.residual_mm[p, k]), self.evidence.get((p, k), ""))
+            for p, k in zip(*np.nonzero(self.excluded))
+        ]
         return sorted(rows, key=lambda r: -r[2])
 
 
@@ -99,8 +117,9 @@ def robust_scale(z: np.ndarray, per_value_q50: float, per_value_q: float) -> flo
     a = np.abs(z[np.isfinite(z)])
     if a.size == 0:
         return float("nan")
-    return float(max(np.median(a) / per_value_q50, np.quantile(a, TAIL_Q) / per_value_q,
-                     RESOLUTION_MM))
+    return float(
+        max(np.median(a) / per_value_q50, np.quantile(a, TAIL_Q) / per_value_q, RESOLUTION_MM)
+    )
 
 
 def _scale_1d(z):
@@ -128,7 +147,11 @@ def distance_residuals(meas, keep, time_s=None, temp_c=None) -> dict:
                 A, cols = A[:, :1], cols[:1]
             if ok.sum() < 3:
                 continue
-            coef, *_ = np.linalg.lstsq(finite(A[ok], "the screening's drift design"), finite(d[ok], "the screening's distances"), rcond=None)
+            coef, *_ = np.linalg.lstsq(
+                finite(A[ok], "the screening's drift design"),
+                finite(d[ok], "the screening's distances"),
+                rcond=None,
+            )
             out[(i, j)] = d - A @ coef
     return out
 
@@ -162,19 +185,27 @@ class _Judge:
         n_pairs = sum(int(np.isfinite(e).sum()) for e in self.dist.values())
         # a pose can leave one reading to the geometric test: a single one, or the last one left
         n_single = int((counts >= 1).sum())
-        kinds = [k for k, n in (("within", n_multi), ("distance", n_pairs), ("geometric", n_single))
-                 if n > 0]
+        kinds = [
+            k
+            for k, n in (("within", n_multi), ("distance", n_pairs), ("geometric", n_single))
+            if n > 0
+        ]
         a = alpha / max(len(kinds), 1)
         chi3 = stats.chi(3)
-        self.T = {"within": float(chi3.isf(a / max(n_multi, 1))),
-                  "distance": float(stats.norm.isf(a / (2 * max(n_pairs, 1)))),
-                  # the arm's own error at a pose may lie along a single direction (with all of
-                  # the three axes' variance): the worst case for a 3-D norm, a 1-D Gaussian
-                  "geometric": float(np.sqrt(3.0) * stats.norm.isf(a / (2 * max(n_single, 1))))}
-        self.s = {"within": _scale_1d(self.w[self.have].ravel()),
-                  "distance": _scale_1d(np.concatenate([e for e in self.dist.values()]))
-                  if self.dist else float("nan"),
-                  "geometric": _scale_1d(self.rs[self.have].ravel())}
+        self.T = {
+            "within": float(chi3.isf(a / max(n_multi, 1))),
+            "distance": float(stats.norm.isf(a / (2 * max(n_pairs, 1)))),
+            # the arm's own error at a pose may lie along a single direction (with all of
+            # the three axes' variance): the worst case for a 3-D norm, a 1-D Gaussian
+            "geometric": float(np.sqrt(3.0) * stats.norm.isf(a / (2 * max(n_single, 1)))),
+        }
+        self.s = {
+            "within": _scale_1d(self.w[self.have].ravel()),
+            "distance": _scale_1d(np.concatenate([e for e in self.dist.values()]))
+            if self.dist
+            else float("nan"),
+            "geometric": _scale_1d(self.rs[self.have].ravel()),
+        }
 
     def ratio_within(self, p, k, S) -> float:
         """How far reading k of pose p stands from its mates S (excluding k), over the threshold."""
@@ -183,8 +214,11 @@ class _Judge:
             return 0.0
         w = (self.r[p, k] - self.r[p, mates].mean(axis=0)) / np.sqrt(1.0 + 1.0 / len(mates))
         zw = np.linalg.norm(w) / self.s["within"] / self.T["within"]
-        zd = min(abs(self._pair(p, k, j)) for j in mates) / self.s["distance"] / self.T["distance"] \
-            if self.dist else 0.0
+        zd = (
+            min(abs(self._pair(p, k, j)) for j in mates) / self.s["distance"] / self.T["distance"]
+            if self.dist
+            else 0.0
+        )
         return float(max(zw, zd))
 
     def _pair(self, p, i, j) -> float:
@@ -208,9 +242,17 @@ class _Judge:
             def cost(k):
                 rest = [j for j in S if j != k]
                 return (self.worst(p, rest) > 1.0, -self.geometric(p, k))
+
             k = min(S, key=cost)
-            zd = (min(abs(self._pair(p, k, j)) for j in S if j != k) / self.s["distance"]
-                  / self.T["distance"]) if self.dist else 0.0
+            zd = (
+                (
+                    min(abs(self._pair(p, k, j)) for j in S if j != k)
+                    / self.s["distance"]
+                    / self.T["distance"]
+                )
+                if self.dist
+                else 0.0
+            )
             out[k] = "distance" if zd > 1.0 else "within-pose"
             S.remove(k)
         if len(S) == 1 and self.geometric(p, S[0]) > self.T["geometric"]:
@@ -253,9 +295,14 @@ def screen(fit, q, meas, time_s=None, temp_c=None, alpha=ALPHA, max_rounds=MAX_R
         excluded, evidence = new, ev
     else:  # the set still moved on the last round: residuals of the set kept
         r, _ = residuals()
-    return Screening(excluded, np.linalg.norm(r, axis=-1), evidence,
-                     {k: float(v) for k, v in judge.s.items()},
-                     {k: float(v) for k, v in judge.T.items()}, rounds)
+    return Screening(
+        excluded,
+        np.linalg.norm(r, axis=-1),
+        evidence,
+        {k: float(v) for k, v in judge.s.items()},
+        {k: float(v) for k, v in judge.T.items()},
+        rounds,
+    )
 
 
 def leverage(J: np.ndarray) -> np.ndarray:
@@ -274,18 +321,22 @@ def geometric_fit(robot, targets, target_names, q, base_guess=None):
     from .kinematics import predict
 
     def fit(meas):
-        cal = calibrate(robot, targets, target_names, q, meas, method="ls-sum",
-                        base_guess=base_guess)
+        cal = calibrate(
+            robot, targets, target_names, q, meas, method="ls-sum", base_guess=base_guess
+        )
         mask = np.all(np.isfinite(meas), axis=-1)
         lev = np.zeros(mask.shape)
         lev[mask] = leverage(jacobian_rows(cal.layout, cal.x, q, mask))
         return predict(cal.layout, cal.x, q), lev
+
     return fit
 
 
-def screen_readings(robot, targets, target_names, q, meas, time_s=None, temp_c=None,
-                    base_guess=None, alpha=ALPHA) -> Screening:
+def screen_readings(
+    robot, targets, target_names, q, meas, time_s=None, temp_c=None, base_guess=None, alpha=ALPHA
+) -> Screening:
     """Screen a campaign with the geometric (ls-sum) model: the one call the commands make."""
     require_inputs(q, meas, targets, base_guess)
-    return screen(geometric_fit(robot, targets, target_names, q, base_guess), q, meas,
-                  time_s, temp_c, alpha)
+    return screen(
+        geometric_fit(robot, targets, target_names, q, base_guess), q, meas, time_s, temp_c, alpha
+    )

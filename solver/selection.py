@@ -71,10 +71,18 @@ class Scores:
         return float((1 + np.sum(self.null_max >= self.z[c])) / (1 + len(self.null_max)))
 
 
-def linear_scores(A: np.ndarray, r: np.ndarray, blocks: list[np.ndarray], pose_of_row: np.ndarray,
-                  folds: list[np.ndarray], m: int, resamples: int = RESAMPLES,
-                  seed: int = 0, scans: dict | None = None,
-                  null_residual: np.ndarray | None = None) -> Scores:
+def linear_scores(
+    A: np.ndarray,
+    r: np.ndarray,
+    blocks: list[np.ndarray],
+    pose_of_row: np.ndarray,
+    folds: list[np.ndarray],
+    m: int,
+    resamples: int = RESAMPLES,
+    seed: int = 0,
+    scans: dict | None = None,
+    null_residual: np.ndarray | None = None,
+) -> Scores:
     """Cross-validated gains of candidate column blocks over the current model's columns A.
 
     A (rows, P) and r (rows,) are the current model's Jacobian and residual (prediction minus
@@ -139,10 +147,14 @@ def linear_scores(A: np.ndarray, r: np.ndarray, blocks: list[np.ndarray], pose_o
         e0_obs = r[test_rows] - Js[:, a] @ coefA[:, 0]
         fresh[test_rows] = e0_obs
         s2 = (rr.sum() - rr[test_poses].sum() - coefA[:, 0] @ X_T[a, 0]) / max(
-            np.count_nonzero(~test_rows) - len(coefA), 1)  # training residual variance
+            np.count_nonzero(~test_rows) - len(coefA), 1
+        )  # training residual variance
         pick = 0.0
-        sse_fold = (squares(test_poses) - 2.0 * np.sum(coefA * X_S[a], axis=0)
-                    + np.sum(coefA * (JJ_S[a, a] @ coefA), axis=0))
+        sse_fold = (
+            squares(test_poses)
+            - 2.0 * np.sum(coefA * X_S[a], axis=0)
+            + np.sum(coefA * (JJ_S[a, a] @ coefA), axis=0)
+        )
         sse += sse_fold
         pose_sse += np.bincount(pose_of_row[test_rows], e0_obs**2, minlength=m)
         for c in range(C):
@@ -161,24 +173,44 @@ def linear_scores(A: np.ndarray, r: np.ndarray, blocks: list[np.ndarray], pose_o
             merit = (X_T[b, 0] - M.T @ X_T[a, 0]) @ beta[:, 0] - 2.0 * (b.stop - b.start) * s2
             if merit > pick:
                 pick, fresh[test_rows] = merit, e0_obs - step
-            pose_gain[c] += np.bincount(pose_of_row[test_rows], 2.0 * e0_obs * step - step * step,
-                                        minlength=m)
+            pose_gain[c] += np.bincount(
+                pose_of_row[test_rows], 2.0 * e0_obs * step - step * step, minlength=m
+            )
     # log of the cross-validated error ratio: free of the residuals' scale, so the null's residual
     # need only have the campaign's shape of error, not its size
     lr = np.log(sse / np.maximum(sse - gain, 1e-12 * sse))
     for c, (Z, order) in (scans or {}).items():
-        lr[c] = _split_scan(J[:, a], Z, r, r0, starts, poses, order, X_all[a], JJ_all[a, a],
-                            squares(np.arange(m)), signs)
+        lr[c] = _split_scan(
+            J[:, a],
+            Z,
+            r,
+            r0,
+            starts,
+            poses,
+            order,
+            X_all[a],
+            JJ_all[a, a],
+            squares(np.arange(m)),
+            signs,
+        )
     null = lr[:, 1:]
     if resamples == 0:
-        return Scores(float(sse[0]), pose_sse, gain[:, 0], pose_gain, np.full(C, np.nan),
-                      np.zeros(0), fresh)
+        return Scores(
+            float(sse[0]), pose_sse, gain[:, 0], pose_gain, np.full(C, np.nan), np.zeros(0), fresh
+        )
     mu = null.mean(axis=1, keepdims=True)
     sd = null.std(axis=1, keepdims=True)
     sd[sd <= 0] = np.inf
     z_all = (lr - mu) / sd
-    return Scores(float(sse[0]), pose_sse, gain[:, 0], pose_gain, z_all[:, 0],
-                  z_all[:, 1:].max(axis=0) if C else np.zeros(resamples), fresh)
+    return Scores(
+        float(sse[0]),
+        pose_sse,
+        gain[:, 0],
+        pose_gain,
+        z_all[:, 0],
+        z_all[:, 1:].max(axis=0) if C else np.zeros(resamples),
+        fresh,
+    )
 
 
 EDGE_POSES = 5  # a split leaves at least this many poses on either side
@@ -203,8 +235,9 @@ def _split_scan(A, Z, r, r0, starts, poses, order, XA, AA, rr_total, signs):
     AA_inv = _pinv_sym(AA)
     H = AA_inv @ XA
     rss0 = rr_total - np.sum(XA * H, axis=0)
-    per = np.concatenate([Zr[order][:, :, None], Z0[order][:, :, None] * signs[order][:, None, :]],
-                         axis=2)
+    per = np.concatenate(
+        [Zr[order][:, :, None], Z0[order][:, :, None] * signs[order][:, None, :]], axis=2
+    )
     sZr = np.cumsum(per[::-1], axis=0)[::-1]
     sZA = np.cumsum(ZA[order][::-1], axis=0)[::-1]
     sZZ = np.cumsum(ZZ[order][::-1], axis=0)[::-1]
@@ -225,14 +258,22 @@ def paired_t(a: np.ndarray, b: np.ndarray) -> float:
     return float(d.mean() / (sd / np.sqrt(len(d))))
 
 
-def rmse_gain_interval(sq_before: np.ndarray, sq_after: np.ndarray, n: np.ndarray,
-                       level: float = 0.95, resamples: int = 2000, seed: int = 0):
+def rmse_gain_interval(
+    sq_before: np.ndarray,
+    sq_after: np.ndarray,
+    n: np.ndarray,
+    level: float = 0.95,
+    resamples: int = 2000,
+    seed: int = 0,
+):
     """Bootstrap interval over poses of the held-out RMS gain (before minus after), mm."""
     rng = np.random.default_rng(seed)
     m = len(n)
     idx = rng.integers(0, m, size=(resamples, m))
     nn = n[idx].sum(axis=1)
     ok = nn > 0
-    g = np.sqrt(sq_before[idx].sum(axis=1)[ok] / nn[ok]) - np.sqrt(sq_after[idx].sum(axis=1)[ok] / nn[ok])
+    g = np.sqrt(sq_before[idx].sum(axis=1)[ok] / nn[ok]) - np.sqrt(
+        sq_after[idx].sum(axis=1)[ok] / nn[ok]
+    )
     lo, hi = np.quantile(g, [(1 - level) / 2, (1 + level) / 2])
     return float(lo), float(hi)

@@ -41,8 +41,12 @@ class Rows:
     def stack(parts: list[Rows]) -> Rows:
         if len(parts) == 1:
             return parts[0]
-        return Rows(*(np.concatenate([getattr(p, k) for p in parts])
-                      for k in ("J", "G", "r", "pose", "stage")))
+        return Rows(
+            *(
+                np.concatenate([getattr(p, k) for p in parts])
+                for k in ("J", "G", "r", "pose", "stage")
+            )
+        )
 
 
 def _bread(rows: Rows) -> np.ndarray:
@@ -132,9 +136,15 @@ class ParameterErrors:
 
 def errors_from_rows(rows: Rows, names, column, degrees) -> ParameterErrors:
     """Both estimates from a fit's rows; the clustered one is the one reported."""
-    return ParameterErrors(tuple(names), np.asarray(column, dtype=int), clustered(rows),
-                           np.asarray(degrees, dtype=bool), CLUSTERED,
-                           int(len(np.unique(rows.pose))), plain(rows))
+    return ParameterErrors(
+        tuple(names),
+        np.asarray(column, dtype=int),
+        clustered(rows),
+        np.asarray(degrees, dtype=bool),
+        CLUSTERED,
+        int(len(np.unique(rows.pose))),
+        plain(rows),
+    )
 
 
 # central differences over these fractions of each coefficient's standard deviation: the first
@@ -148,8 +158,9 @@ def _numbers(values: dict) -> dict[str, np.ndarray]:
     out = {}
     for k, v in values.items():
         items = v if isinstance(v, (list, tuple, np.ndarray)) else [v]
-        if len(items) and all(isinstance(i, (int, float, np.number)) and not isinstance(i, bool)
-                              for i in items):
+        if len(items) and all(
+            isinstance(i, (int, float, np.number)) and not isinstance(i, bool) for i in items
+        ):
             out[k] = np.asarray(items, dtype=float)
     return out
 
@@ -187,5 +198,7 @@ def propagate(values, coef, cov) -> dict:
         for k, g in _gradients(values, coef, sd, rel, todo).items():
             if np.any(g):
                 se = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", g, cov, g), 0.0, None))
-                out[k] = se.tolist() if isinstance(orig[k], (list, tuple, np.ndarray)) else float(se[0])
+                out[k] = (
+                    se.tolist() if isinstance(orig[k], (list, tuple, np.ndarray)) else float(se[0])
+                )
     return {k: out[k] for k in base if k in out}

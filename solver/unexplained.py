@@ -19,8 +19,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from .effects import (Extension, Inputs, gravity_basis, gravity_in_base, joint_basis,
-                      point_basis, point_shift)
+from .effects import (
+    Extension,
+    Inputs,
+    gravity_basis,
+    gravity_in_base,
+    joint_basis,
+    point_basis,
+    point_shift,
+)
 from .finite import finite
 from .kinematics import Layout, joint_frames, predict_rows
 
@@ -38,8 +45,15 @@ NULL_DRAWS = 19  # random deals of the covariates: beating all of them is a 5% t
 OWN_TIE = 0.9  # a joint's own channel is preferred when it explains this fraction of the best one
 
 
-def unexplained(resid: np.ndarray, layout: Layout, x, extensions: list[Extension], inputs: Inputs,
-                floor: float | None, baseline_mse: float) -> dict | None:
+def unexplained(
+    resid: np.ndarray,
+    layout: Layout,
+    x,
+    extensions: list[Extension],
+    inputs: Inputs,
+    floor: float | None,
+    baseline_mse: float,
+) -> dict | None:
     """The `unexplained` block of the report (FORMATS.md section 5), or None when nothing is left.
 
     resid: (m, K, 3) held-out residual of the final model (prediction - reading), NaN if missing.
@@ -72,11 +86,13 @@ def unexplained(resid: np.ndarray, layout: Layout, x, extensions: list[Extension
         chance = chance_strength(fields, r, pose, cands)
         if covs[0]["strength"] <= chance:
             return None
-    block = {"holdout_rmse_mm": rmse,
-             "share_of_baseline_mse": float(rmse**2 / baseline_mse) if baseline_mse > 0 else None,
-             "noise_floor_ratio": None if not floor else rmse / floor,
-             "reachable_mm": reach,
-             "covariates": covs}
+    block = {
+        "holdout_rmse_mm": rmse,
+        "share_of_baseline_mse": float(rmse**2 / baseline_mse) if baseline_mse > 0 else None,
+        "noise_floor_ratio": None if not floor else rmse / floor,
+        "reachable_mm": reach,
+        "covariates": covs,
+    }
     if chance is not None:
         block["chance_strength"] = chance
     shared = per_pose_share(r, fields.p, pose, floor)
@@ -96,21 +112,26 @@ class Fields:
     def __init__(self, layout: Layout, x, extensions, inputs: Inputs, mask):
         self.layout, self.x, self.inputs, self.mask = layout, x, inputs, mask
         self.pose = np.nonzero(mask)[0]
-        bases = [joint_basis(e, layout, x, inputs) if e.is_joint else point_basis(e, layout, x, inputs)
-                 for e in extensions]
+        bases = [
+            joint_basis(e, layout, x, inputs) if e.is_joint else point_basis(e, layout, x, inputs)
+            for e in extensions
+        ]
         dq = None
         for e, B in zip(extensions, bases):
             if e.is_joint:
                 dq = np.zeros_like(inputs.q) if dq is None else dq
                 dq[:, e.joint] += B @ e.coef
-        p, Jt, Jq = predict_rows(layout, x, inputs.q, mask, np.arange(layout.n_params), dq=dq,
-                                 joint_cols=True)
+        p, Jt, Jq = predict_rows(
+            layout, x, inputs.q, mask, np.arange(layout.n_params), dq=dq, joint_cols=True
+        )
         self.p, self.Jq = p, Jq  # (N, 3), (n, N, 3)
         self.centroid = p.mean(axis=0)
         cols = [Jt.reshape(Jt.shape[0], -1).T]
         for e, B in zip(extensions, bases):
             if e.is_joint:
-                cols.append((Jq[e.joint][None] * B[self.pose].T[:, :, None]).reshape(B.shape[1], -1).T)
+                cols.append(
+                    (Jq[e.joint][None] * B[self.pose].T[:, :, None]).reshape(B.shape[1], -1).T
+                )
             else:
                 origin = layout.base(x)[:3, 3] if e.name == "thermal_drift" else e.origin
                 s = np.nan_to_num(B[mask])
@@ -134,7 +155,8 @@ class Fields:
             beam = self.p / np.linalg.norm(self.p, axis=1, keepdims=True)
             return [("beam", beam[None]), ("rigid", rigid)]
         return [(f"joint {j + 1}", self.Jq[j][None]) for j in range(self.Jq.shape[0])] + [
-            ("rigid", rigid)]
+            ("rigid", rigid)
+        ]
 
     def design(self, basis: np.ndarray, unit: np.ndarray) -> np.ndarray:
         """Columns (3N, P c) of basis (N, P) times each unit field, made orthogonal to the model."""
@@ -165,8 +187,9 @@ def gravity_terms(G: np.ndarray) -> np.ndarray:
     G = G - G.mean(axis=0)
     scale = np.linalg.norm(G, axis=0)
     live = scale > 1e-9 * scale.max()
-    U, sv, _ = np.linalg.svd(finite(G[:, live] / scale[live], "the residual design"),
-                          full_matrices=False)
+    U, sv, _ = np.linalg.svd(
+        finite(G[:, live] / scale[live], "the residual design"), full_matrices=False
+    )
     share = np.cumsum(sv**2) / np.sum(sv**2)
     return U[:, : min(GRAVITY_TERMS, int(np.searchsorted(share, 0.99)) + 1)]
 
@@ -183,8 +206,13 @@ def candidate_covariates(fields: Fields):
     for j in range(n):
         s = inputs.motion[:, j].astype(float)
         if np.ptp(s) > 0:
-            out.append((("motion", j), f"direction of joint {j + 1}'s last motion",
-                        (s - s.mean())[pose, None]))
+            out.append(
+                (
+                    ("motion", j),
+                    f"direction of joint {j + 1}'s last motion",
+                    (s - s.mean())[pose, None],
+                )
+            )
     g = gravity_in_base(fields.layout, fields.x)
     frames = joint_frames(Layout(fields.layout.robot, np.eye(4), ()), fields.x, inputs.q)
     for j in range(n):
@@ -192,10 +220,13 @@ def candidate_covariates(fields: Fields):
         # base's tilt, a shape of the pose with nothing of gravity in it
         if np.abs(frames[j][0][:, :, 2] @ g).min() < np.cos(np.radians(VERTICAL_DEG)):
             G = gravity_basis(fields.layout, fields.x, inputs.q, j, g)
-            out.append((("gravity", j), f"gravity torque about joint {j + 1}",
-                        gravity_terms(G)[pose]))
-    for key, a, name in (("time", inputs.time_s, "time"), ("temperature", inputs.temp_c,
-                                                            "air temperature")):
+            out.append(
+                (("gravity", j), f"gravity torque about joint {j + 1}", gravity_terms(G)[pose])
+            )
+    for key, a, name in (
+        ("time", inputs.time_s, "time"),
+        ("temperature", inputs.temp_c, "air temperature"),
+    ):
         if a is not None:
             B = legendre(np.asarray(a, dtype=float)[mask], SCALAR_DEGREE)
             if B is not None:
@@ -206,12 +237,15 @@ def candidate_covariates(fields: Fields):
     return out
 
 
-def covariates(fields: Fields, r: np.ndarray, pose: np.ndarray, shuffle=None,
-               cands=None) -> list[dict]:
+def covariates(
+    fields: Fields, r: np.ndarray, pose: np.ndarray, shuffle=None, cands=None
+) -> list[dict]:
     """Every covariate with its strength (best channel's cross-validated share) and a reading."""
     held = HeldOut(fields.Q, r.ravel(), pose_folds(pose))
-    return [entry for entry, _ in scored(fields, held, held, cands or candidate_covariates(fields),
-                                         shuffle)]
+    return [
+        entry
+        for entry, _ in scored(fields, held, held, cands or candidate_covariates(fields), shuffle)
+    ]
 
 
 def ranked(fields: Fields, r: np.ndarray, pose: np.ndarray, cands, count: int) -> list[dict]:
@@ -230,8 +264,9 @@ def ranked(fields: Fields, r: np.ndarray, pose: np.ndarray, cands, count: int) -
         entry, F = results[k]
         out.append(entry)
         if entry["strength"] < STRONG:  # nothing much left to take: the rest in this round's order
-            rest = sorted((e for i, (e, _) in enumerate(results) if i != k),
-                          key=lambda e: -e["strength"])
+            rest = sorted(
+                (e for i, (e, _) in enumerate(results) if i != k), key=lambda e: -e["strength"]
+            )
             out += rest[: count - len(out)]
             break
         left = [c for c in left if c[1] != entry["name"]]
@@ -264,8 +299,17 @@ def scored(fields: Fields, held: HeldOut, first: HeldOut, cands, shuffle=None, f
         if own in shares and shares[own] >= OWN_TIE * shares[where]:
             where = own
         best = max(shares[where], 0.0)
-        out.append(({"name": name, "strength": round(float(best), 4), "channel": where,
-                     "reading": reading(kind, j, where, best, further)}, designs[where]))
+        out.append(
+            (
+                {
+                    "name": name,
+                    "strength": round(float(best), 4),
+                    "channel": where,
+                    "reading": reading(kind, j, where, best, further),
+                },
+                designs[where],
+            )
+        )
     return out
 
 
@@ -320,7 +364,9 @@ class HeldOut:
                 Ft = F[t]
                 Gqf = QF - Qt.T @ Ft
                 S = FF - Ft.T @ Ft - Gqf.T @ inv @ Gqf
-                cf = np.linalg.lstsq(finite(S, "the held-out system"), Fy - Ft.T @ yt - Gqf.T @ cq, rcond=1e-10)[0]
+                cf = np.linalg.lstsq(
+                    finite(S, "the held-out system"), Fy - Ft.T @ yt - Gqf.T @ cq, rcond=1e-10
+                )[0]
                 pred = Qt @ (cq - inv @ (Gqf @ cf)) + Ft @ cf
             e = yt - pred
             err += float(e @ e)
@@ -375,56 +421,88 @@ def reading(kind: str, j: int | None, channel: str, strength: float, further=Fal
         if own:
             return f"the residual flips with the direction of joint {J}'s last motion ({pct}): backlash or lost motion in joint {J}?"
         if channel == "rigid":
-            return (f"the SMRs shift as a whole with the direction of joint {J}'s last motion ({pct}): "
-                    f"hysteresis or backlash near joint {J}, or the arm settling after moves?")
-        return (f"{channel}'s error flips with the direction of joint {J}'s last motion ({pct}): "
-                f"backlash or friction coupled between joints {J} and {channel.split()[1]}?")
+            return (
+                f"the SMRs shift as a whole with the direction of joint {J}'s last motion ({pct}): "
+                f"hysteresis or backlash near joint {J}, or the arm settling after moves?"
+            )
+        return (
+            f"{channel}'s error flips with the direction of joint {J}'s last motion ({pct}): "
+            f"backlash or friction coupled between joints {J} and {channel.split()[1]}?"
+        )
     if kind == "angle":
         if own:
-            return (f"joint {J}'s error follows its own angle beyond the modelled terms ({pct}): "
-                    f"a transmission or encoder error of higher order in joint {J}?")
+            return (
+                f"joint {J}'s error follows its own angle beyond the modelled terms ({pct}): "
+                f"a transmission or encoder error of higher order in joint {J}?"
+            )
         if channel == "rigid":
-            return (f"the SMRs move with joint {J}'s angle in a way no joint rotation explains ({pct}): "
-                    f"a bent or tilting axis, or link deflection, at joint {J}?")
+            return (
+                f"the SMRs move with joint {J}'s angle in a way no joint rotation explains ({pct}): "
+                f"a bent or tilting axis, or link deflection, at joint {J}?"
+            )
         other = int(channel.split()[1])
-        return (f"{channel}'s error follows joint {J}'s angle ({pct}): a coupling between joints {J} "
-                f"and {other}" + (" (a wrist gear coupling)?" if min(J, other) >= 4 else "?"))
+        return (
+            f"{channel}'s error follows joint {J}'s angle ({pct}): a coupling between joints {J} "
+            f"and {other}" + (" (a wrist gear coupling)?" if min(J, other) >= 4 else "?")
+        )
     if kind == "gravity":
         if own:
-            return (f"joint {J}'s error follows the gravity torque it carries ({pct}): compliance "
-                    f"in joint {J} that the model does not hold?")
+            return (
+                f"joint {J}'s error follows the gravity torque it carries ({pct}): compliance "
+                f"in joint {J} that the model does not hold?"
+            )
         if channel == "rigid":
-            return (f"the SMRs sag with the gravity torque about joint {J} ({pct}): links bending, "
-                    f"or compliance across joint {J}'s axis?")
-        return (f"{channel}'s error follows the gravity torque about joint {J} ({pct}): compliance "
-                f"in {channel}, loaded by the arm beyond joint {J}?")
-    what = {"time": "time", "temperature": "the air temperature",
-            "distance": "the distance from the tracker"}[kind]
+            return (
+                f"the SMRs sag with the gravity torque about joint {J} ({pct}): links bending, "
+                f"or compliance across joint {J}'s axis?"
+            )
+        return (
+            f"{channel}'s error follows the gravity torque about joint {J} ({pct}): compliance "
+            f"in {channel}, loaded by the arm beyond joint {J}?"
+        )
+    what = {
+        "time": "time",
+        "temperature": "the air temperature",
+        "distance": "the distance from the tracker",
+    }[kind]
     if kind == "distance" and channel == "beam":
-        return (f"the error along the beam grows with the distance from the tracker ({pct}): a "
-                f"tracker distance scale error, or the air's refractive index mis-set?")
+        return (
+            f"the error along the beam grows with the distance from the tracker ({pct}): a "
+            f"tracker distance scale error, or the air's refractive index mis-set?"
+        )
     if kind == "distance":
-        return (f"the SMRs move with the distance from the tracker ({pct}): a tracker angle-encoder "
-                f"or levelling error, or a pose-dependent effect that tracks distance?")
+        return (
+            f"the SMRs move with the distance from the tracker ({pct}): a tracker angle-encoder "
+            f"or levelling error, or a pose-dependent effect that tracks distance?"
+        )
     if channel == "rigid":
-        return (f"the SMRs drift with {what} ({pct}): thermal growth or the tracker or robot base "
-                f"moving during the campaign?")
-    return f"{channel}'s error drifts with {what} ({pct}): the drive or encoder of {channel} warming?"
+        return (
+            f"the SMRs drift with {what} ({pct}): thermal growth or the tracker or robot base "
+            f"moving during the campaign?"
+        )
+    return (
+        f"{channel}'s error drifts with {what} ({pct}): the drive or encoder of {channel} warming?"
+    )
 
 
 def per_pose_reading(share: float, dominates: bool) -> str:
     pct = f"{100 * share:.0f}% of the remaining residual"
     if dominates:
-        return (f"{pct} moves all SMRs of a pose together, beyond tracker noise, and no covariate "
-                f"explains it: the arm's repeatability, or poses measured before it settled?")
+        return (
+            f"{pct} moves all SMRs of a pose together, beyond tracker noise, and no covariate "
+            f"explains it: the arm's repeatability, or poses measured before it settled?"
+        )
     return f"{pct} moves all SMRs of a pose together beyond tracker noise (an error of the arm, not of the tracker)."
 
 
 def summary(block: dict, floor: float | None) -> str:
     """One line: how much is left and where to look first."""
     left = f"{block['holdout_rmse_mm']:.3f} mm held out"
-    left += (f" ({block['noise_floor_ratio']:.1f}x the noise floor)" if floor else
-             f" (noise floor unknown; chance level of a strength {block['chance_strength']:.2f})")
+    left += (
+        f" ({block['noise_floor_ratio']:.1f}x the noise floor)"
+        if floor
+        else f" (noise floor unknown; chance level of a strength {block['chance_strength']:.2f})"
+    )
     share = block["share_of_baseline_mse"]
     if share is not None:
         left += f", {100 * share:.0f}% of the geometric model's held-out MSE"

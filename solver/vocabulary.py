@@ -70,8 +70,11 @@ class Effect:
     def figure(self, ext: Extension, inputs: Inputs, expected) -> dict:
         """The figure's variable per pose and its axis labels."""
         j = ext.joint + 1
-        return {"x": np.degrees(inputs.q[:, ext.joint]), "x_label": f"q{j} / deg",
-                "y_label": f"joint {j} error / mdeg"}
+        return {
+            "x": np.degrees(inputs.q[:, ext.joint]),
+            "x_label": f"q{j} / deg",
+            "y_label": f"joint {j} error / mdeg",
+        }
 
     def signature_axis(self, ext: Extension, Jq, p, layout, x):
         """Per reading, the direction (N, 3) that measures the effect in a residual, and its scale."""
@@ -81,7 +84,12 @@ class Effect:
 class JointPeriodic(Effect):
     """dq_j = a sin(k q_j) + b cos(k q_j): a cyclic transmission or encoder error."""
 
-    name, params, stored, report_keys = "joint_periodic", 2, (("harmonic", "integer"),), ("harmonic",)
+    name, params, stored, report_keys = (
+        "joint_periodic",
+        2,
+        (("harmonic", "integer"),),
+        ("harmonic",),
+    )
     HARMONICS = (1, 2)
 
     def label(self, ext):
@@ -92,18 +100,26 @@ class JointPeriodic(Effect):
         return np.stack([np.sin(kq), np.cos(kq)], axis=1)
 
     def candidates(self, layout, x, inputs):
-        return [Extension(self.name, joint=j, harmonic=k)
-                for j in range(layout.robot.n_joints) for k in self.HARMONICS]
+        return [
+            Extension(self.name, joint=j, harmonic=k)
+            for j in range(layout.robot.n_joints)
+            for k in self.HARMONICS
+        ]
 
     def parameters(self, ext, basis):
         c = np.asarray(ext.coef, dtype=float)
-        return {"amplitude_deg": float(np.degrees(np.hypot(c[0], c[1]))),
-                "phase_deg": float(np.degrees(np.arctan2(c[1], c[0]))), "harmonic": ext.harmonic}
+        return {
+            "amplitude_deg": float(np.degrees(np.hypot(c[0], c[1]))),
+            "phase_deg": float(np.degrees(np.arctan2(c[1], c[0]))),
+            "harmonic": ext.harmonic,
+        }
 
     def evidence(self, ext, p, gain):
         j = ext.joint + 1
-        return (f"Joint {j}'s residual rotation follows {p['amplitude_deg'] * 1000:.1f} mdeg x "
-                f"sin({ext.harmonic} q{j} {p['phase_deg']:+.0f} deg); {gain}.")
+        return (
+            f"Joint {j}'s residual rotation follows {p['amplitude_deg'] * 1000:.1f} mdeg x "
+            f"sin({ext.harmonic} q{j} {p['phase_deg']:+.0f} deg); {gain}."
+        )
 
 
 class JointScale(Effect):
@@ -118,8 +134,10 @@ class JointScale(Effect):
         return {"scale_ppm": float(ext.coef[0] * 1e6)}
 
     def evidence(self, ext, p, gain):
-        return (f"Joint {ext.joint + 1}'s residual rotation grows linearly with its angle, "
-                f"{p['scale_ppm']:.0f} ppm; {gain}.")
+        return (
+            f"Joint {ext.joint + 1}'s residual rotation grows linearly with its angle, "
+            f"{p['scale_ppm']:.0f} ppm; {gain}."
+        )
 
 
 class JointCompliance(Effect):
@@ -145,18 +163,24 @@ class JointCompliance(Effect):
     def parameters(self, ext, basis):
         dq = basis @ np.asarray(ext.coef, dtype=float)
         dq = dq - dq.mean()  # the constant part is the joint's offset
-        return {"deflection_rms_deg": float(np.degrees(np.sqrt(np.mean(dq * dq)))),
-                "deflection_range_deg": float(np.degrees(dq.max() - dq.min())),
-                "gravity_terms": int(len(ext.coef))}
+        return {
+            "deflection_rms_deg": float(np.degrees(np.sqrt(np.mean(dq * dq)))),
+            "deflection_range_deg": float(np.degrees(dq.max() - dq.min())),
+            "gravity_terms": int(len(ext.coef)),
+        }
 
     def evidence(self, ext, p, gain):
-        return (f"Joint {ext.joint + 1}'s residual rotation follows the gravity torque it carries "
-                f"({p['deflection_range_deg'] * 1000:.1f} mdeg peak to peak over the poses); {gain}.")
+        return (
+            f"Joint {ext.joint + 1}'s residual rotation follows the gravity torque it carries "
+            f"({p['deflection_range_deg'] * 1000:.1f} mdeg peak to peak over the poses); {gain}."
+        )
 
     def to_json(self, ext):
-        return {"gravity": np.asarray(ext.gravity, dtype=float).tolist(),
-                "gravity_terms": np.flatnonzero(ext.keep).tolist(),
-                "gravity_terms_total": len(ext.keep)}
+        return {
+            "gravity": np.asarray(ext.gravity, dtype=float).tolist(),
+            "gravity_terms": np.flatnonzero(ext.keep).tolist(),
+            "gravity_terms_total": len(ext.keep),
+        }
 
     def from_json(self, read):
         keep = np.zeros(read.integer("gravity_terms_total"), dtype=bool)
@@ -167,8 +191,11 @@ class JointCompliance(Effect):
         return {"gravity": read.vector("gravity"), "keep": keep}
 
     def figure(self, ext, inputs, expected):
-        return {"x": expected, "x_label": "unabsorbed gravity deflection / mdeg",
-                "y_label": f"joint {ext.joint + 1} error / mdeg"}
+        return {
+            "x": expected,
+            "x_label": "unabsorbed gravity deflection / mdeg",
+            "y_label": f"joint {ext.joint + 1} error / mdeg",
+        }
 
 
 class JointBacklash(Effect):
@@ -182,8 +209,11 @@ class JointBacklash(Effect):
     def candidates(self, layout, x, inputs):
         # a joint that moved only one way leaves a constant, which its offset already is
         d = inputs.motion
-        return [Extension(self.name, joint=j) for j in range(layout.robot.n_joints)
-                if (d[:, j] > 0).any() and (d[:, j] < 0).any()]
+        return [
+            Extension(self.name, joint=j)
+            for j in range(layout.robot.n_joints)
+            if (d[:, j] > 0).any() and (d[:, j] < 0).any()
+        ]
 
     def parameters(self, ext, basis):
         return {"backlash_deg": float(-np.degrees(ext.coef[0]))}
@@ -191,16 +221,20 @@ class JointBacklash(Effect):
     def evidence(self, ext, p, gain):
         b = p["backlash_deg"] * 1000
         how = "lags behind" if b >= 0 else "runs ahead of"
-        return (f"Joint {ext.joint + 1}'s residual rotation flips by {2 * abs(b):.1f} mdeg with the "
-                f"direction of its last motion (it {how} its motion by {abs(b):.1f} mdeg: backlash); "
-                f"{gain}.")
+        return (
+            f"Joint {ext.joint + 1}'s residual rotation flips by {2 * abs(b):.1f} mdeg with the "
+            f"direction of its last motion (it {how} its motion by {abs(b):.1f} mdeg: backlash); "
+            f"{gain}."
+        )
 
     def figure(self, ext, inputs, expected):
         j, m = ext.joint + 1, len(inputs.q)
         spread = 0.3 * (np.arange(m) / max(m - 1, 1) - 0.5)  # the poses side by side, in file order
-        return {"x": inputs.motion[:, ext.joint] + spread,
-                "x_label": f"direction of joint {j}'s last motion (spread by pose)",
-                "y_label": f"joint {j} error / mdeg"}
+        return {
+            "x": inputs.motion[:, ext.joint] + spread,
+            "x_label": f"direction of joint {j}'s last motion (spread by pose)",
+            "y_label": f"joint {j} error / mdeg",
+        }
 
 
 class PointEffect(Effect):
@@ -261,8 +295,11 @@ class ThermalDrift(PointEffect):
     def parameters(self, ext, basis):
         per_c = ext.variable == "temp_c"
         unit = "ppm_per_c" if per_c else "ppm_per_hour"
-        return {f"growth_{unit}": float(ext.coef[0] * (1e6 if per_c else 1e6 * 3600.0)),
-                "variable": ext.variable, "reference": ext.t_ref}
+        return {
+            f"growth_{unit}": float(ext.coef[0] * (1e6 if per_c else 1e6 * 3600.0)),
+            "variable": ext.variable,
+            "reference": ext.t_ref,
+        }
 
     def evidence(self, ext, p, gain):
         key = next(k for k in p if k.startswith("growth_"))
@@ -271,9 +308,11 @@ class ThermalDrift(PointEffect):
 
     def figure(self, ext, inputs, expected):
         per_c = ext.variable == "temp_c"
-        return {"x": np.nanmean(getattr(inputs, ext.variable), axis=1),
-                "x_label": "air temperature / degC" if per_c else "time / s",
-                "y_label": "radial growth / ppm"}
+        return {
+            "x": np.nanmean(getattr(inputs, ext.variable), axis=1),
+            "x_label": "air temperature / degC" if per_c else "time / s",
+            "y_label": "radial growth / ppm",
+        }
 
     def signature_axis(self, ext, Jq, p, layout, x):
         return p - layout.base(x)[:3, 3], 1e6
@@ -309,25 +348,42 @@ class BaseShift(PointEffect):
 
     def parameters(self, ext, basis):
         c = np.asarray(ext.coef, dtype=float)
-        return {"at_s": ext.at_s, "translation_mm": np.round(c[:3], 5).tolist(),
-                "rotation_deg": np.round(np.degrees(c[3:]), 6).tolist(),
-                "shift_mm": float(np.linalg.norm(c[:3]))}
+        return {
+            "at_s": ext.at_s,
+            "translation_mm": np.round(c[:3], 5).tolist(),
+            "rotation_deg": np.round(np.degrees(c[3:]), 6).tolist(),
+            "shift_mm": float(np.linalg.norm(c[:3])),
+        }
 
     def evidence(self, ext, p, gain):
-        return (f"Readings after t = {ext.at_s:.0f} s are displaced by {p['shift_mm']:.3f} mm "
-                f"as a rigid body; {gain}.")
+        return (
+            f"Readings after t = {ext.at_s:.0f} s are displaced by {p['shift_mm']:.3f} mm "
+            f"as a rigid body; {gain}."
+        )
 
     def figure(self, ext, inputs, expected):
-        return {"x": np.nanmean(inputs.time_s, axis=1), "x_label": "time / s",
-                "y_label": "displacement along the shift / mm"}
+        return {
+            "x": np.nanmean(inputs.time_s, axis=1),
+            "x_label": "time / s",
+            "y_label": "displacement along the shift / mm",
+        }
 
     def signature_axis(self, ext, Jq, p, layout, x):
         u = ext.coef[:3] / max(np.linalg.norm(ext.coef[:3]), 1e-12)
         return np.broadcast_to(u, p.shape), 1.0
 
 
-KINDS: dict[str, Effect] = {k.name: k for k in (
-    JointPeriodic(), JointScale(), JointCompliance(), JointBacklash(), ThermalDrift(), BaseShift())}
+KINDS: dict[str, Effect] = {
+    k.name: k
+    for k in (
+        JointPeriodic(),
+        JointScale(),
+        JointCompliance(),
+        JointBacklash(),
+        ThermalDrift(),
+        BaseShift(),
+    )
+}
 
 
 def candidates(layout, x, inputs: Inputs) -> list[Extension]:

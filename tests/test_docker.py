@@ -43,8 +43,13 @@ def instructions():
 
 
 def copied():
-    return {src.rstrip("/") for word, rest in instructions() if word == "COPY"
-            for src in rest.split()[:-1] if not src.startswith("--")}
+    return {
+        src.rstrip("/")
+        for word, rest in instructions()
+        if word == "COPY"
+        for src in rest.split()[:-1]
+        if not src.startswith("--")
+    }
 
 
 def test_dockerfile_copies_existing_paths():
@@ -56,8 +61,8 @@ def test_dockerfile_copies_what_the_installed_service_reads():
     """The wheel's packages and the directories the code finds beside them (page, migrations)."""
     import tomllib
 
-    from server.store.db import MIGRATIONS
-    from server.web import WEB_DIR
+    from robocal.server.store.db import MIGRATIONS
+    from robocal.server.web import WEB_DIR
 
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
     needed = set(pyproject["tool"]["hatch"]["build"]["targets"]["wheel"]["packages"])
@@ -82,16 +87,22 @@ def test_lock_is_current_and_installs_for_the_image(tmp_path):
     uv = shutil.which("uv")
     if uv is None:
         pytest.skip("no uv on PATH")
-    r = subprocess.run([uv, "lock", "--check"], cwd=ROOT, capture_output=True, text=True,
-                       timeout=120)
+    r = subprocess.run(
+        [uv, "lock", "--check"], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
     assert r.returncode == 0, f"uv.lock is stale for pyproject.toml: {r.stderr.strip()}"
     steps = [rest for word, rest in instructions() if word == "RUN" and rest.startswith("uv sync")]
     assert steps, "no `uv sync` step in the Dockerfile"
     for step in steps:
         assert "--frozen" in step and "--no-dev" in step, step
-    r = subprocess.run([uv, "sync", "--frozen", "--no-dev", "--no-install-project", "--dry-run"],
-                       cwd=ROOT, capture_output=True, text=True, timeout=300,
-                       env={**os.environ, "UV_PROJECT_ENVIRONMENT": str(tmp_path / "venv")})
+    r = subprocess.run(
+        [uv, "sync", "--frozen", "--no-dev", "--no-install-project", "--dry-run"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "UV_PROJECT_ENVIRONMENT": str(tmp_path / "venv")},
+    )
     assert r.returncode == 0, r.stderr
     plan = set(re.findall(r"^ \+ ([\w.-]+)==", r.stderr + r.stdout, re.M))
     assert {"fastapi", "uvicorn", "numpy"} <= plan and not plan & {"pytest", "playwright"}, plan
@@ -107,6 +118,7 @@ def test_compose_publishes_on_loopback_with_a_data_volume():
 
 
 # ---- the real image, where a daemon answers -------------------------------------------------
+
 
 def _docker(*args, timeout=120, check=True):
     r = subprocess.run(["docker", *args], capture_output=True, text=True, timeout=timeout)
@@ -124,19 +136,36 @@ def _last_line(text: str) -> str:
 def image():
     if shutil.which("docker") is None:
         pytest.skip("no docker command")
-    info = subprocess.run(["docker", "info", "--format", "{{.ServerVersion}}"],
-                          capture_output=True, text=True, timeout=30)
+    info = subprocess.run(
+        ["docker", "info", "--format", "{{.ServerVersion}}"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     if info.returncode != 0:
         pytest.skip(f"no Docker daemon: {_last_line(info.stderr)}")
     if _docker("image", "inspect", BASE, check=False).returncode != 0:
         pull = _docker("pull", BASE, timeout=300, check=False)
         if pull.returncode != 0:
-            pytest.skip(f"base image {BASE} not available: {_last_line(pull.stderr)} "
-                        "(ROBOCAL_DOCKER_BASE names another; docker/local-base.sh builds one)")
+            pytest.skip(
+                f"base image {BASE} not available: {_last_line(pull.stderr)} "
+                "(ROBOCAL_DOCKER_BASE names another; docker/local-base.sh builds one)"
+            )
     tag = "robocal:pytest"
     # Host network for the build's downloads: it works whether or not the daemon has a bridge.
-    _docker("build", "--network", "host", "-f", str(DOCKERFILE), "--build-arg",
-            f"PYTHON_IMAGE={BASE}", "-t", tag, str(ROOT), timeout=1800)
+    _docker(
+        "build",
+        "--network",
+        "host",
+        "-f",
+        str(DOCKERFILE),
+        "--build-arg",
+        f"PYTHON_IMAGE={BASE}",
+        "-t",
+        tag,
+        str(ROOT),
+        timeout=1800,
+    )
     yield tag
 
 
@@ -175,8 +204,16 @@ def test_image_serves_on_loopback_keeps_its_data_and_starts_offline(image, volum
     try:
         # The host's network, the service on its loopback only (the image's default is 0.0.0.0,
         # for a published port).
-        ctr = _run(image, volume, "--network", "host", "-e", "ROBOCAL_HOST=127.0.0.1",
-                   "-e", f"ROBOCAL_PORT={port}")
+        ctr = _run(
+            image,
+            volume,
+            "--network",
+            "host",
+            "-e",
+            "ROBOCAL_HOST=127.0.0.1",
+            "-e",
+            f"ROBOCAL_PORT={port}",
+        )
         containers.append(ctr)
 
         def health():
@@ -195,21 +232,36 @@ def test_image_serves_on_loopback_keeps_its_data_and_starts_offline(image, volum
         r = httpx.post(f"{url}/api/campaigns", json={"poses": 5, "name": "kept"}, headers=auth)
         assert r.status_code == 201, r.text
         # The database and the data directory are on the volume, written by the service's user.
-        ls = _docker("exec", ctr, "sh", "-c",
-                     "id -un; test -s /data/robocal.db && test -d /data/robocal-data && echo ok")
+        ls = _docker(
+            "exec",
+            ctr,
+            "sh",
+            "-c",
+            "id -un; test -s /data/robocal.db && test -d /data/robocal-data && echo ok",
+        )
         user, ok = ls.stdout.split()
         assert user != "root" and ok == "ok", ls.stdout
 
         # A new container on the same volume: the campaign is there and the token is not reissued.
         _docker("rm", "-f", containers.pop())
-        ctr = _run(image, volume, "--network", "host", "-e", "ROBOCAL_HOST=127.0.0.1",
-                   "-e", f"ROBOCAL_PORT={port}")
+        ctr = _run(
+            image,
+            volume,
+            "--network",
+            "host",
+            "-e",
+            "ROBOCAL_HOST=127.0.0.1",
+            "-e",
+            f"ROBOCAL_PORT={port}",
+        )
         containers.append(ctr)
         _wait(health, f"GET /api/health of {ctr}")
         assert [c["name"] for c in httpx.get(f"{url}/api/campaigns", headers=auth).json()] == [
-            "kept"]
-        assert httpx.post(f"{url}/api/campaigns", json={"poses": 5},
-                          headers=auth).status_code == 201
+            "kept"
+        ]
+        assert (
+            httpx.post(f"{url}/api/campaigns", json={"poses": 5}, headers=auth).status_code == 201
+        )
         assert "API token" not in _docker("logs", ctr).stdout + _docker("logs", ctr).stderr
 
         # No network at all: the service still starts (nothing fetched at start); asked from
@@ -217,11 +269,15 @@ def test_image_serves_on_loopback_keeps_its_data_and_starts_offline(image, volum
         _docker("rm", "-f", containers.pop())
         ctr = _run(image, volume, "--network", "none")
         containers.append(ctr)
-        probe = ("import urllib.request; print(urllib.request.urlopen(urllib.request.Request("
-                 f"'http://127.0.0.1:8000/api/campaigns', headers={auth!r}), timeout=4)"
-                 ".read().decode())")
-        got = _wait(lambda: json.loads(_docker("exec", ctr, "python3", "-c", probe).stdout),
-                    f"the offline container {ctr}")
+        probe = (
+            "import urllib.request; print(urllib.request.urlopen(urllib.request.Request("
+            f"'http://127.0.0.1:8000/api/campaigns', headers={auth!r}), timeout=4)"
+            ".read().decode())"
+        )
+        got = _wait(
+            lambda: json.loads(_docker("exec", ctr, "python3", "-c", probe).stdout),
+            f"the offline container {ctr}",
+        )
         assert len(got) == 2
     finally:
         for c in containers:

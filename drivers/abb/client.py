@@ -11,8 +11,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
-
-from solver.robot import BUILTIN
+from robocal.solver.robot import BUILTIN
 
 from . import protocol as p
 from .transport import LineTransport, TransportClosed
@@ -22,7 +21,7 @@ log = logging.getLogger(__name__)
 ESCALATE_S = 0.1  # a STOP unanswered this long on the open connection goes out on a fresh one too
 STOP_WRITE_WAIT_S = 0.05  # the write lock is held only around a write; this bounds a stuck one
 READ_SLICE_S = 0.25  # the reader thread's read timeout: how soon it notices its link was closed
-LIMIT_TOL_DEG = 0.5 * 10.0 ** -p.ANGLE_DECIMALS  # limits compared at the wire's resolution
+LIMIT_TOL_DEG = 0.5 * 10.0**-p.ANGLE_DECIMALS  # limits compared at the wire's resolution
 
 
 class ControllerError(Exception):
@@ -175,8 +174,10 @@ def check_target(q_deg, lower_rad: np.ndarray, upper_rad: np.ndarray) -> tuple[f
     q_rad = np.deg2rad(np.array(wire))
     for i, (v, lo, hi) in enumerate(zip(q_rad, lower_rad, upper_rad, strict=True), start=1):
         if not lo <= v <= hi:
-            raise LimitError(f"joint {i} {np.rad2deg(v):.4f} deg outside "
-                             f"[{np.rad2deg(lo):.4f}, {np.rad2deg(hi):.4f}]")
+            raise LimitError(
+                f"joint {i} {np.rad2deg(v):.4f} deg outside "
+                f"[{np.rad2deg(lo):.4f}, {np.rad2deg(hi):.4f}]"
+            )
     return wire
 
 
@@ -190,9 +191,18 @@ class ControllerClient:
     MOVEJ is written until `clear_stop()`.
     """
 
-    def __init__(self, url: str, robot, timeout_s: float = 5.0, retries: int = 2, *,
-                 max_move_s: float = 120.0, in_position_tol_deg: float = 0.01,
-                 baudrate: int = 9600, connect: bool = True):
+    def __init__(
+        self,
+        url: str,
+        robot,
+        timeout_s: float = 5.0,
+        retries: int = 2,
+        *,
+        max_move_s: float = 120.0,
+        in_position_tol_deg: float = 0.01,
+        baudrate: int = 9600,
+        connect: bool = True,
+    ):
         self.url, self.timeout_s, self.retries = url, float(timeout_s), int(retries)
         self.max_move_s, self.tol_deg = float(max_move_s), float(in_position_tol_deg)
         self.baudrate = baudrate
@@ -265,7 +275,8 @@ class ControllerClient:
             if info.version != p.VERSION or info.n_joints != self.n_joints:
                 raise ControllerError(
                     f"controller {info.name} speaks version {info.version} with {info.n_joints} "
-                    f"joints; this client: version {p.VERSION}, {self.n_joints} joints")
+                    f"joints; this client: version {p.VERSION}, {self.n_joints} joints"
+                )
             self._lower, self._upper = self._tightened(info)
         except BaseException:
             if self._link is link:
@@ -286,9 +297,13 @@ class ControllerClient:
                     f"controller {info.name} does not report its joint limits at HELLO and the "
                     f"cell's robot {self._robot_name!r} is not a built-in one; an uploaded cell's "
                     "limits alone are never trusted: load the current RAPID module "
-                    "(drivers/abb/rapid) or name a built-in robot")
-            log.warning("controller %s does not report its joint limits; using the built-in "
-                        "%s's", info.name, self._robot_name)
+                    "(drivers/abb/rapid) or name a built-in robot"
+                )
+            log.warning(
+                "controller %s does not report its joint limits; using the built-in %s's",
+                info.name,
+                self._robot_name,
+            )
             ctrl = np.rad2deg(np.column_stack([builtin.lower, builtin.upper]))
         else:
             ctrl = np.array(info.limits_deg)
@@ -298,7 +313,8 @@ class ControllerClient:
                 raise ControllerError(
                     f"joint {i + 1}: the cell's robot allows [{cell_lo[i]:g}, {cell_hi[i]:g}] deg, "
                     f"beyond controller {info.name}'s limits [{ctrl[i, 0]:g}, {ctrl[i, 1]:g}] deg; "
-                    "fix the cell's joint limits")
+                    "fix the cell's joint limits"
+                )
         lower = np.maximum(self._cell_lower, np.deg2rad(ctrl[:, 0]))
         upper = np.minimum(self._cell_upper, np.deg2rad(ctrl[:, 1]))
         return _frozen(lower), _frozen(upper)
@@ -361,8 +377,9 @@ class ControllerClient:
                     # RAPID server accepts a new client only once the old one is closed.
                     failure = exc
                     self._drop_link()
-                    log.warning("%s attempt %d/%d failed: %s", what, attempt + 1,
-                                1 + self.retries, exc)
+                    log.warning(
+                        "%s attempt %d/%d failed: %s", what, attempt + 1, 1 + self.retries, exc
+                    )
             if isinstance(failure, TransportClosed):
                 raise ControllerConnectionError(f"{what}: {failure}") from failure
             raise ControllerTimeout(f"{what}: {failure}") from failure
@@ -370,7 +387,8 @@ class ControllerClient:
     def _call(self, command: str) -> p.Reply:
         """An idempotent request (HELLO, STATUS, JOINTS, RESET), retried."""
         return self._retry(
-            command, lambda: self._ok(self._roundtrip(p.Request(self._new_id(), command))))
+            command, lambda: self._ok(self._roundtrip(p.Request(self._new_id(), command)))
+        )
 
     # --- the emergency stop ---------------------------------------------------------------------
 
@@ -411,7 +429,9 @@ class ControllerClient:
     def stop(self) -> None:
         """Halt the arm where it is (emergency_stop); ControllerError if it was not confirmed."""
         if not self.emergency_stop():
-            raise ControllerError(f"the controller did not confirm the stop: {self.last_stop_error}")
+            raise ControllerError(
+                f"the controller did not confirm the stop: {self.last_stop_error}"
+            )
 
     def _send_stop(self, deadline: float) -> tuple[bool, str]:
         """STOP on the open connection if it has shaken hands, else (or if it does not answer
@@ -544,8 +564,9 @@ class ControllerClient:
             raise FaultError(f"move #{move_id}: FAULT {status.fault_code}", status.fault_code)
         raise MoveStopped(f"move #{move_id} was taken and then stopped ({status.state})")
 
-    def wait_in_position(self, clock, poll_s: float = 0.2,
-                         timeout_s: float | None = None) -> p.Status:
+    def wait_in_position(
+        self, clock, poll_s: float = 0.2, timeout_s: float | None = None
+    ) -> p.Status:
         """Poll STATUS every poll_s on `clock` until the last move is INPOS.
 
         Raises FaultError, MoveStopped, ControllerError (STATUS names another move: someone else
@@ -565,7 +586,8 @@ class ControllerClient:
                 raise FaultError(f"controller in FAULT {status.fault_code}", status.fault_code)
             if status.move_id != move.id:
                 raise ControllerError(
-                    f"controller reports move #{status.move_id}, expected #{move.id}")
+                    f"controller reports move #{status.move_id}, expected #{move.id}"
+                )
             if status.state == "INPOS":
                 return status
             if status.state != "MOVING":
@@ -613,8 +635,9 @@ class _FreshStop:
         line = p.encode_request(p.Request(self.stop_id, "STOP"))
         while not self._abandoned.is_set() and time.monotonic() < self.deadline:
             try:
-                transport = LineTransport(self.url, max(0.05, self.deadline - time.monotonic()),
-                                          self.baudrate)
+                transport = LineTransport(
+                    self.url, max(0.05, self.deadline - time.monotonic()), self.baudrate
+                )
             except TransportClosed as exc:
                 self.errors.append(str(exc))
                 self._abandoned.wait(0.02)  # refused: a restarting controller may listen soon

@@ -83,6 +83,7 @@ class Status:
 
 # --- lines --------------------------------------------------------------------------------------
 
+
 def _check_line(line: str, limit: int = MAX_LINE) -> str:
     line = line.rstrip("\r\n")
     if len(line) > limit:
@@ -137,6 +138,7 @@ def resync(line: str) -> str:
 
 # --- requests -----------------------------------------------------------------------------------
 
+
 def encode_request(req: Request) -> str:
     """The request line, without its newline."""
     _check_id(req.id)
@@ -180,10 +182,11 @@ def parse_request(line: str) -> Request:
 
 # --- replies ------------------------------------------------------------------------------------
 
+
 def _clean_message(message: str, room: int) -> str:
     # Messages may quote what the peer sent: keep them printable ASCII, '#'-free (resync), short.
     text = "".join(c if c.isascii() and c.isprintable() and c != "#" else "?" for c in message)
-    return " ".join(text.split())[:max(0, room)].rstrip()
+    return " ".join(text.split())[: max(0, room)].rstrip()
 
 
 def encode_reply(reply: Reply | ErrorReply) -> str:
@@ -222,6 +225,7 @@ def parse_reply(line: str, expect_id: int | None = None) -> Reply | ErrorReply:
 
 
 # --- typed payloads -----------------------------------------------------------------------------
+
 
 def _expect(fields, n: int, what: str) -> None:
     if len(fields) != n:

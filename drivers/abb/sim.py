@@ -23,8 +23,9 @@ class SimulatedController:
     unless report_limits is False (a controller from before that extension).
     """
 
-    def __init__(self, world, robot, clock, name: str = "IRB2600-SIM", *,
-                 report_limits: bool = True):
+    def __init__(
+        self, world, robot, clock, name: str = "IRB2600-SIM", *, report_limits: bool = True
+    ):
         self.world, self.robot, self.clock, self.name = world, robot, clock, name
         self.report_limits = report_limits
         self.received: list[str] = []
@@ -87,8 +88,13 @@ class SimulatedController:
     def _do_hello(self, req):
         limits = None
         if self.report_limits:
-            limits = tuple(zip(np.rad2deg(self.robot.lower).tolist(),
-                               np.rad2deg(self.robot.upper).tolist(), strict=True))
+            limits = tuple(
+                zip(
+                    np.rad2deg(self.robot.lower).tolist(),
+                    np.rad2deg(self.robot.upper).tolist(),
+                    strict=True,
+                )
+            )
         info = p.HelloInfo(self.name, p.VERSION, self.robot.n_joints, limits)
         return p.Reply(req.id, p.hello_fields(info))
 
@@ -111,16 +117,21 @@ class SimulatedController:
     def _do_movej(self, req):
         n = self.robot.n_joints
         if len(req.values) != n:
-            return p.ErrorReply(req.id, "BAD_REQUEST",
-                                f"MOVEJ needs {n} values, got {len(req.values)}")
+            return p.ErrorReply(
+                req.id, "BAD_REQUEST", f"MOVEJ needs {n} values, got {len(req.values)}"
+            )
         if self._fault is not None:
             return p.ErrorReply(req.id, "FAULT", str(self._fault))
         q_rad = np.deg2rad(np.array(req.values))
         lo, hi = self.robot.lower, self.robot.upper
         for i in range(n):
             if not lo[i] <= q_rad[i] <= hi[i]:
-                return p.ErrorReply(req.id, "LIMIT", f"joint {i + 1} {req.values[i]:.4f} outside "
-                                    f"[{np.rad2deg(lo[i]):.4f}, {np.rad2deg(hi[i]):.4f}]")
+                return p.ErrorReply(
+                    req.id,
+                    "LIMIT",
+                    f"joint {i + 1} {req.values[i]:.4f} outside "
+                    f"[{np.rad2deg(lo[i]):.4f}, {np.rad2deg(hi[i]):.4f}]",
+                )
         if self.world.moving():
             return p.ErrorReply(req.id, "BUSY", f"executing move {self._move_id}")
         duration = self.world.command_move(q_rad)
@@ -145,8 +156,7 @@ class ControllerServer:
         self._mute = False
         self._refuse_until = 0.0  # time.monotonic(): connections before it are reset at once
         self._quiet_until = 0.0  # time.monotonic(): no request is handled before it
-        self._server = self._loop.run_until_complete(
-            asyncio.start_server(self._serve, host, port))
+        self._server = self._loop.run_until_complete(asyncio.start_server(self._serve, host, port))
         self.port: int = self._server.sockets[0].getsockname()[1]
         self._thread = threading.Thread(target=self._loop.run_forever, name="abb-sim", daemon=True)
         self._thread.start()
@@ -296,7 +306,8 @@ class ControllerServer:
         self.close()
 
 
-def serve_controller(device: SimulatedController, host: str = "127.0.0.1",
-                     port: int = 0) -> ControllerServer:
+def serve_controller(
+    device: SimulatedController, host: str = "127.0.0.1", port: int = 0
+) -> ControllerServer:
     """Serve `device` over TCP from a background thread; port 0 picks a free port (.port, .url)."""
     return ControllerServer(device, host, port)

@@ -26,8 +26,9 @@ class LineTransport:
 
     def __init__(self, url: str, timeout_s: float, baudrate: int = 9600):
         try:
-            self._port = serial.serial_for_url(url, timeout=timeout_s, write_timeout=timeout_s,
-                                               baudrate=baudrate)
+            self._port = serial.serial_for_url(
+                url, timeout=timeout_s, write_timeout=timeout_s, baudrate=baudrate
+            )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise TransportClosed(f"cannot open {url}: {exc}") from exc
         self._buffer = bytearray()

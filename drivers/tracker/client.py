@@ -8,9 +8,22 @@ import time
 
 import numpy as np
 
-from .protocol import (IDEMPOTENT, MAX_ID, NOMINAL_SAMPLE_RATE_HZ, ErrorCode, Ident, Measurement,
-                       ProtocolError, Status, TrackerError, Weather, decode_reply, encode_request,
-                       search_time_s, split_reply)
+from .protocol import (
+    IDEMPOTENT,
+    MAX_ID,
+    NOMINAL_SAMPLE_RATE_HZ,
+    ErrorCode,
+    Ident,
+    Measurement,
+    ProtocolError,
+    Status,
+    TrackerError,
+    Weather,
+    decode_reply,
+    encode_request,
+    search_time_s,
+    split_reply,
+)
 from .transport import LineSocket, LineTimeout
 
 log = logging.getLogger(__name__)
@@ -58,8 +71,11 @@ class TrackerClient:
     def search(self, radius_mm: float, timeout_s: float | None = None) -> bool:
         """Spiral-search around the aim; True if locked, False on TARGET_NOT_FOUND."""
         try:
-            return self.request("SEARCH", float(radius_mm),
-                                timeout_s=timeout_s or self.timeout_s + search_time_s(radius_mm))
+            return self.request(
+                "SEARCH",
+                float(radius_mm),
+                timeout_s=timeout_s or self.timeout_s + search_time_s(radius_mm),
+            )
         except TrackerError as e:
             if e.code == ErrorCode.TARGET_NOT_FOUND:
                 return False
@@ -112,8 +128,10 @@ class TrackerClient:
                     continue
                 return decode_reply(command, reply)
         except LineTimeout as e:
-            raise TrackerTimeout(f"{command} #{req_id}: no reply within {timeout_s:.3g} s "
-                                 f"({self.host}:{self.port}): {e}") from e
+            raise TrackerTimeout(
+                f"{command} #{req_id}: no reply within {timeout_s:.3g} s "
+                f"({self.host}:{self.port}): {e}"
+            ) from e
 
     def _reconnect(self, deadline: float) -> None:
         self.close()

@@ -17,8 +17,12 @@ SEARCH_SETUP_S = 0.2
 SEARCH_AREA_MM2_S = 1000.0  # the spiral sweeps this much area per second
 
 COMMANDS: dict[str, tuple[type, ...]] = {
-    "ID": (), "POINT": (float, float, float), "SEARCH": (float,), "MEASURE": (int,),
-    "WEATHER": (), "STATUS": (),
+    "ID": (),
+    "POINT": (float, float, float),
+    "SEARCH": (float,),
+    "MEASURE": (int,),
+    "WEATHER": (),
+    "STATUS": (),
 }
 # Repeating these changes nothing a second time (MEASURE only costs time); SEARCH may relock.
 IDEMPOTENT = frozenset({"ID", "POINT", "MEASURE", "WEATHER", "STATUS"})
@@ -189,8 +193,10 @@ def parse_request(line: str) -> Request:
         raise ProtocolError(f"unknown command {command!r}", req_id)
     if len(raw) != len(kinds):
         raise ProtocolError(f"{command} takes {len(kinds)} arguments, got {len(raw)}", req_id)
-    args = tuple(parse_int(t, command, req_id) if k is int else parse_float(t, command, req_id)
-                 for k, t in zip(kinds, raw))
+    args = tuple(
+        parse_int(t, command, req_id) if k is int else parse_float(t, command, req_id)
+        for k, t in zip(kinds, raw)
+    )
     if command == "SEARCH" and not 0 < args[0] <= MAX_SEARCH_RADIUS_MM:
         raise ProtocolError(f"SEARCH radius must be in (0, {MAX_SEARCH_RADIUS_MM}] mm", req_id)
     if command == "MEASURE" and not 1 <= args[0] <= MAX_SAMPLES:
@@ -210,8 +216,12 @@ def encode_reply(req_id: int, value) -> str:
     elif isinstance(value, bool):
         fields = ["LOCKED" if value else "UNLOCKED"]
     elif isinstance(value, Measurement):
-        fields = [*map(_num, value.mean_mm), *map(_num, value.std_mm), str(value.samples),
-                  value.status]
+        fields = [
+            *map(_num, value.mean_mm),
+            *map(_num, value.std_mm),
+            str(value.samples),
+            value.status,
+        ]
     elif isinstance(value, Weather):
         fields = [_num(value.temp_c), _num(value.pressure_hpa), _num(value.humidity_pct)]
     elif isinstance(value, Status):

@@ -6,13 +6,23 @@ import asyncio
 import threading
 
 import numpy as np
+from robocal.drivers.cell import MIN_RANGE_MM
+from robocal.solver.kinematics import Layout, flange_frames
 
-from drivers.cell import MIN_RANGE_MM
-from solver.kinematics import Layout, flange_frames
-
-from .protocol import (MEASURE_INACCURATE, MEASURE_OK, ErrorCode, Ident, Measurement,
-                       ProtocolError, Status, TrackerError, Weather, encode_reply, parse_request,
-                       search_time_s)
+from .protocol import (
+    MEASURE_INACCURATE,
+    MEASURE_OK,
+    ErrorCode,
+    Ident,
+    Measurement,
+    ProtocolError,
+    Status,
+    TrackerError,
+    Weather,
+    encode_reply,
+    parse_request,
+    search_time_s,
+)
 
 POINT_S = 0.05  # head slew and lock
 INACCURATE_SPREAD = 3.0  # sample std above this many sigma: the target moved while measured
@@ -30,9 +40,18 @@ class SimulatedTracker:
 
     model, serial, firmware = "SimTracker", "SIM-0001", "1.0"
 
-    def __init__(self, world, clock, capture_radius_mm: float = 3.0, beam_break_rate: float = 0.0,
-                 settle_amplitude_mm: float = 0.05, settle_tau_s: float = 1.5,
-                 settle_hz: float = 3.0, sample_rate_hz: float = 1000, seed: int = 0):
+    def __init__(
+        self,
+        world,
+        clock,
+        capture_radius_mm: float = 3.0,
+        beam_break_rate: float = 0.0,
+        settle_amplitude_mm: float = 0.05,
+        settle_tau_s: float = 1.5,
+        settle_hz: float = 3.0,
+        sample_rate_hz: float = 1000,
+        seed: int = 0,
+    ):
         if capture_radius_mm <= 0 or sample_rate_hz <= 0 or settle_tau_s <= 0:
             raise ValueError("capture radius, sample rate and settle tau must be > 0")
         if not 0 <= beam_break_rate <= 1 or settle_amplitude_mm < 0:
@@ -66,9 +85,14 @@ class SimulatedTracker:
         if not self._busy.acquire(blocking=False):
             return encode_reply(req.id, TrackerError(ErrorCode.BUSY, "another request is running"))
         try:
-            method = {"ID": self.ident, "POINT": lambda *xyz: self.point(xyz),
-                      "SEARCH": self.search, "MEASURE": self.measure, "WEATHER": self.weather,
-                      "STATUS": self.status}[req.command]
+            method = {
+                "ID": self.ident,
+                "POINT": lambda *xyz: self.point(xyz),
+                "SEARCH": self.search,
+                "MEASURE": self.measure,
+                "WEATHER": self.weather,
+                "STATUS": self.status,
+            }[req.command]
             value = method(*req.args)
         except TrackerError as e:
             value = e
@@ -108,8 +132,10 @@ class SimulatedTracker:
         p = self.world.smr_positions()[self.target]
         distance = float(np.linalg.norm(p))
         if distance < MIN_RANGE_MM:
-            raise TrackerError(ErrorCode.INACCURATE, f"target at {distance:.0f} mm, inside the "
-                               f"{MIN_RANGE_MM:.0f} mm minimum range")
+            raise TrackerError(
+                ErrorCode.INACCURATE,
+                f"target at {distance:.0f} mm, inside the {MIN_RANGE_MM:.0f} mm minimum range",
+            )
         sigma = float(self.world.cell.tracker.sigma_mm(distance))
         amplitude, tau, hz = self.settle
         t = self.world.since_arrival() + np.arange(n) / self.sample_rate_hz
@@ -117,8 +143,12 @@ class SimulatedTracker:
         # the spec is for a stationary reading: a shared error keeps the mean's sigma at the spec
         # whatever n, and per-sample jitter of the same sigma makes motion visible in the spread
         shared = self._rng.normal(scale=sigma * np.sqrt(1.0 - 1.0 / n), size=3)
-        samples = (p + shared + ring[:, None] * self.settle_direction
-                   + self._rng.normal(scale=sigma, size=(n, 3)))
+        samples = (
+            p
+            + shared
+            + ring[:, None] * self.settle_direction
+            + self._rng.normal(scale=sigma, size=(n, 3))
+        )
         std = samples.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
         self.clock.sleep(duration)
         self.aim_mm = p.copy()
@@ -127,8 +157,11 @@ class SimulatedTracker:
 
     def weather(self) -> Weather:
         noise = self._rng.normal(scale=WEATHER_NOISE)
-        return Weather(self.world.air_temperature() + noise[0], PRESSURE_HPA + noise[1],
-                       HUMIDITY_PCT + noise[2])
+        return Weather(
+            self.world.air_temperature() + noise[0],
+            PRESSURE_HPA + noise[1],
+            HUMIDITY_PCT + noise[2],
+        )
 
     def status(self) -> Status:
         locked = self._still_locked()
@@ -184,8 +217,9 @@ class TrackerServer:
         self._error: OSError | None = None
         self._loop = asyncio.new_event_loop()
         started = threading.Event()
-        self._thread = threading.Thread(target=self._run, args=(host, port, started),
-                                        name="sim-tracker", daemon=True)
+        self._thread = threading.Thread(
+            target=self._run, args=(host, port, started), name="sim-tracker", daemon=True
+        )
         self._thread.start()
         started.wait()
         if self._error is not None:
@@ -227,7 +261,8 @@ class TrackerServer:
         asyncio.set_event_loop(self._loop)
         try:
             self._server = self._loop.run_until_complete(
-                asyncio.start_server(self._serve, host, port))
+                asyncio.start_server(self._serve, host, port)
+            )
             self.port = self._server.sockets[0].getsockname()[1]
         except OSError as e:
             self._error = e
@@ -265,7 +300,8 @@ class TrackerServer:
                     break
                 # device time may be real (RealClock): keep the loop free for other connections
                 reply = await self._loop.run_in_executor(
-                    None, self.device.handle, raw.decode("ascii", errors="replace"))
+                    None, self.device.handle, raw.decode("ascii", errors="replace")
+                )
                 writer.write(garbage + reply.encode("ascii"))
                 await writer.drain()
         except (ConnectionError, ValueError):  # ValueError: a line over the reader's limit
@@ -286,7 +322,8 @@ class TrackerServer:
             await asyncio.wait(list(self._tasks), timeout=2.0)
 
 
-def serve_tracker(device: SimulatedTracker, host: str = "127.0.0.1",
-                  port: int = 0) -> TrackerServer:
+def serve_tracker(
+    device: SimulatedTracker, host: str = "127.0.0.1", port: int = 0
+) -> TrackerServer:
     """Serve `device` over TCP from a background thread with its own event loop; port 0: any."""
     return TrackerServer(device, host, port)

@@ -72,7 +72,7 @@ class LineSocket:
         while True:
             i = self._buf.find(b"\n")
             if i >= 0:
-                line, self._buf = self._buf[:i + 1], self._buf[i + 1:]
+                line, self._buf = self._buf[: i + 1], self._buf[i + 1 :]
                 return line.decode("ascii", errors="replace")
             remaining = deadline - time.monotonic()
             if remaining <= 0:

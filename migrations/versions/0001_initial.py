@@ -20,8 +20,11 @@ depends_on = None
 
 def _pose_fk(table: str) -> sa.ForeignKeyConstraint:
     return sa.ForeignKeyConstraint(
-        ["campaign_id", "pose_index"], ["planned_pose.campaign_id", "planned_pose.pose_index"],
-        name=op.f(f"fk_{table}_campaign_id_pose_index_planned_pose"), ondelete="CASCADE")
+        ["campaign_id", "pose_index"],
+        ["planned_pose.campaign_id", "planned_pose.pose_index"],
+        name=op.f(f"fk_{table}_campaign_id_pose_index_planned_pose"),
+        ondelete="CASCADE",
+    )
 
 
 def upgrade() -> None:
@@ -38,7 +41,8 @@ def upgrade() -> None:
         sa.PrimaryKeyConstraint("id", name=op.f("pk_campaign")),
         sa.CheckConstraint(
             "status IN ('planned', 'running', 'paused', 'done', 'aborted', 'failed')",
-            name=op.f("ck_campaign_status")),
+            name=op.f("ck_campaign_status"),
+        ),
     )
     op.create_table(
         "planned_pose",
@@ -48,10 +52,15 @@ def upgrade() -> None:
         sa.Column("label", sa.Text(), nullable=False),
         sa.Column("joints_deg", sa.JSON(), nullable=False),
         sa.PrimaryKeyConstraint("id", name=op.f("pk_planned_pose")),
-        sa.ForeignKeyConstraint(["campaign_id"], ["campaign.id"], ondelete="CASCADE",
-                                name=op.f("fk_planned_pose_campaign_id_campaign")),
-        sa.UniqueConstraint("campaign_id", "pose_index",
-                            name=op.f("uq_planned_pose_campaign_id_pose_index")),
+        sa.ForeignKeyConstraint(
+            ["campaign_id"],
+            ["campaign.id"],
+            ondelete="CASCADE",
+            name=op.f("fk_planned_pose_campaign_id_campaign"),
+        ),
+        sa.UniqueConstraint(
+            "campaign_id", "pose_index", name=op.f("uq_planned_pose_campaign_id_pose_index")
+        ),
         sa.UniqueConstraint("campaign_id", "label", name=op.f("uq_planned_pose_campaign_id_label")),
         sa.CheckConstraint("pose_index >= 0", name=op.f("ck_planned_pose_pose_index")),
     )
@@ -77,13 +86,18 @@ def upgrade() -> None:
         sa.Column("created_at", sa.DateTime(), nullable=False),
         sa.PrimaryKeyConstraint("id", name=op.f("pk_reading")),
         _pose_fk("reading"),
-        sa.UniqueConstraint("campaign_id", "pose_index", "target",
-                            name=op.f("uq_reading_campaign_id_pose_index_target")),
+        sa.UniqueConstraint(
+            "campaign_id",
+            "pose_index",
+            "target",
+            name=op.f("uq_reading_campaign_id_pose_index_target"),
+        ),
         sa.CheckConstraint("status IN ('ok', 'missing')", name=op.f("ck_reading_status")),
         sa.CheckConstraint(
             "(status = 'ok' AND x IS NOT NULL AND y IS NOT NULL AND z IS NOT NULL) OR "
             "(status = 'missing' AND x IS NULL AND y IS NULL AND z IS NULL)",
-            name=op.f("ck_reading_xyz_present")),
+            name=op.f("ck_reading_xyz_present"),
+        ),
         sa.CheckConstraint("samples IS NULL OR samples >= 1", name=op.f("ck_reading_samples")),
     )
     op.create_table(
@@ -97,10 +111,12 @@ def upgrade() -> None:
         sa.Column("created_at", sa.DateTime(), nullable=False),
         sa.PrimaryKeyConstraint("id", name=op.f("pk_pose_outcome")),
         _pose_fk("pose_outcome"),
-        sa.UniqueConstraint("campaign_id", "pose_index",
-                            name=op.f("uq_pose_outcome_campaign_id_pose_index")),
-        sa.CheckConstraint("state IN ('measured', 'missing-target', 'skipped')",
-                           name=op.f("ck_pose_outcome_state")),
+        sa.UniqueConstraint(
+            "campaign_id", "pose_index", name=op.f("uq_pose_outcome_campaign_id_pose_index")
+        ),
+        sa.CheckConstraint(
+            "state IN ('measured', 'missing-target', 'skipped')", name=op.f("ck_pose_outcome_state")
+        ),
     )
 
 

@@ -31,11 +31,16 @@ def upgrade() -> None:
         sa.Column("finished_at", sa.DateTime(), nullable=True),
         sa.Column("results", sa.JSON(), nullable=False),
         sa.PrimaryKeyConstraint("id", name=op.f("pk_job")),
-        sa.ForeignKeyConstraint(["campaign_id"], ["campaign.id"], ondelete="CASCADE",
-                                name=op.f("fk_job_campaign_id_campaign")),
+        sa.ForeignKeyConstraint(
+            ["campaign_id"],
+            ["campaign.id"],
+            ondelete="CASCADE",
+            name=op.f("fk_job_campaign_id_campaign"),
+        ),
         sa.CheckConstraint("kind IN ('calibration', 'diagnosis')", name=op.f("ck_job_kind")),
-        sa.CheckConstraint("state IN ('queued', 'running', 'done', 'failed')",
-                           name=op.f("ck_job_state")),
+        sa.CheckConstraint(
+            "state IN ('queued', 'running', 'done', 'failed')", name=op.f("ck_job_state")
+        ),
         sa.CheckConstraint("progress >= 0 AND progress <= 1", name=op.f("ck_job_progress")),
     )
 

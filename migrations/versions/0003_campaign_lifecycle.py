@@ -17,8 +17,17 @@ depends_on = None
 
 OLD = ("planned", "running", "paused", "done", "aborted", "failed")
 # drivers/lifecycle.py STATES as of this revision (a migration is frozen: no import).
-NEW = ("planned", "running", "pausing", "paused", "stopping", "aborted", "estopped", "failed",
-       "done")
+NEW = (
+    "planned",
+    "running",
+    "pausing",
+    "paused",
+    "stopping",
+    "aborted",
+    "estopped",
+    "failed",
+    "done",
+)
 
 
 def _check(states) -> str:
@@ -37,8 +46,7 @@ def upgrade() -> None:
 def downgrade() -> None:
     # The old vocabulary has no in-between states: a campaign caught in one becomes failed
     # (resumable there); an e-stopped one paused, where a reset would have left it.
-    op.execute("UPDATE campaign SET status = 'failed' "
-               "WHERE status IN ('pausing', 'stopping')")
+    op.execute("UPDATE campaign SET status = 'failed' WHERE status IN ('pausing', 'stopping')")
     op.execute("UPDATE campaign SET status = 'paused' WHERE status = 'estopped'")
     with op.batch_alter_table("campaign") as batch:
         batch.drop_column("lease_expires_at")

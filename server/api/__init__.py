@@ -3,8 +3,16 @@
 from . import campaigns, cells, charts, events, health, jobs, measurements, models
 
 # Every route of these needs the token (reads too, unless reads are open on loopback).
-ROUTERS = (cells.router, campaigns.router, campaigns.estop_router, measurements.router,
-           jobs.router, models.router, events.router, charts.router)
+ROUTERS = (
+    cells.router,
+    campaigns.router,
+    campaigns.estop_router,
+    measurements.router,
+    jobs.router,
+    models.router,
+    events.router,
+    charts.router,
+)
 # Open to anyone: nothing in them says anything about the cell.
 OPEN_ROUTERS = (health.router,)
 

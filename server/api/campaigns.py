@@ -7,26 +7,46 @@ import asyncio
 
 from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse
-
-from server import store
-from server.acquire import AcquireOptions
-from server.campaign_planning import check_plan_size, plans_long
+from robocal.server import store
+from robocal.server.acquire import AcquireOptions
+from robocal.server.campaign_planning import check_plan_size, plans_long
 
 from . import ops
+from .deps import (
+    AcquisitionsDep,
+    Authorized,
+    AuthorizedNow,
+    CampaignId,
+    CampaignStatus,
+    DbDep,
+    JobsDep,
+    SettingsDep,
+)
 from .jobs import public_job
-from .deps import (AcquisitionsDep, Authorized, AuthorizedNow, CampaignId, CampaignStatus, DbDep,
-                   JobsDep, SettingsDep)
 from .problems import problem
-from .schemas import ActionPublic, CampaignCreate, CampaignDetail, CampaignPublic, EstopPublic, \
-    JobPublic, RunPublic
+from .schemas import (
+    ActionPublic,
+    CampaignCreate,
+    CampaignDetail,
+    CampaignPublic,
+    EstopPublic,
+    JobPublic,
+    RunPublic,
+)
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
-ESTOP_NOTE = ("STOP sent to the controller (the arm halts where it is), the campaign e-stopped; "
-              "POST .../reset, then .../resume, continues it; the cell's hardware e-stop rules")
+ESTOP_NOTE = (
+    "STOP sent to the controller (the arm halts where it is), the campaign e-stopped; "
+    "POST .../reset, then .../resume, continues it; the cell's hardware e-stop rules"
+)
 # An e-stop is answered within this (502 "unconfirmed" past it), whatever the controller does.
 ESTOP_ANSWER_S = 1.0
-CONFLICT = {409: {"description": "the campaign's state does not allow this action (the body "
-                                 "says its `state` and `allowed_actions`)"}}
+CONFLICT = {
+    409: {
+        "description": "the campaign's state does not allow this action (the body "
+        "says its `state` and `allowed_actions`)"
+    }
+}
 
 
 def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
@@ -34,11 +54,21 @@ def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
     run = acquisitions.get(info.id)
     status = acquisitions.status_of(info)
     extra = {"settings": info.settings} if cls is CampaignDetail else {}
-    return cls(id=info.id, name=info.name, created_at=info.created_at, status=status,
-               actions=acquisitions.actions(info, status), simulated=info.simulated,
-               notes=info.notes, poses_total=info.n_poses, poses_done=info.n_done,
-               run=None if run is None else RunPublic(active=run.active, detail=run.detail,
-                                                      summary=run.summary), **extra)
+    return cls(
+        id=info.id,
+        name=info.name,
+        created_at=info.created_at,
+        status=status,
+        actions=acquisitions.actions(info, status),
+        simulated=info.simulated,
+        notes=info.notes,
+        poses_total=info.n_poses,
+        poses_done=info.n_done,
+        run=None
+        if run is None
+        else RunPublic(active=run.active, detail=run.detail, summary=run.summary),
+        **extra,
+    )
 
 
 def _acted(outcome, db, acquisitions, note: str) -> ActionPublic:
@@ -49,18 +79,31 @@ def _acted(outcome, db, acquisitions, note: str) -> ActionPublic:
     return ActionPublic(**now, was=outcome.was, note=outcome.note or note)
 
 
-PLANNING_JOB = {202: {
-    "model": JobPublic,
-    "description": "A planning that may take seconds (a D-optimal choice, a long tour) is "
-                   "queued as a `planning` job: follow it at `Location` (GET /api/jobs/{id}, "
-                   "progress 0..1); it ends done with `campaign_url`, or failed with the reason",
-    "headers": {"Location": {"description": "the planning job", "schema": {"type": "string"}}}}}
+PLANNING_JOB = {
+    202: {
+        "model": JobPublic,
+        "description": "A planning that may take seconds (a D-optimal choice, a long tour) is "
+        "queued as a `planning` job: follow it at `Location` (GET /api/jobs/{id}, "
+        "progress 0..1); it ends done with `campaign_url`, or failed with the reason",
+        "headers": {"Location": {"description": "the planning job", "schema": {"type": "string"}}},
+    }
+}
 
 
-@router.post("", status_code=201, dependencies=[Authorized], response_model=CampaignDetail,
-             responses=PLANNING_JOB)
-def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
-                    acquisitions: AcquisitionsDep, jobs: JobsDep):
+@router.post(
+    "",
+    status_code=201,
+    dependencies=[Authorized],
+    response_model=CampaignDetail,
+    responses=PLANNING_JOB,
+)
+def create_campaign(
+    body: CampaignCreate,
+    db: DbDep,
+    settings: SettingsDep,
+    acquisitions: AcquisitionsDep,
+    jobs: JobsDep,
+):
     """Plan a campaign on the cell (stored `planned`; POST .../start runs it): on its real devices
     if the cell has `devices`, else on the simulated ones. Random poses are planned at once
     (201, the campaign); a D-optimal choice or a long tour is queued as a planning job (202, the
@@ -70,22 +113,30 @@ def create_campaign(body: CampaignCreate, db: DbDep, settings: SettingsDep,
     check_plan_size(opts)
     if plans_long(opts):
         job = public_job(jobs.submit_planning(cell=cell, opts=opts))
-        return JSONResponse(job.model_dump(mode="json"), status_code=202,
-                            headers={"Location": f"/api/jobs/{job.id}"})
+        return JSONResponse(
+            job.model_dump(mode="json"),
+            status_code=202,
+            headers={"Location": f"/api/jobs/{job.id}"},
+        )
     cid = ops.plan_campaign(db, cell=cell, opts=opts)
     return _public(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)
 
 
 @router.get("")
-def list_campaigns(db: DbDep, acquisitions: AcquisitionsDep,
-                   status: CampaignStatus | None = None) -> list[CampaignPublic]:
+def list_campaigns(
+    db: DbDep, acquisitions: AcquisitionsDep, status: CampaignStatus | None = None
+) -> list[CampaignPublic]:
     """Every campaign, oldest first (or those with this status)."""
-    return [_public(acquisitions.refresh(c), acquisitions)
-            for c in store.list_campaigns(db, status=status)]
+    return [
+        _public(acquisitions.refresh(c), acquisitions)
+        for c in store.list_campaigns(db, status=status)
+    ]
 
 
 @router.get("/{campaign_id}")
-def get_campaign(campaign_id: CampaignId, db: DbDep, acquisitions: AcquisitionsDep) -> CampaignDetail:
+def get_campaign(
+    campaign_id: CampaignId, db: DbDep, acquisitions: AcquisitionsDep
+) -> CampaignDetail:
     """One campaign with its state, the actions it allows, and its poses done of total."""
     info = acquisitions.refresh(store.get_campaign(db, campaign_id=campaign_id))
     return _public(info, acquisitions, CampaignDetail)
@@ -98,21 +149,43 @@ def _action(name: str, doc: str, note: str, status_code: int = 200):
 
     route.__name__ = f"{name}_campaign"
     route.__doc__ = doc
-    router.post(f"/{{campaign_id}}/{name}", status_code=status_code, dependencies=[Authorized],
-                responses=CONFLICT)(route)
+    router.post(
+        f"/{{campaign_id}}/{name}",
+        status_code=status_code,
+        dependencies=[Authorized],
+        responses=CONFLICT,
+    )(route)
 
 
-_action("start", "Run the acquisition on the worker thread (planned); poll GET for progress.",
-        "queued", 202)
-_action("pause", "Pause the run after its current pose (running).",
-        "the engine pauses after the pose in progress; POST .../resume")
-_action("resume", "Resume: the live engine (pausing, paused), or a new run from the next "
-        "unmeasured pose (paused, failed).", "resumed", 202)
-_action("abort", "Abort: a run ends after the pose in progress; final, the readings stay.",
-        "aborted after the pose in progress; the readings stay")
-_action("reset", "Bring an e-stopped (or failed) campaign back to paused, after the cell was "
-        "checked; POST .../resume then continues it at its next unmeasured pose.",
-        "reset to paused; POST .../resume continues it")
+_action(
+    "start",
+    "Run the acquisition on the worker thread (planned); poll GET for progress.",
+    "queued",
+    202,
+)
+_action(
+    "pause",
+    "Pause the run after its current pose (running).",
+    "the engine pauses after the pose in progress; POST .../resume",
+)
+_action(
+    "resume",
+    "Resume: the live engine (pausing, paused), or a new run from the next "
+    "unmeasured pose (paused, failed).",
+    "resumed",
+    202,
+)
+_action(
+    "abort",
+    "Abort: a run ends after the pose in progress; final, the readings stay.",
+    "aborted after the pose in progress; the readings stay",
+)
+_action(
+    "reset",
+    "Bring an e-stopped (or failed) campaign back to paused, after the cell was "
+    "checked; POST .../resume then continues it at its next unmeasured pose.",
+    "reset to paused; POST .../resume continues it",
+)
 
 
 async def _estop(request: Request, campaign_id: int | None):
@@ -123,20 +196,38 @@ async def _estop(request: Request, campaign_id: int | None):
     try:
         outcome = await asyncio.wait_for(asyncio.wrap_future(future), ESTOP_ANSWER_S)
     except TimeoutError:
-        return problem(request, 502, f"unconfirmed: the controller did not confirm the stop "
-                       f"within {ESTOP_ANSWER_S:g} s; use the cell's hardware e-stop",
-                       campaign_id=campaign_id, confirmed=False)
+        return problem(
+            request,
+            502,
+            f"unconfirmed: the controller did not confirm the stop "
+            f"within {ESTOP_ANSWER_S:g} s; use the cell's hardware e-stop",
+            campaign_id=campaign_id,
+            confirmed=False,
+        )
     if outcome.confirmed is False:
-        return problem(request, 502, "unconfirmed: the controller did not confirm the stop; "
-                       "use the cell's hardware e-stop", campaign_id=outcome.campaign_id,
-                       state=outcome.status, confirmed=False)
+        return problem(
+            request,
+            502,
+            "unconfirmed: the controller did not confirm the stop; use the cell's hardware e-stop",
+            campaign_id=outcome.campaign_id,
+            state=outcome.status,
+            confirmed=False,
+        )
     note = outcome.note or ESTOP_NOTE
-    return EstopPublic(campaign_id=outcome.campaign_id, status=outcome.status, was=outcome.was,
-                       confirmed=outcome.confirmed, actions=list(outcome.actions), note=note)
+    return EstopPublic(
+        campaign_id=outcome.campaign_id,
+        status=outcome.status,
+        was=outcome.was,
+        confirmed=outcome.confirmed,
+        actions=list(outcome.actions),
+        note=note,
+    )
 
 
-ESTOP_RESPONSES = {**CONFLICT, 502: {"description": "unconfirmed: the controller did not "
-                                                    "confirm the stop within 1 s"}}
+ESTOP_RESPONSES = {
+    **CONFLICT,
+    502: {"description": "unconfirmed: the controller did not confirm the stop within 1 s"},
+}
 
 
 @router.post("/{campaign_id}/estop", dependencies=[AuthorizedNow], responses=ESTOP_RESPONSES)

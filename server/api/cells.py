@@ -3,17 +3,24 @@
 from __future__ import annotations
 
 from fastapi import APIRouter, Request
+from robocal.server.formats.cell_json import Cell, cell_to_json
 from starlette.concurrency import run_in_threadpool
-
-from server.formats.cell_json import Cell, cell_to_json
 
 from . import ops
 from .deps import Authorized, SettingsDep
 from .schemas import CellPublic
 
 router = APIRouter(prefix="/cells", tags=["cells"])
-JSON_BODY = {"requestBody": {"required": True, "content": {"application/json": {
-    "schema": {"type": "object", "description": "a cell.json (spec section 2)"}}}}}
+JSON_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "application/json": {
+                "schema": {"type": "object", "description": "a cell.json (spec section 2)"}
+            }
+        },
+    }
+}
 
 
 @router.get("")
@@ -33,8 +40,7 @@ async def upload_cell(request: Request, settings: SettingsDep) -> CellPublic:
     """Validate and keep a cell.json (read raw, so errors name its line and column); a
     `devices` object makes it a real cell, whose campaigns drive the tracker and controller there."""
     text = (await request.body()).decode("utf-8", errors="replace")
-    cell_id, cell = await run_in_threadpool(ops.save_cell, cells_dir=settings.cells_dir,
-                                            text=text)
+    cell_id, cell = await run_in_threadpool(ops.save_cell, cells_dir=settings.cells_dir, text=text)
     return _public(cell_id, cell)
 
 

@@ -6,10 +6,9 @@ numerics choke on costs a 504 and a killed process, never a hung request."""
 from __future__ import annotations
 
 from fastapi import APIRouter, Response
-
-from server import charts, store
-from server.formats.cell_json import parse_cell
-from solver.finite import require_inputs
+from robocal.server import charts, store
+from robocal.server.formats.cell_json import parse_cell
+from robocal.solver.finite import require_inputs
 
 from .deps import DbDep, JobId, JobsDep
 from .worker_calls import CALL_PROBLEMS, call_slot, run_call

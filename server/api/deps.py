@@ -6,14 +6,13 @@ from typing import Annotated, Literal
 
 from fastapi import Depends, Path, Query, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-
-from server.acquisitions import Acquisitions
-from server.events import Events
-from server.job_queue import Jobs
-from server.security import require_token
-from server.settings import Settings
-from server.store import Database
-from server.store.models import STATUSES
+from robocal.server.acquisitions import Acquisitions
+from robocal.server.events import Events
+from robocal.server.job_queue import Jobs
+from robocal.server.security import require_token
+from robocal.server.settings import Settings
+from robocal.server.store import Database
+from robocal.server.store.models import STATUSES
 
 
 def get_db(request: Request) -> Database:
@@ -41,10 +40,14 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 JobsDep = Annotated[Jobs, Depends(get_jobs)]
 AcquisitionsDep = Annotated[Acquisitions, Depends(get_acquisitions)]
 EventsDep = Annotated[Events, Depends(get_events)]
+
+
 async def require_token_now(
-        request: Request,
-        credentials: Annotated[HTTPAuthorizationCredentials | None,
-                               Depends(HTTPBearer(auto_error=False))]) -> None:
+    request: Request,
+    credentials: Annotated[
+        HTTPAuthorizationCredentials | None, Depends(HTTPBearer(auto_error=False))
+    ],
+) -> None:
     """require_token on the event loop, for the e-stop routes: a sync dependency would wait for
     a thread of the server's pool, behind every request in it."""
     require_token(request, credentials)

@@ -14,9 +14,19 @@ router = APIRouter(tags=["events"])
 PING_S = 15
 
 
-@router.get("/events", response_class=EventSourceResponse, responses={200: {"content": {
-    "text/event-stream": {"schema": {"type": "string",
-                                     "description": "server-sent events, endless"}}}}})
+@router.get(
+    "/events",
+    response_class=EventSourceResponse,
+    responses={
+        200: {
+            "content": {
+                "text/event-stream": {
+                    "schema": {"type": "string", "description": "server-sent events, endless"}
+                }
+            }
+        }
+    },
+)
 async def events(request: Request, bus: EventsDep) -> EventSourceResponse:
     """Server-sent events: `event:` is the type (campaign.state, campaign.pose, campaign.run,
     job), `data:` its JSON object; events from before the connection are not replayed."""

@@ -7,8 +7,7 @@ import json
 
 from fastapi import APIRouter, Request
 from fastapi.responses import FileResponse
-
-from server.job_queue import DuplicateJob, Job
+from robocal.server.job_queue import DuplicateJob, Job
 
 from . import problems
 from .deps import Authorized, JobId, JobsDep
@@ -22,38 +21,63 @@ def public_job(job: Job) -> JobPublic:
     urls = {}
     if done:
         base = f"/api/jobs/{job.id}"
-        urls = dict(model_url=f"/api/models/{job.id}" if "model" in job.results else None,
-                    recording_url=f"{base}/recording" if "recording" in job.results else None,
-                    report_url=f"{base}/report" if "report" in job.results else None,
-                    figures_url=f"{base}/figures" if "report" in job.results else None,
-                    campaign_url=(f"/api/campaigns/{job.results['campaign']}"
-                                  if "campaign" in job.results else None))
-    return JobPublic(id=job.id, kind=job.kind, campaign_id=job.campaign_id, method=job.method,
-                     state=job.state, reason=job.reason, progress=job.progress,
-                     created_at=job.created_at, started_at=job.started_at,
-                     finished_at=job.finished_at, **urls)
+        urls = dict(
+            model_url=f"/api/models/{job.id}" if "model" in job.results else None,
+            recording_url=f"{base}/recording" if "recording" in job.results else None,
+            report_url=f"{base}/report" if "report" in job.results else None,
+            figures_url=f"{base}/figures" if "report" in job.results else None,
+            campaign_url=(
+                f"/api/campaigns/{job.results['campaign']}" if "campaign" in job.results else None
+            ),
+        )
+    return JobPublic(
+        id=job.id,
+        kind=job.kind,
+        campaign_id=job.campaign_id,
+        method=job.method,
+        state=job.state,
+        reason=job.reason,
+        progress=job.progress,
+        created_at=job.created_at,
+        started_at=job.started_at,
+        finished_at=job.finished_at,
+        **urls,
+    )
 
 
 PROBLEM = {"content": {"application/problem+json": {}}}
 
 
-@router.post("", status_code=202, dependencies=[Authorized],
-             responses={409: {"description": "The campaign is not done, or the same "
-                              "calibration (campaign and method) is queued or running; "
-                              "`job_id` names that job", **PROBLEM}})
+@router.post(
+    "",
+    status_code=202,
+    dependencies=[Authorized],
+    responses={
+        409: {
+            "description": "The campaign is not done, or the same "
+            "calibration (campaign and method) is queued or running; "
+            "`job_id` names that job",
+            **PROBLEM,
+        }
+    },
+)
 def create_job(body: JobCreate, jobs: JobsDep, request: Request) -> JobPublic:
     """Queue a calibration or diagnosis of a done campaign; poll GET /jobs/{id} or /api/events.
     A second calibration of a campaign with the same method while one is queued or running is
     refused (409); another method is accepted."""
     try:
-        return public_job(jobs.submit(campaign_id=body.campaign_id, method=body.method,
-                                   kind=body.kind))
+        return public_job(
+            jobs.submit(campaign_id=body.campaign_id, method=body.method, kind=body.kind)
+        )
     except DuplicateJob as e:
         return problems.problem(request, 409, str(e), job_id=e.job_id)
 
 
-@router.post("/{job_id}/cancel", dependencies=[Authorized],
-             responses={409: {"description": "The job is already done or failed", **PROBLEM}})
+@router.post(
+    "/{job_id}/cancel",
+    dependencies=[Authorized],
+    responses={409: {"description": "The job is already done or failed", **PROBLEM}},
+)
 def cancel_job(job_id: JobId, jobs: JobsDep) -> JobPublic:
     """Cancel a job: a queued one leaves the queue, a running one's worker process is killed;
     either ends failed with reason "cancelled" (409 if it already ended)."""
@@ -72,12 +96,18 @@ def get_job(job_id: JobId, jobs: JobsDep) -> JobPublic:
     return public_job(jobs.get(job_id))
 
 
-@router.get("/{job_id}/recording", response_class=FileResponse,
-            responses={200: {"content": {"application/octet-stream": {}}}})
+@router.get(
+    "/{job_id}/recording",
+    response_class=FileResponse,
+    responses={200: {"content": {"application/octet-stream": {}}}},
+)
 def get_recording(job_id: JobId, jobs: JobsDep) -> FileResponse:
     """The Rerun recording (.rrd) of a done calibration (404 none, 409 not done)."""
-    return FileResponse(jobs.result_path(job_id, "recording"),
-                        media_type="application/octet-stream", filename=f"job-{job_id}.rrd")
+    return FileResponse(
+        jobs.result_path(job_id, "recording"),
+        media_type="application/octet-stream",
+        filename=f"job-{job_id}.rrd",
+    )
 
 
 @router.get("/{job_id}/report")
@@ -94,8 +124,11 @@ def list_figures(job_id: JobId, jobs: JobsDep) -> list[FigurePublic]:
     return [FigurePublic(name=n, url=f"/api/jobs/{job_id}/figures/{n}") for n in names]
 
 
-@router.get("/{job_id}/figures/{name}", response_class=FileResponse,
-            responses={200: {"content": {"image/png": {}}}})
+@router.get(
+    "/{job_id}/figures/{name}",
+    response_class=FileResponse,
+    responses={200: {"content": {"image/png": {}}}},
+)
 def get_figure(job_id: JobId, name: str, jobs: JobsDep) -> FileResponse:
     """One figure of a done diagnosis, by the name the list gives."""
     return FileResponse(jobs.figure_path(job_id, name), media_type="image/png")

@@ -6,72 +6,118 @@ from typing import Annotated
 
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import StreamingResponse
+from robocal.drivers.lifecycle import allowed
+from robocal.server import store
 from starlette.concurrency import iterate_in_threadpool, run_in_threadpool
-
-from server import store
 
 from . import ops
 from .deps import Authorized, CampaignId, DbDep, SettingsDep
-from drivers.lifecycle import allowed
-
 from .schemas import MAX_ID, PRINTABLE, CampaignPublic, ReadingPublic
 
 router = APIRouter(tags=["measurements"])
 # Readings per page of GET .../measurements: a page stays a few megabytes whatever the campaign.
 PAGE_MAX = 10_000
 TOTAL_HEADER = "X-Total-Count"
-CSV_BODY = {"requestBody": {"required": True, "content": {"text/csv": {
-    "schema": {"type": "string", "description": "a meas.csv (spec section 1)"}}}}}
+CSV_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "text/csv": {"schema": {"type": "string", "description": "a meas.csv (spec section 1)"}}
+        },
+    }
+}
 
 
-@router.get("/campaigns/{campaign_id}/measurements", responses={200: {"headers": {
-    TOTAL_HEADER: {"description": "readings the campaign has in all",
-                   "schema": {"type": "integer"}}}}})
-def list_readings(campaign_id: CampaignId, db: DbDep, response: Response,
-                  offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
-                  limit: Annotated[int, Query(ge=1, le=PAGE_MAX)] = 1000
-                  ) -> list[ReadingPublic]:
+@router.get(
+    "/campaigns/{campaign_id}/measurements",
+    responses={
+        200: {
+            "headers": {
+                TOTAL_HEADER: {
+                    "description": "readings the campaign has in all",
+                    "schema": {"type": "integer"},
+                }
+            }
+        }
+    },
+)
+def list_readings(
+    campaign_id: CampaignId,
+    db: DbDep,
+    response: Response,
+    offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
+    limit: Annotated[int, Query(ge=1, le=PAGE_MAX)] = 1000,
+) -> list[ReadingPublic]:
     """A page of the campaign's readings (missing targets included), in plan order: `limit`
     from `offset`; the X-Total-Count header says how many there are in all."""
     total, page = store.readings_page(db, campaign_id=campaign_id, offset=offset, limit=limit)
     response.headers[TOTAL_HEADER] = str(total)
-    return [ReadingPublic(pose=label, pose_index=r.pose_index, target=r.target, status=r.status,
-                          xyz=r.xyz, std=r.std, samples=r.samples, time_s=r.time_s,
-                          temp_c=r.temp_c, detail=r.detail)
-            for label, r in page]
+    return [
+        ReadingPublic(
+            pose=label,
+            pose_index=r.pose_index,
+            target=r.target,
+            status=r.status,
+            xyz=r.xyz,
+            std=r.std,
+            samples=r.samples,
+            time_s=r.time_s,
+            temp_c=r.temp_c,
+            detail=r.detail,
+        )
+        for label, r in page
+    ]
 
 
-@router.get("/campaigns/{campaign_id}/measurements.csv", response_class=StreamingResponse,
-            responses={200: {"content": {"text/csv": {"schema": {"type": "string"}}}}})
+@router.get(
+    "/campaigns/{campaign_id}/measurements.csv",
+    response_class=StreamingResponse,
+    responses={200: {"content": {"text/csv": {"schema": {"type": "string"}}}}},
+)
 async def export_readings(campaign_id: CampaignId, db: DbDep) -> StreamingResponse:
     """The campaign as a meas.csv, streamed (409 if it has no readings yet)."""
     lines = store.export_lines(db, campaign_id=campaign_id)
     # The first chunk (header) is read here, so a missing campaign is a 404 before streaming.
     first = await run_in_threadpool(next, lines)
+
     async def body():
         yield first
         async for chunk in iterate_in_threadpool(lines):
             yield chunk
-    return StreamingResponse(body(), media_type="text/csv", headers={
-        "Content-Disposition": f'attachment; filename="campaign-{campaign_id}.csv"'})
+
+    return StreamingResponse(
+        body(),
+        media_type="text/csv",
+        headers={"Content-Disposition": f'attachment; filename="campaign-{campaign_id}.csv"'},
+    )
 
 
-@router.post("/measurements/import", status_code=201, dependencies=[Authorized],
-             openapi_extra=CSV_BODY)
-async def import_readings(request: Request, db: DbDep, settings: SettingsDep,
-                          name: Annotated[str | None, Query(max_length=200,
-                                                            pattern=PRINTABLE)] = None,
-                          filename: Annotated[str, Query(max_length=255,
-                                                         pattern=PRINTABLE)] = "meas.csv",
-                          cell_id: Annotated[str, Query(max_length=64)] = "default"
-                          ) -> CampaignPublic:
+@router.post(
+    "/measurements/import", status_code=201, dependencies=[Authorized], openapi_extra=CSV_BODY
+)
+async def import_readings(
+    request: Request,
+    db: DbDep,
+    settings: SettingsDep,
+    name: Annotated[str | None, Query(max_length=200, pattern=PRINTABLE)] = None,
+    filename: Annotated[str, Query(max_length=255, pattern=PRINTABLE)] = "meas.csv",
+    cell_id: Annotated[str, Query(max_length=64)] = "default",
+) -> CampaignPublic:
     """Store a meas.csv as a done campaign; a bad file is 422 with its line and nothing stored."""
     data = await request.body()
     cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=cell_id)
-    cid = await run_in_threadpool(ops.import_campaign_csv, db, data=data, filename=filename,
-                                  cell=cell, name=name or filename)
+    cid = await run_in_threadpool(
+        ops.import_campaign_csv, db, data=data, filename=filename, cell=cell, name=name or filename
+    )
     info = store.get_campaign(db, campaign_id=cid)
-    return CampaignPublic(id=info.id, name=info.name, created_at=info.created_at,
-                          status=info.status, actions=allowed(info.status),
-                          simulated=info.simulated, notes=info.notes,
-                          poses_total=info.n_poses, poses_done=info.n_done)
+    return CampaignPublic(
+        id=info.id,
+        name=info.name,
+        created_at=info.created_at,
+        status=info.status,
+        actions=allowed(info.status),
+        simulated=info.simulated,
+        notes=info.notes,
+        poses_total=info.n_poses,
+        poses_done=info.n_done,
+    )

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 from fastapi.responses import FileResponse
-
-from server import charts, store
-from server.formats.cell_json import parse_cell
-from solver.finite import require_inputs
+from robocal.server import charts, store
+from robocal.server.formats.cell_json import parse_cell
+from robocal.solver.finite import require_inputs
 
 from .deps import CampaignQuery, DbDep, JobId, JobsDep
 from .worker_calls import CALL_PROBLEMS, call_slot, run_call
@@ -15,12 +14,14 @@ from .worker_calls import CALL_PROBLEMS, call_slot, run_call
 router = APIRouter(prefix="/models", tags=["models"])
 
 
-@router.get("/{job_id}", response_class=FileResponse,
-            responses={200: {"content": {"application/json": {}}}})
+@router.get(
+    "/{job_id}", response_class=FileResponse, responses={200: {"content": {"application/json": {}}}}
+)
 def get_model(job_id: JobId, jobs: JobsDep) -> FileResponse:
     """The model.json of a done job (404 no job, 409 not done)."""
-    return FileResponse(jobs.model_path(job_id), media_type="application/json",
-                        filename=f"job-{job_id}.model.json")
+    return FileResponse(
+        jobs.model_path(job_id), media_type="application/json", filename=f"job-{job_id}.model.json"
+    )
 
 
 @router.get("/{job_id}/evaluate", responses=CALL_PROBLEMS)

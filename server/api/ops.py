@@ -9,18 +9,24 @@ import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
-from server import store
-from server.acquire import (UNFINISHED, AcquireOptions, base_guess, check_options,
-                            plan_and_store)
-from server.formats.cell_json import Cell, cell_to_json, default_cell, parse_cell
-from server.formats.errors import InputError
-from server.formats.files import atomic_write_text
+from robocal.server import store
+from robocal.server.acquire import (
+    UNFINISHED,
+    AcquireOptions,
+    base_guess,
+    check_options,
+    plan_and_store,
+)
+from robocal.server.formats.cell_json import Cell, cell_to_json, default_cell, parse_cell
+from robocal.server.formats.errors import InputError
+from robocal.server.formats.files import atomic_write_text
 
 DEFAULT_CELL = "default"
 CELL_ID = re.compile(r"[0-9a-f]{16}")
 
 
 # --- cells -------------------------------------------------------------------------------------
+
 
 def save_cell(*, cells_dir: Path, text: str, filename: str = "cell.json") -> tuple[str, Cell]:
     """Validate a cell.json and keep it under its content hash; (id, cell)."""
@@ -52,6 +58,7 @@ def list_cells(*, cells_dir: Path) -> list[str]:
 
 # --- campaigns ---------------------------------------------------------------------------------
 
+
 def plan_campaign(db: store.Database, *, cell: Cell, opts: AcquireOptions, progress=None) -> int:
     """Plan a campaign on the cell (simulated or real) exactly as `robocal acquire` would, and
     store it `planned`; ValueError for options the cell cannot have. progress(fraction), if
@@ -63,15 +70,18 @@ def plan_campaign(db: store.Database, *, cell: Cell, opts: AcquireOptions, progr
     if clash:
         raise store.Conflict(f"campaign {clash[-1]} is already named {name!r} and unfinished")
     opts = AcquireOptions(**{**asdict(opts), "name": name})
-    cid, _ = plan_and_store(db, name=name, cell=cell, opts=opts, base=base_guess(cell, opts.seed),
-                            progress=progress)
+    cid, _ = plan_and_store(
+        db, name=name, cell=cell, opts=opts, base=base_guess(cell, opts.seed), progress=progress
+    )
     return cid
 
 
 # --- readings and files ------------------------------------------------------------------------
 
-def import_campaign_csv(db: store.Database, *, data: bytes, filename: str, cell: Cell,
-                        name: str) -> int:
+
+def import_campaign_csv(
+    db: store.Database, *, data: bytes, filename: str, cell: Cell, name: str
+) -> int:
     """Store an uploaded meas.csv as a done campaign; InputError naming `filename`:line:column."""
     filename = Path(filename).name or "meas.csv"  # only a label: never a path on this machine
     with tempfile.TemporaryDirectory() as tmp:

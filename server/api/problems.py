@@ -5,16 +5,15 @@ from __future__ import annotations
 from http import HTTPStatus
 
 from fastapi import FastAPI, Request
-from pydantic import BaseModel, ConfigDict
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from pydantic import BaseModel, ConfigDict
+from robocal.drivers.lifecycle import StateError
+from robocal.server.acquisitions import ControllerUnreachable
+from robocal.server.formats.errors import InputError
+from robocal.server.store import Conflict, NotFound, StoreError
 from starlette.exceptions import HTTPException as StarletteHTTPException
-
-from drivers.lifecycle import StateError
-from server.formats.errors import InputError
-from server.acquisitions import ControllerUnreachable
-from server.store import Conflict, NotFound, StoreError
 
 MEDIA_TYPE = "application/problem+json"
 
@@ -32,29 +31,47 @@ class Problem(BaseModel):
 
 def problem_response(description: str) -> dict:
     """An OpenAPI `responses` entry for a problem-details answer."""
-    return {"description": description,
-            "content": {MEDIA_TYPE: {"schema": Problem.model_json_schema()}}}
+    return {
+        "description": description,
+        "content": {MEDIA_TYPE: {"schema": Problem.model_json_schema()}},
+    }
 
 
 # What every route may answer besides its success (server.app adds them to each route's
 # OpenAPI): statuses by which routes can give them.
 UNAUTHORIZED = {401: problem_response("no or wrong bearer token")}
-READ_ERRORS = {404: problem_response("no such resource"),
-               409: problem_response("the resource is not in a state that allows this"),
-               422: problem_response("the request (or an uploaded file) is invalid; the "
-                                     "detail names the field, or the file's line and column")}
-WRITE_ERRORS = {400: problem_response("the body is not valid JSON"),
-                413: problem_response("the request body is larger than max_upload_bytes")}
-DEVICE_ERRORS = {502: problem_response("a device (controller, tracker) did not answer as it "
-                                       "must; the arm may still move")}
+READ_ERRORS = {
+    404: problem_response("no such resource"),
+    409: problem_response("the resource is not in a state that allows this"),
+    422: problem_response(
+        "the request (or an uploaded file) is invalid; the "
+        "detail names the field, or the file's line and column"
+    ),
+}
+WRITE_ERRORS = {
+    400: problem_response("the body is not valid JSON"),
+    413: problem_response("the request body is larger than max_upload_bytes"),
+}
+DEVICE_ERRORS = {
+    502: problem_response(
+        "a device (controller, tracker) did not answer as it must; the arm may still move"
+    )
+}
 
 
 def problem(request: Request, status: int, detail: str, headers=None, **extra) -> JSONResponse:
     """A problem-details response."""
-    body = {"type": "about:blank", "title": HTTPStatus(status).phrase, "status": status,
-            "detail": detail, "instance": request.url.path, **extra}
-    return JSONResponse(jsonable_encoder(body), status_code=status, headers=headers,
-                        media_type=MEDIA_TYPE)
+    body = {
+        "type": "about:blank",
+        "title": HTTPStatus(status).phrase,
+        "status": status,
+        "detail": detail,
+        "instance": request.url.path,
+        **extra,
+    }
+    return JSONResponse(
+        jsonable_encoder(body), status_code=status, headers=headers, media_type=MEDIA_TYPE
+    )
 
 
 class UploadLimit:
@@ -87,8 +104,10 @@ class UploadLimit:
 
 
 def too_large(max_bytes: int) -> str:
-    return (f"the request body is larger than {max_bytes} bytes (setting max_upload_bytes, "
-            "env ROBOCAL_MAX_UPLOAD_BYTES); split the file")
+    return (
+        f"the request body is larger than {max_bytes} bytes (setting max_upload_bytes, "
+        "env ROBOCAL_MAX_UPLOAD_BYTES); split the file"
+    )
 
 
 def install(app: FastAPI) -> None:
@@ -116,9 +135,16 @@ def install(app: FastAPI) -> None:
 
     # Store and device errors map to one status each; the store and the solver front ends raise
     # ValueError for bad arguments only. A 502 means the arm may still move: said loudly.
-    statuses = ((NotFound, 404), (Conflict, 409), (StoreError, 422),
-                (ControllerUnreachable, 502), (ValueError, 422))
+    statuses = (
+        (NotFound, 404),
+        (Conflict, 409),
+        (StoreError, 422),
+        (ControllerUnreachable, 502),
+        (ValueError, 422),
+    )
     for exc_type, status in statuses:
+
         async def handler(request: Request, exc: Exception, status: int = status):
             return problem(request, status, str(exc))
+
         app.add_exception_handler(exc_type, handler)

@@ -15,8 +15,8 @@ _CTRL = r"\x00-\x1f\x7f-\x9f\u2028\u2029"
 PRINTABLE = rf"^[^{_CTRL}]*[^\s{_CTRL}][^{_CTRL}]*$"  # and not blank
 METHOD = r"^(minimax|ls-sum|ls-pose|nominal|ls-single(:[A-Za-z][A-Za-z0-9_]{0,15})?)$"
 
-from drivers.lifecycle import ACTIONS, STATES
-from server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
+from robocal.drivers.lifecycle import ACTIONS, STATES
+from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
 
 
 class CellPublic(BaseModel):
@@ -36,9 +36,15 @@ class CampaignCreate(BaseModel):
     settle: Literal["fixed", "adaptive"] = "fixed"
     pause_s: float = Field(10.0, ge=0.0, le=600.0)
     order: bool = False
-    choose_from: int = Field(0, ge=0, le=MAX_CANDIDATES, description=(
-        "choose `poses` of this many candidates by D-optimality (0: no choice); "
-        f"poses x choose_from at most {MAX_CHOICE_WORK}"))
+    choose_from: int = Field(
+        0,
+        ge=0,
+        le=MAX_CANDIDATES,
+        description=(
+            "choose `poses` of this many candidates by D-optimality (0: no choice); "
+            f"poses x choose_from at most {MAX_CHOICE_WORK}"
+        ),
+    )
     beam_break_rate: float = Field(0.0, ge=0.0, lt=1.0, description="simulated cell only")
     samples: int = Field(1000, ge=1, le=100_000)
 
@@ -52,8 +58,10 @@ class RunPublic(BaseModel):
     summary: dict | None = None
 
 
-ACTIONS_FIELD = Field(description="the actions its state allows that this service can carry "
-                      "out now (start, pause, resume, abort, estop, reset)")
+ACTIONS_FIELD = Field(
+    description="the actions its state allows that this service can carry "
+    "out now (start, pause, resume, abort, estop, reset)"
+)
 
 
 class CampaignPublic(BaseModel):
@@ -84,8 +92,11 @@ class EstopPublic(BaseModel):
     campaign_id: int | None
     status: Literal[STATES] | None = None
     was: Literal[STATES] | None = None
-    confirmed: bool | None = Field(None, description="the controller confirmed the stop (null: "
-                                   "no run of this service was moving the arm)")
+    confirmed: bool | None = Field(
+        None,
+        description="the controller confirmed the stop (null: "
+        "no run of this service was moving the arm)",
+    )
     actions: list[Literal[ACTIONS]] = ACTIONS_FIELD
     note: str
 
@@ -106,8 +117,11 @@ class ReadingPublic(BaseModel):
 class JobCreate(BaseModel):
     campaign_id: int = Field(ge=1, le=MAX_ID)
     kind: Literal["calibration", "diagnosis"] = "calibration"
-    method: str = Field("minimax", pattern=METHOD, description="minimax, ls-sum, ls-single[:T], ls-pose, nominal "
-                        "(calibration only)")
+    method: str = Field(
+        "minimax",
+        pattern=METHOD,
+        description="minimax, ls-sum, ls-single[:T], ls-pose, nominal (calibration only)",
+    )
 
 
 class JobPublic(BaseModel):

@@ -6,16 +6,19 @@ from __future__ import annotations
 from contextlib import contextmanager
 
 from fastapi import HTTPException
-
-from server.job_queue import Busy, CallTimedOut, Jobs
-from server.processes import WorkerDied
+from robocal.server.job_queue import Busy, CallTimedOut, Jobs
+from robocal.server.processes import WorkerDied
 
 PROBLEM = {"application/problem+json": {}}
 CALL_PROBLEMS = {
-    503: {"description": "No worker free for the computation (Retry-After), or it died",
-          "content": PROBLEM},
-    504: {"description": "The computation ran past its wall-clock limit and was stopped",
-          "content": PROBLEM},
+    503: {
+        "description": "No worker free for the computation (Retry-After), or it died",
+        "content": PROBLEM,
+    },
+    504: {
+        "description": "The computation ran past its wall-clock limit and was stopped",
+        "content": PROBLEM,
+    },
 }
 RETRY_AFTER_S = 5
 

@@ -6,9 +6,8 @@ import csv
 import io
 
 import numpy as np
-
-from solver.measurements import Measurements
-from solver.robot import Robot
+from robocal.solver.measurements import Measurements
+from robocal.solver.robot import Robot
 
 from .cell_json import TARGET_NAME
 from .csv_table import Row, Table
@@ -62,8 +61,12 @@ class _Poses:
         first = self.first[k]
         for name, a, b in zip(self.columns, self.q_deg[k], q):
             if abs(a - b) > SAME_POSE_TOL_DEG:
-                raise t.error(row, name, f"{t.raw(row, name)} differs from {t.raw(first, name)} "
-                                         f"on line {first.line}, an earlier row of pose {pid!r}")
+                raise t.error(
+                    row,
+                    name,
+                    f"{t.raw(row, name)} differs from {t.raw(first, name)} "
+                    f"on line {first.line}, an earlier row of pose {pid!r}",
+                )
         return k, False
 
     def _joint(self, row: Row, i: int, name: str) -> float:
@@ -71,8 +74,12 @@ class _Poses:
         value = t.number(row, name)
         lo, hi = self.lo[i], self.hi[i]
         if value < lo - LIMIT_TOL_DEG or value > hi + LIMIT_TOL_DEG:
-            raise t.error(row, name, f"{t.raw(row, name)} deg is outside the limits "
-                                     f"[{lo:.6g}, {hi:.6g}] deg of joint {i + 1} of {self.robot.name}")
+            raise t.error(
+                row,
+                name,
+                f"{t.raw(row, name)} deg is outside the limits "
+                f"[{lo:.6g}, {hi:.6g}] deg of joint {i + 1} of {self.robot.name}",
+            )
         return value
 
     def q_rad(self) -> np.ndarray:
@@ -92,12 +99,19 @@ def read_campaign(path, robot: Robot) -> Measurements:
         k, _ = poses.add(row)
         target = t.text(row, "target")
         if not TARGET_NAME.fullmatch(target):
-            raise t.error(row, "target", f"{target!r} is not a target name (a letter, then up "
-                                         "to 15 letters, digits or '_', as in cell.json)")
+            raise t.error(
+                row,
+                "target",
+                f"{target!r} is not a target name (a letter, then up "
+                "to 15 letters, digits or '_', as in cell.json)",
+            )
         key = (poses.ids[k], target)
         if key in seen:
-            raise t.error(row, "target", f"target {target!r} of pose {key[0]!r} is already "
-                                         f"on line {seen[key].line}")
+            raise t.error(
+                row,
+                "target",
+                f"target {target!r} of pose {key[0]!r} is already on line {seen[key].line}",
+            )
         seen[key] = row
         xyz = [t.number(row, c, None, *BOUNDS[c]) for c in MEASURED]
         # A blank time or temperature means "not recorded" (NaN), unlike a blank coordinate.
@@ -113,8 +127,9 @@ def read_campaign(path, robot: Robot) -> Measurements:
         xyz[k, col[target]] = p
         for c, v in zip(extras, more):
             extra[c][k, col[target]] = v
-    return Measurements(list(poses.ids), poses.q_rad(), names, xyz,
-                        extra.get("time_s"), extra.get("temp_c"))
+    return Measurements(
+        list(poses.ids), poses.q_rad(), names, xyz, extra.get("time_s"), extra.get("temp_c")
+    )
 
 
 def read_poses(path, robot: Robot):
@@ -165,9 +180,16 @@ def write_campaign(path, meas: Measurements) -> None:
         raise ValueError("joint readings must be finite")
     if len(set(map(str, meas.pose_ids))) != m:
         raise ValueError("pose ids must be unique")
-    extras = [(c, a) for c, a in (("time_s", meas.time_s), ("temp_c", meas.temp_c)) if a is not None]
-    header = ["pose", *[f"q{i}" for i in range(1, q.shape[1] + 1)], "target", *MEASURED,
-              *[c for c, _ in extras]]
+    extras = [
+        (c, a) for c, a in (("time_s", meas.time_s), ("temp_c", meas.temp_c)) if a is not None
+    ]
+    header = [
+        "pose",
+        *[f"q{i}" for i in range(1, q.shape[1] + 1)],
+        "target",
+        *MEASURED,
+        *[c for c, _ in extras],
+    ]
     q_deg = np.rad2deg(q)
     mask = meas.mask
     rows = []
@@ -175,8 +197,15 @@ def write_campaign(path, meas: Measurements) -> None:
         joints = ["%.9f" % v for v in q_deg[i]]
         for k, name in enumerate(meas.target_names):
             if mask[i, k]:
-                rows.append([str(pid), *joints, name, *["%.6f" % v for v in meas.xyz[i, k]],
-                             *[_fmt(a[i, k], "%.6f") for _, a in extras]])
+                rows.append(
+                    [
+                        str(pid),
+                        *joints,
+                        name,
+                        *["%.6f" % v for v in meas.xyz[i, k]],
+                        *[_fmt(a[i, k], "%.6f") for _, a in extras],
+                    ]
+                )
     atomic_write_text(path, _csv_text(header, rows))
 
 
@@ -184,14 +213,17 @@ def write_predictions(path, pose_ids, target_names, xyz) -> None:
     """Write `pred.csv`: `pose,target,x,y,z`, one row per (pose, target), atomically."""
     xyz = np.asarray(xyz, dtype=float)
     if xyz.shape != (len(pose_ids), len(target_names), 3):
-        raise ValueError(f"xyz has shape {xyz.shape}, expected "
-                         f"({len(pose_ids)}, {len(target_names)}, 3)")
+        raise ValueError(
+            f"xyz has shape {xyz.shape}, expected ({len(pose_ids)}, {len(target_names)}, 3)"
+        )
     if not np.all(np.isfinite(xyz)):
         raise ValueError("predictions must be finite")
-    rows = [[str(pid), name, *["%.6f" % v for v in xyz[i, k]]]
-            for i, pid in enumerate(pose_ids) for k, name in enumerate(target_names)]
+    rows = [
+        [str(pid), name, *["%.6f" % v for v in xyz[i, k]]]
+        for i, pid in enumerate(pose_ids)
+        for k, name in enumerate(target_names)
+    ]
     atomic_write_text(path, _csv_text(["pose", "target", *MEASURED], rows))
 
 
-__all__ = ["joint_columns", "read_campaign", "read_poses", "write_campaign",
-           "write_predictions"]
+__all__ = ["joint_columns", "read_campaign", "read_poses", "write_campaign", "write_predictions"]

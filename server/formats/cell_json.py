@@ -7,8 +7,7 @@ import re
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from solver.robot import BUILTIN, IRB2600, Joint, Robot, detect_parallel
+from robocal.solver.robot import BUILTIN, IRB2600, Joint, Robot, detect_parallel
 
 from .files import read_text
 from .json_doc import JsonDoc
@@ -88,9 +87,12 @@ def parse_cell(text: str, path="<cell>") -> Cell:
     if devices is not None and base is None:
         # Planning and the tracker's first aims need the base: a search covers 10 to 50 mm
         # around each predicted SMR, not the metres between the tracker and an unknown base.
-        raise doc.error(("devices",), "a cell with real devices needs a `base` guess (4x4, the "
-                                      "robot base in the tracker frame, to within about 10 mm)",
-                        key=True)
+        raise doc.error(
+            ("devices",),
+            "a cell with real devices needs a `base` guess (4x4, the "
+            "robot base in the tracker frame, to within about 10 mm)",
+            key=True,
+        )
     if devices is not None:
         _within_builtin(doc, root["robot"], robot)
     return Cell(robot, targets, base, tracker, payload, devices)
@@ -107,25 +109,33 @@ def _within_builtin(doc: JsonDoc, value, robot: Robot) -> None:
     if model is None:
         return
     if robot.n_joints != model.n_joints:
-        raise doc.error(("robot", "joints"), f"names the built-in {model.name}, which has "
-                                             f"{model.n_joints} joints, not {robot.n_joints}")
+        raise doc.error(
+            ("robot", "joints"),
+            f"names the built-in {model.name}, which has "
+            f"{model.n_joints} joints, not {robot.n_joints}",
+        )
     tol = 1e-4  # degrees: the controller protocol's resolution
     for i, (mine, theirs) in enumerate(zip(robot.joints, model.joints)):
         lo, hi = _deg(mine.limits[0]), _deg(mine.limits[1])
         blo, bhi = _deg(theirs.limits[0]), _deg(theirs.limits[1])
         if lo < blo - tol or hi > bhi + tol:
-            raise doc.error(("robot", "joints", i, "limits"),
-                            f"[{lo:g}, {hi:g}] deg exceeds the built-in {model.name}'s "
-                            f"[{blo:g}, {bhi:g}] for joint {i + 1}; a cell with real devices "
-                            "may only narrow a built-in robot's limits")
+            raise doc.error(
+                ("robot", "joints", i, "limits"),
+                f"[{lo:g}, {hi:g}] deg exceeds the built-in {model.name}'s "
+                f"[{blo:g}, {bhi:g}] for joint {i + 1}; a cell with real devices "
+                "may only narrow a built-in robot's limits",
+            )
 
 
 def _robot(doc: JsonDoc, value) -> Robot:
     if isinstance(value, str):
         robot = BUILTIN.get(value.strip().lower())
         if robot is None:
-            raise doc.error(("robot",), f"unknown robot {value!r}; built-in robots: "
-                                        f"{', '.join(sorted(BUILTIN))}, or give an inline robot object")
+            raise doc.error(
+                ("robot",),
+                f"unknown robot {value!r}; built-in robots: "
+                f"{', '.join(sorted(BUILTIN))}, or give an inline robot object",
+            )
         return robot
     return robot_from_json(value, doc, ("robot",))
 
@@ -138,8 +148,12 @@ def _targets(doc: JsonDoc, value) -> dict[str, np.ndarray]:
     targets = {}
     for name, xyz in value.items():
         if not TARGET_NAME.fullmatch(name):
-            raise doc.error((*at, name), f"target name {name!r} must be a letter followed by up to "
-                                         "15 letters, digits or '_'", key=True)
+            raise doc.error(
+                (*at, name),
+                f"target name {name!r} must be a letter followed by up to "
+                "15 letters, digits or '_'",
+                key=True,
+            )
         doc.array(xyz, (*at, name), 3)
         targets[name] = np.array([doc.coordinate(v, (*at, name, i)) for i, v in enumerate(xyz)])
     return targets
@@ -149,14 +163,19 @@ def _base(doc: JsonDoc, value) -> np.ndarray:
     at = ("base",)
     doc.array(value, at, 4)
     rows = [doc.array(r, (*at, i), 4) for i, r in enumerate(value)]
-    T = np.array([[doc.coordinate(v, (*at, i, j)) for j, v in enumerate(r)] for i, r in enumerate(rows)])
+    T = np.array(
+        [[doc.coordinate(v, (*at, i, j)) for j, v in enumerate(r)] for i, r in enumerate(rows)]
+    )
     if np.max(np.abs(T[3] - [0, 0, 0, 1])) > 1e-9:
         raise doc.error((*at, 3), "the last row of a homogeneous transform must be [0, 0, 0, 1]")
     R = T[:3, :3]
     err = np.max(np.abs(R.T @ R - np.eye(3)))
     if err > ORTHONORMAL_TOL:
-        raise doc.error(at, f"rotation part is not orthonormal (max |R'R - I| = {err:.3g}, "
-                            f"tolerance {ORTHONORMAL_TOL:g})")
+        raise doc.error(
+            at,
+            f"rotation part is not orthonormal (max |R'R - I| = {err:.3g}, "
+            f"tolerance {ORTHONORMAL_TOL:g})",
+        )
     if np.linalg.det(R) < 0:
         raise doc.error(at, "rotation part is a reflection (determinant -1), not a rotation")
     return T
@@ -184,8 +203,9 @@ def _devices(doc: JsonDoc, value) -> Devices:
     port = doc.integer(doc.require(tracker, "port", at), (*at, "port"), 1, 65535)
     t_timeout = _timeout(doc, tracker, at)
     at = ("devices", "controller")
-    controller = doc.object(doc.require(value, "controller", ("devices",)), at,
-                            CONTROLLER_ADDRESS_KEYS)
+    controller = doc.object(
+        doc.require(value, "controller", ("devices",)), at, CONTROLLER_ADDRESS_KEYS
+    )
     url = _controller_url(doc, doc.require(controller, "url", at), (*at, "url"))
     baudrate = DEFAULT_BAUDRATE
     if "baudrate" in controller:
@@ -198,12 +218,18 @@ def _controller_url(doc: JsonDoc, value, at: tuple) -> str:
     scheme, sep, rest = url.partition("://")
     if not sep:
         if not SERIAL_PORT.fullmatch(url):
-            raise doc.error(at, f"{url!r} is neither socket://host:port nor a serial port such "
-                                "as /dev/ttyUSB0 or COM3")
+            raise doc.error(
+                at,
+                f"{url!r} is neither socket://host:port nor a serial port such "
+                "as /dev/ttyUSB0 or COM3",
+            )
         return url
     if scheme not in NETWORK_SCHEMES:
-        raise doc.error(at, f"scheme {scheme!r} is not one of "
-                            f"{', '.join(s + '://' for s in NETWORK_SCHEMES)} (or a serial port)")
+        raise doc.error(
+            at,
+            f"scheme {scheme!r} is not one of "
+            f"{', '.join(s + '://' for s in NETWORK_SCHEMES)} (or a serial port)",
+        )
     host, colon, port = rest.split("?", 1)[0].rpartition(":")
     if not colon or not _is_host(host) or not port.isdigit() or not 1 <= int(port) <= 65535:
         raise doc.error(at, f"{url!r}: expected {scheme}://host:port with a port in 1..65535")
@@ -230,10 +256,18 @@ def _timeout(doc: JsonDoc, obj: dict, at: tuple) -> float:
 
 def devices_to_json(d: Devices) -> dict:
     """The `devices` object of a cell.json (every value spelled out)."""
-    return {"tracker": {"host": d.tracker_host, "port": d.tracker_port,
-                        "timeout_s": d.tracker_timeout_s},
-            "controller": {"url": d.controller_url, "baudrate": d.baudrate,
-                           "timeout_s": d.controller_timeout_s}}
+    return {
+        "tracker": {
+            "host": d.tracker_host,
+            "port": d.tracker_port,
+            "timeout_s": d.tracker_timeout_s,
+        },
+        "controller": {
+            "url": d.controller_url,
+            "baudrate": d.baudrate,
+            "timeout_s": d.controller_timeout_s,
+        },
+    }
 
 
 def robot_from_json(obj, doc: JsonDoc | None = None, at: tuple = ()) -> Robot:
@@ -255,15 +289,26 @@ def robot_from_json(obj, doc: JsonDoc | None = None, at: tuple = ()) -> Robot:
         theta, alpha = (doc.angle(doc.require(row, k, jat), (*jat, k)) for k in ("theta", "alpha"))
         lo, hi = _limits(doc, row.get("limits"), (*jat, "limits"))
         beta = doc.angle(row["beta"], (*jat, "beta")) if "beta" in row else 0.0
-        joints.append(Joint(a=a, d=d, theta=_rad(theta), alpha=_rad(alpha),
-                            limits=(_rad(lo), _rad(hi)), beta=_rad(beta)))
+        joints.append(
+            Joint(
+                a=a,
+                d=d,
+                theta=_rad(theta),
+                alpha=_rad(alpha),
+                limits=(_rad(lo), _rad(hi)),
+                beta=_rad(beta),
+            )
+        )
         has_beta.append("beta" in row)
     detected = detect_parallel(convention, joints)
     for i, (det, beta) in enumerate(zip(detected, has_beta)):
         # Kinematics only uses beta on parallel axes; elsewhere it would be a silently dead value.
         if beta and not det:
-            raise doc.error((*at, "joints", i, "beta"), f"joint {i + 1} has no parallel neighbour "
-                                                        "axis, so beta does not apply", key=True)
+            raise doc.error(
+                (*at, "joints", i, "beta"),
+                f"joint {i + 1} has no parallel neighbour axis, so beta does not apply",
+                key=True,
+            )
     return Robot(name, convention, tuple(joints), detected)
 
 
@@ -281,8 +326,13 @@ def robot_to_json(robot: Robot) -> dict:
     """The inline JSON object of a robot (degrees, mm), with beta on its parallel joints."""
     joints = []
     for j, par in zip(robot.joints, robot.parallel):
-        row = {"a": float(j.a), "d": float(j.d), "theta": _deg(j.theta), "alpha": _deg(j.alpha),
-               "limits": [_deg(j.limits[0]), _deg(j.limits[1])]}
+        row = {
+            "a": float(j.a),
+            "d": float(j.d),
+            "theta": _deg(j.theta),
+            "alpha": _deg(j.alpha),
+            "limits": [_deg(j.limits[0]), _deg(j.limits[1])],
+        }
         if par:
             row["beta"] = _deg(j.beta)
         joints.append(row)
@@ -292,12 +342,16 @@ def robot_to_json(robot: Robot) -> dict:
 def cell_to_json(cell: Cell) -> dict:
     """The JSON object of a cell; a built-in robot is written by name."""
     builtin = BUILTIN.get(cell.robot.name)
-    out = {"robot": cell.robot.name if builtin == cell.robot else robot_to_json(cell.robot),
-           "targets": {k: [float(x) for x in v] for k, v in cell.targets.items()}}
+    out = {
+        "robot": cell.robot.name if builtin == cell.robot else robot_to_json(cell.robot),
+        "targets": {k: [float(x) for x in v] for k, v in cell.targets.items()},
+    }
     if cell.base is not None:
         out["base"] = np.asarray(cell.base, dtype=float).tolist()
-    out["tracker"] = {k: (float(v) if isinstance(v, (int, float, np.floating)) else v)
-                      for k, v in cell.tracker.items()}
+    out["tracker"] = {
+        k: (float(v) if isinstance(v, (int, float, np.floating)) else v)
+        for k, v in cell.tracker.items()
+    }
     if cell.payload_kg is not None:
         out["payload_kg"] = float(cell.payload_kg)
     if cell.devices is not None:

@@ -54,8 +54,12 @@ class Table:
                 # Blank lines (often trailing) carry nothing; skip rather than refuse them.
                 if fields and not (len(fields) == 1 and not fields[0].strip()):
                     if len(records) > CSV_ROWS_MAX:  # the header plus CSV_ROWS_MAX rows
-                        raise InputError(self.path, start, None,
-                                         f"more than {CSV_ROWS_MAX} data rows; split the file")
+                        raise InputError(
+                            self.path,
+                            start,
+                            None,
+                            f"more than {CSV_ROWS_MAX} data rows; split the file",
+                        )
                     records.append((start, fields))
                 start = reader.line_num + 1
         except csv.Error as e:
@@ -65,21 +69,33 @@ class Table:
     def _check_width(self, line: int, fields: list[str]) -> None:
         n, width = len(fields), len(self.header)
         if n < width:
-            raise InputError(self.path, line, n + 1,
-                             f"row has {n} fields but the header has {width}: "
-                             f"column '{self.header[n]}' and after are missing")
+            raise InputError(
+                self.path,
+                line,
+                n + 1,
+                f"row has {n} fields but the header has {width}: "
+                f"column '{self.header[n]}' and after are missing",
+            )
         if n > width:
-            raise InputError(self.path, line, width + 1,
-                             f"row has {n} fields but the header has {width} "
-                             f"(extra value {fields[width].strip()!r})")
+            raise InputError(
+                self.path,
+                line,
+                width + 1,
+                f"row has {n} fields but the header has {width} "
+                f"(extra value {fields[width].strip()!r})",
+            )
 
     def require(self, names: list[str]) -> None:
         """Locate these columns; InputError on line 1 (the header) if one is missing."""
         for name in names:
             col = self._find(name)
             if col is None:
-                raise InputError(self.path, self.header_line, None,
-                                 f"missing required column '{name}'{self._header_hint()}")
+                raise InputError(
+                    self.path,
+                    self.header_line,
+                    None,
+                    f"missing required column '{name}'{self._header_hint()}",
+                )
             self._index[name] = col
 
     def optional(self, names: list[str]) -> list[str]:
@@ -100,8 +116,12 @@ class Table:
     def _find(self, name: str) -> int | None:
         cols = [i for i, h in enumerate(self.header) if h.lower() == name]
         if len(cols) > 1:
-            raise InputError(self.path, self.header_line, cols[1] + 1,
-                             f"column '{name}' appears twice (columns {cols[0] + 1} and {cols[1] + 1})")
+            raise InputError(
+                self.path,
+                self.header_line,
+                cols[1] + 1,
+                f"column '{name}' appears twice (columns {cols[0] + 1} and {cols[1] + 1})",
+            )
         return cols[0] if cols else None
 
     def _header_hint(self) -> str:
@@ -131,8 +151,14 @@ class Table:
         """The stripped string in column `name`, possibly empty."""
         return row.fields[self._index[name]].strip()
 
-    def number(self, row: Row, name: str, blank: float | None = None,
-               bounds: tuple[float, float] = (-NUMBER_MAX, NUMBER_MAX), what: str = "") -> float:
+    def number(
+        self,
+        row: Row,
+        name: str,
+        blank: float | None = None,
+        bounds: tuple[float, float] = (-NUMBER_MAX, NUMBER_MAX),
+        what: str = "",
+    ) -> float:
         """The finite number in column `name` within bounds (`what` says why those); an empty
         field gives `blank` if that is not None."""
         s = row.fields[self._index[name]].strip()
@@ -145,8 +171,9 @@ class Table:
             lo, hi = bounds
             if math.isfinite(value) and lo <= value <= hi:
                 return value
-            raise self.error(row, name, f"{s} is out of range [{lo:g}, {hi:g}]"
-                                        f"{' ' + what if what else ''}")
+            raise self.error(
+                row, name, f"{s} is out of range [{lo:g}, {hi:g}]{' ' + what if what else ''}"
+            )
         if s.lower().lstrip("+-") in _NOT_FINITE:
             raise self.error(row, name, f"{s!r} is not a finite number")
         raise self.error(row, name, f"{s!r} is not a number")

@@ -18,16 +18,18 @@ def read_text(path) -> str:
     except OSError as e:
         raise InputError(path, None, None, f"cannot read the file: {e.strerror or e}") from None
     if len(data) > FILE_BYTES_MAX:
-        raise InputError(path, None, None, f"the file is larger than {FILE_BYTES_MAX >> 20} MiB; "
-                                           "split it")
+        raise InputError(
+            path, None, None, f"the file is larger than {FILE_BYTES_MAX >> 20} MiB; split it"
+        )
     # Strip the BOM ourselves so that error offsets index `data` directly.
     data = data.removeprefix(b"\xef\xbb\xbf")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as e:
         line = data[: e.start].count(b"\n") + 1
-        raise InputError(path, line, None,
-                         f"not UTF-8 text (byte 0x{data[e.start]:02x}); save the file as UTF-8") from None
+        raise InputError(
+            path, line, None, f"not UTF-8 text (byte 0x{data[e.start]:02x}); save the file as UTF-8"
+        ) from None
 
 
 def atomic_write_text(path, text: str) -> None:

@@ -57,8 +57,12 @@ class JsonDoc:
                 key = pointer.rsplit("/", 1)[-1]
                 first = seen[pointer].key_start or seen[pointer].value_start
                 start = entry.key_start or entry.value_start
-                raise InputError(self.path, start.line + 1, start.column + 1,
-                                 f"duplicate key {key!r} (first on line {first.line + 1})")
+                raise InputError(
+                    self.path,
+                    start.line + 1,
+                    start.column + 1,
+                    f"duplicate key {key!r} (first on line {first.line + 1})",
+                )
             seen[pointer] = entry
         return seen
 
@@ -67,7 +71,11 @@ class JsonDoc:
         for n in range(len(at), -1, -1):
             entry = self._map.get("".join(f"/{s}" for s in at[:n]))
             if entry is not None:
-                loc = entry.key_start if key and n == len(at) and entry.key_start else entry.value_start
+                loc = (
+                    entry.key_start
+                    if key and n == len(at) and entry.key_start
+                    else entry.value_start
+                )
                 return loc.line + 1, loc.column + 1
         return None, None
 
@@ -85,7 +93,11 @@ class JsonDoc:
             for k in value:
                 if k not in allowed:
                     hint = difflib.get_close_matches(k, allowed, n=1)
-                    extra = f"; did you mean {hint[0]!r}?" if hint else f" (known: {', '.join(allowed)})"
+                    extra = (
+                        f"; did you mean {hint[0]!r}?"
+                        if hint
+                        else f" (known: {', '.join(allowed)})"
+                    )
                     raise self.error((*at, k), f"unknown key {k!r}{extra}", key=True)
         return value
 
@@ -101,8 +113,14 @@ class JsonDoc:
             raise self.error(at, f"expected {length} elements, got {len(value)}")
         return value
 
-    def number(self, value, at: tuple, minimum: float | None = None,
-               limit: float = NUMBER_MAX, what: str = "") -> float:
+    def number(
+        self,
+        value,
+        at: tuple,
+        minimum: float | None = None,
+        limit: float = NUMBER_MAX,
+        what: str = "",
+    ) -> float:
         """A finite number with |x| <= limit (`what` says why that limit, e.g. the tracker's
         range); at least `minimum` if given."""
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -114,8 +132,11 @@ class JsonDoc:
         if not math.isfinite(x):
             raise self.error(at, f"{value} is not a finite number")
         if not -limit <= x <= limit:
-            raise self.error(at, f"{value} is out of range: |value| must be at most {limit:g}"
-                                 f"{' ' + what if what else ''}")
+            raise self.error(
+                at,
+                f"{value} is out of range: |value| must be at most {limit:g}"
+                f"{' ' + what if what else ''}",
+            )
         if minimum is not None and x < minimum:
             raise self.error(at, f"{value} is below the minimum {minimum:g}")
         return x

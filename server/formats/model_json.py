@@ -9,11 +9,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
-
-from solver.effects import Extension
-from solver.kinematics import Layout
-from solver.robot import Robot
-from solver.vocabulary import KINDS
+from robocal.solver.effects import Extension
+from robocal.solver.kinematics import Layout
+from robocal.solver.robot import Robot
+from robocal.solver.vocabulary import KINDS
 
 from .cell_json import TARGET_NAME, robot_from_json, robot_to_json
 from .files import atomic_write_text, read_text
@@ -43,7 +42,9 @@ class ModelFile:
         return lay, lay.initial(np.array([self.targets[n] for n in names]))
 
 
-def extension_to_json(ext: Extension, parameters: dict | None = None, errors: dict | None = None) -> dict:
+def extension_to_json(
+    ext: Extension, parameters: dict | None = None, errors: dict | None = None
+) -> dict:
     """An extension as stored: its kind and place (joints from 1), its own fields (the kind's
     `to_json`), coefficients, readable parameters, standard errors."""
     out = {"name": ext.name}
@@ -85,8 +86,13 @@ class _Fields:
 
     def vector(self, key) -> np.ndarray:
         at = (*self.at, key)
-        return np.array([self.doc.number(v, (*at, i)) for i, v in
-                         enumerate(self.doc.array(self._get(key), at))], dtype=float)
+        return np.array(
+            [
+                self.doc.number(v, (*at, i))
+                for i, v in enumerate(self.doc.array(self._get(key), at))
+            ],
+            dtype=float,
+        )
 
 
 def uncertainty_to_json(errors, names) -> dict:
@@ -98,7 +104,7 @@ def uncertainty_to_json(errors, names) -> dict:
         "poses": errors.poses,
         "units": "mm; degrees for theta, alpha, beta and base_rz, base_ry, base_rx",
         "frames": "base_x/y/z and base_rz/ry/rx along and about the calibrated base frame's "
-                  "axes; SMR positions in the flange frame",
+        "axes; SMR positions in the flange frame",
         "standard_errors": {n: se[n] for n in names},
         "null": "held fixed: not identifiable from this model (see fit.fixed_parameters)",
     }
@@ -107,11 +113,15 @@ def uncertainty_to_json(errors, names) -> dict:
 def extension_errors(errors) -> list[dict]:
     """Per extension (solver.fit_errors.ExtendedErrors), its coefficients' standard errors (in the
     coefficients' own units) and its parameters' (edge units)."""
-    return [{"coef_standard_errors": c, "uncertainty": u}
-            for c, u in zip(errors.coefficients, errors.effects)]
+    return [
+        {"coef_standard_errors": c, "uncertainty": u}
+        for c, u in zip(errors.coefficients, errors.effects)
+    ]
 
 
-def extension_from_json(obj: dict, doc: JsonDoc, at: tuple, n_joints: int | None = None) -> Extension:
+def extension_from_json(
+    obj: dict, doc: JsonDoc, at: tuple, n_joints: int | None = None
+) -> Extension:
     """The inverse of extension_to_json; errors located in the file."""
     doc.object(obj, at)
     name = doc.string(doc.require(obj, "name", at), (*at, "name"))
@@ -122,7 +132,9 @@ def extension_from_json(obj: dict, doc: JsonDoc, at: tuple, n_joints: int | None
     if kind.is_joint:
         joint = read.integer("joint") - 1
         if n_joints is not None and not 0 <= joint < n_joints:
-            raise read.error("joint", f"joint {joint + 1} is not one of the robot's joints 1 to {n_joints}")
+            raise read.error(
+                "joint", f"joint {joint + 1} is not one of the robot's joints 1 to {n_joints}"
+            )
     ext = Extension(name, joint=joint, coef=read.vector("coef"), **kind.from_json(read))
     if len(ext.coef) != ext.n_params:
         raise doc.error((*at, "coef"), f"expected {ext.n_params} coefficients")
@@ -137,7 +149,9 @@ def file_digest(path) -> str:
 def to_plain(obj):
     """A JSON-safe copy: numpy scalars and arrays become Python numbers and lists, anything else
     unknown its text."""
-    return json.loads(json.dumps(obj, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)))
+    return json.loads(
+        json.dumps(obj, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v))
+    )
 
 
 def write_json_atomic(path, obj) -> None:
@@ -153,9 +167,14 @@ def model_to_json(model: ModelFile) -> dict:
         "nominal_robot": robot_to_json(model.nominal) if model.nominal is not None else None,
         "base": np.asarray(model.base).round(9).tolist(),
         "targets": {k: np.asarray(v).round(6).tolist() for k, v in model.targets.items()},
-        "extensions": [extension_to_json(e, p, u) for e, p, u in
-                       zip(model.extensions, model.parameters or [None] * len(model.extensions),
-                           model.extension_errors or [None] * len(model.extensions))],
+        "extensions": [
+            extension_to_json(e, p, u)
+            for e, p, u in zip(
+                model.extensions,
+                model.parameters or [None] * len(model.extensions),
+                model.extension_errors or [None] * len(model.extensions),
+            )
+        ],
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         **model.meta,
     }
@@ -176,23 +195,40 @@ def read_model(path) -> ModelFile:
     if obj.get("nominal_robot") is not None:
         nominal = robot_from_json(obj["nominal_robot"], doc, ("nominal_robot",))
     rows = doc.array(doc.require(obj, "base", ()), ("base",), 4)
-    base = np.array([[doc.coordinate(v, ("base", i, j)) for j, v in
-                      enumerate(doc.array(r, ("base", i), 4))] for i, r in enumerate(rows)])
+    base = np.array(
+        [
+            [doc.coordinate(v, ("base", i, j)) for j, v in enumerate(doc.array(r, ("base", i), 4))]
+            for i, r in enumerate(rows)
+        ]
+    )
     targets = {}
     for k, v in doc.object(doc.require(obj, "targets", ()), ("targets",)).items():
         at = ("targets", k)
         if not TARGET_NAME.fullmatch(k):
-            raise doc.error(at, f"target name {k!r} must be a letter followed by up to 15 "
-                                "letters, digits or '_'", key=True)
-        targets[k] = np.array([doc.coordinate(c, (*at, i)) for i, c in enumerate(doc.array(v, at, 3))])
+            raise doc.error(
+                at,
+                f"target name {k!r} must be a letter followed by up to 15 letters, digits or '_'",
+                key=True,
+            )
+        targets[k] = np.array(
+            [doc.coordinate(c, (*at, i)) for i, c in enumerate(doc.array(v, at, 3))]
+        )
     if not targets:
         raise doc.error(("targets",), "at least one target is needed")
-    extensions = [extension_from_json(e, doc, ("extensions", i), robot.n_joints)
-                  for i, e in enumerate(doc.array(obj.get("extensions", []), ("extensions",)))]
-    meta = {k: v for k, v in obj.items()
-            if k not in ("schema", "robot", "nominal_robot", "base", "targets", "extensions")}
+    extensions = [
+        extension_from_json(e, doc, ("extensions", i), robot.n_joints)
+        for i, e in enumerate(doc.array(obj.get("extensions", []), ("extensions",)))
+    ]
+    meta = {
+        k: v
+        for k, v in obj.items()
+        if k not in ("schema", "robot", "nominal_robot", "base", "targets", "extensions")
+    }
     stored = obj.get("extensions", [])
     parameters = [e.get("parameters") for e in stored] if extensions else None
-    errors = [{k: e[k] for k in ("coef_standard_errors", "uncertainty") if k in e}
-              for e in stored] if extensions else None
+    errors = (
+        [{k: e[k] for k in ("coef_standard_errors", "uncertainty") if k in e} for e in stored]
+        if extensions
+        else None
+    )
     return ModelFile(robot, base, targets, nominal, list(extensions), meta, parameters, errors)

@@ -11,20 +11,29 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from robocal.drivers import lifecycle
+from robocal.server.formats.campaign_csv import read_campaign, write_campaign
+from robocal.server.formats.cell_json import parse_cell
+from robocal.solver.measurements import Measurements
+from robocal.solver.robot import Robot
 from sqlalchemy import and_, delete, exists, func, insert, or_, select, update
 from sqlalchemy.orm import Session
-
-from drivers import lifecycle
-from server.formats.campaign_csv import read_campaign, write_campaign
-from server.formats.cell_json import parse_cell
-from solver.measurements import Measurements
-from solver.robot import Robot
 
 from . import checks
 from .db import Database
 from .errors import Conflict, NotFound, StoreError
-from .models import (JOB_KINDS, JOB_STATES, POSE_STATES, STATUSES, Campaign, Job, PlannedPose,
-                     PoseOutcome, Reading, utcnow)
+from .models import (
+    JOB_KINDS,
+    JOB_STATES,
+    POSE_STATES,
+    STATUSES,
+    Campaign,
+    Job,
+    PlannedPose,
+    PoseOutcome,
+    Reading,
+    utcnow,
+)
 
 # Which status may follow which is the engine's table (drivers/lifecycle.py): the store persists
 # the engine's state and refuses a jump no request or event makes. Setting the same status again
@@ -84,9 +93,18 @@ class ReadingInfo:
 
 # --- campaigns ---------------------------------------------------------------------------------
 
-def create_campaign(db: Database, *, name: str, cell_json: str | Mapping, poses_deg,
-                    settings: Mapping | None = None, labels: Sequence[str] | None = None,
-                    simulated: bool = False, notes: str = "") -> int:
+
+def create_campaign(
+    db: Database,
+    *,
+    name: str,
+    cell_json: str | Mapping,
+    poses_deg,
+    settings: Mapping | None = None,
+    labels: Sequence[str] | None = None,
+    simulated: bool = False,
+    notes: str = "",
+) -> int:
     """Store a new `planned` campaign and its plan (n poses x N joints, deg) together; its id.
 
     Labels (the `pose` column of an exported meas.csv) default to "1" ... "n".
@@ -95,8 +113,15 @@ def create_campaign(db: Database, *, name: str, cell_json: str | Mapping, poses_
     q = checks.plan_deg(poses_deg, cell.robot)
     labels = checks.pose_labels(labels, len(q))
     with db.session(write=True) as s:
-        campaign = _add_campaign(s, name=name, cell_text=cell_text, settings=settings,
-                                 simulated=simulated, notes=notes, status="planned")
+        campaign = _add_campaign(
+            s,
+            name=name,
+            cell_text=cell_text,
+            settings=settings,
+            simulated=simulated,
+            notes=notes,
+            status="planned",
+        )
         _add_plan(s, campaign.id, labels, q)
     return campaign.id
 
@@ -127,51 +152,69 @@ def set_status(db: Database, *, campaign_id: int, status: str) -> str:
             return before
         if not lifecycle.reachable(before, status):
             after = sorted(set(lifecycle.TRANSITIONS[before].values()))
-            raise Conflict(f"campaign {campaign_id} is {before}; it can go to "
-                           f"{', '.join(after) or 'nothing (final)'}, not {status}")
+            raise Conflict(
+                f"campaign {campaign_id} is {before}; it can go to "
+                f"{', '.join(after) or 'nothing (final)'}, not {status}"
+            )
         if status == "done" and _next_unmeasured(s, campaign_id) is not None:
-            raise Conflict(f"campaign {campaign_id} cannot be done: pose "
-                           f"{_next_unmeasured(s, campaign_id)} has no outcome yet")
+            raise Conflict(
+                f"campaign {campaign_id} cannot be done: pose "
+                f"{_next_unmeasured(s, campaign_id)} has no outcome yet"
+            )
         campaign.status = status
     return before
 
 
-def take_lease(db: Database, *, campaign_id: int, owner: str, ttl_s: float,
-               dead_owner: str | None = None) -> None:
+def take_lease(
+    db: Database, *, campaign_id: int, owner: str, ttl_s: float, dead_owner: str | None = None
+) -> None:
     """Claim the campaign for `owner` for ttl_s seconds (or renew its claim), in one UPDATE that
     succeeds only if no one holds it, the claim lapsed, it is owner's, or it is `dead_owner`'s (a
     holder the caller knows is gone); LeaseHeld naming the holder otherwise."""
     now = utcnow()
-    free = or_(Campaign.lease_owner.is_(None), Campaign.lease_owner == owner,
-               Campaign.lease_expires_at.is_(None), Campaign.lease_expires_at < now)
+    free = or_(
+        Campaign.lease_owner.is_(None),
+        Campaign.lease_owner == owner,
+        Campaign.lease_expires_at.is_(None),
+        Campaign.lease_expires_at < now,
+    )
     if dead_owner is not None:
         free = or_(free, Campaign.lease_owner == dead_owner)
     with db.session(write=True) as s:
-        done = s.execute(update(Campaign).where(Campaign.id == campaign_id, free).values(
-            lease_owner=owner, lease_expires_at=now + dt.timedelta(seconds=ttl_s)))
+        done = s.execute(
+            update(Campaign)
+            .where(Campaign.id == campaign_id, free)
+            .values(lease_owner=owner, lease_expires_at=now + dt.timedelta(seconds=ttl_s))
+        )
         if done.rowcount == 1:
             return
         c = _campaign(s, campaign_id)
-        raise LeaseHeld(f"campaign {campaign_id} is driven by another process ({c.lease_owner}, "
-                        f"claim held until {c.lease_expires_at:%H:%M:%S} UTC); stop it there",
-                        c.lease_owner)
+        raise LeaseHeld(
+            f"campaign {campaign_id} is driven by another process ({c.lease_owner}, "
+            f"claim held until {c.lease_expires_at:%H:%M:%S} UTC); stop it there",
+            c.lease_owner,
+        )
 
 
 def renew_lease(db: Database, *, campaign_id: int, owner: str, ttl_s: float) -> bool:
     """Extend owner's claim by ttl_s from now; False if it is no longer owner's (never steals)."""
     with db.session(write=True) as s:
-        done = s.execute(update(Campaign).where(Campaign.id == campaign_id,
-                                                Campaign.lease_owner == owner).values(
-            lease_expires_at=utcnow() + dt.timedelta(seconds=ttl_s)))
+        done = s.execute(
+            update(Campaign)
+            .where(Campaign.id == campaign_id, Campaign.lease_owner == owner)
+            .values(lease_expires_at=utcnow() + dt.timedelta(seconds=ttl_s))
+        )
         return done.rowcount == 1
 
 
 def release_lease(db: Database, *, campaign_id: int, owner: str) -> None:
     """Drop owner's claim (a no-op if it holds none)."""
     with db.session(write=True) as s:
-        s.execute(update(Campaign).where(Campaign.id == campaign_id,
-                                         Campaign.lease_owner == owner).values(
-            lease_owner=None, lease_expires_at=None))
+        s.execute(
+            update(Campaign)
+            .where(Campaign.id == campaign_id, Campaign.lease_owner == owner)
+            .values(lease_owner=None, lease_expires_at=None)
+        )
 
 
 class LeaseHeld(Conflict):
@@ -187,9 +230,17 @@ def planned_poses(db: Database, *, campaign_id: int) -> list[PoseInfo]:
     with db.session() as s:
         _campaign(s, campaign_id)
         rows = s.execute(_poses_query(campaign_id)).all()
-    return [PoseInfo(r.pose_index, r.label, tuple(r.joints_deg), r.state,
-                     None if r.reached_deg is None else tuple(r.reached_deg), r.detail or "")
-            for r in rows]
+    return [
+        PoseInfo(
+            r.pose_index,
+            r.label,
+            tuple(r.joints_deg),
+            r.state,
+            None if r.reached_deg is None else tuple(r.reached_deg),
+            r.detail or "",
+        )
+        for r in rows
+    ]
 
 
 def next_unmeasured_pose(db: Database, *, campaign_id: int) -> int | None:
@@ -201,10 +252,22 @@ def next_unmeasured_pose(db: Database, *, campaign_id: int) -> int | None:
 
 # --- readings and outcomes ---------------------------------------------------------------------
 
-def record_reading(db: Database, *, campaign_id: int, pose_index: int, target: str, xyz,
-                   std=None, samples: int | None = None, time_s: float | None = None,
-                   temp_c: float | None = None, pressure_hpa: float | None = None,
-                   humidity_pct: float | None = None, detail: str = "") -> bool:
+
+def record_reading(
+    db: Database,
+    *,
+    campaign_id: int,
+    pose_index: int,
+    target: str,
+    xyz,
+    std=None,
+    samples: int | None = None,
+    time_s: float | None = None,
+    temp_c: float | None = None,
+    pressure_hpa: float | None = None,
+    humidity_pct: float | None = None,
+    detail: str = "",
+) -> bool:
     """Store one target's reading (mm, tracker frame), committed before returning.
 
     True if stored now, False if the same reading was already there (a retried call); Conflict
@@ -213,28 +276,65 @@ def record_reading(db: Database, *, campaign_id: int, pose_index: int, target: s
     x, y, z = checks.vector3(xyz, "xyz")
     sx, sy, sz = (None, None, None) if std is None else checks.vector3(std, "std", minimum=0.0)
     opt = checks.optional
-    values = dict(status="ok", x=x, y=y, z=z, std_x=sx, std_y=sy, std_z=sz,
-                  samples=checks.samples(samples), time_s=opt(time_s), temp_c=opt(temp_c),
-                  pressure_hpa=opt(pressure_hpa), humidity_pct=opt(humidity_pct),
-                  detail=str(detail))
+    values = dict(
+        status="ok",
+        x=x,
+        y=y,
+        z=z,
+        std_x=sx,
+        std_y=sy,
+        std_z=sz,
+        samples=checks.samples(samples),
+        time_s=opt(time_s),
+        temp_c=opt(temp_c),
+        pressure_hpa=opt(pressure_hpa),
+        humidity_pct=opt(humidity_pct),
+        detail=str(detail),
+    )
     return _record(db, campaign_id, pose_index, target, values)
 
 
-def record_missing(db: Database, *, campaign_id: int, pose_index: int, target: str,
-                   detail: str = "", time_s: float | None = None) -> bool:
+def record_missing(
+    db: Database,
+    *,
+    campaign_id: int,
+    pose_index: int,
+    target: str,
+    detail: str = "",
+    time_s: float | None = None,
+) -> bool:
     """Record that a target could not be measured at this pose (beam break after retries).
 
     Same contract as record_reading: True if new, False if already recorded so, else Conflict.
     """
-    values = dict(status="missing", x=None, y=None, z=None, std_x=None, std_y=None, std_z=None,
-                  samples=None, time_s=checks.optional(time_s), temp_c=None, pressure_hpa=None,
-                  humidity_pct=None, detail=str(detail))
+    values = dict(
+        status="missing",
+        x=None,
+        y=None,
+        z=None,
+        std_x=None,
+        std_y=None,
+        std_z=None,
+        samples=None,
+        time_s=checks.optional(time_s),
+        temp_c=None,
+        pressure_hpa=None,
+        humidity_pct=None,
+        detail=str(detail),
+    )
     return _record(db, campaign_id, pose_index, target, values)
 
 
-def record_pose_outcome(db: Database, *, campaign_id: int, pose_index: int, state: str,
-                        reached_deg=None, detail: str = "",
-                        missing: Sequence[str] | None = None) -> bool:
+def record_pose_outcome(
+    db: Database,
+    *,
+    campaign_id: int,
+    pose_index: int,
+    state: str,
+    reached_deg=None,
+    detail: str = "",
+    missing: Sequence[str] | None = None,
+) -> bool:
     """Close a pose: `measured` (every target read), `missing-target` (some recorded missing) or
     `skipped` (nothing read). True if new, False if identical to the stored one, else Conflict.
 
@@ -248,19 +348,30 @@ def record_pose_outcome(db: Database, *, campaign_id: int, pose_index: int, stat
     with db.session(write=True) as s:
         campaign = _campaign(s, campaign_id)
         pose = _planned(s, campaign_id, pose_index)
-        old = s.scalar(select(PoseOutcome).where(PoseOutcome.campaign_id == campaign_id,
-                                                 PoseOutcome.pose_index == pose_index))
+        old = s.scalar(
+            select(PoseOutcome).where(
+                PoseOutcome.campaign_id == campaign_id, PoseOutcome.pose_index == pose_index
+            )
+        )
         if old is not None:
             if (old.state, old.reached_deg, old.detail) == (state, reached, str(detail)):
                 return False
-            raise Conflict(f"campaign {campaign_id} pose {pose_index} is already closed as "
-                           f"{old.state} with other values")
+            raise Conflict(
+                f"campaign {campaign_id} pose {pose_index} is already closed as "
+                f"{old.state} with other values"
+            )
         _check_recording(campaign)
         if reached is not None and len(reached) != len(pose.joints_deg):
-            raise ValueError(f"reached_deg has {len(reached)} joints, the plan has "
-                             f"{len(pose.joints_deg)}")
-        status = dict(s.execute(select(Reading.target, Reading.status).where(
-            Reading.campaign_id == campaign_id, Reading.pose_index == pose_index)).all())
+            raise ValueError(
+                f"reached_deg has {len(reached)} joints, the plan has {len(pose.joints_deg)}"
+            )
+        status = dict(
+            s.execute(
+                select(Reading.target, Reading.status).where(
+                    Reading.campaign_id == campaign_id, Reading.pose_index == pose_index
+                )
+            ).all()
+        )
         if missing is None and state == "missing-target":
             targets = parse_cell(campaign.cell_json, f"<campaign {campaign_id} cell>").targets
             missing = [t for t in targets if t not in status]
@@ -268,13 +379,27 @@ def record_pose_outcome(db: Database, *, campaign_id: int, pose_index: int, stat
             if status.get(t) == "ok":
                 raise Conflict(f"pose {pose_index} target {t} has a reading; it is not missing")
             if t not in status:
-                s.add(Reading(campaign_id=campaign_id, pose_index=pose_index, target=t,
-                              status="missing", detail=str(detail) or "not measured"))
+                s.add(
+                    Reading(
+                        campaign_id=campaign_id,
+                        pose_index=pose_index,
+                        target=t,
+                        status="missing",
+                        detail=str(detail) or "not measured",
+                    )
+                )
                 status[t] = "missing"
         counts = [sum(v == k for v in status.values()) for k in ("ok", "missing")]
         checks.outcome_agrees(state, *counts, pose_index)
-        s.add(PoseOutcome(campaign_id=campaign_id, pose_index=pose_index, state=state,
-                          reached_deg=reached, detail=str(detail)))
+        s.add(
+            PoseOutcome(
+                campaign_id=campaign_id,
+                pose_index=pose_index,
+                state=state,
+                reached_deg=reached,
+                detail=str(detail),
+            )
+        )
     return True
 
 
@@ -283,29 +408,44 @@ def discard_unfinished_pose(db: Database, *, campaign_id: int, pose_index: int) 
     arrival of the arm); how many. Conflict if the pose is closed."""
     with db.session(write=True) as s:
         _planned(s, campaign_id, pose_index)
-        closed = s.scalar(select(PoseOutcome.state).where(PoseOutcome.campaign_id == campaign_id,
-                                                          PoseOutcome.pose_index == pose_index))
+        closed = s.scalar(
+            select(PoseOutcome.state).where(
+                PoseOutcome.campaign_id == campaign_id, PoseOutcome.pose_index == pose_index
+            )
+        )
         if closed is not None:
-            raise Conflict(f"campaign {campaign_id} pose {pose_index} is closed ({closed}); "
-                           "its readings stay")
-        return s.execute(delete(Reading).where(Reading.campaign_id == campaign_id,
-                                               Reading.pose_index == pose_index)).rowcount
+            raise Conflict(
+                f"campaign {campaign_id} pose {pose_index} is closed ({closed}); its readings stay"
+            )
+        return s.execute(
+            delete(Reading).where(
+                Reading.campaign_id == campaign_id, Reading.pose_index == pose_index
+            )
+        ).rowcount
 
 
 def pose_readings(db: Database, *, campaign_id: int, pose_index: int) -> dict[str, ReadingInfo]:
     """The readings stored for one pose, by target: on resume, the ones not to measure again."""
     with db.session() as s:
         _planned(s, campaign_id, pose_index)
-        rows = s.scalars(select(Reading).where(Reading.campaign_id == campaign_id,
-                                               Reading.pose_index == pose_index)
-                         .order_by(Reading.id))
+        rows = s.scalars(
+            select(Reading)
+            .where(Reading.campaign_id == campaign_id, Reading.pose_index == pose_index)
+            .order_by(Reading.id)
+        )
         return {r.target: _reading_info(r) for r in rows}
 
 
 # --- arrays and files --------------------------------------------------------------------------
 
-def campaign_measurements(db: Database, *, campaign_id: int, robot: Robot | None = None,
-                          targets: Sequence[str] | None = None) -> Measurements:
+
+def campaign_measurements(
+    db: Database,
+    *,
+    campaign_id: int,
+    robot: Robot | None = None,
+    targets: Sequence[str] | None = None,
+) -> Measurements:
     """The campaign's readings as arrays: poses with at least one reading, in plan order.
 
     Targets sorted by name (or `targets`, in that order), missing ones NaN; q in rad from the
@@ -315,9 +455,17 @@ def campaign_measurements(db: Database, *, campaign_id: int, robot: Robot | None
     with db.session() as s:
         campaign = _campaign(s, campaign_id)
         poses = s.execute(_poses_query(campaign_id)).all()
-        rows = s.execute(select(Reading.pose_index, Reading.target, Reading.x, Reading.y,
-                                Reading.z, Reading.time_s, Reading.temp_c)
-                         .where(Reading.campaign_id == campaign_id, Reading.status == "ok")).all()
+        rows = s.execute(
+            select(
+                Reading.pose_index,
+                Reading.target,
+                Reading.x,
+                Reading.y,
+                Reading.z,
+                Reading.time_s,
+                Reading.temp_c,
+            ).where(Reading.campaign_id == campaign_id, Reading.status == "ok")
+        ).all()
         cell_text = campaign.cell_json
     robot = checks.matching_robot(robot, parse_cell(cell_text, f"<campaign {campaign_id} cell>"))
     if targets is None:
@@ -330,11 +478,14 @@ def campaign_measurements(db: Database, *, campaign_id: int, robot: Robot | None
     row_of = {p.pose_index: i for i, p in enumerate(poses)}
     col = {n: k for k, n in enumerate(names)}
     m, K = len(poses), len(names)
-    q = np.array([p.reached_deg if p.reached_deg is not None else p.joints_deg for p in poses],
-                 dtype=float).reshape(m, -1 if m else robot.n_joints)
+    q = np.array(
+        [p.reached_deg if p.reached_deg is not None else p.joints_deg for p in poses], dtype=float
+    ).reshape(m, -1 if m else robot.n_joints)
     if q.shape[1] != robot.n_joints:
-        raise ValueError(f"campaign {campaign_id} has {q.shape[1]} joints per pose, "
-                         f"{robot.name} has {robot.n_joints}")
+        raise ValueError(
+            f"campaign {campaign_id} has {q.shape[1]} joints per pose, "
+            f"{robot.name} has {robot.n_joints}"
+        )
     xyz = np.full((m, K, 3), np.nan)
     time_s, temp_c = np.full((m, K), np.nan), np.full((m, K), np.nan)
     for r in rows:
@@ -343,8 +494,9 @@ def campaign_measurements(db: Database, *, campaign_id: int, robot: Robot | None
         time_s[i, k] = np.nan if r.time_s is None else r.time_s
         temp_c[i, k] = np.nan if r.temp_c is None else r.temp_c
     some = lambda a: a if np.isfinite(a).any() else None  # noqa: E731
-    return Measurements([p.label for p in poses], np.deg2rad(q), names, xyz, some(time_s),
-                        some(temp_c))
+    return Measurements(
+        [p.label for p in poses], np.deg2rad(q), names, xyz, some(time_s), some(temp_c)
+    )
 
 
 def export_csv(db: Database, *, campaign_id: int, path, robot: Robot | None = None) -> None:
@@ -360,8 +512,15 @@ def export_csv(db: Database, *, campaign_id: int, path, robot: Robot | None = No
 IMPORT_CHUNK = 2000
 
 
-def import_csv(db: Database, *, path, cell_json: str | Mapping, name: str,
-               robot: Robot | None = None, notes: str = "") -> int:
+def import_csv(
+    db: Database,
+    *,
+    path,
+    cell_json: str | Mapping,
+    name: str,
+    robot: Robot | None = None,
+    notes: str = "",
+) -> int:
     """Store a `meas.csv` as a `done` campaign; its id. All or nothing: InputError on a bad file
     (or cell), and then nothing is written.
 
@@ -379,8 +538,15 @@ def import_csv(db: Database, *, path, cell_json: str | Mapping, name: str,
     with db.session(write=True) as s:
         # `failed` until complete: a process killed mid-import leaves a campaign that says so,
         # never one that looks done with readings missing.
-        campaign = _add_campaign(s, name=name, cell_text=cell_text, settings=settings,
-                                 simulated=False, notes=IMPORTING, status="failed")
+        campaign = _add_campaign(
+            s,
+            name=name,
+            cell_text=cell_text,
+            settings=settings,
+            simulated=False,
+            notes=IMPORTING,
+            status="failed",
+        )
         cid = campaign.id
     step = max(1, IMPORT_CHUNK // len(meas.target_names))  # poses per transaction
     try:
@@ -388,13 +554,27 @@ def import_csv(db: Database, *, path, cell_json: str | Mapping, name: str,
             stop = min(meas.n_poses, start + step)
             with db.session(write=True) as s:
                 _add_plan(s, cid, meas.pose_ids[start:stop], q[start:stop], first=start)
-                s.execute(insert(Reading), [
-                    _imported_reading(meas, cid, i, k, target, mask[i, k])
-                    for i in range(start, stop) for k, target in enumerate(meas.target_names)])
-                s.execute(insert(PoseOutcome), [
-                    dict(campaign_id=cid, pose_index=i, reached_deg=q[i].tolist(),
-                         state="measured" if mask[i].all() else "missing-target",
-                         detail="imported") for i in range(start, stop)])
+                s.execute(
+                    insert(Reading),
+                    [
+                        _imported_reading(meas, cid, i, k, target, mask[i, k])
+                        for i in range(start, stop)
+                        for k, target in enumerate(meas.target_names)
+                    ],
+                )
+                s.execute(
+                    insert(PoseOutcome),
+                    [
+                        dict(
+                            campaign_id=cid,
+                            pose_index=i,
+                            reached_deg=q[i].tolist(),
+                            state="measured" if mask[i].all() else "missing-target",
+                            detail="imported",
+                        )
+                        for i in range(start, stop)
+                    ],
+                )
         with db.session(write=True) as s:
             done = _campaign(s, cid)
             done.status, done.notes = "done", str(notes)
@@ -416,27 +596,51 @@ def export_lines(db: Database, *, campaign_id: int, chunk: int = 5000):
         ok = and_(Reading.campaign_id == campaign_id, Reading.status == "ok")
         if not s.scalar(select(func.count()).where(ok)):
             raise Conflict(f"campaign {campaign_id} has no readings to export yet")
-        extras = [c for c, col in (("time_s", Reading.time_s), ("temp_c", Reading.temp_c))
-                  if s.scalar(select(func.count()).where(ok, col.is_not(None)))]
+        extras = [
+            c
+            for c, col in (("time_s", Reading.time_s), ("temp_c", Reading.temp_c))
+            if s.scalar(select(func.count()).where(ok, col.is_not(None)))
+        ]
         n_joints = parse_cell(campaign.cell_json).robot.n_joints
-    yield ",".join(["pose", *[f"q{i}" for i in range(1, n_joints + 1)], "target", "x", "y", "z",
-                    *extras]) + "\n"
+    yield (
+        ",".join(
+            ["pose", *[f"q{i}" for i in range(1, n_joints + 1)], "target", "x", "y", "z", *extras]
+        )
+        + "\n"
+    )
     after = (-1, "")  # keyset: (pose_index, target) of the last line written
-    on = and_(PlannedPose.campaign_id == Reading.campaign_id,
-              PlannedPose.pose_index == Reading.pose_index)
-    done = and_(PoseOutcome.campaign_id == Reading.campaign_id,
-                PoseOutcome.pose_index == Reading.pose_index)
+    on = and_(
+        PlannedPose.campaign_id == Reading.campaign_id, PlannedPose.pose_index == Reading.pose_index
+    )
+    done = and_(
+        PoseOutcome.campaign_id == Reading.campaign_id, PoseOutcome.pose_index == Reading.pose_index
+    )
     while True:
         with db.session() as s:
             rows = s.execute(
-                select(Reading.pose_index, Reading.target, Reading.x, Reading.y, Reading.z,
-                       Reading.time_s, Reading.temp_c, PlannedPose.label,
-                       PlannedPose.joints_deg, PoseOutcome.reached_deg)
-                .join(PlannedPose, on).outerjoin(PoseOutcome, done)
-                .where(Reading.campaign_id == campaign_id, Reading.status == "ok",
-                       (Reading.pose_index > after[0])
-                       | ((Reading.pose_index == after[0]) & (Reading.target > after[1])))
-                .order_by(Reading.pose_index, Reading.target).limit(chunk)).all()
+                select(
+                    Reading.pose_index,
+                    Reading.target,
+                    Reading.x,
+                    Reading.y,
+                    Reading.z,
+                    Reading.time_s,
+                    Reading.temp_c,
+                    PlannedPose.label,
+                    PlannedPose.joints_deg,
+                    PoseOutcome.reached_deg,
+                )
+                .join(PlannedPose, on)
+                .outerjoin(PoseOutcome, done)
+                .where(
+                    Reading.campaign_id == campaign_id,
+                    Reading.status == "ok",
+                    (Reading.pose_index > after[0])
+                    | ((Reading.pose_index == after[0]) & (Reading.target > after[1])),
+                )
+                .order_by(Reading.pose_index, Reading.target)
+                .limit(chunk)
+            ).all()
         if not rows:
             return
         buf = io.StringIO()
@@ -444,9 +648,15 @@ def export_lines(db: Database, *, campaign_id: int, chunk: int = 5000):
         for r in rows:
             q = r.reached_deg if r.reached_deg is not None else r.joints_deg
             more = {"time_s": r.time_s, "temp_c": r.temp_c}
-            w.writerow([r.label, *["%.9f" % v for v in q], r.target,
-                        *["%.6f" % v for v in (r.x, r.y, r.z)],
-                        *["" if more[c] is None else "%.6f" % more[c] for c in extras]])
+            w.writerow(
+                [
+                    r.label,
+                    *["%.9f" % v for v in q],
+                    r.target,
+                    *["%.6f" % v for v in (r.x, r.y, r.z)],
+                    *["" if more[c] is None else "%.6f" % more[c] for c in extras],
+                ]
+            )
         yield buf.getvalue()
         after = (rows[-1].pose_index, rows[-1].target)
 
@@ -454,8 +664,9 @@ def export_lines(db: Database, *, campaign_id: int, chunk: int = 5000):
 IMPORTING = "import in progress (or interrupted: delete and import again)"
 
 
-def readings_page(db: Database, *, campaign_id: int, offset: int = 0,
-                  limit: int = 1000) -> tuple[int, list[tuple[str, ReadingInfo]]]:
+def readings_page(
+    db: Database, *, campaign_id: int, offset: int = 0, limit: int = 1000
+) -> tuple[int, list[tuple[str, ReadingInfo]]]:
     """(total, page): the campaign's readings in plan order (pose, then arrival), with their pose
     labels, `limit` of them from `offset`; one bounded query, whatever the campaign's size."""
     if offset < 0 or limit < 1:
@@ -463,20 +674,30 @@ def readings_page(db: Database, *, campaign_id: int, offset: int = 0,
     with db.session() as s:
         _campaign(s, campaign_id)
         total = s.scalar(select(func.count()).where(Reading.campaign_id == campaign_id))
-        on = and_(PlannedPose.campaign_id == Reading.campaign_id,
-                  PlannedPose.pose_index == Reading.pose_index)
-        rows = s.execute(select(PlannedPose.label, Reading).join(PlannedPose, on)
-                         .where(Reading.campaign_id == campaign_id)
-                         .order_by(Reading.pose_index, Reading.id)
-                         .offset(offset).limit(limit)).all()
+        on = and_(
+            PlannedPose.campaign_id == Reading.campaign_id,
+            PlannedPose.pose_index == Reading.pose_index,
+        )
+        rows = s.execute(
+            select(PlannedPose.label, Reading)
+            .join(PlannedPose, on)
+            .where(Reading.campaign_id == campaign_id)
+            .order_by(Reading.pose_index, Reading.id)
+            .offset(offset)
+            .limit(limit)
+        ).all()
         return total, [(label, _reading_info(r)) for label, r in rows]
 
 
 # --- jobs --------------------------------------------------------------------------------------
 
 # queued -> running -> done | failed; a queued job may fail without running (a restart).
-JOB_TRANSITIONS = {"queued": {"running", "failed"}, "running": {"done", "failed"},
-                   "done": set(), "failed": set()}
+JOB_TRANSITIONS = {
+    "queued": {"running", "failed"},
+    "running": {"done", "failed"},
+    "done": set(),
+    "failed": set(),
+}
 JOB_FIELDS = ("progress", "reason", "results", "campaign_id")  # campaign: a planning job's
 
 
@@ -505,8 +726,15 @@ def create_job(db: Database, *, kind: str, campaign_id: int | None, method: str)
     with db.session(write=True) as s:
         if campaign_id is not None:
             _campaign(s, campaign_id)
-        job = Job(kind=kind, campaign_id=campaign_id, method=str(method), state="queued",
-                  progress=0.0, results={}, created_at=utcnow())
+        job = Job(
+            kind=kind,
+            campaign_id=campaign_id,
+            method=str(method),
+            state="queued",
+            progress=0.0,
+            results={},
+            created_at=utcnow(),
+        )
         s.add(job)
         s.flush()
         return _job_info(job)
@@ -564,6 +792,7 @@ def fail_unfinished_jobs(db: Database, *, reason: str) -> list[int]:
 
 # --- helpers -----------------------------------------------------------------------------------
 
+
 def _campaign(s: Session, campaign_id: int) -> Campaign:
     campaign = s.get(Campaign, campaign_id)
     if campaign is None:
@@ -579,13 +808,27 @@ def _job(s: Session, job_id: int) -> Job:
 
 
 def _job_info(j: Job) -> JobInfo:
-    return JobInfo(j.id, j.kind, j.campaign_id, j.method, j.state, j.reason, j.progress,
-                   j.created_at, j.started_at, j.finished_at, dict(j.results or {}))
+    return JobInfo(
+        j.id,
+        j.kind,
+        j.campaign_id,
+        j.method,
+        j.state,
+        j.reason,
+        j.progress,
+        j.created_at,
+        j.started_at,
+        j.finished_at,
+        dict(j.results or {}),
+    )
 
 
 def _planned(s: Session, campaign_id: int, pose_index: int) -> PlannedPose:
-    pose = s.scalar(select(PlannedPose).where(PlannedPose.campaign_id == campaign_id,
-                                              PlannedPose.pose_index == pose_index))
+    pose = s.scalar(
+        select(PlannedPose).where(
+            PlannedPose.campaign_id == campaign_id, PlannedPose.pose_index == pose_index
+        )
+    )
     if pose is None:
         _campaign(s, campaign_id)
         raise NotFound(f"campaign {campaign_id} has no planned pose {pose_index}")
@@ -593,27 +836,54 @@ def _planned(s: Session, campaign_id: int, pose_index: int) -> PlannedPose:
 
 
 def _next_unmeasured(s: Session, campaign_id: int) -> int | None:
-    closed = exists().where(PoseOutcome.campaign_id == PlannedPose.campaign_id,
-                            PoseOutcome.pose_index == PlannedPose.pose_index)
-    return s.scalar(select(func.min(PlannedPose.pose_index))
-                    .where(PlannedPose.campaign_id == campaign_id, ~closed))
+    closed = exists().where(
+        PoseOutcome.campaign_id == PlannedPose.campaign_id,
+        PoseOutcome.pose_index == PlannedPose.pose_index,
+    )
+    return s.scalar(
+        select(func.min(PlannedPose.pose_index)).where(
+            PlannedPose.campaign_id == campaign_id, ~closed
+        )
+    )
 
 
 def _poses_query(campaign_id: int):
-    on = and_(PoseOutcome.campaign_id == PlannedPose.campaign_id,
-              PoseOutcome.pose_index == PlannedPose.pose_index)
-    return (select(PlannedPose.pose_index, PlannedPose.label, PlannedPose.joints_deg,
-                   PoseOutcome.state, PoseOutcome.reached_deg, PoseOutcome.detail)
-            .outerjoin(PoseOutcome, on).where(PlannedPose.campaign_id == campaign_id)
-            .order_by(PlannedPose.pose_index))
+    on = and_(
+        PoseOutcome.campaign_id == PlannedPose.campaign_id,
+        PoseOutcome.pose_index == PlannedPose.pose_index,
+    )
+    return (
+        select(
+            PlannedPose.pose_index,
+            PlannedPose.label,
+            PlannedPose.joints_deg,
+            PoseOutcome.state,
+            PoseOutcome.reached_deg,
+            PoseOutcome.detail,
+        )
+        .outerjoin(PoseOutcome, on)
+        .where(PlannedPose.campaign_id == campaign_id)
+        .order_by(PlannedPose.pose_index)
+    )
 
 
 def _info(s: Session, c: Campaign) -> CampaignInfo:
     n_poses = s.scalar(select(func.count()).where(PlannedPose.campaign_id == c.id))
     n_done = s.scalar(select(func.count()).where(PoseOutcome.campaign_id == c.id))
-    return CampaignInfo(c.id, c.name, c.created_at, c.status, c.cell_json,
-                        json.loads(c.settings_json), c.simulated, c.notes, n_poses, n_done,
-                        c.lease_owner, c.lease_expires_at)
+    return CampaignInfo(
+        c.id,
+        c.name,
+        c.created_at,
+        c.status,
+        c.cell_json,
+        json.loads(c.settings_json),
+        c.simulated,
+        c.notes,
+        n_poses,
+        n_done,
+        c.lease_owner,
+        c.lease_expires_at,
+    )
 
 
 def _add_campaign(s: Session, *, name, cell_text, settings, simulated, notes, status) -> Campaign:
@@ -623,18 +893,32 @@ def _add_campaign(s: Session, *, name, cell_text, settings, simulated, notes, st
         settings_text = json.dumps(dict(settings or {}), sort_keys=True, allow_nan=False)
     except (TypeError, ValueError) as e:
         raise ValueError(f"settings must be plain JSON values: {e}") from None
-    campaign = Campaign(name=name.strip(), cell_json=cell_text, settings_json=settings_text,
-                        simulated=bool(simulated), notes=str(notes), status=status)
+    campaign = Campaign(
+        name=name.strip(),
+        cell_json=cell_text,
+        settings_json=settings_text,
+        simulated=bool(simulated),
+        notes=str(notes),
+        status=status,
+    )
     s.add(campaign)
     s.flush()  # assigns the id
     return campaign
 
 
 def _add_plan(s: Session, campaign_id: int, labels, q_deg: np.ndarray, first: int = 0) -> None:
-    s.execute(insert(PlannedPose), [
-        dict(campaign_id=campaign_id, pose_index=first + i, label=str(label),
-             joints_deg=[float(v) for v in q_deg[i]])
-        for i, label in enumerate(labels)])
+    s.execute(
+        insert(PlannedPose),
+        [
+            dict(
+                campaign_id=campaign_id,
+                pose_index=first + i,
+                label=str(label),
+                joints_deg=[float(v) for v in q_deg[i]],
+            )
+            for i, label in enumerate(labels)
+        ],
+    )
 
 
 def _record(db: Database, campaign_id: int, pose_index: int, target: str, values: dict) -> bool:
@@ -642,45 +926,88 @@ def _record(db: Database, campaign_id: int, pose_index: int, target: str, values
     with db.session(write=True) as s:
         campaign = _campaign(s, campaign_id)
         _planned(s, campaign_id, pose_index)
-        old = s.scalar(select(Reading).where(Reading.campaign_id == campaign_id,
-                                             Reading.pose_index == pose_index,
-                                             Reading.target == target))
+        old = s.scalar(
+            select(Reading).where(
+                Reading.campaign_id == campaign_id,
+                Reading.pose_index == pose_index,
+                Reading.target == target,
+            )
+        )
         if old is not None:
             differ = [k for k, v in values.items() if getattr(old, k) != v]
             if not differ:
                 return False
-            raise Conflict(f"campaign {campaign_id} pose {pose_index} target {target} is already "
-                           f"recorded with other {', '.join(differ)}")
+            raise Conflict(
+                f"campaign {campaign_id} pose {pose_index} target {target} is already "
+                f"recorded with other {', '.join(differ)}"
+            )
         _check_recording(campaign)
-        closed = s.scalar(select(PoseOutcome.state).where(PoseOutcome.campaign_id == campaign_id,
-                                                          PoseOutcome.pose_index == pose_index))
+        closed = s.scalar(
+            select(PoseOutcome.state).where(
+                PoseOutcome.campaign_id == campaign_id, PoseOutcome.pose_index == pose_index
+            )
+        )
         if closed is not None:
-            raise Conflict(f"campaign {campaign_id} pose {pose_index} is already closed "
-                           f"({closed}); no new readings")
+            raise Conflict(
+                f"campaign {campaign_id} pose {pose_index} is already closed "
+                f"({closed}); no new readings"
+            )
         s.add(Reading(campaign_id=campaign_id, pose_index=pose_index, target=target, **values))
     return True
 
 
 def _imported_reading(meas: Measurements, cid: int, i: int, k: int, target: str, present) -> dict:
-    row = dict(campaign_id=cid, pose_index=i, target=target, std_x=None, std_y=None,
-               std_z=None, samples=None, pressure_hpa=None, humidity_pct=None)
+    row = dict(
+        campaign_id=cid,
+        pose_index=i,
+        target=target,
+        std_x=None,
+        std_y=None,
+        std_z=None,
+        samples=None,
+        pressure_hpa=None,
+        humidity_pct=None,
+    )
     if not present:
-        return row | dict(status="missing", x=None, y=None, z=None, time_s=None, temp_c=None,
-                          detail="absent from the imported file")
-    extra = {c: None if a is None else checks.optional(a[i, k])
-             for c, a in (("time_s", meas.time_s), ("temp_c", meas.temp_c))}
+        return row | dict(
+            status="missing",
+            x=None,
+            y=None,
+            z=None,
+            time_s=None,
+            temp_c=None,
+            detail="absent from the imported file",
+        )
+    extra = {
+        c: None if a is None else checks.optional(a[i, k])
+        for c, a in (("time_s", meas.time_s), ("temp_c", meas.temp_c))
+    }
     x, y, z = (float(v) for v in meas.xyz[i, k])
     return row | extra | dict(status="ok", x=x, y=y, z=z, detail="")
 
 
 def _check_recording(campaign: Campaign) -> None:
     if campaign.status not in RECORDING:
-        raise Conflict(f"campaign {campaign.id} is {campaign.status}: readings are recorded "
-                       f"only while it is {', '.join(RECORDING)}")
+        raise Conflict(
+            f"campaign {campaign.id} is {campaign.status}: readings are recorded "
+            f"only while it is {', '.join(RECORDING)}"
+        )
 
 
 def _reading_info(r: Reading) -> ReadingInfo:
     xyz = None if r.status != "ok" else (r.x, r.y, r.z)
     std = None if r.std_x is None else (r.std_x, r.std_y, r.std_z)
-    return ReadingInfo(r.pose_index, r.target, r.status, xyz, std, r.samples, r.time_s,
-                       r.temp_c, r.pressure_hpa, r.humidity_pct, r.detail, r.created_at)
+    return ReadingInfo(
+        r.pose_index,
+        r.target,
+        r.status,
+        xyz,
+        std,
+        r.samples,
+        r.time_s,
+        r.temp_c,
+        r.pressure_hpa,
+        r.humidity_pct,
+        r.detail,
+        r.created_at,
+    )

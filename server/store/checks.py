@@ -6,10 +6,9 @@ import json
 import math
 
 import numpy as np
-
-from server.formats.campaign_csv import LIMIT_TOL_DEG
-from server.formats.cell_json import TARGET_NAME, Cell, parse_cell
-from solver.robot import Robot
+from robocal.server.formats.campaign_csv import LIMIT_TOL_DEG
+from robocal.server.formats.cell_json import TARGET_NAME, Cell, parse_cell
+from robocal.solver.robot import Robot
 
 from .errors import Conflict
 
@@ -25,8 +24,10 @@ def matching_robot(robot: Robot | None, cell: Cell) -> Robot:
     if robot is None:
         return cell.robot
     if robot.n_joints != cell.robot.n_joints:
-        raise ValueError(f"robot {robot.name} has {robot.n_joints} joints, the cell's "
-                         f"{cell.robot.name} has {cell.robot.n_joints}")
+        raise ValueError(
+            f"robot {robot.name} has {robot.n_joints} joints, the cell's "
+            f"{cell.robot.name} has {cell.robot.n_joints}"
+        )
     return robot
 
 
@@ -34,16 +35,18 @@ def plan_deg(poses_deg, robot: Robot) -> np.ndarray:
     """The plan as an (n >= 1, N) array of finite joint angles within the robot's limits, deg."""
     q = np.asarray(poses_deg, dtype=float)
     if q.ndim != 2 or q.shape[0] == 0 or q.shape[1] != robot.n_joints:
-        raise ValueError(f"poses_deg must be (n >= 1, {robot.n_joints}) for {robot.name}, "
-                         f"not {q.shape}")
+        raise ValueError(
+            f"poses_deg must be (n >= 1, {robot.n_joints}) for {robot.name}, not {q.shape}"
+        )
     if not np.all(np.isfinite(q)):
         raise ValueError("poses_deg must be finite")
     lo, hi = np.rad2deg(robot.lower), np.rad2deg(robot.upper)
     bad = np.argwhere((q < lo - LIMIT_TOL_DEG) | (q > hi + LIMIT_TOL_DEG))
     if len(bad):
         i, j = bad[0]
-        raise ValueError(f"pose {i}: joint {j + 1} at {q[i, j]:g} deg is outside "
-                         f"[{lo[j]:g}, {hi[j]:g}] deg")
+        raise ValueError(
+            f"pose {i}: joint {j + 1} at {q[i, j]:g} deg is outside [{lo[j]:g}, {hi[j]:g}] deg"
+        )
     return q
 
 
@@ -60,8 +63,10 @@ def pose_labels(labels, n: int) -> list[str]:
 def target_name(target) -> str:
     """A target name as cell.json allows it (it becomes a CSV value and a parameter name)."""
     if not isinstance(target, str) or not TARGET_NAME.fullmatch(target):
-        raise ValueError(f"target {target!r} is not a target name (a letter, then up to 15 "
-                         "letters, digits or '_')")
+        raise ValueError(
+            f"target {target!r} is not a target name (a letter, then up to 15 "
+            "letters, digits or '_')"
+        )
     return target
 
 
@@ -108,8 +113,13 @@ def samples(value) -> int | None:
 
 def outcome_agrees(state: str, ok: int, missing: int, pose_index: int) -> None:
     """Conflict unless the pose's readings fit the state, so a resumed run can trust outcomes."""
-    wrong = {"measured": missing or not ok, "missing-target": not missing,
-             "skipped": ok or missing}[state]
+    wrong = {
+        "measured": missing or not ok,
+        "missing-target": not missing,
+        "skipped": ok or missing,
+    }[state]
     if wrong:
-        raise Conflict(f"pose {pose_index} cannot be {state}: it has {ok} reading(s) and "
-                       f"{missing} target(s) recorded missing")
+        raise Conflict(
+            f"pose {pose_index} cannot be {state}: it has {ok} reading(s) and "
+            f"{missing} target(s) recorded missing"
+        )

@@ -12,12 +12,23 @@ from __future__ import annotations
 
 import datetime as dt
 
-from sqlalchemy import (JSON, Boolean, CheckConstraint, DateTime, Float, ForeignKey,
-                        ForeignKeyConstraint, Integer, MetaData, String, Text, TypeDecorator,
-                        UniqueConstraint)
+from robocal.drivers.lifecycle import STATES
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    CheckConstraint,
+    DateTime,
+    Float,
+    ForeignKey,
+    ForeignKeyConstraint,
+    Integer,
+    MetaData,
+    String,
+    Text,
+    TypeDecorator,
+    UniqueConstraint,
+)
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
-
-from drivers.lifecycle import STATES
 
 # A campaign's status is the engine's life-cycle state (drivers/lifecycle.py), all of them.
 STATUSES = STATES
@@ -109,9 +120,11 @@ class PlannedPose(Base):
 
 def _pose_fk() -> ForeignKeyConstraint:
     # Readings and outcomes can only refer to a pose of the plan.
-    return ForeignKeyConstraint(["campaign_id", "pose_index"],
-                                ["planned_pose.campaign_id", "planned_pose.pose_index"],
-                                ondelete="CASCADE")
+    return ForeignKeyConstraint(
+        ["campaign_id", "pose_index"],
+        ["planned_pose.campaign_id", "planned_pose.pose_index"],
+        ondelete="CASCADE",
+    )
 
 
 class Reading(Base):
@@ -122,9 +135,11 @@ class Reading(Base):
         UniqueConstraint("campaign_id", "pose_index", "target"),
         _pose_fk(),
         CheckConstraint(one_of("status", READING_STATUSES), name="status"),
-        CheckConstraint("(status = 'ok' AND x IS NOT NULL AND y IS NOT NULL AND z IS NOT NULL) OR "
-                        "(status = 'missing' AND x IS NULL AND y IS NULL AND z IS NULL)",
-                        name="xyz_present"),
+        CheckConstraint(
+            "(status = 'ok' AND x IS NOT NULL AND y IS NOT NULL AND z IS NOT NULL) OR "
+            "(status = 'missing' AND x IS NULL AND y IS NULL AND z IS NULL)",
+            name="xyz_present",
+        ),
         CheckConstraint("samples IS NULL OR samples >= 1", name="samples"),
     )
 

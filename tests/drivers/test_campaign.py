@@ -4,14 +4,14 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from robocal.drivers.campaign import CampaignEngine, Settings, StateError
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.clock import VirtualClock
+from robocal.drivers.plan import Measure
+from robocal.drivers.predictor import SmrPredictor
+from robocal.drivers.world import SimulatedWorld
+from robocal.solver.robot import IRB2600
 
-from drivers.campaign import CampaignEngine, Settings, StateError
-from drivers.cell import VirtualCell
-from drivers.clock import VirtualClock
-from drivers.plan import Measure
-from drivers.predictor import SmrPredictor
-from drivers.world import SimulatedWorld
-from solver.robot import IRB2600
 from tests.robots import TARGETS
 
 
@@ -81,8 +81,12 @@ class Tracker:
         sigma = self.world.cell.tracker.sigma_mm(np.linalg.norm(p))
         self.world.clock.sleep(n / 1000)
         # the spec is the mean's accuracy; the samples spread sqrt(n) wider
-        return SimpleNamespace(mean_mm=p + self.rng.normal(0, sigma, 3),
-                               std_mm=np.full(3, sigma * np.sqrt(n)), samples=n, status="OK")
+        return SimpleNamespace(
+            mean_mm=p + self.rng.normal(0, sigma, 3),
+            std_mm=np.full(3, sigma * np.sqrt(n)),
+            samples=n,
+            status="OK",
+        )
 
     def weather(self):
         return SimpleNamespace(temp_c=self.world.air_temperature())
@@ -140,7 +144,9 @@ def test_beam_breaks_lose_nothing():
 def test_adaptive_settling_is_shorter():
     fixed, poses, _, clock_f = setup(n=15)
     fixed.run(poses)
-    adaptive, poses, _, clock_a = setup(n=15, settings=Settings(settle="adaptive", search_radius_mm=60))
+    adaptive, poses, _, clock_a = setup(
+        n=15, settings=Settings(settle="adaptive", search_radius_mm=60)
+    )
     adaptive.run(poses)
     assert clock_a.now() < clock_f.now()
 
@@ -166,8 +172,7 @@ def test_estop_mid_campaign_reset_and_run_again_completes_with_every_reading_onc
     done = len(sink.poses)
     partial = {t: xyz for (p, t), xyz in sink.readings.items() if p == done}
     rows = [[sink.readings[(p, t)] for t in eng.predictor.names] for p in range(done)]
-    eng.run(poses, start=done, history=(np.deg2rad(poses[:done]), np.array(rows)),
-            partial=partial)
+    eng.run(poses, start=done, history=(np.deg2rad(poses[:done]), np.array(rows)), partial=partial)
     assert eng.state == "done" and len(sink.readings) == 12 * 3  # the sink refuses duplicates
     assert [p for p, _ in sink.poses] == list(range(12))
     # pose 5 is moved to again (the arm may have been moved by hand) but its first reading kept

@@ -4,12 +4,19 @@ import json
 
 import numpy as np
 import pytest
+from robocal.drivers.cell import GeometricErrors, TrackerSpec, VirtualCell
+from robocal.solver.kinematics import (
+    Layout,
+    flange_frames,
+    predict,
+    predict_with_jacobian,
+    translation,
+)
+from robocal.solver.robot import IRB2600
 from scipy.optimize import least_squares
 
-from drivers.cell import GeometricErrors, TrackerSpec, VirtualCell
-from solver.kinematics import Layout, flange_frames, predict, predict_with_jacobian, translation
-from solver.robot import IRB2600
 from tests.robots import KUKA_LIKE, PUMA_LIKE, TARGETS
+
 
 def irb_cell(seed=1, **kw):
     return VirtualCell.random(IRB2600, TARGETS, seed=seed, **kw)

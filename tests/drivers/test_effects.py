@@ -6,12 +6,12 @@ import sys
 
 import numpy as np
 import pytest
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.effects import EFFECTS, make_effect, make_effects
+from robocal.solver.calibrate import calibrate
+from robocal.solver.kinematics import Layout, predict
+from robocal.solver.robot import IRB2600, Robot
 
-from drivers.cell import VirtualCell
-from drivers.effects import EFFECTS, make_effect, make_effects
-from solver.calibrate import calibrate
-from solver.kinematics import Layout, predict
-from solver.robot import IRB2600, Robot
 from tests.robots import PUMA_LIKE, TARGETS
 
 
@@ -48,15 +48,22 @@ def test_periodic_is_a_sine_of_k_times_the_joint():
 
 
 def test_periodic_draws_its_harmonic_when_not_given():
-    drawn = {make_effect("joint_periodic:2", cell_with("joint_scale:1")[0],
-                         np.random.default_rng(s)).harmonic for s in range(20)}
+    drawn = {
+        make_effect(
+            "joint_periodic:2", cell_with("joint_scale:1")[0], np.random.default_rng(s)
+        ).harmonic
+        for s in range(20)
+    }
     assert drawn == {1, 2}
 
 
-@pytest.mark.parametrize("spec, joint, driver", [
-    ("joint_scale:2=250", 1, 1),  # scale: the joint's own angle
-    ("joint_coupling:5=250", 4, 3),  # wrist coupling: the joint before it
-])
+@pytest.mark.parametrize(
+    "spec, joint, driver",
+    [
+        ("joint_scale:2=250", 1, 1),  # scale: the joint's own angle
+        ("joint_coupling:5=250", 4, 3),  # wrist coupling: the joint before it
+    ],
+)
 def test_linear_effects_grow_with_their_joint_angle(spec, joint, driver):
     cell, _ = cell_with(spec)
     q = poses(cell)
@@ -70,7 +77,9 @@ def test_backlash_lags_behind_the_last_move_in_visit_order():
     q = poses(cell)
     q[5, 2] = q[4, 2]  # joint 3 stands still: it keeps the direction of its previous move
     step = np.sign(np.diff(q[:, 2]))
-    d = np.concatenate([[0.0], np.where(step == 0, np.roll(step, 1), step)])  # first pose: no move yet
+    d = np.concatenate(
+        [[0.0], np.where(step == 0, np.roll(step, 1), step)]
+    )  # first pose: no move yet
     dq = np.zeros_like(q)
     dq[:, 2] = -np.deg2rad(0.02) * d
     np.testing.assert_allclose(cell.true_points(q), true_arm(cell, q, dq), atol=1e-9)
@@ -79,8 +88,8 @@ def test_backlash_lags_behind_the_last_move_in_visit_order():
 
 def test_backlash_is_the_same_campaign_at_once_or_pose_by_pose():
     """The batch campaign and the socket-driven world (moves, then one read per SMR, some twice)."""
-    from drivers.clock import VirtualClock
-    from drivers.world import SimulatedWorld
+    from robocal.drivers.clock import VirtualClock
+    from robocal.drivers.world import SimulatedWorld
 
     rng = np.random.default_rng(11)
     joint = int(rng.integers(1, 7))
@@ -116,8 +125,9 @@ def cell_without_effects(cell):
 
 def body_positions(robot, mass, q):
     """Centres of gravity (m, bodies, 3) from the described mass model, through `predict`."""
-    bodies = mass["links"] + [{"link": robot.n_joints, "mass_kg": mass["payload_kg"],
-                               "cog_mm": mass["payload_cog_mm"]}]
+    bodies = mass["links"] + [
+        {"link": robot.n_joints, "mass_kg": mass["payload_kg"], "cog_mm": mass["payload_cog_mm"]}
+    ]
     out = []
     for b in bodies:
         j = b["link"]
@@ -227,16 +237,19 @@ def test_base_shift_happens_mid_campaign():
     assert eff.describe()["at_s"] == eff.at_s
 
 
-@pytest.mark.parametrize("spec, name, joint, harmonic, magnitude", [
-    ("joint_periodic:3:2=0.02", "joint_periodic", 3, 2, 0.02),
-    ("joint_compliance:2", "joint_compliance", 2, None, EFFECTS["joint_compliance"].default),
-    (" joint_scale:6=-40 ", "joint_scale", 6, None, -40.0),
-    ("thermal_drift=20", "thermal_drift", None, None, 20.0),
-    ("base_shift=0.3", "base_shift", None, None, 0.3),
-    ("base_shift", "base_shift", None, None, 0.2),
-    ("joint_backlash:4", "joint_backlash", 4, None, EFFECTS["joint_backlash"].default),
-    ("joint_coupling:5=-300", "joint_coupling", 5, None, -300.0),
-])
+@pytest.mark.parametrize(
+    "spec, name, joint, harmonic, magnitude",
+    [
+        ("joint_periodic:3:2=0.02", "joint_periodic", 3, 2, 0.02),
+        ("joint_compliance:2", "joint_compliance", 2, None, EFFECTS["joint_compliance"].default),
+        (" joint_scale:6=-40 ", "joint_scale", 6, None, -40.0),
+        ("thermal_drift=20", "thermal_drift", None, None, 20.0),
+        ("base_shift=0.3", "base_shift", None, None, 0.3),
+        ("base_shift", "base_shift", None, None, 0.2),
+        ("joint_backlash:4", "joint_backlash", 4, None, EFFECTS["joint_backlash"].default),
+        ("joint_coupling:5=-300", "joint_coupling", 5, None, -300.0),
+    ],
+)
 def test_spec_parsing(spec, name, joint, harmonic, magnitude):
     d = cell_with(spec)[1].describe()
     assert (d["name"], d["joint"], d["magnitude"]) == (name, joint, magnitude)
@@ -245,24 +258,27 @@ def test_spec_parsing(spec, name, joint, harmonic, magnitude):
     assert d["unit"] == EFFECTS[name].unit
 
 
-@pytest.mark.parametrize("spec, message", [
-    ("gravity", "unknown effect 'gravity'; choose from joint_compliance"),
-    ("joint_periodic", "needs a joint, 1 to 6"),
-    ("joint_periodic:0", "joint 0 is not one of the robot's joints 1 to 6"),
-    ("joint_scale:7=5", "joint 7 is not one of"),
-    ("joint_scale:two", "joint 'two' is not an integer"),
-    ("joint_scale:2:1", "joint_scale takes only a joint"),
-    ("joint_periodic:2:1:1", "takes a joint and a harmonic"),
-    ("joint_periodic:2:0", "harmonic must be a positive integer"),
-    ("joint_periodic:2:1.5", "harmonic '1.5' is not an integer"),
-    ("thermal_drift:1", "thermal_drift takes no joint"),
-    ("base_shift=far", r"magnitude 'far' is not a number \(in mm\)"),
-    ("base_shift=", "magnitude '' is not a number"),
-    ("base_shift=-0.1", "must not be negative"),
-    ("joint_compliance:2=inf", "must be finite"),
-    ("joint_backlash:2=-0.01", "must not be negative"),
-    ("joint_coupling:1", "joint_coupling acts on joints 2 to 6"),
-])
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("gravity", "unknown effect 'gravity'; choose from joint_compliance"),
+        ("joint_periodic", "needs a joint, 1 to 6"),
+        ("joint_periodic:0", "joint 0 is not one of the robot's joints 1 to 6"),
+        ("joint_scale:7=5", "joint 7 is not one of"),
+        ("joint_scale:two", "joint 'two' is not an integer"),
+        ("joint_scale:2:1", "joint_scale takes only a joint"),
+        ("joint_periodic:2:1:1", "takes a joint and a harmonic"),
+        ("joint_periodic:2:0", "harmonic must be a positive integer"),
+        ("joint_periodic:2:1.5", "harmonic '1.5' is not an integer"),
+        ("thermal_drift:1", "thermal_drift takes no joint"),
+        ("base_shift=far", r"magnitude 'far' is not a number \(in mm\)"),
+        ("base_shift=", "magnitude '' is not a number"),
+        ("base_shift=-0.1", "must not be negative"),
+        ("joint_compliance:2=inf", "must be finite"),
+        ("joint_backlash:2=-0.01", "must not be negative"),
+        ("joint_coupling:1", "joint_coupling acts on joints 2 to 6"),
+    ],
+)
 def test_bad_specs_are_refused(spec, message):
     cell = VirtualCell.random(IRB2600, TARGETS, seed=1)
     with pytest.raises(ValueError, match=message):
@@ -288,9 +304,18 @@ def test_same_seed_same_effects_and_campaign():
     assert tc["true_params"] == ta["true_params"]  # effects draw from their own stream
 
 
-@pytest.mark.parametrize("spec", ["joint_compliance:2", "joint_periodic:2", "joint_scale:2",
-                                  "thermal_drift", "base_shift", "joint_backlash:2",
-                                  "joint_coupling:5"])
+@pytest.mark.parametrize(
+    "spec",
+    [
+        "joint_compliance:2",
+        "joint_periodic:2",
+        "joint_scale:2",
+        "thermal_drift",
+        "base_shift",
+        "joint_backlash:2",
+        "joint_coupling:5",
+    ],
+)
 def test_defaults_are_clearly_visible_to_a_geometric_calibration(spec):
     cell = VirtualCell.random(IRB2600, TARGETS, seed=0)
     cell.effects.extend(make_effects([spec], cell, 0))
@@ -304,13 +329,32 @@ def test_defaults_are_clearly_visible_to_a_geometric_calibration(spec):
 
 
 def robocal(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "server.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
 def test_simulate_with_an_effect_end_to_end(tmp_path):
-    r = robocal("simulate", "--poses", 30, "--seed", 2, "--effect", "joint_periodic:3:2=0.02",
-                "--effect", "base_shift", "--out", "m.csv", "--truth-out", "t.json", cwd=tmp_path)
+    r = robocal(
+        "simulate",
+        "--poses",
+        30,
+        "--seed",
+        2,
+        "--effect",
+        "joint_periodic:3:2=0.02",
+        "--effect",
+        "base_shift",
+        "--out",
+        "m.csv",
+        "--truth-out",
+        "t.json",
+        cwd=tmp_path,
+    )
     assert r.returncode == 0, r.stderr
     assert "joint_periodic:3:2=0.02 deg" in r.stdout and "base_shift=0.2 mm" in r.stdout
     effects = json.loads((tmp_path / "t.json").read_text())["effects"]

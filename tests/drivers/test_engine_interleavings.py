@@ -13,12 +13,11 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
-from drivers import campaign as campaign_module
-from drivers.campaign import CampaignEngine, EngineBusy, Settings, StateError
-from drivers.clock import VirtualClock
-from drivers.lifecycle import TRANSITIONS
-from drivers.plan import Aim, Checkpoint, Measure, Move, campaign_plan
+from robocal.drivers import campaign as campaign_module
+from robocal.drivers.campaign import CampaignEngine, EngineBusy, Settings, StateError
+from robocal.drivers.clock import VirtualClock
+from robocal.drivers.lifecycle import TRANSITIONS
+from robocal.drivers.plan import Aim, Checkpoint, Measure, Move, campaign_plan
 
 NAMES = ("a", "b")
 POSES = np.array([[0, 10, 20, 0, 30, 0], [5, 15, 25, 0, 35, 0], [10, 20, 30, 0, 40, 0]], float)
@@ -171,9 +170,16 @@ class Rig:
         self.at_message = None  # at_message(k, message) just before message k executes
         self.at_state = None  # at_state(old, new) after each transition is recorded
         self.k = -1
-        self.engine = CampaignEngine(Controller(self.cell), Tracker(self.cell), self.clock,
-                                     self.predictor, self.sink, Settings(pause_s=1.0, samples=10),
-                                     on_state=self._on_state, trace=self._trace)
+        self.engine = CampaignEngine(
+            Controller(self.cell),
+            Tracker(self.cell),
+            self.clock,
+            self.predictor,
+            self.sink,
+            Settings(pause_s=1.0, samples=10),
+            on_state=self._on_state,
+            trace=self._trace,
+        )
 
     def _on_state(self, old, new):
         self.cell.note("state", old, new, self.clock.now())
@@ -222,8 +228,10 @@ class Rig:
         poses before it, the readings already stored for it."""
         done = {p for p, _ in self.sink.poses}
         start = min(set(range(len(POSES))) - done, default=len(POSES))
-        rows = [[self.sink.readings.get((p, t), np.full(3, np.nan)) for t in NAMES]
-                for p in range(start)]
+        rows = [
+            [self.sink.readings.get((p, t), np.full(3, np.nan)) for t in NAMES]
+            for p in range(start)
+        ]
         history = (np.deg2rad(POSES[:start]), np.array(rows)) if start else None
         partial = {t: xyz for (p, t), xyz in self.sink.readings.items() if p == start}
         return dict(start=start, history=history, partial=partial)
@@ -235,7 +243,7 @@ class Rig:
         return self.cell.timeline.index(entry)
 
     def after(self, i, kind):
-        return [e for e in self.cell.timeline[i + 1:] if e[0] == kind]
+        return [e for e in self.cell.timeline[i + 1 :] if e[0] == kind]
 
 
 def check_consistent(rig):
@@ -264,6 +272,7 @@ def inject(rig, k, *actions):
         if j == k:
             for a in actions:
                 rig.request(a)
+
     rig.at_message = at
 
 
@@ -286,7 +295,9 @@ def test_estop_at_every_boundary_then_reset_and_run_completes(k):
     check_consistent(rig)
     rig.at_message = None
     assert rig.engine.reset() == "paused" and rig.cell.timeline[-2:] == [
-        ("CLEAR",), ("state", "estopped", "paused", rig.clock.now())]
+        ("CLEAR",),
+        ("state", "estopped", "paused", rig.clock.now()),
+    ]
     assert "error" not in rig.run(**rig.resume_args())
     check_complete(rig)
 
@@ -324,7 +335,7 @@ def test_pause_at_every_boundary_then_resume_abort_or_estop(k, then):
     paused = [i for i, e in enumerate(rig.cell.timeline) if e[:3] == ("state", "pausing", "paused")]
     asked = rig.index("request", then)
     assert len(paused) == 1 and paused[0] < asked
-    between = rig.cell.timeline[paused[0] + 1:asked]
+    between = rig.cell.timeline[paused[0] + 1 : asked]
     assert not [e for e in between if e[0] in ("msg", "MOVEJ", "reading")]  # nothing while paused
     assert rig.cell.timeline[paused[0]][3] == rig.clock.now() or then == "resume"
     if then == "resume":
@@ -364,8 +375,9 @@ def test_an_illegal_request_at_every_boundary_is_refused_and_changes_nothing(k):
     rig.at_message = at
     assert "error" not in rig.run()
     check_complete(rig)
-    assert refused == [("running", a, ("pause", "abort", "estop"))
-                       for a in ("resume", "reset", "start")]
+    assert refused == [
+        ("running", a, ("pause", "abort", "estop")) for a in ("resume", "reset", "start")
+    ]
 
 
 @pytest.mark.parametrize("device", ["controller", "tracker"])
@@ -405,13 +417,16 @@ CALLS = _device_calls()
 
 
 def test_the_plan_under_test_makes_27_device_calls():
-    assert len(CALLS) == 27 and CALLS[:3] == [("controller", "move_abs_j"),
-                                              ("controller", "wait_in_position"),
-                                              ("controller", "joints")]
+    assert len(CALLS) == 27 and CALLS[:3] == [
+        ("controller", "move_abs_j"),
+        ("controller", "wait_in_position"),
+        ("controller", "joints"),
+    ]
 
 
-@pytest.mark.parametrize("j", range(len(CALLS)), ids=[f"{j}-{d}.{n}" for j, (d, n) in
-                                                       enumerate(CALLS)])
+@pytest.mark.parametrize(
+    "j", range(len(CALLS)), ids=[f"{j}-{d}.{n}" for j, (d, n) in enumerate(CALLS)]
+)
 def test_estop_during_every_device_call(j):
     """A stop landing inside a message: at move_abs_j it is the gap between the engine's last
     look and the MOVEJ write, which the latch closes."""
@@ -431,8 +446,9 @@ def test_estop_during_every_device_call(j):
     check_complete(rig)
 
 
-@pytest.mark.parametrize("j", range(len(CALLS)), ids=[f"{j}-{d}.{n}" for j, (d, n) in
-                                                       enumerate(CALLS)])
+@pytest.mark.parametrize(
+    "j", range(len(CALLS)), ids=[f"{j}-{d}.{n}" for j, (d, n) in enumerate(CALLS)]
+)
 def test_a_fault_of_every_device_call_loses_and_duplicates_nothing(j):
     rig = Rig()
 
@@ -468,8 +484,12 @@ def test_a_resume_landing_between_reaching_the_pause_and_waiting_is_not_lost():
     assert "error" not in out
     check_complete(rig)
     assert [e[1:3] for e in rig.cell.timeline if e[0] == "state"] == [
-        ("planned", "running"), ("running", "pausing"), ("pausing", "paused"),
-        ("paused", "running"), ("running", "done")]
+        ("planned", "running"),
+        ("running", "pausing"),
+        ("pausing", "paused"),
+        ("paused", "running"),
+        ("running", "done"),
+    ]
 
 
 def test_estop_from_another_thread_never_waits_for_a_stuck_device_call(monkeypatch):

@@ -4,16 +4,23 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from drivers.plan import Aim, Checkpoint, Measure, Move, Save, Settle, campaign_plan
+from robocal.drivers.plan import Aim, Checkpoint, Measure, Move, Save, Settle, campaign_plan
 
 POSES = np.array([[0, 10, 20, 0, 30, 0], [5, 15, 25, 0, 35, 0], [10, 20, 30, 0, 40, 0]], float)
 
 
 def test_a_plan_is_move_settle_aim_measure_save_per_pose_after_a_checkpoint():
     plan = list(campaign_plan(POSES, ("a", "b")))
-    first = [Checkpoint(0), Move(0, (0.0, 10.0, 20.0, 0.0, 30.0, 0.0)), Settle(0),
-             Aim(0, "a"), Measure(0, "a"), Aim(0, "b"), Measure(0, "b"), Save(0)]
+    first = [
+        Checkpoint(0),
+        Move(0, (0.0, 10.0, 20.0, 0.0, 30.0, 0.0)),
+        Settle(0),
+        Aim(0, "a"),
+        Measure(0, "a"),
+        Aim(0, "b"),
+        Measure(0, "b"),
+        Save(0),
+    ]
     assert plan[:8] == first
     assert len(plan) == 3 * 8
     assert [m.pose for m in plan] == [i for i in range(3) for _ in range(8)]
@@ -22,11 +29,20 @@ def test_a_plan_is_move_settle_aim_measure_save_per_pose_after_a_checkpoint():
 
 def test_a_resumed_plan_skips_measured_poses_and_the_cut_off_pose_s_stored_targets():
     plan = list(campaign_plan(POSES, ("a", "b"), start=1, partial={"a": np.zeros(3)}))
-    assert plan[:6] == [Checkpoint(1), Move(1, tuple(POSES[1])), Settle(1), Aim(1, "b"),
-                        Measure(1, "b"), Save(1)]
+    assert plan[:6] == [
+        Checkpoint(1),
+        Move(1, tuple(POSES[1])),
+        Settle(1),
+        Aim(1, "b"),
+        Measure(1, "b"),
+        Save(1),
+    ]
     # the partial readings are pose 1's only: pose 2 measures every target
-    assert [m for m in plan if isinstance(m, Measure)] == [Measure(1, "b"), Measure(2, "a"),
-                                                           Measure(2, "b")]
+    assert [m for m in plan if isinstance(m, Measure)] == [
+        Measure(1, "b"),
+        Measure(2, "a"),
+        Measure(2, "b"),
+    ]
     assert list(campaign_plan(POSES, ("a",), start=3)) == []
 
 
@@ -35,11 +51,14 @@ def test_messages_are_frozen():
         Move(0, (1.0,)).pose = 2
 
 
-@pytest.mark.parametrize("kwargs, says", [
-    (dict(start=4), "start 4 is outside 0..3"),
-    (dict(start=-1), "start -1 is outside 0..3"),
-    (dict(partial={"z": (0, 0, 0)}), "unknown targets: z"),
-])
+@pytest.mark.parametrize(
+    "kwargs, says",
+    [
+        (dict(start=4), "start 4 is outside 0..3"),
+        (dict(start=-1), "start -1 is outside 0..3"),
+        (dict(partial={"z": (0, 0, 0)}), "unknown targets: z"),
+    ],
+)
 def test_bad_plans_are_refused_before_any_message(kwargs, says):
     with pytest.raises(ValueError, match=says):
         campaign_plan(POSES, ("a", "b"), **kwargs)

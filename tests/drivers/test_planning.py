@@ -2,16 +2,22 @@
 
 import numpy as np
 import pytest
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.clock import VirtualClock
+from robocal.drivers.planning import (
+    candidate_jacobians,
+    move_time,
+    order_poses,
+    plan_campaign,
+    plan_poses,
+    total_move_time,
+)
+from robocal.drivers.world import ACCEL_S, SimulatedWorld
+from robocal.solver.calibrate import calibrate
+from robocal.solver.kinematics import Layout, flange_frames, predict, rot, translation
+from robocal.solver.observability import observability_indices, select_poses, unit_columns
+from robocal.solver.robot import IRB2600
 
-from drivers.cell import VirtualCell
-from drivers.clock import VirtualClock
-from drivers.planning import (candidate_jacobians, move_time, order_poses, plan_campaign,
-                              plan_poses, total_move_time)
-from drivers.world import ACCEL_S, SimulatedWorld
-from solver.calibrate import calibrate
-from solver.kinematics import Layout, flange_frames, predict, rot, translation
-from solver.observability import observability_indices, select_poses, unit_columns
-from solver.robot import IRB2600
 from tests.robots import TARGETS
 
 T = np.array(list(TARGETS.values()))
@@ -64,8 +70,9 @@ def test_planned_poses_meet_every_constraint():
 
 def test_narrow_acceptance_and_high_floor_are_honoured():
     base = cell(2).base
-    q = plan_poses(IRB2600, base, T, 100, np.random.default_rng(1), acceptance_deg=40.0,
-                   floor_mm=600.0)
+    q = plan_poses(
+        IRB2600, base, T, 100, np.random.default_rng(1), acceptance_deg=40.0, floor_mm=600.0
+    )
     assert_constraints(IRB2600, base, q, acceptance_deg=40.0, floor_mm=600.0)
 
 
@@ -79,8 +86,9 @@ def test_planning_is_deterministic():
 def test_too_tight_constraints_raise_with_pass_rates():
     tiny = ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
     with pytest.raises(RuntimeError, match=r"only 0 of 10 poses valid.*bounds 0\.0%"):
-        plan_poses(IRB2600, cell().base, T, 10, np.random.default_rng(0), bounds=tiny,
-                   max_batches=2)
+        plan_poses(
+            IRB2600, cell().base, T, 10, np.random.default_rng(0), bounds=tiny, max_batches=2
+        )
 
 
 def test_move_time_matches_the_simulated_world():
@@ -133,8 +141,9 @@ def test_plan_campaign_chooses_and_orders():
 def test_the_planning_reports_rising_progress_and_plans_the_same():
     base = cell().base
     seen = []
-    q, _ = plan_campaign(IRB2600, base, TARGETS, 200, np.random.default_rng(6), k=20,
-                         progress=seen.append)
+    q, _ = plan_campaign(
+        IRB2600, base, TARGETS, 200, np.random.default_rng(6), k=20, progress=seen.append
+    )
     q_quiet, _ = plan_campaign(IRB2600, base, TARGETS, 200, np.random.default_rng(6), k=20)
     np.testing.assert_array_equal(q, q_quiet)  # reporting changes nothing
     assert seen == sorted(seen) and 0 < seen[0] and seen[-1] < 1  # done is the caller's to say

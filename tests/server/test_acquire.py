@@ -9,25 +9,26 @@ import time
 
 import numpy as np
 import pytest
+from robocal.drivers.abb.client import ControllerClient
+from robocal.drivers.abb.sim import SimulatedController, serve_controller
+from robocal.drivers.campaign import CampaignEngine, Settings
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.clock import VirtualClock
+from robocal.drivers.predictor import SmrPredictor
+from robocal.drivers.tracker.client import TrackerClient
+from robocal.drivers.tracker.sim import SimulatedTracker, serve_tracker
+from robocal.drivers.world import SimulatedWorld
+from robocal.solver.robot import IRB2600
 
-from drivers.abb.client import ControllerClient
-from drivers.abb.sim import SimulatedController, serve_controller
-from drivers.campaign import CampaignEngine, Settings
-from drivers.cell import VirtualCell
-from drivers.clock import VirtualClock
-from drivers.predictor import SmrPredictor
-from drivers.tracker.client import TrackerClient
-from drivers.tracker.sim import SimulatedTracker, serve_tracker
-from drivers.world import SimulatedWorld
-from solver.robot import IRB2600
 from tests.robots import TARGETS
 
-CMD = [sys.executable, "-m", "server.cli"]
+CMD = [sys.executable, "-m", "robocal.server.cli"]
 
 
 def robocal(*args, cwd, check=True):
-    r = subprocess.run(CMD + list(map(str, args)), cwd=cwd, capture_output=True, text=True,
-                       timeout=600)
+    r = subprocess.run(
+        CMD + list(map(str, args)), cwd=cwd, capture_output=True, text=True, timeout=600
+    )
     if check:
         assert r.returncode == 0, r.stderr
     return r
@@ -38,8 +39,10 @@ def counts(db):
     try:
         ok = con.execute("select count(*) from reading where status = 'ok'").fetchone()[0]
         missing = con.execute("select count(*) from reading where status = 'missing'").fetchone()[0]
-        dup = con.execute("select count(*) from (select pose_index, target, count(*) c from reading "
-                          "group by campaign_id, pose_index, target having c > 1)").fetchone()[0]
+        dup = con.execute(
+            "select count(*) from (select pose_index, target, count(*) c from reading "
+            "group by campaign_id, pose_index, target having c > 1)"
+        ).fetchone()[0]
         outcomes = con.execute("select count(*) from pose_outcome").fetchone()[0]
     finally:
         con.close()
@@ -58,8 +61,18 @@ def test_campaign_ends_in_a_database_that_calibrate_reads(tmp_path):
 
 
 def test_beam_breaks_lose_and_duplicate_nothing(tmp_path):
-    r = robocal("acquire", "--db", "b.db", "--poses", 40, "--seed", 5, "--beam-break-rate", 0.1,
-                cwd=tmp_path)
+    r = robocal(
+        "acquire",
+        "--db",
+        "b.db",
+        "--poses",
+        40,
+        "--seed",
+        5,
+        "--beam-break-rate",
+        0.1,
+        cwd=tmp_path,
+    )
     breaks = int(re.search(r"(\d+) beam breaks", r.stdout).group(1))
     assert breaks > 0
     ok, missing, dup, outcomes = counts(tmp_path / "b.db")
@@ -70,8 +83,12 @@ def test_beam_breaks_lose_and_duplicate_nothing(tmp_path):
 def test_killed_acquisition_resumes_at_the_next_pose(tmp_path):
     db = tmp_path / "k.db"
     args = ["acquire", "--db", "k.db", "--poses", 100, "--seed", 7, "--name", "run"]
-    proc = subprocess.Popen(CMD + list(map(str, args)), cwd=tmp_path, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        CMD + list(map(str, args)),
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.monotonic() + 120
     seen = 0
     while time.monotonic() < deadline and proc.poll() is None:
@@ -130,9 +147,9 @@ def test_no_out_of_limit_command_reaches_the_controller():
 
 
 def test_controller_fault_stops_keeps_readings_and_resumes(tmp_path, monkeypatch):
-    import server.acquire as acq
-    from server import store
-    from server.formats.cell_json import default_cell
+    import robocal.server.acquire as acq
+    from robocal.server import store
+    from robocal.server.formats.cell_json import default_cell
 
     made = []
     real = acq.SimulatedCell
@@ -151,6 +168,7 @@ def test_controller_fault_stops_keeps_readings_and_resumes(tmp_path, monkeypatch
                 if "MOVEJ" in line and moves == 5 and len(made) == 1:  # first run only
                     dev.fault(42)
                 return handle(line)
+
             dev.handle_line = handle_line
 
     monkeypatch.setattr(acq, "SimulatedCell", Faulty)

@@ -4,8 +4,7 @@ import json
 import math
 
 import pytest
-
-from server.bench import GOALS, run_solver_bench
+from robocal.server.bench import GOALS, run_solver_bench
 
 
 @pytest.fixture(scope="module")

@@ -12,25 +12,26 @@ from contextlib import contextmanager
 
 import numpy as np
 import pytest
-
-from server import store
-from server.formats import csv_table, limits
-from server.formats.campaign_csv import read_campaign, write_campaign
-from server.formats.cell_json import cell_to_json, default_cell, parse_cell
-from server.formats.errors import InputError
-from server.formats.model_json import read_model
-from server.store import access
-from server.store import db as store_db
-from solver.measurements import Measurements
-from solver.robot import IRB2600
+from robocal.server import store
+from robocal.server.formats import csv_table, limits
+from robocal.server.formats.campaign_csv import read_campaign, write_campaign
+from robocal.server.formats.cell_json import cell_to_json, default_cell, parse_cell
+from robocal.server.formats.errors import InputError
+from robocal.server.formats.model_json import read_model
+from robocal.server.store import access
+from robocal.server.store import db as store_db
+from robocal.solver.measurements import Measurements
+from robocal.solver.robot import IRB2600
 
 HEADER = "pose,q1,q2,q3,q4,q5,q6,target,x,y,z\n"
 ROW = "1,0,0,0,0,30,0,{target},{x},200,300\n"
 
 
 def meas_text(n_poses=5, x="100.5", target="A", pose="{i}"):
-    rows = [ROW.format(target=target, x=x).replace("1,", pose.format(i=i) + ",", 1)
-            for i in range(1, n_poses + 1)]
+    rows = [
+        ROW.format(target=target, x=x).replace("1,", pose.format(i=i) + ",", 1)
+        for i in range(1, n_poses + 1)
+    ]
     return HEADER + "".join(rows)
 
 
@@ -87,19 +88,43 @@ def cell_with(**change) -> str:
     return json.dumps(cell, indent=1)
 
 
-@pytest.mark.parametrize("change,field", [
-    ({"targets": {"A": [1e308, 0, 0]}}, "targets.A[0]"),
-    ({"targets": {"A": [0, 0, 100001]}}, "targets.A[2]"),
-    ({"base": [[1, 0, 0, 2e5], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}, "base[0][3]"),
-    ({"robot": {"convention": "dh", "joints": [
-        {"a": 0, "d": 1e300, "theta": 0, "alpha": 0}]}}, "robot.joints[0].d"),
-    ({"robot": {"convention": "dh", "joints": [
-        {"a": 0, "d": 0, "theta": 0, "alpha": 0, "limits": [-2000, 2000]}]}},
-     "robot.joints[0].limits[0]"),
-    ({"payload_kg": 1e300}, "payload_kg"),
-    ({"robot": {"name": "arm\u0000", "convention": "dh", "joints": [
-        {"a": 0, "d": 0, "theta": 0, "alpha": 0}]}}, "robot.name"),
-])
+@pytest.mark.parametrize(
+    "change,field",
+    [
+        ({"targets": {"A": [1e308, 0, 0]}}, "targets.A[0]"),
+        ({"targets": {"A": [0, 0, 100001]}}, "targets.A[2]"),
+        ({"base": [[1, 0, 0, 2e5], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}, "base[0][3]"),
+        (
+            {
+                "robot": {
+                    "convention": "dh",
+                    "joints": [{"a": 0, "d": 1e300, "theta": 0, "alpha": 0}],
+                }
+            },
+            "robot.joints[0].d",
+        ),
+        (
+            {
+                "robot": {
+                    "convention": "dh",
+                    "joints": [{"a": 0, "d": 0, "theta": 0, "alpha": 0, "limits": [-2000, 2000]}],
+                }
+            },
+            "robot.joints[0].limits[0]",
+        ),
+        ({"payload_kg": 1e300}, "payload_kg"),
+        (
+            {
+                "robot": {
+                    "name": "arm\u0000",
+                    "convention": "dh",
+                    "joints": [{"a": 0, "d": 0, "theta": 0, "alpha": 0}],
+                }
+            },
+            "robot.name",
+        ),
+    ],
+)
 def test_cell_json_numbers_and_names_are_bounded(change, field):
     with pytest.raises(InputError) as e:
         parse_cell(cell_with(**change), "cell.json")
@@ -108,10 +133,14 @@ def test_cell_json_numbers_and_names_are_bounded(change, field):
 
 
 def test_model_json_coordinates_are_bounded(tmp_path):
-    model = {"schema": 1, "robot": json.loads(json.dumps(cell_to_json(default_cell())))["robot"],
-             "base": [[1, 0, 0, 1e308], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]],
-             "targets": {"A": [0, 0, 0]}}
-    from server.formats.cell_json import robot_to_json
+    model = {
+        "schema": 1,
+        "robot": json.loads(json.dumps(cell_to_json(default_cell())))["robot"],
+        "base": [[1, 0, 0, 1e308], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]],
+        "targets": {"A": [0, 0, 0]},
+    }
+    from robocal.server.formats.cell_json import robot_to_json
+
     model["robot"] = robot_to_json(IRB2600)
     path = tmp_path / "model.json"
     path.write_text(json.dumps(model, indent=1))
@@ -121,7 +150,8 @@ def test_model_json_coordinates_are_bounded(tmp_path):
 
 
 def test_oversized_file_is_refused_before_parsing(tmp_path, monkeypatch):
-    from server.formats import files
+    from robocal.server.formats import files
+
     monkeypatch.setattr(files, "FILE_BYTES_MAX", 100)
     e = refused(tmp_path, meas_text(5))
     assert e.line is None and "larger than" in e.message
@@ -130,8 +160,21 @@ def test_oversized_file_is_refused_before_parsing(tmp_path, monkeypatch):
 def test_cli_refuses_the_1e308_import_in_one_line(tmp_path):
     (tmp_path / "meas.csv").write_text(meas_text(x="1e308"))
     t0 = time.monotonic()
-    r = subprocess.run([sys.executable, "-m", "server.cli", "calibrate", "meas.csv", "--out",
-                        "model.json"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "robocal.server.cli",
+            "calibrate",
+            "meas.csv",
+            "--out",
+            "model.json",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     print(f"refused in {time.monotonic() - t0:.2f} s: {r.stderr.strip()}")
     assert r.returncode != 0 and "Traceback" not in r.stderr
     assert "meas.csv:2:9" in r.stderr and "out of range" in r.stderr
@@ -141,24 +184,29 @@ def test_cli_refuses_the_1e308_import_in_one_line(tmp_path):
 
 # --- chunked import ------------------------------------------------------------------------
 
+
 def big_campaign(path, n_poses: int) -> None:
     rng = np.random.default_rng(1)
     lo, hi = IRB2600.lower, IRB2600.upper
     q = rng.uniform(lo * 0.5, hi * 0.5, size=(n_poses, 6))
     xyz = rng.uniform(-2000, 2000, size=(n_poses, 3, 3))
-    write_campaign(path, Measurements([str(i + 1) for i in range(n_poses)], q, ("A", "B", "C"),
-                                      xyz, None, None))
+    write_campaign(
+        path,
+        Measurements([str(i + 1) for i in range(n_poses)], q, ("A", "B", "C"), xyz, None, None),
+    )
 
 
-def test_a_large_import_holds_the_write_lock_only_briefly_while_a_campaign_records(tmp_path,
-                                                                                   monkeypatch):
+def test_a_large_import_holds_the_write_lock_only_briefly_while_a_campaign_records(
+    tmp_path, monkeypatch
+):
     """Chunked transactions: the longest write transaction of a 12,000-reading import is far
     below the busy timeout, and a campaign recording readings at the same time never fails."""
     big_campaign(tmp_path / "big.csv", 4000)
     db = store.open_database(tmp_path / "robocal.db")
     cell = cell_to_json(default_cell())
-    running = store.create_campaign(db, name="recording", cell_json=cell,
-                                    poses_deg=np.zeros((1, 6)) + [0, 0, 0, 0, 30, 0])
+    running = store.create_campaign(
+        db, name="recording", cell_json=cell, poses_deg=np.zeros((1, 6)) + [0, 0, 0, 0, 30, 0]
+    )
     store.set_status(db, campaign_id=running, status="running")
     durations, lock = [], threading.Lock()
     session = store_db.Database.session
@@ -179,8 +227,9 @@ def test_a_large_import_holds_the_write_lock_only_briefly_while_a_campaign_recor
         # A campaign's reading, rewritten as the engine would retry it: each is a write.
         while not stop.is_set():
             try:
-                store.record_reading(db, campaign_id=running, pose_index=0, target="A",
-                                     xyz=(1.0, 2.0, 3.0))
+                store.record_reading(
+                    db, campaign_id=running, pose_index=0, target="A", xyz=(1.0, 2.0, 3.0)
+                )
                 recorded[0] += 1
             except Exception as e:  # noqa: BLE001 - any failure is what the test looks for
                 errors.append(e)
@@ -194,8 +243,10 @@ def test_a_large_import_holds_the_write_lock_only_briefly_while_a_campaign_recor
         stop.set()
         worker.join(timeout=10)
     longest = max(durations)
-    print(f"import: {len(durations)} write transactions, longest {longest * 1000:.0f} ms "
-          f"(busy timeout {store_db.BUSY_TIMEOUT_MS} ms); concurrent writes {recorded[0]}")
+    print(
+        f"import: {len(durations)} write transactions, longest {longest * 1000:.0f} ms "
+        f"(busy timeout {store_db.BUSY_TIMEOUT_MS} ms); concurrent writes {recorded[0]}"
+    )
     assert not errors and recorded[0] > 0
     # One transaction per IMPORT_CHUNK readings (and the campaign's first and last), each far
     # below the busy timeout a concurrent writer waits.
@@ -223,8 +274,9 @@ def test_a_failed_import_leaves_nothing(tmp_path, monkeypatch):
 
     monkeypatch.setattr(access, "_add_plan", failing)
     with pytest.raises(RuntimeError):
-        store.import_csv(db, path=tmp_path / "big.csv", cell_json=cell_to_json(default_cell()),
-                         name="big")
+        store.import_csv(
+            db, path=tmp_path / "big.csv", cell_json=cell_to_json(default_cell()), name="big"
+        )
     assert store.list_campaigns(db) == []
     db.close()
 

@@ -4,13 +4,14 @@ import json
 
 import numpy as np
 import pytest
+from robocal.server.formats import InputError, cell_to_json, default_cell, read_cell
+from robocal.server.formats.cell_json import robot_to_json
+from robocal.solver.robot import IRB2600
 
-from server.formats import InputError, cell_to_json, default_cell, read_cell
-from server.formats.cell_json import robot_to_json
-from solver.robot import IRB2600
-
-DEVICES = {"tracker": {"host": "127.0.0.1", "port": 5000},
-           "controller": {"url": "socket://127.0.0.1:1025"}}
+DEVICES = {
+    "tracker": {"host": "127.0.0.1", "port": 5000},
+    "controller": {"url": "socket://127.0.0.1:1025"},
+}
 
 
 def cell_doc(name="irb2600", joint2=(-95.0, 155.0), devices=True):

@@ -11,15 +11,30 @@ import pytest
 
 
 def robocal(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "server.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
 @pytest.fixture(scope="module")
 def workdir(tmp_path_factory):
     d = tmp_path_factory.mktemp("cli")
-    r = robocal("simulate", "--poses", 150, "--seed", 4, "--out", "all.csv",
-                "--truth-out", "truth.json", cwd=d)
+    r = robocal(
+        "simulate",
+        "--poses",
+        150,
+        "--seed",
+        4,
+        "--out",
+        "all.csv",
+        "--truth-out",
+        "truth.json",
+        cwd=d,
+    )
     assert r.returncode == 0, r.stderr
     rows = list(csv.DictReader(open(d / "all.csv")))
     head = list(rows[0])
@@ -40,12 +55,25 @@ def test_simulate_writes_the_spec_columns(workdir):
 
 
 def test_calibrate_predict_evaluate(workdir):
-    r = robocal("calibrate", "cal.csv", "--method", "minimax", "--out", "model.json",
-                "--recording", "cal.rrd", cwd=workdir)
+    r = robocal(
+        "calibrate",
+        "cal.csv",
+        "--method",
+        "minimax",
+        "--out",
+        "model.json",
+        "--recording",
+        "cal.rrd",
+        cwd=workdir,
+    )
     assert r.returncode == 0, r.stderr
     rerun = Path(sys.executable).parent / "rerun"
-    v = subprocess.run([str(rerun), "rrd", "verify", str(workdir / "cal.rrd")], capture_output=True,
-                       text=True, timeout=120)
+    v = subprocess.run(
+        [str(rerun), "rrd", "verify", str(workdir / "cal.rrd")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert v.returncode == 0, v.stderr
     assert "held fixed: theta1" in r.stdout and "SQP" in r.stdout
     model = json.loads((workdir / "model.json").read_text())
@@ -56,10 +84,14 @@ def test_calibrate_predict_evaluate(workdir):
 
     r = robocal("predict", "model.json", "hold.csv", "--out", "pred.csv", cwd=workdir)
     assert r.returncode == 0, r.stderr
-    pred = {(p["pose"], p["target"]): np.array([float(p[c]) for c in "xyz"])
-            for p in csv.DictReader(open(workdir / "pred.csv"))}
-    meas = {(p["pose"], p["target"]): np.array([float(p[c]) for c in "xyz"])
-            for p in csv.DictReader(open(workdir / "hold.csv"))}
+    pred = {
+        (p["pose"], p["target"]): np.array([float(p[c]) for c in "xyz"])
+        for p in csv.DictReader(open(workdir / "pred.csv"))
+    }
+    meas = {
+        (p["pose"], p["target"]): np.array([float(p[c]) for c in "xyz"])
+        for p in csv.DictReader(open(workdir / "hold.csv"))
+    }
     assert pred.keys() == meas.keys() and len(pred) == 150
     rms = np.sqrt(np.mean([np.sum((pred[k] - meas[k]) ** 2) for k in meas]))
     floor = json.loads((workdir / "truth.json").read_text())["noise_floor_mm"]
@@ -76,8 +108,16 @@ def test_calibrate_predict_evaluate(workdir):
 def test_compare_prints_table3(workdir):
     r = robocal("compare", "cal.csv", "--json", "cmp.json", cwd=workdir)
     assert r.returncode == 0, r.stderr
-    for label in ("nominal", "ls-single:A", "ls-single:C", "ls-sum", "minimax", "ls-pose",
-                  "RMSE(phi)", "AO' mean"):
+    for label in (
+        "nominal",
+        "ls-single:A",
+        "ls-single:C",
+        "ls-sum",
+        "minimax",
+        "ls-pose",
+        "RMSE(phi)",
+        "AO' mean",
+    ):
         assert label in r.stdout
     assert "smallest max F_i: minimax" in r.stdout
     cmp = json.loads((workdir / "cmp.json").read_text())
@@ -101,8 +141,11 @@ def test_malformed_campaign_is_refused_with_its_location(workdir):
     row[cols.index("q3")] = "twelve"
     lines[5] = ",".join(row)
     (workdir / "bad.csv").write_text("\n".join(lines) + "\n")
-    one_line_error(robocal("calibrate", "bad.csv", "--out", "bad.json", cwd=workdir),
-                   f"bad.csv:6:{cols.index('q3') + 1}", "q3")
+    one_line_error(
+        robocal("calibrate", "bad.csv", "--out", "bad.json", cwd=workdir),
+        f"bad.csv:6:{cols.index('q3') + 1}",
+        "q3",
+    )
     assert not (workdir / "bad.json").exists()
 
 
@@ -121,20 +164,24 @@ def test_malformed_cell_is_refused_with_line_and_column(workdir):
     (workdir / "cell.json").write_text(
         '{\n  "robot": {"name": "x", "convention": "dh",\n'
         '    "joints": [{"a": 0, "d": 400, "theta": 0, "alpha": "ninety"}]},\n'
-        '  "targets": {"A": [0, 0, 50]}\n}\n')
-    msg = one_line_error(robocal("calibrate", "cal.csv", "--cell", "cell.json", cwd=workdir),
-                         "cell.json:3:", "alpha")
+        '  "targets": {"A": [0, 0, 50]}\n}\n'
+    )
+    msg = one_line_error(
+        robocal("calibrate", "cal.csv", "--cell", "cell.json", cwd=workdir), "cell.json:3:", "alpha"
+    )
     col = int(msg.split("cell.json:3:")[1].split(":")[0])
     assert '"ninety"' == open(workdir / "cell.json").read().splitlines()[2][col - 1 : col + 7]
     (workdir / "broken.json").write_text('{"robot": "irb2600",\n "targets": {"A": [0, 0,]}}\n')
-    one_line_error(robocal("compare", "cal.csv", "--cell", "broken.json", cwd=workdir),
-                   "broken.json:2:")
+    one_line_error(
+        robocal("compare", "cal.csv", "--cell", "broken.json", cwd=workdir), "broken.json:2:"
+    )
 
 
 def test_bad_arguments_are_refused(workdir):
     one_line_error(robocal("calibrate", "nothere.csv", cwd=workdir), "nothere.csv")
-    one_line_error(robocal("calibrate", "cal.csv", "--method", "ls-single:Z", cwd=workdir),
-                   "ls-single:Z")
+    one_line_error(
+        robocal("calibrate", "cal.csv", "--method", "ls-single:Z", cwd=workdir), "ls-single:Z"
+    )
     one_line_error(robocal("calibrate", "cal.csv", "--method", "gauss", cwd=workdir), "gauss")
 
 
@@ -149,11 +196,21 @@ def test_demo_runs_the_whole_job(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "Table 3" in r.stdout and "held-out RMS: nominal" in r.stdout
     out = tmp_path / "d"
-    for name in ("robocal.db", "model.json", "model-extended.json", "report.json", "calibration.rrd"):
+    for name in (
+        "robocal.db",
+        "model.json",
+        "model-extended.json",
+        "report.json",
+        "calibration.rrd",
+    ):
         assert (out / name).stat().st_size > 0, name
     report = json.loads((out / "report.json").read_text())
     assert report["effects"][0]["name"] == "joint_compliance" and report["effects"][0]["joint"] == 2
     rerun = Path(sys.executable).parent / "rerun"
-    v = subprocess.run([str(rerun), "rrd", "verify", str(out / "calibration.rrd")],
-                       capture_output=True, text=True, timeout=120)
+    v = subprocess.run(
+        [str(rerun), "rrd", "verify", str(out / "calibration.rrd")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert v.returncode == 0, v.stderr

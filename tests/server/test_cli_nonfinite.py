@@ -7,8 +7,7 @@ import subprocess
 import sys
 
 import pytest
-
-from server.cli import main as robocal
+from robocal.server.cli import main as robocal
 
 LIMIT_S = 120  # a hang would be a regression: the test fails instead of waiting
 
@@ -31,14 +30,21 @@ def files(tmp_path_factory):
 @pytest.mark.parametrize("command", ["calibrate", "evaluate", "diagnose"])
 def test_a_huge_coordinate_exits_with_one_line(files, command):
     d, bad, model = files
-    args = {"calibrate": ["calibrate", str(bad), "--out", str(d / "out.json")],
-            "evaluate": ["evaluate", str(model), str(bad)],
-            "diagnose": ["diagnose", str(bad), "--out", str(d / "report.json")]}[command]
-    run = subprocess.run([sys.executable, "-m", "server.cli", *args], capture_output=True,
-                         text=True, timeout=LIMIT_S)
+    args = {
+        "calibrate": ["calibrate", str(bad), "--out", str(d / "out.json")],
+        "evaluate": ["evaluate", str(model), str(bad)],
+        "diagnose": ["diagnose", str(bad), "--out", str(d / "report.json")],
+    }[command]
+    run = subprocess.run(
+        [sys.executable, "-m", "robocal.server.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=LIMIT_S,
+    )
     print(f"\n{command}: exit {run.returncode}: {run.stderr.strip()}")
     assert run.returncode != 0
-    assert run.stderr.startswith("robocal: error:") and len(run.stderr.splitlines()) == 1, \
+    assert run.stderr.startswith("robocal: error:") and len(run.stderr.splitlines()) == 1, (
         run.stderr
+    )
     assert "huge.csv" in run.stderr and ("1e+308" in run.stderr or "1e308" in run.stderr)
     assert not (d / "out.json").exists() and not (d / "report.json").exists()

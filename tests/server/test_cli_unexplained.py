@@ -7,8 +7,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from server.formats.campaign_csv import write_campaign
-from server.formats.cell_json import cell_to_json
+from robocal.server.formats.campaign_csv import write_campaign
+from robocal.server.formats.cell_json import cell_to_json
+
 from tests.solver.test_unexplained import campaign, draw
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -19,10 +20,24 @@ def test_diagnose_prints_the_unexplained_block(tmp_path):
     cell, _, meas = campaign(1, effect)
     write_campaign(tmp_path / "meas.csv", meas)
     (tmp_path / "cell.json").write_text(json.dumps(cell_to_json(cell)))
-    r = subprocess.run([sys.executable, "-m", "server.cli", "diagnose", "meas.csv", "--cell",
-                        "cell.json", "--out", "report.json"], cwd=tmp_path, capture_output=True,
-                       text=True, timeout=300, env={"COLUMNS": "200", "PYTHONPATH": str(ROOT),
-                                                    "PATH": "/usr/bin:/bin"})
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "robocal.server.cli",
+            "diagnose",
+            "meas.csv",
+            "--cell",
+            "cell.json",
+            "--out",
+            "report.json",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={"COLUMNS": "200", "PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+    )
     assert r.returncode == 0, r.stderr
     block = json.loads((tmp_path / "report.json").read_text())["unexplained"]
     top = block["covariates"][0]

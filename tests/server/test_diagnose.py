@@ -7,13 +7,12 @@ import sys
 
 import numpy as np
 import pytest
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.effects import make_effects
+from robocal.server.formats.cell_json import Cell, cell_to_json, default_cell
+from robocal.solver.calibrate import calibrate
+from robocal.solver.kinematics import predict
 
-from drivers.cell import VirtualCell
-from drivers.effects import make_effects
-from server.formats.cell_json import cell_to_json, default_cell
-from server.formats.cell_json import Cell
-from solver.calibrate import calibrate
-from solver.kinematics import predict
 from tests.robots import KUKA_LIKE
 
 EFFECTS = ("joint_compliance", "joint_periodic", "joint_scale", "thermal_drift", "base_shift")
@@ -32,8 +31,13 @@ def cells(tmp_path):
 
 
 def robocal(*args, cwd):
-    r = subprocess.run([sys.executable, "-m", "server.cli", *map(str, args)], cwd=cwd,
-                       capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stderr
     return r
 
@@ -57,7 +61,7 @@ def aim(cell, spec, name, seed, target):
     The effect's share of the error grows linearly with its magnitude, so one probe where the
     effect dominates (ratio above 3) fixes the scale.
     """
-    from drivers.effects import EFFECTS as FX
+    from robocal.drivers.effects import EFFECTS as FX
 
     m0 = FX[name].default
     for _ in range(6):
@@ -100,13 +104,33 @@ def run(workdir, robot, seed, specs):
     d, cs = workdir
     cell, path = cs[robot]
     stem = f"{robot}-{seed}"
-    args = ["simulate", "--cell", path, "--poses", 100, "--seed", seed,
-            "--out", f"{stem}.csv", "--truth-out", f"{stem}-truth.json"]
+    args = [
+        "simulate",
+        "--cell",
+        path,
+        "--poses",
+        100,
+        "--seed",
+        seed,
+        "--out",
+        f"{stem}.csv",
+        "--truth-out",
+        f"{stem}-truth.json",
+    ]
     for s in specs:
         args += ["--effect", s]
     robocal(*args, cwd=d)
-    robocal("diagnose", f"{stem}.csv", "--cell", path, "--out", f"{stem}/report.json",
-            "--model-out", f"{stem}/model.json", cwd=d)
+    robocal(
+        "diagnose",
+        f"{stem}.csv",
+        "--cell",
+        path,
+        "--out",
+        f"{stem}/report.json",
+        "--model-out",
+        f"{stem}/model.json",
+        cwd=d,
+    )
     report = json.loads((d / stem / "report.json").read_text())
     truth = json.loads((d / f"{stem}-truth.json").read_text())
     return report, truth, d / stem
@@ -147,7 +171,9 @@ def test_clean_campaign_has_no_effect(workdir, seed):
 
 
 def test_two_effects_are_both_found(workdir):
-    report, truth, _ = run(workdir, "irb2600", 300, ["joint_periodic:4:2=0.015", "thermal_drift=25"])
+    report, truth, _ = run(
+        workdir, "irb2600", 300, ["joint_periodic:4:2=0.015", "thermal_drift=25"]
+    )
     names = {(e["name"], e.get("joint"), e.get("harmonic")) for e in report["effects"]}
     assert names == {("joint_periodic", 4, 2), ("thermal_drift", None, None)}
     assert report["final"]["holdout_rmse_mm"] <= 1.3 * truth["noise_floor_mm"]
@@ -159,7 +185,9 @@ def test_extended_model_predicts_with_time_and_temperature(workdir):
     assert [e["name"] for e in report["effects"]] == ["thermal_drift"]
     model = json.loads((out / "model.json").read_text())
     assert model["extensions"][0]["name"] == "thermal_drift"
-    r = robocal("evaluate", out / "model.json", "irb2600-301.csv", "--json", out / "eval.json", cwd=d)
+    r = robocal(
+        "evaluate", out / "model.json", "irb2600-301.csv", "--json", out / "eval.json", cwd=d
+    )
     ev = json.loads((out / "eval.json").read_text())
     assert ev["model"]["rmse"] <= 1.3 * truth["noise_floor_mm"]
     assert "improvement over nominal" in r.stdout
@@ -199,8 +227,9 @@ def test_backlash_is_found_and_predicted_in_visit_order(workdir, seed):
     floor = truth["noise_floor_mm"]
     ratio = report["baseline"]["holdout_rmse_mm"] / floor
     assert 3.0 <= ratio <= 30.0, f"premise: geometric-only held-out error {ratio:.1f}x the floor"
-    assert [(e["name"], e.get("joint")) for e in report["effects"]] == [("joint_backlash", joint)], \
-        (spec, magnitude, ratio, report["effects"])
+    assert [(e["name"], e.get("joint")) for e in report["effects"]] == [
+        ("joint_backlash", joint)
+    ], (spec, magnitude, ratio, report["effects"])
     found = report["effects"][0]
     assert found["parameters"]["backlash_deg"] == pytest.approx(magnitude, rel=0.2)
     assert report["final"]["holdout_rmse_mm"] <= 1.3 * floor
@@ -214,8 +243,14 @@ def test_backlash_is_found_and_predicted_in_visit_order(workdir, seed):
     write_poses(meas, out / "wrong.csv", shuffled, keep_time=False)
     pred = {}
     for name in ("timed", "untimed", "wrong"):
-        robocal("predict", out / "model.json", out / f"{name}.csv", "--out", out / f"{name}-pred.csv",
-                cwd=d)
+        robocal(
+            "predict",
+            out / "model.json",
+            out / f"{name}.csv",
+            "--out",
+            out / f"{name}-pred.csv",
+            cwd=d,
+        )
         pred[name] = read_predictions(out / f"{name}-pred.csv")
     truth_xyz = read_predictions(write_measured(meas, out / "measured.csv"))
 
@@ -223,8 +258,9 @@ def test_backlash_is_found_and_predicted_in_visit_order(workdir, seed):
         return np.sqrt(np.mean([np.sum((p[k] - v) ** 2) for k, v in truth_xyz.items()]))
 
     keys = sorted(pred["timed"])
-    np.testing.assert_allclose([pred["timed"][k] for k in keys], [pred["untimed"][k] for k in keys],
-                               atol=2e-6)
+    np.testing.assert_allclose(
+        [pred["timed"][k] for k in keys], [pred["untimed"][k] for k in keys], atol=2e-6
+    )
     assert rms(pred["timed"]) <= 1.3 * floor
     assert rms(pred["wrong"]) > 2.0 * floor  # the order matters: a shuffle without times is wrong
 

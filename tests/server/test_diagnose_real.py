@@ -13,8 +13,17 @@ from tests.server.test_diagnose import robocal
 def test_real_campaign_names_joint_2_compliance(name, tmp_path):
     meas, cell = campaign_files(name)
     report = tmp_path / "report.json"
-    out = robocal("diagnose", meas, "--cell", cell, "--out", report, "--model-out",
-                  tmp_path / "model.json", cwd=tmp_path).stdout
+    out = robocal(
+        "diagnose",
+        meas,
+        "--cell",
+        cell,
+        "--out",
+        report,
+        "--model-out",
+        tmp_path / "model.json",
+        cwd=tmp_path,
+    ).stdout
     r = json.loads(report.read_text())
     first = r["effects"][0]
     assert (first["name"], first["joint"]) == ("joint_compliance", 2), out

@@ -10,8 +10,7 @@ import json
 
 import numpy as np
 import pytest
-
-from server.diagnose_suite import (
+from robocal.server.diagnose_suite import (
     KINDS,
     PROBE_FIT,
     PROBE_POSES,
@@ -22,7 +21,8 @@ from server.diagnose_suite import (
     suite,
     summarize,
 )
-from server.formats.cell_json import Cell, cell_to_json
+from robocal.server.formats.cell_json import Cell, cell_to_json
+
 from tests.server.test_diagnose import robocal
 
 SEEDS = range(40)  # the ten kinds in turn, four seeds each
@@ -60,20 +60,23 @@ def test_cases_are_reproducible_and_cover_the_issue():
 
 def test_aimed_magnitude_shows_the_drawn_multiple():
     """On a fresh noisy campaign a geometric fit errs held out by the drawn multiple of the floor."""
-    from solver.calibrate import calibrate
-    from solver.kinematics import predict
+    from robocal.solver.calibrate import calibrate
+    from robocal.solver.kinematics import predict
 
     case = draw_case(3, "joint_scale")
     vc = case.cell()
-    opts = {"noise_scale": case.options["noise_scale"],
-            "arm_scatter_deg": case.options.get("arm_scatter_deg", 0.0)}
+    opts = {
+        "noise_scale": case.options["noise_scale"],
+        "arm_scatter_deg": case.options.get("arm_scatter_deg", 0.0),
+    }
     meas = vc.campaign(PROBE_POSES, case.cell_seed + 5, **opts)
     last = vc.last_campaign
     floor = np.hypot(last["noise_floor_mm"], last.get("arm_scatter_rms_mm", 0.0))
     names = meas.target_names
     nominal = np.array([case.targets[t] for t in names])
-    fit = calibrate(case.robot, nominal, names, meas.q[:PROBE_FIT], meas.xyz[:PROBE_FIT],
-                    method="ls-sum")
+    fit = calibrate(
+        case.robot, nominal, names, meas.q[:PROBE_FIT], meas.xyz[:PROBE_FIT], method="ls-sum"
+    )
     err = predict(fit.layout, fit.x, meas.q[PROBE_FIT:]) - meas.xyz[PROBE_FIT:]
     ratio = np.sqrt(np.nanmean(np.sum(err**2, axis=-1))) / floor
     assert ratio == pytest.approx(case.multiples[0], rel=0.3)
@@ -100,22 +103,24 @@ def test_out_of_vocabulary_named_only_when_it_pays_off(results, summary):
     oov = [r for r in results if r["case"]["kind"] == "out_of_vocabulary"]
     if all("skipped" in r for r in oov):
         pytest.skip(oov[0]["skipped"])
-    unpaid = [(r["case"], r["named"], r.get("payoff")) for r in oov
-              if "skipped" not in r and r["named"] and not r["payoff"]["pays_off"]]
+    unpaid = [
+        (r["case"], r["named"], r.get("payoff"))
+        for r in oov
+        if "skipped" not in r and r["named"] and not r["payoff"]["pays_off"]
+    ]
     assert not unpaid, unpaid
 
 
 def test_payoff_compares_the_named_model_with_geometry_on_other_poses():
     """A real effect named pays off on a separate campaign of the same cell, against geometry."""
-    from server.diagnose_suite import _diagnoser, payoff
-    from solver.diagnose import diagnose
+    from robocal.server.diagnose_suite import _diagnoser, payoff
+    from robocal.solver.diagnose import diagnose
 
     case = draw_case(2, "joint_periodic")
     vc = case.cell()
     meas = vc.campaign(case.n_poses, case.cell_seed, **case.options)
     nominal = np.array([case.targets[t] for t in meas.target_names])
-    d = diagnose(case.robot, nominal, meas.target_names, meas.q, meas.xyz, meas.time_s,
-                 meas.temp_c)
+    d = diagnose(case.robot, nominal, meas.target_names, meas.q, meas.xyz, meas.time_s, meas.temp_c)
     assert d.extensions, "premise: the effect is named"
     p = payoff(case, vc, _diagnoser(case, meas, meas.xyz), d)
     assert p["pays_off"] and p["named_rmse_mm"] < 0.7 * p["geometric_rmse_mm"], p
@@ -128,8 +133,17 @@ def test_through_the_command_line(tmp_path, results, seed):
     case = draw_case(seed, kind)
     assert not case.skip
     (tmp_path / "cell.json").write_text(json.dumps(cell_to_json(Cell(case.robot, case.targets))))
-    robocal("simulate", "--cell", "cell.json", *case.simulate_args(), "--out", "meas.csv",
-            "--truth-out", "truth.json", cwd=tmp_path)
+    robocal(
+        "simulate",
+        "--cell",
+        "cell.json",
+        *case.simulate_args(),
+        "--out",
+        "meas.csv",
+        "--truth-out",
+        "truth.json",
+        cwd=tmp_path,
+    )
     robocal("diagnose", "meas.csv", "--cell", "cell.json", "--out", "report.json", cwd=tmp_path)
     report = json.loads((tmp_path / "report.json").read_text())
     truth = json.loads((tmp_path / "truth.json").read_text())
@@ -137,7 +151,8 @@ def test_through_the_command_line(tmp_path, results, seed):
     named = [(e["name"], e.get("joint"), e.get("harmonic")) for e in report["effects"]]
     assert [list(n) for n in named] == results[seed]["named"]  # the CSV's rounding changes nothing
     assert report["final"]["holdout_rmse_mm"] == pytest.approx(
-        results[seed]["final_holdout_rmse_mm"], rel=0.05)
+        results[seed]["final_holdout_rmse_mm"], rel=0.05
+    )
     for hidden in case.hidden:
         assert is_named(hidden, named), (case.specs, named)
     if kind == "clean":
@@ -146,7 +161,7 @@ def test_through_the_command_line(tmp_path, results, seed):
 
 def test_false_alarms_over_200_clean_campaigns():
     """At most 1% of clean campaigns (sizes, noise, scatter, defects all drawn) name any effect."""
-    from server.bench_diagnose import run_suite
+    from robocal.server.bench_diagnose import run_suite
 
     runs = run_suite([(seed, "clean") for seed in range(1000, 1200)], workers=2)
     alarms = [r["case"]["seed"] for r in runs if r["false_alarm"]]
@@ -155,17 +170,23 @@ def test_false_alarms_over_200_clean_campaigns():
 
 def test_bench_reports_the_suite_and_the_timing():
     """The bench JSON: detection per effect and size, false alarms, held-out/floor ratios, time."""
-    from server.bench_diagnose import run_diagnose_bench
+    from robocal.server.bench_diagnose import run_diagnose_bench
 
     out = run_diagnose_bench(effect_cases=2, clean_cases=1, sizes=(30,), workers=1)
     json.dumps(out)
     s = out["summary"]
     assert out["effect_cases"] == 2 and len(out["cases"]) == 3
     assert s["detection"]["hidden"] == 2 and set(s["detection"]["per_effect"]) == {
-        "joint_compliance", "joint_periodic"}
+        "joint_compliance",
+        "joint_periodic",
+    }
     assert s["false_alarms"]["clean_campaigns"] == 1
     assert s["holdout_over_floor"]["count"] + s["holdout_over_floor_outlier_cases"]["count"] == 3
     t = out["timing"]["30"]
     assert t["seconds"] > 0 and t["target_seconds"] is None and t["met"] is None
-    assert set(out["met"]) >= {"detection_rate_min_0.9", "false_alarm_rate_max_0.01",
-                               "holdout_over_floor_median_max_1.2", "seconds_30_poses"}
+    assert set(out["met"]) >= {
+        "detection_rate_min_0.9",
+        "false_alarm_rate_max_0.01",
+        "holdout_over_floor_median_max_1.2",
+        "seconds_30_poses",
+    }

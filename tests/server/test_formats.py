@@ -7,12 +7,22 @@ import os
 
 import numpy as np
 import pytest
-
-from server.formats import (Cell, InputError, cell_to_json, default_cell, parse_cell, read_campaign,
-                            read_cell, read_poses, robot_from_json, robot_to_json, write_campaign,
-                            write_predictions)
-from solver.measurements import Measurements
-from solver.robot import IRB2600, robot_from_degrees
+from robocal.server.formats import (
+    Cell,
+    InputError,
+    cell_to_json,
+    default_cell,
+    parse_cell,
+    read_campaign,
+    read_cell,
+    read_poses,
+    robot_from_json,
+    robot_to_json,
+    write_campaign,
+    write_predictions,
+)
+from robocal.solver.measurements import Measurements
+from robocal.solver.robot import IRB2600, robot_from_degrees
 
 HEAD = "pose,q1,q2,q3,q4,q5,q6,target,x,y,z"
 
@@ -81,11 +91,13 @@ def test_campaign_without_extras_round_trips(tmp_path):
 
 
 def test_campaign_order_bom_whitespace_and_extra_columns(tmp_path):
-    text = ("\ufeff target , note, z,y,x, pose ,q6,q5,q4,q3,q2,q1, TIME_S\n"
-            "C, first ,3,2,1, 10 ,0,0,0,0,0,0, 0.5\n"
-            "A,,6,5,4,10,0,0,0,0,0,0,1.5\n"
-            "B,,9,8,7,2,60,50,40,30,20,10,2.5\n"
-            "\n")
+    text = (
+        "\ufeff target , note, z,y,x, pose ,q6,q5,q4,q3,q2,q1, TIME_S\n"
+        "C, first ,3,2,1, 10 ,0,0,0,0,0,0, 0.5\n"
+        "A,,6,5,4,10,0,0,0,0,0,0,1.5\n"
+        "B,,9,8,7,2,60,50,40,30,20,10,2.5\n"
+        "\n"
+    )
     meas = read_campaign(put(tmp_path, "m.csv", text), IRB2600)
     assert meas.pose_ids == ["10", "2"]  # first appearance
     assert meas.target_names == ("A", "B", "C")  # sorted
@@ -107,31 +119,84 @@ ROW = "1,0,0,0,0,0,0,A,1,2,3"
 CSV_REFUSALS = [
     ("empty", "", 1, None, ["empty"], None),
     ("blank", "\n\n", 1, None, ["empty"], None),
-    ("missing column", "pose,q1,q2,q4,q5,q6,target,x,y,z\n" + "1,0,0,0,0,0,A,1,2,3\n", 1, None,
-     ["missing required column 'q3'"], None),
+    (
+        "missing column",
+        "pose,q1,q2,q4,q5,q6,target,x,y,z\n" + "1,0,0,0,0,0,A,1,2,3\n",
+        1,
+        None,
+        ["missing required column 'q3'"],
+        None,
+    ),
     ("semicolons", HEAD.replace(",", ";") + "\n", 1, None, ["'pose'", "semicolons"], None),
-    ("short row", f"{HEAD}\n{ROW}\n1,0,0,0,0,0,0,B,1,2\n", 3, 11, ["column 'z'", "10 fields"], None),
+    (
+        "short row",
+        f"{HEAD}\n{ROW}\n1,0,0,0,0,0,0,B,1,2\n",
+        3,
+        11,
+        ["column 'z'", "10 fields"],
+        None,
+    ),
     ("long row", f"{HEAD}\n{ROW},9\n", 2, 12, ["12 fields", "'9'"], None),
-    ("not a number", f'{HEAD}\n{ROW}\n2,1,"12,5",3,4,5,6,A,1,2,3\n', 3, 3,
-     ["column 'q2'", "'12,5' is not a number"], "12,5"),
-    ("nan", f"{HEAD}\n{ROW}\n2,0,0,0,0,0,0,A,NaN,2,3\n", 3, 9, ["column 'x'", "not a finite"], "NaN"),
+    (
+        "not a number",
+        f'{HEAD}\n{ROW}\n2,1,"12,5",3,4,5,6,A,1,2,3\n',
+        3,
+        3,
+        ["column 'q2'", "'12,5' is not a number"],
+        "12,5",
+    ),
+    (
+        "nan",
+        f"{HEAD}\n{ROW}\n2,0,0,0,0,0,0,A,NaN,2,3\n",
+        3,
+        9,
+        ["column 'x'", "not a finite"],
+        "NaN",
+    ),
     ("inf", f"{HEAD}\n1,0,0,0,0,0,0,A,1,-inf,3\n", 2, 10, ["column 'y'", "not a finite"], "-inf"),
     ("overflow", f"{HEAD}\n1,0,0,0,0,0,0,A,1,2,1e999\n", 2, 11, ["column 'z'"], "1e999"),
     ("empty value", f"{HEAD}\n1,0,0,,0,0,0,A,1,2,3\n", 2, 4, ["column 'q3'", "empty"], None),
-    ("empty pose", f"{HEAD}\n{ROW}\n  ,0,0,0,0,0,0,B,1,2,3\n", 3, 1, ["column 'pose'", "empty"], None),
+    (
+        "empty pose",
+        f"{HEAD}\n{ROW}\n  ,0,0,0,0,0,0,B,1,2,3\n",
+        3,
+        1,
+        ["column 'pose'", "empty"],
+        None,
+    ),
     ("empty target", f"{HEAD}\n1,0,0,0,0,0,0,,1,2,3\n", 2, 8, ["column 'target'", "empty"], None),
-    ("duplicate", f"{HEAD}\n{ROW}\n1,0,0,0,0,0,0,B,1,2,3\n1,0,0,0,0,0,0,A,1,2,3\n", 4, 8,
-     ["column 'target'", "'A'", "pose '1'", "line 2"], None),
-    ("outside limits", f"{HEAD}\n{ROW}\n2,0,160,0,0,0,0,A,1,2,3\n", 3, 3,
-     ["column 'q2'", "160", "[-95, 155]"], "160"),
-    ("pose disagrees", f"{HEAD}\n{ROW}\n1,0,0,0,0.001,0,0,B,1,2,3\n", 3, 5,
-     ["column 'q4'", "0.001", "line 2", "pose '1'"], "0.001"),
+    (
+        "duplicate",
+        f"{HEAD}\n{ROW}\n1,0,0,0,0,0,0,B,1,2,3\n1,0,0,0,0,0,0,A,1,2,3\n",
+        4,
+        8,
+        ["column 'target'", "'A'", "pose '1'", "line 2"],
+        None,
+    ),
+    (
+        "outside limits",
+        f"{HEAD}\n{ROW}\n2,0,160,0,0,0,0,A,1,2,3\n",
+        3,
+        3,
+        ["column 'q2'", "160", "[-95, 155]"],
+        "160",
+    ),
+    (
+        "pose disagrees",
+        f"{HEAD}\n{ROW}\n1,0,0,0,0.001,0,0,B,1,2,3\n",
+        3,
+        5,
+        ["column 'q4'", "0.001", "line 2", "pose '1'"],
+        "0.001",
+    ),
     ("no data", f"{HEAD}\n\n", 1, None, ["no data rows"], None),
     ("duplicate header", f"{HEAD},x\n{ROW},1\n", 1, 12, ["'x' appears twice"], None),
 ]
 
 
-@pytest.mark.parametrize("name,text,line,column,words,bad", CSV_REFUSALS, ids=[c[0] for c in CSV_REFUSALS])
+@pytest.mark.parametrize(
+    "name,text,line,column,words,bad", CSV_REFUSALS, ids=[c[0] for c in CSV_REFUSALS]
+)
 def test_campaign_refusals(tmp_path, name, text, line, column, words, bad):
     path = put(tmp_path, "meas.csv", text)
     msg = refused(lambda: read_campaign(path, IRB2600), path, line, column)
@@ -157,7 +222,9 @@ def test_not_utf8_and_missing_file(tmp_path):
 
 
 def test_robot_with_fewer_joints_needs_fewer_columns(tmp_path):
-    robot = robot_from_degrees("planar", "dh", [(300, 0, 0, 0, (-170, 170)), (200, 0, 0, 0, (-170, 170))])
+    robot = robot_from_degrees(
+        "planar", "dh", [(300, 0, 0, 0, (-170, 170)), (200, 0, 0, 0, (-170, 170))]
+    )
     text = "pose,q1,q2,target,x,y,z\n1,10,-20,A,1,2,3\n"
     meas = read_campaign(put(tmp_path, "m.csv", text), robot)
     assert meas.q.shape == (1, 2)
@@ -181,9 +248,11 @@ def test_atomic_write_leaves_old_file_on_failure(tmp_path, monkeypatch):
 
 
 def test_read_poses_csv(tmp_path):
-    text = ("pose,q1,q2,q3,q4,q5,q6,time_s,temp_c\n"
-            "a,0,0,0,0,0,0,0,20.5\n"
-            "b,10,20,30,40,50,60,12.5,20.6\n")
+    text = (
+        "pose,q1,q2,q3,q4,q5,q6,time_s,temp_c\n"
+        "a,0,0,0,0,0,0,0,20.5\n"
+        "b,10,20,30,40,50,60,12.5,20.6\n"
+    )
     ids, q, time_s, temp_c = read_poses(put(tmp_path, "poses.csv", text), IRB2600)
     assert ids == ["a", "b"]
     np.testing.assert_allclose(q[1], np.deg2rad([10, 20, 30, 40, 50, 60]))
@@ -192,10 +261,12 @@ def test_read_poses_csv(tmp_path):
 
 
 def test_read_poses_accepts_meas_csv(tmp_path):
-    text = (f"{HEAD},time_s\n"
-            "1,0,0,0,0,0,0,A,1,2,3,0.0\n"
-            "1,0,0,0,0,0,0,B,not measured,,,0.5\n"
-            "2,10,20,30,40,50,60,B,1,2,3,1.0\n")
+    text = (
+        f"{HEAD},time_s\n"
+        "1,0,0,0,0,0,0,A,1,2,3,0.0\n"
+        "1,0,0,0,0,0,0,B,not measured,,,0.5\n"
+        "2,10,20,30,40,50,60,B,1,2,3,1.0\n"
+    )
     ids, q, time_s, temp_c = read_poses(put(tmp_path, "meas.csv", text), IRB2600)
     assert ids == ["1", "2"]
     assert q.shape == (2, 6)
@@ -275,7 +346,9 @@ def test_spec_example_cell(tmp_path):
 def test_default_cell_matches_spec_example():
     a, b = default_cell(), parse_cell(SPEC_CELL)
     assert a.robot == b.robot
-    assert {k: v.tolist() for k, v in a.targets.items()} == {k: v.tolist() for k, v in b.targets.items()}
+    assert {k: v.tolist() for k, v in a.targets.items()} == {
+        k: v.tolist() for k, v in b.targets.items()
+    }
 
 
 def test_inline_dh_robot_equals_builtin(tmp_path):
@@ -286,7 +359,7 @@ def test_inline_dh_robot_equals_builtin(tmp_path):
 
 
 def test_inline_mdh_is_the_same_arm_as_inline_dh():
-    from solver.kinematics import Layout, predict
+    from robocal.solver.kinematics import Layout, predict
 
     q = np.deg2rad(np.random.default_rng(0).uniform(-60, 60, (5, 6)))
     points = []
@@ -346,7 +419,7 @@ def json_refusal(tmp_path, text, bad, *words):
     err = info.value
     assert str(err).startswith(f"{path}:{err.line}:{err.column}: "), str(err)
     line = text.splitlines()[err.line - 1]
-    assert line[err.column - 1:].startswith(bad), (str(err), line)
+    assert line[err.column - 1 :].startswith(bad), (str(err), line)
     for w in words:
         assert w in str(err)
     return str(err)
@@ -358,53 +431,103 @@ def swap(old, new, text=INLINE_DH):
 
 
 def test_cell_json_syntax_error(tmp_path):
-    json_refusal(tmp_path, swap('"alpha": 90, "limits": [-400', '"alpha": 90 "limits": [-400'),
-                 '"limits"', "invalid JSON")
+    json_refusal(
+        tmp_path,
+        swap('"alpha": 90, "limits": [-400', '"alpha": 90 "limits": [-400'),
+        '"limits"',
+        "invalid JSON",
+    )
 
 
 def test_cell_refusals_point_at_the_value(tmp_path):
-    json_refusal(tmp_path, SPEC_CELL.replace('"irb2600"', '"irb9999"'), '"irb9999"',
-                 "robot:", "irb2600")
-    json_refusal(tmp_path, swap('"alpha": 0, "limits": [-95', '"alpha": "0", "limits": [-95'),
-                 '"0"', "robot.joints[1].alpha")
-    json_refusal(tmp_path, swap('"theta": 180', '"theta": NaN'), "NaN", "robot.joints[4].theta",
-                 "finite")
-    json_refusal(tmp_path, swap('"a": 0, "d": 200, "theta": 0, "alpha": 0',
-                                '"a": 0, "d": 200, "theta": 0, "alpah": 0'),
-                 '"alpah"', "unknown key 'alpah'", "did you mean 'alpha'")
+    json_refusal(
+        tmp_path, SPEC_CELL.replace('"irb2600"', '"irb9999"'), '"irb9999"', "robot:", "irb2600"
+    )
+    json_refusal(
+        tmp_path,
+        swap('"alpha": 0, "limits": [-95', '"alpha": "0", "limits": [-95'),
+        '"0"',
+        "robot.joints[1].alpha",
+    )
+    json_refusal(
+        tmp_path, swap('"theta": 180', '"theta": NaN'), "NaN", "robot.joints[4].theta", "finite"
+    )
+    json_refusal(
+        tmp_path,
+        swap(
+            '"a": 0, "d": 200, "theta": 0, "alpha": 0', '"a": 0, "d": 200, "theta": 0, "alpah": 0'
+        ),
+        '"alpah"',
+        "unknown key 'alpah'",
+        "did you mean 'alpha'",
+    )
     json_refusal(tmp_path, swap("[-95, 155]", "[155, -95]"), "[155, -95]", "lower limit")
     json_refusal(tmp_path, swap("[-95, 155]", "[-95]"), "[-95]", "2 elements")
-    json_refusal(tmp_path, swap('"convention": "dh"', '"convention": "DH-ish"'), '"DH-ish"',
-                 "'dh' or 'mdh'")
-    json_refusal(tmp_path, swap('"alpha": 90, "limits": [-120',
-                                '"alpha": 90, "beta": 0.1, "limits": [-120'), '"beta"',
-                 "joints[4].beta", "joint 5")
-    json_refusal(tmp_path, swap('{"A": [60.0, 0.0, 35.0]}', '{"A": [60.0, 0.0]}'), "[60.0, 0.0]",
-                 "targets.A", "3 elements")
-    json_refusal(tmp_path, swap('{"A": [60.0, 0.0, 35.0]}', '{"A": [1, 2, 3], "a b": [1, 2, 3]}'),
-                 '"a b"', "target name")
-    json_refusal(tmp_path, swap('{"A": [60.0, 0.0, 35.0]}', '{\n  }'), "{", "at least one target")
-    json_refusal(tmp_path, SPEC_CELL.replace('"B"', '"A"'), '"A": [-30.0, 52.0', "duplicate key 'A'")
+    json_refusal(
+        tmp_path, swap('"convention": "dh"', '"convention": "DH-ish"'), '"DH-ish"', "'dh' or 'mdh'"
+    )
+    json_refusal(
+        tmp_path,
+        swap('"alpha": 90, "limits": [-120', '"alpha": 90, "beta": 0.1, "limits": [-120'),
+        '"beta"',
+        "joints[4].beta",
+        "joint 5",
+    )
+    json_refusal(
+        tmp_path,
+        swap('{"A": [60.0, 0.0, 35.0]}', '{"A": [60.0, 0.0]}'),
+        "[60.0, 0.0]",
+        "targets.A",
+        "3 elements",
+    )
+    json_refusal(
+        tmp_path,
+        swap('{"A": [60.0, 0.0, 35.0]}', '{"A": [1, 2, 3], "a b": [1, 2, 3]}'),
+        '"a b"',
+        "target name",
+    )
+    json_refusal(tmp_path, swap('{"A": [60.0, 0.0, 35.0]}', "{\n  }"), "{", "at least one target")
+    json_refusal(
+        tmp_path, SPEC_CELL.replace('"B"', '"A"'), '"A": [-30.0, 52.0', "duplicate key 'A'"
+    )
 
 
 def test_cell_refusals_of_optional_keys(tmp_path):
-    json_refusal(tmp_path, swap('[0, -1, 0, 2000]', '[0, -1.01, 0, 2000]', INLINE_MDH), "[[0, -1.01",
-                 "base", "orthonormal")
-    json_refusal(tmp_path, swap('[1, 0, 0, 0]', '[-1, 0, 0, 0]', INLINE_MDH), "[[0, -1", "reflection")
-    json_refusal(tmp_path, swap('[0, 0, 0, 1]]', '[0, 0, 1, 1]]', INLINE_MDH), "[0, 0, 1, 1]",
-                 "base[3]")
-    json_refusal(tmp_path, swap('"payload_kg": 12.5', '"payload_kg": -1', INLINE_MDH), "-1",
-                 "payload_kg", "minimum")
-    json_refusal(tmp_path, swap('"mpe_um": 15', '"mpe_um": true', INLINE_MDH), "true",
-                 "tracker.mpe_um")
+    json_refusal(
+        tmp_path,
+        swap("[0, -1, 0, 2000]", "[0, -1.01, 0, 2000]", INLINE_MDH),
+        "[[0, -1.01",
+        "base",
+        "orthonormal",
+    )
+    json_refusal(
+        tmp_path, swap("[1, 0, 0, 0]", "[-1, 0, 0, 0]", INLINE_MDH), "[[0, -1", "reflection"
+    )
+    json_refusal(
+        tmp_path, swap("[0, 0, 0, 1]]", "[0, 0, 1, 1]]", INLINE_MDH), "[0, 0, 1, 1]", "base[3]"
+    )
+    json_refusal(
+        tmp_path,
+        swap('"payload_kg": 12.5', '"payload_kg": -1', INLINE_MDH),
+        "-1",
+        "payload_kg",
+        "minimum",
+    )
+    json_refusal(
+        tmp_path, swap('"mpe_um": 15', '"mpe_um": true', INLINE_MDH), "true", "tracker.mpe_um"
+    )
 
 
 def test_cell_missing_keys_and_no_joints(tmp_path):
     text = '{\n  "robot": "irb2600"\n}'
     msg = json_refusal(tmp_path, text, "{", "missing key 'targets'")
     assert msg.endswith(":1:1: the document: missing key 'targets'")
-    json_refusal(tmp_path, '{"robot": {"convention": "dh", "joints": []}, "targets": {"A": [0, 0, 0]}}',
-                 "[]", "at least one joint")
+    json_refusal(
+        tmp_path,
+        '{"robot": {"convention": "dh", "joints": []}, "targets": {"A": [0, 0, 0]}}',
+        "[]",
+        "at least one joint",
+    )
     json_refusal(tmp_path, "[1, 2]", "[1, 2]", "expected an object")
     with pytest.raises(InputError, match="empty"):
         read_cell(put(tmp_path, "cell.json", "  \n"))
@@ -423,7 +546,14 @@ def test_cell_with_bom_is_accepted(tmp_path):
 STORED_KEYS = {
     "joint_periodic": {"name", "joint", "harmonic", "coef"},
     "joint_scale": {"name", "joint", "coef"},
-    "joint_compliance": {"name", "joint", "gravity", "gravity_terms", "gravity_terms_total", "coef"},
+    "joint_compliance": {
+        "name",
+        "joint",
+        "gravity",
+        "gravity_terms",
+        "gravity_terms_total",
+        "coef",
+    },
     "joint_backlash": {"name", "joint", "coef"},
     "thermal_drift": {"name", "t_ref", "variable", "coef"},
     "base_shift": {"name", "at_s", "origin", "coef"},
@@ -432,11 +562,11 @@ STORED_KEYS = {
 
 def every_effect(seed):
     """A model with one extension of every kind, as a diagnosis leaves them, and poses to predict."""
-    from server.formats.model_json import ModelFile
-    from solver.diagnosis_report import parameters
-    from solver.effects import Inputs, prepare
-    from solver.kinematics import Layout, translation
-    from solver.vocabulary import KINDS
+    from robocal.server.formats.model_json import ModelFile
+    from robocal.solver.diagnosis_report import parameters
+    from robocal.solver.effects import Inputs, prepare
+    from robocal.solver.kinematics import Layout, translation
+    from robocal.solver.vocabulary import KINDS
 
     rng = np.random.default_rng(seed)
     cell = default_cell()
@@ -457,16 +587,17 @@ def every_effect(seed):
         exts.append(ext)
         params.append(parameters(ext, prepare(ext, lay, x, inputs) if ext.is_joint else None))
     base = translation(2500.0, -400.0, 300.0)  # the robot base in the tracker frame
-    model = ModelFile(IRB2600, base, dict(cell.targets), nominal=IRB2600, extensions=exts,
-                      parameters=params)
+    model = ModelFile(
+        IRB2600, base, dict(cell.targets), nominal=IRB2600, extensions=exts, parameters=params
+    )
     return model, q, time_s, temp_c
 
 
 @pytest.mark.parametrize("seed", range(3))
 def test_every_effect_round_trips_through_model_json(tmp_path, seed):
-    from server.formats.model_json import extension_to_json, read_model, write_model
-    from server.workflow import model_predict
-    from solver.vocabulary import KINDS
+    from robocal.server.formats.model_json import extension_to_json, read_model, write_model
+    from robocal.server.workflow import model_predict
+    from robocal.solver.vocabulary import KINDS
 
     assert set(KINDS) == set(STORED_KEYS)
     model, q, time_s, temp_c = every_effect(seed)
@@ -474,8 +605,9 @@ def test_every_effect_round_trips_through_model_json(tmp_path, seed):
     stored = json.loads((tmp_path / "model.json").read_text())["extensions"]
     assert [set(e) - {"parameters"} for e in stored] == [STORED_KEYS[e["name"]] for e in stored]
     back = read_model(tmp_path / "model.json")
-    assert [extension_to_json(e) for e in back.extensions] == [extension_to_json(e) for e in
-                                                               model.extensions]
+    assert [extension_to_json(e) for e in back.extensions] == [
+        extension_to_json(e) for e in model.extensions
+    ]
     want = model_predict(model, q, time_s, temp_c)
     np.testing.assert_allclose(model_predict(back, q, time_s, temp_c), want, atol=1e-9)
     for i in range(len(model.extensions)):  # every extension counts in the prediction
@@ -484,17 +616,40 @@ def test_every_effect_round_trips_through_model_json(tmp_path, seed):
         model.extensions[i] = back.extensions[i]
 
 
-@pytest.mark.parametrize("name, old, new, words", [
-    ("thermal_drift", '"variable": "temp_c"', '"variable": "pressure"', "variable: expected one of"),
-    ("joint_backlash", '"joint": ', '"joint": 7, "was": ', "joint 7 is not one of the robot's"),
-    ("joint_periodic", '"harmonic": ', '"harmonic": 1.5, "was": ', "harmonic: expected an integer"),
-    ("base_shift", '"at_s": ', '"was": ', "at_s"),
-    ("joint_compliance", '"gravity_terms": [', '"gravity_terms": [99, ', "gravity_terms: expected indices"),
-    ("joint_scale", '"coef": [', '"coef": [1.0, ', "expected 1 coefficients"),
-    ("joint_scale", '"name": "joint_scale"', '"name": "joint_wobble"', "unknown extension 'joint_wobble'"),
-])
+@pytest.mark.parametrize(
+    "name, old, new, words",
+    [
+        (
+            "thermal_drift",
+            '"variable": "temp_c"',
+            '"variable": "pressure"',
+            "variable: expected one of",
+        ),
+        ("joint_backlash", '"joint": ', '"joint": 7, "was": ', "joint 7 is not one of the robot's"),
+        (
+            "joint_periodic",
+            '"harmonic": ',
+            '"harmonic": 1.5, "was": ',
+            "harmonic: expected an integer",
+        ),
+        ("base_shift", '"at_s": ', '"was": ', "at_s"),
+        (
+            "joint_compliance",
+            '"gravity_terms": [',
+            '"gravity_terms": [99, ',
+            "gravity_terms: expected indices",
+        ),
+        ("joint_scale", '"coef": [', '"coef": [1.0, ', "expected 1 coefficients"),
+        (
+            "joint_scale",
+            '"name": "joint_scale"',
+            '"name": "joint_wobble"',
+            "unknown extension 'joint_wobble'",
+        ),
+    ],
+)
 def test_bad_extensions_in_a_model_file_are_refused(tmp_path, name, old, new, words):
-    from server.formats.model_json import model_to_json, read_model
+    from robocal.server.formats.model_json import model_to_json, read_model
 
     model, *_ = every_effect(0)
     obj = model_to_json(model)

@@ -7,19 +7,23 @@ import sys
 
 import numpy as np
 import pytest
-
-from drivers.cell import VirtualCell
-from drivers.effects import make_effects
-from server.formats.campaign_csv import write_campaign
-from server.formats.cell_json import default_cell
-from server.bench_screen import displace
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.effects import make_effects
+from robocal.server.bench_screen import displace
+from robocal.server.formats.campaign_csv import write_campaign
+from robocal.server.formats.cell_json import default_cell
 
 SEED = 21
 
 
 def robocal(*args, cwd, ok=True):
-    r = subprocess.run([sys.executable, "-m", "server.cli", *map(str, args)], cwd=cwd,
-                       capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert (r.returncode == 0) == ok, r.stderr
     return r
 
@@ -72,8 +76,9 @@ def test_compare_prints_them_once(campaign):
 
 def test_diagnose_lists_them_and_keeps_the_floor(campaign):
     d, bad, floor = campaign
-    r = robocal("diagnose", "meas.csv", "--out", "diag/report.json", "--model-out",
-                "diag/model.json", cwd=d)
+    r = robocal(
+        "diagnose", "meas.csv", "--out", "diag/report.json", "--model-out", "diag/model.json", cwd=d
+    )
     assert printed(r.stdout) == bad
     report = json.loads((d / "diag" / "report.json").read_text())
     assert {(o["pose"], o["target"]) for o in report["outliers"]} == bad

@@ -14,12 +14,12 @@ import pytest
 
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 
-from drivers.cell import VirtualCell  # noqa: E402
-from server.formats.cell_json import default_cell  # noqa: E402
-from server.recording import _chain, _rms, record_calibration  # noqa: E402
-from server.workflow import run_method  # noqa: E402
-from solver.kinematics import predict  # noqa: E402
-from solver.robot import IRB2600  # noqa: E402
+from robocal.drivers.cell import VirtualCell  # noqa: E402
+from robocal.server.formats.cell_json import default_cell  # noqa: E402
+from robocal.server.recording import _chain, _rms, record_calibration  # noqa: E402
+from robocal.server.workflow import run_method  # noqa: E402
+from robocal.solver.kinematics import predict  # noqa: E402
+from robocal.solver.robot import IRB2600  # noqa: E402
 
 TARGETS = {"A": [60, 0, 35], "B": [-30, 52, 35], "C": [-30, -52, 35]}
 
@@ -33,8 +33,9 @@ def _rerun() -> str:
 
 def _cli(*args) -> subprocess.CompletedProcess:
     env = dict(os.environ, RERUN_ANALYTICS="0")
-    return subprocess.run([_rerun(), "rrd", *args], capture_output=True, text=True, timeout=60,
-                          env=env)
+    return subprocess.run(
+        [_rerun(), "rrd", *args], capture_output=True, text=True, timeout=60, env=env
+    )
 
 
 @pytest.fixture(scope="module")
@@ -46,11 +47,23 @@ def campaign():
 
 def test_recording_reads_back_with_every_entity(campaign, tmp_path):
     cell, meas, cal = campaign
-    figure = {"name": "joint_offset", "label": "joint offset (q2)", "x": np.linspace(-1, 1, 30),
-              "before": np.sin(np.arange(30.0)), "after": np.zeros(30), "expected": np.ones(30),
-              "x_label": "q2 / deg", "y_label": "joint 2 error / mdeg"}
-    out = record_calibration(tmp_path / "sub" / "cal.rrd", cell=cell, meas=meas, calibration=cal,
-                             diagnosis=SimpleNamespace(figures=[figure]))
+    figure = {
+        "name": "joint_offset",
+        "label": "joint offset (q2)",
+        "x": np.linspace(-1, 1, 30),
+        "before": np.sin(np.arange(30.0)),
+        "after": np.zeros(30),
+        "expected": np.ones(30),
+        "x_label": "q2 / deg",
+        "y_label": "joint 2 error / mdeg",
+    }
+    out = record_calibration(
+        tmp_path / "sub" / "cal.rrd",
+        cell=cell,
+        meas=meas,
+        calibration=cal,
+        diagnosis=SimpleNamespace(figures=[figure]),
+    )
     assert out == tmp_path / "sub" / "cal.rrd" and out.stat().st_size > 10_000
 
     verify = _cli("verify", str(out))
@@ -58,11 +71,22 @@ def test_recording_reads_back_with_every_entity(campaign, tmp_path):
     printed = _cli("print", "-vv", str(out))
     assert printed.returncode == 0, printed.stderr
     text = printed.stdout + printed.stderr
-    for entity in ("world/arm/before", "world/arm/after", "world/arm/after/flange",
-                   "world/smr/measured", "world/smr/before", "world/smr/after",
-                   "world/error_vectors/before", "world/error_vectors/after",
-                   "errors/rms/before", "errors/rms/after", "solver/max_F", "summary",
-                   "diagnosis/1_joint_offset/scatter/before", "diagnosis/1_joint_offset/figure"):
+    for entity in (
+        "world/arm/before",
+        "world/arm/after",
+        "world/arm/after/flange",
+        "world/smr/measured",
+        "world/smr/before",
+        "world/smr/after",
+        "world/error_vectors/before",
+        "world/error_vectors/after",
+        "errors/rms/before",
+        "errors/rms/after",
+        "solver/max_F",
+        "summary",
+        "diagnosis/1_joint_offset/scatter/before",
+        "diagnosis/1_joint_offset/figure",
+    ):
         assert f"- /{entity} -" in text, entity
     assert "index_name: pose" in text and "index_name: iteration" in text
     assert "EncodedImage:blob" in text
@@ -98,24 +122,34 @@ def test_recording_streams_live_to_a_viewer(tmp_path):
     import socket
     import time
 
-    from solver.robot import IRB2600
+    from robocal.solver.robot import IRB2600
 
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     exe = shutil.which("rerun") or str(Path(sys.executable).parent / "rerun")
     # --test-receive: host a gRPC server, take in a recording, exit 0 on the SDK's goodbye
-    server = subprocess.Popen([exe, "--test-receive", "--bind", "127.0.0.1", "--port", str(port)],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                              env={**os.environ, "RERUN_ANALYTICS": "0"})
+    server = subprocess.Popen(
+        [exe, "--test-receive", "--bind", "127.0.0.1", "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env={**os.environ, "RERUN_ANALYTICS": "0"},
+    )
     try:
         time.sleep(1.5)
         cell = default_cell()
-        meas = VirtualCell.random(IRB2600, {k: list(v) for k, v in cell.targets.items()},
-                                  seed=2).campaign(12, seed=2)
+        meas = VirtualCell.random(
+            IRB2600, {k: list(v) for k, v in cell.targets.items()}, seed=2
+        ).campaign(12, seed=2)
         cal = run_method(cell, meas, "ls-sum")
-        path = record_calibration(tmp_path / "local.rrd", cell=cell, meas=meas, calibration=cal,
-                                  viewer_url=f"rerun+http://127.0.0.1:{port}/proxy")
+        path = record_calibration(
+            tmp_path / "local.rrd",
+            cell=cell,
+            meas=meas,
+            calibration=cal,
+            viewer_url=f"rerun+http://127.0.0.1:{port}/proxy",
+        )
         assert path.stat().st_size > 1000
         assert server.wait(timeout=60) == 0, server.stdout.read()
     finally:

@@ -6,18 +6,22 @@ import sys
 
 import numpy as np
 import pytest
-
-from drivers.cell import VirtualCell
-from server import workflow
-from server.cli import main
-from server.formats.cell_json import default_cell
-from server.formats.model_json import read_model, write_model
-from solver.effects import Extension
+from robocal.drivers.cell import VirtualCell
+from robocal.server import workflow
+from robocal.server.cli import main
+from robocal.server.formats.cell_json import default_cell
+from robocal.server.formats.model_json import read_model, write_model
+from robocal.solver.effects import Extension
 
 
 def robocal(*args, cwd):
-    r = subprocess.run([sys.executable, "-m", "server.cli", *map(str, args)], cwd=cwd,
-                       capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
     return r
 
@@ -26,8 +30,22 @@ def robocal(*args, cwd):
 def compliance(tmp_path_factory):
     """A campaign with joint-2 compliance of a magnitude drawn from the seed, and its diagnosis."""
     d = tmp_path_factory.mktemp("uncertainty")
-    assert main(["simulate", "--poses", "60", "--seed", "5", "--effect", "joint_compliance:2",
-                 "--out", str(d / "meas.csv")]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--poses",
+                "60",
+                "--seed",
+                "5",
+                "--effect",
+                "joint_compliance:2",
+                "--out",
+                str(d / "meas.csv"),
+            ]
+        )
+        == 0
+    )
     r = robocal("diagnose", "meas.csv", "--out", "report.json", "--model-out", "model.json", cwd=d)
     return d, r.stdout
 
@@ -40,7 +58,10 @@ def test_diagnose_reports_each_effect_parameter_with_its_standard_error(complian
     assert set(unc) == {"deflection_rms_deg", "deflection_range_deg"}  # not the term count
     for k, se in unc.items():
         assert 0 < se < 0.1 * par[k]
-    assert f"deflection_rms_deg {par['deflection_rms_deg']:.6f} ± {unc['deflection_rms_deg']:.6f}" in out
+    assert (
+        f"deflection_rms_deg {par['deflection_rms_deg']:.6f} ± {unc['deflection_rms_deg']:.6f}"
+        in out
+    )
 
     model = json.loads((d / "model.json").read_text())
     (ext,) = model["extensions"]

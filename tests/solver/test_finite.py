@@ -6,15 +6,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import robocal.solver.finite
+from robocal.drivers.cell import VirtualCell
+from robocal.server.processes import call
+from robocal.solver.calibrate import calibrate
+from robocal.solver.diagnose import diagnose
+from robocal.solver.finite import NonFinite
+from robocal.solver.rigid import kabsch
+from robocal.solver.robot import IRB2600
 
-import solver.finite
-from drivers.cell import VirtualCell
-from server.processes import call
-from solver.calibrate import calibrate
-from solver.diagnose import diagnose
-from solver.finite import NonFinite
-from solver.rigid import kabsch
-from solver.robot import IRB2600
 from tests.robots import TARGETS
 
 NAMES = ("A", "B", "C")
@@ -66,14 +66,16 @@ def test_the_registration_refuses_an_overflowing_cross_covariance():
     src = np.random.default_rng(0).normal(size=(10, 3)) * 1000
     dst = src.copy()
     dst[0] = 1e308  # finite, but (dst - mean)' (src - mean) overflows to inf
-    with np.errstate(over="ignore"), \
-            pytest.raises(NonFinite, match="registration's cross-covariance"):
+    with (
+        np.errstate(over="ignore"),
+        pytest.raises(NonFinite, match="registration's cross-covariance"),
+    ):
         kabsch(src, dst)
 
 
 def _without_entry_bound(what: str, value: float, report=None) -> str:
     """In a child: the fit with the entry bound lifted; the error it ended with, or "ok"."""
-    solver.finite.MAX_MM = np.inf
+    robocal.solver.finite.MAX_MM = np.inf
     targets, q, xyz = huge(value)
     try:
         if what == "diagnose":

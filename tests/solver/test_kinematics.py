@@ -2,14 +2,17 @@
 
 import numpy as np
 import pytest
+from robocal.solver.kinematics import Layout, flange_frames, predict, predict_with_jacobian
+from robocal.solver.robot import IRB2600, robot_from_degrees
 
-from solver.kinematics import Layout, flange_frames, predict, predict_with_jacobian
-from solver.robot import IRB2600, robot_from_degrees
-
-PLANAR_MDH = robot_from_degrees("planar", "mdh", [
-    (0.0, 0.0, 0.0, 0.0, (-170, 170)),
-    (300.0, 0.0, 0.0, 0.0, (-170, 170)),
-])
+PLANAR_MDH = robot_from_degrees(
+    "planar",
+    "mdh",
+    [
+        (0.0, 0.0, 0.0, 0.0, (-170, 170)),
+        (300.0, 0.0, 0.0, 0.0, (-170, 170)),
+    ],
+)
 
 
 def frame(robot, q_deg):
@@ -42,8 +45,11 @@ def test_planar_mdh_by_hand():
     lay = Layout(PLANAR_MDH, np.eye(4), ("A",))
     p = predict(lay, lay.initial([[200.0, 0.0, 0.0]]), np.deg2rad([q]))[0, 0]
     q1, q12 = np.deg2rad(30), np.deg2rad(75)
-    np.testing.assert_allclose(p, [300 * np.cos(q1) + 200 * np.cos(q12),
-                                   300 * np.sin(q1) + 200 * np.sin(q12), 0.0], atol=1e-9)
+    np.testing.assert_allclose(
+        p,
+        [300 * np.cos(q1) + 200 * np.cos(q12), 300 * np.sin(q1) + 200 * np.sin(q12), 0.0],
+        atol=1e-9,
+    )
     assert PLANAR_MDH.parallel == (False, True)
 
 
@@ -57,9 +63,25 @@ def test_batch_equals_one_pose_at_a_time():
         np.testing.assert_allclose(predict(lay, x, q[i : i + 1])[0], batch[i], atol=1e-9)
 
 
-@pytest.mark.parametrize("robot", [IRB2600, PLANAR_MDH, robot_from_degrees("mdh6", "mdh", [
-    (0, 400, 0, 0, (-170, 170)), (25, 0, -90, -90, (-120, 120)), (455, 0, 0, 0, (-200, 70)),
-    (35, 420, 0, -90, (-350, 350)), (0, 0, 0, 90, (-125, 125)), (0, 80, 0, -90, (-350, 350))])])
+@pytest.mark.parametrize(
+    "robot",
+    [
+        IRB2600,
+        PLANAR_MDH,
+        robot_from_degrees(
+            "mdh6",
+            "mdh",
+            [
+                (0, 400, 0, 0, (-170, 170)),
+                (25, 0, -90, -90, (-120, 120)),
+                (455, 0, 0, 0, (-200, 70)),
+                (35, 420, 0, -90, (-350, 350)),
+                (0, 0, 0, 90, (-125, 125)),
+                (0, 80, 0, -90, (-350, 350)),
+            ],
+        ),
+    ],
+)
 def test_jacobian_matches_finite_differences(robot):
     rng = np.random.default_rng(0)
     base = np.array([[0, -1, 0, 2500.0], [1, 0, 0, 300.0], [0, 0, 1, -400.0], [0, 0, 0, 1]])
@@ -73,8 +95,9 @@ def test_jacobian_matches_finite_differences(robot):
         e = np.zeros_like(x)
         e[i] = h
         num = (predict(lay, x + e, q) - predict(lay, x - e, q)) / (2 * h)
-        np.testing.assert_allclose(J[..., i], num, atol=1e-5 * max(1.0, np.abs(num).max()),
-                                   err_msg=lay.names()[i])
+        np.testing.assert_allclose(
+            J[..., i], num, atol=1e-5 * max(1.0, np.abs(num).max()), err_msg=lay.names()[i]
+        )
     for j in range(robot.n_joints):
         dq = np.zeros_like(q)
         dq[:, j] = h

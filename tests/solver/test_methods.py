@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
+from robocal.drivers.cell import VirtualCell
+from robocal.solver.calibrate import calibrate
+from robocal.solver.identifiability import NotIdentifiable
+from robocal.solver.kinematics import predict
+from robocal.solver.robot import IRB2600
 
-from drivers.cell import VirtualCell
-from solver.calibrate import calibrate
-from solver.identifiability import NotIdentifiable
-from solver.kinematics import predict
-from solver.robot import IRB2600
 from tests.robots import KUKA_LIKE, PUMA_LIKE, TARGETS
 
 NAMES = ("A", "B", "C")
@@ -36,8 +36,9 @@ def fitted_rows(method):
     return [NAMES.index(method.split(":")[1])] if method.startswith("ls-single") else [0, 1, 2]
 
 
-@pytest.fixture(scope="module", params=[("irb2600", 1), ("kuka-like", 2), ("puma-like", 3)],
-                ids=lambda p: p[0])
+@pytest.fixture(
+    scope="module", params=[("irb2600", 1), ("kuka-like", 2), ("puma-like", 3)], ids=lambda p: p[0]
+)
 def fits(request):
     name, seed = request.param
     robot = ROBOTS[name]

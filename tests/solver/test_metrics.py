@@ -7,9 +7,8 @@ import warnings
 
 import numpy as np
 import pytest
+from robocal.solver import metrics as mt
 from scipy.spatial.transform import Rotation
-
-from solver import metrics as mt
 
 NAMES = ("A", "B", "C")
 # Right triangle whose spanned frame is the identity: x along A->B, z = +z.
@@ -44,10 +43,10 @@ def moved(points, R, t):
 
 # --- sum_squares / rmse_phi / position_errors ---------------------------------------------
 
+
 def test_sum_squares_hand():
     pred = np.zeros((2, 2, 3))
-    meas = np.array([[[3.0, 4.0, 0.0], [1.0, 0.0, 0.0]],
-                     [[0.0, 0.0, 2.0], [1.0, 2.0, 2.0]]])
+    meas = np.array([[[3.0, 4.0, 0.0], [1.0, 0.0, 0.0]], [[0.0, 0.0, 2.0], [1.0, 2.0, 2.0]]])
     np.testing.assert_allclose(mt.sum_squares(pred, meas), [25.0 + 4.0, 1.0 + 9.0])
 
 
@@ -111,6 +110,7 @@ def test_position_errors_hand_and_nan():
 
 
 # --- frames / Euler / orientation errors --------------------------------------------------
+
 
 def test_frames_from_points_hand():
     pts = np.array([TRI, [[0, 0, 0], [0, 5, 0], [-1, 0, 0]]], dtype=float)
@@ -200,8 +200,11 @@ def test_ao_log_invariant_to_common_rigid_motion():
     assert np.all(ao > 0)
     np.testing.assert_allclose(ao_moved, ao, rtol=1e-7, atol=1e-10)
     # Position errors are invariant as well.
-    np.testing.assert_allclose(mt.position_errors(moved(pred, Q, t), moved(meas, Q, t)),
-                               mt.position_errors(pred, meas), rtol=1e-9)
+    np.testing.assert_allclose(
+        mt.position_errors(moved(pred, Q, t), moved(meas, Q, t)),
+        mt.position_errors(pred, meas),
+        rtol=1e-9,
+    )
 
 
 def test_orientation_missing_reading_gives_nan_row():
@@ -215,6 +218,7 @@ def test_orientation_missing_reading_gives_nan_row():
 
 
 # --- stats / improvement ------------------------------------------------------------------
+
 
 def test_stats_hand_ignores_nan():
     s = mt.stats(np.array([[1.0, np.nan], [2.0, 3.0]]))
@@ -240,6 +244,7 @@ def test_improvement_pct():
 
 
 # --- accuracy / compare / table3 ----------------------------------------------------------
+
 
 def _offset_case(d):
     """Two poses of TRI, every target offset by d mm along x; one reading of B missing."""

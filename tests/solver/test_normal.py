@@ -2,14 +2,14 @@
 
 import numpy as np
 import pytest
+from robocal.solver.identifiability import structural
+from robocal.solver.identify import SumOfSquares, register, start_fit
+from robocal.solver.kinematics import Layout, predict, predict_rows
+from robocal.solver.lm import levenberg_marquardt
+from robocal.solver.normal import PointNormal
+from robocal.solver.robot import IRB2600
 from scipy.optimize import least_squares
 
-from solver.identify import SumOfSquares, register, start_fit
-from solver.identifiability import structural
-from solver.kinematics import Layout, predict, predict_rows
-from solver.lm import levenberg_marquardt
-from solver.normal import PointNormal
-from solver.robot import IRB2600
 from tests.robots import KUKA_LIKE, PUMA_LIKE
 
 SMRS = [[60, 0, 35], [-30, 52, 35], [-30, -52, 35], [0, 0, 80]]
@@ -34,9 +34,17 @@ def _explicit(lay, x, q, meas, cols):
     return r, J
 
 
-@pytest.mark.parametrize("robot,seed,K,missing", [
-    (IRB2600, 0, 3, 0.0), (IRB2600, 1, 3, 0.3), (KUKA_LIKE, 2, 3, 0.2), (PUMA_LIKE, 3, 4, 0.25),
-    (PUMA_LIKE, 4, 2, 0.0), (KUKA_LIKE, 5, 1, 0.1)])
+@pytest.mark.parametrize(
+    "robot,seed,K,missing",
+    [
+        (IRB2600, 0, 3, 0.0),
+        (IRB2600, 1, 3, 0.3),
+        (KUKA_LIKE, 2, 3, 0.2),
+        (PUMA_LIKE, 3, 4, 0.25),
+        (PUMA_LIKE, 4, 2, 0.0),
+        (KUKA_LIKE, 5, 1, 0.1),
+    ],
+)
 def test_normal_equations_equal_the_explicit_jacobian(robot, seed, K, missing):
     lay, x, q, meas = _problem(robot, seed, K=K, missing=missing)
     rng = np.random.default_rng(seed + 100)
@@ -55,8 +63,10 @@ def test_normal_equations_equal_the_explicit_jacobian(robot, seed, K, missing):
 def test_base_and_smrs_alone_reuse_the_arm_and_agree():
     lay, x, q, meas = _problem(IRB2600, 7, missing=0.1)
     mask = np.all(np.isfinite(meas), axis=-1)
-    cols = np.r_[np.arange(lay.base_slice.start, lay.base_slice.stop),
-                 np.arange(lay.target_slice.start, lay.target_slice.stop)]
+    cols = np.r_[
+        np.arange(lay.base_slice.start, lay.base_slice.stop),
+        np.arange(lay.target_slice.start, lay.target_slice.stop),
+    ]
     points = PointNormal(lay, q, mask, meas, cols)
     assert points.arm_held
     y = x.copy()
@@ -70,7 +80,9 @@ def test_base_and_smrs_alone_reuse_the_arm_and_agree():
 
 def test_levenberg_marquardt_reaches_scipys_minimum():
     lay, x, q, meas = _problem(KUKA_LIKE, 11, m=60)
-    prob, x0 = register(KUKA_LIKE, np.array(SMRS[:3], float), ("A", "B", "C"), q, meas, refine=False)
+    prob, x0 = register(
+        KUKA_LIKE, np.array(SMRS[:3], float), ("A", "B", "C"), q, meas, refine=False
+    )
     free = np.zeros(prob.layout.n_params, dtype=bool)
     free[[0, 1, 2, 5, 9, 13]] = True
     free[prob.layout.base_slice] = True
@@ -139,7 +151,9 @@ def test_a_first_step_on_spread_poses_reaches_the_minimum_of_all_the_data(seed, 
     assert res.message == "converged" and res.njev <= 2
     assert res.cost == pytest.approx(ref.cost, rel=1e-8)  # the fits stop at ftol 1e-8
     # the same arm, base and SMRs, whatever base_ref each fit kept
-    np.testing.assert_allclose(predict(fit.prob.layout, xs, q), predict(prob.layout, ref_x, q), atol=1e-6)
+    np.testing.assert_allclose(
+        predict(fit.prob.layout, xs, q), predict(prob.layout, ref_x, q), atol=1e-6
+    )
     # a fit on a registered problem takes the same first step by itself
     again = SumOfSquares(prob, x0, free)
     xa, ra = again.fit()

@@ -2,8 +2,7 @@
 
 import numpy as np
 import pytest
-
-from solver.observability import observability_indices, select_poses, unit_columns
+from robocal.solver.observability import observability_indices, select_poses, unit_columns
 
 
 def synthetic(n=120, rows=6, P=10, seed=0):

@@ -2,15 +2,15 @@
 
 import numpy as np
 import pytest
+from robocal.drivers.cell import VirtualCell
+from robocal.server import workflow
+from robocal.server.bench_screen import displace
+from robocal.server.formats.cell_json import default_cell
+from robocal.solver.diagnose import noise_floor
+from robocal.solver.effects import Inputs
+from robocal.solver.kinematics import predict
+from robocal.solver.screen import screen_readings
 
-from drivers.cell import VirtualCell
-from server import workflow
-from server.bench_screen import displace
-from server.formats.cell_json import default_cell
-from solver.diagnose import noise_floor
-from solver.effects import Inputs
-from solver.kinematics import predict
-from solver.screen import screen_readings
 from tests.real import CAMPAIGNS, campaign_files
 
 CELL = default_cell()
@@ -29,12 +29,15 @@ def campaign(seed, poses, one_smr=False, beam_break_rate=0.0):
 
 def screen(meas, xyz):
     targets = np.array([CELL.targets[t] for t in meas.target_names])
-    return screen_readings(CELL.robot, targets, meas.target_names, meas.q, xyz, meas.time_s,
-                           meas.temp_c)
+    return screen_readings(
+        CELL.robot, targets, meas.target_names, meas.q, xyz, meas.time_s, meas.temp_c
+    )
 
 
-@pytest.mark.parametrize("poses, one_smr, breaks", [(40, False, 0.0), (60, False, 0.1),
-                                                    (100, False, 0.0), (40, True, 0.0)])
+@pytest.mark.parametrize(
+    "poses, one_smr, breaks",
+    [(40, False, 0.0), (60, False, 0.1), (100, False, 0.0), (40, True, 0.0)],
+)
 def test_every_gross_outlier_is_found(poses, one_smr, breaks):
     """Every reading moved by 0.3 mm or more is excluded, over 12 seeds of 1-3% outliers."""
     found = total = false = 0
@@ -96,8 +99,14 @@ def test_minimax_with_outliers_close_to_without():
     for seed in range(4):
         _, meas = campaign(seed, 60)
         fit, hold = meas.subset(np.arange(40)), meas.subset(np.arange(40, 60))
-        dirty = workflow.Measurements(fit.pose_ids, fit.q, fit.target_names,
-                                      displace(fit.xyz, seed, 0.03)[0], fit.time_s, fit.temp_c)
+        dirty = workflow.Measurements(
+            fit.pose_ids,
+            fit.q,
+            fit.target_names,
+            displace(fit.xyz, seed, 0.03)[0],
+            fit.time_s,
+            fit.temp_c,
+        )
 
         def held_out(m, screening):
             cal = workflow.run_method(CELL, m, "minimax", screening=screening)

@@ -2,15 +2,15 @@
 
 import numpy as np
 import pytest
+from robocal.drivers.cell import TrackerSpec, VirtualCell
+from robocal.drivers.effects import make_effects
+from robocal.server.formats.cell_json import default_cell
+from robocal.solver import identifiability as ident
+from robocal.solver.diagnose import Diagnoser, candidates, diagnose
+from robocal.solver.effects import Inputs
+from robocal.solver.identify import register
+from robocal.solver.selection import linear_scores, rmse_gain_interval
 
-from drivers.cell import TrackerSpec, VirtualCell
-from drivers.effects import make_effects
-from server.formats.cell_json import default_cell
-from solver import identifiability as ident
-from solver.diagnose import Diagnoser, candidates, diagnose
-from solver.effects import Inputs
-from solver.identify import register
-from solver.selection import linear_scores, rmse_gain_interval
 from tests.robots import KUKA_LIKE, TARGETS
 
 
@@ -35,8 +35,11 @@ def test_linearised_gains_match_the_fitted_cross_validation():
     prob, x0 = register(default_cell().robot, targets, meas.target_names, meas.q, meas.xyz)
     st = ident.structural(prob.layout, x0, np.ones(prob.layout.n_params, dtype=bool))
     diag = Diagnoser(prob, x0, st.free, Inputs(meas.q, meas.time_s, meas.temp_c))
-    cands = [c for c in candidates(prob.layout, x0, diag.inputs) if c.name in
-             ("joint_compliance", "joint_scale")][:4]
+    cands = [
+        c
+        for c in candidates(prob.layout, x0, diag.inputs)
+        if c.name in ("joint_compliance", "joint_scale")
+    ][:4]
     cv0 = diag.cross_validate([])
     trial, A, r, blocks, rows, scans = diag.linear_system(cv0.fits["all"], [], cands)
     sc = linear_scores(A, r, blocks, rows, diag.folds, len(meas.q), resamples=50)
@@ -50,8 +53,12 @@ def test_linearised_gains_match_the_fitted_cross_validation():
 @pytest.mark.parametrize("seed", range(12))
 def test_clean_campaigns_name_nothing(seed):
     rng = np.random.default_rng(seed)
-    meas = campaign(default_cell().robot, 500 + seed, int(rng.choice([30, 40, 60])),
-                    noise=float(rng.uniform(1, 6)))
+    meas = campaign(
+        default_cell().robot,
+        500 + seed,
+        int(rng.choice([30, 40, 60])),
+        noise=float(rng.uniform(1, 6)),
+    )
     assert named(run(default_cell().robot, meas)) == []
 
 
@@ -95,7 +102,9 @@ def test_gain_interval_brackets_the_gain():
 
 
 def test_two_effects_at_once():
-    meas = campaign(default_cell().robot, 9, 100, ["joint_compliance:2", "joint_periodic:4:2=0.015"])
+    meas = campaign(
+        default_cell().robot, 9, 100, ["joint_compliance:2", "joint_periodic:4:2=0.015"]
+    )
     d = run(default_cell().robot, meas)
     assert set(named(d)) == {("joint_compliance", 2), ("joint_periodic", 4)}
     for e in d.report["effects"]:

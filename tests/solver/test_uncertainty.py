@@ -3,18 +3,25 @@
 
 import numpy as np
 import pytest
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.effects import make_effects
+from robocal.solver import identifiability as ident
+from robocal.solver.calibrate import calibrate
+from robocal.solver.diagnosis_report import parameters
+from robocal.solver.effects import (
+    Extension,
+    Inputs,
+    gravity_basis,
+    gravity_in_base,
+    joint_basis,
+    select_independent,
+)
+from robocal.solver.extended import fit_extended
+from robocal.solver.fit_errors import calibration_errors, effect_uncertainty, extended_errors
+from robocal.solver.identify import register
+from robocal.solver.robot import IRB2600
+from robocal.solver.uncertainty import Rows, clustered, propagate
 
-from drivers.cell import VirtualCell
-from drivers.effects import make_effects
-from solver import identifiability as ident
-from solver.calibrate import calibrate
-from solver.diagnosis_report import parameters
-from solver.effects import Extension, Inputs, gravity_basis, gravity_in_base, joint_basis, select_independent
-from solver.extended import fit_extended
-from solver.fit_errors import calibration_errors, effect_uncertainty, extended_errors
-from solver.identify import register
-from solver.robot import IRB2600
-from solver.uncertainty import Rows, clustered, propagate
 from tests.robots import KUKA_LIKE, TARGETS
 
 DRAWS = 40
@@ -31,8 +38,9 @@ def base_entries(B0, B):
     """Base B as the six entries of the layout (translation, then z-y-x angles) about B0."""
     D = np.linalg.inv(B0) @ B
     R = D[:3, :3]
-    return np.r_[D[:3, 3], np.arctan2(R[1, 0], R[0, 0]), -np.arcsin(R[2, 0]),
-                 np.arctan2(R[2, 1], R[2, 2])]
+    return np.r_[
+        D[:3, 3], np.arctan2(R[1, 0], R[0, 0]), -np.arcsin(R[2, 0]), np.arctan2(R[2, 1], R[2, 2])
+    ]
 
 
 def monte_carlo(method, robot=IRB2600, seed=3, poses=40, scatter_deg=0.0, draws=DRAWS):
@@ -59,8 +67,12 @@ def monte_carlo(method, robot=IRB2600, seed=3, poses=40, scatter_deg=0.0, draws=
     ok = np.all(np.isfinite(se), axis=0)
     sd = est[:, ok].std(axis=0, ddof=1)
     held = [n for n, good in zip(err.names, ok) if not good]
-    return (sd / np.sqrt(np.mean(se[:, ok] ** 2, axis=0)),
-            sd / np.sqrt(np.mean(se_plain[:, ok] ** 2, axis=0)), held, cal)
+    return (
+        sd / np.sqrt(np.mean(se[:, ok] ** 2, axis=0)),
+        sd / np.sqrt(np.mean(se_plain[:, ok] ** 2, axis=0)),
+        held,
+        cal,
+    )
 
 
 def assert_honest(ratio):
@@ -107,11 +119,17 @@ def compliance(layout, x0, q):
     return Extension("joint_compliance", joint=1, keep=keep, gravity=g)
 
 
-@pytest.mark.parametrize("spec,make,keys", [
-    ("joint_compliance:2", compliance, {"deflection_rms_deg", "deflection_range_deg"}),
-    ("joint_periodic:3:1", lambda *_: Extension("joint_periodic", joint=2, harmonic=1),
-     {"amplitude_deg", "phase_deg"}),
-])
+@pytest.mark.parametrize(
+    "spec,make,keys",
+    [
+        ("joint_compliance:2", compliance, {"deflection_rms_deg", "deflection_range_deg"}),
+        (
+            "joint_periodic:3:1",
+            lambda *_: Extension("joint_periodic", joint=2, harmonic=1),
+            {"amplitude_deg", "phase_deg"},
+        ),
+    ],
+)
 def test_effect_parameters_standard_errors_match_the_spread(spec, make, keys):
     """An effect's coefficients and its parameters in degrees, over repeated campaigns."""
     seed = 21
@@ -135,7 +153,9 @@ def test_effect_parameters_standard_errors_match_the_spread(spec, make, keys):
         p = parameters(ee[0], basis)
         u = effect_uncertainty(err, ee, 0, basis, parameters)
         assert set(u) == keys  # not the term count or the harmonic
-        coef_se = np.sqrt(np.diag(err.block([f"{ee[0].label()}[{i}]" for i in range(ext.n_params)])))
+        coef_se = np.sqrt(
+            np.diag(err.block([f"{ee[0].label()}[{i}]" for i in range(ext.n_params)]))
+        )
         values.append([p[k] for k in sorted(keys)] + list(ee[0].coef))
         ses.append([u[k] for k in sorted(keys)] + list(coef_se))
     values, ses = np.array(values), np.array(ses)
@@ -148,10 +168,15 @@ def test_propagation_matches_the_analytic_one_and_wraps_phases():
     cov = np.array([[4e-10, 1e-10], [1e-10, 9e-10]])
 
     def values(v):
-        return {"amplitude_deg": float(np.degrees(np.hypot(*v))),
-                "phase_deg": float(np.degrees(np.arctan2(v[1], v[0]))),
-                "harmonic": 1, "variable": "time_s", "shift_mm": [v[0], 2 * v[1]],
-                "rounded_mm": float(np.round(v[0], 5))}  # rounded far below its error
+        return {
+            "amplitude_deg": float(np.degrees(np.hypot(*v))),
+            "phase_deg": float(np.degrees(np.arctan2(v[1], v[0]))),
+            "harmonic": 1,
+            "variable": "time_s",
+            "shift_mm": [v[0], 2 * v[1]],
+            "rounded_mm": float(np.round(v[0], 5)),
+        }  # rounded far below its error
+
     out = propagate(values, c, cov)
     assert set(out) == {"amplitude_deg", "phase_deg", "shift_mm", "rounded_mm"}
     assert 0.5 < out["rounded_mm"] / 2e-5 < 2.0

@@ -6,15 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from drivers.cell import VirtualCell
-from server.formats.cell_json import default_cell
-from solver import identifiability as ident
-from solver.diagnose import Diagnoser, diagnose, noise_floor
-from solver.effects import Inputs
-from solver.identify import register
-from solver.motion import last_motion
-from solver.unexplained import STRONG, Fields, covariates, unexplained
+from robocal.drivers.cell import VirtualCell
+from robocal.server.formats.cell_json import default_cell
+from robocal.solver import identifiability as ident
+from robocal.solver.diagnose import Diagnoser, diagnose, noise_floor
+from robocal.solver.effects import Inputs
+from robocal.solver.identify import register
+from robocal.solver.motion import last_motion
+from robocal.solver.unexplained import STRONG, Fields, covariates, unexplained
 
 
 class Backlash:
@@ -146,8 +145,16 @@ def test_hidden_effect_ranks_its_covariate_first(seed):
 def test_clean_campaign_gets_no_block_and_weak_strengths(seed, poses):
     cell, _, meas = campaign(seed, poses=poses)
     targets = np.array([cell.targets[t] for t in meas.target_names])
-    d = diagnose(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s,
-                 meas.temp_c, cell.base)
+    d = diagnose(
+        cell.robot,
+        targets,
+        meas.target_names,
+        meas.q,
+        meas.xyz,
+        meas.time_s,
+        meas.temp_c,
+        cell.base,
+    )
     assert "unexplained" not in d.report, d.report["unexplained"]
     top = max(strengths(cell, meas), key=lambda c: c["strength"])
     # the best of ~140 covariate-channel pairs on 30 poses reaches about 0.1 by chance (measured)
@@ -161,8 +168,16 @@ def test_wrist_coupling_is_reported_by_the_diagnosis():
     assert name == "joint 4's angle"  # seed 1 draws the coupling
     cell, _, meas = campaign(1, effect)
     targets = np.array([cell.targets[t] for t in meas.target_names])
-    d = diagnose(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s,
-                 meas.temp_c, cell.base)
+    d = diagnose(
+        cell.robot,
+        targets,
+        meas.target_names,
+        meas.q,
+        meas.xyz,
+        meas.time_s,
+        meas.temp_c,
+        cell.base,
+    )
     block = d.report["unexplained"]
     assert block["holdout_rmse_mm"] == pytest.approx(d.report["final"]["holdout_rmse_mm"])
     assert block["noise_floor_ratio"] > 1.5
@@ -208,7 +223,8 @@ def test_per_pose_scatter_is_said_to_dominate(seed):
 def test_no_block_once_the_hidden_effect_is_named(seed):
     """An effect of the vocabulary, drawn as tests/server/test_diagnose.py draws it: the diagnosis
     names it, the final model reaches the floor, and nothing is left to say."""
-    from drivers.effects import make_effects
+    from robocal.drivers.effects import make_effects
+
     from tests.server.test_diagnose import aim
     from tests.server.test_diagnose import draw as draw_vocabulary
 
@@ -219,8 +235,16 @@ def test_no_block_once_the_hidden_effect_is_named(seed):
     vc.effects.extend(make_effects([f"{spec}={magnitude:.6g}"], vc, seed))
     meas = vc.campaign(100, seed=seed)
     targets = np.array([cell.targets[t] for t in meas.target_names])
-    d = diagnose(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s,
-                 meas.temp_c, cell.base)
+    d = diagnose(
+        cell.robot,
+        targets,
+        meas.target_names,
+        meas.q,
+        meas.xyz,
+        meas.time_s,
+        meas.temp_c,
+        cell.base,
+    )
     assert [e["name"] for e in d.report["effects"]] == [name]
     assert "unexplained" not in d.report, d.report["unexplained"]
 
@@ -244,13 +268,16 @@ def test_two_hidden_effects_are_the_first_two(seed):
     each judged beside the one above it, and what follows is weak."""
     rng = np.random.default_rng(seed)
     joint = int(rng.integers(0, 3))
-    both = Together(Backlash(joint, np.radians(rng.uniform(0.003, 0.006))),
-                    WristCoupling(rng.choice([-1, 1]) * rng.uniform(3e-5, 6e-5)))
+    both = Together(
+        Backlash(joint, np.radians(rng.uniform(0.003, 0.006))),
+        WristCoupling(rng.choice([-1, 1]) * rng.uniform(3e-5, 6e-5)),
+    )
     cell, _, meas = campaign(seed, both)
     cv, layout, x, exts, inputs, floor = geometric_remainder(cell, meas)
     covs = unexplained(cv.resid, layout, x, exts, inputs, floor, cv.mse)["covariates"]
     assert {(c["name"], c["channel"]) for c in covs[:2]} == {
         (f"direction of joint {joint + 1}'s last motion", f"joint {joint + 1}"),
-        ("joint 4's angle", "joint 5")}, covs[:3]
+        ("joint 4's angle", "joint 5"),
+    }, covs[:3]
     assert covs[2]["strength"] < 0.05, covs[2]
     assert "a further" in covs[1]["reading"]

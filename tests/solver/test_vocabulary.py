@@ -1,14 +1,14 @@
 """The diagnosis vocabulary: each effect's class, and backlash's basis from the visit order."""
 
 import numpy as np
+from robocal.solver.diagnose import candidates
+from robocal.solver.diagnosis_report import evidence, parameters
+from robocal.solver.effects import Extension, Inputs, joint_basis
+from robocal.solver.kinematics import Layout
+from robocal.solver.motion import last_motion
+from robocal.solver.robot import IRB2600
+from robocal.solver.vocabulary import KINDS
 
-from solver.diagnose import candidates
-from solver.diagnosis_report import evidence, parameters
-from solver.effects import Extension, Inputs, joint_basis
-from solver.kinematics import Layout
-from solver.motion import last_motion
-from solver.robot import IRB2600
-from solver.vocabulary import KINDS
 from tests.robots import TARGETS
 
 NAMES = tuple(TARGETS)
@@ -17,7 +17,9 @@ NAMES = tuple(TARGETS)
 def data(seed, m=30):
     rng = np.random.default_rng(seed)
     q = rng.uniform(IRB2600.lower, IRB2600.upper, (m, 6))
-    time_s = rng.permutation(m)[:, None] * 20.0 + 2.0 * np.arange(len(NAMES))  # visited out of file order
+    time_s = rng.permutation(m)[:, None] * 20.0 + 2.0 * np.arange(
+        len(NAMES)
+    )  # visited out of file order
     temp_c = 20.0 + time_s / time_s.max()
     lay = Layout(IRB2600, np.eye(4), NAMES)
     return lay, lay.initial(np.array([TARGETS[n] for n in NAMES])), q, time_s, temp_c
@@ -27,7 +29,9 @@ def test_every_kind_proposes_candidates_and_backlash_one_per_joint():
     lay, x, q, time_s, temp_c = data(1)
     cands = candidates(lay, x, Inputs(q, time_s, temp_c))
     assert {c.name for c in cands} == set(KINDS)
-    assert "joint_coupling" not in KINDS  # the simulator's wrist coupling stays outside the vocabulary
+    assert (
+        "joint_coupling" not in KINDS
+    )  # the simulator's wrist coupling stays outside the vocabulary
     assert [c.joint for c in cands if c.name == "joint_backlash"] == list(range(6))
     assert all(c.kind is KINDS[c.name] and c.n_params >= 1 for c in cands)
 

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import re
-
 import json
+import re
 import time
 
 import httpx
@@ -20,15 +19,20 @@ def _get(served, url, **kw):
 
 def _done_job(served, poses=20, method="ls-sum"):
     """A done calibration job made through the API; its id."""
-    with httpx.Client(base_url=served.url, timeout=60,
-                      headers={"Authorization": f"Bearer {served.token}"}) as c:
+    with httpx.Client(
+        base_url=served.url, timeout=60, headers={"Authorization": f"Bearer {served.token}"}
+    ) as c:
         cid = c.post("/api/campaigns", json={"poses": poses}).json()["id"]
         assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
-        wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["status"],
-                 lambda s: s in ("done", "failed", "aborted"))
+        wait_for(
+            lambda: c.get(f"/api/campaigns/{cid}").json()["status"],
+            lambda s: s in ("done", "failed", "aborted"),
+        )
         job = c.post("/api/jobs", json={"campaign_id": cid, "method": method}).json()
-        job = wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(),
-                       lambda j: j["state"] in ("done", "failed"))
+        job = wait_for(
+            lambda: c.get(f"/api/jobs/{job['id']}").json(),
+            lambda j: j["state"] in ("done", "failed"),
+        )
         assert job["state"] == "done", job
         return job["id"]
 
@@ -76,8 +80,9 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
     page.click("#create")
     page.wait_for_selector("#progress:not([hidden])")
     page.click("#start")
-    page.wait_for_function("document.getElementById('p-status').textContent === 'done'",
-                           timeout=180_000)
+    page.wait_for_function(
+        "document.getElementById('p-status').textContent === 'done'", timeout=180_000
+    )
     assert page.text_content("#p-count") == "20 / 20 poses"
     # The latest readings, refreshed with the progress poll: the last is pose 20's.
     page.wait_for_selector("#readings-table tbody tr")
@@ -85,10 +90,13 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
     assert 1 <= rows.count() <= 6
     # 20 poses x 3 SMRs; an early target the rough base leaves unfound may be recorded missing.
     # The table refreshes on the next progress poll after the count, so wait for it.
-    page.wait_for_function("""() => {
+    page.wait_for_function(
+        """() => {
         const c = document.querySelector('#readings-table caption');
         const m = c && c.textContent.match(/of (\\d+) readings/);
-        return m && Number(m[1]) >= 55; }""", timeout=15000)
+        return m && Number(m[1]) >= 55; }""",
+        timeout=15000,
+    )
     caption = page.text_content("#readings-table caption")
     assert 55 <= int(re.search(r"of (\d+) readings", caption).group(1)) <= 60, caption
 
@@ -106,7 +114,9 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
     for img in ("#boxplot", "#errors"):
         page.wait_for_function(
             f"(() => {{ const i = document.querySelector('{img}');"
-            " return i.complete && i.naturalWidth > 0; })()", timeout=120_000)
+            " return i.complete && i.naturalWidth > 0; })()",
+            timeout=120_000,
+        )
     page.wait_for_selector("#table3-table", timeout=180_000)
     headers = page.locator("#table3-table thead th").all_text_contents()
     assert "minimax" in headers and "nominal" in headers

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from robocal.server.formats.cell_json import default_cell
 
-from server.formats.cell_json import default_cell
 from tests.server.test_diagnose import aim
 from tests.server.test_diagnose import draw as draw_effect
 from tests.web.conftest import shot
@@ -44,9 +44,26 @@ def simulate(tmp_path, seed):
     magnitude = aim(default_cell(), spec, name, seed, target)
     hidden = f"{spec}={magnitude:.6g}"
     out = tmp_path / f"hidden-{seed}.csv"
-    r = subprocess.run([sys.executable, "-m", "server.cli", "simulate", "--poses", str(POSES),
-                        "--seed", str(seed), "--effect", hidden, "--out", str(out)],
-                       cwd=ROOT, capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "robocal.server.cli",
+            "simulate",
+            "--poses",
+            str(POSES),
+            "--seed",
+            str(seed),
+            "--effect",
+            hidden,
+            "--out",
+            str(out),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
     return out, hidden, name, joint, harmonic
 
@@ -56,7 +73,8 @@ def _loaded(page, selector):
     page.wait_for_function(
         f"""() => {{ const imgs = [...document.querySelectorAll({selector!r})];
             return imgs.length > 0 && imgs.every((i) => i.complete && i.naturalWidth > 0); }}""",
-        timeout=60_000)
+        timeout=60_000,
+    )
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -75,8 +93,10 @@ def test_hidden_effect_is_named_with_its_evidence_and_figure(served, page, tmp_p
     fields = bad[2].split(",")
     fields[8] = "oops"  # line 3's x
     bad[2] = ",".join(fields)
-    page.set_input_files("#m-file", files=[{"name": "bad.csv", "mimeType": "text/csv",
-                                            "buffer": "\n".join(bad).encode()}])
+    page.set_input_files(
+        "#m-file",
+        files=[{"name": "bad.csv", "mimeType": "text/csv", "buffer": "\n".join(bad).encode()}],
+    )
     page.click("#m-import-btn")
     page.wait_for_selector("#message:not([hidden])")
     message = page.text_content("#message")
@@ -97,7 +117,8 @@ def test_hidden_effect_is_named_with_its_evidence_and_figure(served, page, tmp_p
     page.wait_for_selector("#diagnosis:not([hidden])")
     page.wait_for_selector("#effects-table, #d-none", timeout=120_000)
     assert page.locator("#effects-table").count(), (
-        f"{hidden}: the page reports no effect: {page.text_content('#d-state')}")
+        f"{hidden}: the page reports no effect: {page.text_content('#d-state')}"
+    )
 
     # The first effect, most important first, is the hidden one: its type, joint and harmonic.
     row = page.locator("#effects-table tbody tr").first
@@ -134,6 +155,10 @@ def test_hidden_effect_is_named_with_its_evidence_and_figure(served, page, tmp_p
     page.locator("#diagnosis").scroll_into_view_if_needed()
     path = shot(page, "diagnosis_effect")
     assert path.stat().st_size > 10_000
-    page.locator("#d-figures figure").first.screenshot(path=str(path.with_name("diagnosis_figure.png")))
-    print(f"{hidden}: found '{cells[0]}' joint {cells[1]}; simulate {t_sim:.1f} s, "
-          f"whole test {time.monotonic() - t0:.1f} s")
+    page.locator("#d-figures figure").first.screenshot(
+        path=str(path.with_name("diagnosis_figure.png"))
+    )
+    print(
+        f"{hidden}: found '{cells[0]}' joint {cells[1]}; simulate {t_sim:.1f} s, "
+        f"whole test {time.monotonic() - t0:.1f} s"
+    )

@@ -24,8 +24,9 @@ def test_a_planning_job_is_followed_to_its_campaign(served, page):
     page.wait_for_selector("#c-planning:not([hidden])", timeout=10_000)
     assert re.fullmatch(r"planning\.\.\. \d{1,3} %", page.text_content("#c-planning"))
     shot(page, "planning-job")
-    page.wait_for_function("document.getElementById('p-status').textContent === 'planned'",
-                           timeout=180_000)
+    page.wait_for_function(
+        "document.getElementById('p-status').textContent === 'planned'", timeout=180_000
+    )
     assert page.text_content("#p-name") == "chosen"
     assert page.is_hidden("#c-planning")
     jobs = [j for j in served.client.get("/api/jobs").json() if j["kind"] == "planning"]
@@ -33,7 +34,9 @@ def test_a_planning_job_is_followed_to_its_campaign(served, page):
     assert page.text_content("#p-id") == str(jobs[0]["campaign_id"])
 
     _create(page, "chosen")  # the same name while it is unfinished: the job fails
-    page.wait_for_function("document.getElementById('message').textContent.includes("
-                           "'failed: Conflict')", timeout=180_000)
+    page.wait_for_function(
+        "document.getElementById('message').textContent.includes('failed: Conflict')",
+        timeout=180_000,
+    )
     assert "already named 'chosen'" in page.text_content("#message")
     assert page.is_hidden("#c-planning")

@@ -20,10 +20,10 @@ POSES = 300  # long enough to pause, resume and e-stop it on the way
 
 def _wait_status(page, status, timeout=120_000):
     page.wait_for_function(
-        f"document.getElementById('p-status').textContent === {status!r}", timeout=timeout)
+        f"document.getElementById('p-status').textContent === {status!r}", timeout=timeout
+    )
     # the buttons are updated in the same call that writes the status
-    return {a for a in BUTTONS
-            if page.is_enabled(f"button[data-action={a}]")}
+    return {a for a in BUTTONS if page.is_enabled(f"button[data-action={a}]")}
 
 
 def test_buttons_walk_the_life_cycle(served, page):
@@ -60,8 +60,9 @@ def test_buttons_walk_the_life_cycle(served, page):
     assert page.text_content("#p-count") == f"{POSES} / {POSES} poses"
 
     # readings taken before the e-stop stayed, and none was taken twice
-    with httpx.Client(base_url=served.url, timeout=60,
-                      headers={"Authorization": f"Bearer {served.token}"}) as c:
+    with httpx.Client(
+        base_url=served.url, timeout=60, headers={"Authorization": f"Bearer {served.token}"}
+    ) as c:
         cid = int(page.text_content("#p-id"))
         rows = c.get(f"/api/campaigns/{cid}/measurements").json()
     keys = [(r["pose"], r["target"]) for r in rows]

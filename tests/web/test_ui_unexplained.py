@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import json
 
-from server.formats.campaign_csv import write_campaign
+from robocal.server.formats.campaign_csv import write_campaign
+
 from tests.solver.test_unexplained import campaign, draw
 from tests.web.conftest import shot
 
@@ -20,17 +21,26 @@ SEED = 1  # draws the wrist coupling
 
 def extra_keys(report):
     """The optional keys of FORMATS.md section 5 that this branch does not compute, crafted."""
-    report["outliers"] = [{"pose": "17", "target": "B", "residual_mm": 1.42},
-                          {"pose": "63", "target": "A", "residual_mm": 0.31}]
-    report["effects"] = [{
-        "name": "joint_compliance", "joint": 2, "evidence": "Joint 2's residual rotation follows "
-        "the gravity torque it carries; crafted for the page.",
-        "holdout_rmse_before_mm": 0.3, "holdout_rmse_after_mm": 0.1,
-        "parameters": {"deflection_rms_deg": 0.01},
-        "uncertainty": {"deflection_rms_deg": 0.0004},
-        "holdout_gain_interval_mm": [0.15, 0.22],
-        "alternatives": [{"name": "joint_periodic", "joint": 2, "harmonic": 1,
-                          "holdout_rmse_mm": 0.104}]}] + report["effects"]
+    report["outliers"] = [
+        {"pose": "17", "target": "B", "residual_mm": 1.42},
+        {"pose": "63", "target": "A", "residual_mm": 0.31},
+    ]
+    report["effects"] = [
+        {
+            "name": "joint_compliance",
+            "joint": 2,
+            "evidence": "Joint 2's residual rotation follows "
+            "the gravity torque it carries; crafted for the page.",
+            "holdout_rmse_before_mm": 0.3,
+            "holdout_rmse_after_mm": 0.1,
+            "parameters": {"deflection_rms_deg": 0.01},
+            "uncertainty": {"deflection_rms_deg": 0.0004},
+            "holdout_gain_interval_mm": [0.15, 0.22],
+            "alternatives": [
+                {"name": "joint_periodic", "joint": 2, "harmonic": 1, "holdout_rmse_mm": 0.104}
+            ],
+        }
+    ] + report["effects"]
     return report
 
 
@@ -45,6 +55,7 @@ def test_page_shows_the_unexplained_and_the_optional_keys(served, page, tmp_path
         report = route.fetch().json()
         seen["report"] = report
         route.fulfill(json=extra_keys(json.loads(json.dumps(report))))
+
     page.route("**/api/jobs/*/report", augment)
 
     page.goto(served.url + "/")
@@ -81,8 +92,11 @@ def test_page_shows_the_unexplained_and_the_optional_keys(served, page, tmp_path
     assert out.first.locator("td").all_text_contents() == ["17", "B", "1.4200"]
     assert "(2)" in page.text_content("#d-outliers h3")
     heads = page.locator("#effects-table thead th").all_text_contents()
-    assert heads[6:] == ["standard error", "held-out gain interval / mm",
-                         "could not be told apart from"], heads
+    assert heads[6:] == [
+        "standard error",
+        "held-out gain interval / mm",
+        "could not be told apart from",
+    ], heads
     cells = page.locator("#effects-table tbody tr").first.locator("td").all_text_contents()
     assert cells[6] == "deflection rms ± 4.000e-4 deg", cells
     assert cells[7] == "0.1500 to 0.2200", cells

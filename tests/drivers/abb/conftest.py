@@ -1,12 +1,11 @@
 """Fixtures: a virtual cell's world on a VirtualClock, the simulated controller, its TCP server."""
 
 import pytest
-
-from drivers.abb.sim import SimulatedController, serve_controller
-from drivers.cell import VirtualCell
-from drivers.clock import VirtualClock
-from drivers.world import SimulatedWorld
-from solver.robot import IRB2600
+from robocal.drivers.abb.sim import SimulatedController, serve_controller
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.clock import VirtualClock
+from robocal.drivers.world import SimulatedWorld
+from robocal.solver.robot import IRB2600
 
 TARGETS = {"A": [60, 0, 35], "B": [-30, 52, 35], "C": [-30, -52, 35]}
 

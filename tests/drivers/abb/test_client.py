@@ -5,9 +5,8 @@ import time
 
 import numpy as np
 import pytest
-
-from drivers.abb import protocol as p
-from drivers.abb.client import (
+from robocal.drivers.abb import protocol as p
+from robocal.drivers.abb.client import (
     BusyError,
     ControllerClient,
     ControllerConnectionError,
@@ -18,7 +17,7 @@ from drivers.abb.client import (
     MoveStopped,
     check_target,
 )
-from solver.robot import IRB2600, Joint, Robot
+from robocal.solver.robot import IRB2600, Joint, Robot
 
 LO, HI = np.rad2deg(IRB2600.lower), np.rad2deg(IRB2600.upper)
 TARGET = [10.0, -20.5, 30.0, 0.0, 45.0, 90.0]
@@ -62,18 +61,21 @@ def test_move_poll_joints_cycle(client, device, clock):
     assert [m.values for m in sent_moves(device)] == [tuple(TARGET)]
 
 
-@pytest.mark.parametrize("q", [
-    [0, 200, 0, 0, 0, 0],
-    [0, 0, 0, 0, 0, 400.001],
-    [-180.0001, 0, 0, 0, 0, 0],
-    [0, 155.00006, 0, 0, 0, 0],  # 155.0001 on the wire: the check is on what is sent
-    [0, 0, 0, math.nan, 0, 0],
-    [0, 0, 0, 0, math.inf, 0],
-    [0, 0, 0, 0, 0],
-    [0] * 7,
-    [[0] * 6],
-    "fast",
-])
+@pytest.mark.parametrize(
+    "q",
+    [
+        [0, 200, 0, 0, 0, 0],
+        [0, 0, 0, 0, 0, 400.001],
+        [-180.0001, 0, 0, 0, 0, 0],
+        [0, 155.00006, 0, 0, 0, 0],  # 155.0001 on the wire: the check is on what is sent
+        [0, 0, 0, math.nan, 0, 0],
+        [0, 0, 0, 0, math.inf, 0],
+        [0, 0, 0, 0, 0],
+        [0] * 7,
+        [[0] * 6],
+        "fast",
+    ],
+)
 def test_limit_error_raised_locally_and_nothing_sent(client, device, q):
     before = list(device.received)
     with pytest.raises(LimitError):
@@ -110,8 +112,9 @@ def test_the_check_guards_the_wire_itself(client, device):
 
 def test_a_controller_without_limits_is_refused_unless_the_robot_is_built_in(server, device):
     device.report_limits = False  # a controller that does not say its limits at HELLO
-    wide = Robot("wide", "dh", tuple(Joint(j.a, j.d, j.theta, j.alpha, (-7.0, 7.0))
-                                     for j in IRB2600.joints))
+    wide = Robot(
+        "wide", "dh", tuple(Joint(j.a, j.d, j.theta, j.alpha, (-7.0, 7.0)) for j in IRB2600.joints)
+    )
     with pytest.raises(ControllerError, match="does not report its joint limits"):
         ControllerClient(server.url, wide, timeout_s=1.0)
     # a built-in robot: its own limits stand in for the controller's

@@ -3,11 +3,10 @@ connect, and every MOVEJ is checked against the tighter of the two before it is 
 
 import numpy as np
 import pytest
-
-from drivers.abb import protocol as p
-from drivers.abb.client import ControllerClient, ControllerError, LimitError
-from drivers.abb.sim import SimulatedController, serve_controller
-from solver.robot import IRB2600, Joint, Robot
+from robocal.drivers.abb import protocol as p
+from robocal.drivers.abb.client import ControllerClient, ControllerError, LimitError
+from robocal.drivers.abb.sim import SimulatedController, serve_controller
+from robocal.solver.robot import IRB2600, Joint, Robot
 
 
 def with_limits(robot, joint, lo_deg, hi_deg, name="narrow"):
@@ -32,13 +31,16 @@ def test_a_six_joint_hello_with_a_long_name_fits_a_reply():
     assert len(line) <= p.MAX_REPLY and p.parse_reply(line).fields[3] == "-99999.9999"
 
 
-@pytest.mark.parametrize("fields", [
-    ("A", "1", "2", "-1", "1"),  # one pair for two joints
-    ("A", "1", "1", "-1", "1", "2"),
-    ("A", "1", "1", "1", "-1"),  # empty range
-    ("A", "1", "1", "0", "0"),
-    ("A", "1", "1", "-1", "nan"),
-])
+@pytest.mark.parametrize(
+    "fields",
+    [
+        ("A", "1", "2", "-1", "1"),  # one pair for two joints
+        ("A", "1", "1", "-1", "1", "2"),
+        ("A", "1", "1", "1", "-1"),  # empty range
+        ("A", "1", "1", "0", "0"),
+        ("A", "1", "1", "-1", "nan"),
+    ],
+)
 def test_bad_hello_limits_refused(fields):
     with pytest.raises(p.ProtocolError):
         p.parse_hello(fields)
@@ -65,7 +67,8 @@ def test_moves_are_checked_against_the_tighter_limits(server, device):
             c.move_abs_j([120.0, 0, 0, 0, 0, 0])  # inside the controller's, outside the cell's
         c.move_abs_j([80.0, 0, 0, 0, 0, 0])
     assert [line for _, line in device.arrivals if " MOVEJ " in line] == [
-        "#%d MOVEJ 80.0000 0.0000 0.0000 0.0000 0.0000 0.0000" % device.moves[0][1]]
+        "#%d MOVEJ 80.0000 0.0000 0.0000 0.0000 0.0000 0.0000" % device.moves[0][1]
+    ]
 
 
 def test_limits_tighten_to_the_controller_within_rounding(server):

@@ -3,8 +3,7 @@
 import math
 
 import pytest
-
-from drivers.abb import protocol as p
+from robocal.drivers.abb import protocol as p
 
 GOOD_REQUESTS = [
     ("#1 HELLO", p.Request(1, "HELLO")),
@@ -60,8 +59,10 @@ GOOD_REPLIES = [
     ("#5 OK 3.42", p.Reply(5, ("3.42",))),
     ("#5 OK", p.Reply(5)),
     ("#5 OK INPOS 4\r", p.Reply(5, ("INPOS", "4"))),
-    ("#5 ERR LIMIT joint 2 200.0000 outside [-95.0000, 155.0000]",
-     p.ErrorReply(5, "LIMIT", "joint 2 200.0000 outside [-95.0000, 155.0000]")),
+    (
+        "#5 ERR LIMIT joint 2 200.0000 outside [-95.0000, 155.0000]",
+        p.ErrorReply(5, "LIMIT", "joint 2 200.0000 outside [-95.0000, 155.0000]"),
+    ),
     ("#5 ERR BUSY", p.ErrorReply(5, "BUSY")),
     ("#0 ERR BAD_REQUEST no  id", p.ErrorReply(0, "BAD_REQUEST", "no id")),
     ("#5 ERR FAULT 50204", p.ErrorReply(5, "FAULT", "50204")),
@@ -101,54 +102,92 @@ def test_wrong_id_is_its_own_error():
     assert info.value.request_id == 7
 
 
-@pytest.mark.parametrize("line, expected", [
-    ("#5 OK", "#5 OK"),
-    (">>> \x07#5 OK 1.0", "#5 OK 1.0"),
-    ("#4 OK 1.#5 OK", "#5 OK"),  # the rest of a reply cut by a timeout, then the next one
-    ("garbage", "garbage"),
-])
+@pytest.mark.parametrize(
+    "line, expected",
+    [
+        ("#5 OK", "#5 OK"),
+        (">>> \x07#5 OK 1.0", "#5 OK 1.0"),
+        ("#4 OK 1.#5 OK", "#5 OK"),  # the rest of a reply cut by a timeout, then the next one
+        ("garbage", "garbage"),
+    ],
+)
 def test_resync(line, expected):
     assert p.resync(line) == expected
 
 
-@pytest.mark.parametrize("fields, expected", [
-    (("IRB2600-SIM", "1", "6"), p.HelloInfo("IRB2600-SIM", 1, 6)),
-    (("cell_3.a", "2", "1"), p.HelloInfo("cell_3.a", 2, 1)),
-])
+@pytest.mark.parametrize(
+    "fields, expected",
+    [
+        (("IRB2600-SIM", "1", "6"), p.HelloInfo("IRB2600-SIM", 1, 6)),
+        (("cell_3.a", "2", "1"), p.HelloInfo("cell_3.a", 2, 1)),
+    ],
+)
 def test_parse_hello(fields, expected):
     assert p.parse_hello(fields) == expected
 
 
-@pytest.mark.parametrize("fields", [(), ("A", "1"), ("A", "1", "7"), ("A", "1", "0"),
-                                    ("A", "x", "6"), ("A#", "1", "6"), ("A", "1", "6", "x")])
+@pytest.mark.parametrize(
+    "fields",
+    [
+        (),
+        ("A", "1"),
+        ("A", "1", "7"),
+        ("A", "1", "0"),
+        ("A", "x", "6"),
+        ("A#", "1", "6"),
+        ("A", "1", "6", "x"),
+    ],
+)
 def test_parse_hello_refuses(fields):
     with pytest.raises(p.ProtocolError):
         p.parse_hello(fields)
 
 
-@pytest.mark.parametrize("fields, expected", [
-    (("IDLE", "0"), p.Status("IDLE", 0)),
-    (("MOVING", "17"), p.Status("MOVING", 17)),
-    (("INPOS", "17"), p.Status("INPOS", 17)),
-    (("STOPPED", "17"), p.Status("STOPPED", 17)),
-    (("FAULT", "50204", "17"), p.Status("FAULT", 17, 50204)),
-])
+@pytest.mark.parametrize(
+    "fields, expected",
+    [
+        (("IDLE", "0"), p.Status("IDLE", 0)),
+        (("MOVING", "17"), p.Status("MOVING", 17)),
+        (("INPOS", "17"), p.Status("INPOS", 17)),
+        (("STOPPED", "17"), p.Status("STOPPED", 17)),
+        (("FAULT", "50204", "17"), p.Status("FAULT", 17, 50204)),
+    ],
+)
 def test_status_round_trip(fields, expected):
     assert p.parse_status(fields) == expected
     assert p.status_fields(expected) == fields
 
 
-@pytest.mark.parametrize("fields", [(), ("BUSY", "1"), ("MOVING",), ("MOVING", "1", "2"),
-                                    ("FAULT", "1"), ("FAULT", "x", "1"), ("INPOS", "-1"),
-                                    ("INPOS", "1.5")])
+@pytest.mark.parametrize(
+    "fields",
+    [
+        (),
+        ("BUSY", "1"),
+        ("MOVING",),
+        ("MOVING", "1", "2"),
+        ("FAULT", "1"),
+        ("FAULT", "x", "1"),
+        ("INPOS", "-1"),
+        ("INPOS", "1.5"),
+    ],
+)
 def test_parse_status_refuses(fields):
     with pytest.raises(p.ProtocolError):
         p.parse_status(fields)
 
 
-@pytest.mark.parametrize("fields, ok", [(("3.420",), True), (("0",), True), (("-1",), False),
-                                        (("nan",), False), (("inf",), False), ((), False),
-                                        (("1", "2"), False)])
+@pytest.mark.parametrize(
+    "fields, ok",
+    [
+        (("3.420",), True),
+        (("0",), True),
+        (("-1",), False),
+        (("nan",), False),
+        (("inf",), False),
+        ((), False),
+        (("1", "2"), False),
+    ],
+)
 def test_parse_duration(fields, ok):
     if ok:
         assert p.parse_duration(fields) == float(fields[0])
@@ -172,17 +211,20 @@ def test_encode_request_round_trips_at_4_decimals():
     assert p.parse_request(line).values == (-400.0, -179.9999, 155.0, 0.3333, 0.0, 400.0)
 
 
-@pytest.mark.parametrize("req", [
-    p.Request(1, "MOVEJ", (1.0, math.nan)),
-    p.Request(1, "MOVEJ", (math.inf,)),
-    p.Request(1, "MOVEJ", ()),
-    p.Request(1, "MOVEJ", (0.0,) * 7),
-    p.Request(1, "STATUS", (1.0,)),
-    p.Request(0 - 1, "HELLO"),
-    p.Request(100000, "HELLO"),
-    p.Request(1, "FLY"),
-    p.Request(1, "MOVEJ", (1e12,) * 6),  # over 80 characters
-])
+@pytest.mark.parametrize(
+    "req",
+    [
+        p.Request(1, "MOVEJ", (1.0, math.nan)),
+        p.Request(1, "MOVEJ", (math.inf,)),
+        p.Request(1, "MOVEJ", ()),
+        p.Request(1, "MOVEJ", (0.0,) * 7),
+        p.Request(1, "STATUS", (1.0,)),
+        p.Request(0 - 1, "HELLO"),
+        p.Request(100000, "HELLO"),
+        p.Request(1, "FLY"),
+        p.Request(1, "MOVEJ", (1e12,) * 6),  # over 80 characters
+    ],
+)
 def test_encode_request_refuses(req):
     with pytest.raises(p.ProtocolError):
         p.encode_request(req)

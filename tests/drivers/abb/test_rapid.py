@@ -5,10 +5,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from drivers.abb import protocol as p
-from drivers.world import ACCEL_S, DEFAULT_SPEEDS_DEG_S
-from solver.robot import IRB2600
+from robocal.drivers.abb import protocol as p
+from robocal.drivers.world import ACCEL_S, DEFAULT_SPEEDS_DEG_S
+from robocal.solver.robot import IRB2600
 
 MOD = Path(__file__).parents[3] / "drivers" / "abb" / "rapid" / "RobocalServer.mod"
 SOURCE = MOD.read_text(encoding="ascii")
@@ -41,10 +40,18 @@ def test_module_frame():
     assert "PROC main()" in lines
 
 
-@pytest.mark.parametrize("opening, closing", [
-    ("PROC", "ENDPROC"), ("FUNC", "ENDFUNC"), ("TRAP", "ENDTRAP"), ("WHILE", "ENDWHILE"),
-    ("FOR", "ENDFOR"), ("TEST", "ENDTEST"), ("MODULE", "ENDMODULE"),
-])
+@pytest.mark.parametrize(
+    "opening, closing",
+    [
+        ("PROC", "ENDPROC"),
+        ("FUNC", "ENDFUNC"),
+        ("TRAP", "ENDTRAP"),
+        ("WHILE", "ENDWHILE"),
+        ("FOR", "ENDFOR"),
+        ("TEST", "ENDTEST"),
+        ("MODULE", "ENDMODULE"),
+    ],
+)
 def test_blocks_balance(opening, closing):
     w = words()
     assert w.count(opening) == w.count(closing) > 0
@@ -52,21 +59,47 @@ def test_blocks_balance(opening, closing):
 
 def test_if_blocks_balance():
     lines = list(code_lines())
-    block_ifs = sum(1 for line in lines if re.match(r"(ELSE)?IF\b.*\bTHEN$", line)
-                    and not line.startswith("ELSEIF"))
+    block_ifs = sum(
+        1
+        for line in lines
+        if re.match(r"(ELSE)?IF\b.*\bTHEN$", line) and not line.startswith("ELSEIF")
+    )
     assert block_ifs == sum(1 for line in lines if line == "ENDIF")
 
 
 def test_statements_end_with_semicolons():
-    keywords = ("MODULE", "ENDMODULE", "PROC", "LOCAL PROC", "FUNC", "LOCAL FUNC", "LOCAL TRAP",
-                "ENDPROC", "ENDFUNC", "ENDTRAP", "ERROR", "ELSE", "DEFAULT:", "CASE", "TEST",
-                "ENDIF", "ENDWHILE", "ENDFOR", "ENDTEST")
+    keywords = (
+        "MODULE",
+        "ENDMODULE",
+        "PROC",
+        "LOCAL PROC",
+        "FUNC",
+        "LOCAL FUNC",
+        "LOCAL TRAP",
+        "ENDPROC",
+        "ENDFUNC",
+        "ENDTRAP",
+        "ERROR",
+        "ELSE",
+        "DEFAULT:",
+        "CASE",
+        "TEST",
+        "ENDIF",
+        "ENDWHILE",
+        "ENDFOR",
+        "ENDTEST",
+    )
     lines = [line for line in code_lines() if line]
     # RAPID closes compound statements without a semicolon
     assert not [line for line in lines if re.fullmatch(r"END(IF|WHILE|FOR|TEST);", line)]
     for line, following in zip(lines, lines[1:] + [""], strict=True):
-        ok = (line.endswith(";") or line.endswith("THEN") or line.endswith(" DO")
-              or line.startswith(keywords) or following.startswith("+"))
+        ok = (
+            line.endswith(";")
+            or line.endswith("THEN")
+            or line.endswith(" DO")
+            or line.startswith(keywords)
+            or following.startswith("+")
+        )
         assert ok, line
 
 
@@ -95,10 +128,10 @@ def test_speaks_protocol_md():
 
 def test_safety_order_in_movej():
     start = SOURCE.index("PROC DoMoveJ")
-    body = SOURCE[start:SOURCE.index("ENDPROC", start)]
+    body = SOURCE[start : SOURCE.index("ENDPROC", start)]
     assert body.index("LIM_LO{i}") < body.index("MoveAbsJ")
     assert body.index('"MOVING"') < body.index("MoveAbsJ")
-    assert "fine" in body[body.index("MoveAbsJ"):]
+    assert "fine" in body[body.index("MoveAbsJ") :]
 
 
 def test_every_local_routine_is_used():
@@ -110,7 +143,7 @@ def test_every_local_routine_is_used():
 
 def routine(name):
     start = re.search(rf"(PROC|FUNC \w+) {name}\(", SOURCE).start()
-    return SOURCE[start:SOURCE.index("END", SOURCE.index(")", start))]
+    return SOURCE[start : SOURCE.index("END", SOURCE.index(")", start))]
 
 
 def test_hello_reports_the_limit_table():
@@ -121,12 +154,15 @@ def test_hello_reports_the_limit_table():
 
 
 def test_a_new_connection_preempts_a_hung_client():
-    serve = SOURCE[SOURCE.index("PROC ServeClient"):SOURCE.index("PROC StartClient")]
+    serve = SOURCE[SOURCE.index("PROC ServeClient") : SOURCE.index("PROC StartClient")]
     # Lines of the served client first, then a newer client takes over: a STOP sent on a new
     # connection waits at most one receive poll and one accept poll.
-    assert serve.index("ReadLine(line)") < serve.index("NewClient()") < serve.index("current := 3 - current")
+    assert (
+        serve.index("ReadLine(line)")
+        < serve.index("NewClient()")
+        < serve.index("current := 3 - current")
+    )
     assert float(const("POLL_S")) <= 0.05
     assert routine("NewClient").count("\\Time:=POLL_S") == 2
     assert routine("ReadLine").count("\\Time:=POLL_S") == 2
     assert "WAIT_MAX" not in serve
-

@@ -2,10 +2,9 @@
 
 import numpy as np
 import pytest
-
-from drivers.abb import protocol as p
-from drivers.world import ACCEL_S
-from solver.robot import IRB2600
+from robocal.drivers.abb import protocol as p
+from robocal.drivers.world import ACCEL_S
+from robocal.solver.robot import IRB2600
 
 LO, HI = np.rad2deg(IRB2600.lower), np.rad2deg(IRB2600.upper)
 
@@ -29,12 +28,15 @@ def test_hello_and_idle(device):
     assert device.received == ["#1 HELLO", "#1 STATUS"]
 
 
-@pytest.mark.parametrize("q_deg, slowest_s", [
-    ([87.5, 0, 0, 0, 0, 0], 87.5 / 175),  # main axes at 175 deg/s
-    ([0, 0, 0, 0, 0, 180], 180 / 360),  # wrist axes at 360 deg/s
-    ([-35, 70, -17.5, 90, 0, 0], 70 / 175),  # the slowest joint sets the duration
-    ([0, 0, 0, 0, 0, 0], 0.0),  # no travel still ramps
-])
+@pytest.mark.parametrize(
+    "q_deg, slowest_s",
+    [
+        ([87.5, 0, 0, 0, 0, 0], 87.5 / 175),  # main axes at 175 deg/s
+        ([0, 0, 0, 0, 0, 180], 180 / 360),  # wrist axes at 360 deg/s
+        ([-35, 70, -17.5, 90, 0, 0], 70 / 175),  # the slowest joint sets the duration
+        ([0, 0, 0, 0, 0, 0], 0.0),  # no travel still ramps
+    ],
+)
 def test_move_duration_follows_joint_speeds(device, world, q_deg, slowest_s):
     expected = world.move_duration(np.deg2rad(q_deg))
     reply = ask(device, movej(q_deg))
@@ -107,13 +109,16 @@ def test_fault_until_reset_not_hello(device, clock):
     assert isinstance(ask(device, movej([0] * 6, 10)), p.Reply)
 
 
-@pytest.mark.parametrize("line, expected", [
-    ("garbage", "#0 ERR BAD_REQUEST"),
-    ("#5 FLY", "#5 ERR BAD_REQUEST"),
-    ("#5 MOVEJ 1 2 3", "#5 ERR BAD_REQUEST MOVEJ needs 6 values, got 3"),
-    ("#5 MOVEJ 1 2 3 nan 5 6", "#5 ERR BAD_REQUEST"),
-    ("#5 MOVEJ 1 2 3 1e999 5 6", "#5 ERR BAD_REQUEST"),
-])
+@pytest.mark.parametrize(
+    "line, expected",
+    [
+        ("garbage", "#0 ERR BAD_REQUEST"),
+        ("#5 FLY", "#5 ERR BAD_REQUEST"),
+        ("#5 MOVEJ 1 2 3", "#5 ERR BAD_REQUEST MOVEJ needs 6 values, got 3"),
+        ("#5 MOVEJ 1 2 3 nan 5 6", "#5 ERR BAD_REQUEST"),
+        ("#5 MOVEJ 1 2 3 1e999 5 6", "#5 ERR BAD_REQUEST"),
+    ],
+)
 def test_bad_requests(device, world, line, expected):
     assert device.handle_line(line).startswith(expected)
     assert not world.moving() and device.received == [line]

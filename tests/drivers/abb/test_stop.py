@@ -7,10 +7,9 @@ import threading
 import time
 
 import pytest
-
-import drivers.abb.client as client_module
-from drivers.abb.client import ControllerClient, ControllerError, StopLatched
-from solver.robot import IRB2600
+import robocal.drivers.abb.client as client_module
+from robocal.drivers.abb.client import ControllerClient, ControllerError, StopLatched
+from robocal.solver.robot import IRB2600
 
 TARGET = [10.0, -20.5, 30.0, 0.0, 45.0, 90.0]
 STOP_ON_WIRE_S = 0.1  # the bound: stop request to STOP received by the controller
@@ -55,8 +54,10 @@ def timed_stop(client, device, case):
     confirmed = client.emergency_stop(confirm_s=CONFIRM_S)
     returned = time.monotonic() - t0
     on_wire = arrived(device, "STOP", t0) - t0
-    print(f"\n[stop latency] {case}: STOP on the wire after {on_wire * 1000:.1f} ms, "
-          f"emergency_stop returned {confirmed} after {returned * 1000:.0f} ms")
+    print(
+        f"\n[stop latency] {case}: STOP on the wire after {on_wire * 1000:.1f} ms, "
+        f"emergency_stop returned {confirmed} after {returned * 1000:.0f} ms"
+    )
     assert on_wire <= STOP_ON_WIRE_S, f"{case}: STOP on the wire after {on_wire * 1000:.1f} ms"
     assert returned <= CONFIRM_S + 0.5
     return confirmed, on_wire, returned
@@ -78,7 +79,9 @@ def test_stalled_mid_move(client, server, device, request_kind):
         client.move_abs_j([90, 0, 0, 0, 0, 0])  # the arm is moving when the controller hangs
     since = time.monotonic()
     server.stall()
-    stuck = InFlight(client.status if request_kind == "STATUS" else lambda: client.move_abs_j(TARGET))
+    stuck = InFlight(
+        client.status if request_kind == "STATUS" else lambda: client.move_abs_j(TARGET)
+    )
     arrived(device, request_kind, since)
     confirmed, _, _ = timed_stop(client, device, f"stalled controller, {request_kind} in flight")
     # The open connection is hung; a fresh one reaches the controller's STOP handling.
@@ -95,7 +98,9 @@ def test_stalled_mid_move(client, server, device, request_kind):
 def test_reconnecting(client, server, device, request_kind):
     since = time.monotonic()
     server.reconnecting(slow_s=3.0)  # dropped; new connections accepted, answered after 3 s
-    stuck = InFlight(client.status if request_kind == "STATUS" else lambda: client.move_abs_j(TARGET))
+    stuck = InFlight(
+        client.status if request_kind == "STATUS" else lambda: client.move_abs_j(TARGET)
+    )
     arrived(device, "HELLO", since)  # the request is reconnecting, hung in its handshake
     confirmed, _, returned = timed_stop(client, device, f"reconnecting controller, {request_kind}")
     assert not confirmed and "no reply" in client.last_stop_error
@@ -163,6 +168,7 @@ def test_stop_in_the_gap_before_movej_sends_no_movej(client, device, monkeypatch
         assert go.wait(WAIT_S)
 
     if gap == "engine check":
+
         def engine_step():
             if not client.stopped:  # the engine's between-pose check passes...
                 hold()  # ...and the stop lands here

@@ -3,10 +3,9 @@
 import time
 
 import pytest
-
-from drivers.abb.client import ControllerClient, ControllerTimeout
-from drivers.abb.transport import LineTransport, TransportClosed
-from solver.robot import IRB2600
+from robocal.drivers.abb.client import ControllerClient, ControllerTimeout
+from robocal.drivers.abb.transport import LineTransport, TransportClosed
+from robocal.solver.robot import IRB2600
 
 
 @pytest.fixture

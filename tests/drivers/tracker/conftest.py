@@ -4,12 +4,11 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
-from drivers.cell import VirtualCell
-from drivers.clock import VirtualClock
-from drivers.tracker.sim import SimulatedTracker
-from drivers.world import SimulatedWorld
-from solver.robot import IRB2600
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.clock import VirtualClock
+from robocal.drivers.tracker.sim import SimulatedTracker
+from robocal.drivers.world import SimulatedWorld
+from robocal.solver.robot import IRB2600
 
 TARGETS = {"A": [60.0, 0.0, 35.0], "B": [-30.0, 52.0, 35.0], "C": [-30.0, -52.0, 35.0]}
 
@@ -23,8 +22,9 @@ def make_rig(seed: int = 1, settled: bool = True, **tracker_kw) -> SimpleNamespa
     if settled:
         clock.sleep(60.0)
     dev = SimulatedTracker(world, clock, seed=seed, **tracker_kw)
-    return SimpleNamespace(cell=cell, clock=clock, world=world, dev=dev, q=q,
-                           smr=world.smr_positions())
+    return SimpleNamespace(
+        cell=cell, clock=clock, world=world, dev=dev, q=q, smr=world.smr_positions()
+    )
 
 
 @pytest.fixture

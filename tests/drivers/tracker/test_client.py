@@ -6,9 +6,8 @@ import time
 
 import numpy as np
 import pytest
-
-from drivers.tracker import ErrorCode, TrackerClient, TrackerError, TrackerTimeout
-from drivers.tracker.sim import SimulatedTracker, serve_tracker
+from robocal.drivers.tracker import ErrorCode, TrackerClient, TrackerError, TrackerTimeout
+from robocal.drivers.tracker.sim import SimulatedTracker, serve_tracker
 
 from .conftest import make_rig
 from .test_sim import GateClock
@@ -117,8 +116,10 @@ def test_connection_refused():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]  # free once closed
-    with TrackerClient("127.0.0.1", port, timeout_s=0.5, retries=1) as c, \
-            pytest.raises(ConnectionError):
+    with (
+        TrackerClient("127.0.0.1", port, timeout_s=0.5, retries=1) as c,
+        pytest.raises(ConnectionError),
+    ):
         c.ident()
 
 

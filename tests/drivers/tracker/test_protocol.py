@@ -2,10 +2,20 @@
 
 import numpy as np
 import pytest
-
-from drivers.tracker.protocol import (Ident, Measurement, ProtocolError, Request, Status,
-                                      TrackerError, Weather, encode_reply, encode_request,
-                                      parse_reply, parse_request, search_time_s)
+from robocal.drivers.tracker.protocol import (
+    Ident,
+    Measurement,
+    ProtocolError,
+    Request,
+    Status,
+    TrackerError,
+    Weather,
+    encode_reply,
+    encode_request,
+    parse_reply,
+    parse_request,
+    search_time_s,
+)
 
 GOOD_REPLIES = [
     ("ID", "#1 OK FARO-Vantage S1234 2.4.1\n", Ident("FARO-Vantage", "S1234", "2.4.1")),
@@ -81,12 +91,18 @@ def test_bad_replies_are_refused(command, line, req_id, message):
         parse_reply(line, command, req_id)
 
 
-@pytest.mark.parametrize("line, code, message", [
-    ("#5 ERR TARGET_NOT_FOUND no target within 10 mm\n", "TARGET_NOT_FOUND",
-     "no target within 10 mm"),
-    ("#5 ERR BEAM_BROKEN\n", "BEAM_BROKEN", ""),
-    ("#5 ERR LASER_COLD warming up\n", "LASER_COLD", "warming up"),  # unknown codes still raise
-])
+@pytest.mark.parametrize(
+    "line, code, message",
+    [
+        (
+            "#5 ERR TARGET_NOT_FOUND no target within 10 mm\n",
+            "TARGET_NOT_FOUND",
+            "no target within 10 mm",
+        ),
+        ("#5 ERR BEAM_BROKEN\n", "BEAM_BROKEN", ""),
+        ("#5 ERR LASER_COLD warming up\n", "LASER_COLD", "warming up"),  # unknown codes still raise
+    ],
+)
 def test_error_replies_raise_tracker_error(line, code, message):
     with pytest.raises(TrackerError) as info:
         parse_reply(line, "MEASURE", 5)
@@ -136,36 +152,55 @@ def test_bad_requests_are_refused(line, req_id, message):
     assert info.value.req_id == req_id
 
 
-@pytest.mark.parametrize("command, args", [
-    ("ID", ()), ("POINT", (1523.25, -402.1, 880.0)), ("SEARCH", (10.0,)), ("MEASURE", (500,)),
-    ("WEATHER", ()), ("STATUS", ()),
-])
+@pytest.mark.parametrize(
+    "command, args",
+    [
+        ("ID", ()),
+        ("POINT", (1523.25, -402.1, 880.0)),
+        ("SEARCH", (10.0,)),
+        ("MEASURE", (500,)),
+        ("WEATHER", ()),
+        ("STATUS", ()),
+    ],
+)
 def test_requests_round_trip(command, args):
     assert parse_request(encode_request(42, command, *args)) == Request(42, command, args)
 
 
-@pytest.mark.parametrize("req_id, command, args", [
-    (0, "ID", ()), (1_000_000_000, "ID", ()), (1, "FIRE", ()), (1, "POINT", (1.0, 2.0)),
-    (1, "POINT", (1.0, 2.0, float("nan"))),
-])
+@pytest.mark.parametrize(
+    "req_id, command, args",
+    [
+        (0, "ID", ()),
+        (1_000_000_000, "ID", ()),
+        (1, "FIRE", ()),
+        (1, "POINT", (1.0, 2.0)),
+        (1, "POINT", (1.0, 2.0, float("nan"))),
+    ],
+)
 def test_encode_request_refuses_bad_input(req_id, command, args):
     with pytest.raises(ValueError):
         encode_request(req_id, command, *args)
 
 
 def test_replies_round_trip():
-    m = Measurement(np.array([1523.251234, -402.098765, 880.001111]),
-                    np.array([0.007102, 0.006954, 0.007311]), 500, "OK")
+    m = Measurement(
+        np.array([1523.251234, -402.098765, 880.001111]),
+        np.array([0.007102, 0.006954, 0.007311]),
+        500,
+        "OK",
+    )
     back = parse_reply(encode_reply(7, m), "MEASURE", 7)
     np.testing.assert_allclose(back.mean_mm, m.mean_mm, atol=1e-6)
     np.testing.assert_allclose(back.std_mm, m.std_mm, atol=1e-6)
     assert (back.samples, back.status) == (500, "OK")
-    assert parse_reply(encode_reply(7, Ident("Sim", "S1", "1.0")), "ID", 7) == Ident("Sim", "S1",
-                                                                                     "1.0")
+    assert parse_reply(encode_reply(7, Ident("Sim", "S1", "1.0")), "ID", 7) == Ident(
+        "Sim", "S1", "1.0"
+    )
     assert parse_reply(encode_reply(7, True), "POINT", 7) is True
     assert parse_reply(encode_reply(7, False), "POINT", 7) is False
     assert parse_reply(encode_reply(7, Weather(20.1, 1013.2, 45.0)), "WEATHER", 7) == Weather(
-        20.1, 1013.2, 45.0)
+        20.1, 1013.2, 45.0
+    )
     s = parse_reply(encode_reply(7, Status(True, np.array([1.0, 2.0, 3.0]))), "STATUS", 7)
     assert s.locked and np.allclose(s.aim_mm, [1, 2, 3])
 

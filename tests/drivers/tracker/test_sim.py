@@ -4,10 +4,9 @@ import threading
 
 import numpy as np
 import pytest
-
-from drivers.tracker.protocol import ErrorCode, TrackerError, search_time_s
-from drivers.tracker.sim import POINT_S, SimulatedTracker
-from solver.kinematics import translation
+from robocal.drivers.tracker.protocol import ErrorCode, TrackerError, search_time_s
+from robocal.drivers.tracker.sim import POINT_S, SimulatedTracker
+from robocal.solver.kinematics import translation
 
 from .conftest import make_rig
 
@@ -212,8 +211,15 @@ def test_busy_while_another_request_runs(rig):
     assert dev.handle("#3 ID\n").startswith("#3 OK")
 
 
-@pytest.mark.parametrize("kw", [{"capture_radius_mm": 0}, {"beam_break_rate": 1.5},
-                                {"sample_rate_hz": 0}, {"settle_amplitude_mm": -1}])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"capture_radius_mm": 0},
+        {"beam_break_rate": 1.5},
+        {"sample_rate_hz": 0},
+        {"settle_amplitude_mm": -1},
+    ],
+)
 def test_bad_settings_are_refused(rig, kw):
     with pytest.raises(ValueError):
         SimulatedTracker(rig.world, rig.clock, **kw)

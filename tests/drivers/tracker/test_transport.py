@@ -5,8 +5,7 @@ import threading
 import time
 
 import pytest
-
-from drivers.tracker.transport import MAX_LINE, LineSocket, LineTimeout
+from robocal.drivers.tracker.transport import MAX_LINE, LineSocket, LineTimeout
 
 
 @pytest.fixture

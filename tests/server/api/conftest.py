@@ -10,10 +10,9 @@ from dataclasses import dataclass
 import httpx
 import pytest
 import uvicorn
-
-from server.app import create_app
-from server.security import ensure_token
-from server.settings import Settings
+from robocal.server.app import create_app
+from robocal.server.security import ensure_token
+from robocal.server.settings import Settings
 
 
 def free_port() -> int:
@@ -34,8 +33,9 @@ class Live:
 
 
 def settings_for(tmp_path) -> Settings:
-    return Settings(database=str(tmp_path / "robocal.db"), data_dir=tmp_path / "data",
-                    port=free_port())
+    return Settings(
+        database=str(tmp_path / "robocal.db"), data_dir=tmp_path / "data", port=free_port()
+    )
 
 
 @pytest.fixture
@@ -49,9 +49,15 @@ def serve(settings: Settings):
     token = ensure_token(settings.token_file)
     # An open event stream would hold a graceful stop until its next keep-alive: cut it short
     # (signals, which end the streams at once, reach only a server on the main thread).
-    server = uvicorn.Server(uvicorn.Config(create_app(settings), host=settings.host,
-                                           port=settings.port, log_level="warning",
-                                           timeout_graceful_shutdown=1))
+    server = uvicorn.Server(
+        uvicorn.Config(
+            create_app(settings),
+            host=settings.host,
+            port=settings.port,
+            log_level="warning",
+            timeout_graceful_shutdown=1,
+        )
+    )
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     deadline = time.monotonic() + 30
@@ -59,8 +65,12 @@ def serve(settings: Settings):
         assert thread.is_alive() and time.monotonic() < deadline, "server did not start"
         time.sleep(0.02)
     url = f"http://{settings.host}:{settings.port}"
-    with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"},
-                      timeout=30) as client, httpx.Client(base_url=url, timeout=30) as anonymous:
+    with (
+        httpx.Client(
+            base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=30
+        ) as client,
+        httpx.Client(base_url=url, timeout=30) as anonymous,
+    ):
         yield Live(settings, token, url, client, anonymous)
     server.should_exit = True
     thread.join(timeout=30)

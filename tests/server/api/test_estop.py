@@ -13,11 +13,11 @@ import time
 from pathlib import Path
 
 import httpx
+from robocal.drivers.lifecycle import allowed
 
-from drivers.lifecycle import allowed
 from tests.server.api.conftest import free_port, serve, settings_for, wait_for
-from tests.server.api.test_sigterm import Wire, start_service
 from tests.server.api.test_real_devices import cell_json, devices  # noqa: F401 - a fixture
+from tests.server.api.test_sigterm import Wire, start_service
 
 ROOT = Path(__file__).resolve().parents[3]
 PROBLEM = "application/problem+json"
@@ -31,8 +31,12 @@ def running_campaign(c, devices, name: str, run=SLOW) -> int:
     assert r.status_code == 201, r.text
     cid = r.json()["id"]
     assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
-    wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(), lambda j: j["status"] == "running",
-             timeout=30, interval=0.02)
+    wait_for(
+        lambda: c.get(f"/api/campaigns/{cid}").json(),
+        lambda j: j["status"] == "running",
+        timeout=30,
+        interval=0.02,
+    )
     wait_for(lambda: len(devices.controller.moves), lambda n: n >= 1, timeout=30, interval=0.02)
     return cid
 
@@ -82,11 +86,13 @@ def _estop_under_reads(url, token, devices):
     # The heavy reads: Table 3 (every method of the paper) of a calibrated simulated campaign.
     sim = c.post("/api/campaigns", json={"name": "data", "poses": 40, "seed": 4}).json()["id"]
     c.post(f"/api/campaigns/{sim}/start")
-    wait_for(lambda: c.get(f"/api/campaigns/{sim}").json(), lambda j: j["status"] == "done",
-             timeout=120)
+    wait_for(
+        lambda: c.get(f"/api/campaigns/{sim}").json(), lambda j: j["status"] == "done", timeout=120
+    )
     job = c.post("/api/jobs", json={"campaign_id": sim, "method": "ls-sum"}).json()
-    wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(), lambda j: j["state"] == "done",
-             timeout=120)
+    wait_for(
+        lambda: c.get(f"/api/jobs/{job['id']}").json(), lambda j: j["state"] == "done", timeout=120
+    )
     cid = running_campaign(c, devices, "stop")
     with httpx.Client(base_url=url, headers=c.headers, timeout=30) as h:
         idle = []
@@ -119,11 +125,13 @@ def _estop_under_reads(url, token, devices):
     for t in threads:
         t.join(timeout=300)
     reads = sorted(s for _, s in answered)
-    print(f"\ne-stop: STOP on the wire after {(on_wire - m0) * 1000:.1f} ms, answered in "
-          f"{took * 1000:.1f} ms with {in_flight} of 60 Table 3 reads in "
-          f"flight (reads took {reads[0]:.2f}-{reads[-1]:.2f} s, median {reads[30]:.2f} s); "
-          f"with no load {min(idle) * 1000:.1f}-{max(idle) * 1000:.1f} ms; load average "
-          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
+    print(
+        f"\ne-stop: STOP on the wire after {(on_wire - m0) * 1000:.1f} ms, answered in "
+        f"{took * 1000:.1f} ms with {in_flight} of 60 Table 3 reads in "
+        f"flight (reads took {reads[0]:.2f}-{reads[-1]:.2f} s, median {reads[30]:.2f} s); "
+        f"with no load {min(idle) * 1000:.1f}-{max(idle) * 1000:.1f} ms; load average "
+        f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
+    )
     assert r.status_code == 200 and r.json()["status"] == "estopped", r.text
     assert r.json()["confirmed"] is True
     assert in_flight >= 30, f"the reads were over before the e-stop: not a load test {answered[:3]}"
@@ -154,9 +162,24 @@ def test_one_process_owns_a_running_campaign(tmp_path, live, devices):
             assert "another process" in r.json()["detail"], r.text
     finally:
         second.close()
-    done = subprocess.run([sys.executable, "-m", "server.cli", "acquire", "--db",
-                           live.settings.database, "--cell", str(cell), "--name", name],
-                          cwd=ROOT, capture_output=True, text=True, timeout=60)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "robocal.server.cli",
+            "acquire",
+            "--db",
+            live.settings.database,
+            "--cell",
+            str(cell),
+            "--name",
+            name,
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert done.returncode == 1, done
     err = done.stderr.strip().splitlines()
     assert len(err) == 1 and "driven by another process" in err[0], done.stderr

@@ -21,9 +21,10 @@ def test_simulated_campaign_runs_then_calibrates_to_a_model(live):
 
     r = c.post(f"/api/campaigns/{cid}/start")
     assert r.status_code == 202, r.text
-    done = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
-                    lambda j: j["status"] not in ("planned", "running")
-                    and not (j["run"] or {}).get("active"))
+    done = wait_for(
+        lambda: c.get(f"/api/campaigns/{cid}").json(),
+        lambda j: j["status"] not in ("planned", "running") and not (j["run"] or {}).get("active"),
+    )
     assert done["status"] == "done" and done["actions"] == [], done
     assert done["poses_done"] == 20 and done["run"]["detail"] == "the run ended done"
     assert done["run"]["summary"]["measured_poses"] == 20
@@ -40,8 +41,9 @@ def test_simulated_campaign_runs_then_calibrates_to_a_model(live):
     assert r.status_code == 202, r.text
     job = r.json()
     assert job["state"] in ("queued", "running", "done")
-    job = wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(),
-                   lambda j: j["state"] in ("done", "failed"))
+    job = wait_for(
+        lambda: c.get(f"/api/jobs/{job['id']}").json(), lambda j: j["state"] in ("done", "failed")
+    )
     assert job["state"] == "done", job
     model = c.get(job["model_url"]).json()
     assert model["method"] == "minimax" and model["data"]["poses"] == 20
@@ -54,8 +56,9 @@ def test_simulated_campaign_runs_then_calibrates_to_a_model(live):
     rrd = live.settings.data_dir / "downloaded.rrd"
     rrd.write_bytes(r.content)
     rerun = Path(sys.executable).parent / "rerun"
-    v = subprocess.run([str(rerun), "rrd", "verify", str(rrd)], capture_output=True, text=True,
-                       timeout=120)
+    v = subprocess.run(
+        [str(rerun), "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=120
+    )
     assert v.returncode == 0, v.stderr
     ev = c.get(f"/api/models/{job['id']}/evaluate", params={"campaign_id": cid}).json()
     assert ev["model"]["rmse"] < 0.05 and ev["improvement_pct"]["ap_mean"] > 90
@@ -63,8 +66,10 @@ def test_simulated_campaign_runs_then_calibrates_to_a_model(live):
     # A diagnosis of the same campaign: a report, its figures and the extended model.
     r = c.post("/api/jobs", json={"campaign_id": cid, "kind": "diagnosis"})
     assert r.status_code == 202, r.text
-    diag = wait_for(lambda: c.get(f"/api/jobs/{r.json()['id']}").json(),
-                    lambda j: j["state"] in ("done", "failed"))
+    diag = wait_for(
+        lambda: c.get(f"/api/jobs/{r.json()['id']}").json(),
+        lambda j: j["state"] in ("done", "failed"),
+    )
     assert diag["state"] == "done" and diag["kind"] == "diagnosis", diag
     report = c.get(diag["report_url"]).json()
     assert "final" in report and "effects" in report
@@ -89,25 +94,33 @@ def test_job_requests_are_checked_before_queueing(live):
 
 def test_failed_job_reports_its_reason(live):
     c = live.client
-    rows = ["pose,q1,q2,q3,q4,q5,q6,target,x,y,z",
-            "p1,0,0,0,0,30,0,A,1000,0,1500",
-            "p2,10,20,-10,45,-30,90,A,900,100,1400"]
+    rows = [
+        "pose,q1,q2,q3,q4,q5,q6,target,x,y,z",
+        "p1,0,0,0,0,30,0,A,1000,0,1500",
+        "p2,10,20,-10,45,-30,90,A,900,100,1400",
+    ]
     cid = c.post("/api/measurements/import", content="\n".join(rows) + "\n").json()["id"]
     job = c.post("/api/jobs", json={"campaign_id": cid, "method": "ls-sum"}).json()
-    job = wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(),
-                   lambda j: j["state"] in ("done", "failed"))
+    job = wait_for(
+        lambda: c.get(f"/api/jobs/{job['id']}").json(), lambda j: j["state"] in ("done", "failed")
+    )
     assert job["state"] == "failed" and job["reason"], job
     assert c.get(f"/api/models/{job['id']}").status_code == 409
 
 
 def test_malformed_csv_is_422_with_its_line_and_imports_nothing(live):
     c = live.client
-    rows = ["pose,q1,q2,q3,q4,q5,q6,target,x,y,z",
-            "p1,0,0,0,0,30,0,A,1000,0,1500",
-            "p1,0,0,0,0,30,0,B,1000,oops,1500",
-            "p2,10,20,-10,45,-30,90,A,900,100,1400"]
-    r = c.post("/api/measurements/import?filename=bad.csv", content="\n".join(rows) + "\n",
-               headers={"Content-Type": "text/csv"})
+    rows = [
+        "pose,q1,q2,q3,q4,q5,q6,target,x,y,z",
+        "p1,0,0,0,0,30,0,A,1000,0,1500",
+        "p1,0,0,0,0,30,0,B,1000,oops,1500",
+        "p2,10,20,-10,45,-30,90,A,900,100,1400",
+    ]
+    r = c.post(
+        "/api/measurements/import?filename=bad.csv",
+        content="\n".join(rows) + "\n",
+        headers={"Content-Type": "text/csv"},
+    )
     assert r.status_code == 422, r.text
     assert r.headers["content-type"] == PROBLEM
     body = r.json()
@@ -163,8 +176,14 @@ def test_validation_errors_are_problem_details(live):
 def test_openapi_schema_and_docs_are_served(live):
     schema = live.anonymous.get("/openapi.json").json()
     assert schema["info"]["title"] == "robocal"
-    for path in ("/api/campaigns", "/api/campaigns/{campaign_id}/start", "/api/jobs",
-                 "/api/models/{job_id}", "/api/measurements/import", "/api/cells"):
+    for path in (
+        "/api/campaigns",
+        "/api/campaigns/{campaign_id}/start",
+        "/api/jobs",
+        "/api/models/{job_id}",
+        "/api/measurements/import",
+        "/api/cells",
+    ):
         assert path in schema["paths"]
     body = schema["paths"]["/api/measurements/import"]["post"]["requestBody"]
     assert "text/csv" in body["content"]
@@ -179,8 +198,7 @@ def test_abort_stops_a_running_acquisition_at_its_next_reading(live):
     r = c.post(f"/api/campaigns/{cid}/abort")
     assert r.status_code == 200 and r.json()["was"] == "running", r.text
     assert r.json()["status"] in ("stopping", "aborted"), r.text
-    j = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
-                 lambda j: not j["run"]["active"])
+    j = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(), lambda j: not j["run"]["active"])
     assert j["status"] == "aborted" and j["run"]["detail"] == "the run ended aborted", j
     assert 2 <= j["poses_done"] < 400
     assert [x["id"] for x in c.get("/api/campaigns").json()] == [cid]  # no namesake planned

@@ -13,11 +13,11 @@ import time
 
 import httpx
 import pytest
+import robocal.server.app
+from robocal.server.cli import main as robocal
+from robocal.server.job_queue import CANCELLED
+from robocal.server.security import ensure_token
 
-import server.app
-from server.cli import main as robocal
-from server.job_queue import CANCELLED
-from server.security import ensure_token
 from tests.server.api.conftest import serve, settings_for, wait_for
 from tests.server.api.test_job_pool import SpiedJobs, csv_text  # noqa: F401 - a fixture
 
@@ -25,7 +25,7 @@ from tests.server.api.test_job_pool import SpiedJobs, csv_text  # noqa: F401 - a
 def served(tmp_path, **settings):
     """A live server with these settings; its Jobs is the last of SpiedJobs.made."""
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(server.app, "Jobs", SpiedJobs)
+        mp.setattr(robocal.server.app, "Jobs", SpiedJobs)
         yield from serve(settings_for(tmp_path).model_copy(update=settings))
 
 
@@ -67,13 +67,18 @@ def queue(live, cid: int, **body) -> dict:
 
 def running_pid(job_id: int) -> int:
     jobs = SpiedJobs.made[-1]
-    return wait_for(lambda: jobs.worker_pid(job_id), lambda pid: pid is not None, timeout=60,
-                    interval=0.01)
+    return wait_for(
+        lambda: jobs.worker_pid(job_id), lambda pid: pid is not None, timeout=60, interval=0.01
+    )
 
 
 def finished(live, job_id: int, timeout=120) -> dict:
-    return wait_for(lambda: live.client.get(f"/api/jobs/{job_id}").json(),
-                    lambda j: j["state"] in ("done", "failed"), timeout=timeout, interval=0.02)
+    return wait_for(
+        lambda: live.client.get(f"/api/jobs/{job_id}").json(),
+        lambda j: j["state"] in ("done", "failed"),
+        timeout=timeout,
+        interval=0.02,
+    )
 
 
 def gone(pid: int) -> bool:
@@ -88,13 +93,28 @@ def gone(pid: int) -> bool:
 @pytest.fixture(scope="module")
 def long_csv_text(tmp_path_factory):
     path = tmp_path_factory.mktemp("sim") / "meas.csv"
-    assert robocal(["simulate", "--poses", "400", "--seed", "5", "--effect", "thermal_drift",
-                    "--out", str(path)]) == 0
+    assert (
+        robocal(
+            [
+                "simulate",
+                "--poses",
+                "400",
+                "--seed",
+                "5",
+                "--effect",
+                "thermal_drift",
+                "--out",
+                str(path),
+            ]
+        )
+        == 0
+    )
     return path.read_text()
 
 
 def test_a_job_past_its_wall_clock_limit_is_killed_and_failed_with_the_reason(
-        make_live, long_csv_text, caplog):
+    make_live, long_csv_text, caplog
+):
     live = make_live(job_timeout_s=0.5)
     c = live.client
     cid = campaign(live, long_csv_text)
@@ -109,13 +129,19 @@ def test_a_job_past_its_wall_clock_limit_is_killed_and_failed_with_the_reason(
         assert c.get("/api/campaigns").status_code == 200
         answers.append(time.perf_counter() - t0)
         time.sleep(0.05)
-    job = wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(),
-                   lambda j: j["state"] == "failed", timeout=10, interval=0.02)
+    job = wait_for(
+        lambda: c.get(f"/api/jobs/{job['id']}").json(),
+        lambda j: j["state"] == "failed",
+        timeout=10,
+        interval=0.02,
+    )
     assert job["reason"] == "exceeded its wall-clock limit of 0.5 s", job
     killed = [r.getMessage() for r in caplog.records if "after its wall-clock limit" in r.message]
     assert len(killed) == 1, killed
-    print(f"\n{killed[0]}; {len(answers)} health+list reads while it ran, slowest "
-          f"{max(answers) * 1000:.0f} ms")
+    print(
+        f"\n{killed[0]}; {len(answers)} health+list reads while it ran, slowest "
+        f"{max(answers) * 1000:.0f} ms"
+    )
 
 
 def test_cancel_a_queued_and_a_running_job(one_worker, csv_text):
@@ -128,8 +154,11 @@ def test_cancel_a_queued_and_a_running_job(one_worker, csv_text):
 
     r = c.post(f"/api/jobs/{second['id']}/cancel")
     assert r.status_code == 200, r.text
-    assert (r.json()["state"], r.json()["reason"], r.json()["started_at"]) == \
-        ("failed", CANCELLED, None)
+    assert (r.json()["state"], r.json()["reason"], r.json()["started_at"]) == (
+        "failed",
+        CANCELLED,
+        None,
+    )
 
     t0 = time.perf_counter()
     r = c.post(f"/api/jobs/{first['id']}/cancel")
@@ -153,8 +182,7 @@ def test_killing_one_job_leaves_the_other_running(two_workers, csv_text):
     other = queue(two_workers, cid, method="minimax")
     doomed_pid, other_pid = running_pid(doomed["id"]), running_pid(other["id"])
     assert doomed_pid != other_pid
-    assert two_workers.client.post(f"/api/jobs/{doomed['id']}/cancel").json()["state"] == \
-        "failed"
+    assert two_workers.client.post(f"/api/jobs/{doomed['id']}/cancel").json()["state"] == "failed"
     assert not gone(other_pid) or finished(two_workers, other["id"])["state"] == "done"
     assert finished(two_workers, other["id"])["state"] == "done"
     assert finished(two_workers, doomed["id"])["reason"] == CANCELLED
@@ -197,8 +225,9 @@ def test_a_chart_past_its_limit_answers_504_and_the_service_goes_on(make_live, c
 def poison(database: str, campaign_id: int) -> None:
     """Put x = 1e308 into one stored reading, as an import without bounds once let through."""
     with sqlite3.connect(database) as con:
-        rid = con.execute("SELECT min(id) FROM reading WHERE campaign_id = ?",
-                          (campaign_id,)).fetchone()[0]
+        rid = con.execute(
+            "SELECT min(id) FROM reading WHERE campaign_id = ?", (campaign_id,)
+        ).fetchone()[0]
         con.execute("UPDATE reading SET x = 1e308 WHERE id = ?", (rid,))
 
 
@@ -220,8 +249,13 @@ def test_a_non_finite_campaign_is_refused_quickly_everywhere(two_workers, csv_te
     ok = c.get(f"/api/models/{model['id']}/evaluate", params={"campaign_id": good})
     assert ok.status_code == 200 and ok.json()["model"]["ap"]["max"] > 0
 
-    for body in ({"method": "minimax"}, {"method": "ls-sum"}, {"method": "ls-pose"},
-                 {"method": "ls-single:A"}, {"kind": "diagnosis"}):
+    for body in (
+        {"method": "minimax"},
+        {"method": "ls-sum"},
+        {"method": "ls-pose"},
+        {"method": "ls-single:A"},
+        {"kind": "diagnosis"},
+    ):
         job = finished(two_workers, queue(two_workers, bad, **body)["id"], timeout=60)
         assert job["state"] == "failed", job
         assert "NonFinite" in job["reason"] and "beyond" in job["reason"], job
@@ -240,8 +274,11 @@ def test_an_oversized_plan_is_refused_at_once_and_a_bounded_one_plans(one_worker
     assert c.get("/api/campaigns").json() == []  # nothing half-planned was stored
     r = c.post("/api/campaigns", json={"poses": 10, "choose_from": 200, "name": "chosen"})
     assert r.status_code == 202, r.text  # a planning job (tests/server/api/test_planning_jobs.py)
-    job = wait_for(lambda: c.get(r.headers["location"]).json(),
-                   lambda j: j["state"] in ("done", "failed"), timeout=120)
+    job = wait_for(
+        lambda: c.get(r.headers["location"]).json(),
+        lambda j: j["state"] in ("done", "failed"),
+        timeout=120,
+    )
     assert job["state"] == "done", job
     info = c.get(job["campaign_url"]).json()
     assert (info["poses_total"], info["status"]) == (10, "planned")
@@ -251,21 +288,33 @@ def test_workers_die_with_a_killed_service(tmp_path, csv_text):
     """SIGKILL of the service: its job's worker process ends within about a second."""
     settings = settings_for(tmp_path)
     token = ensure_token(settings.token_file)
-    env = {**os.environ, "ROBOCAL_DATABASE": settings.database,
-           "ROBOCAL_DATA_DIR": str(settings.data_dir), "ROBOCAL_PORT": str(settings.port)}
-    service = subprocess.Popen([sys.executable, "-m", "server.cli", "serve"], env=env,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    env = {
+        **os.environ,
+        "ROBOCAL_DATABASE": settings.database,
+        "ROBOCAL_DATA_DIR": str(settings.data_dir),
+        "ROBOCAL_PORT": str(settings.port),
+    }
+    service = subprocess.Popen(
+        [sys.executable, "-m", "robocal.server.cli", "serve"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         url = f"http://127.0.0.1:{settings.port}"
-        with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"},
-                          timeout=30) as c:
+        with httpx.Client(
+            base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=30
+        ) as c:
             wait_for(lambda: _answers(c), bool, timeout=60, interval=0.1)
             cid = c.post("/api/measurements/import", content=csv_text).json()["id"]
             job = c.post("/api/jobs", json={"campaign_id": cid, "kind": "diagnosis"}).json()
-            wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json()["state"],
-                     lambda s: s != "queued", timeout=60, interval=0.02)
-            workers = wait_for(lambda: _grandchildren(service.pid), bool, timeout=10,
-                               interval=0.02)
+            wait_for(
+                lambda: c.get(f"/api/jobs/{job['id']}").json()["state"],
+                lambda s: s != "queued",
+                timeout=60,
+                interval=0.02,
+            )
+            workers = wait_for(lambda: _grandchildren(service.pid), bool, timeout=10, interval=0.02)
         service.kill()
         t0 = time.monotonic()
         wait_for(lambda: all(gone(pid) for pid in workers), bool, timeout=10, interval=0.01)

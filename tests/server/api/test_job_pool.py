@@ -9,11 +9,11 @@ import time
 
 import httpx
 import pytest
+import robocal.server.app
+from robocal.server import store
+from robocal.server.cli import main as robocal
+from robocal.server.job_queue import RESTART_REASON, Jobs
 
-import server.app
-from server import store
-from server.cli import main as robocal
-from server.job_queue import RESTART_REASON, Jobs
 from tests.server.api.conftest import serve, settings_for, wait_for
 
 
@@ -37,7 +37,7 @@ def csv_text(tmp_path_factory):
 def served(tmp_path):
     """A live server whose Jobs is the last of SpiedJobs.made."""
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(server.app, "Jobs", SpiedJobs)
+        mp.setattr(robocal.server.app, "Jobs", SpiedJobs)
         yield from serve(settings_for(tmp_path))
 
 
@@ -53,22 +53,31 @@ def campaign(live, csv_text) -> int:
 
 
 def running_pid(jobs: Jobs, job_id: int) -> int:
-    return wait_for(lambda: jobs.worker_pid(job_id), lambda pid: pid is not None, timeout=60,
-                    interval=0.01)
+    return wait_for(
+        lambda: jobs.worker_pid(job_id), lambda pid: pid is not None, timeout=60, interval=0.01
+    )
 
 
 def finished(live, job_id: int) -> dict:
-    return wait_for(lambda: live.client.get(f"/api/jobs/{job_id}").json(),
-                    lambda j: j["state"] in ("done", "failed"), timeout=60)
+    return wait_for(
+        lambda: live.client.get(f"/api/jobs/{job_id}").json(),
+        lambda j: j["state"] in ("done", "failed"),
+        timeout=60,
+    )
 
 
 def job_events(live, body: dict) -> tuple[int, list[dict]]:
     """Queue a job while reading /api/events; the job's id and its events up to the last."""
     seen, kind = [], None
     # Read on this thread, so that leaving closes the stream at once (the server waits for it).
-    with httpx.Client(base_url=live.url, timeout=httpx.Timeout(30, read=60),
-                      headers={"Authorization": f"Bearer {live.token}"}) as c, \
-            c.stream("GET", "/api/events") as stream:
+    with (
+        httpx.Client(
+            base_url=live.url,
+            timeout=httpx.Timeout(30, read=60),
+            headers={"Authorization": f"Bearer {live.token}"},
+        ) as c,
+        c.stream("GET", "/api/events") as stream,
+    ):
         job_id = live.client.post("/api/jobs", json=body).json()["id"]
         for line in stream.iter_lines():
             if line.startswith("event:"):
@@ -81,11 +90,17 @@ def job_events(live, body: dict) -> tuple[int, list[dict]]:
 
 
 def test_progress_events_arrive_from_the_worker_process(pooled, csv_text):
-    job_id, events = job_events(pooled, {"campaign_id": campaign(pooled, csv_text),
-                                         "method": "ls-sum"})
+    job_id, events = job_events(
+        pooled, {"campaign_id": campaign(pooled, csv_text), "method": "ls-sum"}
+    )
     seen = [(e["state"], e["progress"]) for e in events]
-    assert seen == [("queued", 0.0), ("running", 0.0), ("running", 0.1), ("running", 0.5),
-                    ("done", 1.0)], seen
+    assert seen == [
+        ("queued", 0.0),
+        ("running", 0.0),
+        ("running", 0.1),
+        ("running", 0.5),
+        ("done", 1.0),
+    ], seen
     assert finished(pooled, job_id)["model_url"]
 
 
@@ -106,8 +121,9 @@ def test_stopping_the_service_with_a_running_job_does_not_hang(tmp_path, csv_tex
     live = served(tmp_path)
     client = next(live)
     cid = campaign(client, csv_text)
-    job_id = client.client.post("/api/jobs", json={"campaign_id": cid,
-                                                   "kind": "diagnosis"}).json()["id"]
+    job_id = client.client.post("/api/jobs", json={"campaign_id": cid, "kind": "diagnosis"}).json()[
+        "id"
+    ]
     pid = running_pid(SpiedJobs.made[-1], job_id)
     t0 = time.monotonic()
     with pytest.raises(StopIteration):

@@ -6,8 +6,8 @@ from __future__ import annotations
 import sqlite3
 
 import pytest
+from robocal.drivers.lifecycle import ACTIONS, MOVING, STATES, allowed, next_state
 
-from drivers.lifecycle import ACTIONS, MOVING, STATES, allowed, next_state
 from tests.server.api.conftest import wait_for
 
 PROBLEM = "application/problem+json"
@@ -25,16 +25,20 @@ def force_state(live, cid: int, state: str) -> None:
 
 
 def plan(live, name: str) -> int:
-    r = live.client.post("/api/campaigns", json={"name": name, "poses": 6, "seed": 1,
-                                                 "pause_s": 0.0, "samples": 5})
+    r = live.client.post(
+        "/api/campaigns", json={"name": name, "poses": 6, "seed": 1, "pause_s": 0.0, "samples": 5}
+    )
     assert r.status_code == 201, r.text
     return r.json()["id"]
 
 
 def idle(live, cid):
     """Wait until this service's worker is done with the campaign; its JSON."""
-    return wait_for(lambda: live.client.get(f"/api/campaigns/{cid}").json(),
-                    lambda j: not (j["run"] or {}).get("active"), timeout=120)
+    return wait_for(
+        lambda: live.client.get(f"/api/campaigns/{cid}").json(),
+        lambda j: not (j["run"] or {}).get("active"),
+        timeout=120,
+    )
 
 
 @pytest.mark.parametrize("state", AT_REST)

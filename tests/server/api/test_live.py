@@ -8,9 +8,9 @@ import threading
 import time
 
 import httpx
+from robocal.server import store
+from robocal.server.formats import cell_to_json, default_cell
 
-from server import store
-from server.formats import cell_to_json, default_cell
 from tests.server.api.conftest import serve, settings_for, wait_for
 
 PROBLEM = "application/problem+json"
@@ -22,8 +22,11 @@ class EventReader:
     def __init__(self, url, token):
         self.events: list[tuple[str, dict]] = []
         self.connected = threading.Event()
-        self._client = httpx.Client(base_url=url, timeout=httpx.Timeout(30, read=None),
-                                    headers={"Authorization": f"Bearer {token}"})
+        self._client = httpx.Client(
+            base_url=url,
+            timeout=httpx.Timeout(30, read=None),
+            headers={"Authorization": f"Bearer {token}"},
+        )
         self._thread = threading.Thread(target=self._read, daemon=True)
         self._thread.start()
         assert self.connected.wait(10), "no event stream"
@@ -58,8 +61,11 @@ class EventReader:
 def readings(live, cid):
     """(pose_index, target) of every stored reading, and how many rows each has."""
     con = sqlite3.connect(live.settings.database, timeout=30)
-    rows = con.execute("SELECT pose_index, target, count(*) FROM reading WHERE campaign_id = ? "
-                       "GROUP BY pose_index, target", (cid,)).fetchall()
+    rows = con.execute(
+        "SELECT pose_index, target, count(*) FROM reading WHERE campaign_id = ? "
+        "GROUP BY pose_index, target",
+        (cid,),
+    ).fetchall()
     con.close()
     return {(i, t): n for i, t, n in rows}
 
@@ -113,15 +119,21 @@ def test_pause_resume_estop_reset_resume_completes(live):
         r = c.post(f"/api/campaigns/{cid}/reset")
         assert r.status_code == 200 and r.json()["status"] == "paused", r.text
         assert c.post(f"/api/campaigns/{cid}/resume").status_code == 202
-        done = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
-                        lambda j: j["status"] == "done", timeout=180)
+        done = wait_for(
+            lambda: c.get(f"/api/campaigns/{cid}").json(),
+            lambda j: j["status"] == "done",
+            timeout=180,
+        )
         assert done["poses_done"] == 40 and done["actions"] == []
         after = readings(live, cid)
         assert set(after.values()) == {1}  # none duplicated
         assert set(before) <= set(after)  # none lost
         assert len({i for i, _ in after}) == 40  # every pose measured
-        states = [e["state"] for k, e in reader.events
-                  if k == "campaign.state" and e["campaign_id"] == cid]
+        states = [
+            e["state"]
+            for k, e in reader.events
+            if k == "campaign.state" and e["campaign_id"] == cid
+        ]
         assert states[-1] == "done" and "estopped" in states and "pausing" in states, states
         assert set(states) <= {"running", "pausing", "paused", "estopped", "done"}, states
     finally:
@@ -132,12 +144,14 @@ def test_abort_a_running_campaign_ends_after_the_pose(live):
     c = live.client
     cid = c.post("/api/campaigns", json={"name": "ab", "poses": 40, "seed": 2}).json()["id"]
     c.post(f"/api/campaigns/{cid}/start")
-    wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(), lambda j: j["poses_done"] >= 1,
-             interval=0.02)
+    wait_for(
+        lambda: c.get(f"/api/campaigns/{cid}").json(), lambda j: j["poses_done"] >= 1, interval=0.02
+    )
     r = c.post(f"/api/campaigns/{cid}/abort")
     assert r.status_code == 200 and r.json()["status"] in ("stopping", "aborted"), r.text
-    done = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
-                    lambda j: not (j["run"] or {}).get("active"))
+    done = wait_for(
+        lambda: c.get(f"/api/campaigns/{cid}").json(), lambda j: not (j["run"] or {}).get("active")
+    )
     assert done["status"] == "aborted" and done["actions"] == [], done
     assert done["poses_done"] < 40
 
@@ -145,8 +159,9 @@ def test_abort_a_running_campaign_ends_after_the_pose(live):
 def test_jobs_left_running_fail_when_the_service_starts(tmp_path):
     settings = settings_for(tmp_path)
     db = store.open_database(settings.database)
-    cid = store.create_campaign(db, name="old", cell_json=cell_to_json(default_cell()),
-                                poses_deg=[[0, 0, 0, 0, 30, 0]])
+    cid = store.create_campaign(
+        db, name="old", cell_json=cell_to_json(default_cell()), poses_deg=[[0, 0, 0, 0, 30, 0]]
+    )
     running = store.create_job(db, kind="calibration", campaign_id=cid, method="minimax")
     store.update_job(db, job_id=running.id, state="running", progress=0.5)
     queued = store.create_job(db, kind="diagnosis", campaign_id=cid, method="diagnose")

@@ -2,12 +2,12 @@
 them by pose and target."""
 
 import numpy as np
+from robocal.drivers.cell import VirtualCell
+from robocal.server.bench_screen import displace
+from robocal.server.formats.campaign_csv import write_campaign
+from robocal.server.formats.cell_json import default_cell
 
-from drivers.cell import VirtualCell
-from server.formats.campaign_csv import write_campaign
-from server.formats.cell_json import default_cell
 from tests.server.api.conftest import wait_for
-from server.bench_screen import displace
 
 
 def test_jobs_exclude_and_list_gross_outliers(live, tmp_path):
@@ -18,14 +18,17 @@ def test_jobs_exclude_and_list_gross_outliers(live, tmp_path):
     bad = {(int(meas.pose_ids[p]), meas.target_names[k]) for p, k in np.argwhere(moved)}
     write_campaign(tmp_path / "meas.csv", meas)
     c = live.client
-    r = c.post("/api/measurements/import?name=outliers", content=(tmp_path / "meas.csv").read_text())
+    r = c.post(
+        "/api/measurements/import?name=outliers", content=(tmp_path / "meas.csv").read_text()
+    )
     assert r.status_code == 201, r.text
     cid = r.json()["id"]
 
     def run(**job):
         j = c.post("/api/jobs", json={"campaign_id": cid, **job}).json()
-        j = wait_for(lambda: c.get(f"/api/jobs/{j['id']}").json(),
-                     lambda s: s["state"] in ("done", "failed"))
+        j = wait_for(
+            lambda: c.get(f"/api/jobs/{j['id']}").json(), lambda s: s["state"] in ("done", "failed")
+        )
         assert j["state"] == "done", j
         return j
 

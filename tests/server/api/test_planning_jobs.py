@@ -39,9 +39,11 @@ def test_a_d_optimal_plan_is_a_job_whose_progress_rises_to_a_planned_campaign(ma
 
     t0 = time.perf_counter()
     job = wait_for(poll, lambda j: j["state"] in ENDED, timeout=120, interval=0.02)
-    print(f"planning job {job['state']} in {time.perf_counter() - t0:.2f} s (ran "
-          f"{job['started_at']} .. {job['finished_at']}); progress seen "
-          f"{sorted(set(seen))}")
+    print(
+        f"planning job {job['state']} in {time.perf_counter() - t0:.2f} s (ran "
+        f"{job['started_at']} .. {job['finished_at']}); progress seen "
+        f"{sorted(set(seen))}"
+    )
     assert job["state"] == "done", job
     rising = sorted(p for p in set(seen) if 0 < p < 1)
     assert len(rising) >= 2, seen  # reported along the way, not only at the end
@@ -56,11 +58,13 @@ def test_a_d_optimal_plan_is_a_job_whose_progress_rises_to_a_planned_campaign(ma
     # The same name again: the job fails with the clash, nothing more stored.
     r, _ = post_plan(c, poses=10, choose_from=200, name="chosen")
     assert r.status_code == 202, r.text
-    again = wait_for(lambda: c.get(r.headers["location"]).json(),
-                     lambda j: j["state"] in ENDED, timeout=120)
+    again = wait_for(
+        lambda: c.get(r.headers["location"]).json(), lambda j: j["state"] in ENDED, timeout=120
+    )
     assert again["state"] == "failed" and again["campaign_id"] is None, again
-    assert again["reason"] == (f"Conflict: campaign {cid} is already named 'chosen' and "
-                               "unfinished"), again
+    assert again["reason"] == (
+        f"Conflict: campaign {cid} is already named 'chosen' and unfinished"
+    ), again
     assert [x["id"] for x in c.get("/api/campaigns").json()] == [cid]
 
 
@@ -68,8 +72,12 @@ def test_a_planning_job_is_cancelled_and_stores_nothing(make_live):
     c = make_live(job_workers=1).client
     r, _ = post_plan(c, **BIG)
     job = r.json()
-    wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json()["state"], lambda s: s != "queued",
-             timeout=60, interval=0.01)
+    wait_for(
+        lambda: c.get(f"/api/jobs/{job['id']}").json()["state"],
+        lambda s: s != "queued",
+        timeout=60,
+        interval=0.01,
+    )
     r = c.post(f"/api/jobs/{job['id']}/cancel")
     assert r.status_code == 200, r.text
     assert (r.json()["state"], r.json()["reason"]) == ("failed", "cancelled"), r.json()
@@ -91,8 +99,12 @@ def test_a_planning_job_past_its_wall_clock_limit_fails(make_live):
     # the biggest plan allowed takes most of a second in its worker: far past 0.1 s anywhere
     c = make_live(job_workers=1, job_timeout_s=0.1).client
     job = post_plan(c, **BIG)[0].json()
-    job = wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(),
-                   lambda j: j["state"] in ENDED, timeout=60, interval=0.02)
+    job = wait_for(
+        lambda: c.get(f"/api/jobs/{job['id']}").json(),
+        lambda j: j["state"] in ENDED,
+        timeout=60,
+        interval=0.02,
+    )
     assert (job["state"], job["reason"]) == ("failed", "exceeded its wall-clock limit of 0.1 s")
     assert c.get("/api/campaigns").json() == []
 
@@ -115,7 +127,8 @@ def test_a_planning_job_has_no_charts(make_live):
     for chart in ("table3", "boxplot.png", "errors.png"):
         r = c.get(f"/api/charts/jobs/{job['id']}/{chart}")
         assert r.status_code in (404, 409), r.text  # 409 while it is not done (no model)
-    wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json()["state"], lambda s: s in ENDED,
-             timeout=120)
+    wait_for(
+        lambda: c.get(f"/api/jobs/{job['id']}").json()["state"], lambda s: s in ENDED, timeout=120
+    )
     r = c.get(f"/api/charts/jobs/{job['id']}/table3")
     assert r.status_code == 404 and "no charts" in r.json()["detail"], r.text

@@ -10,14 +10,14 @@ from dataclasses import dataclass
 
 import httpx
 import pytest
+from robocal.drivers.abb.sim import SimulatedController, serve_controller
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.clock import RealClock
+from robocal.drivers.lifecycle import MOVING
+from robocal.drivers.tracker.sim import SimulatedTracker, serve_tracker
+from robocal.drivers.world import SimulatedWorld
+from robocal.server.formats import cell_to_json, default_cell
 
-from drivers.abb.sim import SimulatedController, serve_controller
-from drivers.cell import VirtualCell
-from drivers.lifecycle import MOVING
-from drivers.clock import RealClock
-from drivers.tracker.sim import SimulatedTracker, serve_tracker
-from drivers.world import SimulatedWorld
-from server.formats import cell_to_json, default_cell
 from tests.server.api.conftest import free_port, wait_for
 
 PROBLEM = "application/problem+json"
@@ -63,8 +63,11 @@ def cell_json(devices: Devices, *, tracker_port=None, controller_port=None) -> d
     doc["base"] = devices.cell.base.tolist()  # a good survey: the first poses need no search
     doc["devices"] = {
         "tracker": {"host": "127.0.0.1", "port": tracker_port or devices.tracker_server.port},
-        "controller": {"url": f"socket://127.0.0.1:{controller_port or devices.controller_server.port}",
-                       "timeout_s": 2}}
+        "controller": {
+            "url": f"socket://127.0.0.1:{controller_port or devices.controller_server.port}",
+            "timeout_s": 2,
+        },
+    }
     return doc
 
 
@@ -74,8 +77,11 @@ class FailedEvents:
     def __init__(self, url, count, token):
         self.details: dict[int, str] = {}
         self.count = count
-        self._client = httpx.Client(base_url=url, timeout=httpx.Timeout(30, read=None),
-                                    headers={"Authorization": f"Bearer {token}"})
+        self._client = httpx.Client(
+            base_url=url,
+            timeout=httpx.Timeout(30, read=None),
+            headers={"Authorization": f"Bearer {token}"},
+        )
         self._connected = threading.Event()
         threading.Thread(target=self._read, daemon=True).start()
         assert self._connected.wait(10), "no event stream"
@@ -99,10 +105,12 @@ class FailedEvents:
 
 def finished(c, cid, timeout=90.0) -> dict:
     """The campaign once its run has ended (status and run are read apart: wait for both)."""
-    return wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
-                    lambda j: j["run"] is not None and not j["run"]["active"]
-                    and j["status"] not in MOVING,
-                    timeout=timeout, interval=0.05)
+    return wait_for(
+        lambda: c.get(f"/api/campaigns/{cid}").json(),
+        lambda j: j["run"] is not None and not j["run"]["active"] and j["status"] not in MOVING,
+        timeout=timeout,
+        interval=0.05,
+    )
 
 
 def test_campaign_on_real_devices_survives_a_lost_controller_resumes_and_calibrates(live, devices):
@@ -122,8 +130,12 @@ def test_campaign_on_real_devices_survives_a_lost_controller_resumes_and_calibra
     # The controller drops off the network mid-campaign: the run fails, naming its address.
     t0 = time.monotonic()
     assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
-    wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(), lambda j: j["poses_done"] >= 3,
-             timeout=60, interval=0.05)
+    wait_for(
+        lambda: c.get(f"/api/campaigns/{cid}").json(),
+        lambda j: j["poses_done"] >= 3,
+        timeout=60,
+        interval=0.05,
+    )
     port = devices.controller_server.port
     devices.controller_server.close()
     failed = finished(c, cid)
@@ -149,8 +161,11 @@ def test_campaign_on_real_devices_survives_a_lost_controller_resumes_and_calibra
     assert time.monotonic() - t0 > RUN["poses"] * RUN["pause_s"]
 
     job = c.post("/api/jobs", json={"campaign_id": cid, "method": "ls-sum"}).json()
-    job = wait_for(lambda: c.get(f"/api/jobs/{job['id']}").json(),
-                   lambda j: j["state"] in ("done", "failed"), timeout=60)
+    job = wait_for(
+        lambda: c.get(f"/api/jobs/{job['id']}").json(),
+        lambda j: j["state"] in ("done", "failed"),
+        timeout=60,
+    )
     assert job["state"] == "done", job
     model = c.get(job["model_url"]).json()
     assert model["method"] == "ls-sum" and model["data"]["poses"] == RUN["poses"]
@@ -177,16 +192,23 @@ def test_unreachable_devices_fail_the_campaign_with_their_address(live, devices)
     nobody = free_port()  # nothing listens there: connection refused
     events = FailedEvents(live.url, count=2, token=live.token)
     for where, doc, expect in (
-            ("tracker", cell_json(devices, tracker_port=nobody), f"tracker at 127.0.0.1:{nobody}"),
-            ("controller", cell_json(devices, controller_port=nobody),
-             f"controller at socket://127.0.0.1:{nobody}")):
+        ("tracker", cell_json(devices, tracker_port=nobody), f"tracker at 127.0.0.1:{nobody}"),
+        (
+            "controller",
+            cell_json(devices, controller_port=nobody),
+            f"controller at socket://127.0.0.1:{nobody}",
+        ),
+    ):
         cell_id = c.post("/api/cells", json=doc).json()["id"]
         cid = c.post("/api/campaigns", json={"name": where, "cell_id": cell_id, **RUN}).json()["id"]
         assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
         # nothing moved: the campaign stays planned (start it again), the run says why
-        failed = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(),
-                          lambda j: j["run"] is not None and not j["run"]["active"],
-                          timeout=30, interval=0.05)
+        failed = wait_for(
+            lambda: c.get(f"/api/campaigns/{cid}").json(),
+            lambda j: j["run"] is not None and not j["run"]["active"],
+            timeout=30,
+            interval=0.05,
+        )
         assert failed["status"] == "planned" and "start" in failed["actions"], failed
         assert expect in failed["run"]["detail"] and "does not answer" in failed["run"]["detail"]
         assert failed["poses_done"] == 0 and devices.controller.moves == []
@@ -199,12 +221,15 @@ BAD_DEVICES = (
     (lambda d: d["devices"]["tracker"].update(port=70000), "devices.tracker.port"),
     (lambda d: d["devices"]["tracker"].update(port=50.5), "devices.tracker.port"),
     (lambda d: d["devices"]["tracker"].update(host="10.0.0.5:5000"), "devices.tracker.host"),
-    (lambda d: d["devices"].update(controler=d["devices"].pop("controller")),
-     "devices.controler"),
-    (lambda d: d["devices"]["controller"].update(url="http://10.0.0.6:1025"),
-     "devices.controller.url"),
-    (lambda d: d["devices"]["controller"].update(url="socket://10.0.0.6"),
-     "devices.controller.url"),
+    (lambda d: d["devices"].update(controler=d["devices"].pop("controller")), "devices.controler"),
+    (
+        lambda d: d["devices"]["controller"].update(url="http://10.0.0.6:1025"),
+        "devices.controller.url",
+    ),
+    (
+        lambda d: d["devices"]["controller"].update(url="socket://10.0.0.6"),
+        "devices.controller.url",
+    ),
     (lambda d: d["devices"]["controller"].update(baudrate=0), "devices.controller.baudrate"),
     (lambda d: d.pop("base"), "devices"),
 )
@@ -212,10 +237,15 @@ BAD_DEVICES = (
 
 def test_bad_device_config_is_422_naming_the_field_and_its_line(live):
     for change, field in BAD_DEVICES:
-        doc = {"robot": "irb2600", "targets": {"A": [60, 0, 35]},
-               "base": [[1, 0, 0, 2000], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]],
-               "devices": {"tracker": {"host": "10.0.0.5", "port": 5000},
-                           "controller": {"url": "socket://10.0.0.6:1025"}}}
+        doc = {
+            "robot": "irb2600",
+            "targets": {"A": [60, 0, 35]},
+            "base": [[1, 0, 0, 2000], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]],
+            "devices": {
+                "tracker": {"host": "10.0.0.5", "port": 5000},
+                "controller": {"url": "socket://10.0.0.6:1025"},
+            },
+        }
         change(doc)
         text = json.dumps(doc, indent=1)
         r = live.client.post("/api/cells", content=text)

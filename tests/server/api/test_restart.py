@@ -13,9 +13,24 @@ from tests.server.api.conftest import free_port
 
 
 def start(tmp_path, port):
-    proc = subprocess.Popen([sys.executable, "-m", "server.cli", "serve", "--port", str(port),
-                             "--db", str(tmp_path / "s.db"), "--data-dir", str(tmp_path / "data")],
-                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "robocal.server.cli",
+            "serve",
+            "--port",
+            str(port),
+            "--db",
+            str(tmp_path / "s.db"),
+            "--data-dir",
+            str(tmp_path / "data"),
+        ],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     token, deadline = None, time.monotonic() + 60
     while time.monotonic() < deadline:
         line = proc.stdout.readline()
@@ -59,8 +74,10 @@ def test_kill_dash_nine_mid_campaign_then_resume(tmp_path):
         proc2.wait(timeout=30)
     con = sqlite3.connect(tmp_path / "s.db")
     rows = con.execute("select count(*) from reading").fetchone()[0]
-    dup = con.execute("select count(*) from (select count(*) c from reading group by campaign_id, "
-                      "pose_index, target having c > 1)").fetchone()[0]
+    dup = con.execute(
+        "select count(*) from (select count(*) c from reading group by campaign_id, "
+        "pose_index, target having c > 1)"
+    ).fetchone()[0]
     outcomes = con.execute("select count(*) from pose_outcome").fetchone()[0]
     con.close()
     assert (rows, dup, outcomes) == (450, 0, 150)

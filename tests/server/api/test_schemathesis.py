@@ -9,17 +9,19 @@ import pytest
 import schemathesis
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis.errors import Unsatisfiable
-from schemathesis.specs.openapi import checks
 from schemathesis.core.failures import Failure, FailureGroup
 from schemathesis.generation import GenerationMode
+from schemathesis.specs.openapi import checks
 
 from .conftest import serve, settings_for
 
 # They command motion on the (simulated) cell: a run would move the arm for every generated
 # case that names an existing campaign, and make the test long; their refusals (401, 404, 409,
 # 422) are the same code paths as the other campaign actions', which are tested here.
-MOTION = {("POST", "/api/campaigns/{campaign_id}/start"),
-          ("POST", "/api/campaigns/{campaign_id}/resume")}
+MOTION = {
+    ("POST", "/api/campaigns/{campaign_id}/start"),
+    ("POST", "/api/campaigns/{campaign_id}/resume"),
+}
 # An endless text/event-stream: a client that reads the whole body (as schemathesis does)
 # would wait forever; test_event_stream_is_documented_and_guarded checks it instead.
 STREAMS = {("GET", "/api/events")}
@@ -53,9 +55,14 @@ def test_schemathesis_finds_no_failure(live_schema):
             found = []
             excluded = FILE_CHECKS_EXCLUDED if (op.method.upper(), op.path) in FILES else []
 
-            @settings(max_examples=n, derandomize=True, database=None, deadline=None,
-                      phases=[Phase.explicit, Phase.generate],
-                      suppress_health_check=list(HealthCheck))
+            @settings(
+                max_examples=n,
+                derandomize=True,
+                database=None,
+                deadline=None,
+                phases=[Phase.explicit, Phase.generate],
+                suppress_health_check=list(HealthCheck),
+            )
             @given(case=op.as_strategy(generation_mode=mode))
             def run(case):
                 nonlocal cases
@@ -65,10 +72,12 @@ def test_schemathesis_finds_no_failure(live_schema):
                     case.validate_response(response, headers=auth, excluded_checks=excluded)
                 except (Failure, FailureGroup) as e:
                     errors = getattr(e, "exceptions", [e])
-                    found.append(f"{op.method.upper()} {op.path} [{mode.value}]: "
-                                 f"{'; '.join(sorted({x.title for x in errors}))}: "
-                                 f"{response.status_code} {response.text[:300]!r} "
-                                 f"(query {case.query}, body {str(case.body)[:200]!r})")
+                    found.append(
+                        f"{op.method.upper()} {op.path} [{mode.value}]: "
+                        f"{'; '.join(sorted({x.title for x in errors}))}: "
+                        f"{response.status_code} {response.text[:300]!r} "
+                        f"(query {case.query}, body {str(case.body)[:200]!r})"
+                    )
 
             t0 = time.monotonic()
             try:
@@ -78,12 +87,17 @@ def test_schemathesis_finds_no_failure(live_schema):
                 assert mode is GenerationMode.NEGATIVE
                 continue
             failures.extend(found)
-            print(f"{op.method.upper()} {op.path} [{mode.value}]: {len(found)} failures, "
-                  f"{time.monotonic() - t0:.1f} s", flush=True)
+            print(
+                f"{op.method.upper()} {op.path} [{mode.value}]: {len(found)} failures, "
+                f"{time.monotonic() - t0:.1f} s",
+                flush=True,
+            )
     elapsed = time.monotonic() - started
     unique = sorted(set(failures))
-    print(f"\nschemathesis: {seen_ops} operations, {cases} cases, {len(failures)} failures "
-          f"({len(unique)} distinct) in {elapsed:.1f} s")
+    print(
+        f"\nschemathesis: {seen_ops} operations, {cases} cases, {len(failures)} failures "
+        f"({len(unique)} distinct) in {elapsed:.1f} s"
+    )
     for f in unique:
         print(" ", f)
     assert seen_ops >= 25

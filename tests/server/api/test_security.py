@@ -3,10 +3,9 @@
 import hashlib
 
 import pytest
-
-from server.app import MUTATING, _api_routes, create_app
-from server.security import ensure_token, reads_open, reset_token
-from server.settings import Settings
+from robocal.server.app import MUTATING, _api_routes, create_app
+from robocal.server.security import ensure_token, reads_open, reset_token
+from robocal.server.settings import Settings
 
 from .conftest import serve, settings_for
 
@@ -14,20 +13,28 @@ PROBLEM = "application/problem+json"
 
 
 def mutating_operations(schema):
-    return [(method.upper(), path) for path, ops in schema["paths"].items()
-            for method in ops if method.upper() in MUTATING]
+    return [
+        (method.upper(), path)
+        for path, ops in schema["paths"].items()
+        for method in ops
+        if method.upper() in MUTATING
+    ]
 
 
 def concrete(path):
-    return path.replace("{campaign_id}", "1").replace("{job_id}", "1").replace("{cell_id}",
-                                                                              "default")
+    return (
+        path.replace("{campaign_id}", "1").replace("{job_id}", "1").replace("{cell_id}", "default")
+    )
 
 
 def test_every_mutating_route_answers_401_without_the_token(live):
     schema = live.anonymous.get("/openapi.json").json()
     ops = mutating_operations(schema)
-    app_ops = {(m, r.path) for r in _api_routes(create_app(live.settings).routes)
-               for m in r.methods & MUTATING}
+    app_ops = {
+        (m, r.path)
+        for r in _api_routes(create_app(live.settings).routes)
+        for m in r.methods & MUTATING
+    }
     assert set(ops) == app_ops and len(ops) >= 7  # the schema hides none of the app's routes
     for method, path in ops:
         for headers in ({}, {"Authorization": "Bearer wrong"}, {"Authorization": "Basic eDp5"}):
@@ -83,8 +90,7 @@ def test_open_reads_only_on_a_loopback_host(tmp_path):
 
 def test_an_unguarded_read_route_is_refused_at_build_time(monkeypatch):
     from fastapi import APIRouter
-
-    from server import app as app_module
+    from robocal.server import app as app_module
 
     leak = APIRouter()
 
@@ -113,14 +119,17 @@ def test_token_is_stored_only_as_its_sha256(tmp_path):
 def test_rotated_token_takes_effect_without_restart(live):
     new = reset_token(live.settings.token_file)
     assert live.client.post("/api/campaigns", json={"poses": 5}).status_code == 401
-    r = live.anonymous.post("/api/campaigns", json={"poses": 5},
-                            headers={"Authorization": f"Bearer {new}"})
+    r = live.anonymous.post(
+        "/api/campaigns", json={"poses": 5}, headers={"Authorization": f"Bearer {new}"}
+    )
     assert r.status_code == 201, r.text
 
 
 def test_cors_is_closed_by_default(live):
-    r = live.anonymous.options("/api/campaigns", headers={
-        "Origin": "http://evil.example", "Access-Control-Request-Method": "POST"})
+    r = live.anonymous.options(
+        "/api/campaigns",
+        headers={"Origin": "http://evil.example", "Access-Control-Request-Method": "POST"},
+    )
     assert "access-control-allow-origin" not in r.headers
 
 
@@ -136,9 +145,8 @@ def test_settings_listen_on_loopback_by_default(monkeypatch):
 
 
 def test_an_unguarded_mutating_route_is_refused_at_build(tmp_path, monkeypatch):
+    import robocal.server.app as app_module
     from fastapi import APIRouter
-
-    import server.app as app_module
 
     extra = APIRouter()
     extra.delete("/oops")(lambda: None)

@@ -33,18 +33,32 @@ class Wire:
         def handle_line(line):
             self.lines.append((time.monotonic(), line.strip()))
             return handle(line)
+
         controller.handle_line = handle_line
 
     def first(self, word: str, after: float = 0.0) -> float | None:
-        return next((t for t, line in list(self.lines) if f" {word}" in line and t >= after),
-                    None)
+        return next((t for t, line in list(self.lines) if f" {word}" in line and t >= after), None)
 
 
 def start_service(tmp_path, port):
-    proc = subprocess.Popen([sys.executable, "-m", "server.cli", "serve", "--port", str(port),
-                             "--db", str(tmp_path / "s.db"), "--data-dir",
-                             str(tmp_path / "data")], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "robocal.server.cli",
+            "serve",
+            "--port",
+            str(port),
+            "--db",
+            str(tmp_path / "s.db"),
+            "--data-dir",
+            str(tmp_path / "data"),
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     out: list[str] = []
     token, deadline = None, time.monotonic() + 60
     while time.monotonic() < deadline:
@@ -80,11 +94,13 @@ def test_sigterm_stops_the_arm_before_the_listener_closes(tmp_path, devices):
     try:
         with httpx.Client(headers=auth, timeout=30) as c:
             cell_id = c.post(f"{url}/cells", json=cell_json(devices)).json()["id"]
-            cid = c.post(f"{url}/campaigns", json={"name": "term", "cell_id": cell_id,
-                                                   **SLOW}).json()["id"]
+            cid = c.post(
+                f"{url}/campaigns", json={"name": "term", "cell_id": cell_id, **SLOW}
+            ).json()["id"]
             assert c.post(f"{url}/campaigns/{cid}/start").status_code == 202
-            wait_for(lambda: len(devices.controller.moves), lambda n: n >= 2, timeout=60,
-                     interval=0.01)
+            wait_for(
+                lambda: len(devices.controller.moves), lambda n: n >= 2, timeout=60, interval=0.01
+            )
         # The slow request: an event stream held open, which the drain waits for.
         stream = httpx.Client(headers=auth, timeout=httpx.Timeout(30, read=None))
         opened = threading.Event()
@@ -97,6 +113,7 @@ def test_sigterm_stops_the_arm_before_the_listener_closes(tmp_path, devices):
                         pass
             except httpx.HTTPError:
                 pass
+
         threading.Thread(target=follow, daemon=True).start()
         assert opened.wait(10)
         closed, stop = {}, threading.Event()
@@ -116,9 +133,11 @@ def test_sigterm_stops_the_arm_before_the_listener_closes(tmp_path, devices):
     t_stop = wire.first("STOP", after=t_signal)
     assert t_stop is not None, "no STOP reached the controller"
     assert "t" in closed, "the listener never closed"
-    print(f"\nSIGTERM -> STOP on the wire {1000 * (t_stop - t_signal):.1f} ms, listener closed "
-          f"{1000 * (closed['t'] - t_signal):.1f} ms, process exited "
-          f"{1000 * (t_exit - t_signal):.0f} ms after the signal")
+    print(
+        f"\nSIGTERM -> STOP on the wire {1000 * (t_stop - t_signal):.1f} ms, listener closed "
+        f"{1000 * (closed['t'] - t_signal):.1f} ms, process exited "
+        f"{1000 * (t_exit - t_signal):.0f} ms after the signal"
+    )
     assert t_stop < closed["t"], "the listener closed before the arm was stopped"
     moves_after = [t for t, line in wire.lines if " MOVEJ" in line and t > t_stop]
     assert moves_after == [] and len(devices.controller.moves) == moves_before
@@ -135,13 +154,29 @@ def test_ctrl_c_of_acquire_sends_stop_then_resumes_with_reset(tmp_path, devices)
     wire = Wire(devices.controller)
     cell = tmp_path / "cell.json"
     cell.write_text(json.dumps(cell_json(devices)))
-    args = [sys.executable, "-m", "server.cli", "acquire", "--db", str(tmp_path / "a.db"),
-            "--cell", str(cell), "--name", "cc", "--poses", "8", "--pause", "0.3", "--seed", "2"]
-    proc = subprocess.Popen(args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    args = [
+        sys.executable,
+        "-m",
+        "robocal.server.cli",
+        "acquire",
+        "--db",
+        str(tmp_path / "a.db"),
+        "--cell",
+        str(cell),
+        "--name",
+        "cc",
+        "--poses",
+        "8",
+        "--pause",
+        "0.3",
+        "--seed",
+        "2",
+    ]
+    proc = subprocess.Popen(
+        args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     try:
-        wait_for(lambda: len(devices.controller.moves), lambda n: n >= 2, timeout=60,
-                 interval=0.01)
+        wait_for(lambda: len(devices.controller.moves), lambda n: n >= 2, timeout=60, interval=0.01)
         moves = len(devices.controller.moves)
         t_signal = time.monotonic()
         proc.send_signal(signal.SIGINT)
@@ -165,12 +200,12 @@ def test_ctrl_c_of_acquire_sends_stop_then_resumes_with_reset(tmp_path, devices)
     again = subprocess.run(args, cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert again.returncode == 1 and "e-stopped" in again.stderr, again.stderr
     assert len(again.stderr.strip().splitlines()) == 1
-    done = subprocess.run(args + ["--reset"], cwd=ROOT, capture_output=True, text=True,
-                          timeout=120)
+    done = subprocess.run(args + ["--reset"], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     con = sqlite3.connect(tmp_path / "a.db")
     status = con.execute("SELECT status FROM campaign").fetchone()[0]
-    rows, distinct = con.execute("SELECT count(*), count(DISTINCT pose_index || target) "
-                                 "FROM reading").fetchone()
+    rows, distinct = con.execute(
+        "SELECT count(*), count(DISTINCT pose_index || target) FROM reading"
+    ).fetchone()
     con.close()
     assert status == "done" and rows == distinct == 24 and rows >= before

@@ -6,32 +6,65 @@ import datetime as dt
 
 import numpy as np
 import pytest
+from robocal.server.formats import InputError
+from robocal.server.store import (
+    Conflict,
+    LeaseHeld,
+    NotFound,
+    create_campaign,
+    discard_unfinished_pose,
+    get_campaign,
+    list_campaigns,
+    next_unmeasured_pose,
+    planned_poses,
+    pose_readings,
+    record_missing,
+    record_pose_outcome,
+    record_reading,
+    release_lease,
+    renew_lease,
+    set_status,
+    take_lease,
+)
 from sqlalchemy import text
 from sqlalchemy.exc import IntegrityError
 
-from server.formats import InputError
-from server.store import (Conflict, NotFound, create_campaign, discard_unfinished_pose,
-                          get_campaign, list_campaigns, next_unmeasured_pose, planned_poses,
-                          pose_readings, record_missing, record_pose_outcome, record_reading,
-                          set_status, take_lease, renew_lease, release_lease, LeaseHeld)
-
 from .conftest import POSES_DEG
 
-READING = dict(xyz=[1200.5, -300.25, 845.125], std=[0.002, 0.003, 0.001], samples=25,
-               time_s=12.5, temp_c=20.3, pressure_hpa=1013.2, humidity_pct=41.0)
+READING = dict(
+    xyz=[1200.5, -300.25, 845.125],
+    std=[0.002, 0.003, 0.001],
+    samples=25,
+    time_s=12.5,
+    temp_c=20.3,
+    pressure_hpa=1013.2,
+    humidity_pct=41.0,
+)
 
 
 def measure_pose(db, cid, i, targets=("A", "B", "C")):
     """What an engine does at a pose: each target, then the outcome."""
     for t in targets:
         record_reading(db, campaign_id=cid, pose_index=i, target=t, **READING)
-    record_pose_outcome(db, campaign_id=cid, pose_index=i, state="measured",
-                        reached_deg=POSES_DEG[i % len(POSES_DEG)])
+    record_pose_outcome(
+        db,
+        campaign_id=cid,
+        pose_index=i,
+        state="measured",
+        reached_deg=POSES_DEG[i % len(POSES_DEG)],
+    )
 
 
 def test_create_stores_campaign_and_plan(db, cell_json):
-    cid = create_campaign(db, name=" first ", cell_json=cell_json, poses_deg=POSES_DEG,
-                          settings={"seed": 7, "settle": "adaptive"}, simulated=True, notes="n")
+    cid = create_campaign(
+        db,
+        name=" first ",
+        cell_json=cell_json,
+        poses_deg=POSES_DEG,
+        settings={"seed": 7, "settle": "adaptive"},
+        simulated=True,
+        notes="n",
+    )
     info = get_campaign(db, campaign_id=cid)
     assert (info.name, info.status, info.simulated, info.notes) == ("first", "planned", True, "n")
     assert info.settings == {"seed": 7, "settle": "adaptive"}
@@ -51,11 +84,13 @@ def test_create_refuses_bad_input_and_writes_nothing(db, cell_json):
     with pytest.raises(ValueError, match=r"\(n >= 1, 6\)"):
         create_campaign(db, name="x", cell_json=cell_json, poses_deg=[[0, 0, 0]])
     with pytest.raises(ValueError, match="labels"):
-        create_campaign(db, name="x", cell_json=cell_json, poses_deg=POSES_DEG,
-                        labels=["a", "a", "b"])
+        create_campaign(
+            db, name="x", cell_json=cell_json, poses_deg=POSES_DEG, labels=["a", "a", "b"]
+        )
     with pytest.raises(ValueError, match="settings"):
-        create_campaign(db, name="x", cell_json=cell_json, poses_deg=POSES_DEG,
-                        settings={"pause": float("nan")})
+        create_campaign(
+            db, name="x", cell_json=cell_json, poses_deg=POSES_DEG, settings={"pause": float("nan")}
+        )
     with pytest.raises(InputError):
         create_campaign(db, name="x", cell_json='{"robot": "nope"}', poses_deg=POSES_DEG)
     assert list_campaigns(db) == []
@@ -86,7 +121,7 @@ def test_status_transitions(db, cell_json):
 
 def test_every_lifecycle_state_is_storable(db, cell_json):
     """All nine engine states pass the table's check constraint."""
-    from drivers.lifecycle import STATES
+    from robocal.drivers.lifecycle import STATES
 
     cid = create_campaign(db, name="x", cell_json=cell_json, poses_deg=POSES_DEG[:1])
     with db.session(write=True) as s:
@@ -124,16 +159,29 @@ def test_record_reading_is_idempotent(db, running):
     same = READING | dict(xyz=np.array(READING["xyz"]), samples=np.int64(25))
     assert not record_reading(db, campaign_id=running, pose_index=1, target="A", **same)
     with pytest.raises(Conflict, match="other x"):
-        record_reading(db, campaign_id=running, pose_index=1, target="A",
-                       **READING | dict(xyz=[1200.6, -300.25, 845.125]))
+        record_reading(
+            db,
+            campaign_id=running,
+            pose_index=1,
+            target="A",
+            **READING | dict(xyz=[1200.6, -300.25, 845.125]),
+        )
     with pytest.raises(Conflict, match="temp_c"):
-        record_reading(db, campaign_id=running, pose_index=1, target="A",
-                       **READING | dict(temp_c=float("nan")))
+        record_reading(
+            db, campaign_id=running, pose_index=1, target="A", **READING | dict(temp_c=float("nan"))
+        )
     stored = pose_readings(db, campaign_id=running, pose_index=1)
     assert list(stored) == ["A"]
     a = stored["A"]
     assert (a.xyz, a.std, a.samples, a.time_s, a.temp_c, a.pressure_hpa, a.humidity_pct) == (
-        tuple(READING["xyz"]), tuple(READING["std"]), 25, 12.5, 20.3, 1013.2, 41.0)
+        tuple(READING["xyz"]),
+        tuple(READING["std"]),
+        25,
+        12.5,
+        20.3,
+        1013.2,
+        41.0,
+    )
 
 
 def test_record_reading_refusals(db, running, cell_json):
@@ -144,11 +192,11 @@ def test_record_reading_refusals(db, running, cell_json):
     with pytest.raises(ValueError, match="xyz"):
         record_reading(db, campaign_id=running, pose_index=0, target="A", xyz=[0, np.nan, 0])
     with pytest.raises(ValueError, match="std"):
-        record_reading(db, campaign_id=running, pose_index=0, target="A", xyz=[0, 0, 0],
-                       std=[0, -1, 0])
+        record_reading(
+            db, campaign_id=running, pose_index=0, target="A", xyz=[0, 0, 0], std=[0, -1, 0]
+        )
     with pytest.raises(ValueError, match="samples"):
-        record_reading(db, campaign_id=running, pose_index=0, target="A", xyz=[0, 0, 0],
-                       samples=0)
+        record_reading(db, campaign_id=running, pose_index=0, target="A", xyz=[0, 0, 0], samples=0)
     with pytest.raises(ValueError, match="target"):
         record_reading(db, campaign_id=running, pose_index=0, target="A B", xyz=[0, 0, 0])
     planned = create_campaign(db, name="not started", cell_json=cell_json, poses_deg=POSES_DEG)
@@ -159,8 +207,10 @@ def test_record_reading_refusals(db, running, cell_json):
 
 def test_the_database_itself_refuses_duplicates_and_strays(db, running):
     record_reading(db, campaign_id=running, pose_index=0, target="A", xyz=[1, 2, 3])
-    insert = text("INSERT INTO reading (campaign_id, pose_index, target, status, x, y, z, detail, "
-                  "created_at) VALUES (:c, :p, 'A', 'ok', 1, 2, 3, '', '2025-01-01')")
+    insert = text(
+        "INSERT INTO reading (campaign_id, pose_index, target, status, x, y, z, detail, "
+        "created_at) VALUES (:c, :p, 'A', 'ok', 1, 2, 3, '', '2025-01-01')"
+    )
     with pytest.raises(IntegrityError, match="UNIQUE"):
         with db.session(write=True) as s:
             s.execute(insert, {"c": running, "p": 0})
@@ -176,10 +226,22 @@ def test_outcomes_agree_with_readings(db, running):
     with pytest.raises(Conflict, match="cannot be measured"):
         record_pose_outcome(db, campaign_id=running, pose_index=0, state="measured")
     record_reading(db, campaign_id=running, pose_index=0, target="A", **READING)
-    assert record_missing(db, campaign_id=running, pose_index=0, target="B",
-                          detail="beam break after 3 retries", time_s=14.0)
-    assert not record_missing(db, campaign_id=running, pose_index=0, target="B",
-                              detail="beam break after 3 retries", time_s=14.0)
+    assert record_missing(
+        db,
+        campaign_id=running,
+        pose_index=0,
+        target="B",
+        detail="beam break after 3 retries",
+        time_s=14.0,
+    )
+    assert not record_missing(
+        db,
+        campaign_id=running,
+        pose_index=0,
+        target="B",
+        detail="beam break after 3 retries",
+        time_s=14.0,
+    )
     with pytest.raises(Conflict, match="other status"):
         record_reading(db, campaign_id=running, pose_index=0, target="B", **READING)
     with pytest.raises(Conflict, match="cannot be measured"):
@@ -187,13 +249,25 @@ def test_outcomes_agree_with_readings(db, running):
     with pytest.raises(Conflict, match="cannot be skipped"):
         record_pose_outcome(db, campaign_id=running, pose_index=0, state="skipped")
     with pytest.raises(ValueError, match="reached_deg has 2 joints"):
-        record_pose_outcome(db, campaign_id=running, pose_index=0, state="missing-target",
-                            reached_deg=[0, 0])
-    assert record_pose_outcome(db, campaign_id=running, pose_index=0, state="missing-target",
-                               reached_deg=POSES_DEG[0], detail="B lost")
-    assert not record_pose_outcome(db, campaign_id=running, pose_index=0,
-                                   state="missing-target", reached_deg=POSES_DEG[0],
-                                   detail="B lost")
+        record_pose_outcome(
+            db, campaign_id=running, pose_index=0, state="missing-target", reached_deg=[0, 0]
+        )
+    assert record_pose_outcome(
+        db,
+        campaign_id=running,
+        pose_index=0,
+        state="missing-target",
+        reached_deg=POSES_DEG[0],
+        detail="B lost",
+    )
+    assert not record_pose_outcome(
+        db,
+        campaign_id=running,
+        pose_index=0,
+        state="missing-target",
+        reached_deg=POSES_DEG[0],
+        detail="B lost",
+    )
     with pytest.raises(Conflict, match="already closed"):
         record_pose_outcome(db, campaign_id=running, pose_index=0, state="missing-target")
     with pytest.raises(Conflict, match="other status"):  # C was recorded missing with it
@@ -202,14 +276,25 @@ def test_outcomes_agree_with_readings(db, running):
         record_reading(db, campaign_id=running, pose_index=0, target="D", **READING)
     # a retried call of a reading already stored is still fine after the pose closed
     assert not record_reading(db, campaign_id=running, pose_index=0, target="A", **READING)
-    assert record_pose_outcome(db, campaign_id=running, pose_index=1, state="skipped",
-                               detail="unreachable: collision check")
+    assert record_pose_outcome(
+        db,
+        campaign_id=running,
+        pose_index=1,
+        state="skipped",
+        detail="unreachable: collision check",
+    )
     missing = pose_readings(db, campaign_id=running, pose_index=0)["B"]
-    assert (missing.status, missing.xyz, missing.detail) == ("missing", None,
-                                                             "beam break after 3 retries")
+    assert (missing.status, missing.xyz, missing.detail) == (
+        "missing",
+        None,
+        "beam break after 3 retries",
+    )
     poses = planned_poses(db, campaign_id=running)
     assert [(p.state, p.reached_deg) for p in poses] == [
-        ("missing-target", tuple(POSES_DEG[0])), ("skipped", None), (None, None)]
+        ("missing-target", tuple(POSES_DEG[0])),
+        ("skipped", None),
+        (None, None),
+    ]
 
 
 def test_resume_point(db, cell_json):
@@ -242,18 +327,24 @@ def test_resume_inside_a_pose(db, running):
 def test_outcome_records_the_missing_targets_with_it(db, running):
     record_reading(db, campaign_id=running, pose_index=0, target="B", **READING)
     # by default, the cell's targets (A, B, C) without a reading
-    record_pose_outcome(db, campaign_id=running, pose_index=0, state="missing-target",
-                        detail="beam break after 2 retries")
+    record_pose_outcome(
+        db,
+        campaign_id=running,
+        pose_index=0,
+        state="missing-target",
+        detail="beam break after 2 retries",
+    )
     stored = pose_readings(db, campaign_id=running, pose_index=0)
-    assert {t: r.status for t, r in stored.items()} == {"A": "missing", "B": "ok",
-                                                        "C": "missing"}
+    assert {t: r.status for t, r in stored.items()} == {"A": "missing", "B": "ok", "C": "missing"}
     assert stored["A"].detail == "beam break after 2 retries"
     record_reading(db, campaign_id=running, pose_index=1, target="A", **READING)
     with pytest.raises(Conflict, match="has a reading"):
-        record_pose_outcome(db, campaign_id=running, pose_index=1, state="missing-target",
-                            missing=["A"])
-    record_pose_outcome(db, campaign_id=running, pose_index=1, state="missing-target",
-                        missing=["C"])
+        record_pose_outcome(
+            db, campaign_id=running, pose_index=1, state="missing-target", missing=["A"]
+        )
+    record_pose_outcome(
+        db, campaign_id=running, pose_index=1, state="missing-target", missing=["C"]
+    )
     assert sorted(pose_readings(db, campaign_id=running, pose_index=1)) == ["A", "C"]
 
 

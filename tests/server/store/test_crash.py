@@ -10,10 +10,14 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from robocal.server.store import (
+    campaign_measurements,
+    create_campaign,
+    get_campaign,
+    next_unmeasured_pose,
+    open_database,
+)
 from sqlalchemy import text
-
-from server.store import (campaign_measurements, create_campaign, get_campaign,
-                          next_unmeasured_pose, open_database)
 
 from .crash_writer import TARGETS, beam_broken, fake_reading
 
@@ -24,16 +28,31 @@ KILL_AFTER = 40  # readings reported committed
 
 def writer(path, cid, delay_s, **kwargs):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.Popen([sys.executable, "-m", "tests.server.store.crash_writer", str(path),
-                             str(cid), str(delay_s)], cwd=ROOT, env=env, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kwargs)
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "tests.server.store.crash_writer",
+            str(path),
+            str(cid),
+            str(delay_s),
+        ],
+        cwd=ROOT,
+        env=env,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        **kwargs,
+    )
 
 
 def stored_readings(path) -> list[tuple]:
     con = sqlite3.connect(path)
     try:
-        return con.execute("SELECT pose_index, target, status, x, y, z, std_x, std_y, std_z, "
-                           "samples, time_s, temp_c FROM reading ORDER BY id").fetchall()
+        return con.execute(
+            "SELECT pose_index, target, status, x, y, z, std_x, std_y, std_z, "
+            "samples, time_s, temp_c FROM reading ORDER BY id"
+        ).fetchall()
     finally:
         con.close()
 

@@ -12,11 +12,11 @@ import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
+from robocal.server.store import open_database, record_reading
+from robocal.server.store.db import alembic_config, database_url
+from robocal.server.store.models import Base
 from sqlalchemy import inspect, text
 
-from server.store import open_database, record_reading
-from server.store.db import alembic_config, database_url
-from server.store.models import Base
 from tests.server.store.conftest import POSES_DEG
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -28,15 +28,34 @@ def test_migrations_create_the_schema(tmp_path):
     insp = inspect(db.engine)
     assert set(insp.get_table_names()) == TABLES
     columns = {c["name"] for c in insp.get_columns("reading")}
-    assert {"campaign_id", "pose_index", "target", "x", "y", "z", "std_x", "std_y", "std_z",
-            "samples", "time_s", "temp_c", "pressure_hpa", "humidity_pct", "status"} <= columns
+    assert {
+        "campaign_id",
+        "pose_index",
+        "target",
+        "x",
+        "y",
+        "z",
+        "std_x",
+        "std_y",
+        "std_z",
+        "samples",
+        "time_s",
+        "temp_c",
+        "pressure_hpa",
+        "humidity_pct",
+        "status",
+    } <= columns
     uniques = {tuple(u["column_names"]) for u in insp.get_unique_constraints("reading")}
     assert ("campaign_id", "pose_index", "target") in uniques
     with db.engine.connect() as c:
         assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0004"
         # The migration and the models describe the same schema.
-        assert compare_metadata(MigrationContext.configure(c, opts={"compare_type": True}),
-                                Base.metadata) == []
+        assert (
+            compare_metadata(
+                MigrationContext.configure(c, opts={"compare_type": True}), Base.metadata
+            )
+            == []
+        )
     db.close()
 
 
@@ -112,8 +131,14 @@ def test_migrations_in_code_down_and_up(tmp_path):
 def test_alembic_command_line_with_database_url(tmp_path):
     path = tmp_path / "cli.db"
     env = dict(os.environ, DATABASE_URL=f"sqlite:///{path}")
-    done = subprocess.run([sys.executable, "-m", "alembic", "upgrade", "head"], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-m", "alembic", "upgrade", "head"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 0, done.stderr
     con = sqlite3.connect(path)
     assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0004",)
@@ -125,12 +150,14 @@ def test_two_writers_wait_for_each_other(tmp_path, cell_json):
     """Write transactions take the lock up front, so a second writer waits instead of failing."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from server.store import create_campaign, set_status
+    from robocal.server.store import create_campaign, set_status
 
     path = tmp_path / "store.db"
     with open_database(path) as db:
-        cids = [create_campaign(db, name=f"c{i}", cell_json=cell_json, poses_deg=POSES_DEG)
-                for i in range(2)]
+        cids = [
+            create_campaign(db, name=f"c{i}", cell_json=cell_json, poses_deg=POSES_DEG)
+            for i in range(2)
+        ]
         for cid in cids:
             set_status(db, campaign_id=cid, status="running")
 
@@ -155,8 +182,16 @@ def test_opening_a_new_file_from_many_places_at_once(tmp_path):
     path = tmp_path / "fresh.db"
     code = "import sys; from server.store import open_database; open_database(sys.argv[1])"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    procs = [subprocess.Popen([sys.executable, "-c", code, str(path)], cwd=ROOT, env=env,
-                              stderr=subprocess.PIPE, text=True) for _ in range(3)]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", code, str(path)],
+            cwd=ROOT,
+            env=env,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for _ in range(3)
+    ]
 
     def version(_):
         with open_database(path) as db, db.engine.connect() as c:
@@ -175,9 +210,11 @@ def test_migration_0003_widens_the_status_and_keeps_campaigns(tmp_path):
     config = alembic_config(path)
     command.upgrade(config, "0002")
     con = sqlite3.connect(path)
-    con.execute("INSERT INTO campaign (id, name, created_at, status, cell_json, settings_json, "
-                "simulated, notes) VALUES (1, 'a', '2026-01-01 00:00:00', 'paused', '{}', '{}', "
-                "0, '')")
+    con.execute(
+        "INSERT INTO campaign (id, name, created_at, status, cell_json, settings_json, "
+        "simulated, notes) VALUES (1, 'a', '2026-01-01 00:00:00', 'paused', '{}', '{}', "
+        "0, '')"
+    )
     con.commit()
     with pytest.raises(sqlite3.IntegrityError):
         con.execute("UPDATE campaign SET status = 'estopped'")
@@ -201,11 +238,15 @@ def test_migration_0004_adds_planning_jobs_and_keeps_jobs(tmp_path):
     config = alembic_config(path)
     command.upgrade(config, "0003")
     con = sqlite3.connect(path)
-    con.execute("INSERT INTO campaign (id, name, created_at, status, cell_json, settings_json, "
-                "simulated, notes) VALUES (1, 'a', '2026-01-01 00:00:00', 'done', '{}', '{}', "
-                "0, '')")
-    job = ("INSERT INTO job (kind, campaign_id, method, state, progress, created_at, results) "
-           "VALUES (?, ?, 'm', 'done', 1.0, '2026-01-01 00:00:00', '{}')")
+    con.execute(
+        "INSERT INTO campaign (id, name, created_at, status, cell_json, settings_json, "
+        "simulated, notes) VALUES (1, 'a', '2026-01-01 00:00:00', 'done', '{}', '{}', "
+        "0, '')"
+    )
+    job = (
+        "INSERT INTO job (kind, campaign_id, method, state, progress, created_at, results) "
+        "VALUES (?, ?, 'm', 'done', 1.0, '2026-01-01 00:00:00', '{}')"
+    )
     con.execute(job, ("diagnosis", 1))
     con.commit()
     for kind, campaign in (("planning", None), ("diagnosis", None)):
@@ -219,7 +260,9 @@ def test_migration_0004_adds_planning_jobs_and_keeps_jobs(tmp_path):
     with pytest.raises(sqlite3.IntegrityError):
         con.execute(job, ("survey", 1))
     assert con.execute("SELECT kind, campaign_id FROM job ORDER BY id").fetchall() == [
-        ("diagnosis", 1), ("planning", None)]
+        ("diagnosis", 1),
+        ("planning", None),
+    ]
     con.close()
     command.downgrade(config, "0003")
     con = sqlite3.connect(path)
@@ -228,7 +271,7 @@ def test_migration_0004_adds_planning_jobs_and_keeps_jobs(tmp_path):
 
 
 def test_a_planning_job_has_no_campaign_until_it_planned_one(tmp_path, cell_json):
-    from server import store
+    from robocal.server import store
 
     db = open_database(tmp_path / "store.db")
     job = store.create_job(db, kind="planning", campaign_id=None, method="20 of 2000")
@@ -237,7 +280,8 @@ def test_a_planning_job_has_no_campaign_until_it_planned_one(tmp_path, cell_json
         store.create_job(db, kind="diagnosis", campaign_id=None, method="diagnose")
     cid = store.create_campaign(db, name="p", cell_json=cell_json, poses_deg=POSES_DEG)
     store.update_job(db, job_id=job.id, state="running")
-    done = store.update_job(db, job_id=job.id, state="done", campaign_id=cid,
-                            results={"campaign": cid})
+    done = store.update_job(
+        db, job_id=job.id, state="done", campaign_id=cid, results={"campaign": cid}
+    )
     assert (done.campaign_id, done.results, done.progress) == (cid, {"campaign": cid}, 1.0)
     db.close()

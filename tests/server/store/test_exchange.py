@@ -4,14 +4,25 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from robocal.drivers.cell import VirtualCell
+from robocal.server.formats import InputError, read_campaign, write_campaign
+from robocal.server.store import (
+    StoreError,
+    campaign_measurements,
+    create_campaign,
+    export_csv,
+    get_campaign,
+    import_csv,
+    planned_poses,
+    pose_readings,
+    record_missing,
+    record_pose_outcome,
+    record_reading,
+    set_status,
+)
+from robocal.solver.robot import IRB2600
 from sqlalchemy import text
 
-from drivers.cell import VirtualCell
-from server.formats import InputError, read_campaign, write_campaign
-from server.store import (StoreError, campaign_measurements, create_campaign, export_csv,
-                          get_campaign, import_csv, planned_poses, pose_readings,
-                          record_missing, record_pose_outcome, record_reading, set_status)
-from solver.robot import IRB2600
 from tests.robots import TARGETS
 
 TABLES = ("campaign", "planned_pose", "reading", "pose_outcome")
@@ -27,18 +38,33 @@ def simulated():
 def store_like_an_engine(db, cell_json, meas) -> int:
     """Record a campaign reading by reading, as the campaign engine would."""
     q_deg = np.rad2deg(meas.q)
-    cid = create_campaign(db, name="engine", cell_json=cell_json, poses_deg=q_deg,
-                          settings={"seed": 12}, simulated=True)
+    cid = create_campaign(
+        db,
+        name="engine",
+        cell_json=cell_json,
+        poses_deg=q_deg,
+        settings={"seed": 12},
+        simulated=True,
+    )
     set_status(db, campaign_id=cid, status="running")
     for i in range(meas.n_poses):
         for k, t in enumerate(meas.target_names):
             if meas.mask[i, k]:
-                record_reading(db, campaign_id=cid, pose_index=i, target=t, xyz=meas.xyz[i, k],
-                               std=[0.002] * 3, samples=20, time_s=meas.time_s[i, k],
-                               temp_c=meas.temp_c[i, k])
+                record_reading(
+                    db,
+                    campaign_id=cid,
+                    pose_index=i,
+                    target=t,
+                    xyz=meas.xyz[i, k],
+                    std=[0.002] * 3,
+                    samples=20,
+                    time_s=meas.time_s[i, k],
+                    temp_c=meas.temp_c[i, k],
+                )
             else:
-                record_missing(db, campaign_id=cid, pose_index=i, target=t,
-                               detail="beam break after 3 retries")
+                record_missing(
+                    db, campaign_id=cid, pose_index=i, target=t, detail="beam break after 3 retries"
+                )
         state = "measured" if meas.mask[i].all() else "missing-target"
         record_pose_outcome(db, campaign_id=cid, pose_index=i, state=state, reached_deg=q_deg[i])
     set_status(db, campaign_id=cid, status="done")
@@ -77,8 +103,9 @@ def test_round_trip_export_import(tmp_path, db, cell_json, simulated):
     export_csv(db, campaign_id=cid, path=tmp_path / "meas.csv", robot=IRB2600)
     assert_same(read_campaign(tmp_path / "meas.csv", IRB2600), before, mm=5e-7, deg=5e-10)
 
-    back = import_csv(db, path=tmp_path / "meas.csv", robot=IRB2600, cell_json=cell_json,
-                      name="imported")
+    back = import_csv(
+        db, path=tmp_path / "meas.csv", robot=IRB2600, cell_json=cell_json, name="imported"
+    )
     info = get_campaign(db, campaign_id=back)
     assert (info.status, info.n_done, info.n_poses) == ("done", before.n_poses, before.n_poses)
     assert info.settings == {"source": "csv", "file": "meas.csv"}
@@ -98,16 +125,21 @@ def test_import_records_absent_targets_as_missing(tmp_path, db, cell_json, simul
         assert pose.state == ("measured" if mask.all() else "missing-target")
         readings = pose_readings(db, campaign_id=cid, pose_index=pose.index)
         assert [readings[t].status for t in simulated.target_names] == [
-            "ok" if m else "missing" for m in mask]
+            "ok" if m else "missing" for m in mask
+        ]
 
 
-@pytest.mark.parametrize("bad, match", [
-    ("x", "not a number"),        # a non-numeric coordinate on the last line
-    ("duplicate", "already on line"),
-    ("limits", "outside the limits"),
-])
-def test_bad_csv_import_leaves_the_database_unchanged(tmp_path, db, cell_json, simulated, bad,
-                                                      match):
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        ("x", "not a number"),  # a non-numeric coordinate on the last line
+        ("duplicate", "already on line"),
+        ("limits", "outside the limits"),
+    ],
+)
+def test_bad_csv_import_leaves_the_database_unchanged(
+    tmp_path, db, cell_json, simulated, bad, match
+):
     store_like_an_engine(db, cell_json, simulated)
     write_campaign(tmp_path / "meas.csv", simulated)
     lines = (tmp_path / "meas.csv").read_text().splitlines()
@@ -131,8 +163,9 @@ def test_bad_csv_import_leaves_the_database_unchanged(tmp_path, db, cell_json, s
 def test_bad_cell_or_robot_leaves_the_database_unchanged(tmp_path, db, cell_json, simulated):
     write_campaign(tmp_path / "meas.csv", simulated)
     with pytest.raises(InputError, match="unknown robot"):
-        import_csv(db, path=tmp_path / "meas.csv", cell_json='{"robot": "x", "targets": {}}',
-                   name="bad")
+        import_csv(
+            db, path=tmp_path / "meas.csv", cell_json='{"robot": "x", "targets": {}}', name="bad"
+        )
     with pytest.raises(InputError, match="cannot read"):
         import_csv(db, path=tmp_path / "none.csv", cell_json=cell_json, name="bad")
     assert dump(db) == {t: [] for t in TABLES}

@@ -1,9 +1,17 @@
 """Jobs in the store: created queued, moved along their states, failed when cut off."""
 
 import pytest
+from robocal.server.store import (
+    Conflict,
+    NotFound,
+    create_campaign,
+    create_job,
+    fail_unfinished_jobs,
+    get_job,
+    list_jobs,
+    update_job,
+)
 
-from server.store import (Conflict, NotFound, create_campaign, create_job, fail_unfinished_jobs,
-                          get_job, list_jobs, update_job)
 from tests.server.store.conftest import POSES_DEG
 
 
@@ -48,5 +56,7 @@ def test_unfinished_jobs_fail_with_the_reason(db, cid):
     update_job(db, job_id=done.id, state="done")
     assert fail_unfinished_jobs(db, reason="stopped") == [queued.id, running.id]
     assert {j.id: (j.state, j.reason) for j in list_jobs(db)} == {
-        queued.id: ("failed", "stopped"), running.id: ("failed", "stopped"),
-        done.id: ("done", None)}
+        queued.id: ("failed", "stopped"),
+        running.id: ("failed", "stopped"),
+        done.id: ("done", None),
+    }
