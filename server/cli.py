@@ -115,7 +115,6 @@ def cmd_calibrate(args) -> None:
 def cmd_predict(args) -> None:
     from . import workflow
     from .formats.campaign_csv import read_poses, write_predictions
-    from .tables import console
 
     model = workflow.read_model(args.model)
     pose_ids, q, time_s, temp_c = read_poses(args.poses, model.robot)
@@ -124,7 +123,8 @@ def cmd_predict(args) -> None:
     except workflow.DataError as e:
         raise workflow.DataError(f"{args.poses}: {e}") from None
     write_predictions(args.out, pose_ids, list(model.targets), xyz)
-    console.print(f"predicted {len(pose_ids)} poses x {len(model.targets)} targets to {args.out}")
+    # plain print, not rich's console: rich's import would be a fifth of predict's start
+    print(f"predicted {len(pose_ids)} poses x {len(model.targets)} targets to {args.out}")
 
 
 def cmd_evaluate(args) -> None:
@@ -475,6 +475,10 @@ def cmd_bench(args) -> None:
         from .bench_service import run_service_bench
 
         result = run_service_bench()
+    elif args.what == "startup":
+        from .bench_startup import run_startup_bench
+
+        result = run_startup_bench(repeats=args.repeats)
     elif args.what == "acquire":
         from .bench_acquire import run_acquire_bench
 
@@ -666,7 +670,12 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=cmd_demo)
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
-    b.add_argument("what", choices=("solver", "diagnose", "acquire", "service", "outliers"))
+    b.add_argument(
+        "what", choices=("solver", "diagnose", "acquire", "service", "outliers", "startup")
+    )
+    b.add_argument(
+        "--repeats", type=int, default=7, help="startup: runs of each command (median reported)"
+    )
     b.add_argument(
         "--poses",
         type=int,

@@ -3,18 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from robocal.solver import metrics
-from robocal.solver.calibrate import Calibration, calibrate
-from robocal.solver.diagnose import diagnose as run_diagnosis
 from robocal.solver.effects import Inputs, prepare
 from robocal.solver.extended import predict_extended
 from robocal.solver.finite import require_inputs
-from robocal.solver.fit_errors import calibration_errors
 from robocal.solver.kinematics import Layout, predict
 from robocal.solver.measurements import Measurements
-from robocal.solver.screen import Screening, screen_readings
 
 from .formats.campaign_csv import read_campaign
 from .formats.cell_json import Cell, default_cell, read_cell
@@ -25,6 +21,12 @@ from .formats.model_json import (
     read_model,
     uncertainty_to_json,
 )
+
+# The fit, the screening and the diagnosis pull in scipy (seconds on a busy machine): imported in
+# the functions that run them, so `robocal predict` starts with numpy alone.
+if TYPE_CHECKING:
+    from robocal.solver.calibrate import Calibration
+    from robocal.solver.screen import Screening
 
 PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
 
@@ -85,6 +87,8 @@ def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurement
 
 def screen_campaign(cell: Cell, meas: Measurements) -> Screening:
     """The campaign's gross outliers (solver.screen), judged with the cell's nominal model."""
+    from robocal.solver.screen import screen_readings
+
     targets = np.array([cell.targets[t] for t in meas.target_names])
     return screen_readings(
         cell.robot,
@@ -122,6 +126,8 @@ def run_method(
 ) -> Calibration:
     """One method on the campaign; screening True screens out gross outliers first, False keeps
     every reading, a Screening reuses one already made (compare screens once for all methods)."""
+    from robocal.solver.calibrate import calibrate
+
     if screening is True:
         screening = screen_campaign(cell, meas)
     screening = screening or None
@@ -145,6 +151,9 @@ def run_method(
 
 def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None) -> ModelFile:
     """The self-contained model file of a calibration."""
+    from robocal.solver import metrics
+    from robocal.solver.fit_errors import calibration_errors
+
     screening = cal.details.get("screening")
     used = without_outliers(meas, screening)
     pred = predict(cal.layout, cal.x, meas.q)
@@ -227,6 +236,8 @@ def compare(
 ):
     """Every method on the same data, screened once for gross outliers (unless screen is False):
     calibrations and their accuracy on the readings they used."""
+    from robocal.solver import metrics
+
     screening = screen_campaign(cell, meas) if screen else False
     used = without_outliers(meas, screening or None)
     rows = {}
@@ -242,6 +253,9 @@ def compare(
 
 def evaluate(model: ModelFile, meas: Measurements) -> dict:
     """Accuracy of a model on measured data, next to the nominal model fitted to the same data."""
+    from robocal.solver import metrics
+    from robocal.solver.calibrate import calibrate
+
     unknown = [t for t in meas.target_names if t not in model.targets]
     if unknown:
         raise DataError(
@@ -274,6 +288,8 @@ def _pose_column(a):
 
 def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
+    from robocal.solver.diagnose import diagnose as run_diagnosis
+
     targets = np.array([cell.targets[t] for t in meas.target_names])
     d = run_diagnosis(
         cell.robot,

@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg.blas import dsyrk
 
 from .finite import finite
 from .kinematics import Layout, predict
@@ -242,6 +241,9 @@ class PointNormal:
         A, g = np.zeros((ng, ng)), np.zeros(ng)
         Usum = np.zeros((len(tc), 6, ng))  # per SMR, the sum of U over the poses that measured it
         if self.full.any():
+            # here, not at the top: scipy.linalg costs `robocal predict` (which never fits) its start
+            from scipy.linalg.blas import dsyrk
+
             Uf = U if self.full.all() else U[:, :, self.full]
             C = dsyrk(
                 1.0, finite(Uf.reshape(ng + 1, -1).T, "the twists"), trans=1

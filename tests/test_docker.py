@@ -81,6 +81,13 @@ def test_image_starts_without_uv_run():
     assert "/app/.venv/bin" in env, "the venv's bin is not on the image's PATH"
 
 
+def test_image_runs_the_installed_package_not_the_sources():
+    """The project step installs the wheel's layout into the venv (no editable link to /app)."""
+    steps = [rest for word, rest in instructions() if word == "RUN" and rest.startswith("uv sync")]
+    project = [s for s in steps if "--no-install-project" not in s]
+    assert project and all("--no-editable" in s for s in project), steps
+
+
 def test_lock_is_current_and_installs_for_the_image(tmp_path):
     """`uv sync --frozen` in the image trusts uv.lock blindly: it must match pyproject.toml, and
     the non-dev set must resolve for Python 3.11 on Linux (what the image's two sync steps do)."""

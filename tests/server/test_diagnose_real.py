@@ -1,5 +1,6 @@
-"""Both real campaigns through the command line: joint 2's compliance named with its held-out gain,
-no per-dataset setting."""
+"""Both real campaigns through the command line: exit 0, the report and the model written, joint
+2's compliance named and printed with its held-out gain (the numerics are checked in process in
+tests/solver/test_diagnose_real.py)."""
 
 import json
 
@@ -27,12 +28,6 @@ def test_real_campaign_names_joint_2_compliance(name, tmp_path):
     r = json.loads(report.read_text())
     first = r["effects"][0]
     assert (first["name"], first["joint"]) == ("joint_compliance", 2), out
-    before, after = first["holdout_rmse_before_mm"], first["holdout_rmse_after_mm"]
-    assert after < 0.8 * before
-    lo, hi = first["holdout_gain_interval_mm"]
-    assert 0 < lo <= before - after <= hi
-    assert first["significance"]["p_value"] < 0.005 and first["uncertainty"]
-    for alt in first["alternatives"]:  # named beside it when the data cannot tell them apart
-        assert alt["holdout_rmse_mm"] > after
+    assert json.loads((tmp_path / "model.json").read_text())["extensions"]
     assert "joint_compliance joint 2" in out and "held-out gain" in out and "interval" in out
     assert r["outliers"] == []

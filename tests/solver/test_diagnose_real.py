@@ -1,0 +1,25 @@
+"""Both real campaigns, in process: joint 2's compliance named with its held-out gain, no
+per-dataset setting (tests/server/test_diagnose_real.py runs them through the command line)."""
+
+import pytest
+from robocal.server import workflow
+
+from tests.real import CAMPAIGNS, campaign_files
+from tests.solver.test_diagnose_effects import diagnosed
+
+
+@pytest.mark.parametrize("name", CAMPAIGNS)
+def test_real_campaign_names_joint_2_compliance(name):
+    meas_path, cell_path = campaign_files(name)
+    cell, meas = workflow.load_data(meas_path, cell_path)
+    r = diagnosed(cell, meas).report
+    first = r["effects"][0]
+    assert (first["name"], first["joint"]) == ("joint_compliance", 2), r["effects"]
+    before, after = first["holdout_rmse_before_mm"], first["holdout_rmse_after_mm"]
+    assert after < 0.8 * before
+    lo, hi = first["holdout_gain_interval_mm"]
+    assert 0 < lo <= before - after <= hi
+    assert first["significance"]["p_value"] < 0.005 and first["uncertainty"]
+    for alt in first["alternatives"]:  # named beside it when the data cannot tell them apart
+        assert alt["holdout_rmse_mm"] > after
+    assert r["outliers"] == []
