@@ -106,11 +106,16 @@ def explain(err: dict) -> tuple[tuple, str, bool]:
         return at, f"expected {EXPECTED[kind]}, got {_kind(value)}", False
     if kind == "finite_number":
         return at, f"{value} is not a finite number", False
-    if kind in ("greater_than_equal", "less_than_equal"):
-        lo, hi = ctx.get("ge"), ctx.get("le")
-        if lo == 0:
-            return at, f"{value} is below the minimum 0", False
-        return at, f"{value} is out of range: |value| must be at most {abs(hi or lo):g}", False
+    if kind in ("greater_than_equal", "greater_than"):
+        lo = ctx.get("ge", ctx.get("gt"))
+        if lo < 0:  # the symmetric bounds of limits.py
+            return at, f"{value} is out of range: |value| must be at most {-lo:g}", False
+        if "gt" in ctx:
+            return at, f"{value} must be above {lo:g}", False
+        return at, f"{value} is below the minimum {lo:g}", False
+    if kind in ("less_than_equal", "less_than"):
+        hi = ctx.get("le", ctx.get("lt"))
+        return at, f"{value} is out of range: it must be at most {hi:g}", False
     if kind in ("too_short", "too_long"):
         n = ctx.get("min_length") if kind == "too_short" else ctx.get("max_length")
         most = "at least" if kind == "too_short" else "at most"
