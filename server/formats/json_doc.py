@@ -22,28 +22,32 @@ def field_name(at: tuple) -> str:
 class JsonDoc:
     """Locates values of a parsed JSON document by their path (a tuple of keys and indices)."""
 
-    def __init__(self, path, source_map: dict | None = None):
+    def __init__(self, path, text: str = ""):
         self.path = path
-        self._map = source_map or {}
+        self._text = text
+        self._map: dict | None = None  # built on the first error: it costs 5x the parse
 
     @classmethod
     def parse(cls, path, text: str):
         """(doc, value) for this JSON text; InputError on syntax errors and duplicate keys."""
         if not text.strip():
             raise InputError(path, 1, None, "empty file: expected a JSON object")
+        doc = cls(path, text)
         try:
-            value = json.loads(text)
+            try:
+                value = json.loads(text, object_pairs_hook=_unique)
+            except _DuplicateKey:
+                json.loads(text)  # a syntax error anywhere comes first, as it would alone
+                doc._source_map(text)  # raises the duplicate, located
+                raise InputError(path, None, None, "a key appears twice in one object") from None
         except json.JSONDecodeError as e:
             raise InputError(path, e.lineno, e.colno, f"invalid JSON: {e.msg}") from None
         except RecursionError:
             raise InputError(path, 1, None, "invalid JSON: nested too deeply") from None
-        doc = cls(path)
-        doc._map = doc._source_map(text)
         return doc, value
 
     def _source_map(self, text: str) -> dict:
-        # json.loads silently keeps the last of two equal keys, which hides typos such as a second
-        # "A" meant as "B"; the ordered entry list (internal API, hence the fallback) reveals them.
+        # The ordered entry list (internal API, hence the fallback) says where a duplicate key is.
         try:
             from json_source_map import handle, types
 
@@ -67,6 +71,8 @@ class JsonDoc:
 
     def where(self, at: tuple, key: bool = False) -> tuple[int | None, int | None]:
         """1-based (line, column) of the value at `at` (of its key if `key`), else of its parent."""
+        if self._map is None:
+            self._map = self._source_map(self._text) if self._text else {}
         for n in range(len(at), -1, -1):
             entry = self._map.get("".join(f"/{s}" for s in at[:n]))
             if entry is not None:
@@ -90,6 +96,19 @@ class JsonDoc:
         except ValidationError as e:
             at, message, key = explain(e.errors()[0])
             raise self.error(at, message, key) from None
+
+
+class _DuplicateKey(Exception):
+    pass
+
+
+def _unique(pairs: list) -> dict:
+    # json.loads silently keeps the last of two equal keys, which hides typos such as a second
+    # "A" meant as "B".
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        raise _DuplicateKey
+    return out
 
 
 def explain(err: dict) -> tuple[tuple, str, bool]:

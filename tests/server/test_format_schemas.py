@@ -119,3 +119,15 @@ def test_api_upload_is_validated_by_the_cell_model(tmp_path):
         assert "CellDoc" in schema["components"]["schemas"]
     finally:
         gen.close()
+
+
+def test_a_syntax_error_after_a_duplicate_key_is_the_one_reported():
+    from robocal.server.formats import InputError, parse_cell
+
+    text = '{"robot": "irb2600", "robot": "irb2600",\n "targets": {"A": [1, 2, 3]]}'
+    with pytest.raises(InputError) as e:
+        parse_cell(text, "cell.json")
+    assert (e.value.line, e.value.column) == (2, 28) and "invalid JSON" in e.value.message
+    with pytest.raises(InputError) as e:
+        parse_cell(text.replace("]]", "]}"), "cell.json")
+    assert (e.value.line, e.value.column) == (1, 22) and "duplicate key 'robot'" in e.value.message
