@@ -456,6 +456,12 @@ def cmd_demo(args) -> None:
     )
 
 
+def cmd_schema(args) -> None:
+    # The committed file (tests keep it equal to the model's): no pydantic import to print it.
+    folder = Path(__file__).parent / "formats" / "schema"
+    sys.stdout.write((folder / f"{args.file}.schema.json").read_text(encoding="utf-8"))
+
+
 def cmd_bench(args) -> None:
     if args.what == "diagnose":
         from .bench_diagnose import run_diagnose_bench
@@ -668,6 +674,10 @@ def build_parser() -> argparse.ArgumentParser:
         "see `simulate --help`",
     )
     d.set_defaults(func=cmd_demo)
+
+    sc = sub.add_parser("schema", help="the JSON Schema of cell.json, model.json or report.json")
+    sc.add_argument("file", choices=("cell", "model", "report"))
+    sc.set_defaults(func=cmd_schema)
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
     b.add_argument(

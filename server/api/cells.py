@@ -16,7 +16,8 @@ JSON_BODY = {
         "required": True,
         "content": {
             "application/json": {
-                "schema": {"type": "object", "description": "a cell.json (spec section 2)"}
+                # the model the upload is validated with (CellPublic puts it in the components)
+                "schema": {"$ref": "#/components/schemas/CellDoc"}
             }
         },
     }
@@ -29,16 +30,23 @@ def list_cells(settings: SettingsDep) -> list[str]:
     return ops.list_cells(cells_dir=settings.cells_dir)
 
 
-@router.get("/{cell_id}")
+@router.get("/{cell_id}", response_model_exclude_none=True)
 def get_cell(cell_id: str, settings: SettingsDep) -> CellPublic:
     """One cell as cell.json, and whether it is simulated."""
     return _public(cell_id, ops.load_cell(cells_dir=settings.cells_dir, cell_id=cell_id))
 
 
-@router.post("", status_code=201, dependencies=[Authorized], openapi_extra=JSON_BODY)
+@router.post(
+    "",
+    status_code=201,
+    dependencies=[Authorized],
+    openapi_extra=JSON_BODY,
+    response_model_exclude_none=True,
+)
 async def upload_cell(request: Request, settings: SettingsDep) -> CellPublic:
-    """Validate and keep a cell.json (read raw, so errors name its line and column); a
-    `devices` object makes it a real cell, whose campaigns drive the tracker and controller there."""
+    """Validate a cell.json with the file's own model (CellDoc; read raw, so errors name its line
+    and column) and keep it; a `devices` object makes it a real cell, whose campaigns drive the
+    tracker and controller there."""
     text = (await request.body()).decode("utf-8", errors="replace")
     cell_id, cell = await run_in_threadpool(ops.save_cell, cells_dir=settings.cells_dir, text=text)
     return _public(cell_id, cell)

@@ -17,12 +17,13 @@ METHOD = r"^(minimax|ls-sum|ls-pose|nominal|ls-single(:[A-Za-z][A-Za-z0-9_]{0,15
 
 from robocal.drivers.lifecycle import ACTIONS, STATES
 from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
+from robocal.server.formats.cell_doc import CellDoc
 
 
 class CellPublic(BaseModel):
     id: str
     simulated: bool = Field(description="false when the cell has real `devices`")
-    cell: dict
+    cell: CellDoc = Field(description="the cell.json, every value spelled out")
 
 
 class CampaignCreate(BaseModel):

@@ -1,4 +1,5 @@
-"""Input and output file formats (spec FORMATS.md sections 1, 2, 4), with located input errors."""
+"""Input and output file formats (spec FORMATS.md sections 1 to 5), with located input errors;
+the JSON files are pydantic models (cell_doc, model_doc, report_doc)."""
 
 from .campaign_csv import read_campaign, read_poses, write_campaign, write_predictions
 from .cell_json import (

@@ -1,15 +1,14 @@
-"""A parsed JSON text that can say on which line and column each value sits."""
+"""A parsed JSON text that can say on which line and column each value sits, and validate
+itself against a pydantic model with errors placed there."""
 
 from __future__ import annotations
 
-import difflib
 import json
-import math
 
 import json_source_map
+from pydantic import ValidationError
 
 from .errors import InputError
-from .limits import ANGLE_MAX_DEG, COORD_MAX_MM, NUMBER_MAX, bad_text
 
 
 def field_name(at: tuple) -> str:
@@ -23,28 +22,32 @@ def field_name(at: tuple) -> str:
 class JsonDoc:
     """Locates values of a parsed JSON document by their path (a tuple of keys and indices)."""
 
-    def __init__(self, path, source_map: dict | None = None):
+    def __init__(self, path, text: str = ""):
         self.path = path
-        self._map = source_map or {}
+        self._text = text
+        self._map: dict | None = None  # built on the first error: it costs 5x the parse
 
     @classmethod
     def parse(cls, path, text: str):
         """(doc, value) for this JSON text; InputError on syntax errors and duplicate keys."""
         if not text.strip():
             raise InputError(path, 1, None, "empty file: expected a JSON object")
+        doc = cls(path, text)
         try:
-            value = json.loads(text)
+            try:
+                value = json.loads(text, object_pairs_hook=_unique)
+            except _DuplicateKey:
+                json.loads(text)  # a syntax error anywhere comes first, as it would alone
+                doc._source_map(text)  # raises the duplicate, located
+                raise InputError(path, None, None, "a key appears twice in one object") from None
         except json.JSONDecodeError as e:
             raise InputError(path, e.lineno, e.colno, f"invalid JSON: {e.msg}") from None
         except RecursionError:
             raise InputError(path, 1, None, "invalid JSON: nested too deeply") from None
-        doc = cls(path)
-        doc._map = doc._source_map(text)
         return doc, value
 
     def _source_map(self, text: str) -> dict:
-        # json.loads silently keeps the last of two equal keys, which hides typos such as a second
-        # "A" meant as "B"; the ordered entry list (internal API, hence the fallback) reveals them.
+        # The ordered entry list (internal API, hence the fallback) says where a duplicate key is.
         try:
             from json_source_map import handle, types
 
@@ -68,6 +71,8 @@ class JsonDoc:
 
     def where(self, at: tuple, key: bool = False) -> tuple[int | None, int | None]:
         """1-based (line, column) of the value at `at` (of its key if `key`), else of its parent."""
+        if self._map is None:
+            self._map = self._source_map(self._text) if self._text else {}
         for n in range(len(at), -1, -1):
             entry = self._map.get("".join(f"/{s}" for s in at[:n]))
             if entry is not None:
@@ -84,84 +89,73 @@ class JsonDoc:
         line, column = self.where(at, key)
         return InputError(self.path, line, column, f"{field_name(at)}: {message}")
 
-    # Typed accessors: each returns the value or raises an InputError located at `at`.
-
-    def object(self, value, at: tuple, allowed: tuple | None = None) -> dict:
-        if not isinstance(value, dict):
-            raise self.error(at, f"expected an object {{...}}, got {_kind(value)}")
-        if allowed is not None:
-            for k in value:
-                if k not in allowed:
-                    hint = difflib.get_close_matches(k, allowed, n=1)
-                    extra = (
-                        f"; did you mean {hint[0]!r}?"
-                        if hint
-                        else f" (known: {', '.join(allowed)})"
-                    )
-                    raise self.error((*at, k), f"unknown key {k!r}{extra}", key=True)
-        return value
-
-    def require(self, obj: dict, key: str, at: tuple):
-        if key not in obj:
-            raise self.error(at, f"missing key {key!r}")
-        return obj[key]
-
-    def array(self, value, at: tuple, length: int | None = None) -> list:
-        if not isinstance(value, list):
-            raise self.error(at, f"expected an array [...], got {_kind(value)}")
-        if length is not None and len(value) != length:
-            raise self.error(at, f"expected {length} elements, got {len(value)}")
-        return value
-
-    def number(
-        self,
-        value,
-        at: tuple,
-        minimum: float | None = None,
-        limit: float = NUMBER_MAX,
-        what: str = "",
-    ) -> float:
-        """A finite number with |x| <= limit (`what` says why that limit, e.g. the tracker's
-        range); at least `minimum` if given."""
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.error(at, f"expected a number, got {_kind(value)}")
+    def validate(self, model, value, context: dict | None = None):
+        """`value` as an instance of the pydantic `model`; InputError at the first problem."""
         try:
-            x = float(value)
-        except OverflowError:
-            x = math.inf
-        if not math.isfinite(x):
-            raise self.error(at, f"{value} is not a finite number")
-        if not -limit <= x <= limit:
-            raise self.error(
-                at,
-                f"{value} is out of range: |value| must be at most {limit:g}"
-                f"{' ' + what if what else ''}",
-            )
-        if minimum is not None and x < minimum:
-            raise self.error(at, f"{value} is below the minimum {minimum:g}")
-        return x
+            return model.model_validate(value, context=context)
+        except ValidationError as e:
+            at, message, key = explain(e.errors()[0])
+            raise self.error(at, message, key) from None
 
-    def coordinate(self, value, at: tuple) -> float:
-        """A length or position in mm, within the instrument's range."""
-        return self.number(value, at, limit=COORD_MAX_MM, what="mm (beyond any tracker's range)")
 
-    def angle(self, value, at: tuple) -> float:
-        """An angle in degrees, within three turns."""
-        return self.number(value, at, limit=ANGLE_MAX_DEG, what="deg (three turns)")
+class _DuplicateKey(Exception):
+    pass
 
-    def integer(self, value, at: tuple, lo: int, hi: int) -> int:
-        x = self.number(value, at)
-        if x != int(x) or not lo <= x <= hi:
-            raise self.error(at, f"{value} must be an integer in {lo}..{hi}")
-        return int(x)
 
-    def string(self, value, at: tuple) -> str:
-        if not isinstance(value, str) or not value.strip():
-            raise self.error(at, f"expected a non-empty string, got {_kind(value)}")
-        why = bad_text(value)
-        if why:
-            raise self.error(at, f"the string {why}")
-        return value
+def _unique(pairs: list) -> dict:
+    # json.loads silently keeps the last of two equal keys, which hides typos such as a second
+    # "A" meant as "B".
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        raise _DuplicateKey
+    return out
+
+
+def explain(err: dict) -> tuple[tuple, str, bool]:
+    """(location, message, whether at the key) of one pydantic error, in this project's words."""
+    at = tuple(s for s in err["loc"] if s not in UNION_TAGS)
+    kind, value, ctx = err["type"], err.get("input"), err.get("ctx") or {}
+    if kind == "located":
+        return (*at, *ctx["at"]), ctx["message"], ctx["key"]
+    if kind == "missing":
+        return at[:-1], f"missing key {at[-1]!r}", False
+    if kind == "extra_forbidden":
+        return at, f"unknown key {at[-1]!r}", True
+    if kind in EXPECTED:
+        return at, f"expected {EXPECTED[kind]}, got {_kind(value)}", False
+    if kind == "finite_number":
+        return at, f"{value} is not a finite number", False
+    if kind in ("greater_than_equal", "greater_than"):
+        lo = ctx.get("ge", ctx.get("gt"))
+        if lo < 0:  # the symmetric bounds of limits.py
+            return at, f"{value} is out of range: |value| must be at most {-lo:g}", False
+        if "gt" in ctx:
+            return at, f"{value} must be above {lo:g}", False
+        return at, f"{value} is below the minimum {lo:g}", False
+    if kind in ("less_than_equal", "less_than"):
+        hi = ctx.get("le", ctx.get("lt"))
+        return at, f"{value} is out of range: it must be at most {hi:g}", False
+    if kind in ("too_short", "too_long"):
+        n = ctx.get("min_length") if kind == "too_short" else ctx.get("max_length")
+        most = "at least" if kind == "too_short" else "at most"
+        return at, f"expected {most} {n} elements, got {ctx.get('actual_length')}", False
+    if kind == "literal_error":
+        return at, f"expected {ctx['expected']}, got {_kind(value)}", False
+    return at, err["msg"], False
+
+
+# The tags of tagged unions (robot by name or inline): pydantic puts them in an error's location.
+UNION_TAGS = ("built-in robot", "inline robot")
+EXPECTED = {
+    "float_type": "a number",
+    "int_type": "an integer",
+    "int_from_float": "an integer",
+    "string_type": "a string",
+    "list_type": "an array [...]",
+    "dict_type": "an object {...}",
+    "model_type": "an object {...}",
+    "model_attributes_type": "an object {...}",
+}
 
 
 def _kind(value) -> str:

@@ -12,13 +12,14 @@ import numpy as np
 from robocal.solver.effects import Extension
 from robocal.solver.kinematics import Layout
 from robocal.solver.robot import Robot
-from robocal.solver.vocabulary import KINDS
 
-from .cell_json import TARGET_NAME, robot_from_json, robot_to_json
+from .cell_json import robot_to_json
 from .files import atomic_write_text, read_text
 from .json_doc import JsonDoc
+from .model_doc import SCHEMA, ModelDoc
 
-SCHEMA = 1
+# what ModelFile holds apart from `meta`
+MODEL_KEYS = ("schema", "robot", "nominal_robot", "base", "targets", "extensions")
 
 
 @dataclass
@@ -60,41 +61,6 @@ def extension_to_json(
     return out
 
 
-class _Fields:
-    """Required fields of one extension object, read with errors located in the file."""
-
-    def __init__(self, obj: dict, doc: JsonDoc, at: tuple):
-        self.obj, self.doc, self.at = obj, doc, at
-
-    def error(self, key, message):
-        return self.doc.error((*self.at, key), message)
-
-    def _get(self, key):
-        return self.doc.require(self.obj, key, self.at)
-
-    def number(self, key) -> float:
-        return self.doc.number(self._get(key), (*self.at, key))
-
-    def integer(self, key) -> int:
-        v = self.number(key)
-        if v != int(v):
-            raise self.error(key, f"expected an integer, found {v!r}")
-        return int(v)
-
-    def string(self, key) -> str:
-        return self.doc.string(self._get(key), (*self.at, key))
-
-    def vector(self, key) -> np.ndarray:
-        at = (*self.at, key)
-        return np.array(
-            [
-                self.doc.number(v, (*at, i))
-                for i, v in enumerate(self.doc.array(self._get(key), at))
-            ],
-            dtype=float,
-        )
-
-
 def uncertainty_to_json(errors, names) -> dict:
     """The standard errors of the named parameters of a fit (solver.uncertainty.ParameterErrors)
     as model.json states them (extension coefficients go with their extension)."""
@@ -117,28 +83,6 @@ def extension_errors(errors) -> list[dict]:
         {"coef_standard_errors": c, "uncertainty": u}
         for c, u in zip(errors.coefficients, errors.effects)
     ]
-
-
-def extension_from_json(
-    obj: dict, doc: JsonDoc, at: tuple, n_joints: int | None = None
-) -> Extension:
-    """The inverse of extension_to_json; errors located in the file."""
-    doc.object(obj, at)
-    name = doc.string(doc.require(obj, "name", at), (*at, "name"))
-    if name not in KINDS:
-        raise doc.error((*at, "name"), f"unknown extension {name!r} (known: {', '.join(KINDS)})")
-    read, kind = _Fields(obj, doc, at), KINDS[name]
-    joint = None
-    if kind.is_joint:
-        joint = read.integer("joint") - 1
-        if n_joints is not None and not 0 <= joint < n_joints:
-            raise read.error(
-                "joint", f"joint {joint + 1} is not one of the robot's joints 1 to {n_joints}"
-            )
-    ext = Extension(name, joint=joint, coef=read.vector("coef"), **kind.from_json(read))
-    if len(ext.coef) != ext.n_params:
-        raise doc.error((*at, "coef"), f"expected {ext.n_params} coefficients")
-    return ext
 
 
 def file_digest(path) -> str:
@@ -187,43 +131,8 @@ def write_model(path, model: ModelFile) -> None:
 def read_model(path) -> ModelFile:
     """Read a model file; refuse a malformed one with file:line:column and the field."""
     doc, obj = JsonDoc.parse(path, read_text(path))
-    doc.object(obj, ())
-    if obj.get("schema") != SCHEMA:
-        raise doc.error(("schema",), f"expected schema {SCHEMA}, found {obj.get('schema')!r}")
-    robot = robot_from_json(doc.require(obj, "robot", ()), doc, ("robot",))
-    nominal = None
-    if obj.get("nominal_robot") is not None:
-        nominal = robot_from_json(obj["nominal_robot"], doc, ("nominal_robot",))
-    rows = doc.array(doc.require(obj, "base", ()), ("base",), 4)
-    base = np.array(
-        [
-            [doc.coordinate(v, ("base", i, j)) for j, v in enumerate(doc.array(r, ("base", i), 4))]
-            for i, r in enumerate(rows)
-        ]
-    )
-    targets = {}
-    for k, v in doc.object(doc.require(obj, "targets", ()), ("targets",)).items():
-        at = ("targets", k)
-        if not TARGET_NAME.fullmatch(k):
-            raise doc.error(
-                at,
-                f"target name {k!r} must be a letter followed by up to 15 letters, digits or '_'",
-                key=True,
-            )
-        targets[k] = np.array(
-            [doc.coordinate(c, (*at, i)) for i, c in enumerate(doc.array(v, at, 3))]
-        )
-    if not targets:
-        raise doc.error(("targets",), "at least one target is needed")
-    extensions = [
-        extension_from_json(e, doc, ("extensions", i), robot.n_joints)
-        for i, e in enumerate(doc.array(obj.get("extensions", []), ("extensions",)))
-    ]
-    meta = {
-        k: v
-        for k, v in obj.items()
-        if k not in ("schema", "robot", "nominal_robot", "base", "targets", "extensions")
-    }
+    m = doc.validate(ModelDoc, obj)
+    extensions = [e.extension for e in m.extensions]
     stored = obj.get("extensions", [])
     parameters = [e.get("parameters") for e in stored] if extensions else None
     errors = (
@@ -231,4 +140,13 @@ def read_model(path) -> ModelFile:
         if extensions
         else None
     )
-    return ModelFile(robot, base, targets, nominal, list(extensions), meta, parameters, errors)
+    return ModelFile(
+        m.robot.robot,
+        np.array(m.base, dtype=float),
+        {k: np.array(v, dtype=float) for k, v in m.targets.items()},
+        None if m.nominal_robot is None else m.nominal_robot.robot,
+        extensions,
+        {k: v for k, v in obj.items() if k not in MODEL_KEYS},
+        parameters,
+        errors,
+    )

@@ -206,6 +206,9 @@ def test_demo_runs_the_whole_job(tmp_path):
         assert (out / name).stat().st_size > 0, name
     report = json.loads((out / "report.json").read_text())
     assert report["effects"][0]["name"] == "joint_compliance" and report["effects"][0]["joint"] == 2
+    from robocal.server.formats.report_doc import ReportDoc
+
+    assert ReportDoc.model_validate(report).effects[0].joint == 2  # the report as published
     rerun = Path(sys.executable).parent / "rerun"
     v = subprocess.run(
         [str(rerun), "rrd", "verify", str(out / "calibration.rrd")],

@@ -39,7 +39,14 @@ def test_diagnose_prints_the_unexplained_block(tmp_path):
         env={"COLUMNS": "200", "PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
     )
     assert r.returncode == 0, r.stderr
-    block = json.loads((tmp_path / "report.json").read_text())["unexplained"]
+    report = json.loads((tmp_path / "report.json").read_text())
+    block = report["unexplained"]
+    from robocal.server.formats.report_doc import ReportDoc
+
+    assert (
+        ReportDoc.model_validate(report).unexplained.covariates[0].name
+        == block["covariates"][0]["name"]
+    )
     top = block["covariates"][0]
     assert (top["name"], top["channel"]) == (name, channel)
     lines = r.stdout.splitlines()

@@ -1,0 +1,315 @@
+"""The shape of `cell.json` (spec section 2) as pydantic models, shared by the file and the API."""
+
+from __future__ import annotations
+
+import ipaddress
+import re
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import (
+    ConfigDict,
+    Discriminator,
+    Field,
+    PrivateAttr,
+    Tag,
+    field_validator,
+    model_validator,
+)
+from robocal.solver.robot import BUILTIN, Joint, Robot, detect_parallel
+
+from .fields import (
+    TARGET_NAME_PATTERN,
+    Angle,
+    Coordinate,
+    Doc,
+    Label,
+    Matrix4,
+    NonNegative,
+    Point,
+    located,
+)
+
+TARGET_NAME = re.compile(TARGET_NAME_PATTERN)
+DEFAULT_LIMITS_DEG = (-180.0, 180.0)
+ORTHONORMAL_TOL = 1e-6
+# pyserial URL schemes that reach a controller over the network; other strings are serial ports
+NETWORK_SCHEMES = ("socket", "rfc2217")
+HOST_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9.-]{0,252}")
+SERIAL_PORT = re.compile(r"/dev/[A-Za-z0-9._/-]+|COM[0-9]{1,3}|\\\\\.\\COM[0-9]{1,3}")
+Timeout = Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0.0, le=600.0)]
+
+
+class JointDoc(Doc):
+    """One row of the DH (or modified DH) table: mm and degrees."""
+
+    a: Coordinate
+    d: Coordinate
+    theta: Angle = Field(description="zero offset added to the joint reading, degrees")
+    alpha: Angle
+    limits: Annotated[list[Angle], Field(min_length=2, max_length=2)] = list(DEFAULT_LIMITS_DEG)
+    beta: Angle | None = Field(None, description="Hayati's beta, parallel axes only")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        lo, hi = self.limits
+        if not lo < hi:
+            raise located(f"lower limit {lo:g} must be below upper limit {hi:g}", "limits")
+        return self
+
+    def joint(self) -> Joint:
+        """The solver's joint (radians)."""
+        return Joint(
+            a=self.a,
+            d=self.d,
+            theta=_rad(self.theta),
+            alpha=_rad(self.alpha),
+            limits=(_rad(self.limits[0]), _rad(self.limits[1])),
+            beta=_rad(self.beta or 0.0),
+        )
+
+
+class RobotDoc(Doc):
+    """An inline robot: its convention and joint table."""
+
+    name: Label = "custom"
+    convention: Literal["dh", "mdh"] = Field(
+        description="dh: Rz(theta) Tz(d) Tx(a) Rx(alpha); mdh: Rx(alpha) Tx(a) Rz(theta) Tz(d)"
+    )
+    joints: list[JointDoc] = Field(json_schema_extra={"minItems": 1})
+    _robot: Robot = PrivateAttr()
+
+    @model_validator(mode="after")
+    def _build(self):
+        if not self.joints:
+            raise located("at least one joint is needed", "joints")
+        joints = [j.joint() for j in self.joints]
+        detected = detect_parallel(self.convention, joints)
+        for i, (det, row) in enumerate(zip(detected, self.joints)):
+            # Kinematics only uses beta on parallel axes; elsewhere it would be a dead value.
+            if row.beta is not None and not det:
+                raise located(
+                    f"joint {i + 1} has no parallel neighbour axis, so beta does not apply",
+                    "joints",
+                    i,
+                    "beta",
+                    key=True,
+                )
+        self._robot = Robot(self.name.strip(), self.convention, tuple(joints), detected)
+        return self
+
+    @property
+    def robot(self) -> Robot:
+        return self._robot
+
+
+def builtin_robot(name: str) -> Robot:
+    robot = BUILTIN.get(name.strip().lower())
+    if robot is None:
+        raise located(
+            f"unknown robot {name!r}; built-in robots: {', '.join(sorted(BUILTIN))}, "
+            "or give an inline robot object"
+        )
+    return robot
+
+
+BuiltinName = Annotated[
+    str, Field(strict=True, description=f"a built-in robot: {', '.join(sorted(BUILTIN))}")
+]
+RobotField = Annotated[
+    Annotated[BuiltinName, Tag("built-in robot")] | Annotated[RobotDoc, Tag("inline robot")],
+    Discriminator(lambda v: "built-in robot" if isinstance(v, str) else "inline robot"),
+]
+
+
+class TrackerDoc(Doc):
+    """The tracker's accuracy spec (maximum permissible error); other keys are kept as given."""
+
+    model_config = ConfigDict(extra="allow")
+    mpe_um: NonNegative = 10.0
+    mpe_um_per_m: NonNegative = 2.5
+
+
+class TrackerAddress(Doc):
+    host: Label
+    port: Annotated[int, Field(ge=1, le=65535)]
+    timeout_s: Timeout = 5.0
+
+    @field_validator("host")
+    @classmethod
+    def _host(cls, host: str) -> str:
+        host = host.strip()
+        if not _is_host(host):
+            raise located(f"{host!r} is not a host name or IP address")
+        return host
+
+
+class ControllerAddress(Doc):
+    url: Label = Field(description="socket://host:port, rfc2217://host:port or a serial port")
+    baudrate: Annotated[int, Field(ge=50, le=4_000_000)] = 9600
+    timeout_s: Timeout = 5.0
+
+    @field_validator("url")
+    @classmethod
+    def _url(cls, url: str) -> str:
+        url = url.strip()
+        scheme, sep, rest = url.partition("://")
+        if not sep:
+            if not SERIAL_PORT.fullmatch(url):
+                raise located(
+                    f"{url!r} is neither socket://host:port nor a serial port such "
+                    "as /dev/ttyUSB0 or COM3"
+                )
+            return url
+        if scheme not in NETWORK_SCHEMES:
+            raise located(
+                f"scheme {scheme!r} is not one of "
+                f"{', '.join(s + '://' for s in NETWORK_SCHEMES)} (or a serial port)"
+            )
+        host, colon, port = rest.split("?", 1)[0].rpartition(":")
+        if not colon or not _is_host(host) or not port.isdigit() or not 1 <= int(port) <= 65535:
+            raise located(f"{url!r}: expected {scheme}://host:port with a port in 1..65535")
+        return url
+
+
+class DevicesDoc(Doc):
+    """Real instruments instead of the simulated cell."""
+
+    tracker: TrackerAddress
+    controller: ControllerAddress
+
+
+class CellDoc(Doc):
+    """A cell.json: the robot, its SMR targets (flange frame, mm) and the tracker setup."""
+
+    model_config = ConfigDict(extra="ignore", title="cell.json")
+    robot: RobotField
+    targets: dict[str, Point] = Field(
+        description="nominal SMR positions in the flange frame, mm",
+        json_schema_extra={
+            "minProperties": 1,
+            "propertyNames": {"pattern": f"^{TARGET_NAME_PATTERN}$"},
+        },
+    )
+    base: Matrix4 | None = Field(
+        None, description="4x4 guess of the robot base in the tracker frame"
+    )
+    tracker: TrackerDoc = Field(default_factory=TrackerDoc)
+    payload_kg: NonNegative | None = None
+    devices: DevicesDoc | None = None
+
+    @field_validator("targets")
+    @classmethod
+    def _targets(cls, targets: dict) -> dict:
+        return check_targets(targets)
+
+    @field_validator("base")
+    @classmethod
+    def _base(cls, base):
+        if base is not None:
+            check_transform(np.array(base))
+        return base
+
+    @field_validator("robot")
+    @classmethod
+    def _robot(cls, robot):
+        if isinstance(robot, str):
+            builtin_robot(robot)
+        return robot
+
+    @model_validator(mode="after")
+    def _devices_need(self):
+        if self.devices is None:
+            return self
+        if self.base is None:
+            # Planning and the tracker's first aims need the base: a search covers 10 to 50 mm
+            # around each predicted SMR, not the metres between the tracker and an unknown base.
+            raise located(
+                "a cell with real devices needs a `base` guess (4x4, the robot base in the "
+                "tracker frame, to within about 10 mm)",
+                "devices",
+                key=True,
+            )
+        if isinstance(self.robot, RobotDoc):
+            within_builtin(self.robot.robot)
+        return self
+
+    @property
+    def robot_model(self) -> Robot:
+        """The solver's robot (radians)."""
+        return builtin_robot(self.robot) if isinstance(self.robot, str) else self.robot.robot
+
+
+def check_targets(targets: dict) -> dict:
+    if not targets:
+        raise located("at least one target is needed")
+    for name in targets:
+        if not TARGET_NAME.fullmatch(name):
+            raise located(
+                f"target name {name!r} must be a letter followed by up to 15 letters, "
+                "digits or '_'",
+                name,
+                key=True,
+            )
+    return targets
+
+
+def check_transform(T: np.ndarray) -> None:
+    """A rigid transform: last row [0, 0, 0, 1], orthonormal rotation, no reflection."""
+    if np.max(np.abs(T[3] - [0, 0, 0, 1])) > 1e-9:
+        raise located("the last row of a homogeneous transform must be [0, 0, 0, 1]", 3)
+    R = T[:3, :3]
+    err = np.max(np.abs(R.T @ R - np.eye(3)))
+    if err > ORTHONORMAL_TOL:
+        raise located(
+            f"rotation part is not orthonormal (max |R'R - I| = {err:.3g}, "
+            f"tolerance {ORTHONORMAL_TOL:g})"
+        )
+    if np.linalg.det(R) < 0:
+        raise located("rotation part is a reflection (determinant -1), not a rotation")
+
+
+def builtin_named(name: str) -> Robot | None:
+    """The built-in robot an inline robot's name designates ("IRB 2600", "irb-2600"), if any."""
+    return BUILTIN.get(re.sub(r"[^a-z0-9]", "", name.lower()))
+
+
+def within_builtin(robot: Robot) -> None:
+    """A real arm is never driven beyond its built-in model's limits, whatever the upload says."""
+    model = builtin_named(robot.name)
+    if model is None:
+        return
+    if robot.n_joints != model.n_joints:
+        raise located(
+            f"names the built-in {model.name}, which has "
+            f"{model.n_joints} joints, not {robot.n_joints}",
+            "robot",
+            "joints",
+        )
+    tol = 1e-4  # degrees: the controller protocol's resolution
+    for i, (mine, theirs) in enumerate(zip(robot.joints, model.joints)):
+        lo, hi = np.rad2deg(mine.limits)
+        blo, bhi = np.rad2deg(theirs.limits)
+        if lo < blo - tol or hi > bhi + tol:
+            raise located(
+                f"[{lo:g}, {hi:g}] deg exceeds the built-in {model.name}'s "
+                f"[{blo:g}, {bhi:g}] for joint {i + 1}; a cell with real devices "
+                "may only narrow a built-in robot's limits",
+                "robot",
+                "joints",
+                i,
+                "limits",
+            )
+
+
+def _is_host(host: str) -> bool:
+    """A host name or an IP address (IPv6 in brackets or bare)."""
+    try:
+        ipaddress.ip_address(host[1:-1] if host.startswith("[") and host.endswith("]") else host)
+        return True
+    except ValueError:
+        return bool(HOST_NAME.fullmatch(host))
+
+
+def _rad(deg: float) -> float:
+    return float(np.deg2rad(deg))

@@ -1,0 +1,84 @@
+"""The value types of the JSON files (bounded finite numbers, labels) and their common base."""
+
+from __future__ import annotations
+
+import difflib
+from typing import Annotated, Any
+
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic_core import PydanticCustomError
+
+from .limits import ANGLE_MAX_DEG, COORD_MAX_MM, NUMBER_MAX, bad_text
+
+# Letters like the spec's A, B, C, or short identifiers such as SMR1: they become CSV values
+# and parameter names (A_x), so no spaces or punctuation.
+TARGET_NAME_PATTERN = r"[A-Za-z][A-Za-z0-9_]{0,15}"
+
+
+def located(message: str, *at, key: bool = False) -> PydanticCustomError:
+    """A validation error placed at `at` below the validated value (at its key if `key`)."""
+    return PydanticCustomError("located", "{message}", {"message": message, "at": at, "key": key})
+
+
+def _bounded(limit: float, unit: str = "", minimum: float | None = None):
+    return Annotated[
+        float,
+        Field(
+            strict=True,  # no "12" for 12, no true for 1
+            allow_inf_nan=False,
+            ge=-limit if minimum is None else minimum,
+            le=limit,
+            json_schema_extra={"description": unit} if unit else None,
+        ),
+    ]
+
+
+Number = _bounded(NUMBER_MAX)
+NonNegative = _bounded(NUMBER_MAX, minimum=0.0)
+Coordinate = _bounded(COORD_MAX_MM, "mm")
+Angle = _bounded(ANGLE_MAX_DEG, "degrees")
+
+
+def _whole(value):
+    # A JSON integer, or a float that is one (8080.0); never true or "8080".
+    if isinstance(value, (bool, str)):
+        raise PydanticCustomError("int_type", "Input should be a valid integer")
+    return value
+
+
+Integer = Annotated[int, BeforeValidator(_whole)]
+
+
+def _label(text: str) -> str:
+    if not text.strip():
+        raise PydanticCustomError("label", "expected a non-empty string")
+    why = bad_text(text)
+    if why:
+        raise PydanticCustomError("label", "the string {why}", {"why": why})
+    return text
+
+
+Label = Annotated[str, Field(strict=True), AfterValidator(_label)]
+Point = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
+Row4 = Annotated[list[Coordinate], Field(min_length=4, max_length=4)]
+Matrix4 = Annotated[list[Row4], Field(min_length=4, max_length=4)]
+
+
+class Doc(BaseModel):
+    """An object of a JSON file: unknown keys refused, with the nearest known one suggested."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _known_keys(cls, value: Any) -> Any:
+        if isinstance(value, dict) and cls.model_config.get("extra") == "forbid":
+            known = [f.alias or n for n, f in cls.model_fields.items()]
+            for k in value:
+                if k not in known:
+                    hint = difflib.get_close_matches(str(k), known, n=1)
+                    extra = (
+                        f"; did you mean {hint[0]!r}?" if hint else f" (known: {', '.join(known)})"
+                    )
+                    raise located(f"unknown key {k!r}{extra}", k, key=True)
+        return value

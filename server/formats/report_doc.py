@@ -1,0 +1,73 @@
+"""The shape of `report.json` (spec section 5) as pydantic models; readers ignore unknown keys."""
+
+from __future__ import annotations
+
+from pydantic import ConfigDict, Field
+from robocal.solver.vocabulary import KINDS
+
+from .fields import Doc
+
+
+class Open(Doc):
+    """A report object: what a writer adds beyond the spec's keys is kept."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+class Fit(Open):
+    model: str = Field(description="geometric, then each effect: geometric+joint_compliance(2)")
+    holdout_rmse_mm: float
+    holdout_max_mm: float
+
+
+class Alternative(Open):
+    name: str
+
+
+class Effect(Open):
+    """An effect judged real, with the held-out evidence for it."""
+
+    name: str = Field(json_schema_extra={"enum": list(KINDS)})
+    joint: int | None = Field(None, ge=1, description="joints are numbered from 1")
+    evidence: str = Field(description="one sentence a person can check")
+    holdout_rmse_before_mm: float
+    holdout_rmse_after_mm: float
+    parameters: dict[str, float | list[float] | None]
+    uncertainty: dict[str, float | None] | None = Field(
+        None, description="each parameter's standard error"
+    )
+    holdout_gain_interval_mm: list[float] | None = Field(None, min_length=2, max_length=2)
+    alternatives: list[Alternative] | None = Field(
+        None, description="candidates the data could not tell apart from it"
+    )
+
+
+class Outlier(Open):
+    pose: str | int
+    target: str
+    residual_mm: float
+
+
+class Covariate(Open):
+    name: str
+    strength: float
+    reading: str
+
+
+class Unexplained(Open):
+    holdout_rmse_mm: float
+    share_of_baseline_mse: float
+    covariates: list[Covariate]
+
+
+class ReportDoc(Open):
+    """A report.json: what the diagnosis found, most important effect first."""
+
+    model_config = ConfigDict(title="report.json")
+    schema_: int = Field(1, alias="schema")
+    noise_floor_mm: float
+    baseline: Fit
+    effects: list[Effect] = Field(description="effects judged real, most important first")
+    final: Fit
+    outliers: list[Outlier] | None = Field(None, description="readings excluded as gross errors")
+    unexplained: Unexplained | None = None
