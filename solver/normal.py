@@ -14,6 +14,7 @@ the SMR frame's pose. Arrays are pose-last (..., m) so every step is a long vect
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -183,8 +184,9 @@ class PointNormal:
         M, U = flange_twists(self.layout, x, self.q, self.gcols, start, extra=1, arm=self.arm(x))
         return start, tc, M, U
 
-    def register(self, x) -> Normal:
-        """Move base_ref so that x's prediction best fits the readings (closed form); the normal equations there.
+    def register(self, x) -> tuple[PointNormal, Normal]:
+        """Registered: these normal equations with base_ref moved so that x's prediction best fits
+        the readings (closed form), and their value at x there. Leaves self as it is.
 
         The twists are taken in the SMR frame, so they do not depend on base_ref: one pass down
         the chain serves both the registration and the normal equations.
@@ -195,9 +197,10 @@ class PointNormal:
         T = kabsch(p[:, on].T, self.meas_t[:, on].T)
         M = np.einsum("ij,jkm->ikm", T[:3, :3], M)
         M[:, 3] += T[:3, 3, None]
+        moved = copy.copy(self)  # shares the readings and the arm's frames (base_ref-free)
         lay = self.layout
-        self.layout = Layout(lay.robot, T @ lay.base_ref, lay.target_names)
-        return self._assemble(start, tc, M, U)
+        moved.layout = Layout(lay.robot, T @ lay.base_ref, lay.target_names)
+        return moved, moved._assemble(start, tc, M, U)
 
     def _assemble(self, start, tc, M, U) -> Normal:
         """J'J, J'r and the cost from the SMR frame's poses M and its twists U (see flange_twists).
