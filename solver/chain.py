@@ -34,6 +34,11 @@ def walk(ops, x, q, M: np.ndarray, dq=None, reverse=False) -> Iterator:
             amount += np.asarray(dq, dtype=float).T[[op.joint for op in moving]]
         cos, sin = np.cos(amount), np.sin(amount)
         row = {id(op): i for i, op in enumerate(moving)}
+    # views made once: at a hundred poses slicing per motion costs as much as the arithmetic
+    if reverse:  # rows: Rot @ M
+        lines, shift, ti, tj = [M[i] for i in range(3)], None, t1, t2
+    else:  # columns: M @ Rot
+        lines, shift, ti, tj = [M[:, i] for i in range(3)], M[:, 3], t1[:3], t2[:3]
     for op in reversed(ops) if reverse else ops:
         if reverse:
             yield op
@@ -43,29 +48,24 @@ def walk(ops, x, q, M: np.ndarray, dq=None, reverse=False) -> Iterator:
             if reverse:
                 M[a, 3] += v
             else:
-                np.multiply(M[:, a], v, out=t1[:3])
-                M[:, 3] += t1[:3]
+                np.multiply(lines[a], v, out=ti)
+                shift += ti
         else:
             if op.joint >= 0:
                 c, s = cos[row[id(op)]], sin[row[id(op)]]
             else:
                 c, s = math.cos(xs[op.param]), math.sin(xs[op.param])
             i, j = PAIRS[a]
-            if reverse:  # rows: Rot @ M
-                Mi, Mj, ti, tj = M[i], M[j], t1, t2
-                np.multiply(Mj, s, out=ti)
-                np.multiply(Mi, s, out=tj)
-                Mi *= c
+            Mi, Mj = lines[i], lines[j]
+            np.multiply(Mj, s, out=ti)
+            np.multiply(Mi, s, out=tj)
+            Mi *= c
+            Mj *= c
+            if reverse:
                 Mi -= ti
-                Mj *= c
                 Mj += tj
-            else:  # columns: M @ Rot
-                Mi, Mj, ti, tj = M[:, i], M[:, j], t1[:3], t2[:3]
-                np.multiply(Mj, s, out=ti)
-                np.multiply(Mi, s, out=tj)
-                Mi *= c
+            else:
                 Mi += ti
-                Mj *= c
                 Mj -= tj
         if not reverse:
             yield op

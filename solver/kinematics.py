@@ -159,10 +159,12 @@ def flange_frames(layout: Layout, x, q, dq=None, record=False, frames=None):
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
     M = chain.frames(layout.base_ref, q.shape[0])
-    rec = []
+    rec, cols = [], [M[:, c] for c in range(4)]
     for op in chain.walk(layout.ops(), x, q, M, dq):
         if record:
-            rec.append((op, M[:, op.axis].T.copy(), M[:, 3].T.copy() if op.kind == "r" else None))
+            # plain copies of M's rows, seen pose-first: a transposing copy costs more
+            origin = cols[3].copy().T if op.kind == "r" else None
+            rec.append((op, cols[op.axis].copy().T, origin))
         if frames is not None and op.kind == "r" and op.joint >= 0:
             frames.append(chain.split(M))
     R, o = chain.split(M)
