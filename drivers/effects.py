@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from robocal.solver.kinematics import Layout, flange_frames, translation
+from robocal.solver import chain
+from robocal.solver.kinematics import joint_ops, translation
 from robocal.solver.robot import Robot
 
 G = 9.81  # m/s^2, along -z of the robot base frame (a floor-mounted arm)
@@ -14,23 +15,31 @@ EFFECT_STREAM = 0xEFFEC7  # effects draw from their own stream, so the cell's ge
 
 
 def link_frames(robot: Robot, q):
-    """Per joint in the base frame: axis, a point on it (m, N, 3), its link's frame R (m, N, 3, 3), o."""
+    """Per joint in the base frame: axis, a point on it (m, N, 3), its link's frame R (m, N, 3, 3), o.
+
+    One walk down the arm: a joint's axis and point right after its rotation, its link's frame
+    (the convention's frame J, the flange for J = N) after the last motion of its parameters.
+    """
     q = np.atleast_2d(np.asarray(q, dtype=float))
-    n = robot.n_joints
-    lay = Layout(robot, np.eye(4), ())
-    _, _, rec = flange_frames(lay, lay.initial(np.zeros((0, 3))), q, record=True)
-    axes = np.stack([a for op, a, _ in rec if op.kind == "r" and op.joint >= 0], axis=1)
-    points = np.stack([o for op, _, o in rec if op.kind == "r" and op.joint >= 0], axis=1)
-    R, o = [], []
-    for j in range(
-        1, n + 1
-    ):  # the convention's frame J (the flange for J = N): the arm cut after J
-        sub = Robot(robot.name, robot.convention, robot.joints[:j], robot.parallel[:j])
-        sl = Layout(sub, np.eye(4), ())
-        Rj, oj = flange_frames(sl, sl.initial(np.zeros((0, 3))), q[:, :j])
-        R.append(Rj)
-        o.append(oj)
-    return axes, points, np.stack(R, axis=1), np.stack(o, axis=1)
+    ops = joint_ops(robot)
+    ends = np.cumsum([5 if par else 4 for par in robot.parallel])
+    owner = np.searchsorted(ends, [op.param for op in ops], side="right")
+    M = chain.frames(np.eye(4), q.shape[0])
+    axes, points, R, o = [], [], [], []
+    for k, op in enumerate(chain.walk(ops, robot.param_vector(), q, M)):
+        if op.kind == "r" and op.joint >= 0:
+            axes.append(M[:, op.axis].T.copy())
+            points.append(M[:, 3].T.copy())
+        if k + 1 == len(ops) or owner[k + 1] != owner[k]:
+            Rj, oj = chain.split(M)
+            R.append(Rj)
+            o.append(oj)
+    return (
+        np.stack(axes, axis=1),
+        np.stack(points, axis=1),
+        np.stack(R, axis=1),
+        np.stack(o, axis=1),
+    )
 
 
 class MassModel:

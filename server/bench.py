@@ -134,7 +134,7 @@ def _ours(robot, targets, names, q, xyz, m: int, repeats: int, reference_ls=None
             "calibrate_seconds": cal.seconds,
             "F": cal.F.tolist(),
             "free_parameters": int(len(cal.x) - len(cal.fixed)),
-            "iterations": cal.iterations,
+            "iterations": cal.nit,
         }
         if method == "ls-sum":
             r.update(
@@ -144,19 +144,18 @@ def _ours(robot, targets, names, q, xyz, m: int, repeats: int, reference_ls=None
                 first_of_burst_seconds=cold,
             )
         else:
-            d = cal.details
             r.update(
                 objective=float(cal.F.max()),
-                sqp_seconds=d["sqp_seconds"],
-                qp_iterations=d["qp_iterations"],
-                converged=d["converged"],
-                message=d["message"],
+                sqp_seconds=cal.sqp_seconds,
+                qp_iterations=cal.qp_iterations,
+                converged=cal.success,
+                message=cal.message,
                 max_constraint_violation_mm2=_violation(cal.targets, xyz),
             )
         out[key] = r
         _log(
             f"  ours {key}: {secs * 1000:.1f} ms, objective {r['objective']:.6g} mm^2, "
-            f"{cal.iterations} iterations"
+            f"{cal.nit} iterations"
         )
     return out, ref
 

@@ -99,12 +99,11 @@ def cmd_calibrate(args) -> None:
         + ", ".join(f"F_{k} {v:.4f} mm^2" for k, v in fit["F_mm2"].items())
         + f"; RMSE(phi) {fit['rmse_phi_mm']:.4f} mm; RMS {fit['rmse_mm']:.4f} mm"
     )
-    if "history" in cal.details:
-        d = cal.details
+    if "history" in cal:  # minimax
         console.print(
-            f"SQP ({d['qp']} QP): {cal.iterations} iterations, "
-            f"{d['qp_iterations']} QP iterations, max F_i "
-            f"{d['history'][0]:.5f} -> {d['history'][-1]:.5f} mm^2 ({d['message']})"
+            f"SQP ({cal.qp} QP): {cal.nit} iterations, "
+            f"{cal.qp_iterations} QP iterations, max F_i "
+            f"{cal.history[0]:.5f} -> {cal.history[-1]:.5f} mm^2 ({cal.message})"
         )
     console.print(
         f"model written to {args.out}"
@@ -165,11 +164,10 @@ def cmd_compare(args) -> None:
     _print_screening(next(iter(rows.values()))[0])
     console.print(tables.table3(rows, meas.target_names))
     for label, (cal, _) in rows.items():
-        if "history" in cal.details:
-            d = cal.details
+        if "history" in cal:  # minimax
             console.print(
-                f"{label}: {cal.iterations} SQP iterations, {d['qp_iterations']} QP "
-                f"iterations, {d['sqp_seconds'] * 1000:.1f} ms, final max F_i "
+                f"{label}: {cal.nit} SQP iterations, {cal.qp_iterations} QP "
+                f"iterations, {cal.sqp_seconds * 1000:.1f} ms, final max F_i "
                 f"{cal.F.max():.6f} mm^2"
             )
     worst = {k: max(acc["F"].values()) for k, (_, acc) in rows.items()}
@@ -251,8 +249,8 @@ def _print_outliers(outliers, skipped=None) -> None:
 
 
 def _print_screening(cal) -> None:
-    screening = cal.details.get("screening")
-    _print_outliers(cal.details.get("outliers"), screening.skipped if screening else None)
+    screening = cal.get("screening")
+    _print_outliers(cal.get("outliers"), screening.skipped if screening else None)
 
 
 def _print_diagnosis(report) -> None:

@@ -161,7 +161,7 @@ def record_calibration(
             if np.isfinite(rms[k][i]):
                 rec.log(f"errors/rms/{k}", rr.Scalars(rms[k][i]))
 
-    history = calibration.details.get("history")
+    history = calibration.get("history")
     if history:
         rec.log("solver/max_F", rr.SeriesLines(colors=AFTER, names="max F_i / mm^2"), static=True)
         rec.disable_timeline("pose")

@@ -144,8 +144,8 @@ def run_method(
         qp=qp,
     )
     if screening is not None:
-        cal.details["screening"] = screening
-        cal.details["outliers"] = screening.report(meas.pose_ids, meas.target_names)
+        cal.screening = screening
+        cal.outliers = screening.report(meas.pose_ids, meas.target_names)
     return cal
 
 
@@ -154,7 +154,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     from robocal.solver import metrics
     from robocal.solver.fit_errors import calibration_errors
 
-    screening = cal.details.get("screening")
+    screening = cal.get("screening")
     used = without_outliers(meas, screening)
     pred = predict(cal.layout, cal.x, meas.q)
     acc = metrics.accuracy(pred, used.xyz, meas.target_names)
@@ -168,12 +168,12 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         "ap_max_mm": acc["ap"]["max"],
         "condition_number": cal.condition,
         "fixed_parameters": cal.fixed,
-        "iterations": cal.iterations,
+        "iterations": cal.nit,
         "seconds": round(cal.seconds, 4),
     }
     if screening is not None:  # the readings the fit left out as gross errors, and why
         fit["readings_used"] = used.n_readings
-        fit["excluded_readings"] = cal.details["outliers"]
+        fit["excluded_readings"] = cal.outliers
         fit["screening"] = screening.summary()
     meta = {
         "method": cal.method,
@@ -183,8 +183,8 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
             calibration_errors(cal, meas.q, used.xyz), cal.layout.names()
         ),
     }
-    if "qp" in cal.details:
-        meta["qp"] = cal.details["qp"]
+    if "qp" in cal:  # minimax
+        meta["qp"] = cal.qp
     return ModelFile(
         cal.robot,
         cal.base,

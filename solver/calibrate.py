@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import OptimizeResult
 
 from . import identifiability as ident
 from .finite import require_inputs
@@ -17,19 +17,24 @@ from .robot import Robot
 METHODS = ("minimax", "ls-sum", "ls-single", "ls-pose", "nominal")
 
 
-@dataclass
-class Calibration:
-    """A fitted model and how it was obtained."""
+# An OptimizeResult (a dict with attribute access) rather than a dataclass: every method adds
+# figures of its own (minimax its SQP and QP effort and multipliers, ls-pose its weight), which
+# this carries as attributes without a field per method, lists (`keys()`) and prints with the
+# common ones, and reads as scipy's results do.
+class Calibration(OptimizeResult):
+    """A fitted model and how it was obtained, one type for every method.
 
-    method: str
-    layout: Layout
-    x: np.ndarray
-    fixed: dict[str, str]
-    condition: float
-    F: np.ndarray
-    seconds: float
-    iterations: int
-    details: dict = field(default_factory=dict)
+    Common to all: method, layout, x, cost (the method's objective at x, mm^2), success, status
+    (0 converged, 1 iteration limit, 2 stopped without converging), message, nit, fixed,
+    condition, F (per target, mm^2), seconds. The method's own figures are further attributes:
+    structural_condition and lm (the least-squares stage) for every fit; start (ls-sum,
+    ls-single, minimax); pose_weight_mm_per_rad (ls-pose); worst_target, worst_F, qp,
+    qp_iterations, qp_converged, history, lam, mu, constraints, sqp_seconds, ls_sum_F (minimax).
+    """
+
+    @property
+    def iterations(self) -> int:
+        return self.nit
 
     @property
     def robot(self) -> Robot:
@@ -42,6 +47,18 @@ class Calibration:
     @property
     def targets(self) -> np.ndarray:
         return self.layout.targets(self.x)
+
+
+STATUS = {
+    "converged": 0,
+    "predicted decrease below tolerance": 0,
+    "iteration limit reached": 1,
+}
+
+
+def status_of(message: str) -> int:
+    """The status code of a solver's stop message: 0 converged, 1 iteration limit, 2 other."""
+    return next((code for head, code in STATUS.items() if message.startswith(head)), 2)
 
 
 def parse_method(method: str, target_names) -> tuple[str, list[int]]:
@@ -87,7 +104,18 @@ def calibrate(
         prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
         F = prob.sum_squares(x0)
         return Calibration(
-            method, prob.layout, x0, {}, float("nan"), F, time.perf_counter() - t0, 0
+            method=method,
+            layout=prob.layout,
+            x=x0,
+            cost=float(F.sum()),
+            success=True,
+            status=0,
+            message="nominal model registered: nothing fitted",
+            nit=0,
+            fixed={},
+            condition=float("nan"),
+            F=F,
+            seconds=time.perf_counter() - t0,
         )
     # which parameters the model can identify does not depend on where the base is
     lay = Layout(robot, np.eye(4), tuple(target_names))
@@ -99,7 +127,7 @@ def calibrate(
             candidates[ts + 3 * k : ts + 3 * k + 3] = False
     weight = pose_weight(lay.targets(x0)) if name == "ls-pose" else None
     st = ident.structural(lay, x0, candidates, rows=rows, pose_weight=weight)
-    details: dict = {"structural_condition": st.condition}
+    own: dict = {"structural_condition": st.condition}  # the method's own figures
     if name == "ls-pose":
         prob, x0 = register(robot, targets, target_names, q, meas, base_guess, refine=False)
         lay = prob.layout
@@ -111,7 +139,7 @@ def calibrate(
         )
         x, res = pose_fit(prob, x0, st.free, weight)
         x = fit_targets(prob, x, range(len(target_names)))
-        details["pose_weight_mm_per_rad"] = weight
+        own["pose_weight_mm_per_rad"] = weight
     else:
         fit, first = start_fit(robot, targets, target_names, q, meas, st.free, rows, base_guess)
         prob = fit.prob
@@ -119,27 +147,26 @@ def calibrate(
             first.A, st.free, lay.names(), 3 * int(fit.mask.sum()), prob.q.shape[0]
         )
         x, res = fit.fit(first)
-        details["start"] = fit.start
+        own["start"] = fit.start
         if name == "ls-single":
             x = fit_targets(prob, x, [k for k in range(len(target_names)) if k not in rows])
-    iters = res.iterations
-    details["lm"] = {
+    iters, message = res.iterations, res.message
+    own["lm"] = {
         "iterations": res.iterations,
         "evaluations": res.nfev,
         "jacobians": res.njev,
         "message": res.message,
     }
     if name == "minimax":
-        details["ls_sum_F"] = prob.sum_squares(x).tolist()
+        own["ls_sum_F"] = prob.sum_squares(x).tolist()
         mm = minimax(prob, x, st.free, rows=rows, qp=qp, epsilon=epsilon)
         x = mm.x
-        iters = mm.iterations
-        details.update(
+        iters, message = mm.iterations, mm.message
+        own.update(
             history=mm.history,
             qp=qp,
             qp_iterations=mm.qp_iterations,
-            converged=mm.converged,
-            message=mm.message,
+            qp_converged=mm.qp_unconverged == 0,
             lam=mm.lam.tolist(),
             mu=mm.mu.tolist(),
             constraints=mm.constraints.tolist(),
@@ -147,7 +174,26 @@ def calibrate(
         )
     # ls-sum's last residuals, when the fit kept them, are those of x over every target
     F = fit.per_target(res.r) if name == "ls-sum" and res.r is not None else prob.sum_squares(x)
+    if name == "minimax":
+        worst = rows[int(np.argmax(F[rows]))]
+        cost = float(F[worst])
+        own.update(worst_target=list(target_names)[worst], worst_F=cost)
+    else:  # least squares: ls-pose its own residuals, the others F summed over their targets
+        cost = float(res.cost) if name == "ls-pose" else float(F[rows].sum())
     prob, x = prob.rebased(x)
+    status = status_of(message)
     return Calibration(
-        method, prob.layout, x, st.fixed, cond, F, time.perf_counter() - t0, iters, details
+        method=method,
+        layout=prob.layout,
+        x=x,
+        cost=cost,
+        success=status == 0,
+        status=status,
+        message=message,
+        nit=iters,
+        fixed=st.fixed,
+        condition=cond,
+        F=F,
+        seconds=time.perf_counter() - t0,
+        **own,
     )

@@ -73,7 +73,7 @@ def calibration_errors(cal: Calibration, q, meas) -> ParameterErrors:
         column[free[free < ts]] = np.flatnonzero(free < ts)
     else:
         cols = np.r_[free, smr(others)].astype(int)
-        weight = np.asarray(cal.details["lam"]) if name == "minimax" else None
+        weight = np.asarray(cal.lam) if name == "minimax" else None
         sel = np.zeros(mask.shape[1], dtype=bool)
         sel[rows] = True
         parts = [point_rows(lay, x, q, meas, mask & sel, cols, _in(cols, free), weight)]
@@ -90,7 +90,7 @@ def _pose_stages(cal: Calibration, q, meas, mask, free):
     position from its readings with the arm held. The first stage's SMR entries are its own
     (refitted here, since the second stage replaced them in the calibration)."""
     lay = cal.layout
-    weight = cal.details["pose_weight_mm_per_rad"]
+    weight = cal.pose_weight_mm_per_rad
     prob = Problem(lay, q, meas)
     x1, _ = pose_fit(prob, cal.x, np.isin(np.arange(lay.n_params), free), weight)
     full = np.all(mask, axis=1)

@@ -184,7 +184,10 @@ def start_fit(robot: Robot, targets, names, q, meas, free, rows=None, base_guess
     sub = start_poses(len(q))
     some = sub or slice(None)
     points = PointNormal(lay, q[some], mask[some], meas[some], np.flatnonzero(free))
-    ne = points(x0) if base_guess is not None else points.register(x0)
+    if base_guess is None:
+        points, ne = points.register(x0)
+    else:
+        ne = points(x0)
     prob = Problem(points.layout, q, meas)
     if sub is None:
         return SumOfSquares(prob, x0, free, rows, points=points), ne

@@ -13,6 +13,7 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 
+from . import chain
 from .robot import Robot
 
 AXES = {"x": 0, "y": 1, "z": 2}
@@ -148,48 +149,25 @@ def translation(x: float, y: float, z: float) -> np.ndarray:
     return m
 
 
-def _amounts(op: Op, x: np.ndarray, q: np.ndarray, dq: np.ndarray | None):
-    val = x[op.param]
-    if op.joint >= 0:
-        val = val + q[:, op.joint]
-        if dq is not None:
-            val = val + dq[:, op.joint]
-    return val
-
-
 def flange_frames(layout: Layout, x, q, dq=None, record=False, frames=None):
     """Flange frames in the tracker frame for every pose.
 
     q: (m, n) joint readings in rad; dq: optional (m, n) corrections added to them (model
     extensions). Returns (R (m, 3, 3) with columns as axes, o (m, 3)) and, if record, the
-    per-op (axis, origin) pairs needed for the Jacobian. A `frames` list receives each joint's
-    frame (see joint_frames).
+    per-op (op, axis (m, 3), origin (m, 3) or None for translations) the Jacobian needs.
+    A `frames` list receives each joint's frame (see joint_frames).
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
-    m = q.shape[0]
-    ref = layout.base_ref
-    cols = [np.broadcast_to(ref[:3, c], (m, 3)).copy() for c in range(3)]
-    o = np.broadcast_to(ref[:3, 3], (m, 3)).copy()
-    rec = []
-    for op in layout.ops():
-        v = _amounts(op, x, q, dq)
-        if op.kind == "t":
-            v = np.reshape(v, (-1, 1))
-            o = o + v * cols[op.axis]
-            if record:
-                rec.append((op, cols[op.axis], None))
-        else:
-            c = np.reshape(np.cos(v), (-1, 1))
-            s = np.reshape(np.sin(v), (-1, 1))
-            i, j = [(1, 2), (2, 0), (0, 1)][op.axis]
-            ci, cj = cols[i], cols[j]
-            cols[i] = c * ci + s * cj
-            cols[j] = c * cj - s * ci
-            if record:
-                rec.append((op, cols[op.axis], o))
-            if frames is not None and op.joint >= 0:
-                frames.append((np.stack(cols, axis=-1), o))
-    R = np.stack(cols, axis=-1)
+    M = chain.frames(layout.base_ref, q.shape[0])
+    rec, cols = [], [M[:, c] for c in range(4)]
+    for op in chain.walk(layout.ops(), x, q, M, dq):
+        if record:
+            # plain copies of M's rows, seen pose-first: a transposing copy costs more
+            origin = cols[3].copy().T if op.kind == "r" else None
+            rec.append((op, cols[op.axis].copy().T, origin))
+        if frames is not None and op.kind == "r" and op.joint >= 0:
+            frames.append(chain.split(M))
+    R, o = chain.split(M)
     return (R, o, rec) if record else (R, o)
 
 
@@ -215,34 +193,15 @@ def predict_with_jacobian(layout: Layout, x, q, dq=None):
     """SMR centres (m, K, 3), their Jacobian (m, K, 3, P) and d(point)/d(joint angle) (m, K, 3, n).
 
     The joint-angle derivative lets model extensions that perturb joint angles chain their own
-    parameters onto it.
+    parameters onto it. The same columns as predict_rows, laid out pose-first.
     """
-    R, o, rec = flange_frames(layout, x, q, dq, record=True)
-    t = layout.targets(x)
-    p = np.einsum("mij,kj->mki", R, t) + o[:, None, :]
-    m, K = p.shape[:2]
-    J = np.empty((m, K, 3, layout.n_params))
-    rot = [(op, a, org) for op, a, org in rec if op.kind == "r"]
-    tra = [(op, a) for op, a, _ in rec if op.kind == "t"]
-    if rot:
-        w = np.stack([a for _, a, _ in rot], axis=-1)[:, None, :, :]  # (m, 1, 3, Nr)
-        v = p[..., None] - np.stack([org for _, _, org in rot], axis=-1)[:, None, :, :]
-        cols = np.empty(np.broadcast_shapes(w.shape, v.shape))
-        cols[:, :, 0] = w[:, :, 1] * v[:, :, 2] - w[:, :, 2] * v[:, :, 1]
-        cols[:, :, 1] = w[:, :, 2] * v[:, :, 0] - w[:, :, 0] * v[:, :, 2]
-        cols[:, :, 2] = w[:, :, 0] * v[:, :, 1] - w[:, :, 1] * v[:, :, 0]
-        J[..., [op.param for op, _, _ in rot]] = cols
-    if tra:
-        J[..., [op.param for op, _ in tra]] = np.stack([a for _, a in tra], axis=-1)[:, None]
-    Jq = np.zeros((m, K, 3, layout.robot.n_joints))
-    for op, _, _ in rot:
-        if op.joint >= 0:
-            Jq[..., op.joint] += J[..., op.param]
-    ts = layout.target_slice.start
-    J[..., ts:] = 0.0
-    for k in range(K):
-        J[:, k, :, ts + 3 * k : ts + 3 * k + 3] = R
-    return p, J, Jq
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    m, K, P = q.shape[0], len(layout.target_names), layout.n_params
+    mask = np.ones((m, K), dtype=bool)
+    p, Jt, Jq = predict_rows(layout, x, q, mask, np.arange(P), dq, joint_cols=True)
+    J = np.moveaxis(Jt.reshape(P, m, K, 3), 0, -1)
+    Jq = np.moveaxis(Jq.reshape(len(Jq), m, K, 3), 0, -1)
+    return p.reshape(m, K, 3), J, Jq
 
 
 def predict_rows(layout: Layout, x, q, mask, cols, dq=None, joint_cols=False):

@@ -28,6 +28,7 @@ class MinimaxResult:
     converged: bool
     message: str
     constraints: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    qp_unconverged: int = 0  # SQP iterations whose QP subproblem missed its own optimality test
 
 
 def measured_distances(meas: np.ndarray):
@@ -142,18 +143,26 @@ def minimax(
     H = (2.0 / K) * (Jt @ Jt.T) + 1e-12 * np.eye(n)
     lam, mu = np.full(K, 1.0 / K), np.zeros(len(c))
     history = [float(np.max(F))]
-    qp_iters, converged, message = 0, False, "iteration limit reached"
+    qp_iters, qp_missed, converged, message = 0, 0, False, "iteration limit reached"
     rho = 1.0
     it = 0
     for it in range(1, max_iter + 1):
         phi = float(np.max(F))
         sol = solve(H, g, F, phi, A, c)
         qp_iters += sol.iterations
+        if not sol.converged:
+            qp_missed, missed = qp_missed + 1, sol.message
         rho = max(rho, 2.0 * float(np.max(sol.mu, initial=0.0)) + 1.0)
         merit = _merit(F, c, rho)
         predicted = sol.dphi - rho * float(np.sum(np.maximum(c, 0.0)))
         if -predicted <= tol * max(phi, 1e-300):
-            converged, message = True, "predicted decrease below tolerance"
+            # a stop on the decrease an unsolved subproblem predicts is no proof of optimality
+            converged = sol.converged
+            message = (
+                "predicted decrease below tolerance"
+                if converged
+                else "stopped on the decrease of a QP subproblem not solved to tolerance"
+            )
             lam, mu = sol.lam, sol.mu
             break
         alpha = 1.0
@@ -181,6 +190,19 @@ def minimax(
         if sHs > 0 and sy > 0:
             H = H + np.outer(y, y) / sy - np.outer(Hs, Hs) / sHs
         history.append(float(np.max(F)))
+    if qp_missed:  # the steps still went through the line search, so x is sound; say so
+        message += f"; {qp_missed} QP subproblem(s) not solved to tolerance ({missed})"
     return MinimaxResult(
-        obj.x(z), F, history, it, qp_iters, time.perf_counter() - t0, lam, mu, converged, message, c
+        obj.x(z),
+        F,
+        history,
+        it,
+        qp_iters,
+        time.perf_counter() - t0,
+        lam,
+        mu,
+        converged,
+        message,
+        c,
+        qp_missed,
     )

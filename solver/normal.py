@@ -8,22 +8,24 @@ a pose with all readings present, so J'J = sum_i d_i U_i U_i' over the six twist
 per pose instead of 3K, no 6x6 products, and J itself is never stored. Poses missing a reading
 use their own (full) 6x6 weight.
 
-The twists come from one pass down the chain from the flange to the tracker, which also yields
+The twists come from the one walk down the chain (chain.walk), which also yields
 the SMR frame's pose. Arrays are pose-last (..., m) so every step is a long vector operation.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
 
+from . import chain
 from .finite import finite
 from .kinematics import Layout, predict
 from .lm import Normal
 from .rigid import kabsch
 
-PAIRS = ((1, 2), (2, 0), (0, 1))  # (i1, i2) with e_a = e_i1 x e_i2
+PAIRS = chain.PAIRS  # (i1, i2) with e_a = e_i1 x e_i2
 
 # LEVI[a, b, c]: the sign of the permutation (a, b, c), so (t x r)_a = LEVI[a, b, c] t_b r_c.
 LEVI = np.zeros((3, 3, 3))
@@ -31,49 +33,26 @@ for _a, (_b, _c) in enumerate(PAIRS):
     LEVI[_a, _b, _c], LEVI[_a, _c, _b] = 1.0, -1.0
 
 
-def _pass(ops, x, q, where: dict, M: np.ndarray, U: np.ndarray | None) -> None:
-    """Prepend ops (walked from the last) to the frame M (3, 4, m) in place, recording twists in U.
+def _twists(ops, x, q, where: dict, M: np.ndarray, U: np.ndarray) -> None:
+    """Prepend ops to the frame M (3, 4, m) in place, recording each one's twist in U.
 
-    At a hundred poses every numpy call costs more than its arithmetic, so the joints' sines and
-    cosines are taken in one call each and constant amounts stay Python floats.
+    Walked from the flange, M holds the rest of the chain in the op's frame when the op comes,
+    so its twist in M's own coordinates is read off M's rows.
     """
-    m = M.shape[2]
-    t1, t2 = np.empty((4, m)), np.empty((4, m))
-    xs = np.asarray(x, dtype=float).tolist()
-    moving = [op for op in ops if op.joint >= 0]
-    if moving:
-        amount = (
-            q.T[[op.joint for op in moving]] + np.array([xs[op.param] for op in moving])[:, None]
-        )
-        cos, sin = np.cos(amount), np.sin(amount)
-        row = {id(op): i for i, op in enumerate(moving)}
-    for op in reversed(ops):
-        a = op.axis
-        if U is not None and (j := where.get(op.param, -1)) >= 0:
-            if op.kind == "t":
-                U[j, :3] = M[a, :3]
-                U[j, 3:] = 0.0
-            else:
-                i1, i2 = PAIRS[a]
-                U[j, 3:] = M[a, :3]
-                np.multiply(M[i1, 3], M[i2, :3], out=U[j, :3])
-                np.multiply(M[i2, 3], M[i1, :3], out=t1[:3])
-                U[j, :3] -= t1[:3]
-        if op.kind == "t":
-            M[a, 3] += amount[row[id(op)]] if op.joint >= 0 else xs[op.param]
+    t1 = np.empty((3, M.shape[2]))
+    for op in chain.walk(ops, x, q, M, reverse=True):
+        if (j := where.get(op.param, -1)) < 0:
             continue
-        if op.joint >= 0:
-            c, s = cos[row[id(op)]], sin[row[id(op)]]
+        a = op.axis
+        if op.kind == "t":
+            U[j, :3] = M[a, :3]
+            U[j, 3:] = 0.0
         else:
-            c, s = math.cos(xs[op.param]), math.sin(xs[op.param])
-        i1, i2 = PAIRS[a]
-        M1, M2 = M[i1], M[i2]
-        np.multiply(M2, s, out=t1)
-        np.multiply(M1, s, out=t2)
-        M1 *= c
-        M1 -= t1
-        M2 *= c
-        M2 += t2
+            i1, i2 = PAIRS[a]
+            U[j, 3:] = M[a, :3]
+            np.multiply(M[i1, 3], M[i2, :3], out=U[j, :3])
+            np.multiply(M[i2, 3], M[i1, :3], out=t1)
+            U[j, :3] -= t1
 
 
 def flange_twists(layout: Layout, x, q, cols, start: np.ndarray, extra: int = 0, arm=None):
@@ -91,13 +70,12 @@ def flange_twists(layout: Layout, x, q, cols, start: np.ndarray, extra: int = 0,
     U = np.empty((len(where) + extra, 6, m))
     ops = layout.ops()
     if arm is None:
-        M = np.empty((3, 4, m))
-        M[:] = start[:, :, None]
-        _pass(ops[6:], x, q, where, M, U)
+        M = chain.frames(start, m)
+        _twists(ops[6:], x, q, where, M, U)
     else:
         M = np.einsum("ijm,jk->ikm", arm[:, :3], start)
         M[:, 3] += arm[:, 3]
-    _pass(ops[:6], x, q, where, M, U)
+    _twists(ops[:6], x, q, where, M, U)
     ref = layout.base_ref
     M = np.einsum("ij,jkm->ikm", ref[:3, :3], M)
     M[:, 3] += ref[:3, 3, None]
@@ -107,10 +85,9 @@ def flange_twists(layout: Layout, x, q, cols, start: np.ndarray, extra: int = 0,
 def arm_frames(layout: Layout, x, q) -> np.ndarray:
     """The flange in the base_ref frame for every pose, (3, 4, m): the chain without the base."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
-    M = np.zeros((3, 4, q.shape[0]))
-    for i in range(3):
-        M[i, i] = 1.0
-    _pass(layout.ops()[6:], x, q, {}, M, None)
+    M = chain.frames(np.eye(4), q.shape[0])
+    for _ in chain.walk(layout.ops()[6:], x, q, M, reverse=True):
+        pass
     return M
 
 
@@ -206,8 +183,9 @@ class PointNormal:
         M, U = flange_twists(self.layout, x, self.q, self.gcols, start, extra=1, arm=self.arm(x))
         return start, tc, M, U
 
-    def register(self, x) -> Normal:
-        """Move base_ref so that x's prediction best fits the readings (closed form); the normal equations there.
+    def register(self, x) -> tuple[PointNormal, Normal]:
+        """Registered: these normal equations with base_ref moved so that x's prediction best fits
+        the readings (closed form), and their value at x there. Leaves self as it is.
 
         The twists are taken in the SMR frame, so they do not depend on base_ref: one pass down
         the chain serves both the registration and the normal equations.
@@ -218,9 +196,10 @@ class PointNormal:
         T = kabsch(p[:, on].T, self.meas_t[:, on].T)
         M = np.einsum("ij,jkm->ikm", T[:3, :3], M)
         M[:, 3] += T[:3, 3, None]
+        moved = copy.copy(self)  # shares the readings and the arm's frames (base_ref-free)
         lay = self.layout
-        self.layout = Layout(lay.robot, T @ lay.base_ref, lay.target_names)
-        return self._assemble(start, tc, M, U)
+        moved.layout = Layout(lay.robot, T @ lay.base_ref, lay.target_names)
+        return moved, moved._assemble(start, tc, M, U)
 
     def _assemble(self, start, tc, M, U) -> Normal:
         """J'J, J'r and the cost from the SMR frame's poses M and its twists U (see flange_twists).

@@ -23,13 +23,16 @@ from .finite import finite
 
 @dataclass
 class QPSolution:
-    """Step, epigraph change, multipliers of the SMR rows and of the constraint rows."""
+    """Step, epigraph change, multipliers of the SMR rows and of the constraint rows, and
+    whether the solver met its own optimality test (else dx is its last iterate)."""
 
     dx: np.ndarray
     dphi: float
     lam: np.ndarray
     mu: np.ndarray
     iterations: int
+    converged: bool
+    message: str
 
 
 def project_simplex(v: np.ndarray) -> np.ndarray:
@@ -70,7 +73,7 @@ def primal_dual(H, g, F, phi, A, c, tol=1e-10, max_iter=20000) -> QPSolution:
     nu = project(np.full(K + L, 1.0 / K) * (np.arange(K + L) < K))
     y, t = nu.copy(), 1.0
     scale = max(abs(float(b @ nu)), float(nu @ Q @ nu), 1e-300)
-    it = 0
+    it, converged = 0, False
     for it in range(1, max_iter + 1):
         nu_new = project(y + step * (b - Q @ y))
         t_new = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * t * t))
@@ -85,9 +88,11 @@ def primal_dual(H, g, F, phi, A, c, tol=1e-10, max_iter=20000) -> QPSolution:
             primal = 0.5 * float(nu @ Qnu) + float(np.max(lin[:K]))
             viol = float(np.max(lin[K:], initial=0.0))
             if primal - dual <= tol * scale and viol <= tol * scale:
+                converged = True
                 break
     dx = -np.linalg.solve(chol.T, finite(W @ (s * nu), "the QP's step"))
-    return QPSolution(dx, _dphi(dx, g, F, phi), nu[:K], s[K:] * nu[K:], it)
+    message = "duality gap below tolerance" if converged else "iteration limit reached"
+    return QPSolution(dx, _dphi(dx, g, F, phi), nu[:K], s[K:] * nu[K:], it, converged, message)
 
 
 def exact(H, g, F, phi, A, c) -> QPSolution:
@@ -110,11 +115,12 @@ def exact(H, g, F, phi, A, c) -> QPSolution:
         tol_gap_rel=1e-12,
         tol_feas=1e-12,
     )
-    if not sol.found:
+    if sol.x is None or sol.z is None:
         raise RuntimeError("the QP solver found no solution of the SQP subproblem")
     dx = sol.x[:n]
     z = np.maximum(sol.z, 0.0)
-    return QPSolution(dx, _dphi(dx, g, F, phi), z[:K], z[K:], 0)
+    message = f"clarabel: {(sol.extras or {}).get('status', 'no status')}"
+    return QPSolution(dx, _dphi(dx, g, F, phi), z[:K], z[K:], 0, bool(sol.found), message)
 
 
 SOLVERS = {"primal-dual": primal_dual, "exact": exact}

@@ -70,12 +70,13 @@ def test_both_qp_subsolvers_reach_the_same_minimax(fits):
     _, _, _, out = fits
     a, b = out["minimax"].F.max(), out["minimax-exact"].F.max()
     assert abs(a - b) <= 1e-6 * b
-    assert out["minimax"].details["converged"], out["minimax"].details["message"]
+    assert out["minimax"].success and out["minimax"].status == 0, out["minimax"].message
+    assert out["minimax"].qp_converged and out["minimax-exact"].qp_converged
 
 
 def test_minimax_respects_distance_invariance(fits):
     _, _, _, out = fits
-    assert np.all(np.array(out["minimax"].details["constraints"]) <= 1e-9)
+    assert np.all(np.array(out["minimax"].constraints) <= 1e-9)
 
 
 def test_redundant_parameters_are_named():

@@ -125,7 +125,9 @@ def test_register_fits_the_base_in_the_same_pass_as_the_normal_equations():
     cols = np.arange(wrong.n_params)
     points = PointNormal(wrong, q, mask, meas, cols)
     x = wrong.initial(lay.targets(x))  # the nominal model, as register() takes it
-    ne = points.register(x)
+    before = points.layout
+    points, ne = points.register(x)
+    assert points.layout is not before and np.array_equal(before.base_ref, np.eye(4))
     # the closed-form base of register() (30 poses: all of them) ...
     prob, _ = register(lay.robot, lay.targets(x), lay.target_names, q, meas, refine=False)
     np.testing.assert_allclose(points.layout.base_ref, prob.layout.base_ref, atol=1e-9)

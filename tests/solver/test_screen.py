@@ -134,4 +134,4 @@ def test_too_few_poses_for_the_geometry_are_left_unscreened():
     s = screen(few, few.xyz)
     assert s.count == 0 and "poses" in s.skipped
     cal = workflow.run_method(CELL, few, "nominal")
-    assert cal.details["screening"].skipped
+    assert cal.screening.skipped
