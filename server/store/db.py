@@ -1,4 +1,4 @@
-"""Opening the store (SQLite or PostgreSQL): the URL, the write lock, migrations to head, sessions."""
+"""Opening the store (SQLite or PostgreSQL): URL, write lock, migrations to head, sessions."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Fixtures of the store tests: each test its own store, on each backend (a file, a PostgreSQL database)."""
+"""Fixtures of the store tests: each test its own store, on each backend (file or PostgreSQL)."""
 
 from __future__ import annotations
 
