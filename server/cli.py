@@ -498,7 +498,7 @@ def cmd_bench(args) -> None:
 
 def _data_arguments(p) -> None:
     """A campaign to read: a meas.csv or a database (with its campaign id), and the cell."""
-    p.add_argument("meas", help="meas.csv, or a campaign database (.db)")
+    p.add_argument("meas", help="meas.csv, or a campaign database (.db file or URL)")
     p.add_argument("--cell")
     p.add_argument(
         "--campaign", type=int, help="campaign id when MEAS is a database (default: latest)"
@@ -620,7 +620,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="run a campaign on the devices (simulated on loopback "
         "sockets by default), storing every reading as it arrives",
     )
-    aq.add_argument("--db", default="robocal.db", help="SQLite database (created if absent)")
+    aq.add_argument(
+        "--db", default="robocal.db", help="SQLite file (created if absent) or database URL"
+    )
     aq.add_argument("--cell")
     aq.add_argument("--poses", type=int, default=100)
     aq.add_argument("--seed", type=int, default=0)

@@ -59,7 +59,8 @@ DB_SUFFIXES = (".db", ".sqlite", ".sqlite3")
 
 
 def is_database(path) -> bool:
-    return str(path).startswith("sqlite:") or str(path).lower().endswith(DB_SUFFIXES)
+    """A store (a URL: sqlite:///..., postgresql+psycopg://...; or a SQLite file), not a CSV."""
+    return "://" in str(path) or str(path).lower().endswith(DB_SUFFIXES)
 
 
 def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurements]:
@@ -71,7 +72,7 @@ def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurement
     from . import store
     from .formats.cell_json import parse_cell
 
-    if not str(path).startswith("sqlite:") and not Path(path).exists():
+    if "://" not in str(path) and not Path(path).exists():
         raise FileNotFoundError(2, "no such file", str(path))
     db = store.open_database(path)
     campaigns = store.list_campaigns(db)
@@ -159,7 +160,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     pred = predict(cal.layout, cal.x, meas.q)
     acc = metrics.accuracy(pred, used.xyz, meas.target_names)
     data = {"poses": meas.n_poses, "readings": meas.n_readings, "targets": list(meas.target_names)}
-    if data_path is not None:
+    if data_path is not None and "://" not in str(data_path):  # a server's database: no file
         data.update(file=Path(data_path).name, sha256=file_digest(data_path))
     fit = {
         "F_mm2": dict(zip(meas.target_names, np.round(cal.F, 9).tolist())),

@@ -5,6 +5,8 @@ The mark is given here, from what a test does, so a new test cannot forget it: e
 tests/server/api (the service over real sockets) and tests/web (the browser), and any test that
 runs a subprocess (the `robocal` command line, uv, docker), itself, through a helper of its
 module, or through one of its fixtures. A module may also mark itself explicitly.
+
+Tests that ask for `store_url` run once per store backend (tests/backends.py).
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ from functools import cache
 from pathlib import Path
 
 import pytest
+
+from tests.backends import BACKENDS, store_url_for
 
 TESTS = Path(__file__).resolve().parent
 SERVICE_DIRS = (TESTS / "server" / "api", TESTS / "web")
@@ -76,3 +80,23 @@ def pytest_collection_modifyitems(config, items):
         path = Path(str(item.fspath)).resolve()
         if any(path.is_relative_to(d) for d in SERVICE_DIRS) or spawns_a_process(item):
             item.add_marker(pytest.mark.integration)
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "sqlite_only: reads or alters the SQLite file itself; not run on PostgreSQL"
+    )
+
+
+def pytest_generate_tests(metafunc):
+    if "store_url" in metafunc.fixturenames:
+        sqlite_only = metafunc.definition.get_closest_marker("sqlite_only") is not None
+        backends = BACKENDS[:1] if sqlite_only else BACKENDS
+        metafunc.parametrize("store_url", backends, indirect=True)
+
+
+@pytest.fixture
+def store_url(request, tmp_path):
+    """The URL of an empty store on this test's backend."""
+    with store_url_for(request.param, tmp_path) as url:
+        yield url

@@ -1,4 +1,4 @@
-"""The campaign store: SQLite through SQLAlchemy, schema by Alembic, each reading committed."""
+"""The campaign store: SQLite or PostgreSQL through SQLAlchemy, schema by Alembic."""
 
 from .access import (
     CampaignInfo,

@@ -1,4 +1,4 @@
-"""Opening the store: the URL, SQLite pragmas on every connection, migrations to head, sessions."""
+"""Opening the store (SQLite or PostgreSQL): URL, write lock, migrations to head, sessions."""
 
 from __future__ import annotations
 
@@ -18,6 +18,9 @@ MIGRATIONS = Path(__file__).resolve().parents[2] / "migrations"
 # How long a writer waits for another process's write lock before "database is locked".
 BUSY_TIMEOUT_MS = 30_000
 WRITE_OPTION = "robocal_write"
+# PostgreSQL's stand-in for SQLite's write lock: a transaction-level advisory lock on this key
+# (any 64-bit number no other program on the server uses; this one spells "robocal").
+PG_WRITE_LOCK = 0x726F626F63616C
 # Alembic keeps its running context in module globals: one migration at a time per process.
 _MIGRATING = threading.Lock()
 
@@ -33,8 +36,13 @@ def database_url(url_or_path) -> URL:
 
 
 def make_engine(url_or_path) -> Engine:
-    """An engine whose SQLite connections use WAL, enforce foreign keys and sync at NORMAL."""
+    """An engine whose writers lock first; SQLite connections use WAL, foreign keys, NORMAL sync."""
     url = database_url(url_or_path)
+    if url.get_backend_name() == "postgresql":
+        # pre_ping: a fleet's server restarts or drops idle connections; a service outlives that.
+        engine = create_engine(url, pool_pre_ping=True)
+        event.listen(engine, "begin", _postgresql_begin)
+        return engine
     if url.get_backend_name() != "sqlite":
         return create_engine(url)
     if url.database in (None, "", ":memory:"):
@@ -69,6 +77,14 @@ def _sqlite_begin(connection) -> None:
     connection.exec_driver_sql("BEGIN IMMEDIATE" if write else "BEGIN")
 
 
+def _postgresql_begin(connection) -> None:
+    # The same one-writer-at-a-time as SQLite's BEGIN IMMEDIATE, across every station on the
+    # server: a writer's checks and inserts see no other writer in between (READ COMMITTED reads
+    # what was committed before each statement), and the lock goes with the commit or rollback.
+    if connection.get_execution_options().get(WRITE_OPTION, False):
+        connection.exec_driver_sql(f"SELECT pg_advisory_xact_lock({PG_WRITE_LOCK})")
+
+
 def alembic_config(url_or_path=None) -> Config:
     """Alembic's configuration built in code (no alembic.ini needed), for this database if given."""
     config = Config()
@@ -79,7 +95,12 @@ def alembic_config(url_or_path=None) -> Config:
 
 
 def migrate(engine: Engine, revision: str = "head") -> None:
-    """Bring the database to `revision` on one of the engine's connections, in one transaction."""
+    """Bring the database to `revision` on one of the engine's connections, in one transaction.
+
+    The transaction holds the write lock (SQLite's file lock, PostgreSQL's advisory lock) from its
+    first statement, so services starting together migrate one after the other: the first
+    upgrades, the others then find the schema current and do nothing.
+    """
     config = alembic_config()
     with _MIGRATING, engine.connect().execution_options(**{WRITE_OPTION: True}) as connection:
         with connection.begin():

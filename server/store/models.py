@@ -15,6 +15,7 @@ import datetime as dt
 from robocal.drivers.lifecycle import STATES
 from sqlalchemy import (
     JSON,
+    BigInteger,
     Boolean,
     CheckConstraint,
     DateTime,
@@ -46,6 +47,11 @@ NAMING = {
     "fk": "fk_%(table_name)s_%(column_0_N_name)s_%(referred_table_name)s",
     "pk": "pk_%(table_name)s",
 }
+
+
+# Ids are 64-bit: SQLite's INTEGER PRIMARY KEY already is (and must be spelled INTEGER to be the
+# rowid), PostgreSQL's need BIGINT (migration 0005).
+ID = BigInteger().with_variant(Integer(), "sqlite")
 
 
 def utcnow() -> dt.datetime:
@@ -87,7 +93,7 @@ class Campaign(Base):
     __tablename__ = "campaign"
     __table_args__ = (CheckConstraint(one_of("status", STATUSES), name="status"),)
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    id: Mapped[int] = mapped_column(ID, primary_key=True)
     name: Mapped[str] = mapped_column(Text)
     created_at: Mapped[dt.datetime] = mapped_column(UTCDateTime(), default=utcnow)
     status: Mapped[str] = mapped_column(String(16), default="planned")
@@ -111,8 +117,8 @@ class PlannedPose(Base):
         CheckConstraint("pose_index >= 0", name="pose_index"),
     )
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    id: Mapped[int] = mapped_column(ID, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ID, ForeignKey("campaign.id", ondelete="CASCADE"))
     pose_index: Mapped[int] = mapped_column(Integer)
     label: Mapped[str] = mapped_column(Text)  # the `pose` column of meas.csv
     joints_deg: Mapped[list] = mapped_column(JSON)
@@ -143,8 +149,8 @@ class Reading(Base):
         CheckConstraint("samples IS NULL OR samples >= 1", name="samples"),
     )
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True)  # increasing = order of arrival
-    campaign_id: Mapped[int] = mapped_column(Integer)
+    id: Mapped[int] = mapped_column(ID, primary_key=True)  # increasing = order of arrival
+    campaign_id: Mapped[int] = mapped_column(ID)
     pose_index: Mapped[int] = mapped_column(Integer)
     target: Mapped[str] = mapped_column(Text)
     status: Mapped[str] = mapped_column(String(16), default="ok")
@@ -173,8 +179,8 @@ class PoseOutcome(Base):
         CheckConstraint(one_of("state", POSE_STATES), name="state"),
     )
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    campaign_id: Mapped[int] = mapped_column(Integer)
+    id: Mapped[int] = mapped_column(ID, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ID)
     pose_index: Mapped[int] = mapped_column(Integer)
     state: Mapped[str] = mapped_column(String(16))
     reached_deg: Mapped[list | None] = mapped_column(JSON)  # None when the arm never got there
@@ -193,9 +199,11 @@ class Job(Base):
         CheckConstraint("progress >= 0 AND progress <= 1", name="progress"),
     )
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    id: Mapped[int] = mapped_column(ID, primary_key=True)
     kind: Mapped[str] = mapped_column(String(16))
-    campaign_id: Mapped[int | None] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    campaign_id: Mapped[int | None] = mapped_column(
+        ID, ForeignKey("campaign.id", ondelete="CASCADE")
+    )
     method: Mapped[str] = mapped_column(Text)
     state: Mapped[str] = mapped_column(String(16), default="queued")
     reason: Mapped[str | None] = mapped_column(Text)

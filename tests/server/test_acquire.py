@@ -2,7 +2,6 @@
 
 import re
 import signal
-import sqlite3
 import subprocess
 import sys
 import time
@@ -19,7 +18,9 @@ from robocal.drivers.tracker.client import TrackerClient
 from robocal.drivers.tracker.sim import SimulatedTracker, serve_tracker
 from robocal.drivers.world import SimulatedWorld
 from robocal.solver.robot import IRB2600
+from sqlalchemy.exc import DBAPIError
 
+from tests.backends import execute
 from tests.robots import TARGETS
 
 CMD = [sys.executable, "-m", "robocal.server.cli"]
@@ -35,17 +36,16 @@ def robocal(*args, cwd, check=True):
 
 
 def counts(db):
-    con = sqlite3.connect(db)
-    try:
-        ok = con.execute("select count(*) from reading where status = 'ok'").fetchone()[0]
-        missing = con.execute("select count(*) from reading where status = 'missing'").fetchone()[0]
-        dup = con.execute(
-            "select count(*) from (select pose_index, target, count(*) c from reading "
-            "group by campaign_id, pose_index, target having c > 1)"
-        ).fetchone()[0]
-        outcomes = con.execute("select count(*) from pose_outcome").fetchone()[0]
-    finally:
-        con.close()
+    """Readings ok and missing, (campaign, pose, target) stored twice, pose outcomes."""
+    db = str(db)
+    ok = execute(db, "select count(*) from reading where status = 'ok'")[0][0]
+    missing = execute(db, "select count(*) from reading where status = 'missing'")[0][0]
+    dup = execute(
+        db,
+        "select count(*) from (select campaign_id, pose_index, target from reading "
+        "group by campaign_id, pose_index, target having count(*) > 1) as twice",
+    )[0][0]
+    outcomes = execute(db, "select count(*) from pose_outcome")[0][0]
     return ok, missing, dup, outcomes
 
 
@@ -60,11 +60,11 @@ def test_campaign_ends_in_a_database_that_calibrate_reads(tmp_path):
     assert rms < 0.03
 
 
-def test_beam_breaks_lose_and_duplicate_nothing(tmp_path):
+def test_beam_breaks_lose_and_duplicate_nothing(tmp_path, store_url):
     r = robocal(
         "acquire",
         "--db",
-        "b.db",
+        store_url,
         "--poses",
         40,
         "--seed",
@@ -75,7 +75,7 @@ def test_beam_breaks_lose_and_duplicate_nothing(tmp_path):
     )
     breaks = int(re.search(r"(\d+) beam breaks", r.stdout).group(1))
     assert breaks > 0
-    ok, missing, dup, outcomes = counts(tmp_path / "b.db")
+    ok, missing, dup, outcomes = counts(store_url)
     assert dup == 0 and outcomes == 40 and ok + missing == 120
     assert missing <= 3  # retries recover nearly every break
 
@@ -95,7 +95,7 @@ def test_killed_acquisition_resumes_at_the_next_pose(tmp_path):
         time.sleep(0.05)
         try:
             seen = counts(db)[0]
-        except sqlite3.Error:
+        except DBAPIError:  # not made yet
             continue
         if seen >= 60:
             break
@@ -146,7 +146,7 @@ def test_no_out_of_limit_command_reaches_the_controller():
         assert np.all(v >= lo) and np.all(v <= hi)
 
 
-def test_controller_fault_stops_keeps_readings_and_resumes(tmp_path, monkeypatch):
+def test_controller_fault_stops_keeps_readings_and_resumes(store_url, monkeypatch):
     import robocal.server.acquire as acq
     from robocal.server import store
     from robocal.server.formats.cell_json import default_cell
@@ -174,11 +174,11 @@ def test_controller_fault_stops_keeps_readings_and_resumes(tmp_path, monkeypatch
     monkeypatch.setattr(acq, "SimulatedCell", Faulty)
     opts = acq.AcquireOptions(poses=12, seed=3, name="f", pause_s=1.0)
     with pytest.raises(acq.AcquisitionFailed, match="run again to resume"):
-        acq.acquire(tmp_path / "f.db", default_cell(), opts)
-    db = store.open_database(tmp_path / "f.db")
+        acq.acquire(store_url, default_cell(), opts)
+    db = store.open_database(store_url)
     info = store.list_campaigns(db)[0]
     assert info.status == "failed" and info.n_done == 5
-    summary = acq.acquire(tmp_path / "f.db", default_cell(), opts)
+    summary = acq.acquire(store_url, default_cell(), opts)
     assert summary["resumed_at"] == 5 and summary["state"] == "done"
-    ok, missing, dup, outcomes = counts(tmp_path / "f.db")
+    ok, missing, dup, outcomes = counts(store_url)
     assert (ok + missing, dup, outcomes) == (36, 0, 12)

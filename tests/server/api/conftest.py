@@ -1,4 +1,4 @@
-"""A real uvicorn server on 127.0.0.1 per test, with its own database, data dir and token."""
+"""A real uvicorn server on 127.0.0.1 per test, with its own store, data dir and token."""
 
 from __future__ import annotations
 
@@ -32,15 +32,19 @@ class Live:
     anonymous: httpx.Client
 
 
-def settings_for(tmp_path) -> Settings:
+def settings_for(tmp_path, database: str | None = None) -> Settings:
+    """A service's settings under tmp_path; its store a SQLite file there unless `database`."""
     return Settings(
-        database=str(tmp_path / "robocal.db"), data_dir=tmp_path / "data", port=free_port()
+        database=database or str(tmp_path / "robocal.db"),
+        data_dir=tmp_path / "data",
+        port=free_port(),
     )
 
 
 @pytest.fixture
-def live(tmp_path):
-    yield from serve(settings_for(tmp_path))
+def live(tmp_path, store_url):
+    """A running service, once on each store backend."""
+    yield from serve(settings_for(tmp_path, store_url))
 
 
 def serve(settings: Settings):

@@ -20,6 +20,7 @@ def small(tmp_path):
     yield from serve(settings_for(tmp_path).model_copy(update={"max_upload_bytes": 4096}))
 
 
+@pytest.mark.sqlite_only  # checked before the store: once is enough
 @pytest.mark.parametrize(
     "path",
     [
@@ -43,6 +44,7 @@ def test_largest_id_is_404(live):
     assert r.status_code == 404 and r.headers["content-type"] == PROBLEM
 
 
+@pytest.mark.sqlite_only  # checked before the store: once is enough
 def test_undeclared_method_is_405_with_allow(live):
     r = live.client.delete("/api/campaigns")
     assert r.status_code == 405 and r.headers["allow"] == "GET, HEAD, POST"
@@ -88,6 +90,7 @@ def test_the_1e308_import_is_refused_with_its_line(live):
     assert live.client.get("/api/campaigns").json() == []  # nothing stored
 
 
+@pytest.mark.sqlite_only  # checked before the store: once is enough
 @pytest.mark.parametrize("where", ["pose", "target"])
 def test_control_characters_in_an_import_are_refused(live, where):
     text = meas(pose="p\x00") if where == "pose" else meas(target="A\x1bB")
@@ -98,6 +101,7 @@ def test_control_characters_in_an_import_are_refused(live, where):
     assert live.client.get("/api/campaigns").json() == []
 
 
+@pytest.mark.sqlite_only  # checked before the store: once is enough
 @pytest.mark.parametrize("name", ["bad\x00name", "line\nbreak", "esc\x1b[2J", "   "])
 def test_control_characters_in_names_are_refused(live, name):
     r = live.client.post("/api/campaigns", json={"poses": 5, "name": name})
@@ -112,6 +116,7 @@ def test_control_characters_in_names_are_refused(live, name):
     assert live.client.get("/api/campaigns").json() == []
 
 
+@pytest.mark.sqlite_only  # checked before the store: once is enough
 @pytest.mark.parametrize(
     "body",
     [
@@ -174,11 +179,13 @@ def test_readings_come_in_pages_and_the_export_streams(live, tmp_path):
     assert live.client.get("/api/campaigns/999/measurements.csv").status_code == 404
 
 
+@pytest.mark.sqlite_only  # checked before the store: once is enough
 def test_health_is_open(live):
     r = live.anonymous.get("/api/health")
     assert r.status_code == 200 and r.json() == {"status": "ok"}
 
 
+@pytest.mark.sqlite_only  # checked before the store: once is enough
 def test_event_stream_is_documented_and_guarded(live):
     schema = live.client.get("/openapi.json").json()
     get = schema["paths"]["/api/events"]["get"]

@@ -4,6 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tests.server.api.conftest import wait_for
 
 PROBLEM = "application/problem+json"
@@ -149,6 +151,7 @@ def test_abort_marks_the_campaign_and_it_cannot_start(live):
     assert c.post("/api/campaigns", json={"poses": 5}).status_code == 409
 
 
+@pytest.mark.sqlite_only  # no store involved: once is enough
 def test_cells_default_and_upload(live):
     c = live.client
     default = c.get("/api/cells/default").json()["cell"]
@@ -165,6 +168,7 @@ def test_cells_default_and_upload(live):
     assert c.get("/api/cells/..%2Fsecret").status_code == 404
 
 
+@pytest.mark.sqlite_only  # no store involved: once is enough
 def test_validation_errors_are_problem_details(live):
     r = live.client.post("/api/campaigns", json={"poses": 1})
     assert r.status_code == 422 and r.headers["content-type"] == PROBLEM
@@ -173,6 +177,7 @@ def test_validation_errors_are_problem_details(live):
     assert r.status_code == 404 and r.json()["detail"] == "no campaign 12345"
 
 
+@pytest.mark.sqlite_only  # no store involved: once is enough
 def test_openapi_schema_and_docs_are_served(live):
     schema = live.anonymous.get("/openapi.json").json()
     assert schema["info"]["title"] == "robocal"

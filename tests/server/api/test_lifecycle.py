@@ -3,11 +3,10 @@ with the state and the allowed actions; every one it allows does not; JSON carri
 
 from __future__ import annotations
 
-import sqlite3
-
 import pytest
 from robocal.drivers.lifecycle import ACTIONS, MOVING, STATES, allowed, next_state
 
+from tests.backends import execute
 from tests.server.api.conftest import wait_for
 
 PROBLEM = "application/problem+json"
@@ -17,11 +16,8 @@ AT_REST = [s for s in STATES if s not in MOVING]
 
 
 def force_state(live, cid: int, state: str) -> None:
-    """Put the campaign's stored state straight in the database file, as a run would leave it."""
-    con = sqlite3.connect(live.settings.database, timeout=30)
-    with con:
-        con.execute("UPDATE campaign SET status = ? WHERE id = ?", (state, cid))
-    con.close()
+    """Put the campaign's stored state straight in the store, as a run would leave it."""
+    execute(live.settings.database, "UPDATE campaign SET status = :s WHERE id = :c", s=state, c=cid)
 
 
 def plan(live, name: str) -> int:
@@ -82,10 +78,7 @@ def test_estop_after_done_is_refused_not_faked(live):
 
 def test_imported_campaign_offers_no_start(live):
     cid = plan(live, "imported")
-    con = sqlite3.connect(live.settings.database, timeout=30)
-    with con:
-        con.execute("UPDATE campaign SET settings_json = '{}' WHERE id = ?", (cid,))
-    con.close()
+    execute(live.settings.database, "UPDATE campaign SET settings_json = '{}' WHERE id = :c", c=cid)
     shown = live.client.get(f"/api/campaigns/{cid}").json()
     assert shown["status"] == "planned" and shown["actions"] == ["abort"], shown
     r = live.client.post(f"/api/campaigns/{cid}/start")

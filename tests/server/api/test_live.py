@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sqlite3
 import threading
 import time
 
@@ -11,6 +10,7 @@ import httpx
 from robocal.server import store
 from robocal.server.formats import cell_to_json, default_cell
 
+from tests.backends import execute
 from tests.server.api.conftest import serve, settings_for, wait_for
 
 PROBLEM = "application/problem+json"
@@ -60,13 +60,12 @@ class EventReader:
 
 def readings(live, cid):
     """(pose_index, target) of every stored reading, and how many rows each has."""
-    con = sqlite3.connect(live.settings.database, timeout=30)
-    rows = con.execute(
-        "SELECT pose_index, target, count(*) FROM reading WHERE campaign_id = ? "
+    rows = execute(
+        live.settings.database,
+        "SELECT pose_index, target, count(*) FROM reading WHERE campaign_id = :c "
         "GROUP BY pose_index, target",
-        (cid,),
-    ).fetchall()
-    con.close()
+        c=cid,
+    )
     return {(i, t): n for i, t, n in rows}
 
 

@@ -1,4 +1,4 @@
-"""Fixtures of the store tests: each test its own database file."""
+"""Fixtures of the store tests: each test its own store, on each backend (file or PostgreSQL)."""
 
 from __future__ import annotations
 
@@ -20,8 +20,8 @@ def cell_json() -> dict:
 
 
 @pytest.fixture
-def db(tmp_path):
-    database = open_database(tmp_path / "store.db")
+def db(store_url):
+    database = open_database(store_url)
     yield database
     database.close()
 

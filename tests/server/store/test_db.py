@@ -23,6 +23,7 @@ ROOT = Path(__file__).resolve().parents[3]
 TABLES = {"alembic_version", "campaign", "planned_pose", "reading", "pose_outcome", "job"}
 
 
+@pytest.mark.sqlite_only
 def test_migrations_create_the_schema(tmp_path):
     db = open_database(tmp_path / "deep" / "er" / "store.db")  # the folder is created
     insp = inspect(db.engine)
@@ -48,7 +49,7 @@ def test_migrations_create_the_schema(tmp_path):
     uniques = {tuple(u["column_names"]) for u in insp.get_unique_constraints("reading")}
     assert ("campaign_id", "pose_index", "target") in uniques
     with db.engine.connect() as c:
-        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0004"
+        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0005"
         # The migration and the models describe the same schema.
         assert (
             compare_metadata(
@@ -59,6 +60,15 @@ def test_migrations_create_the_schema(tmp_path):
     db.close()
 
 
+def test_the_migrated_schema_is_the_models(store_url):
+    """On each backend, head's tables, types and constraints are what the models declare."""
+    with open_database(store_url) as db, db.engine.connect() as c:
+        context = MigrationContext.configure(c, opts={"compare_type": True})
+        assert compare_metadata(context, Base.metadata) == []
+        assert c.execute(text("SELECT count(*) FROM alembic_version")).scalar() == 1
+
+
+@pytest.mark.sqlite_only
 def test_reopening_keeps_data_and_migrates_once(tmp_path, running, db):
     record_reading(db, campaign_id=running, pose_index=0, target="A", xyz=[1, 2, 3])
     again = open_database(db.engine.url.database)
@@ -68,6 +78,7 @@ def test_reopening_keeps_data_and_migrates_once(tmp_path, running, db):
     again.close()
 
 
+@pytest.mark.sqlite_only
 def test_pragmas_on_every_connection(db):
     a, b = db.engine.raw_connection(), db.engine.raw_connection()  # two pooled connections
     try:
@@ -82,6 +93,7 @@ def test_pragmas_on_every_connection(db):
         b.close()
 
 
+@pytest.mark.sqlite_only
 def test_a_commit_is_visible_to_an_independent_connection(running, db):
     """What crash safety rests on: once record_reading returns, the row is in the file."""
     other = open_database(db.engine.url.database)
@@ -96,6 +108,7 @@ def test_a_commit_is_visible_to_an_independent_connection(running, db):
         other.close()
 
 
+@pytest.mark.sqlite_only
 def test_readers_are_not_blocked_by_an_open_write(running, db):
     other = open_database(db.engine.url.database)
     try:
@@ -120,14 +133,15 @@ def test_urls_and_paths(tmp_path, monkeypatch):
         open_database("sqlite://")
 
 
-def test_migrations_in_code_down_and_up(tmp_path):
-    path = tmp_path / "store.db"
+def test_migrations_in_code_down_and_up(store_url):
+    path = store_url
     config = alembic_config(path)
     command.upgrade(config, "head")  # env.py's own engine, no alembic.ini
     command.downgrade(config, "base")
     assert set(inspect(open_database(path).engine).get_table_names()) == TABLES
 
 
+@pytest.mark.sqlite_only
 def test_alembic_command_line_with_database_url(tmp_path):
     path = tmp_path / "cli.db"
     env = dict(os.environ, DATABASE_URL=f"sqlite:///{path}")
@@ -141,18 +155,18 @@ def test_alembic_command_line_with_database_url(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     con = sqlite3.connect(path)
-    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0004",)
+    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0005",)
     assert con.execute("PRAGMA journal_mode").fetchone() == ("wal",)
     con.close()
 
 
-def test_two_writers_wait_for_each_other(tmp_path, cell_json):
+def test_two_writers_wait_for_each_other(store_url, cell_json):
     """Write transactions take the lock up front, so a second writer waits instead of failing."""
     from concurrent.futures import ThreadPoolExecutor
 
     from robocal.server.store import create_campaign, set_status
 
-    path = tmp_path / "store.db"
+    path = store_url
     with open_database(path) as db:
         cids = [
             create_campaign(db, name=f"c{i}", cell_json=cell_json, poses_deg=POSES_DEG)
@@ -170,17 +184,16 @@ def test_two_writers_wait_for_each_other(tmp_path, cell_json):
 
     with ThreadPoolExecutor(2) as pool:
         assert sorted(pool.map(write, cids)) == cids
-    con = sqlite3.connect(path)
-    assert con.execute("SELECT count(*) FROM reading").fetchone() == (18,)
-    con.close()
+    with open_database(path) as db, db.engine.connect() as c:
+        assert c.execute(text("SELECT count(*) FROM reading")).scalar() == 18
 
 
-def test_opening_a_new_file_from_many_places_at_once(tmp_path):
+def test_opening_a_new_store_from_many_places_at_once(store_url):
     """Threads and processes that open a new store together: one migrates, the others wait."""
     from concurrent.futures import ThreadPoolExecutor
 
-    path = tmp_path / "fresh.db"
-    code = "import sys; from server.store import open_database; open_database(sys.argv[1])"
+    path = store_url
+    code = "import sys; from robocal.server.store import open_database; open_database(sys.argv[1])"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     procs = [
         subprocess.Popen(
@@ -198,12 +211,13 @@ def test_opening_a_new_file_from_many_places_at_once(tmp_path):
             return c.execute(text("SELECT version_num FROM alembic_version")).all()
 
     with ThreadPoolExecutor(4) as pool:
-        assert list(pool.map(version, range(4))) == [[("0004",)]] * 4
+        assert list(pool.map(version, range(4))) == [[("0005",)]] * 4
     for p in procs:
         _, err = p.communicate(timeout=120)
         assert p.returncode == 0, err
 
 
+@pytest.mark.sqlite_only
 def test_migration_0003_widens_the_status_and_keeps_campaigns(tmp_path):
     """A 0002 store keeps its campaigns through 0003 and back (in-between states mapped)."""
     path = tmp_path / "old.db"
@@ -231,6 +245,7 @@ def test_migration_0003_widens_the_status_and_keeps_campaigns(tmp_path):
     con.close()
 
 
+@pytest.mark.sqlite_only
 def test_migration_0004_adds_planning_jobs_and_keeps_jobs(tmp_path):
     """A 0003 store keeps its jobs through 0004 (planning jobs, no campaign until planned) and
     back (the planning jobs dropped, the others kept)."""
@@ -270,6 +285,7 @@ def test_migration_0004_adds_planning_jobs_and_keeps_jobs(tmp_path):
     con.close()
 
 
+@pytest.mark.sqlite_only
 def test_a_planning_job_has_no_campaign_until_it_planned_one(tmp_path, cell_json):
     from robocal.server import store
 
