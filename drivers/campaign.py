@@ -26,6 +26,8 @@ from .predictor import SmrPredictor
 WAKE_S = 0.5
 # Real seconds reset() waits for a run cut off by an e-stop to return before refusing.
 RESET_WAIT_S = 2.0
+# How long a run that ends waits for an e-stop's thread to finish telling its transition.
+TELL_WAIT_S = 5.0
 
 
 @dataclass
@@ -225,14 +227,23 @@ class CampaignEngine:
                 "the run cut off by the e-stop is still ending its last device request; try again",
             )
 
-    def _tell(self) -> None:
+    def _tell(self, wait_s: float | None = None) -> None:
         """Tell on_state every pending transition, in order, outside the engine's lock.
 
         Never blocks on a listener: if another thread is telling, it tells ours too (a request
-        may return before its transition is heard; engine.state is the truth).
+        may return before its transition is heard; engine.state is the truth). With wait_s (the
+        end of a run) it waits that long for the other teller, so that every transition has
+        reached on_state when the run returns.
         """
         while True:
-            if not self._telling.acquire(blocking=False):
+            got = (
+                self._telling.acquire(blocking=False)
+                if wait_s is None
+                else self._telling.acquire(timeout=wait_s)
+            )
+            if not got:
+                if wait_s is not None:
+                    self.log(f"state changes not all told within {wait_s} s")
                 return
             try:
                 while True:
@@ -328,6 +339,9 @@ class CampaignEngine:
             with self._cond:
                 self._active = False
                 self._cond.notify_all()
+            # an e-stop's transition may still be on its request's thread: the run's listener
+            # (the store) must have the last state before the run's owner closes it
+            self._tell(wait_s=TELL_WAIT_S)
         return self.stats
 
     def _begin(self) -> int:

@@ -1,5 +1,7 @@
 """The campaign engine and SMR prediction, on in-process stand-ins for the devices."""
 
+import threading
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -158,6 +160,29 @@ def test_state_machine_refuses_illegal_requests():
     eng.run(poses)
     with pytest.raises(StateError):
         eng.pause()
+
+
+def test_a_run_cut_off_by_an_estop_returns_after_its_listener_heard_the_stop():
+    """The e-stop's transition is told on the request's thread; the run that it ends must not
+    return before the listener (the store) has it, or the campaign would be left `running`."""
+    eng, poses, _, _ = setup(n=12)
+    told, entered = [], threading.Event()
+
+    def listener(old, new):
+        if threading.current_thread() is not threading.main_thread():
+            entered.set()
+            time.sleep(0.3)  # a slow store, on the e-stop's thread
+        told.append(new)
+
+    def stop_from_another_thread():
+        threading.Thread(target=eng.estop, daemon=True).start()
+        assert entered.wait(10)
+
+    eng.on_state = listener
+    target = eng.predictor.names[1]
+    eng.trace = lambda msg: msg == Measure(3, target) and stop_from_another_thread()
+    eng.run(poses)
+    assert eng.state == "estopped" and told[-1] == "estopped", told
 
 
 def test_estop_mid_campaign_reset_and_run_again_completes_with_every_reading_once():

@@ -19,9 +19,13 @@ POSES = 300  # long enough to pause, resume and e-stop it on the way
 
 
 def _wait_status(page, status, timeout=120_000):
-    page.wait_for_function(
-        f"document.getElementById('p-status').textContent === {status!r}", timeout=timeout
-    )
+    try:
+        page.wait_for_function(
+            f"document.getElementById('p-status').textContent === {status!r}", timeout=timeout
+        )
+    except Exception:  # say what the page shows instead
+        shown = [page.text_content(f"#{i}") for i in ("p-status", "p-run", "message")]
+        raise AssertionError(f"waited for {status!r}; the page shows {shown}") from None
     # the buttons are updated in the same call that writes the status
     return {a for a in BUTTONS if page.is_enabled(f"button[data-action={a}]")}
 
