@@ -490,7 +490,7 @@ def _since_last_reading(db, cid, start, n_poses) -> float:
     ]
     if not last:
         return 0.0
-    return max(0.0, (dt.datetime.now(dt.timezone.utc) - max(last)).total_seconds())
+    return max(0.0, (dt.datetime.now(dt.UTC) - max(last)).total_seconds())
 
 
 def _last_time(db, cid) -> float:

@@ -195,11 +195,11 @@ def stop_latency(stops: int = 100) -> dict:
             server.stall()
             stuck = threading.Thread(target=_swallow(client.status, ControllerError), daemon=True)
             stuck.start()
-            _until(lambda: device.first_arrival("STATUS", since), "STATUS in flight")
+            _until(lambda: device.first_arrival("STATUS", since), "STATUS in flight")  # noqa: B023 (awaited here)
             t0 = time.monotonic()
             confirmed += client.emergency_stop(confirm_s=1.0)
             returned.append(time.monotonic() - t0)
-            on_wire.append(_until(lambda: device.first_arrival("STOP", t0), "STOP") - t0)
+            on_wire.append(_until(lambda: device.first_arrival("STOP", t0), "STOP") - t0)  # noqa: B023
             server.drop_connections()  # frees the stalled STATUS (it fails; the next reconnects)
             stuck.join(timeout=10)
     wire_ms, back_ms = np.array(on_wire) * 1000, np.array(returned) * 1000

@@ -306,7 +306,8 @@ def select(diag: Diagnoser, cands, log=None):
         )
         thr = sc.threshold()
         n_read = cv_now.n.sum()
-        rms = lambda i: float(np.sqrt(max(sc.sse - sc.gain[i], 0.0) / n_read))  # noqa: E731
+        # called only within this iteration, so the loop variables it reads are the current ones
+        rms = lambda i: float(np.sqrt(max(sc.sse - sc.gain[i], 0.0) / n_read))  # noqa: E731, B023
         if log:
             for i, c in enumerate(trial):
                 log(
