@@ -74,7 +74,8 @@ def _during_job(c, campaign_id: int, cap: int = 5000) -> dict:
     idle = [_timed_get(c, url) for _ in range(100)]
     job = c.post("/api/jobs", json={"campaign_id": campaign_id, "kind": "diagnosis"}).json()
     _wait(c, f"/api/jobs/{job['id']}", lambda b: b["state"] != "queued")
-    t0, lat = time.perf_counter(), []
+    lat: list[float] = []
+    t0 = time.perf_counter()
     while len(lat) < cap:
         lat.append(_timed_get(c, url))
         # One job poll per 20 reads keeps the measured traffic the live-state endpoint's.
