@@ -13,7 +13,7 @@ import time
 
 import httpx
 import pytest
-import robocal.server.app
+import robocal.server.app as service_app  # (robocal below is the command line)
 from robocal.server.cli import main as robocal
 from robocal.server.job_queue import CANCELLED
 from robocal.server.security import ensure_token
@@ -25,7 +25,7 @@ from tests.server.api.test_job_pool import SpiedJobs, csv_text  # noqa: F401 - a
 def served(tmp_path, **settings):
     """A live server with these settings; its Jobs is the last of SpiedJobs.made."""
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(robocal.server.app, "Jobs", SpiedJobs)
+        mp.setattr(service_app, "Jobs", SpiedJobs)
         yield from serve(settings_for(tmp_path).model_copy(update=settings))
 
 

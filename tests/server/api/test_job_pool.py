@@ -9,7 +9,7 @@ import time
 
 import httpx
 import pytest
-import robocal.server.app
+import robocal.server.app as service_app  # (robocal below is the command line)
 from robocal.server import store
 from robocal.server.cli import main as robocal
 from robocal.server.job_queue import RESTART_REASON, Jobs
@@ -37,7 +37,7 @@ def csv_text(tmp_path_factory):
 def served(tmp_path):
     """A live server whose Jobs is the last of SpiedJobs.made."""
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(robocal.server.app, "Jobs", SpiedJobs)
+        mp.setattr(service_app, "Jobs", SpiedJobs)
         yield from serve(settings_for(tmp_path))
 
 
