@@ -127,7 +127,7 @@ class CampaignEngine:
         self._estops = 0  # e-stops so far: a run ends at once when the count changes under it
         self._active = False  # a run() is executing
         self._halted_on_fault = False  # the engine latched the controller itself after a fault
-        self._pending = deque()  # transitions not yet told to on_state
+        self._pending: deque = deque()  # transitions not yet told to on_state
         self._telling = threading.RLock()  # one teller at a time: on_state hears them in order
 
     @property
@@ -301,8 +301,11 @@ class CampaignEngine:
                     work = self._move(msg, stored if msg.pose == start else {}, epoch)
                     if work is None:
                         break
+                elif work is None:  # campaign_plan puts each pose's Move first
+                    raise AssertionError(f"{type(msg).__name__} before its pose's Move")
                 elif isinstance(msg, Settle):
                     if not work.skipped:
+                        assert work.predicted is not None  # _move predicts every pose it reaches
                         self._settle(work.predicted[0])
                 elif isinstance(msg, Aim):
                     self._aim(msg, work, names)
@@ -420,6 +423,7 @@ class CampaignEngine:
     def _aim(self, msg: Aim, work: _Pose, names) -> None:
         if work.skipped:
             return
+        assert work.predicted is not None  # _move predicts every pose it reaches
         aim = self.predictor.correct(work.predicted, work.measured)[names.index(msg.target)]
         self.stats.aimed += 1
         if msg.pose >= 10:
@@ -497,6 +501,7 @@ class CampaignEngine:
             self.sink.pose_done(pose_index=i, state="skipped", q_deg=work.q_deg)
             self.stats.skipped += 1
             return np.deg2rad(work.q_deg), np.full((len(names), 3), np.nan)
+        assert work.q_rad is not None  # _move reads the joints of every pose it reaches
         row = np.array([work.measured.get(n, np.full(3, np.nan)) for n in names])
         state = "measured" if len(work.measured) == len(names) else "missing-target"
         self.sink.pose_done(pose_index=i, state=state, q_deg=np.rad2deg(work.q_rad))

@@ -158,7 +158,8 @@ class VirtualCell:
         """n poses (n, N) rad drawn uniformly within the limits and meeting every pose check."""
         lo, hi = self.true_robot.lower + LIMIT_MARGIN_RAD, self.true_robot.upper - LIMIT_MARGIN_RAD
         batch = max(1024, 4 * n)
-        found, passed = [], {}
+        found: list[np.ndarray] = []
+        passed: dict[str, int] = {}
         for _ in range(max_batches):
             q = rng.uniform(lo, hi, size=(batch, lo.size))
             checks = self.pose_checks(q)

@@ -69,7 +69,9 @@ def plan_poses(
     """n poses (n, N) rad, uniform within the limits, meeting every check on the nominal model."""
     lo, hi = robot.lower + LIMIT_MARGIN_RAD, robot.upper - LIMIT_MARGIN_RAD
     batch = max(1024, 4 * n)
-    found, passed, count = [], {}, 0
+    found: list[np.ndarray] = []
+    passed: dict[str, int] = {}
+    count = 0
     for _ in range(max_batches):
         q = rng.uniform(lo, hi, size=(batch, robot.n_joints))
         checks = pose_checks(robot, base_in_tracker, targets, q, acceptance_deg, floor_mm, bounds)
@@ -168,6 +170,7 @@ def order_poses(q, start=None, speeds=None) -> np.ndarray:
             path = _nearest_neighbour(sub, 0)
         if best is None or _path_cost(D, path) < _path_cost(D, best):
             best = path
+    assert best is not None  # n >= 1 poses: at least one path was built
     best = _two_opt(D, best)
     given = np.arange(n + 1)
     if _path_cost(D, given) <= _path_cost(D, best):

@@ -163,6 +163,7 @@ def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
         stack.callback(controller.close)
         return tracker, controller
     d = cell.devices
+    assert d is not None  # a cell without devices is simulated
     tracker = TrackerClient(d.tracker_host, d.tracker_port, timeout_s=d.tracker_timeout_s)
     stack.callback(tracker.close)
     try:
@@ -280,6 +281,8 @@ def acquire(
             settings = info.settings or {}
             opts = AcquireOptions(**{**asdict(opts), **settings.get("options", {})})
         check_options(cell, opts)
+        clock: VirtualClock | RealClock
+        sim: SimulatedCell | None
         if cell.simulated:
             clock = VirtualClock()
             sim = SimulatedCell(
@@ -321,14 +324,14 @@ def acquire(
         predictor = SmrPredictor(
             cell.robot, np.array([cell.targets[t] for t in names]), names, base
         )
-        settings = Settings(pause_s=opts.pause_s, settle=opts.settle, samples=opts.samples)
-        sink = StoreSink(db, cid)
+        run = Settings(pause_s=opts.pause_s, settle=opts.settle, samples=opts.samples)
+        sink: StoreSink | _Progress | _Events = StoreSink(db, cid)
         if progress:
             sink = _Progress(sink, progress, len(poses_deg), start)
         writer = StateWriter(db, cid, on_event, log)
         stack.callback(writer.close)  # every state reported is stored before acquire returns
         engine = CampaignEngine(
-            controller, tracker, clock, predictor, sink, settings, log, state=state, on_state=writer
+            controller, tracker, clock, predictor, sink, run, log, state=state, on_state=writer
         )
         stopper.engine = engine
         if on_event:
@@ -490,7 +493,7 @@ def _since_last_reading(db, cid, start, n_poses) -> float:
     ]
     if not last:
         return 0.0
-    return max(0.0, (dt.datetime.now(dt.timezone.utc) - max(last)).total_seconds())
+    return max(0.0, (dt.datetime.now(dt.UTC) - max(last)).total_seconds())
 
 
 def _last_time(db, cid) -> float:

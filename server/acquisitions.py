@@ -16,6 +16,7 @@ from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, replace
 
 from robocal.drivers import lifecycle
+from robocal.drivers.campaign import CampaignEngine
 from robocal.drivers.lifecycle import MOVING, StateError
 
 from . import lease, store
@@ -75,7 +76,7 @@ class Acquisitions:
         self._lock = threading.Lock()  # guards the fields below; never held over I/O
         self._runs: dict[int, Run] = {}
         self._current: int | None = None  # the campaign on the worker (queued or running)
-        self._engine = None  # its CampaignEngine, once acquire() built it
+        self._engine: CampaignEngine | None = None  # once acquire() built it
         self._cancelled = False  # a stop landed before that engine existed
         self._future: Future | None = None
         # Nothing drives a campaign whose process is gone: one left moving is failed, so a
@@ -197,7 +198,7 @@ class Acquisitions:
         if queued:
             status = store.get_campaign(self.db, campaign_id=cid).status
             return Outcome(cid, status, status, True, "stopped before the arm moved")
-        if cid == current:
+        if cid == current and engine is not None:  # (engine None: queued, answered above)
             was = engine.state
             if was in lifecycle.FINAL:  # the run has just ended: nothing to stop
                 if campaign_id is None:

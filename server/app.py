@@ -15,6 +15,7 @@ from . import store
 from .acquisitions import Acquisitions
 from .api import OPEN_ROUTERS, ROUTERS, problems
 from .api.deps import TOKEN_CHECKS
+from .api.problems import Responses
 from .events import Events
 from .job_queue import Jobs
 from .security import ensure_token, require_reader
@@ -94,8 +95,8 @@ def document_errors(router) -> None:
     for route in router.routes:
         if not isinstance(route, APIRoute):
             continue
-        extra = {**problems.UNAUTHORIZED, **problems.READ_ERRORS}
-        if route.methods & MUTATING:
+        extra: Responses = {**problems.UNAUTHORIZED, **problems.READ_ERRORS}
+        if (route.methods or set()) & MUTATING:
             extra.update(problems.WRITE_ERRORS)
             if route.path.startswith(("/campaigns", "/estop")):
                 extra.update(problems.DEVICE_ERRORS)
@@ -105,7 +106,12 @@ def document_errors(router) -> None:
 def unguarded_routes(app: FastAPI) -> list[str]:
     """Routes that do not require the token (should be none): every mutating route needs
     require_token, every read require_reader, except the open ones (GET /api/health)."""
-    open_paths = {API_PREFIX + r.path for router in OPEN_ROUTERS for r in router.routes}
+    open_paths = {
+        API_PREFIX + r.path
+        for router in OPEN_ROUTERS
+        for r in router.routes
+        if isinstance(r, APIRoute)
+    }
     bad = []
     for route in _api_routes(app.routes):
         calls = {d.call for d in _flat(route.dependant)}
@@ -147,7 +153,7 @@ def _flat(dependant):
 
 
 # After SIGTERM or Ctrl-C (the arm already stopped) requests in flight get this long to finish.
-GRACE_S = 5.0
+GRACE_S = 5  # uvicorn takes whole seconds
 
 
 class Server(uvicorn.Server):

@@ -5,11 +5,13 @@ from __future__ import annotations
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 # label -> acquire options: the paper's procedure first, then each saving, then all of them
-CONFIGS = {
+# AcquireOptions keywords per configuration
+CONFIGS: dict[str, dict[str, Any]] = {
     "paper": dict(poses=100, settle="fixed"),
     "adaptive_settling": dict(poses=100, settle="adaptive"),
     "ordered": dict(poses=100, settle="fixed", order=True),

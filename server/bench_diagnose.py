@@ -47,7 +47,7 @@ def _line(r) -> str:
 
 def run_suite(pairs, workers: int = 2, log=None) -> list[dict]:
     """Run (seed, kind) cases, in a pool when workers > 1; results in the pairs' order."""
-    results = [None] * len(pairs)
+    results: list = [None] * len(pairs)  # filled in as the cases finish, in any order
     done = 0
 
     def report(i, r):

@@ -74,7 +74,8 @@ def _during_job(c, campaign_id: int, cap: int = 5000) -> dict:
     idle = [_timed_get(c, url) for _ in range(100)]
     job = c.post("/api/jobs", json={"campaign_id": campaign_id, "kind": "diagnosis"}).json()
     _wait(c, f"/api/jobs/{job['id']}", lambda b: b["state"] != "queued")
-    t0, lat = time.perf_counter(), []
+    lat: list[float] = []
+    t0 = time.perf_counter()
     while len(lat) < cap:
         lat.append(_timed_get(c, url))
         # One job poll per 20 reads keeps the measured traffic the live-state endpoint's.
@@ -195,11 +196,11 @@ def stop_latency(stops: int = 100) -> dict:
             server.stall()
             stuck = threading.Thread(target=_swallow(client.status, ControllerError), daemon=True)
             stuck.start()
-            _until(lambda: device.first_arrival("STATUS", since), "STATUS in flight")
+            _until(lambda: device.first_arrival("STATUS", since), "STATUS in flight")  # noqa: B023 (awaited here)
             t0 = time.monotonic()
             confirmed += client.emergency_stop(confirm_s=1.0)
             returned.append(time.monotonic() - t0)
-            on_wire.append(_until(lambda: device.first_arrival("STOP", t0), "STOP") - t0)
+            on_wire.append(_until(lambda: device.first_arrival("STOP", t0), "STOP") - t0)  # noqa: B023
             server.drop_connections()  # frees the stalled STATUS (it fails; the next reconnects)
             stuck.join(timeout=10)
     wire_ms, back_ms = np.array(on_wire) * 1000, np.array(returned) * 1000

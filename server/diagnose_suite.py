@@ -236,6 +236,7 @@ def aim_magnitudes(case: Case, templates, multiples) -> list[str]:
     probe_seed = case.cell_seed + 1
     vc.effects = []
     meas = vc.campaign(PROBE_POSES, probe_seed, arm_scatter_deg=scatter, noise_scale=0.0)
+    assert vc.last_campaign is not None  # campaign() records what it drew
     floor = np.hypot(
         vc.noise_floor_mm(meas.q, case.options.get("noise_scale", 1.0)),
         vc.last_campaign.get("arm_scatter_rms_mm", 0.0),
@@ -328,6 +329,7 @@ def run_case(case: Case) -> dict:
         return {"case": case.describe(), "skipped": case.skip}
     vc = case.cell()
     meas = vc.campaign(case.n_poses, case.cell_seed, **case.options)
+    assert vc.last_campaign is not None  # campaign() records what it drew
     truth = dict(vc.last_campaign)
     nominal = np.array([case.targets[t] for t in meas.target_names])
     t0 = time.perf_counter()

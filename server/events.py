@@ -12,7 +12,7 @@ QUEUE_SIZE = 1000
 
 
 def _now() -> dt.datetime:
-    return dt.datetime.now(dt.timezone.utc)
+    return dt.datetime.now(dt.UTC)
 
 
 class Events:
@@ -32,7 +32,7 @@ class Events:
 
     def unsubscribe(self, queue: asyncio.Queue) -> None:
         with self._lock:
-            self._subscribers = {(l, q) for l, q in self._subscribers if q is not queue}
+            self._subscribers = {(loop, q) for loop, q in self._subscribers if q is not queue}
 
     def publish(self, event: dict) -> None:
         """Send an event (a dict with a "type") to every subscriber; safe from any thread."""

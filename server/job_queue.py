@@ -394,7 +394,7 @@ class Jobs:
 
     def _forward(self, child: Child) -> None:
         for kind, message in child.messages():
-            if kind == "report":
+            if kind == "report" and isinstance(message, dict):  # what a job's report() sends
                 self.events.publish(message)
 
     def _finish(self, job_id: int, child: Child) -> None:

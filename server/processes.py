@@ -16,12 +16,13 @@ import signal
 import threading
 import time
 from multiprocessing.connection import Connection
+from typing import Final
 
 # Not fork: the service has threads (uvicorn, the acquisition, the event bus) whose locks a
 # forked child would inherit held. The fork server is a single-threaded process that imports
 # the modules below once (the solver, matplotlib, rerun for the recordings); children forked from
 # it start in milliseconds with them loaded, as a job gets a fresh process each time.
-START_METHOD = "forkserver"
+START_METHOD: Final = "forkserver"
 PRELOAD = [
     "robocal.server.worker",
     "robocal.server.charts",
@@ -143,9 +144,10 @@ def call(
     TimeoutError after `timeout` s (the child is killed); WorkerDied if it died without an
     answer. `children` (guarded by `lock`) holds the child while it runs, for a shutdown to kill.
     """
+    guard = lock if lock is not None else threading.Lock()
     child = Child(target, args, name)
     if children is not None:
-        with lock:
+        with guard:
             children.add(child)
     try:
         deadline = child.started + timeout
@@ -168,9 +170,10 @@ def call(
         child.kill()
         child.reap()
         if children is not None:
-            with lock:
+            with guard:
                 children.discard(child)
     if kind == "error":
+        assert isinstance(value, BaseException)  # the child sends its exception as it is
         raise value
     return value
 

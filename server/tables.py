@@ -24,7 +24,7 @@ def table3(rows: dict, target_names) -> Table:
     t.add_column("")
     for label in rows:
         t.add_column(label, justify="right")
-    for i, name in enumerate(target_names):
+    for name in target_names:
         t.add_row(f"F_{name} / mm^2", *[_f(acc["F"][name]) for _, acc in rows.values()])
     t.add_row(
         "max F_i / mm^2", *[_f(max(acc["F"].values())) for _, acc in rows.values()], style="bold"

@@ -98,8 +98,10 @@ def _update(db: store.Database, report: Report, job_id: int, **changes) -> store
     return job
 
 
-def campaign_data(db: store.Database, campaign_id: int):
+def campaign_data(db: store.Database, campaign_id: int | None):
     """The cell and the readings of a stored campaign; StoreError if it has none."""
+    if campaign_id is None:
+        raise store.StoreError("the job names no campaign")
     info = store.get_campaign(db, campaign_id=campaign_id)
     cell = parse_cell(info.cell_json, f"<campaign {campaign_id} cell>")
     meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)

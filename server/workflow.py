@@ -129,10 +129,8 @@ def run_method(
     every reading, a Screening reuses one already made (compare screens once for all methods)."""
     from robocal.solver.calibrate import calibrate
 
-    if screening is True:
-        screening = screen_campaign(cell, meas)
-    screening = screening or None
-    use = without_outliers(meas, screening)
+    screened = screen_campaign(cell, meas) if screening is True else screening or None
+    use = without_outliers(meas, screened)
     targets = np.array([cell.targets[t] for t in meas.target_names])
     cal = calibrate(
         cell.robot,
@@ -144,9 +142,9 @@ def run_method(
         base_guess=cell.base,
         qp=qp,
     )
-    if screening is not None:
-        cal.screening = screening
-        cal.outliers = screening.report(meas.pose_ids, meas.target_names)
+    if screened is not None:
+        cal.screening = screened
+        cal.outliers = screened.report(meas.pose_ids, meas.target_names)
     return cal
 
 
@@ -239,13 +237,13 @@ def compare(
     calibrations and their accuracy on the readings they used."""
     from robocal.solver import metrics
 
-    screening = screen_campaign(cell, meas) if screen else False
-    used = without_outliers(meas, screening or None)
+    screening = screen_campaign(cell, meas) if screen else None
+    used = without_outliers(meas, screening)
     rows = {}
     for method in methods or paper_methods(meas.target_names):
         solvers = qp_solvers if method == "minimax" else (None,)
         for qp in solvers:
-            cal = run_method(cell, meas, method, qp or "primal-dual", screening=screening)
+            cal = run_method(cell, meas, method, qp or "primal-dual", screening=screening or False)
             label = method if qp is None or qp == qp_solvers[0] else f"{method} ({qp} QP)"
             pred = predict(cal.layout, cal.x, meas.q)
             rows[label] = (cal, metrics.accuracy(pred, used.xyz, meas.target_names))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,11 +21,14 @@ from .effects import Extension, Inputs, point_shift, prepare
 from .extended import extension_rows, fit_extended, predict_extended
 from .finite import finite, require_inputs
 from .identify import Problem, register
-from .kinematics import predict_rows
+from .kinematics import Layout, predict_rows
 from .motion import visit_order
 from .robot import Robot
 from .screen import screen_readings
 from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
+
+if TYPE_CHECKING:  # run_diagnosis imports fit_errors only when it needs it
+    from .fit_errors import ExtendedErrors
 
 MIN_GAIN = 0.02  # an accepted effect removes at least this fraction of the held-out MSE
 T_SIMPLER = (
@@ -61,13 +65,13 @@ class Diagnosis:
     """The report (FORMATS.md section 5), the final model and the data behind the figures."""
 
     report: dict
-    layout: object
+    layout: Layout
     x: np.ndarray
     extensions: list
     parameters: list  # per extension, in edge units
     figures: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
-    errors: object = None  # solver.fit_errors.ExtendedErrors: the final model's standard errors
+    errors: ExtendedErrors | None = None  # the final model's standard errors
 
 
 def noise_floor(meas: np.ndarray, inputs: Inputs) -> float | None:
@@ -169,7 +173,7 @@ class Diagnoser:
         sq, n = np.zeros(m), np.zeros(m)
         resid = np.full(self.prob.meas.shape, np.nan)
         maxerr = 0.0
-        fits = {}
+        fits: dict[int | str, tuple] = {}
         for f, test in enumerate(self.folds):
             train = np.setdiff1d(np.arange(m), test)
             x, ee = self.fit(exts, train, fold=f)
@@ -195,6 +199,7 @@ class Diagnoser:
         x, ee = self.fit_plain(others, poses)
         sub = self.inputs.subset(poses)
         meas = self.prob.meas[poses]
+        assert sub.time_s is not None  # a base shift is only scanned for with timed readings
         mask = np.all(np.isfinite(meas), axis=-1) & np.isfinite(sub.time_s)
         r = predict_extended(self.prob.layout, x, ee, sub)[mask] - meas[mask]  # (N, 3)
         idx = np.flatnonzero(self.free)
@@ -285,7 +290,7 @@ def select(diag: Diagnoser, cands, log=None):
     cv_now = diag.cross_validate(current)
     diag.warm = cv_now.fits
     base = cv_now
-    steps = []
+    steps: list[tuple] = []
     remaining = list(cands)
     m = diag.prob.q.shape[0]
     while remaining and len(steps) < MAX_EFFECTS:
@@ -306,7 +311,8 @@ def select(diag: Diagnoser, cands, log=None):
         )
         thr = sc.threshold()
         n_read = cv_now.n.sum()
-        rms = lambda i: float(np.sqrt(max(sc.sse - sc.gain[i], 0.0) / n_read))  # noqa: E731
+        # called only within this iteration, so the loop variables it reads are the current ones
+        rms = lambda i: float(np.sqrt(max(sc.sse - sc.gain[i], 0.0) / n_read))  # noqa: E731, B023
         if log:
             for i, c in enumerate(trial):
                 log(

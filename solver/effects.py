@@ -38,7 +38,7 @@ class Inputs:
 
     def subset(self, idx) -> Inputs:
         pick = lambda a: None if a is None else a[idx]  # noqa: E731
-        return Inputs(self.q[idx], pick(self.time_s), pick(self.temp_c), self.motion[idx])
+        return Inputs(self.q[idx], pick(self.time_s), pick(self.temp_c), pick(self.motion))
 
 
 @dataclass

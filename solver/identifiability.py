@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import cast
 
 import numpy as np
 
@@ -108,8 +109,8 @@ def _explain(R: np.ndarray, j: int, kept: np.ndarray, names) -> str:
         rcond=None,
     )
     top = idx[np.argsort(-np.abs(coef))[:3]]
-    top = [names[i] for i, c in zip(top, np.sort(-np.abs(coef))[:3]) if -c > 0.05]
-    return "redundant with " + ", ".join(top) if top else "no effect on the measured SMRs"
+    labels = [names[i] for i, c in zip(top, np.sort(-np.abs(coef))[:3]) if -c > 0.05]
+    return "redundant with " + ", ".join(labels) if labels else "no effect on the measured SMRs"
 
 
 def jacobian_rows(layout: Layout, x, q, mask) -> np.ndarray:
@@ -154,10 +155,13 @@ def _structural(robot, names, targets, candidates, rows, weight) -> Identifiabil
         J = J[:, list(rows)].reshape(-1, layout.n_params)
     else:
         J = pose_residuals(p, p, J, weight)[1].reshape(-1, layout.n_params)
-    R = np.linalg.qr(finite(J, "the identification Jacobian"), mode="r")
+    # numpy's stubs type every qr() as the (Q, R) pair; mode="r" returns R alone
+    R = cast(np.ndarray, np.linalg.qr(finite(J, "the identification Jacobian"), mode="r"))
     kept = choose_free(R, preference_order(layout), candidates, STRUCTURAL_TOL)
     names_ = layout.names()
-    fixed = {names_[j]: _explain(R, j, kept, names_) for j in np.flatnonzero(candidates & ~kept)}
+    fixed = {
+        names_[j]: _explain(R, int(j), kept, names_) for j in np.flatnonzero(candidates & ~kept)
+    }
     kept.setflags(write=False)
     return Identifiability(kept, fixed, condition_number(J[:, kept]))
 

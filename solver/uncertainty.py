@@ -117,6 +117,8 @@ class ParameterErrors:
     def internal(self, plain_estimate: bool = False) -> np.ndarray:
         """Standard errors (mm, rad, coefficient units) per name, NaN where held fixed."""
         cov = self.plain_cov if plain_estimate else self.cov
+        if cov is None:
+            raise ValueError("this estimate keeps no plain covariance")
         sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         return np.where(self.column >= 0, sd[np.maximum(self.column, 0)], np.nan)
 

@@ -17,6 +17,8 @@ so a per-pose error (repeatability) cannot be fitted and then counted as explain
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .effects import (
@@ -86,7 +88,7 @@ def unexplained(
         chance = chance_strength(fields, r, pose, cands)
         if covs[0]["strength"] <= chance:
             return None
-    block = {
+    block: dict[str, Any] = {
         "holdout_rmse_mm": rmse,
         "share_of_baseline_mse": float(rmse**2 / baseline_mse) if baseline_mse > 0 else None,
         "noise_floor_ratio": None if not floor else rmse / floor,
@@ -197,12 +199,13 @@ def gravity_terms(G: np.ndarray) -> np.ndarray:
 def candidate_covariates(fields: Fields):
     """[(key, name, basis (N, P))] of every covariate this data can show."""
     inputs, mask, pose = fields.inputs, fields.mask, fields.pose
-    out = []
+    out: list[tuple[tuple[str, int | None], str, np.ndarray]] = []
     n = inputs.q.shape[1]
     for j in range(n):
         B = legendre(inputs.q[:, j], ANGLE_DEGREE)
         if B is not None:
             out.append((("angle", j), f"joint {j + 1}'s angle", B[pose]))
+    assert inputs.motion is not None  # Inputs fills it in from q when not given
     for j in range(n):
         s = inputs.motion[:, j].astype(float)
         if np.ptp(s) > 0:
@@ -254,7 +257,8 @@ def ranked(fields: Fields, r: np.ndarray, pose: np.ndarray, cands, count: int) -
     that only echoes a stronger one (a joint's motion direction follows its angle) drops back."""
     y, folds = r.ravel(), pose_folds(pose)
     first = HeldOut(fields.Q, y, folds)
-    held, out, taken = first, [], fields.Q
+    held, taken = first, fields.Q
+    out: list[dict] = []
     left = list(cands)
     while left and len(out) < count:
         results = scored(fields, held, first, left, further=bool(out))
@@ -294,7 +298,7 @@ def scored(fields: Fields, held: HeldOut, first: HeldOut, cands, shuffle=None, f
                 shares[chan] = (held.base - held.error(F)) / first.base
         if not shares:
             continue
-        where = max(shares, key=shares.get)
+        where = max(shares, key=shares.__getitem__)
         own = None if j is None else f"joint {j + 1}"
         if own in shares and shares[own] >= OWN_TIE * shares[where]:
             where = own
@@ -430,6 +434,7 @@ def reading(kind: str, j: int | None, channel: str, strength: float, further=Fal
             f"backlash or friction coupled between joints {J} and {channel.split()[1]}?"
         )
     if kind == "angle":
+        assert J is not None  # an angle covariate belongs to a joint
         if own:
             return (
                 f"joint {J}'s error follows its own angle beyond the modelled terms ({pct}): "

@@ -69,6 +69,7 @@ class Effect:
 
     def figure(self, ext: Extension, inputs: Inputs, expected) -> dict:
         """The figure's variable per pose and its axis labels."""
+        assert ext.joint is not None  # a joint-periodic term names its joint
         j = ext.joint + 1
         return {
             "x": np.degrees(inputs.q[:, ext.joint]),

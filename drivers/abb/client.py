@@ -234,6 +234,7 @@ class ControllerClient:
         with self._lock:
             self._drop_link()
             self._retry("HELLO", lambda: None)  # opening is the handshake
+            assert self.info is not None  # the handshake stores what HELLO said
             return self.info
 
     def close(self) -> None:
@@ -437,7 +438,7 @@ class ControllerClient:
         """STOP on the open connection if it has shaken hands, else (or if it does not answer
         within ESCALATE_S) also on a fresh connection with no handshake; (confirmed, reason)."""
         reasons: list[str] = []
-        link, stop_id = self._link, None
+        link, stop_id = self._link, 0  # 0 is no request's id; set whenever link is kept
         if link is not None and link.ready and link.alive:
             stop_id = self._new_id()
             link.expect(stop_id)
@@ -532,6 +533,7 @@ class ControllerClient:
                     log.warning("MOVEJ #%d: reply lost (%s); asking STATUS", move_id, exc)
                     self._drop_link()
                     if self._move_started(move_id, target):
+                        assert self.last_move is not None  # _move_started records the move
                         known = self.last_move.duration_s
                         return self.max_move_s if known is None else known
                     continue

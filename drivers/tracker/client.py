@@ -115,9 +115,11 @@ class TrackerClient:
         try:
             if self._line is None or not self._line.alive():
                 self._reconnect(deadline)
-            self._line.send_line(line, deadline)
+            sock = self._line
+            assert sock is not None  # _reconnect opened it
+            sock.send_line(line, deadline)
             while True:
-                raw = self._line.read_line(deadline)
+                raw = sock.read_line(deadline)
                 try:
                     reply = split_reply(raw)
                 except ProtocolError as e:

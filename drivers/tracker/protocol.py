@@ -30,7 +30,7 @@ MEASURE_OK, MEASURE_INACCURATE = "OK", "INACCURATE"
 
 _ID = re.compile(r"#(\d{1,9})")
 _NUMBER = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?")
-_INT = re.compile(r"\d+")
+_INT = re.compile(r"\d{1,9}")  # every count fits; int() refuses over 4300 digits
 _TOKEN = re.compile(r"[!-~]+")  # printable ASCII without spaces
 _CODE = re.compile(r"[A-Z][A-Z_]*")
 
@@ -158,7 +158,7 @@ def parse_float(token: str, what: str = "value", req_id: int | None = None) -> f
 
 def parse_int(token: str, what: str = "value", req_id: int | None = None) -> int:
     if not _INT.fullmatch(token):
-        raise ProtocolError(f"{what}: not a non-negative integer: {token!r}", req_id)
+        raise ProtocolError(f"{what}: not an integer 0..999999999: {token!r}", req_id)
     return int(token)
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
+from collections.abc import Callable
 
 import numpy as np
 from robocal.drivers.cell import MIN_RANGE_MM
@@ -85,15 +86,15 @@ class SimulatedTracker:
         if not self._busy.acquire(blocking=False):
             return encode_reply(req.id, TrackerError(ErrorCode.BUSY, "another request is running"))
         try:
-            method = {
+            methods: dict[str, Callable[..., object]] = {
                 "ID": self.ident,
                 "POINT": lambda *xyz: self.point(xyz),
                 "SEARCH": self.search,
                 "MEASURE": self.measure,
                 "WEATHER": self.weather,
                 "STATUS": self.status,
-            }[req.command]
-            value = method(*req.args)
+            }
+            value = methods[req.command](*req.args)
         except TrackerError as e:
             value = e
         finally:
@@ -207,7 +208,8 @@ class TrackerServer:
     """A running simulated tracker server: its `port`, fault injection for tests, `close()`."""
 
     def __init__(self, device: SimulatedTracker, host: str = "127.0.0.1", port: int = 0):
-        self.device, self.host, self.port = device, host, None
+        self.device, self.host = device, host
+        self.port = 0  # the bound port once the server runs
         self.requests = 0  # request lines received, faulted or not
         self._faults = threading.Lock()
         self._silent = self._drop = self._garbage_count = 0
@@ -290,7 +292,9 @@ class TrackerServer:
 
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         self._writers.add(writer)
-        self._tasks.add(asyncio.current_task())
+        task = asyncio.current_task()
+        assert task is not None  # a connection handler runs as a task
+        self._tasks.add(task)
         try:
             while (raw := await reader.readline()).endswith(b"\n"):  # b"" or a partial: EOF
                 fault, garbage = self._take_fault()
@@ -308,7 +312,7 @@ class TrackerServer:
             pass
         finally:
             self._writers.discard(writer)
-            self._tasks.discard(asyncio.current_task())
+            self._tasks.discard(task)
             writer.transport.abort()
 
     async def _abort_all(self) -> None:

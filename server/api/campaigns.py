@@ -23,7 +23,7 @@ from .deps import (
     SettingsDep,
 )
 from .jobs import public_job
-from .problems import problem
+from .problems import Responses, problem
 from .schemas import (
     ActionPublic,
     CampaignCreate,
@@ -41,7 +41,7 @@ ESTOP_NOTE = (
 )
 # An e-stop is answered within this (502 "unconfirmed" past it), whatever the controller does.
 ESTOP_ANSWER_S = 1.0
-CONFLICT = {
+CONFLICT: Responses = {
     409: {
         "description": "the campaign's state does not allow this action (the body "
         "says its `state` and `allowed_actions`)"
@@ -79,7 +79,7 @@ def _acted(outcome, db, acquisitions, note: str) -> ActionPublic:
     return ActionPublic(**now, was=outcome.was, note=outcome.note or note)
 
 
-PLANNING_JOB = {
+PLANNING_JOB: Responses = {
     202: {
         "model": JobPublic,
         "description": "A planning that may take seconds (a D-optimal choice, a long tour) is "
@@ -224,7 +224,7 @@ async def _estop(request: Request, campaign_id: int | None):
     )
 
 
-ESTOP_RESPONSES = {
+ESTOP_RESPONSES: Responses = {
     **CONFLICT,
     502: {"description": "unconfirmed: the controller did not confirm the stop within 1 s"},
 }

@@ -11,10 +11,11 @@ from robocal.server.formats.cell_json import parse_cell
 from robocal.solver.finite import require_inputs
 
 from .deps import DbDep, JobId, JobsDep
+from .problems import Responses
 from .worker_calls import CALL_PROBLEMS, call_slot, run_call
 
 router = APIRouter(prefix="/charts", tags=["charts"])
-PNG = {200: {"content": {"image/png": {}}}, **CALL_PROBLEMS}
+PNG: Responses = {200: {"content": {"image/png": {}}}, **CALL_PROBLEMS}
 
 
 def _inputs(db, jobs, job_id: int, model: bool = True) -> tuple:

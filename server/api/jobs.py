@@ -4,9 +4,10 @@
 from __future__ import annotations
 
 import json
+from typing import Any
 
 from fastapi import APIRouter, Request
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, JSONResponse
 from robocal.server.job_queue import DuplicateJob, Job
 
 from . import problems
@@ -45,13 +46,14 @@ def public_job(job: Job) -> JobPublic:
     )
 
 
-PROBLEM = {"content": {"application/problem+json": {}}}
+PROBLEM: dict[str, Any] = {"content": {"application/problem+json": {}}}
 
 
 @router.post(
     "",
     status_code=202,
     dependencies=[Authorized],
+    response_model=JobPublic,
     responses={
         409: {
             "description": "The campaign is not done, or the same "
@@ -61,7 +63,7 @@ PROBLEM = {"content": {"application/problem+json": {}}}
         }
     },
 )
-def create_job(body: JobCreate, jobs: JobsDep, request: Request) -> JobPublic:
+def create_job(body: JobCreate, jobs: JobsDep, request: Request) -> JobPublic | JSONResponse:
     """Queue a calibration or diagnosis of a done campaign; poll GET /jobs/{id} or /api/events.
     A second calibration of a campaign with the same method while one is queued or running is
     refused (409); another method is accepted."""

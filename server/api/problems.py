@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from http import HTTPStatus
+from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.encoders import jsonable_encoder
@@ -39,8 +40,10 @@ def problem_response(description: str) -> dict:
 
 # What every route may answer besides its success (server.app adds them to each route's
 # OpenAPI): statuses by which routes can give them.
-UNAUTHORIZED = {401: problem_response("no or wrong bearer token")}
-READ_ERRORS = {
+# FastAPI's `responses=`: the OpenAPI answers a route documents beside its own, by status code
+Responses = dict[int | str, dict[str, Any]]
+UNAUTHORIZED: Responses = {401: problem_response("no or wrong bearer token")}
+READ_ERRORS: Responses = {
     404: problem_response("no such resource"),
     409: problem_response("the resource is not in a state that allows this"),
     422: problem_response(
@@ -48,11 +51,11 @@ READ_ERRORS = {
         "detail names the field, or the file's line and column"
     ),
 }
-WRITE_ERRORS = {
+WRITE_ERRORS: Responses = {
     400: problem_response("the body is not valid JSON"),
     413: problem_response("the request body is larger than max_upload_bytes"),
 }
-DEVICE_ERRORS = {
+DEVICE_ERRORS: Responses = {
     502: problem_response(
         "a device (controller, tracker) did not answer as it must; the arm may still move"
     )

@@ -4,13 +4,16 @@ problems: 504 past the wall-clock limit, 503 when no worker frees up or one died
 from __future__ import annotations
 
 from contextlib import contextmanager
+from typing import Any
 
 from fastapi import HTTPException
 from robocal.server.job_queue import Busy, CallTimedOut, Jobs
 from robocal.server.processes import WorkerDied
 
-PROBLEM = {"application/problem+json": {}}
-CALL_PROBLEMS = {
+from .problems import Responses
+
+PROBLEM: dict[str, Any] = {"application/problem+json": {}}
+CALL_PROBLEMS: Responses = {
     503: {
         "description": "No worker free for the computation (Retry-After), or it died",
         "content": PROBLEM,

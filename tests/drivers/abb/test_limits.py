@@ -67,7 +67,7 @@ def test_moves_are_checked_against_the_tighter_limits(server, device):
             c.move_abs_j([120.0, 0, 0, 0, 0, 0])  # inside the controller's, outside the cell's
         c.move_abs_j([80.0, 0, 0, 0, 0, 0])
     assert [line for _, line in device.arrivals if " MOVEJ " in line] == [
-        "#%d MOVEJ 80.0000 0.0000 0.0000 0.0000 0.0000 0.0000" % device.moves[0][1]
+        f"#{device.moves[0][1]} MOVEJ 80.0000 0.0000 0.0000 0.0000 0.0000 0.0000"
     ]
 
 

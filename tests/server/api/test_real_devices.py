@@ -204,7 +204,7 @@ def test_unreachable_devices_fail_the_campaign_with_their_address(live, devices)
         assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
         # nothing moved: the campaign stays planned (start it again), the run says why
         failed = wait_for(
-            lambda: c.get(f"/api/campaigns/{cid}").json(),
+            lambda: c.get(f"/api/campaigns/{cid}").json(),  # noqa: B023 (awaited here)
             lambda j: j["run"] is not None and not j["run"]["active"],
             timeout=30,
             interval=0.05,
@@ -212,7 +212,7 @@ def test_unreachable_devices_fail_the_campaign_with_their_address(live, devices)
         assert failed["status"] == "planned" and "start" in failed["actions"], failed
         assert expect in failed["run"]["detail"] and "does not answer" in failed["run"]["detail"]
         assert failed["poses_done"] == 0 and devices.controller.moves == []
-        detail = wait_for(lambda: events.details.get(cid), lambda d: d is not None, timeout=10)
+        detail = wait_for(lambda: events.details.get(cid), lambda d: d is not None, timeout=10)  # noqa: B023 (awaited here)
         assert expect in detail, detail
     events.close()
 
