@@ -6,6 +6,7 @@ import os
 import platform
 import sys
 import time
+from functools import partial
 
 import numpy as np
 import scipy
@@ -51,7 +52,9 @@ def _in_turns(n: int, fns, bursts=None, budget_s: float = 60.0):
     caches are cold; the later ones run warm, as in a timing loop.
     """
     bursts = bursts or [1] * len(fns)
-    best = [[float("inf"), None, float("inf")] for _ in fns]
+    fastest = [float("inf")] * len(fns)
+    results: list[object] = [None] * len(fns)
+    cold = [float("inf")] * len(fns)
     spent, runs = 0.0, 0
     while runs < n and (runs == 0 or spent < budget_s):
         for i, fn in enumerate(fns):
@@ -60,12 +63,12 @@ def _in_turns(n: int, fns, bursts=None, budget_s: float = 60.0):
                 res = fn()
                 dt = time.perf_counter() - t0
                 spent += dt
-                if dt < best[i][0]:
-                    best[i][:2] = dt, res
+                if dt < fastest[i]:
+                    fastest[i], results[i] = dt, res
                 if k == 0:
-                    best[i][2] = min(best[i][2], dt)
+                    cold[i] = min(cold[i], dt)
         runs += 1
-    return [tuple(b) for b in best], runs
+    return list(zip(fastest, results, cold)), runs
 
 
 def _best_of(n: int, fn, budget_s: float = 60.0):
@@ -111,14 +114,11 @@ def _ours(robot, targets, names, q, xyz, m: int, repeats: int, reference_ls=None
     )  # untimed warm-up: a first large run is slower
     out, ref = {}, None
     for key, (method, qp) in OURS.items():
-
-        def ours():
-            return calibrate(robot, targets, names, q, xyz, method=method, qp=qp)
-
+        ours = partial(calibrate, robot, targets, names, q, xyz, method=method, qp=qp)
         if method == "ls-sum":
             # with the fit alone on the registered problem, to set against the reference's solve stage
             prob, x0, free = _setup(robot, targets, names, q, xyz)
-            fns = [ours, lambda: least_squares_fit(prob, x0, free)] + (
+            fns = [ours, partial(least_squares_fit, prob, x0, free)] + (
                 [reference_ls] if reference_ls else []
             )
             best, n = _in_turns(repeats, fns, [BURST, BURST, 1][: len(fns)])
@@ -386,7 +386,7 @@ def run_solver_bench(
         n = repeats or _repeats(m)
         args = (cell.robot, targets, meas.target_names, meas.q, meas.xyz)
         with_ref = reference and m <= reference_max
-        ours, ls_run = _ours(*args, m, n, (lambda: _reference_ls_run(*args)) if with_ref else None)
+        ours, ls_run = _ours(*args, m, n, partial(_reference_ls_run, *args) if with_ref else None)
         entry = {
             "poses": int(m),
             "readings": meas.n_readings,

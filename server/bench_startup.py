@@ -60,7 +60,7 @@ def run_startup_bench(repeats: int = 7, poses: int = 10) -> dict:
         }
         for argv in commands.values():  # warm the file cache; not timed
             _run(argv, work)
-        runs = {name: [] for name in commands}
+        runs: dict[str, list[float]] = {name: [] for name in commands}
         for _ in range(repeats):
             for name, argv in commands.items():
                 runs[name].append(_wall(argv, work))

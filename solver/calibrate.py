@@ -32,6 +32,8 @@ class Calibration(OptimizeResult):
     qp_iterations, qp_converged, history, lam, mu, constraints, sqp_seconds, ls_sum_F (minimax).
     """
 
+    F: np.ndarray  # typed for checkers, since OptimizeResult's items are untyped to them
+
     @property
     def iterations(self) -> int:
         return self.nit

@@ -35,10 +35,11 @@ def walk(ops, x, q, M: np.ndarray, dq=None, reverse=False) -> Iterator:
         cos, sin = np.cos(amount), np.sin(amount)
         row = {id(op): i for i, op in enumerate(moving)}
     # views made once: at a hundred poses slicing per motion costs as much as the arithmetic
+    shift = M[:, 3]  # the translation column, moved by M @ Trans
     if reverse:  # rows: Rot @ M
-        lines, shift, ti, tj = [M[i] for i in range(3)], None, t1, t2
+        lines, ti, tj = [M[i] for i in range(3)], t1, t2
     else:  # columns: M @ Rot
-        lines, shift, ti, tj = [M[:, i] for i in range(3)], M[:, 3], t1[:3], t2[:3]
+        lines, ti, tj = [M[:, i] for i in range(3)], t1[:3], t2[:3]
     for op in reversed(ops) if reverse else ops:
         if reverse:
             yield op

@@ -15,8 +15,8 @@ can say what near means for its parameters), so the end point is a true stationa
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -171,6 +171,7 @@ def levenberg_marquardt(
             break
         if abs(1.0 - rho) < 1.0 - REUSE_RHO:
             # the linear model was right: another step on this Jacobian, at the new residual
+            assert rn is not None, "only a step with a fresh Jacobian has no residual, and it left"
             ne = Normal(cn, A, ne.jt(rn), ne.jt)
         else:
             ne, at, chords = normal(x), (x, cost), 0

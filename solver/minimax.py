@@ -146,7 +146,7 @@ def minimax(
     qp_iters, qp_missed, converged, message = 0, 0, False, "iteration limit reached"
     rho = 1.0
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count is reported after the loop)
         phi = float(np.max(F))
         sol = solve(H, g, F, phi, A, c)
         qp_iters += sol.iterations

@@ -6,6 +6,9 @@ import datetime as dt
 from typing import Literal
 
 from pydantic import BaseModel, Field
+from robocal.drivers.lifecycle import ACTIONS, STATES
+from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
+from robocal.server.formats.cell_doc import CellDoc
 
 # Ids are SQLite rowids.
 MAX_ID = 2**63 - 1
@@ -14,10 +17,10 @@ MAX_ID = 2**63 - 1
 _CTRL = r"\x00-\x1f\x7f-\x9f\u2028\u2029"
 PRINTABLE = rf"^[^{_CTRL}]*[^\s{_CTRL}][^{_CTRL}]*$"  # and not blank
 METHOD = r"^(minimax|ls-sum|ls-pose|nominal|ls-single(:[A-Za-z][A-Za-z0-9_]{0,15})?)$"
-
-from robocal.drivers.lifecycle import ACTIONS, STATES
-from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
-from robocal.server.formats.cell_doc import CellDoc
+# the engine's states and the user's actions, listed in the OpenAPI; mypy takes only literals
+# written out in a Literal
+State = Literal[STATES]  # type: ignore[valid-type]
+Action = Literal[ACTIONS]  # type: ignore[valid-type]
 
 
 class CellPublic(BaseModel):
@@ -69,8 +72,8 @@ class CampaignPublic(BaseModel):
     id: int
     name: str
     created_at: dt.datetime
-    status: Literal[STATES] = Field(description="the engine's life-cycle state")
-    actions: list[Literal[ACTIONS]] = ACTIONS_FIELD
+    status: State = Field(description="the engine's life-cycle state")
+    actions: list[Action] = ACTIONS_FIELD
     simulated: bool
     notes: str
     poses_total: int
@@ -85,20 +88,20 @@ class CampaignDetail(CampaignPublic):
 class ActionPublic(CampaignPublic):
     """The campaign after a request: its state before (`was`) and now, what it allows now."""
 
-    was: Literal[STATES]
+    was: State
     note: str
 
 
 class EstopPublic(BaseModel):
     campaign_id: int | None
-    status: Literal[STATES] | None = None
-    was: Literal[STATES] | None = None
+    status: State | None = None
+    was: State | None = None
     confirmed: bool | None = Field(
         None,
         description="the controller confirmed the stop (null: "
         "no run of this service was moving the arm)",
     )
-    actions: list[Literal[ACTIONS]] = ACTIONS_FIELD
+    actions: list[Action] = ACTIONS_FIELD
     note: str
 
 

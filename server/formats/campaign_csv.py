@@ -113,10 +113,10 @@ def read_campaign(path, robot: Robot) -> Measurements:
                 f"target {target!r} of pose {key[0]!r} is already on line {seen[key].line}",
             )
         seen[key] = row
-        xyz = [t.number(row, c, None, *BOUNDS[c]) for c in MEASURED]
+        point = [t.number(row, c, None, *BOUNDS[c]) for c in MEASURED]
         # A blank time or temperature means "not recorded" (NaN), unlike a blank coordinate.
         more = [t.number(row, c, np.nan, *BOUNDS[c]) for c in extras]
-        readings.append((k, target, xyz, more))
+        readings.append((k, target, point, more))
 
     names = tuple(sorted({r[1] for r in readings}))
     col = {n: j for j, n in enumerate(names)}
@@ -144,7 +144,7 @@ def read_poses(path, robot: Robot):
     per_target = bool(t.optional(["target"]))
     t.require_rows()
     poses = _Poses(t, robot)
-    values = {c: [] for c in extras}
+    values: dict[str, list[float]] = {c: [] for c in extras}
     for row in t.rows:
         k, new = poses.add(row)
         if not new and not per_target:
@@ -167,7 +167,7 @@ def _csv_text(header: list[str], rows) -> str:
 
 def _fmt(value: float, spec: str) -> str:
     # NaN only occurs in the optional columns, where a blank field means "not recorded".
-    return spec % value if np.isfinite(value) else ""
+    return format(value, spec) if np.isfinite(value) else ""
 
 
 def write_campaign(path, meas: Measurements) -> None:
@@ -194,7 +194,7 @@ def write_campaign(path, meas: Measurements) -> None:
     mask = meas.mask
     rows = []
     for i, pid in enumerate(meas.pose_ids):
-        joints = ["%.9f" % v for v in q_deg[i]]
+        joints = [f"{v:.9f}" for v in q_deg[i]]
         for k, name in enumerate(meas.target_names):
             if mask[i, k]:
                 rows.append(
@@ -202,8 +202,8 @@ def write_campaign(path, meas: Measurements) -> None:
                         str(pid),
                         *joints,
                         name,
-                        *["%.6f" % v for v in meas.xyz[i, k]],
-                        *[_fmt(a[i, k], "%.6f") for _, a in extras],
+                        *[f"{v:.6f}" for v in meas.xyz[i, k]],
+                        *[_fmt(a[i, k], ".6f") for _, a in extras],
                     ]
                 )
     atomic_write_text(path, _csv_text(header, rows))
@@ -219,7 +219,7 @@ def write_predictions(path, pose_ids, target_names, xyz) -> None:
     if not np.all(np.isfinite(xyz)):
         raise ValueError("predictions must be finite")
     rows = [
-        [str(pid), name, *["%.6f" % v for v in xyz[i, k]]]
+        [str(pid), name, *[f"{v:.6f}" for v in xyz[i, k]]]
         for i, pid in enumerate(pose_ids)
         for k, name in enumerate(target_names)
     ]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from robocal.solver.robot import BUILTIN, IRB2600, Robot
@@ -121,7 +122,7 @@ def robot_to_json(robot: Robot) -> dict:
 def cell_to_json(cell: Cell) -> dict:
     """The JSON object of a cell; a built-in robot is written by name."""
     builtin = BUILTIN.get(cell.robot.name)
-    out = {
+    out: dict[str, Any] = {
         "robot": cell.robot.name if builtin == cell.robot else robot_to_json(cell.robot),
         "targets": {k: [float(x) for x in v] for k, v in cell.targets.items()},
     }

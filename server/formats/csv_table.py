@@ -48,7 +48,8 @@ class Table:
 
     def _records(self, text: str) -> list[tuple[int, list[str]]]:
         reader = csv.reader(io.StringIO(text, newline=""))
-        records, start = [], 1
+        records: list[tuple[int, list[str]]] = []
+        start = 1
         try:
             for fields in reader:
                 # Blank lines (often trailing) carry nothing; skip rather than refuse them.

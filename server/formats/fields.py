@@ -6,6 +6,7 @@ import difflib
 from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic.fields import FieldInfo
 from pydantic_core import PydanticCustomError
 
 from .limits import ANGLE_MAX_DEG, COORD_MAX_MM, NUMBER_MAX, bad_text
@@ -20,23 +21,21 @@ def located(message: str, *at, key: bool = False) -> PydanticCustomError:
     return PydanticCustomError("located", "{message}", {"message": message, "at": at, "key": key})
 
 
-def _bounded(limit: float, unit: str = "", minimum: float | None = None):
-    return Annotated[
-        float,
-        Field(
-            strict=True,  # no "12" for 12, no true for 1
-            allow_inf_nan=False,
-            ge=-limit if minimum is None else minimum,
-            le=limit,
-            json_schema_extra={"description": unit} if unit else None,
-        ),
-    ]
+def _bounded(limit: float, unit: str = "", minimum: float | None = None) -> FieldInfo:
+    return Field(
+        strict=True,  # no "12" for 12, no true for 1
+        allow_inf_nan=False,
+        ge=-limit if minimum is None else minimum,
+        le=limit,
+        json_schema_extra={"description": unit} if unit else None,
+    )
 
 
-Number = _bounded(NUMBER_MAX)
-NonNegative = _bounded(NUMBER_MAX, minimum=0.0)
-Coordinate = _bounded(COORD_MAX_MM, "mm")
-Angle = _bounded(ANGLE_MAX_DEG, "degrees")
+# Annotated written out at each alias, so that type checkers see a float
+Number = Annotated[float, _bounded(NUMBER_MAX)]
+NonNegative = Annotated[float, _bounded(NUMBER_MAX, minimum=0.0)]
+Coordinate = Annotated[float, _bounded(COORD_MAX_MM, "mm")]
+Angle = Annotated[float, _bounded(ANGLE_MAX_DEG, "degrees")]
 
 
 def _whole(value):

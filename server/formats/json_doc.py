@@ -7,6 +7,7 @@ import json
 
 import json_source_map
 from pydantic import ValidationError
+from pydantic_core import ErrorDetails
 
 from .errors import InputError
 
@@ -111,7 +112,7 @@ def _unique(pairs: list) -> dict:
     return out
 
 
-def explain(err: dict) -> tuple[tuple, str, bool]:
+def explain(err: ErrorDetails) -> tuple[tuple, str, bool]:
     """(location, message, whether at the key) of one pydantic error, in this project's words."""
     at = tuple(s for s in err["loc"] if s not in UNION_TAGS)
     kind, value, ctx = err["type"], err.get("input"), err.get("ctx") or {}
@@ -127,6 +128,7 @@ def explain(err: dict) -> tuple[tuple, str, bool]:
         return at, f"{value} is not a finite number", False
     if kind in ("greater_than_equal", "greater_than"):
         lo = ctx.get("ge", ctx.get("gt"))
+        assert lo is not None, "pydantic's greater_than errors carry their bound"
         if lo < 0:  # the symmetric bounds of limits.py
             return at, f"{value} is out of range: |value| must be at most {-lo:g}", False
         if "gt" in ctx:

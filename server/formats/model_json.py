@@ -5,8 +5,9 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from robocal.solver.effects import Extension
@@ -48,7 +49,7 @@ def extension_to_json(
 ) -> dict:
     """An extension as stored: its kind and place (joints from 1), its own fields (the kind's
     `to_json`), coefficients, readable parameters, standard errors."""
-    out = {"name": ext.name}
+    out: dict[str, Any] = {"name": ext.name}
     if ext.joint is not None:
         out["joint"] = ext.joint + 1
     out.update(ext.kind.to_json(ext))
@@ -119,7 +120,7 @@ def model_to_json(model: ModelFile) -> dict:
                 model.extension_errors or [None] * len(model.extensions),
             )
         ],
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
         **model.meta,
     }
 

@@ -16,7 +16,7 @@ from robocal.server.formats.campaign_csv import read_campaign, write_campaign
 from robocal.server.formats.cell_json import parse_cell
 from robocal.solver.measurements import Measurements
 from robocal.solver.robot import Robot
-from sqlalchemy import and_, delete, exists, func, insert, or_, select, update
+from sqlalchemy import CursorResult, Result, and_, delete, exists, func, insert, or_, select, update
 from sqlalchemy.orm import Session
 
 from . import checks
@@ -186,7 +186,7 @@ def take_lease(
             .where(Campaign.id == campaign_id, free)
             .values(lease_owner=owner, lease_expires_at=now + dt.timedelta(seconds=ttl_s))
         )
-        if done.rowcount == 1:
+        if _rowcount(done) == 1:
             return
         c = _campaign(s, campaign_id)
         raise LeaseHeld(
@@ -204,7 +204,7 @@ def renew_lease(db: Database, *, campaign_id: int, owner: str, ttl_s: float) -> 
             .where(Campaign.id == campaign_id, Campaign.lease_owner == owner)
             .values(lease_expires_at=utcnow() + dt.timedelta(seconds=ttl_s))
         )
-        return done.rowcount == 1
+        return _rowcount(done) == 1
 
 
 def release_lease(db: Database, *, campaign_id: int, owner: str) -> None:
@@ -389,8 +389,8 @@ def record_pose_outcome(
                     )
                 )
                 status[t] = "missing"
-        counts = [sum(v == k for v in status.values()) for k in ("ok", "missing")]
-        checks.outcome_agrees(state, *counts, pose_index)
+        ok, n_missing = (sum(v == k for v in status.values()) for k in ("ok", "missing"))
+        checks.outcome_agrees(state, ok, n_missing, pose_index)
         s.add(
             PoseOutcome(
                 campaign_id=campaign_id,
@@ -417,11 +417,13 @@ def discard_unfinished_pose(db: Database, *, campaign_id: int, pose_index: int) 
             raise Conflict(
                 f"campaign {campaign_id} pose {pose_index} is closed ({closed}); its readings stay"
             )
-        return s.execute(
-            delete(Reading).where(
-                Reading.campaign_id == campaign_id, Reading.pose_index == pose_index
+        return _rowcount(
+            s.execute(
+                delete(Reading).where(
+                    Reading.campaign_id == campaign_id, Reading.pose_index == pose_index
+                )
             )
-        ).rowcount
+        )
 
 
 def pose_readings(db: Database, *, campaign_id: int, pose_index: int) -> dict[str, ReadingInfo]:
@@ -651,10 +653,10 @@ def export_lines(db: Database, *, campaign_id: int, chunk: int = 5000):
             w.writerow(
                 [
                     r.label,
-                    *["%.9f" % v for v in q],
+                    *[f"{v:.9f}" for v in q],
                     r.target,
-                    *["%.6f" % v for v in (r.x, r.y, r.z)],
-                    *["" if more[c] is None else "%.6f" % more[c] for c in extras],
+                    *[f"{v:.6f}" for v in (r.x, r.y, r.z)],
+                    *["" if more[c] is None else f"{more[c]:.6f}" for c in extras],
                 ]
             )
         yield buf.getvalue()
@@ -673,7 +675,9 @@ def readings_page(
         raise ValueError("offset must be >= 0 and limit >= 1")
     with db.session() as s:
         _campaign(s, campaign_id)
-        total = s.scalar(select(func.count()).where(Reading.campaign_id == campaign_id))
+        total = s.execute(
+            select(func.count()).where(Reading.campaign_id == campaign_id)
+        ).scalar_one()
         on = and_(
             PlannedPose.campaign_id == Reading.campaign_id,
             PlannedPose.pose_index == Reading.pose_index,
@@ -868,8 +872,8 @@ def _poses_query(campaign_id: int):
 
 
 def _info(s: Session, c: Campaign) -> CampaignInfo:
-    n_poses = s.scalar(select(func.count()).where(PlannedPose.campaign_id == c.id))
-    n_done = s.scalar(select(func.count()).where(PoseOutcome.campaign_id == c.id))
+    n_poses = s.execute(select(func.count()).where(PlannedPose.campaign_id == c.id)).scalar_one()
+    n_done = s.execute(select(func.count()).where(PoseOutcome.campaign_id == c.id)).scalar_one()
     return CampaignInfo(
         c.id,
         c.name,
@@ -986,6 +990,12 @@ def _imported_reading(meas: Measurements, cid: int, i: int, k: int, target: str,
     return row | extra | dict(status="ok", x=x, y=y, z=z, detail="")
 
 
+def _rowcount(result: Result) -> int:
+    """Rows an UPDATE or DELETE matched: a session returns such results as a CursorResult."""
+    assert isinstance(result, CursorResult)
+    return result.rowcount
+
+
 def _check_recording(campaign: Campaign) -> None:
     if campaign.status not in RECORDING:
         raise Conflict(
@@ -995,8 +1005,14 @@ def _check_recording(campaign: Campaign) -> None:
 
 
 def _reading_info(r: Reading) -> ReadingInfo:
-    xyz = None if r.status != "ok" else (r.x, r.y, r.z)
-    std = None if r.std_x is None else (r.std_x, r.std_y, r.std_z)
+    xyz: tuple[float, float, float] | None = None
+    std: tuple[float, float, float] | None = None
+    if r.status == "ok":
+        assert r.x is not None and r.y is not None and r.z is not None, "the xyz_present check"
+        xyz = (r.x, r.y, r.z)
+    if r.std_x is not None:
+        assert r.std_y is not None and r.std_z is not None, "a reading's spread is stored whole"
+        std = (r.std_x, r.std_y, r.std_z)
     return ReadingInfo(
         r.pose_index,
         r.target,
