@@ -9,11 +9,13 @@ import pytest
 from robocal.drivers.cell import VirtualCell
 from robocal.server.formats.cell_json import default_cell
 from robocal.solver import identifiability as ident
-from robocal.solver.diagnose import Diagnoser, diagnose, noise_floor
+from robocal.solver.diagnose import Diagnoser, noise_floor
 from robocal.solver.effects import Inputs
 from robocal.solver.identify import register
 from robocal.solver.motion import last_motion
 from robocal.solver.unexplained import STRONG, Fields, covariates, unexplained
+
+from tests.solver.test_diagnose_effects import diagnosed
 
 
 class Backlash:
@@ -144,17 +146,7 @@ def test_hidden_effect_ranks_its_covariate_first(seed):
 @pytest.mark.parametrize("seed,poses", [(s, (30, 60, 100)[s % 3]) for s in range(100, 109)])
 def test_clean_campaign_gets_no_block_and_weak_strengths(seed, poses):
     cell, _, meas = campaign(seed, poses=poses)
-    targets = np.array([cell.targets[t] for t in meas.target_names])
-    d = diagnose(
-        cell.robot,
-        targets,
-        meas.target_names,
-        meas.q,
-        meas.xyz,
-        meas.time_s,
-        meas.temp_c,
-        cell.base,
-    )
+    d = diagnosed(cell, meas)
     assert "unexplained" not in d.report, d.report["unexplained"]
     top = max(strengths(cell, meas), key=lambda c: c["strength"])
     # the best of ~140 covariate-channel pairs on 30 poses reaches about 0.1 by chance (measured)
@@ -167,17 +159,7 @@ def test_wrist_coupling_is_reported_by_the_diagnosis():
     effect, name, channel = draw(1)
     assert name == "joint 4's angle"  # seed 1 draws the coupling
     cell, _, meas = campaign(1, effect)
-    targets = np.array([cell.targets[t] for t in meas.target_names])
-    d = diagnose(
-        cell.robot,
-        targets,
-        meas.target_names,
-        meas.q,
-        meas.xyz,
-        meas.time_s,
-        meas.temp_c,
-        cell.base,
-    )
+    d = diagnosed(cell, meas)
     block = d.report["unexplained"]
     assert block["holdout_rmse_mm"] == pytest.approx(d.report["final"]["holdout_rmse_mm"])
     assert block["noise_floor_ratio"] > 1.5
@@ -234,17 +216,7 @@ def test_no_block_once_the_hidden_effect_is_named(seed):
     vc = VirtualCell.random(cell.robot, cell.targets, seed=seed)
     vc.effects.extend(make_effects([f"{spec}={magnitude:.6g}"], vc, seed))
     meas = vc.campaign(100, seed=seed)
-    targets = np.array([cell.targets[t] for t in meas.target_names])
-    d = diagnose(
-        cell.robot,
-        targets,
-        meas.target_names,
-        meas.q,
-        meas.xyz,
-        meas.time_s,
-        meas.temp_c,
-        cell.base,
-    )
+    d = diagnosed(cell, meas)
     assert [e["name"] for e in d.report["effects"]] == [name]
     assert "unexplained" not in d.report, d.report["unexplained"]
 
