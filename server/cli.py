@@ -454,6 +454,14 @@ def cmd_demo(args) -> None:
     )
 
 
+def cmd_export(args) -> None:
+    from .exports import export, format_for
+
+    # plain print: the exports need numpy and the model code only, not rich
+    for line in export(args.model, format_for(args.format, args.out), args.out, args.joints):
+        print(line)
+
+
 def cmd_schema(args) -> None:
     # The committed file (tests keep it equal to the model's): no pydantic import to print it.
     folder = Path(__file__).parent / "formats" / "schema"
@@ -674,6 +682,26 @@ def build_parser() -> argparse.ArgumentParser:
         "see `simulate --help`",
     )
     d.set_defaults(func=cmd_demo)
+
+    ex = sub.add_parser(
+        "export",
+        help="a calibrated model for the controller and other tools: a RAPID module of "
+        "joint targets, the parameter table (CSV), a URDF",
+    )
+    ex.add_argument("model", help="model.json")
+    ex.add_argument(
+        "--format",
+        choices=("rapid", "params", "urdf"),
+        help="rapid: MODULE of jointtargets and a PROC moving to them (needs --joints); "
+        "params: per joint a, alpha, d, theta, beta in the robot's convention, the base and "
+        "the SMRs, nominal and calibrated (CSV); urdf: calibrated joint origins, base and SMR "
+        "links (default: from the suffix of --out: .mod, .csv, .urdf)",
+    )
+    ex.add_argument("--joints", help="rapid: joints.csv, the joint commands (robocal compensate)")
+    ex.add_argument(
+        "--out", required=True, help="file to write (the RAPID module's name is its stem)"
+    )
+    ex.set_defaults(func=cmd_export)
 
     sc = sub.add_parser("schema", help="the JSON Schema of cell.json, model.json or report.json")
     sc.add_argument("file", choices=("cell", "model", "report"))

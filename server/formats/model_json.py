@@ -110,7 +110,9 @@ def model_to_json(model: ModelFile) -> dict:
         "schema": SCHEMA,
         "robot": robot_to_json(model.robot),
         "nominal_robot": robot_to_json(model.nominal) if model.nominal is not None else None,
-        "base": np.asarray(model.base).round(9).tolist(),
+        # every digit: a base rounded to 1e-9 is no longer a rotation, and at a tracker's
+        # distances that would move a prediction (and the URDF export's match) by micrometres
+        "base": np.asarray(model.base, dtype=float).tolist(),
         "targets": {k: np.asarray(v).round(6).tolist() for k, v in model.targets.items()},
         "extensions": [
             extension_to_json(e, p, u)

@@ -1,0 +1,65 @@
+"""Joint commands (`joints.csv`, FORMATS.md section 7): one row per pose, `pose`, `q1` ... `qN`
+in degrees and, when a compensation wrote it, `predicted_error_mm`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from robocal.solver.robot import Robot
+
+from .csv_table import Row, Table
+from .limits import COORD_MAX_MM
+
+# Limits are stored in radians; a command exactly at a limit must survive the round trip.
+LIMIT_TOL_DEG = 1e-6
+
+
+@dataclass(frozen=True)
+class JointCommands:
+    """Poses in file order, their joint commands (degrees) and the predicted miss (mm) or None."""
+
+    pose_ids: list[str]
+    q_deg: np.ndarray  # (m, n)
+    predicted_error_mm: np.ndarray | None  # (m,); NaN where a row left it blank
+    lines: list[int]  # each pose's line in the file
+
+
+def read_joints(path, robot: Robot) -> JointCommands:
+    """Read a `joints.csv` for this robot; InputError (file:line:column) on any bad field, a
+    repeated pose or a command outside the robot's joint limits."""
+    t = Table.read(path)
+    columns = [f"q{i}" for i in range(1, robot.n_joints + 1)]
+    t.require(["pose", *columns])
+    has_error = bool(t.optional(["predicted_error_mm"]))
+    t.require_rows()
+    lo, hi = np.rad2deg(robot.lower), np.rad2deg(robot.upper)
+    ids: list[str] = []
+    seen: dict[str, Row] = {}
+    q, err = [], []
+    for row in t.rows:
+        pid = t.text(row, "pose")
+        if pid in seen:
+            raise t.error(row, "pose", f"pose {pid!r} is already on line {seen[pid].line}")
+        seen[pid] = row
+        values = []
+        for i, name in enumerate(columns):
+            v = t.number(row, name)
+            if v < lo[i] - LIMIT_TOL_DEG or v > hi[i] + LIMIT_TOL_DEG:
+                raise t.error(
+                    row,
+                    name,
+                    f"{t.raw(row, name)} deg is outside the limits "
+                    f"[{lo[i]:.6g}, {hi[i]:.6g}] deg of joint {i + 1} of {robot.name}",
+                )
+            values.append(v)
+        ids.append(pid)
+        q.append(values)
+        if has_error:
+            err.append(t.number(row, "predicted_error_mm", np.nan, (0.0, COORD_MAX_MM), "mm"))
+    return JointCommands(
+        ids,
+        np.array(q, dtype=float).reshape(len(ids), robot.n_joints),
+        np.array(err, dtype=float) if has_error else None,
+        [r.line for r in t.rows],
+    )
