@@ -45,7 +45,7 @@ def export(model_path, fmt: str, out, joints_path=None) -> list[str]:
     """Write the export atomically (nothing written on bad input); lines to print about it."""
     model = read_model(model_path)
     source = Path(model_path).name
-    said = []
+    said: list[str] = []
     if fmt == "rapid":
         text, said = _rapid(model, model_path, joints_path, out)
     elif fmt == "params":

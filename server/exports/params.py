@@ -88,14 +88,14 @@ def entries(model: ModelFile) -> list[Entry]:
             if p == "beta" and not par:
                 continue
             name = f"{p}{i}"
-            edge = np.rad2deg if p in ANGLES else float
+            scale = 180.0 / np.pi if p in ANGLES else 1.0
             rows.append(
                 Entry(
                     name,
                     i,
                     "deg" if p in ANGLES else "mm",
-                    float(edge(cal[name])),
-                    float(edge(nom[name])) if name in nom else None,
+                    float(cal[name] * scale),
+                    float(nom[name] * scale) if name in nom else None,
                     unc.get(name),
                     status(name),
                 )
@@ -103,8 +103,8 @@ def entries(model: ModelFile) -> list[Entry]:
     # the model's standard errors of the base are along and about the calibrated base's own
     # axes, not of these tracker-frame coordinates and angles: left blank
     rows += [Entry(n, None, u, v, status=status(n)) for n, u, v in base_entries(model.base)]
-    for t, p in model.targets.items():
-        for c, v in zip("xyz", p):
+    for t, xyz in model.targets.items():
+        for c, v in zip("xyz", xyz):
             name = f"{t}_{c}"
             rows.append(Entry(name, None, "mm", float(v), None, unc.get(name), status(name)))
     return rows

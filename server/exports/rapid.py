@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import textwrap
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,7 +70,7 @@ def module_text(
     pose_ids: list[str],
     q_deg: np.ndarray,
     predicted_error_mm: np.ndarray | None = None,
-    about: list[str] = (),
+    about: Sequence[str] = (),
 ) -> str:
     """The module: one CONST jointtarget per pose (named after it), and a PROC that moves to
     each in the given order with MoveAbsJ, fine, tool0. `about`: header sentences."""
