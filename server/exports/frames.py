@@ -52,7 +52,9 @@ def rpy_from_matrix(R: np.ndarray) -> tuple[float, float, float]:
     roll and yaw are each ill-conditioned but only their difference or sum matters) the three
     still rebuild R to rounding.
     """
-    R = np.asarray(R, dtype=float)
+    # the nearest rotation: a matrix read from a file rounded to a few digits is not quite one
+    U, _, Vt = np.linalg.svd(np.asarray(R, dtype=float)[:3, :3])
+    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
     yaw = math.atan2(R[1, 0], R[0, 0]) if math.hypot(R[0, 0], R[1, 0]) > 1e-12 else 0.0
     M = rot(2, -yaw)[:3, :3] @ R[:3, :3]  # = Ry(pitch) Rx(roll)
     pitch = math.atan2(-M[2, 0], M[0, 0])

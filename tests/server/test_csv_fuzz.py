@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from robocal.server.exports.params import read_params
 from robocal.server.formats import InputError, read_campaign, read_poses
 from robocal.server.formats.csv_table import Table
+from robocal.server.formats.joints_csv import read_joints
 from robocal.solver.robot import IRB2600
 
 from ..fuzz import FUZZ, edge_variants, mutated, random_lines
@@ -49,6 +51,8 @@ def read_all(folder, data: bytes) -> None:
     for read in (
         lambda: read_campaign(path, IRB2600),
         lambda: read_poses(path, IRB2600),
+        lambda: read_joints(path, IRB2600),
+        lambda: read_params(path),
         lambda: Table.read(path),
     ):
         try:
