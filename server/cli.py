@@ -126,6 +126,30 @@ def cmd_predict(args) -> None:
     print(f"predicted {len(pose_ids)} poses x {len(model.targets)} targets to {args.out}")
 
 
+def _tcp(text: str) -> list[float]:
+    parts = text.split(",")
+    try:
+        v = [float(p) for p in parts]
+    except ValueError:
+        v = []
+    if len(v) != 3 or not all(np.isfinite(v)) or max(abs(c) for c in v) > 10_000:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not x,y,z: the tool centre point in the flange frame, mm"
+        )
+    return v
+
+
+def cmd_compensate(args) -> None:
+    from .compensation import run
+
+    s = run(args.model, args.targets, args.out, args.tcp, args.max_error_mm)
+    # plain print, as predict: the command starts with numpy alone
+    print(
+        f"compensated {s['poses']} poses to {args.out}: predicted error RMS {s['rms_mm']:.4f} mm, "
+        f"worst {s['worst_mm']:.4f} mm, in {s['seconds']:.2f} s"
+    )
+
+
 def cmd_evaluate(args) -> None:
     from . import tables, workflow
     from .formats.model_json import write_json_atomic
@@ -595,6 +619,26 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("poses")
     pr.add_argument("--out", default="pred.csv")
     pr.set_defaults(func=cmd_predict)
+
+    cp = sub.add_parser(
+        "compensate", help="joint commands that put the SMRs (or a tool point) where wanted"
+    )
+    cp.add_argument("model")
+    cp.add_argument("targets", help="targets.csv: pose, target, x, y, z [, q1..qN, time_s, temp_c]")
+    cp.add_argument("--out", default="joints.csv")
+    cp.add_argument(
+        "--tcp",
+        type=_tcp,
+        metavar="X,Y,Z",
+        help="a tool centre point in the flange frame, mm: targets.csv then gives target TCP",
+    )
+    cp.add_argument(
+        "--max-error-mm",
+        type=_nonnegative,
+        default=0.1,
+        help="refuse a pose the model cannot bring closer than this (default 0.1 mm RMS)",
+    )
+    cp.set_defaults(func=cmd_compensate)
 
     e = sub.add_parser("evaluate", help="accuracy of a model on measured data")
     e.add_argument("model")
