@@ -507,6 +507,10 @@ def cmd_bench(args) -> None:
         from .bench_startup import run_startup_bench
 
         result = run_startup_bench(repeats=args.repeats)
+    elif args.what == "compensate":
+        from .bench_compensate import run_compensate_bench
+
+        result = run_compensate_bench()
     elif args.what == "acquire":
         from .bench_acquire import run_acquire_bench
 
@@ -725,7 +729,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
     b.add_argument(
-        "what", choices=("solver", "diagnose", "acquire", "service", "outliers", "startup")
+        "what",
+        choices=("solver", "diagnose", "acquire", "service", "outliers", "startup", "compensate"),
     )
     b.add_argument(
         "--repeats", type=int, default=7, help="startup: runs of each command (median reported)"

@@ -95,8 +95,10 @@ def read_targets(path, robot: Robot, names) -> Targets:
             q0[k] = np.deg2rad(g)
     # an SMR a pose does not give still needs a time and temperature for the model's prediction
     for c, a in extra.items():
-        fill = np.nanmean(np.where(mask, a, np.nan), axis=1, keepdims=True)
-        extra[c] = np.where(mask, a, np.broadcast_to(fill, a.shape))
+        have = mask & np.isfinite(a)
+        count = have.sum(axis=1, keepdims=True)
+        fill = np.where(have, a, 0.0).sum(axis=1, keepdims=True) / np.maximum(count, 1)
+        extra[c] = np.where(mask, a, np.where(count > 0, fill, np.nan))
     return Targets(
         str(path),
         ids,
