@@ -127,14 +127,14 @@ def cmd_predict(args) -> None:
 
 
 def _tcp(text: str) -> list[float]:
-    parts = text.split(",")
     try:
-        v = [float(p) for p in parts]
+        v = [float(p) for p in text.split(",")]
     except ValueError:
         v = []
-    if len(v) != 3 or not all(np.isfinite(v)) or max(abs(c) for c in v) > 10_000:
+    if len(v) not in (3, 6) or not all(np.isfinite(v)) or max(abs(c) for c in v) > 10_000:
         raise argparse.ArgumentTypeError(
-            f"{text!r} is not x,y,z: the tool centre point in the flange frame, mm"
+            f"{text!r} is not x,y,z[,rx,ry,rz]: the tool centre point in the flange frame, mm, "
+            "and its orientation, degrees"
         )
     return v
 
@@ -633,8 +633,9 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument(
         "--tcp",
         type=_tcp,
-        metavar="X,Y,Z",
-        help="a tool centre point in the flange frame, mm: targets.csv then gives target TCP",
+        metavar="X,Y,Z[,RX,RY,RZ]",
+        help="a tool in the flange frame (mm; orientation Rz Ry Rx in degrees): targets.csv "
+        "then gives target TCP, and optionally rx, ry, rz for the tool's orientation",
     )
     cp.add_argument(
         "--max-error-mm",

@@ -27,10 +27,18 @@ class Targets:
     time_s: np.ndarray | None
     temp_c: np.ndarray | None
     lines: list[int]
+    # with orientation=True: per pose the tool's rx, ry, rz in the cell frame (m, 3) deg, NaN if none
+    orientation: np.ndarray | None = None
 
 
-def read_targets(path, robot: Robot, names) -> Targets:
-    """Read `targets.csv` for this robot and these SMR (or TCP) names; InputError on bad input."""
+ORIENTATION = ("rx", "ry", "rz")
+ANGLE_BOUNDS = ((-360.0, 360.0), "deg")
+
+
+def read_targets(path, robot: Robot, names, orientation: bool = False) -> Targets:
+    """Read `targets.csv` for this robot and these SMR (or TCP) names; InputError on bad input.
+
+    With orientation, optional `rx`, `ry`, `rz` columns give a tool's orientation per pose."""
     t = Table.read(path)
     t.require(["pose", "target", *MEASURED])
     joints = joint_columns(robot)
@@ -39,8 +47,18 @@ def read_targets(path, robot: Robot, names) -> Targets:
         missing = next(c for c in joints if c not in have)
         raise _header_error(t, missing, len(joints))
     extras = t.optional(list(EXTRAS))
+    angles = t.optional(list(ORIENTATION)) if orientation else []
+    if angles and len(angles) != 3:
+        missing = next(c for c in ORIENTATION if c not in angles)
+        raise InputError(
+            t.path,
+            t.header_line,
+            None,
+            f"missing column '{missing}': a tool orientation is rx, ry, rz",
+        )
     t.require_rows()
     names = tuple(names)
+    turn: dict[int, tuple[Row, list[float]]] = {}
     col = {n: k for k, n in enumerate(names)}
     lo, hi = np.rad2deg(robot.lower), np.rad2deg(robot.upper)
     index: dict[str, int] = {}
@@ -78,6 +96,15 @@ def read_targets(path, robot: Robot, names) -> Targets:
                 f"target {target!r} of pose {pid!r} is already on line {seen[(k, target)].line}",
             )
         seen[(k, target)] = row
+        if angles and any(t.raw(row, c) for c in angles):
+            r = [t.number(row, c, None, *ANGLE_BOUNDS) for c in angles]
+            if k in turn and not _same(turn[k][1], r):
+                raise t.error(
+                    row,
+                    "rx",
+                    f"the orientation differs from line {turn[k][0].line} of pose {pid!r}",
+                )
+            turn[k] = (row, r)
         point = [t.number(row, c, None, *BOUNDS[c]) for c in MEASURED]
         more = [t.number(row, c, np.nan, *BOUNDS[c]) for c in extras]
         readings.append((k, col[target], point, more))
@@ -109,7 +136,15 @@ def read_targets(path, robot: Robot, names) -> Targets:
         extra.get("time_s"),
         extra.get("temp_c"),
         [r.line for r in first],
+        _orientations(turn, m) if orientation else None,
     )
+
+
+def _orientations(turn, m: int) -> np.ndarray:
+    out = np.full((m, 3), np.nan)
+    for k, (_, r) in turn.items():
+        out[k] = r
+    return out
 
 
 def _header_error(t: Table, missing: str, n: int):

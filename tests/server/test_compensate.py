@@ -193,3 +193,54 @@ def test_a_refusal_leaves_an_earlier_output_alone(cell, tmp_path):
     r = robocal("compensate", d / "model.json", "targets.csv", "--out", "joints.csv", cwd=tmp_path)
     assert r.returncode == 1 and "targets.csv:2:3: column 'x'" in r.stderr
     assert (tmp_path / "joints.csv").read_text() == "earlier\n"
+
+
+def euler(R):
+    """rx, ry, rz (deg) with R = Rz Ry Rx."""
+    return np.degrees(
+        [np.arctan2(R[2, 1], R[2, 2]), -np.arcsin(R[2, 0]), np.arctan2(R[1, 0], R[0, 0])]
+    )
+
+
+def test_an_oriented_tool(cell, tmp_path):
+    """A tool tilted 30 degrees with its orientation wanted at every pose: position and
+    orientation of the true arm's tool on target."""
+    from robocal.server.compensation import rotation
+
+    d, vc = cell
+    tcp, R_tool = np.array([0.0, 40.0, 180.0]), rotation(0.0, 30.0, 10.0)
+    model = json.loads((d / "model.json").read_text())
+    smrs = np.array([model["targets"][n] for n in vc.target_names])
+    T = kabsch(vc.true_targets, smrs)
+    tcp_model, R_model = T[:3, :3] @ tcp + T[:3, 3], T[:3, :3] @ R_tool
+    q_want = vc.sample_poses(10, np.random.default_rng(4))
+
+    def true_tool(q):
+        dq = sum(e.joint_offsets(vc, q, None, None) for e in vc.effects)
+        lay = Layout(vc.true_robot, vc.base, ("TCP",))
+        R, o = flange_frames(lay, lay.initial(tcp[None]), q, dq)
+        return np.einsum("mij,j->mi", R, tcp) + o, R @ R_tool
+
+    p, R = true_tool(q_want)
+    program = np.round(np.degrees(q_want), 1)
+    rows = [[i, "TCP", *p[i], *program[i], *euler(R[i])] for i in range(10)]
+    header = ("pose", "target", "x", "y", "z", *[f"q{i}" for i in range(1, 7)], "rx", "ry", "rz")
+    write_targets(tmp_path / "t.csv", rows, header)
+    spec = ",".join(map(str, [*tcp_model, *euler(R_model)]))
+    r = robocal(
+        "compensate", d / "model.json", "t.csv", "--tcp", spec, "--out", "j.csv", cwd=tmp_path
+    )
+    assert r.returncode == 0, r.stderr
+    _, q, _ = read_joints(tmp_path / "j.csv")
+    p2, R2 = true_tool(q)
+    floor = vc.noise_floor_mm(q_want)
+    assert np.sqrt(np.mean(np.sum((p2 - p) ** 2, -1))) <= 2 * floor
+    assert angle_deg(R2, R).max() < 0.01
+    # the program's rounded joints turn the tool by about a tenth of a degree
+    assert angle_deg(true_tool(np.deg2rad(program))[1], R).max() > 5 * angle_deg(R2, R).max()
+
+
+def angle_deg(A, B):
+    """Per pose, the angle of the rotation between A and B (m, 3, 3)."""
+    c = (np.trace(np.swapaxes(A, 1, 2) @ B, axis1=1, axis2=2) - 1) / 2
+    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
