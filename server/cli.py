@@ -635,7 +635,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=_tcp,
         metavar="X,Y,Z[,RX,RY,RZ]",
         help="a tool in the flange frame (mm; orientation Rz Ry Rx in degrees): targets.csv "
-        "then gives target TCP, and optionally rx, ry, rz for the tool's orientation",
+        "then gives target TCP, and optionally rx, ry, rz for the tool's orientation "
+        "(--tcp=-10,... when it starts with a minus)",
     )
     cp.add_argument(
         "--max-error-mm",

@@ -139,3 +139,19 @@ def test_backlash_and_thermal_are_compensated_in_the_programs_order():
     assert np.abs(moved[1:, 0] - 0.02 * approach).max() < 0.008
     # growth of 200 ppm two metres out of the base is 0.4 mm: the joints moved to undo it
     assert np.abs(geometric.error_mm).max() < 1e-6 and np.abs(moved[:, 1:3]).max() > 0.005
+
+
+def test_a_pose_beyond_a_joint_limit_stays_within_it_and_keeps_its_miss():
+    """SMRs where the arm would put them with joint 2 six degrees past its limit: the joints
+    stay within the limits and the remaining miss says the pose is out of reach."""
+    cell = default_cell()
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=3)
+    q = vc.sample_poses(4, np.random.default_rng(1))
+    q[2, 1] = vc.true_robot.lower[1] - np.deg2rad(6.0)
+    desired = vc.true_points(q)
+    model = Model(*_true_layout(vc), [], cell.robot)
+    start = np.clip(q, vc.true_robot.lower, vc.true_robot.upper)
+    res = compensate(model, desired, np.ones(desired.shape[:2], dtype=bool), start)
+    assert np.all((res.q >= vc.true_robot.lower) & (res.q <= vc.true_robot.upper))
+    assert res.error_mm[2] > 10.0
+    assert res.error_mm[[0, 1, 3]].max() < 1e-6
