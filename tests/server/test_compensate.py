@@ -244,3 +244,34 @@ def angle_deg(A, B):
     """Per pose, the angle of the rotation between A and B (m, 3, 3)."""
     c = (np.trace(np.swapaxes(A, 1, 2) @ B, axis1=1, axis2=2) - 1) / 2
     return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def test_a_model_with_thermal_growth_needs_the_temperature(tmp_path):
+    """In process: a model whose thermal term reads temp_c refuses targets without it, at the
+    header, or at the pose whose temperature is blank; with it, the joints are found."""
+    from robocal.server.compensation import compensate_file
+    from robocal.server.formats.errors import InputError
+    from robocal.server.formats.model_json import ModelFile, write_model
+    from robocal.solver.effects import Extension
+
+    c = default_cell()
+    vc = VirtualCell.random(c.robot, c.targets, seed=2)
+    growth = Extension("thermal_drift", variable="temp_c", t_ref=20.0, coef=np.array([20e-6]))
+    model = ModelFile(
+        vc.true_robot, vc.base, dict(zip(vc.target_names, vc.true_targets)), c.robot, [growth]
+    )
+    write_model(tmp_path / "model.json", model)
+    q = vc.sample_poses(2, np.random.default_rng(0))
+    p = vc.true_points(q)
+    rows = [[i, t, *p[i, k]] for i in range(2) for k, t in enumerate(vc.target_names)]
+    write_targets(tmp_path / "a.csv", rows, ("pose", "target", "x", "y", "z"))
+    with pytest.raises(InputError, match=r"a.csv:1: the model's thermal_drift needs a temp_c"):
+        compensate_file(tmp_path / "model.json", tmp_path / "a.csv")
+    temps = [[*r, "" if r[0] == 1 else 21.5] for r in rows]
+    write_targets(tmp_path / "b.csv", temps, ("pose", "target", "x", "y", "z", "temp_c"))
+    with pytest.raises(InputError, match=r"b.csv:5: pose '1'"):
+        compensate_file(tmp_path / "model.json", tmp_path / "b.csv")
+    temps = [[*r, 21.5] for r in rows]
+    write_targets(tmp_path / "c.csv", temps, ("pose", "target", "x", "y", "z", "temp_c"))
+    ids, q_deg, err = compensate_file(tmp_path / "model.json", tmp_path / "c.csv")
+    assert ids == ["0", "1"] and err.max() < 0.01
