@@ -126,6 +126,30 @@ def cmd_predict(args) -> None:
     print(f"predicted {len(pose_ids)} poses x {len(model.targets)} targets to {args.out}")
 
 
+def _tcp(text: str) -> list[float]:
+    try:
+        v = [float(p) for p in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) not in (3, 6) or not all(np.isfinite(v)) or max(abs(c) for c in v) > 10_000:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not x,y,z[,rx,ry,rz]: the tool centre point in the flange frame, mm, "
+            "and its orientation, degrees"
+        )
+    return v
+
+
+def cmd_compensate(args) -> None:
+    from .compensation import run
+
+    s = run(args.model, args.targets, args.out, args.tcp, args.max_error_mm)
+    # plain print, as predict: the command starts with numpy alone
+    print(
+        f"compensated {s['poses']} poses to {args.out}: predicted error RMS {s['rms_mm']:.4f} mm, "
+        f"worst {s['worst_mm']:.4f} mm, in {s['seconds']:.2f} s"
+    )
+
+
 def cmd_evaluate(args) -> None:
     from . import tables, workflow
     from .formats.model_json import write_json_atomic
@@ -491,6 +515,10 @@ def cmd_bench(args) -> None:
         from .bench_startup import run_startup_bench
 
         result = run_startup_bench(repeats=args.repeats)
+    elif args.what == "compensate":
+        from .bench_compensate import run_compensate_bench
+
+        result = run_compensate_bench()
     elif args.what == "acquire":
         from .bench_acquire import run_acquire_bench
 
@@ -604,6 +632,28 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--out", default="pred.csv")
     pr.set_defaults(func=cmd_predict)
 
+    cp = sub.add_parser(
+        "compensate", help="joint commands that put the SMRs (or a tool point) where wanted"
+    )
+    cp.add_argument("model")
+    cp.add_argument("targets", help="targets.csv: pose, target, x, y, z [, q1..qN, time_s, temp_c]")
+    cp.add_argument("--out", default="joints.csv")
+    cp.add_argument(
+        "--tcp",
+        type=_tcp,
+        metavar="X,Y,Z[,RX,RY,RZ]",
+        help="a tool in the flange frame (mm; orientation Rz Ry Rx in degrees): targets.csv "
+        "then gives target TCP, and optionally rx, ry, rz for the tool's orientation "
+        "(--tcp=-10,... when it starts with a minus)",
+    )
+    cp.add_argument(
+        "--max-error-mm",
+        type=_nonnegative,
+        default=0.1,
+        help="refuse a pose the model cannot bring closer than this (default 0.1 mm RMS)",
+    )
+    cp.set_defaults(func=cmd_compensate)
+
     e = sub.add_parser("evaluate", help="accuracy of a model on measured data")
     e.add_argument("model")
     e.add_argument("meas")
@@ -709,7 +759,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
     b.add_argument(
-        "what", choices=("solver", "diagnose", "acquire", "service", "outliers", "startup")
+        "what",
+        choices=("solver", "diagnose", "acquire", "service", "outliers", "startup", "compensate"),
     )
     b.add_argument(
         "--repeats", type=int, default=7, help="startup: runs of each command (median reported)"

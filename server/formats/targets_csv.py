@@ -1,0 +1,192 @@
+"""Compensation targets (`targets.csv`) and joint commands (`joints.csv`), FORMATS.md section 7."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from robocal.solver.robot import Robot
+
+from .campaign_csv import BOUNDS, EXTRAS, LIMIT_TOL_DEG, MEASURED, _csv_text, joint_columns
+from .csv_table import Row, Table
+from .errors import InputError
+from .files import atomic_write_text
+
+
+@dataclass
+class Targets:
+    """Desired SMR centres per pose (m, K, 3) mm with the SMRs given (m, K), starting guesses
+    (m, n) rad (a row of NaN: none), per-reading time and temperature, and each pose's first line."""
+
+    path: str
+    pose_ids: list[str]
+    names: tuple[str, ...]
+    desired: np.ndarray
+    mask: np.ndarray
+    q0: np.ndarray
+    time_s: np.ndarray | None
+    temp_c: np.ndarray | None
+    lines: list[int]
+    # with orientation=True: per pose the tool's rx, ry, rz in the cell frame (m, 3) deg, NaN if none
+    orientation: np.ndarray | None = None
+
+
+ORIENTATION = ("rx", "ry", "rz")
+ANGLE_BOUNDS = ((-360.0, 360.0), "deg")
+
+
+def read_targets(path, robot: Robot, names, orientation: bool = False) -> Targets:
+    """Read `targets.csv` for this robot and these SMR (or TCP) names; InputError on bad input.
+
+    With orientation, optional `rx`, `ry`, `rz` columns give a tool's orientation per pose."""
+    t = Table.read(path)
+    t.require(["pose", "target", *MEASURED])
+    joints = joint_columns(robot)
+    have = t.optional(joints)
+    if have and len(have) != len(joints):
+        missing = next(c for c in joints if c not in have)
+        raise _header_error(t, missing, len(joints))
+    extras = t.optional(list(EXTRAS))
+    angles = t.optional(list(ORIENTATION)) if orientation else []
+    if angles and len(angles) != 3:
+        missing = next(c for c in ORIENTATION if c not in angles)
+        raise InputError(
+            t.path,
+            t.header_line,
+            None,
+            f"missing column '{missing}': a tool orientation is rx, ry, rz",
+        )
+    t.require_rows()
+    names = tuple(names)
+    turn: dict[int, tuple[Row, list[float]]] = {}
+    col = {n: k for k, n in enumerate(names)}
+    lo, hi = np.rad2deg(robot.lower), np.rad2deg(robot.upper)
+    index: dict[str, int] = {}
+    ids: list[str] = []
+    first: list[Row] = []
+    guesses: list[list[float] | None] = []
+    seen: dict[tuple[int, str], Row] = {}
+    readings = []
+    for row in t.rows:
+        pid = t.text(row, "pose")
+        q = _guess(t, row, have, lo, hi, robot)
+        k = index.get(pid)
+        if k is None:
+            k = index[pid] = len(ids)
+            ids.append(pid)
+            first.append(row)
+            guesses.append(q)
+        elif not _same(guesses[k], q):
+            name = have[0] if have else "pose"
+            raise t.error(
+                row,
+                name,
+                f"the starting guess differs from line {first[k].line}, an earlier row of "
+                f"pose {pid!r}",
+            )
+        target = t.text(row, "target")
+        if target not in col:
+            raise t.error(
+                row, "target", f"{target!r} is not one of the model's targets ({', '.join(names)})"
+            )
+        if (k, target) in seen:
+            raise t.error(
+                row,
+                "target",
+                f"target {target!r} of pose {pid!r} is already on line {seen[(k, target)].line}",
+            )
+        seen[(k, target)] = row
+        if angles and any(t.raw(row, c) for c in angles):
+            r = [t.number(row, c, None, *ANGLE_BOUNDS) for c in angles]
+            if k in turn and not _same(turn[k][1], r):
+                raise t.error(
+                    row,
+                    "rx",
+                    f"the orientation differs from line {turn[k][0].line} of pose {pid!r}",
+                )
+            turn[k] = (row, r)
+        point = [t.number(row, c, None, *BOUNDS[c]) for c in MEASURED]
+        more = [t.number(row, c, np.nan, *BOUNDS[c]) for c in extras]
+        readings.append((k, col[target], point, more))
+    m, K, n = len(ids), len(names), robot.n_joints
+    desired = np.zeros((m, K, 3))
+    mask = np.zeros((m, K), dtype=bool)
+    extra = {c: np.full((m, K), np.nan) for c in extras}
+    for k, j, p, more in readings:
+        desired[k, j], mask[k, j] = p, True
+        for c, v in zip(extras, more):
+            extra[c][k, j] = v
+    q0 = np.full((m, n), np.nan)
+    for k, g in enumerate(guesses):
+        if g is not None:
+            q0[k] = np.deg2rad(g)
+    # an SMR a pose does not give still needs a time and temperature for the model's prediction
+    for c, a in extra.items():
+        have = mask & np.isfinite(a)
+        count = have.sum(axis=1, keepdims=True)
+        fill = np.where(have, a, 0.0).sum(axis=1, keepdims=True) / np.maximum(count, 1)
+        extra[c] = np.where(mask, a, np.where(count > 0, fill, np.nan))
+    return Targets(
+        str(path),
+        ids,
+        names,
+        desired,
+        mask,
+        q0,
+        extra.get("time_s"),
+        extra.get("temp_c"),
+        [r.line for r in first],
+        _orientations(turn, m) if orientation else None,
+    )
+
+
+def _orientations(turn, m: int) -> np.ndarray:
+    out = np.full((m, 3), np.nan)
+    for k, (_, r) in turn.items():
+        out[k] = r
+    return out
+
+
+def _header_error(t: Table, missing: str, n: int):
+    return InputError(
+        t.path,
+        t.header_line,
+        None,
+        f"missing column '{missing}': a starting guess gives every joint, q1 to q{n}",
+    )
+
+
+def _guess(t: Table, row: Row, have, lo, hi, robot) -> list[float] | None:
+    """The row's starting guess in degrees, or None when its joint fields are all blank."""
+    if not have or not any(t.raw(row, c) for c in have):
+        return None
+    out = []
+    for i, name in enumerate(have):
+        v = t.number(row, name)
+        if v < lo[i] - LIMIT_TOL_DEG or v > hi[i] + LIMIT_TOL_DEG:
+            raise t.error(
+                row,
+                name,
+                f"{t.raw(row, name)} deg is outside the limits [{lo[i]:.6g}, {hi[i]:.6g}] deg "
+                f"of joint {i + 1} of {robot.name}",
+            )
+        out.append(v)
+    return out
+
+
+def _same(a, b) -> bool:
+    if a is None or b is None:
+        return a is b
+    return all(abs(u - v) <= 1e-6 for u, v in zip(a, b))
+
+
+def write_joints(path, pose_ids, q_deg, error_mm) -> None:
+    """Write `joints.csv`: pose, q1 ... qN (degrees), predicted_error_mm; atomically."""
+    q_deg = np.asarray(q_deg, dtype=float)
+    n = q_deg.shape[1]
+    header = ["pose", *[f"q{i}" for i in range(1, n + 1)], "predicted_error_mm"]
+    rows = [
+        [str(pid), *[f"{v:.9f}" for v in q], f"{e:.6f}"]
+        for pid, q, e in zip(pose_ids, q_deg, error_mm)
+    ]
+    atomic_write_text(path, _csv_text(header, rows))

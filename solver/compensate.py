@@ -1,0 +1,195 @@
+"""Compensation: joint commands for which a calibrated model puts the SMRs where they are wanted.
+
+Damped least squares (Levenberg-Marquardt) on the joints, every pose at once: one walk of the
+chain per iteration gives all poses' SMR centres and joint Jacobians, and each pose takes its own
+damped step, clamped to the joint limits. The residual is the full model's (geometry plus every
+extension, evaluated at the current joints: compliance under the gravity torques of those
+joints, periodic and scale terms, backlash with the approach direction from the previous pose in
+visit order, thermal growth at the given temperature); the step uses the geometric joint
+Jacobian only. Extensions move joints by millidegrees, so the step's Jacobian is off by parts
+in ten thousand: Newton then converges a little more slowly, to the same exact solution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .effects import Extension, Inputs, joint_offsets, point_shift, prepare
+from .kinematics import Layout, predict_rows
+from .robot import Robot
+
+STEP_TOL_RAD = 1e-10  # a pose has converged once its step is below this (1e-7 mm per metre)
+STARTS = 24  # starting configurations tried for a pose given without a starting guess
+START_SEED = 20261202  # the starts are drawn, reproducibly, from this
+START_MARGIN_RAD = np.deg2rad(5.0)
+
+
+@dataclass
+class Model:
+    """A calibrated model as the compensation needs it: its layout and parameters, extensions,
+    and the nominal robot the extensions' bases are evaluated on (as model.json's predictions)."""
+
+    layout: Layout
+    x: np.ndarray
+    extensions: list[Extension]
+    nominal: Robot
+
+    def _basis_layout(self) -> tuple[Layout, np.ndarray]:
+        lay = Layout(self.nominal, np.eye(4), self.layout.target_names)
+        return lay, lay.initial(np.zeros((len(self.layout.target_names), 3)))
+
+    def evaluate(self, q, time_s=None, temp_c=None):
+        """SMR centres (m, K, 3) at joints q (m, n) rad and their joint Jacobian (m, K, 3, n).
+
+        time_s and temp_c are per reading (m, K) or None; the poses are taken as visited in
+        time_s order, else in row order (the backlash's approach direction).
+        """
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        m, K = q.shape[0], len(self.layout.target_names)
+        dq = None
+        shifts = []
+        if self.extensions:
+            inputs = Inputs(q, time_s, temp_c)
+            blay, bx = self._basis_layout()
+            bases = [prepare(e, blay, bx, inputs) for e in self.extensions]
+            dq = joint_offsets(self.extensions, bases, q.shape[1])
+            shifts = [(e, B) for e, B in zip(self.extensions, bases) if not e.is_joint]
+        mask = np.ones((m, K), dtype=bool)
+        p, _, Jq = predict_rows(self.layout, self.x, q, mask, [], dq, joint_cols=True)
+        moved = np.zeros_like(p)
+        for ext, B in shifts:
+            d, _ = point_shift(ext, B.ravel(), p, ext.kind.origin(ext, self.layout, self.x))
+            moved += d
+        J = np.moveaxis(Jq.reshape(q.shape[1], m, K, 3), 0, -1)
+        return (p + moved).reshape(m, K, 3), J
+
+    def predict(self, q, time_s=None, temp_c=None) -> np.ndarray:
+        return self.evaluate(q, time_s, temp_c)[0]
+
+
+@dataclass
+class Compensation:
+    """Per pose: joints (m, n) rad, the model's remaining RMS miss over its SMRs (mm), whether
+    the iteration converged, and the iterations run."""
+
+    q: np.ndarray
+    error_mm: np.ndarray
+    converged: np.ndarray
+    iterations: int
+
+
+def _cost(p, desired, w):
+    r = (p - desired) * w[..., None]
+    return r, np.sum(r * r, axis=(1, 2))
+
+
+def solve(
+    model: Model,
+    desired,
+    mask,
+    q0,
+    lower,
+    upper,
+    time_s=None,
+    temp_c=None,
+    max_iter: int = 100,
+) -> Compensation:
+    """Joints from the starts q0 (m, n) rad that put the model's SMRs on desired (m, K, 3) mm
+    where mask (m, K) is set, within [lower, upper]; least squares per pose, all poses at once."""
+    desired = np.where(mask[..., None], np.asarray(desired, dtype=float), 0.0)
+    w = np.asarray(mask, dtype=float)
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    q = np.clip(np.array(q0, dtype=float), lower, upper)
+    m, n = q.shape
+    p, J = model.evaluate(q, time_s, temp_c)
+    r, cost = _cost(p, desired, w)
+    mu = np.full(m, 1e-3)
+    done = np.zeros(m, dtype=bool)
+    eye = np.eye(n)
+    iterations = 0
+    while iterations < max_iter and not done.all():
+        iterations += 1
+        Jw = (J * w[..., None, None]).reshape(m, -1, n)
+        A = np.einsum("mri,mrj->mij", Jw, Jw)
+        g = np.einsum("mri,mr->mi", Jw, r.reshape(m, -1))
+        scale = np.trace(A, axis1=1, axis2=2)[:, None, None] / n + 1e-12
+        step = -np.linalg.solve(A + (mu[:, None, None] * scale) * eye, g[..., None])[..., 0]
+        step[done] = 0.0
+        trial = np.clip(q + step, lower, upper)
+        p_t, J_t = model.evaluate(trial, time_s, temp_c)
+        r_t, cost_t = _cost(p_t, desired, w)
+        better = (cost_t <= cost) & ~done
+        q[better], r[better], cost[better], J[better] = (
+            trial[better],
+            r_t[better],
+            cost_t[better],
+            J_t[better],
+        )
+        mu = np.where(better, np.maximum(mu * 0.3, 1e-12), np.minimum(mu * 10.0, 1e12))
+        small = np.max(np.abs(step), axis=1) < STEP_TOL_RAD
+        done |= (better & small) | (~better & (mu >= 1e12)) | (cost < 1e-24)
+    # the backlash couples poses: report the miss of the joints as they stand, all together
+    p, _ = model.evaluate(q, time_s, temp_c)
+    r, cost = _cost(p, desired, w)
+    count = np.maximum(w.sum(axis=1), 1.0)
+    return Compensation(q, np.sqrt(cost / count), done, iterations)
+
+
+def starts(lower, upper, count: int = STARTS) -> np.ndarray:
+    """Starting configurations (count, n) rad within the limits: mid-range, then a seeded draw."""
+    lo, hi = np.asarray(lower) + START_MARGIN_RAD, np.asarray(upper) - START_MARGIN_RAD
+    rng = np.random.default_rng(START_SEED)
+    out = rng.uniform(lo, hi, size=(count, lo.size))
+    out[0] = 0.5 * (lo + hi)
+    return out
+
+
+def compensate(
+    model: Model,
+    desired,
+    mask,
+    q0=None,
+    time_s=None,
+    temp_c=None,
+    max_iter: int = 100,
+) -> Compensation:
+    """Joint commands (rad) for which the model puts its SMRs on desired (m, K, 3) where mask
+    (m, K) is set, within the robot's limits.
+
+    q0 (m, n) rad is each pose's starting guess (it also chooses the arm's configuration); a row
+    of NaN, or q0 None, has no guess: that pose starts from the best of a fixed set of
+    configurations, tried on the geometric part of the model alone. time_s and temp_c are per
+    reading (m, K) or None, as the model's extensions need them.
+    """
+    desired = np.asarray(desired, dtype=float)
+    mask = np.asarray(mask, dtype=bool)
+    robot = model.layout.robot
+    lower, upper = robot.lower, robot.upper
+    m, n = desired.shape[0], robot.n_joints
+    q = np.full((m, n), np.nan) if q0 is None else np.array(q0, dtype=float)
+    guess = np.all(np.isfinite(q), axis=1)
+    if not guess.all():
+        q[~guess] = _search(model, desired[~guess], mask[~guess], lower, upper, max_iter)
+    return solve(model, desired, mask, q, lower, upper, time_s, temp_c, max_iter)
+
+
+def _search(model: Model, desired, mask, lower, upper, max_iter) -> np.ndarray:
+    """Per pose, the best solution of the geometric model from each of the fixed starts."""
+    geo = Model(model.layout, model.x, [], model.nominal)
+    s = starts(lower, upper)
+    m, S = len(desired), len(s)
+    q0 = np.repeat(s[None], m, axis=0).reshape(m * S, -1)
+    res = solve(
+        geo,
+        np.repeat(desired, S, axis=0),
+        np.repeat(mask, S, axis=0),
+        q0,
+        lower,
+        upper,
+        max_iter=max_iter,
+    )
+    err = res.error_mm.reshape(m, S)
+    best = np.argmin(err, axis=1)  # the first start among equals: reproducible
+    return res.q.reshape(m, S, -1)[np.arange(m), best]

@@ -1,0 +1,157 @@
+"""Compensation on simulated cells: hidden geometric errors and compliance drawn from a seed, a
+model calibrated and diagnosed from a campaign, joint commands solved for it and sent to the
+virtual cell's true arm."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from robocal.drivers.cell import VirtualCell
+from robocal.drivers.effects import make_effects
+from robocal.server import workflow
+from robocal.server.compensation import solver_model
+from robocal.server.formats.cell_json import Cell, default_cell
+from robocal.solver.calibrate import calibrate
+from robocal.solver.compensate import Model, compensate
+
+from tests.robots import PUMA_LIKE
+
+GRAVITY_JOINTS = (2, 3)  # joints carrying a large gravity torque on both arms
+
+
+def cell_of(robot: str) -> Cell:
+    irb = default_cell()
+    return irb if robot == "irb2600" else Cell(PUMA_LIKE, irb.targets)
+
+
+def simulated(robot: str, seed: int):
+    """A virtual cell with hidden geometry and compliance on a joint drawn from the seed, and the
+    model a diagnosis of its campaign writes."""
+    cell = cell_of(robot)
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=seed)
+    joint = GRAVITY_JOINTS[np.random.default_rng(seed).integers(len(GRAVITY_JOINTS))]
+    vc.effects.extend(make_effects([f"joint_compliance:{joint}=1.0"], vc, seed))
+    meas = vc.campaign(100, seed=seed)
+    _, model = workflow.diagnose(cell, meas, screen=False)
+    return cell, vc, meas, model
+
+
+def nominal_model(cell: Cell, meas) -> Model:
+    """What an uncalibrated cell knows: the nominal arm, registered to the tracker."""
+    names = meas.target_names
+    targets = np.array([cell.targets[t] for t in names])
+    nom = calibrate(cell.robot, targets, names, meas.q, meas.xyz, method="nominal")
+    return Model(nom.layout, nom.x, [], cell.robot)
+
+
+@pytest.mark.parametrize("robot", ["irb2600", "puma-like"])
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_compensated_joints_put_the_true_arm_on_target(robot, seed):
+    cell, vc, meas, model = simulated(robot, seed)
+    assert any(e.name == "joint_compliance" for e in model.extensions)
+    q_want = vc.sample_poses(60, np.random.default_rng([seed, 7]))
+    desired = vc.true_points(q_want)
+    mask = np.ones(desired.shape[:2], dtype=bool)
+    floor = vc.noise_floor_mm(q_want)
+
+    nominal = compensate(nominal_model(cell, meas), desired, mask, q_want)
+    calibrated = compensate(solver_model(model), desired, mask, nominal.q)
+
+    def miss(q):
+        return float(np.sqrt(np.mean(np.sum((vc.true_points(q) - desired) ** 2, axis=-1))))
+
+    lo, hi = vc.true_robot.lower, vc.true_robot.upper
+    assert np.all((calibrated.q >= lo) & (calibrated.q <= hi))
+    assert calibrated.converged.all()
+    after = miss(calibrated.q)
+    assert after <= 2 * floor, f"true arm misses by {after:.4f} mm RMS, noise floor {floor:.4f}"
+    assert miss(nominal.q) > max(0.5, 20 * miss(calibrated.q))
+
+
+def test_one_smr_a_pose_without_a_guess_and_the_models_own_prediction():
+    """One SMR a pose and no starting guess: the search finds joints the model puts there, and
+    its reported miss is the model file's own prediction's (workflow.model_predict)."""
+    cell, vc, meas, model = simulated("irb2600", 21)
+    q_want = vc.sample_poses(40, np.random.default_rng(5))
+    desired = vc.true_points(q_want)
+    mask = np.zeros(desired.shape[:2], dtype=bool)
+    mask[np.arange(40), np.arange(40) % 3] = True
+    res = compensate(solver_model(model), desired, mask)
+    assert res.converged.all() and res.error_mm.max() < 1e-6
+    pred = workflow.model_predict(model, res.q)
+    assert np.abs(pred[mask] - desired[mask]).max() < 1e-6
+    assert np.all((res.q >= vc.true_robot.lower) & (res.q <= vc.true_robot.upper))
+
+
+def test_a_target_out_of_reach_keeps_its_miss():
+    """A target 5 m from the base: the solve stops at the best the arm can do and says so."""
+    cell = default_cell()
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=3)
+    q = vc.sample_poses(3, np.random.default_rng(1))
+    desired = vc.true_points(q)
+    desired[1] += 5000.0
+    model = Model(
+        *_true_layout(vc),
+        [],
+        cell.robot,
+    )
+    res = compensate(model, desired, np.ones(desired.shape[:2], dtype=bool), q)
+    assert res.error_mm[1] > 1000.0
+    assert res.error_mm[[0, 2]].max() < 1e-6
+
+
+def _true_layout(vc):
+    from robocal.solver.kinematics import Layout
+
+    lay = Layout(vc.true_robot, vc.base, vc.target_names)
+    return lay, lay.initial(vc.true_targets)
+
+
+def test_backlash_and_thermal_are_compensated_in_the_programs_order():
+    """A model with backlash on joint 1 and thermal growth: the joints found put the SMRs on
+    target with each joint's approach from the previous pose and the given temperature, and
+    differ from the geometric solution by those effects."""
+    from robocal.solver.effects import Extension
+
+    cell = default_cell()
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=4)
+    lay, x = _true_layout(vc)
+    exts = [
+        Extension("joint_backlash", joint=0, coef=np.array([-np.deg2rad(0.02)])),
+        Extension("thermal_drift", variable="temp_c", t_ref=20.0, coef=np.array([50e-6])),
+    ]
+    model = Model(lay, x, exts, cell.robot)
+    q = vc.sample_poses(30, np.random.default_rng(2))
+    desired = vc.true_points(q)
+    mask = np.ones(desired.shape[:2], dtype=bool)
+    temp = np.full(mask.shape, 24.0)
+    res = compensate(model, desired, mask, q, temp_c=temp)
+    # what is left is the SMR triangle grown by 200 ppm, which no joints can shrink (~0.012 mm)
+    assert res.converged.all() and res.error_mm.max() < 0.015
+    miss = np.sqrt(np.mean(np.sum((model.predict(res.q, temp_c=temp) - desired) ** 2, -1), 1))
+    assert np.allclose(miss, res.error_mm, atol=1e-9)
+    geometric = compensate(Model(lay, x, [], cell.robot), desired, mask, q)
+    moved = np.degrees(res.q - geometric.q)
+    # joint 1 turned by the play against its approach from the previous pose (the first mid-play)
+    approach = np.sign(np.diff(res.q[:, 0]))
+    # (to a few mdeg: the least-squares fit of the grown SMR triangle turns it a little too)
+    assert np.all(np.sign(moved[1:, 0]) == approach)
+    assert np.abs(moved[1:, 0] - 0.02 * approach).max() < 0.008
+    # growth of 200 ppm two metres out of the base is 0.4 mm: the joints moved to undo it
+    assert np.abs(geometric.error_mm).max() < 1e-6 and np.abs(moved[:, 1:3]).max() > 0.005
+
+
+def test_a_pose_beyond_a_joint_limit_stays_within_it_and_keeps_its_miss():
+    """SMRs where the arm would put them with joint 2 six degrees past its limit: the joints
+    stay within the limits and the remaining miss says the pose is out of reach."""
+    cell = default_cell()
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=3)
+    q = vc.sample_poses(4, np.random.default_rng(1))
+    q[2, 1] = vc.true_robot.lower[1] - np.deg2rad(6.0)
+    desired = vc.true_points(q)
+    model = Model(*_true_layout(vc), [], cell.robot)
+    start = np.clip(q, vc.true_robot.lower, vc.true_robot.upper)
+    res = compensate(model, desired, np.ones(desired.shape[:2], dtype=bool), start)
+    assert np.all((res.q >= vc.true_robot.lower) & (res.q <= vc.true_robot.upper))
+    assert res.error_mm[2] > 10.0
+    assert res.error_mm[[0, 1, 3]].max() < 1e-6
