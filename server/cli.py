@@ -482,7 +482,8 @@ def cmd_export(args) -> None:
     from .exports import export, format_for
 
     # plain print: the exports need numpy and the model code only, not rich
-    for line in export(args.model, format_for(args.format, args.out), args.out, args.joints):
+    fmt = format_for(args.format, args.out)
+    for line in export(args.model, fmt, args.out, args.joints, args.targets):
         print(line)
 
 
@@ -742,12 +743,18 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument(
         "--format",
         choices=("rapid", "params", "urdf"),
-        help="rapid: MODULE of jointtargets and a PROC moving to them (needs --joints); "
+        help="rapid: MODULE of jointtargets and a PROC moving to them (--joints or --targets); "
         "params: per joint a, alpha, d, theta, beta in the robot's convention, the base and "
         "the SMRs, nominal and calibrated (CSV); urdf: calibrated joint origins, base and SMR "
         "links (default: from the suffix of --out: .mod, .csv, .urdf)",
     )
-    ex.add_argument("--joints", help="rapid: joints.csv, the joint commands (robocal compensate)")
+    joints = ex.add_mutually_exclusive_group()
+    joints.add_argument(
+        "--joints", help="rapid: joints.csv, the joint commands (robocal compensate)"
+    )
+    joints.add_argument(
+        "--targets", help="rapid: targets.csv, compensated first (as robocal compensate does)"
+    )
     ex.add_argument(
         "--out", required=True, help="file to write (the RAPID module's name is its stem)"
     )

@@ -130,7 +130,7 @@ def compensate_file(model_path, targets_path, tcp=None, max_error_mm: float = MA
 
 def run(model_path, targets_path, out_path, tcp=None, max_error_mm: float = MAX_ERROR_MM):
     """Compensate and write joints.csv; returns a summary dict for the command's line."""
-    from .formats.targets_csv import write_joints
+    from .formats.joints_csv import write_joints
 
     t0 = time.perf_counter()
     ids, q_deg, err = compensate_file(model_path, targets_path, tcp, max_error_mm)

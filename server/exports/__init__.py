@@ -41,13 +41,14 @@ def geometric_note(model: ModelFile) -> str | None:
     )
 
 
-def export(model_path, fmt: str, out, joints_path=None) -> list[str]:
-    """Write the export atomically (nothing written on bad input); lines to print about it."""
+def export(model_path, fmt: str, out, joints_path=None, targets_path=None) -> list[str]:
+    """Write the export atomically (nothing written on bad input); lines to print about it.
+    A RAPID module takes its joints from joints_path, or compensates targets_path first."""
     model = read_model(model_path)
     source = Path(model_path).name
     said: list[str] = []
     if fmt == "rapid":
-        text, said = _rapid(model, model_path, joints_path, out)
+        text, said = _rapid(model, model_path, joints_path, targets_path, out)
     elif fmt == "params":
         from .params import params_text
 
@@ -76,18 +77,16 @@ def export(model_path, fmt: str, out, joints_path=None) -> list[str]:
     return said
 
 
-def _rapid(model: ModelFile, model_path, joints_path, out) -> tuple[str, list[str]]:
-    from robocal.server.formats.joints_csv import read_joints
-
+def _rapid(model: ModelFile, model_path, joints_path, targets_path, out) -> tuple[str, list[str]]:
     from .rapid import identifier, module_text
 
-    if joints_path is None:
+    if (joints_path is None) == (targets_path is None):
         raise InputError(
             model_path,
             None,
             None,
-            "a RAPID export needs the joint commands: --joints joints.csv "
-            "(from robocal compensate)",
+            "a RAPID export needs the joint commands: --joints joints.csv (from robocal "
+            "compensate) or --targets targets.csv (compensated here), one of the two",
         )
     if model.robot.n_joints != 6:
         raise InputError(
@@ -97,18 +96,28 @@ def _rapid(model: ModelFile, model_path, joints_path, out) -> tuple[str, list[st
             f"{model.robot.name} has {model.robot.n_joints} joints; a RAPID jointtarget "
             "holds 6 robot axes",
         )
-    cmd = read_joints(joints_path, model.robot)
+    if targets_path is not None:
+        from robocal.server.compensation import compensate_file
+
+        source = targets_path
+        pose_ids, q_deg, error_mm = compensate_file(model_path, targets_path)
+    else:
+        from robocal.server.formats.joints_csv import read_joints
+
+        source = joints_path
+        cmd = read_joints(joints_path, model.robot)
+        pose_ids, q_deg, error_mm = cmd.pose_ids, cmd.q_deg, cmd.predicted_error_mm
     module = identifier(Path(out).stem)
     stamp = datetime.now(UTC).isoformat(timespec="seconds")
     about = [
         f"Written by robocal export ({stamp}) from {Path(model_path).name} ({model.robot.name}, "
         f"method {model.meta.get('method', 'unknown')}, sha256 {file_digest(model_path)[:16]}) "
-        f"and {Path(joints_path).name}: {len(cmd.pose_ids)} joint targets in the file's order.",
+        f"and {Path(source).name}: {len(pose_ids)} joint targets in the file's order.",
         "Each is the joint command that the calibrated model says puts the SMRs where the "
         "targets ask; MoveAbsJ takes it as it is (no configuration, tool or work object enters).",
     ]
-    text = module_text(module, cmd.pose_ids, cmd.q_deg, cmd.predicted_error_mm, about)
+    text = module_text(module, pose_ids, q_deg, error_mm, about)
     return text, [
-        f"wrote module {module} to {out}: {len(cmd.pose_ids)} jointtargets moved to in order "
+        f"wrote module {module} to {out}: {len(pose_ids)} jointtargets moved to in order "
         f"by PROC {identifier('Run_' + module)} (MoveAbsJ, v100, fine, tool0)"
     ]

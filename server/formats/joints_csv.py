@@ -8,7 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 from robocal.solver.robot import Robot
 
+from .campaign_csv import _csv_text
 from .csv_table import Row, Table
+from .files import atomic_write_text
 from .limits import COORD_MAX_MM
 
 # Limits are stored in radians; a command exactly at a limit must survive the round trip.
@@ -63,3 +65,15 @@ def read_joints(path, robot: Robot) -> JointCommands:
         np.array(err, dtype=float) if has_error else None,
         [r.line for r in t.rows],
     )
+
+
+def write_joints(path, pose_ids, q_deg, error_mm) -> None:
+    """Write `joints.csv`: pose, q1 ... qN (degrees), predicted_error_mm; atomically."""
+    q_deg = np.asarray(q_deg, dtype=float)
+    n = q_deg.shape[1]
+    header = ["pose", *[f"q{i}" for i in range(1, n + 1)], "predicted_error_mm"]
+    rows = [
+        [str(pid), *[f"{v:.9f}" for v in q], f"{e:.6f}"]
+        for pid, q, e in zip(pose_ids, q_deg, error_mm)
+    ]
+    atomic_write_text(path, _csv_text(header, rows))

@@ -7,10 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 from robocal.solver.robot import Robot
 
-from .campaign_csv import BOUNDS, EXTRAS, LIMIT_TOL_DEG, MEASURED, _csv_text, joint_columns
+from .campaign_csv import BOUNDS, EXTRAS, LIMIT_TOL_DEG, MEASURED, joint_columns
 from .csv_table import Row, Table
 from .errors import InputError
-from .files import atomic_write_text
 
 
 @dataclass
@@ -178,15 +177,3 @@ def _same(a, b) -> bool:
     if a is None or b is None:
         return a is b
     return all(abs(u - v) <= 1e-6 for u, v in zip(a, b))
-
-
-def write_joints(path, pose_ids, q_deg, error_mm) -> None:
-    """Write `joints.csv`: pose, q1 ... qN (degrees), predicted_error_mm; atomically."""
-    q_deg = np.asarray(q_deg, dtype=float)
-    n = q_deg.shape[1]
-    header = ["pose", *[f"q{i}" for i in range(1, n + 1)], "predicted_error_mm"]
-    rows = [
-        [str(pid), *[f"{v:.9f}" for v in q], f"{e:.6f}"]
-        for pid, q, e in zip(pose_ids, q_deg, error_mm)
-    ]
-    atomic_write_text(path, _csv_text(header, rows))

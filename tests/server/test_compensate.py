@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import make_effects
+from robocal.server.exports.rapid import read_module
 from robocal.server.formats.cell_json import default_cell
 from robocal.solver.kinematics import Layout, flange_frames
 from robocal.solver.rigid import kabsch
@@ -275,3 +276,40 @@ def test_a_model_with_thermal_growth_needs_the_temperature(tmp_path):
     write_targets(tmp_path / "c.csv", temps, ("pose", "target", "x", "y", "z", "temp_c"))
     ids, q_deg, err = compensate_file(tmp_path / "model.json", tmp_path / "c.csv")
     assert ids == ["0", "1"] and err.max() < 0.01
+
+
+def test_a_rapid_module_of_compensated_targets_reaches_them_on_the_true_arm(cell, tmp_path):
+    """targets.csv -> export --targets (compensated on the way) -> the module's jointtargets,
+    parsed back: the same joints as compensate's joints.csv, and the true arm lands on target."""
+    d, vc = cell
+    q_want = vc.sample_poses(8, np.random.default_rng(7))
+    desired = vc.true_points(q_want)
+    program = np.round(np.degrees(q_want), 1)
+    rows = [
+        [f"P{i}", name, *desired[i, k], *program[i]]
+        for i in range(8)
+        for k, name in enumerate(vc.target_names)
+    ]
+    write_targets(tmp_path / "targets.csv", rows)
+    model = d / "model.json"
+    r = robocal("compensate", model, "targets.csv", "--out", "joints.csv", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    for source, out in (("--targets", "T.mod"), ("--joints", "J.mod")):
+        path = "targets.csv" if source == "--targets" else "joints.csv"
+        r = robocal("export", model, "--format", "rapid", source, path, "--out", out, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    ids, q, _ = read_joints(tmp_path / "joints.csv")
+    for out in ("T.mod", "J.mod"):
+        mod = read_module((tmp_path / out).read_text(encoding="ascii"))
+        robax = np.array([mod.targets[n][0] for n in mod.moves])
+        assert len(mod.moves) == len(ids) == 8
+        assert np.abs(robax - np.degrees(q)).max() <= 0.5e-5 + 1e-9  # as printed
+        reached = vc.true_points(np.deg2rad(robax))
+        rms = np.sqrt(np.mean(np.sum((reached - desired) ** 2, -1)))
+        assert rms <= 2 * vc.noise_floor_mm(q_want), rms
+    # both flags at once: argparse refuses, one line, nothing written
+    r = robocal(
+        "export", model, "--format", "rapid", "--joints", "joints.csv", "--targets",
+        "targets.csv", "--out", "X.mod", cwd=tmp_path,
+    )  # fmt: skip
+    assert r.returncode != 0 and not (tmp_path / "X.mod").exists()
