@@ -127,16 +127,12 @@ def cmd_predict(args) -> None:
 
 
 def _tcp(text: str) -> list[float]:
+    from .compensation import parse_tcp
+
     try:
-        v = [float(p) for p in text.split(",")]
-    except ValueError:
-        v = []
-    if len(v) not in (3, 6) or not all(np.isfinite(v)) or max(abs(c) for c in v) > 10_000:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not x,y,z[,rx,ry,rz]: the tool centre point in the flange frame, mm, "
-            "and its orientation, degrees"
-        )
-    return v
+        return parse_tcp(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def cmd_compensate(args) -> None:

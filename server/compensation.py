@@ -20,6 +20,20 @@ TOOL_POINTS = (TCP_NAME, "TCP_X", "TCP_Z")
 MAX_ERROR_MM = 0.1  # a pose the model cannot bring closer than this is refused as unreachable
 
 
+def parse_tcp(text: str) -> list[float]:
+    """x,y,z[,rx,ry,rz] (mm, degrees) of a tool centre point in the flange frame; ValueError."""
+    try:
+        v = [float(p) for p in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) not in (3, 6) or not all(np.isfinite(v)) or max(abs(c) for c in v) > 10_000:
+        raise ValueError(
+            f"{text!r} is not x,y,z[,rx,ry,rz]: the tool centre point in the flange frame, mm, "
+            "and its orientation, degrees"
+        )
+    return v
+
+
 def rotation(rx, ry, rz) -> np.ndarray:
     """Rz(rz) Ry(ry) Rx(rx), angles in degrees (KUKA's A, B, C order)."""
     return (rot(2, np.deg2rad(rz)) @ rot(1, np.deg2rad(ry)) @ rot(0, np.deg2rad(rx)))[:3, :3]

@@ -505,6 +505,48 @@ function showResults(j) {
     .catch((e) => { $("table3").textContent = e.message; });
 }
 
+/** Save a POST answer (a compensation or an export of the shown job's model) as a file. */
+async function postDownload(path, body, filename) {
+  $("t-state").textContent = "computing...";
+  try {
+    const r = await request("POST", path, body, true, "text/csv");
+    const save = Object.assign(document.createElement("a"), {
+      href: URL.createObjectURL(await r.blob()), download: filename });
+    save.click();
+    setTimeout(() => URL.revokeObjectURL(save.href), 10000);
+    $("t-state").textContent = `saved ${filename}`;
+  } catch (e) { $("t-state").textContent = ""; say(e.message); }
+}
+
+async function targetsUpload(query) {
+  const file = $("t-file").files[0];
+  if (!file) { say("choose a targets.csv file first"); return null; }
+  query.set("filename", file.name);
+  return file.text();
+}
+
+$("t-joints").addEventListener("click", async () => {
+  const query = new URLSearchParams();
+  if ($("t-tcp").value.trim()) query.set("tcp", $("t-tcp").value.trim());
+  const body = await targetsUpload(query);
+  if (body !== null) {
+    await postDownload(`/models/${state.job}/compensate?${query}`, body, `job-${state.job}.joints.csv`);
+  }
+});
+
+$("t-rapid").addEventListener("click", async () => {
+  const query = new URLSearchParams({ format: "rapid" });
+  const body = await targetsUpload(query);
+  if (body !== null) {
+    await postDownload(`/models/${state.job}/export?${query}`, body, `job-${state.job}.mod`);
+  }
+});
+
+[["x-params", "params", "csv"], ["x-urdf", "urdf", "urdf"]].forEach(([id, format, suffix]) => {
+  $(id).addEventListener("click", () => postDownload(
+    `/models/${state.job}/export?format=${format}`, undefined, `job-${state.job}.${suffix}`));
+});
+
 function fmt(v) {
   if (v === null || v === undefined) return "-";
   const a = Math.abs(v);

@@ -1,15 +1,22 @@
-"""Models: the model.json a done calibration job wrote, and its accuracy on a campaign."""
+"""Models: the model.json a done calibration job wrote, its accuracy on a campaign, the joint
+commands it compensates for a targets.csv, and its exports (RAPID, parameter table, URDF)."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, HTTPException, Query, Request, Response
 from fastapi.responses import FileResponse
-from robocal.server import charts, store
+from robocal.server import charts, model_files, store
+from robocal.server.compensation import MAX_ERROR_MM, parse_tcp
 from robocal.server.formats.cell_json import parse_cell
 from robocal.solver.finite import require_inputs
+from starlette.concurrency import run_in_threadpool
 
-from .deps import CampaignQuery, DbDep, JobId, JobsDep
-from .worker_calls import CALL_PROBLEMS, call_slot, run_call
+from .deps import Authorized, CampaignQuery, DbDep, JobId, JobsDep
+from .problems import Responses
+from .schemas import PRINTABLE
+from .worker_calls import CALL_PROBLEMS, PROBLEM, call_slot, run_call
 
 router = APIRouter(prefix="/models", tags=["models"])
 
@@ -34,3 +41,111 @@ def evaluate_model(job_id: JobId, campaign_id: CampaignQuery, jobs: JobsDep, db:
         meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
         require_inputs(meas.q, meas.xyz)  # a non-finite campaign: 422 at once, no worker
         return run_call(jobs, charts.evaluation, path, meas)
+
+
+TARGETS_BODY = {
+    "requestBody": {
+        "content": {
+            "text/csv": {
+                "schema": {"type": "string", "description": "a targets.csv (spec section 7)"}
+            }
+        },
+    }
+}
+BAD_FILE: Responses = {
+    422: {"description": "A bad targets.csv (its line) or query", "content": PROBLEM}
+}
+CSV_ANSWER: Responses = {200: {"content": {"text/csv": {"schema": {"type": "string"}}}}}
+EXPORT_ANSWER: Responses = {
+    200: {"content": {m: {"schema": {"type": "string"}} for m in model_files.MEDIA.values()}}
+}
+Filename = Annotated[
+    str, Query(max_length=255, pattern=PRINTABLE, description="the upload's name, for errors")
+]
+Tcp = Annotated[
+    str | None,
+    Query(
+        max_length=200,
+        pattern=r"^[-+0-9.eE]+(,[-+0-9.eE]+){2}(,[-+0-9.eE]+,[-+0-9.eE]+,[-+0-9.eE]+)?$",
+        description="x,y,z[,rx,ry,rz]: a tool centre point in the flange frame (mm, degrees); "
+        "targets.csv then names the target TCP",
+    ),
+]
+
+
+def _tcp(text: str | None) -> list[float] | None:
+    try:
+        return None if text is None else parse_tcp(text)
+    except ValueError as e:
+        raise HTTPException(422, str(e)) from None
+
+
+@router.post(
+    "/{job_id}/compensate",
+    dependencies=[Authorized],
+    openapi_extra={"requestBody": {**TARGETS_BODY["requestBody"], "required": True}},
+    response_class=Response,
+    responses={**CSV_ANSWER, **BAD_FILE, **CALL_PROBLEMS},
+)
+async def compensate(
+    job_id: JobId,
+    request: Request,
+    jobs: JobsDep,
+    tcp: Tcp = None,
+    max_error_mm: Annotated[float, Query(gt=0, le=1000)] = MAX_ERROR_MM,
+    filename: Filename = "targets.csv",
+) -> Response:
+    """The joint commands (joints.csv) that put the SMRs (or the tool) where the uploaded
+    targets.csv wants them, by this job's model; an unreachable pose is 422 with its line."""
+    data = await request.body()
+    text = await run_in_threadpool(
+        _compensate, jobs, job_id, data, filename, _tcp(tcp), max_error_mm
+    )
+    return Response(
+        text,
+        media_type="text/csv",
+        headers={"Content-Disposition": f'attachment; filename="job-{job_id}.joints.csv"'},
+    )
+
+
+def _compensate(jobs, job_id, data, filename, tcp, max_error_mm) -> str:
+    path = jobs.model_path(job_id)
+    with call_slot(jobs):
+        return run_call(jobs, model_files.compensated_csv, path, data, filename, tcp, max_error_mm)
+
+
+@router.post(
+    "/{job_id}/export",
+    dependencies=[Authorized],
+    openapi_extra=TARGETS_BODY,
+    response_class=Response,
+    responses={**EXPORT_ANSWER, **BAD_FILE, **CALL_PROBLEMS},
+)
+async def export(
+    job_id: JobId,
+    request: Request,
+    jobs: JobsDep,
+    format: Annotated[Literal["rapid", "params", "urdf"], Query(description="the export")],
+    filename: Filename = "targets.csv",
+) -> Response:
+    """The model for the controller and other tools: `rapid`, a RAPID module of the joint
+    targets compensated for the uploaded targets.csv; `params`, the identified parameters in the
+    robot's convention (CSV); `urdf`, calibrated joint origins (no body for these two)."""
+    data = await request.body()
+    if format == "rapid" and not data:
+        raise HTTPException(422, "a RAPID export needs a targets.csv as the request body")
+    text = await run_in_threadpool(
+        _export, jobs, job_id, format, data if format == "rapid" else None, filename
+    )
+    name = f"job-{job_id}{model_files.SUFFIX[format]}"
+    return Response(
+        text,
+        media_type=model_files.MEDIA[format],
+        headers={"Content-Disposition": f'attachment; filename="{name}"'},
+    )
+
+
+def _export(jobs, job_id, fmt, data, filename) -> str:
+    path = jobs.model_path(job_id)
+    with call_slot(jobs):
+        return run_call(jobs, model_files.exported, path, fmt, data, filename)

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import re
 import time
 
 import httpx
+from robocal.server.exports.rapid import read_module
 
 from tests.server.api.conftest import wait_for
 from tests.web.conftest import shot as _shot
@@ -65,7 +68,7 @@ def test_page_is_served_and_api_still_answers(served):
     assert r.json()["detail"] == "no API route POST /api/no-such-route"
 
 
-def test_campaign_to_calibration_charts_in_the_browser(served, page):
+def test_campaign_to_calibration_charts_in_the_browser(served, page, tmp_path):
     t0 = time.monotonic()
     page.goto(served.url + "/")
     page.fill("#token", served.token)
@@ -138,6 +141,36 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page):
     else:
         assert "No effect" in page.text_content("#d-none")
     assert page.get_attribute("#d-links a", "href").endswith("/report")
+
+    # Compensation from the page: the campaign's first readings as targets, their joints as
+    # the starting guess; joints.csv, a RAPID module and a URDF come back as downloads.
+    cid = page.text_content("#p-id")
+    meas = list(
+        csv.DictReader(
+            io.StringIO(_get(served, f"{served.url}/api/campaigns/{cid}/measurements.csv").text)
+        )
+    )
+    poses = sorted({r["pose"] for r in meas}, key=int)[:3]
+    with open(tmp_path / "targets.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["pose", "target", "x", "y", "z", *[f"q{i}" for i in range(1, 7)]])
+        for r in meas:
+            if r["pose"] in poses and r["x"]:
+                w.writerow([r["pose"], r["target"], r["x"], r["y"], r["z"],
+                            *[r[f"q{i}"] for i in range(1, 7)]])  # fmt: skip
+    page.set_input_files("#t-file", str(tmp_path / "targets.csv"))
+    with page.expect_download(timeout=120_000) as got:
+        page.click("#t-joints")
+    joints = list(csv.DictReader(open(got.value.path())))
+    assert [j["pose"] for j in joints] == poses and got.value.suggested_filename.endswith(".csv")
+    with page.expect_download(timeout=120_000) as got:
+        page.click("#t-rapid")
+    mod = read_module(open(got.value.path()).read())
+    assert len(mod.moves) == len(poses)
+    with page.expect_download(timeout=120_000) as got:
+        page.click("#x-urdf")
+    assert "<robot" in open(got.value.path()).read()
+    assert page.text_content("#t-state").startswith("saved ")
     shot = _shot(page, "results")
     assert shot.stat().st_size > 10_000
     print(f"browser flow took {time.monotonic() - t0:.1f} s")

@@ -28,7 +28,12 @@ STREAMS = {("GET", "/api/events")}
 # Their body is a whole file (cell.json, meas.csv) whose validity goes beyond any schema (joints
 # within the robot's limits, an orthonormal base, one row per pose and target): a schema-valid
 # body is mostly a bad file, refused 422 with its line. Every other check still runs on them.
-FILES = {("POST", "/api/cells"), ("POST", "/api/measurements/import")}
+FILES = {
+    ("POST", "/api/cells"),
+    ("POST", "/api/measurements/import"),
+    ("POST", "/api/models/{job_id}/compensate"),
+    ("POST", "/api/models/{job_id}/export"),
+}
 FILE_CHECKS_EXCLUDED = [checks.positive_data_acceptance]
 # Examples per operation and generation mode: bounded so the whole run stays near a minute.
 EXAMPLES = {GenerationMode.POSITIVE: 20, GenerationMode.NEGATIVE: 10}

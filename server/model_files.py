@@ -1,0 +1,66 @@
+"""What a calibrated model file makes for the API: compensated joints and exports, as text (run
+in a worker process; uploads are written to a private folder under their own names, so errors
+name the file the user sent)."""
+
+from __future__ import annotations
+
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+from .formats.errors import InputError
+
+SUFFIX = {"rapid": ".mod", "params": ".csv", "urdf": ".urdf"}
+MEDIA = {"rapid": "text/plain", "params": "text/csv", "urdf": "application/xml"}
+# The uploaded file's name on disk: only its last part, and never empty.
+_SAFE = "".join(chr(c) for c in range(33, 127) if chr(c) not in '/\\:*?"<>|')
+
+
+def _upload(folder: Path, filename: str, data: bytes) -> Path:
+    name = "".join(ch if ch in _SAFE else "_" for ch in Path(filename).name) or "upload.csv"
+    path = folder / name
+    path.write_bytes(data)
+    return path
+
+
+@contextmanager
+def _named(paths: dict[str, str]):
+    """InputErrors name the files as the user knows them, never the service's own paths."""
+    try:
+        yield
+    except InputError as e:
+        shown = paths.get(e.path)
+        if shown is None:
+            raise
+        raise InputError(shown, e.line, e.column, e.message) from None
+
+
+def compensated_csv(model_path, data: bytes, filename: str, tcp, max_error_mm, report=None):
+    """joints.csv (text) for an uploaded targets.csv; InputError names the upload's line."""
+    from .compensation import compensate_file
+    from .formats.joints_csv import write_joints
+
+    with tempfile.TemporaryDirectory(prefix="robocal-compensate-") as tmp:
+        folder = Path(tmp)
+        targets = _upload(folder, filename, data)
+        with _named({str(targets): filename, str(model_path): Path(model_path).name}):
+            ids, q_deg, err = compensate_file(model_path, targets, tcp, max_error_mm)
+        out = folder / "joints.out.csv"
+        write_joints(out, ids, q_deg, err)
+        return out.read_text(encoding="utf-8")
+
+
+def exported(model_path, fmt: str, data: bytes | None, filename: str, report=None) -> str:
+    """The export's text; a RAPID module compensates the uploaded targets.csv first."""
+    from .exports import export
+
+    with tempfile.TemporaryDirectory(prefix="robocal-export-") as tmp:
+        folder = Path(tmp)
+        targets = _upload(folder, filename, data) if data is not None else None
+        out = folder / f"Robocal_Targets{SUFFIX[fmt]}"
+        names = {str(model_path): Path(model_path).name}
+        if targets is not None:
+            names[str(targets)] = filename
+        with _named(names):
+            export(model_path, fmt, out, None, targets)
+        return out.read_text(encoding="utf-8")
