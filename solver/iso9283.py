@@ -49,9 +49,9 @@ def position_figures(attained, commanded) -> PositionFigures:
         raise ValueError("repeatability needs at least two attained positions per point")
     bary = a.mean(axis=1)
     ap_xyz = bary - c
-    l = np.linalg.norm(a - bary[:, None], axis=-1)
-    l_bar = l.mean(axis=1)
-    s_l = l.std(axis=1, ddof=1)
+    dist = np.linalg.norm(a - bary[:, None], axis=-1)
+    l_bar = dist.mean(axis=1)
+    s_l = dist.std(axis=1, ddof=1)
     return PositionFigures(
         ap_xyz, np.linalg.norm(ap_xyz, axis=-1), l_bar + 3 * s_l, bary, l_bar, s_l
     )
