@@ -74,8 +74,10 @@ def test_acquire_verify_writes_the_figures_and_refuses_bad_points(verified, tmp_
     assert not (tmp_path / "verification.json").exists()
     r = robocal("--cycles", "1", "--directions", "1")
     assert r.returncode == 1 and "repeatability" in r.stderr, r.stderr
-    r = robocal("--cycles", "2", "--directions", "2", "--out", "v.json")
+    r = robocal("--cycles", "2", "--directions", "2", "--out", "v.json", "--certificate", "c.html")
     assert r.returncode == 0, r.stderr
     out = json.loads((tmp_path / "v.json").read_text())
     assert out["cycles"] == 2 and len(out["after"]["points"][0]["attained_mm"]) == 4
     assert out["model"]["sha256"] and "AP after" in r.stdout
+    html = (tmp_path / "c.html").read_text()
+    assert out["model"]["sha256"] in html and f"{out['after']['AP_max_mm']:.4f}" in html
