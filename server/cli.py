@@ -551,6 +551,10 @@ def cmd_bench(args) -> None:
         from .bench_compensate import run_compensate_bench
 
         result = run_compensate_bench()
+    elif args.what == "verify":
+        from .bench_verify import run_verify_bench
+
+        result = run_verify_bench()
     elif args.what == "acquire":
         from .bench_acquire import run_acquire_bench
 
@@ -817,7 +821,16 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="benchmarks printing JSON")
     b.add_argument(
         "what",
-        choices=("solver", "diagnose", "acquire", "service", "outliers", "startup", "compensate"),
+        choices=(
+            "solver",
+            "diagnose",
+            "acquire",
+            "service",
+            "outliers",
+            "startup",
+            "compensate",
+            "verify",
+        ),
     )
     b.add_argument(
         "--repeats", type=int, default=7, help="startup: runs of each command (median reported)"
