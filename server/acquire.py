@@ -51,6 +51,9 @@ class AcquireOptions:
     beam_break_rate: float = 0.0
     samples: int = 1000
     effects: tuple = ()  # hidden physics of the simulated arm, `simulate --effect` specs
+    # the simulated tracker's own draws (noise, beam breaks; default: seed), so that two runs on
+    # the same simulated arm can read it with independent noise
+    noise_seed: int | list | None = None
 
 
 class StoreSink:
@@ -113,7 +116,13 @@ def check_options(cell: Cell, opts: AcquireOptions) -> None:
     if cell.simulated:
         return
     bad = [
-        n for n, v in (("beam_break_rate", opts.beam_break_rate), ("effects", opts.effects)) if v
+        n
+        for n, v in (
+            ("beam_break_rate", opts.beam_break_rate),
+            ("effects", opts.effects),
+            ("noise_seed", opts.noise_seed is not None),
+        )
+        if v
     ]
     if bad:
         raise ValueError(
@@ -302,6 +311,7 @@ def acquire(
                 opts.beam_break_rate,
                 opts.effects,
                 expected_s=20.0 * opts.poses,
+                noise_seed=opts.noise_seed,
             )
             stack.callback(sim.close)
         else:

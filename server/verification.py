@@ -251,13 +251,15 @@ def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> di
     plan, joints = make_plan(model, opts)
     smr = list(model.targets)[0]
     runs, seconds = {}, {}
-    for what, q_deg in joints.items():
+    for k, (what, q_deg) in enumerate(joints.items()):
         aq = AcquireOptions(
             poses=len(q_deg),
             seed=opts.seed,
             name=f"{opts.name}-{what}-{dt.datetime.now(dt.UTC).strftime('%Y%m%dT%H%M%S%f')}",
             pause_s=opts.pause_s,
             effects=tuple(opts.effects),
+            # the same simulated arm, read with noise of its own in each run
+            noise_seed=[opts.seed, 9283, k] if cell.simulated else None,
         )
         summary = acquire(db_path, cell, aq, log=log, poses_deg=q_deg)
         if summary["state"] != "done":
