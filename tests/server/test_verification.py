@@ -81,3 +81,19 @@ def test_acquire_verify_writes_the_figures_and_refuses_bad_points(verified, tmp_
     assert out["model"]["sha256"] and "AP after" in r.stdout
     html = (tmp_path / "c.html").read_text()
     assert out["model"]["sha256"] in html and f"{out['after']['AP_max_mm']:.4f}" in html
+
+
+def test_a_users_points_are_verified_like_the_cube(verified, tmp_path):
+    report, holdout, d = verified
+    seed = 6 if d.name.startswith("verify6") else 17
+    cube = {p["point"]: p["commanded_mm"] for p in report["after"]["points"]}
+    pts = tmp_path / "points.csv"
+    rows = [f"{n},{x:.3f},{y:.3f},{z:.3f}" for n, (x, y, z) in
+            (("centre", cube["P1"]), ("low", cube["P4"]), ("high", cube["P2"]))]  # fmt: skip
+    pts.write_text("point,x_mm,y_mm,z_mm\n" + "\n".join(rows) + "\n")
+    opts = VerifyOptions(cycles=1, directions=2, points_path=str(pts), seed=seed, effects=(EFFECT,))
+    r = verify(d / "cell.db", default_cell(), d / "model.json", opts)
+    assert r["points"] == ["centre", "low", "high"]
+    np.testing.assert_allclose(r["after"]["points"][1]["commanded_mm"], cube["P4"], atol=1e-3)
+    assert [x["pair"] for x in r["after"]["distances"]] == [["centre", "low"], ["centre", "high"]]
+    assert r["after"]["AP_max_mm"] <= 1.5 * holdout < r["before"]["AP_max_mm"] / 10
