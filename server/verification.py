@@ -298,7 +298,11 @@ def _instrument(cell: Cell, tracker) -> dict:
 
 
 def write(report: dict, path) -> None:
-    Path(path).write_text(json.dumps(report, indent=2, default=_plain))
+    """Write verification.json whole, or not at all."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(json.dumps(report, indent=2, default=_plain))
+    tmp.replace(path)
 
 
 def _plain(v):
