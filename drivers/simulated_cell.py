@@ -25,6 +25,7 @@ class SimulatedCell:
         beam_break_rate: float = 0.0,
         effects=(),
         expected_s: float = 2000.0,
+        noise_seed=None,
     ):
         self.cell = VirtualCell.random(robot, targets, seed=seed, tracker=TrackerSpec(**tracker))
         self.cell.effects.extend(make_effects(list(effects), self.cell, seed))
@@ -36,7 +37,10 @@ class SimulatedCell:
             if hasattr(e, "start_campaign"):
                 e.start_campaign(self.cell, span, np.full_like(span, self.world.air_temperature()))
         self.tracker_device = SimulatedTracker(
-            self.world, clock, beam_break_rate=beam_break_rate, seed=seed
+            self.world,
+            clock,
+            beam_break_rate=beam_break_rate,
+            seed=seed if noise_seed is None else noise_seed,
         )
         self.controller_device = SimulatedController(self.world, robot, clock)
         self.tracker_server = serve_tracker(self.tracker_device)

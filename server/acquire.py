@@ -51,6 +51,9 @@ class AcquireOptions:
     beam_break_rate: float = 0.0
     samples: int = 1000
     effects: tuple = ()  # hidden physics of the simulated arm, `simulate --effect` specs
+    # the simulated tracker's own draws (noise, beam breaks; default: seed), so that two runs on
+    # the same simulated arm can read it with independent noise
+    noise_seed: int | list | None = None
 
 
 class StoreSink:
@@ -113,7 +116,13 @@ def check_options(cell: Cell, opts: AcquireOptions) -> None:
     if cell.simulated:
         return
     bad = [
-        n for n, v in (("beam_break_rate", opts.beam_break_rate), ("effects", opts.effects)) if v
+        n
+        for n, v in (
+            ("beam_break_rate", opts.beam_break_rate),
+            ("effects", opts.effects),
+            ("noise_seed", opts.noise_seed is not None),
+        )
+        if v
     ]
     if bad:
         raise ValueError(
@@ -121,10 +130,16 @@ def check_options(cell: Cell, opts: AcquireOptions) -> None:
         )
 
 
-def plan_and_store(db, *, name: str, cell: Cell, opts: AcquireOptions, base, progress=None):
+def plan_and_store(
+    db, *, name: str, cell: Cell, opts: AcquireOptions, base, progress=None, poses_deg=None
+):
     """Plan the campaign's poses from the base guess and store it `planned`; (id, poses deg).
-    progress(fraction), if given, follows the planning (drivers.planning.plan_campaign)."""
-    poses_deg, plan = _plan(cell, base, opts, progress)
+    progress(fraction), if given, follows the planning (drivers.planning.plan_campaign); given
+    poses_deg (m, n) are stored as the plan instead (a verification run's joint commands)."""
+    if poses_deg is None:
+        poses_deg, plan = _plan(cell, base, opts, progress)
+    else:
+        poses_deg, plan = np.asarray(poses_deg, dtype=float), {"given": True}
     return store.create_campaign(
         db,
         name=name,
@@ -253,6 +268,7 @@ def acquire(
     on_event=None,
     owner: str | None = None,
     reset: bool = False,
+    poses_deg=None,
 ) -> dict:
     """Run (or resume) a campaign on the cell's devices; a summary with the campaign time.
 
@@ -261,6 +277,7 @@ def acquire(
     if another live process drives it. on_engine(engine) is called before the run so another
     thread can pause or stop it; on_event(dict) hears each pose done and each state the engine
     reports (after the store has it). Ctrl-C e-stops the arm and raises Interrupted.
+    poses_deg (m, n) makes a new campaign run these joint commands instead of planned poses.
     """
     db = store.open_database(db_path)
     owner = owner or process_owner()
@@ -294,6 +311,7 @@ def acquire(
                 opts.beam_break_rate,
                 opts.effects,
                 expected_s=20.0 * opts.poses,
+                noise_seed=opts.noise_seed,
             )
             stack.callback(sim.close)
         else:
@@ -301,7 +319,9 @@ def acquire(
             clock, sim = RealClock(), None
         base = base_guess(cell, opts.seed, sim)
         if existing is None:
-            cid, poses_deg = plan_and_store(db, name=name, cell=cell, opts=opts, base=base)
+            cid, poses_deg = plan_and_store(
+                db, name=name, cell=cell, opts=opts, base=base, poses_deg=poses_deg
+            )
             stack.enter_context(Lease(db, cid, owner, on_lost=stopper.estop, log=log))
             state, start, history, partial = "planned", 0, None, {}
         else:

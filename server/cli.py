@@ -336,6 +336,8 @@ def cmd_acquire(args) -> None:
     from .tables import console
 
     cell = workflow.load_cell(args.cell)
+    if args.verify:
+        return _verify(args, cell)
     opts = AcquireOptions(
         poses=args.poses,
         seed=args.seed,
@@ -345,6 +347,7 @@ def cmd_acquire(args) -> None:
         order=args.order,
         choose_from=args.choose_from,
         beam_break_rate=args.beam_break_rate,
+        effects=tuple(args.effect),
     )
     with Progress(
         TextColumn("{task.description}"),
@@ -381,6 +384,34 @@ def cmd_acquire(args) -> None:
         f"stored in {args.db}; calibrate with: robocal calibrate {args.db} "
         f"--campaign {summary['campaign']}"
     )
+
+
+def _verify(args, cell) -> None:
+    """`acquire --verify model.json`: the ISO 9283 run before and after compensation."""
+    from . import verification
+    from .tables import console, verification_table
+
+    opts = verification.VerifyOptions(
+        cycles=args.cycles,
+        directions=args.directions,
+        points_path=args.points,
+        side_mm=args.side,
+        seed=args.seed,
+        name=args.name or "verify",
+        effects=tuple(args.effect),
+        pause_s=args.pause,
+    )
+    with console.status("verifying: nominal joints, then compensated ones..."):
+        report = verification.verify(args.db, cell, args.verify, opts)
+    verification.write(report, args.out)
+    console.print(verification_table(report))
+    written = [args.out]
+    if args.certificate:
+        from .certificate import write_certificate
+
+        write_certificate(report, args.certificate)
+        written.append(args.certificate)
+    console.print(f"wrote {', '.join(written)}")
 
 
 def cmd_serve(args) -> None:
@@ -516,6 +547,10 @@ def cmd_bench(args) -> None:
         from .bench_compensate import run_compensate_bench
 
         result = run_compensate_bench()
+    elif args.what == "verify":
+        from .bench_verify import run_verify_bench
+
+        result = run_verify_bench()
     elif args.what == "acquire":
         from .bench_acquire import run_acquire_bench
 
@@ -699,6 +734,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     aq.add_argument("--beam-break-rate", type=float, default=0.0)
     aq.add_argument(
+        "--effect",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help="hidden effects of the simulated arm; see `simulate --help`",
+    )
+    aq.add_argument(
+        "--verify",
+        metavar="MODEL",
+        help="an ISO 9283 verification run of model.json: each test point visited from several "
+        "directions and cycles, with the nominal joints and the compensated ones",
+    )
+    aq.add_argument("--points", help="verify at these points (points.csv), not the ISO cube")
+    aq.add_argument("--cycles", type=int, default=3, help="verification cycles")
+    aq.add_argument("--directions", type=int, default=3, help="approach directions (1-6)")
+    aq.add_argument("--side", type=float, default=400.0, help="the ISO cube's side, mm")
+    aq.add_argument("--out", default="verification.json", help="the verification's figures")
+    aq.add_argument("--certificate", help="also write the accuracy certificate (HTML) here")
+    aq.add_argument(
         "--reset",
         action="store_true",
         help="resume an e-stopped campaign (after the cell was checked)",
@@ -763,7 +817,16 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="benchmarks printing JSON")
     b.add_argument(
         "what",
-        choices=("solver", "diagnose", "acquire", "service", "outliers", "startup", "compensate"),
+        choices=(
+            "solver",
+            "diagnose",
+            "acquire",
+            "service",
+            "outliers",
+            "startup",
+            "compensate",
+            "verify",
+        ),
     )
     b.add_argument(
         "--repeats", type=int, default=7, help="startup: runs of each command (median reported)"

@@ -140,3 +140,29 @@ def effect_parameters(parameters: dict, uncertainty: dict | None) -> str:
         else:
             out.append(f"{k} {v}")
     return ", ".join(out)
+
+
+def verification_table(report: dict) -> Table:
+    """ISO 9283 figures per test point, before (nominal joints) and after compensation, mm."""
+    t = Table(title=f"verification of {report['model']['path']} on {report['robot']}")
+    for col in ("point", "AP before", "AP after", "RP before", "RP after", "vAP before",
+                "vAP after"):  # fmt: skip
+        t.add_column(col, justify="left" if col == "point" else "right")
+    for b, a in zip(report["before"]["points"], report["after"]["points"]):
+        t.add_row(
+            b["point"],
+            *(f"{x:.4f}" for x in (b["AP_mm"], a["AP_mm"], b["RP_mm"], a["RP_mm"])),
+            f"{b['vAP_mm']:.4f}",
+            f"{a['vAP_mm']:.4f}",
+        )
+    for b, a in zip(report["before"].get("distances", []), report["after"].get("distances", [])):
+        t.add_row(
+            "AD/RD " + "-".join(b["pair"]),
+            f"{b['AD_mm']:.4f}",
+            f"{a['AD_mm']:.4f}",
+            f"{b['RD_mm']:.4f}",
+            f"{a['RD_mm']:.4f}",
+            "",
+            "",
+        )
+    return t

@@ -1,0 +1,187 @@
+"""The accuracy certificate of a verification run: one self-contained HTML page (inline CSS,
+plots as inline PNG), A4 when printed, naming the robot, the model, the instrument, the date and
+the ISO 9283 figures before and after compensation."""
+
+from __future__ import annotations
+
+import base64
+import io
+from html import escape
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only: the workstation may have no display
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+CSS = """
+body { font: 11pt/1.4 "DejaVu Sans", Arial, sans-serif; color: #111; max-width: 190mm;
+       margin: 10mm auto; }
+h1 { font-size: 18pt; margin: 0 0 2mm; } h2 { font-size: 13pt; margin: 6mm 0 2mm; }
+table { border-collapse: collapse; width: 100%; margin: 2mm 0; }
+th, td { border: 1px solid #999; padding: 1mm 2mm; text-align: right; }
+th:first-child, td:first-child { text-align: left; }
+th { background: #eee; } .id td { text-align: left; } .id td:first-child { width: 35mm; }
+.verdict { font-size: 12pt; padding: 2mm 3mm; border: 2px solid #286; background: #efe; }
+figure { margin: 3mm 0; text-align: center; } img { max-width: 100%; }
+.note { font-size: 9pt; color: #444; }
+@page { size: A4; margin: 12mm; }
+@media print { body { margin: 0; } h2, table, figure { break-inside: avoid; } }
+"""
+
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+
+
+def figure_ap_rp(report: dict) -> str:
+    """AP and RP per test point, before and after, on a log axis (mm)."""
+    names = [p["point"] for p in report["before"]["points"]]
+    x = np.arange(len(names))
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2), constrained_layout=True)
+    for ax, key, title in ((axes[0], "AP_mm", "accuracy AP"), (axes[1], "RP_mm", "repeat. RP")):
+        for shift, run, label in (
+            (-0.2, "before", "nominal joints"),
+            (0.2, "after", "compensated"),
+        ):
+            ax.bar(x + shift, [p[key] for p in report[run]["points"]], 0.4, label=label)
+        if key == "AP_mm":  # the two runs differ by orders of magnitude; RP should not
+            ax.set_yscale("log")
+        ax.set_xticks(x, names)
+        ax.set_ylabel("mm")
+        ax.set_title(title)
+        ax.grid(alpha=0.3, axis="y")
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=2)
+    return _png(fig)
+
+
+def figure_scatter(report: dict) -> str:
+    """Each attained position less its commanded one, x against y (µm), before and after."""
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), constrained_layout=True)
+    for ax, run, title in (
+        (axes[0], "before", "nominal joints"),
+        (axes[1], "after", "compensated"),
+    ):
+        for p in report[run]["points"]:
+            d = 1e3 * (np.array(p["attained_mm"]) - np.array(p["commanded_mm"]))
+            ax.scatter(d[:, 0], d[:, 1], s=12, label=p["point"])
+        ax.axhline(0, color="grey", lw=0.8)
+        ax.axvline(0, color="grey", lw=0.8)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("x error, µm")
+        ax.set_ylabel("y error, µm")
+        ax.set_title(f"attained - commanded, {title}")
+        ax.grid(alpha=0.3)
+    axes[1].legend(fontsize=7, loc="best")
+    return _png(fig)
+
+
+def _rows(rows) -> str:
+    return "".join(
+        "<tr>" + "".join(f"<td>{escape(str(c))}</td>" for c in r) + "</tr>" for r in rows
+    )
+
+
+def _table(head, rows, cls="") -> str:
+    th = "".join(f"<th>{escape(h)}</th>" for h in head)
+    tr = f"<tr>{th}</tr>" if head else ""
+    return f'<table class="{cls}">{tr}{_rows(rows)}</table>'
+
+
+def holdout_rms(report: dict):
+    """The model's held-out RMS (mm) as its diagnosis stated it, if it did."""
+    final = (report["model"].get("meta") or {}).get("diagnosis", {}).get("final", {})
+    return final.get("holdout_rmse_mm")
+
+
+def render(report: dict) -> str:
+    """The certificate's HTML."""
+    b, a = report["before"], report["after"]
+    inst = report["instrument"]
+    instrument = inst.get("kind", "laser tracker") + "".join(
+        f", {k} {v}" for k, v in inst.items() if k != "kind" and v is not None
+    )
+    rms = holdout_rms(report)
+    ident = [
+        ("Robot", report["robot"]),
+        ("Model", report["model"]["path"]),
+        ("Model SHA-256", report["model"]["sha256"]),
+        ("Model held-out RMS", "-" if rms is None else f"{rms:.4f} mm"),
+        ("Instrument", instrument),
+        ("Cell", "simulated" if report["simulated"] else "real devices"),
+        ("Date (UTC)", report["date"]),
+        ("Measured point", f"SMR {report['smr']}"),
+        (
+            "Procedure",
+            f"ISO 9283 test points {', '.join(report['points'])}; {report['cycles']} cycles x "
+            f"{report['directions']} approach directions ({report['approach_mm']:g} mm out)",
+        ),
+    ]
+    summary = [
+        ("AP, worst point (mm)", f"{b['AP_max_mm']:.4f}", f"{a['AP_max_mm']:.4f}"),
+        ("RP, worst point (mm)", f"{b['RP_max_mm']:.4f}", f"{a['RP_max_mm']:.4f}"),
+    ]
+    points = [
+        (
+            p["point"],
+            *(f"{v:.1f}" for v in p["commanded_mm"]),
+            f"{p['AP_mm']:.4f}",
+            f"{q['AP_mm']:.4f}",
+            f"{p['RP_mm']:.4f}",
+            f"{q['RP_mm']:.4f}",
+            f"{p['vAP_mm']:.4f}",
+            f"{q['vAP_mm']:.4f}",
+        )
+        for p, q in zip(b["points"], a["points"])
+    ]
+    distances = [
+        (
+            " - ".join(p["pair"]),
+            f"{p['AD_mm']:.4f}",
+            f"{q['AD_mm']:.4f}",
+            f"{p['RD_mm']:.4f}",
+            f"{q['RD_mm']:.4f}",
+        )
+        for p, q in zip(b.get("distances", []), a.get("distances", []))
+    ]
+    gain = b["AP_max_mm"] / a["AP_max_mm"] if a["AP_max_mm"] > 0 else float("inf")
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>Accuracy certificate - {escape(report["robot"])}</title>
+<style>{CSS}</style></head><body>
+<h1>Accuracy certificate</h1>
+<p class="note">Positioning accuracy and repeatability after calibration, measured per ISO 9283
+(7.2.1 AP, 7.2.2 RP, 7.3 vAP, 7.4 AD/RD), commanded once with the nominal joints and once with
+the model's compensated joints.</p>
+{_table([], ident, "id")}
+<p class="verdict" id="verdict">Worst-point accuracy AP: <b>{b["AP_max_mm"]:.4f} mm</b> with the
+nominal joints, <b>{a["AP_max_mm"]:.4f} mm</b> compensated ({gain:.0f}x better); worst
+repeatability RP {b["RP_max_mm"]:.4f} mm / {a["RP_max_mm"]:.4f} mm.</p>
+<h2>Summary</h2>
+{_table(["figure", "before (nominal)", "after (compensated)"], summary)}
+<h2>Per test point (mm)</h2>
+{_table(["point", "x", "y", "z", "AP before", "AP after", "RP before", "RP after", "vAP before", "vAP after"], points)}
+{"<h2>Distance accuracy and repeatability (mm)</h2>" + _table(["pair", "AD before", "AD after", "RD before", "RD after"], distances) if distances else ""}
+<h2>Plots</h2>
+<figure><img alt="AP and RP per point" src="{figure_ap_rp(report)}"></figure>
+<figure><img alt="attained less commanded positions" src="{figure_scatter(report)}"></figure>
+<p class="note">AP: distance from the barycentre of the attained positions to the commanded
+position; RP = l&#772; + 3 S<sub>l</sub> of the distances to that barycentre; vAP: widest gap
+between the barycentres reached from each approach direction; AD: mean attained less commanded
+distance between two points; RD = 3 S<sub>D</sub>.</p>
+</body></html>
+"""
+
+
+def write_certificate(report: dict, path) -> Path:
+    """Write the certificate's HTML to path (whole, or not at all); the path."""
+    path = Path(path)
+    html = render(report)
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(html, encoding="utf-8")
+    tmp.replace(path)
+    return path

@@ -1,0 +1,313 @@
+"""`robocal acquire --verify model.json`: an ISO 9283 verification run of a calibrated model.
+
+Each test point (the standard cube's five, or a points.csv) is visited from several approach
+directions, several cycles, once with the joints the nominal arm gives and once with the model's
+compensated joints; both runs go through `acquire` (the cell's devices, the campaign engine, the
+store), and the tracker's readings of one SMR give the ISO figures before and after.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from robocal.solver.compensate import compensate
+from robocal.solver.iso9283 import (
+    CUBE_PAIRS,
+    cube_points,
+    distance_figures,
+    multidirectional_variation,
+    position_figures,
+)
+
+from . import store
+from .acquire import AcquireOptions, acquire
+from .compensation import MAX_ERROR_MM, solver_model
+from .formats.cell_json import Cell
+from .formats.errors import InputError
+from .formats.model_json import ModelFile, read_model
+
+APPROACH_MM = 50.0  # each approach pose stands this far from its point
+# approach directions, in the order they are taken: from above, then along the cell's axes
+DIRECTIONS = np.array(
+    [[0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=float
+)
+CUBE_SIDE_MM = 400.0
+REFERENCE_CANDIDATES = 60  # visible poses drawn to place the cube near the workspace's middle
+
+
+@dataclass
+class VerifyOptions:
+    """How to verify: points (None: the ISO cube), cycles, approach directions, the cube."""
+
+    cycles: int = 3
+    directions: int = 3
+    points_path: str | None = None
+    side_mm: float = CUBE_SIDE_MM
+    seed: int = 0
+    name: str = "verify"
+    effects: tuple = ()
+    pause_s: float = 10.0
+
+
+def read_points(path) -> tuple[list[str], np.ndarray]:
+    """points.csv: `point,x_mm,y_mm,z_mm` per line (cell frame, mm): (names, (p, 3))."""
+    names, xyz = [], []
+    with open(path, newline="") as f:
+        rows = csv.reader(f)
+        header = next(rows, None)
+        want = ["point", "x_mm", "y_mm", "z_mm"]
+        if header is None or [h.strip() for h in header] != want:
+            raise InputError(path, 1, None, f"the header must be {','.join(want)}")
+        for line, row in enumerate(rows, start=2):
+            if not row or not "".join(row).strip():
+                continue
+            if len(row) != 4:
+                raise InputError(path, line, None, "needs 4 fields: point,x_mm,y_mm,z_mm")
+            for col, (field, v) in enumerate(zip(want[1:], row[1:]), start=2):
+                try:
+                    val = float(v)
+                except ValueError:
+                    val = float("nan")
+                if not np.isfinite(val):
+                    raise InputError(path, line, col, f"{field}: {v!r} is not a finite number")
+            names.append(row[0].strip())
+            xyz.append([float(v) for v in row[1:]])
+    if len(names) < 1:
+        raise InputError(path, 1, None, "no points")
+    return names, np.array(xyz)
+
+
+def nominal_file(model: ModelFile) -> ModelFile:
+    """What an uncalibrated cell commands with: the nominal arm on the model's base and SMRs."""
+    return ModelFile(model.nominal or model.robot, model.base, dict(model.targets))
+
+
+def reference_poses(model: ModelFile, seed: int) -> np.ndarray:
+    """Poses (c, n) rad the tracker sees, their first SMR nearest the middle of the visible
+    workspace first: candidates for the cube's centre and the test points' orientation."""
+    from robocal.drivers.planning import plan_poses
+
+    offsets = np.array(list(model.targets.values()))
+    q = plan_poses(
+        model.nominal or model.robot,
+        model.base,
+        offsets,
+        REFERENCE_CANDIDATES,
+        np.random.default_rng([seed, 9283]),
+    )
+    p = solver_model(nominal_file(model)).evaluate(q)[0][:, 0]
+    return q[np.argsort(np.linalg.norm(p - np.median(p, axis=0), axis=1))]
+
+
+@dataclass
+class Plan:
+    """The run's poses: desired SMR positions (m, K, 3), which are measured test visits, and for
+    each of those its point, cycle and approach direction."""
+
+    desired: np.ndarray
+    visit: np.ndarray  # (m,) bool: a test point (else an approach pose)
+    point: np.ndarray  # (m,) index of the test point visited or approached
+    cycle: np.ndarray
+    direction: np.ndarray
+    points: np.ndarray  # (p, 3) commanded positions of the verification SMR
+    names: list[str]
+    q_ref: np.ndarray
+
+
+def make_plan(model: ModelFile, opts: VerifyOptions) -> tuple[Plan, dict]:
+    """The plan about the first reference pose from which both the nominal arm and the model
+    reach every pose, and its joint commands {"nominal": (m, n) deg, "compensated": ...}."""
+    error = None
+    for q_ref in reference_poses(model, opts.seed):
+        plan = plan_about(model, opts, q_ref)
+        try:
+            return plan, {w: joints_for(model, plan, w) for w in ("nominal", "compensated")}
+        except ValueError as e:
+            error = e
+    raise ValueError(f"no reference pose reaches every test point: {error}")
+
+
+def plan_about(model: ModelFile, opts: VerifyOptions, q_ref) -> Plan:
+    """Cycles x directions x points, each point preceded by its approach pose; every pose keeps
+    the reference pose's orientation (the SMRs translated rigidly)."""
+    smrs = solver_model(model).evaluate(q_ref[None])[0][0]  # (K, 3) as the model has them
+    if opts.points_path:
+        names, points = read_points(opts.points_path)
+    else:
+        names, points = [f"P{i}" for i in range(1, 6)], cube_points(smrs[0], opts.side_mm)
+    dirs = DIRECTIONS[: opts.directions]
+    desired, visit, point, cycle, direction = [], [], [], [], []
+    for c in range(opts.cycles):
+        for d, u in enumerate(dirs):
+            for j, p in enumerate(points):
+                shift = p - smrs[0]
+                for is_visit, extra in ((False, APPROACH_MM * u), (True, 0.0)):
+                    desired.append(smrs + shift + extra)
+                    visit.append(is_visit)
+                    point.append(j)
+                    cycle.append(c)
+                    direction.append(d)
+    return Plan(
+        np.array(desired),
+        np.array(visit),
+        np.array(point),
+        np.array(cycle),
+        np.array(direction),
+        points,
+        names,
+        q_ref,
+    )
+
+
+def joints_for(model: ModelFile, plan: Plan, what: str) -> np.ndarray:
+    """The plan's joint commands (m, n) deg from the nominal arm or the calibrated model."""
+    sm = solver_model(nominal_file(model) if what == "nominal" else model)
+    mask = np.ones(plan.desired.shape[:2], dtype=bool)
+    q0 = np.repeat(plan.q_ref[None], len(plan.desired), axis=0)
+    res = compensate(sm, plan.desired, mask, q0)
+    bad = np.flatnonzero(~(res.error_mm <= MAX_ERROR_MM))
+    if len(bad):
+        k = int(bad[0])
+        raise ValueError(
+            f"verification pose {k + 1} (point {plan.names[plan.point[k]]}) is unreachable with "
+            f"the {what} joints: {res.error_mm[k]:.3f} mm RMS off"
+        )
+    return np.rad2deg(res.q)
+
+
+def figures(plan: Plan, attained: np.ndarray) -> dict:
+    """The ISO figures (mm) of one run from the verification SMR's readings (m, 3)."""
+    p, n = len(plan.points), int(plan.visit.sum()) // len(plan.points)
+    a = np.full((p, n, 3), np.nan)
+    dirs = np.zeros(n, dtype=int)
+    for j in range(p):
+        rows = np.flatnonzero(plan.visit & (plan.point == j))
+        a[j] = attained[rows]
+        dirs = plan.direction[rows]
+    if not np.all(np.isfinite(a)):
+        raise ValueError("a test point's reading is missing; run the verification again")
+    pos = position_figures(a, plan.points)
+    out = {
+        "points": [
+            {
+                "point": plan.names[j],
+                "commanded_mm": plan.points[j].tolist(),
+                "AP_mm": float(pos.ap[j]),
+                "AP_xyz_mm": pos.ap_xyz[j].tolist(),
+                "RP_mm": float(pos.rp[j]),
+                "vAP_mm": float(multidirectional_variation(a[j : j + 1], dirs)[0]),
+                "attained_mm": a[j].tolist(),
+            }
+            for j in range(p)
+        ],
+        "AP_max_mm": float(pos.ap.max()),
+        "RP_max_mm": float(pos.rp.max()),
+    }
+    pairs = CUBE_PAIRS if p == 5 and plan.names == [f"P{i}" for i in range(1, 6)] else []
+    if not pairs and p >= 2:
+        pairs = [(0, j) for j in range(1, p)]
+    if pairs:
+        # the distance between two points is taken within each cycle and approach
+        d = distance_figures(a, plan.points, pairs)
+        out["distances"] = [
+            {
+                "pair": [plan.names[i], plan.names[j]],
+                "AD_mm": float(d.ad[k]),
+                "RD_mm": float(d.rd[k]),
+            }
+            for k, (i, j) in enumerate(pairs)
+        ]
+    return out
+
+
+def _sha256(path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> dict:
+    """Run the nominal and the compensated verification on the cell; the verification report."""
+    if opts.cycles < 1 or not 1 <= opts.directions <= len(DIRECTIONS):
+        raise ValueError(f"--cycles must be >= 1 and --directions 1 to {len(DIRECTIONS)}")
+    if opts.cycles * opts.directions < 2:
+        raise ValueError(
+            "repeatability needs at least two visits a point (--cycles x --directions)"
+        )
+    if not opts.side_mm > 0:
+        raise ValueError("--side must be a positive length, mm")
+    model = read_model(model_path)
+    if set(model.targets) != set(cell.targets):
+        raise InputError(
+            model_path,
+            None,
+            None,
+            f"the model's SMRs {sorted(model.targets)} are not the cell's {sorted(cell.targets)}",
+        )
+    plan, joints = make_plan(model, opts)
+    smr = list(model.targets)[0]
+    runs, seconds = {}, {}
+    for k, (what, q_deg) in enumerate(joints.items()):
+        aq = AcquireOptions(
+            poses=len(q_deg),
+            seed=opts.seed,
+            name=f"{opts.name}-{what}-{dt.datetime.now(dt.UTC).strftime('%Y%m%dT%H%M%S%f')}",
+            pause_s=opts.pause_s,
+            effects=tuple(opts.effects),
+            # the same simulated arm, read with noise of its own in each run
+            noise_seed=[opts.seed, 9283, k] if cell.simulated else None,
+        )
+        summary = acquire(db_path, cell, aq, log=log, poses_deg=q_deg)
+        if summary["state"] != "done":
+            raise RuntimeError(f"the {what} run ended {summary['state']}")
+        db = store.open_database(db_path)
+        meas = store.campaign_measurements(db, campaign_id=summary["campaign"], targets=[smr])
+        index = {p.label: p.index for p in store.planned_poses(db, campaign_id=summary["campaign"])}
+        attained = np.full((len(q_deg), 3), np.nan)
+        for row, label in enumerate(meas.pose_ids):
+            attained[index[label]] = meas.xyz[row, 0]
+        runs[what] = figures(plan, attained) | {"campaign": summary["campaign"]}
+        seconds[what] = summary["campaign_s"]
+    tracker = cell.tracker if cell.simulated else None
+    return {
+        "robot": cell.robot.name if hasattr(cell.robot, "name") else str(cell.robot),
+        "model": {"path": str(model_path), "sha256": _sha256(model_path), "meta": model.meta},
+        "instrument": _instrument(cell, tracker),
+        "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "smr": smr,
+        "simulated": cell.simulated,
+        "cycles": opts.cycles,
+        "directions": opts.directions,
+        "approach_mm": APPROACH_MM,
+        "points": plan.names,
+        "before": runs["nominal"],
+        "after": runs["compensated"],
+        "simulated_s": seconds if cell.simulated else None,
+    }
+
+
+def _instrument(cell: Cell, tracker) -> dict:
+    if cell.simulated:
+        return {"kind": "simulated laser tracker", **(tracker or {})}
+    d = cell.devices
+    return {"kind": "laser tracker", "address": d.tracker_address() if d else None}
+
+
+def write(report: dict, path) -> None:
+    """Write verification.json whole, or not at all."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(json.dumps(report, indent=2, default=_plain))
+    tmp.replace(path)
+
+
+def _plain(v):
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    return str(v)

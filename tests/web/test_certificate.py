@@ -1,0 +1,65 @@
+"""The accuracy certificate of a real verification run on the simulated cell, opened in headless
+Chromium: the figures are there as text, the plots load, it prints to A4 PDF; screenshots in
+tests/web/artifacts."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from robocal.server import store, workflow
+from robocal.server.acquire import AcquireOptions, acquire
+from robocal.server.certificate import write_certificate
+from robocal.server.formats.cell_json import default_cell
+from robocal.server.formats.model_json import write_model
+from robocal.server.verification import VerifyOptions, verify
+
+from .conftest import ARTIFACTS, shot
+
+SEED, EFFECT = 6, "joint_compliance:2=1.0"
+
+
+@pytest.fixture(scope="module")
+def certificate(tmp_path_factory):
+    """(certificate.html, the verification report) of a calibrated simulated cell."""
+    d = tmp_path_factory.mktemp("certificate")
+    db_path, cell = d / "cell.db", default_cell()
+    s = acquire(db_path, cell, AcquireOptions(poses=100, seed=SEED, effects=(EFFECT,), name="cal"))
+    db = store.open_database(db_path)
+    meas = store.campaign_measurements(
+        db, campaign_id=s["campaign"], targets=tuple(sorted(cell.targets))
+    )
+    _, model = workflow.diagnose(cell, meas, screen=False)
+    write_model(d / "model.json", model)
+    report = verify(db_path, cell, d / "model.json", VerifyOptions(seed=SEED, effects=(EFFECT,)))
+    return write_certificate(report, d / "certificate.html"), report
+
+
+def test_certificate_shows_the_run_and_its_figures(page, certificate):
+    path, report = certificate
+    page.goto(path.as_uri())
+    body = page.inner_text("body")
+    for text in (
+        "Accuracy certificate",
+        report["robot"],
+        report["model"]["sha256"],
+        "simulated laser tracker",
+        report["date"],
+        f"{report['before']['AP_max_mm']:.4f}",
+        f"{report['after']['AP_max_mm']:.4f}",
+        f"{report['after']['RP_max_mm']:.4f}",
+    ):
+        assert text in body, text
+    verdict = page.inner_text("#verdict")
+    assert re.search(r"\(\d+x better\)", verdict), verdict
+    for p in report["after"]["points"]:
+        assert page.get_by_role("cell", name=p["point"], exact=True).is_visible()
+    # the plots are inline and decode: each image has a natural width
+    widths = page.eval_on_selector_all("img", "imgs => imgs.map(i => i.naturalWidth)")
+    assert len(widths) == 2 and min(widths) > 300
+    shot(page, "certificate")
+    page.emulate_media(media="print")
+    shot(page, "certificate-print")
+    pdf = page.pdf(format="A4", print_background=True)
+    assert pdf.startswith(b"%PDF")
+    (ARTIFACTS / "certificate.pdf").write_bytes(pdf)
