@@ -294,6 +294,9 @@ class Acquisitions:
             if self._cancelled:
                 raise _Cancelled()  # stopped while acquire() was setting up: nothing moved
             self._engine = engine
+            if engine is not None and self._current in self._runs:
+                # the run has begun: "start queued" no longer says anything; the state does
+                self._runs[self._current] = replace(self._runs[self._current], detail=None)
 
     def _publish(self, campaign_id: int, state: str, was: str) -> None:
         self.events.publish(

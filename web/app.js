@@ -240,7 +240,8 @@ async function pollCampaign() {
     if (id !== state.campaign) return;  // another campaign was created meanwhile
     showCampaign(c);
     await pollReadings(id);
-    if (FINAL.has(c.status)) return;
+    // done, until the run has also stored its summary (the state ends a moment before it)
+    if (FINAL.has(c.status) && !(c.run && c.run.active)) return;
   } catch (e) { say(e.message); }
   state.campaignTimer = setTimeout(pollCampaign, POLL_MS);
 }

@@ -87,6 +87,10 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page, tmp_path):
         "document.getElementById('p-status').textContent === 'done'", timeout=180_000
     )
     assert page.text_content("#p-count") == "20 / 20 poses"
+    # the page follows the run until it has ended, not just the state: its last word is shown
+    page.wait_for_function(
+        "document.getElementById('p-run').textContent === 'last run: the run ended done'"
+    )
     # The latest readings, refreshed with the progress poll: the last is pose 20's.
     page.wait_for_selector("#readings-table tbody tr")
     rows = page.locator("#readings-table tbody tr")
