@@ -99,7 +99,14 @@ async def compensate(
     targets.csv wants them, by this job's model; an unreachable pose is 422 with its line."""
     data = await request.body()
     text = await run_in_threadpool(
-        _compensate, jobs, job_id, data, filename, _tcp(tcp), max_error_mm
+        _with_model,
+        jobs,
+        job_id,
+        model_files.compensated_csv,
+        data,
+        filename,
+        _tcp(tcp),
+        max_error_mm,
     )
     return Response(
         text,
@@ -108,10 +115,11 @@ async def compensate(
     )
 
 
-def _compensate(jobs, job_id, data, filename, tcp, max_error_mm) -> str:
+def _with_model(jobs, job_id, target, *args) -> str:
+    """target(model path, *args) in a worker, once a worker slot is free."""
     path = jobs.model_path(job_id)
     with call_slot(jobs):
-        return run_call(jobs, model_files.compensated_csv, path, data, filename, tcp, max_error_mm)
+        return run_call(jobs, target, path, *args)
 
 
 @router.post(
@@ -135,7 +143,13 @@ async def export(
     if format == "rapid" and not data:
         raise HTTPException(422, "a RAPID export needs a targets.csv as the request body")
     text = await run_in_threadpool(
-        _export, jobs, job_id, format, data if format == "rapid" else None, filename
+        _with_model,
+        jobs,
+        job_id,
+        model_files.exported,
+        format,
+        data if format == "rapid" else None,
+        filename,
     )
     name = f"job-{job_id}{model_files.SUFFIX[format]}"
     return Response(
@@ -143,9 +157,3 @@ async def export(
         media_type=model_files.MEDIA[format],
         headers={"Content-Disposition": f'attachment; filename="{name}"'},
     )
-
-
-def _export(jobs, job_id, fmt, data, filename) -> str:
-    path = jobs.model_path(job_id)
-    with call_slot(jobs):
-        return run_call(jobs, model_files.exported, path, fmt, data, filename)

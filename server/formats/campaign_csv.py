@@ -33,14 +33,26 @@ def joint_columns(robot: Robot) -> list[str]:
     return [f"q{i}" for i in range(1, robot.n_joints + 1)]
 
 
+def joint_deg(t: Table, row: Row, i: int, name: str, robot: Robot) -> float:
+    """Joint i's value (degrees) in the row's column `name`, refused outside the joint limits."""
+    value = t.number(row, name)
+    lo, hi = np.rad2deg(robot.lower[i]), np.rad2deg(robot.upper[i])
+    if value < lo - LIMIT_TOL_DEG or value > hi + LIMIT_TOL_DEG:
+        raise t.error(
+            row,
+            name,
+            f"{t.raw(row, name)} deg is outside the limits "
+            f"[{lo:.6g}, {hi:.6g}] deg of joint {i + 1} of {robot.name}",
+        )
+    return value
+
+
 class _Poses:
     """Collects poses in order of first appearance, checking joint limits and agreement."""
 
     def __init__(self, table: Table, robot: Robot):
         self.table, self.robot = table, robot
         self.columns = joint_columns(robot)
-        self.lo = np.rad2deg(robot.lower)
-        self.hi = np.rad2deg(robot.upper)
         self.ids: list[str] = []
         self.index: dict[str, int] = {}
         self.first: list[Row] = []
@@ -50,7 +62,7 @@ class _Poses:
         """Index of this row's pose, and whether the row is the pose's first."""
         t = self.table
         pid = t.text(row, "pose")
-        q = [self._joint(row, i, name) for i, name in enumerate(self.columns)]
+        q = [joint_deg(t, row, i, name, self.robot) for i, name in enumerate(self.columns)]
         k = self.index.get(pid)
         if k is None:
             self.index[pid] = len(self.ids)
@@ -68,19 +80,6 @@ class _Poses:
                     f"on line {first.line}, an earlier row of pose {pid!r}",
                 )
         return k, False
-
-    def _joint(self, row: Row, i: int, name: str) -> float:
-        t = self.table
-        value = t.number(row, name)
-        lo, hi = self.lo[i], self.hi[i]
-        if value < lo - LIMIT_TOL_DEG or value > hi + LIMIT_TOL_DEG:
-            raise t.error(
-                row,
-                name,
-                f"{t.raw(row, name)} deg is outside the limits "
-                f"[{lo:.6g}, {hi:.6g}] deg of joint {i + 1} of {self.robot.name}",
-            )
-        return value
 
     def q_rad(self) -> np.ndarray:
         return np.deg2rad(np.array(self.q_deg, dtype=float).reshape(len(self.ids), -1))

@@ -8,13 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 from robocal.solver.robot import Robot
 
-from .campaign_csv import _csv_text
+from .campaign_csv import _csv_text, joint_deg
 from .csv_table import Row, Table
 from .files import atomic_write_text
 from .limits import COORD_MAX_MM
-
-# Limits are stored in radians; a command exactly at a limit must survive the round trip.
-LIMIT_TOL_DEG = 1e-6
 
 
 @dataclass(frozen=True)
@@ -35,7 +32,6 @@ def read_joints(path, robot: Robot) -> JointCommands:
     t.require(["pose", *columns])
     has_error = bool(t.optional(["predicted_error_mm"]))
     t.require_rows()
-    lo, hi = np.rad2deg(robot.lower), np.rad2deg(robot.upper)
     ids: list[str] = []
     seen: dict[str, Row] = {}
     q, err = [], []
@@ -44,17 +40,7 @@ def read_joints(path, robot: Robot) -> JointCommands:
         if pid in seen:
             raise t.error(row, "pose", f"pose {pid!r} is already on line {seen[pid].line}")
         seen[pid] = row
-        values = []
-        for i, name in enumerate(columns):
-            v = t.number(row, name)
-            if v < lo[i] - LIMIT_TOL_DEG or v > hi[i] + LIMIT_TOL_DEG:
-                raise t.error(
-                    row,
-                    name,
-                    f"{t.raw(row, name)} deg is outside the limits "
-                    f"[{lo[i]:.6g}, {hi[i]:.6g}] deg of joint {i + 1} of {robot.name}",
-                )
-            values.append(v)
+        values = [joint_deg(t, row, i, name, robot) for i, name in enumerate(columns)]
         ids.append(pid)
         q.append(values)
         if has_error:

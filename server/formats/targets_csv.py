@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from robocal.solver.robot import Robot
 
-from .campaign_csv import BOUNDS, EXTRAS, LIMIT_TOL_DEG, MEASURED, joint_columns
+from .campaign_csv import BOUNDS, EXTRAS, MEASURED, joint_columns, joint_deg
 from .csv_table import Row, Table
 from .errors import InputError
 
@@ -59,7 +59,6 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
     names = tuple(names)
     turn: dict[int, tuple[Row, list[float]]] = {}
     col = {n: k for k, n in enumerate(names)}
-    lo, hi = np.rad2deg(robot.lower), np.rad2deg(robot.upper)
     index: dict[str, int] = {}
     ids: list[str] = []
     first: list[Row] = []
@@ -68,7 +67,7 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
     readings = []
     for row in t.rows:
         pid = t.text(row, "pose")
-        q = _guess(t, row, have, lo, hi, robot)
+        q = _guess(t, row, have, robot)
         k = index.get(pid)
         if k is None:
             k = index[pid] = len(ids)
@@ -155,22 +154,11 @@ def _header_error(t: Table, missing: str, n: int):
     )
 
 
-def _guess(t: Table, row: Row, have, lo, hi, robot) -> list[float] | None:
+def _guess(t: Table, row: Row, have, robot) -> list[float] | None:
     """The row's starting guess in degrees, or None when its joint fields are all blank."""
     if not have or not any(t.raw(row, c) for c in have):
         return None
-    out = []
-    for i, name in enumerate(have):
-        v = t.number(row, name)
-        if v < lo[i] - LIMIT_TOL_DEG or v > hi[i] + LIMIT_TOL_DEG:
-            raise t.error(
-                row,
-                name,
-                f"{t.raw(row, name)} deg is outside the limits [{lo[i]:.6g}, {hi[i]:.6g}] deg "
-                f"of joint {i + 1} of {robot.name}",
-            )
-        out.append(v)
-    return out
+    return [joint_deg(t, row, i, name, robot) for i, name in enumerate(have)]
 
 
 def _same(a, b) -> bool:

@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -19,17 +17,9 @@ from robocal.server.formats.cell_json import default_cell
 from robocal.solver.kinematics import Layout, flange_frames
 from robocal.solver.rigid import kabsch
 
+from tests.server.test_cli import robocal
+
 SEED, EFFECT = 6, "joint_compliance:2=1.0"
-
-
-def robocal(*args, cwd):
-    return subprocess.run(
-        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
 
 
 @pytest.fixture(scope="module")
