@@ -23,13 +23,16 @@ REFIT_EVERY = 5
 class SmrPredictor:
     """Predicted SMR centres (tracker frame, mm) for joint positions (rad)."""
 
-    def __init__(self, robot: Robot, targets, names, base_guess=None):
+    def __init__(self, robot: Robot, targets, names, base_guess=None, *, refit: bool = True):
+        """refit=False keeps the given geometry (a calibrated model's): poses clustered in a
+        small volume, as a verification's are, would only spoil it."""
         self.robot, self.names = robot, tuple(names)
         self.targets = np.asarray(targets, dtype=float)
         base = np.eye(4) if base_guess is None else np.asarray(base_guess, dtype=float)
         self.layout = Layout(robot, base, self.names)
         self.x = self.layout.initial(self.targets)
-        self.stage = "nominal"
+        self.stage = "nominal" if refit else "given"
+        self.refit = refit
         self._fitted_at = 0
 
     def predict(self, q) -> np.ndarray:
@@ -44,8 +47,10 @@ class SmrPredictor:
     def update(self, q, meas) -> str:
         """Refit from all readings so far (q (m, n) rad, meas (m, K, 3) NaN where missing)."""
         m = int(np.sum(np.any(np.all(np.isfinite(meas), axis=-1), axis=1)))
-        if m < MIN_REGISTER_POSES or m - self._fitted_at < (
-            1 if m < 2 * MIN_CALIBRATE_POSES else REFIT_EVERY
+        if (
+            not self.refit
+            or m < MIN_REGISTER_POSES
+            or m - self._fitted_at < (1 if m < 2 * MIN_CALIBRATE_POSES else REFIT_EVERY)
         ):
             return self.stage
         self._fitted_at = m

@@ -24,9 +24,12 @@ from robocal.drivers.predictor import SmrPredictor
 from robocal.drivers.simulated_cell import SimulatedCell, surveyed_base
 
 from . import store
-from .formats.cell_json import Cell, cell_to_json, parse_cell
+from .formats.cell_json import Cell, cell_to_json, parse_cell, robot_from_json
 from .formats.model_json import to_plain
 from .lease import Lease, process_owner
+
+# The campaign settings' key of a known geometry for the SMR predictor (robot, base, targets).
+PREDICTOR = "predictor"
 
 
 class AcquisitionFailed(RuntimeError):
@@ -131,11 +134,21 @@ def check_options(cell: Cell, opts: AcquireOptions) -> None:
 
 
 def plan_and_store(
-    db, *, name: str, cell: Cell, opts: AcquireOptions, base, progress=None, poses_deg=None
+    db,
+    *,
+    name: str,
+    cell: Cell,
+    opts: AcquireOptions,
+    base,
+    progress=None,
+    poses_deg=None,
+    labels=None,
+    settings=None,
 ):
     """Plan the campaign's poses from the base guess and store it `planned`; (id, poses deg).
     progress(fraction), if given, follows the planning (drivers.planning.plan_campaign); given
-    poses_deg (m, n) are stored as the plan instead (a verification run's joint commands)."""
+    poses_deg (m, n) are stored as the plan instead (a verification run's joint commands), with
+    their labels and settings of their own (its plan)."""
     if poses_deg is None:
         poses_deg, plan = _plan(cell, base, opts, progress)
     else:
@@ -145,8 +158,10 @@ def plan_and_store(
         name=name,
         cell_json=json.dumps(cell_to_json(cell)),
         poses_deg=poses_deg.tolist(),
+        labels=labels,
         simulated=cell.simulated,
         settings={
+            **(settings or {}),
             "options": asdict(opts),
             "plan": _undefined_as_null(to_plain(plan)),
             "base_guess": np.asarray(base).tolist(),
@@ -269,6 +284,8 @@ def acquire(
     owner: str | None = None,
     reset: bool = False,
     poses_deg=None,
+    labels=None,
+    settings=None,
 ) -> dict:
     """Run (or resume) a campaign on the cell's devices; a summary with the campaign time.
 
@@ -277,7 +294,8 @@ def acquire(
     if another live process drives it. on_engine(engine) is called before the run so another
     thread can pause or stop it; on_event(dict) hears each pose done and each state the engine
     reports (after the store has it). Ctrl-C e-stops the arm and raises Interrupted.
-    poses_deg (m, n) makes a new campaign run these joint commands instead of planned poses.
+    poses_deg (m, n) makes a new campaign run these joint commands instead of planned poses,
+    stored with their labels and these settings.
     """
     db = store.open_database(db_path)
     owner = owner or process_owner()
@@ -320,7 +338,14 @@ def acquire(
         base = base_guess(cell, opts.seed, sim)
         if existing is None:
             cid, poses_deg = plan_and_store(
-                db, name=name, cell=cell, opts=opts, base=base, poses_deg=poses_deg
+                db,
+                name=name,
+                cell=cell,
+                opts=opts,
+                base=base,
+                poses_deg=poses_deg,
+                labels=labels,
+                settings=settings,
             )
             stack.enter_context(Lease(db, cid, owner, on_lost=stopper.estop, log=log))
             state, start, history, partial = "planned", 0, None, {}
@@ -341,9 +366,8 @@ def acquire(
             # nothing moved: the campaign keeps its state and can be started again
             raise AcquisitionFailed(f"campaign {cid} ({name}) did not start: {e}") from e
         names = tuple(sorted(cell.targets))
-        predictor = SmrPredictor(
-            cell.robot, np.array([cell.targets[t] for t in names]), names, base
-        )
+        known = (existing.settings if existing is not None else settings) or {}
+        predictor = _predictor(cell, names, base, known.get(PREDICTOR))
         run = Settings(pause_s=opts.pause_s, settle=opts.settle, samples=opts.samples)
         sink: StoreSink | _Progress | _Events = StoreSink(db, cid)
         if progress:
@@ -400,6 +424,20 @@ def acquire(
         "skipped_poses": stats.skipped,
         "simulated": cell.simulated,
     }
+
+
+def _predictor(cell: Cell, names, base, geometry: dict | None) -> SmrPredictor:
+    """The SMR predictor: the cell's nominal arm from the base guess, refitted as readings come;
+    or the geometry a campaign was stored with (a calibrated model's), kept as it is."""
+    if geometry is None:
+        return SmrPredictor(cell.robot, np.array([cell.targets[t] for t in names]), names, base)
+    return SmrPredictor(
+        robot_from_json(geometry["robot"]),
+        np.array([geometry["targets"][t] for t in names]),
+        names,
+        np.array(geometry["base"], dtype=float),
+        refit=False,
+    )
 
 
 # How long Ctrl-C waits for the engine to return after its e-stop.

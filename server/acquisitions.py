@@ -125,6 +125,11 @@ class Acquisitions:
             acts = [a for a in acts if a not in ("start", "resume")]
         return acts
 
+    def running(self) -> int | None:
+        """The campaign on the worker (queued or running), if any."""
+        with self._lock:
+            return self._current
+
     def get(self, campaign_id: int) -> Run | None:
         with self._lock:
             return self._runs.get(campaign_id)

@@ -24,11 +24,12 @@ from robocal.solver.iso9283 import (
     multidirectional_variation,
     position_figures,
 )
+from robocal.solver.measurements import Measurements
 
 from . import store
-from .acquire import AcquireOptions, acquire
+from .acquire import PREDICTOR, AcquireOptions, acquire
 from .compensation import MAX_ERROR_MM, solver_model
-from .formats.cell_json import Cell
+from .formats.cell_json import Cell, parse_cell, robot_to_json
 from .formats.errors import InputError
 from .formats.model_json import ModelFile, read_model
 
@@ -39,6 +40,8 @@ DIRECTIONS = np.array(
 )
 CUBE_SIDE_MM = 400.0
 REFERENCE_CANDIDATES = 60  # visible poses drawn to place the cube near the workspace's middle
+RUNS = ("nominal", "compensated")  # the campaign visits the plan with each joint set, in turn
+RECORD = "verification"  # the campaign settings' key of the plan the figures come from
 
 
 @dataclass
@@ -48,6 +51,7 @@ class VerifyOptions:
     cycles: int = 3
     directions: int = 3
     points_path: str | None = None
+    points: tuple | None = None  # (names, (p, 3) mm) given inline, as the API takes them
     side_mm: float = CUBE_SIDE_MM
     seed: int = 0
     name: str = "verify"
@@ -117,7 +121,7 @@ class Plan:
     direction: np.ndarray
     points: np.ndarray  # (p, 3) commanded positions of the verification SMR
     names: list[str]
-    q_ref: np.ndarray
+    q_ref: np.ndarray | None
 
 
 def make_plan(model: ModelFile, opts: VerifyOptions) -> tuple[Plan, dict]:
@@ -139,6 +143,8 @@ def plan_about(model: ModelFile, opts: VerifyOptions, q_ref) -> Plan:
     smrs = solver_model(model).evaluate(q_ref[None])[0][0]  # (K, 3) as the model has them
     if opts.points_path:
         names, points = read_points(opts.points_path)
+    elif opts.points is not None:
+        names, points = list(opts.points[0]), np.asarray(opts.points[1], dtype=float)
     else:
         names, points = [f"P{i}" for i in range(1, 6)], cube_points(smrs[0], opts.side_mm)
     dirs = DIRECTIONS[: opts.directions]
@@ -169,6 +175,7 @@ def joints_for(model: ModelFile, plan: Plan, what: str) -> np.ndarray:
     """The plan's joint commands (m, n) deg from the nominal arm or the calibrated model."""
     sm = solver_model(nominal_file(model) if what == "nominal" else model)
     mask = np.ones(plan.desired.shape[:2], dtype=bool)
+    assert plan.q_ref is not None, "a stored plan's layout has no reference pose to solve from"
     q0 = np.repeat(plan.q_ref[None], len(plan.desired), axis=0)
     res = compensate(sm, plan.desired, mask, q0)
     bad = np.flatnonzero(~(res.error_mm <= MAX_ERROR_MM))
@@ -230,8 +237,8 @@ def _sha256(path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> dict:
-    """Run the nominal and the compensated verification on the cell; the verification report."""
+def check_options(opts: VerifyOptions) -> None:
+    """ValueError naming the option that cannot make a verification."""
     if opts.cycles < 1 or not 1 <= opts.directions <= len(DIRECTIONS):
         raise ValueError(f"--cycles must be >= 1 and --directions 1 to {len(DIRECTIONS)}")
     if opts.cycles * opts.directions < 2:
@@ -240,6 +247,15 @@ def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> di
         )
     if not opts.side_mm > 0:
         raise ValueError("--side must be a positive length, mm")
+
+
+def prepare(
+    cell: Cell, model_path, opts: VerifyOptions, model_name: str | None = None, report=None
+):
+    """The run's joint commands (2m, n) deg, the nominal visits then the compensated ones, their
+    pose labels, and the campaign's settings: the plan the figures are computed from, and the
+    model's geometry, from which the tracker is aimed (clustered poses teach a predictor little)."""
+    check_options(opts)
     model = read_model(model_path)
     if set(model.targets) != set(cell.targets):
         raise InputError(
@@ -249,45 +265,150 @@ def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> di
             f"the model's SMRs {sorted(model.targets)} are not the cell's {sorted(cell.targets)}",
         )
     plan, joints = make_plan(model, opts)
-    smr = list(model.targets)[0]
-    runs, seconds = {}, {}
-    for k, (what, q_deg) in enumerate(joints.items()):
-        aq = AcquireOptions(
-            poses=len(q_deg),
-            seed=opts.seed,
-            name=f"{opts.name}-{what}-{dt.datetime.now(dt.UTC).strftime('%Y%m%dT%H%M%S%f')}",
-            pause_s=opts.pause_s,
-            effects=tuple(opts.effects),
-            # the same simulated arm, read with noise of its own in each run
-            noise_seed=[opts.seed, 9283, k] if cell.simulated else None,
-        )
-        summary = acquire(db_path, cell, aq, log=log, poses_deg=q_deg)
-        if summary["state"] != "done":
-            raise RuntimeError(f"the {what} run ended {summary['state']}")
-        db = store.open_database(db_path)
-        meas = store.campaign_measurements(db, campaign_id=summary["campaign"], targets=[smr])
-        index = {p.label: p.index for p in store.planned_poses(db, campaign_id=summary["campaign"])}
-        attained = np.full((len(q_deg), 3), np.nan)
-        for row, label in enumerate(meas.pose_ids):
-            attained[index[label]] = meas.xyz[row, 0]
-        runs[what] = figures(plan, attained) | {"campaign": summary["campaign"]}
-        seconds[what] = summary["campaign_s"]
-    tracker = cell.tracker if cell.simulated else None
-    return {
-        "robot": cell.robot.name if hasattr(cell.robot, "name") else str(cell.robot),
-        "model": {"path": str(model_path), "sha256": _sha256(model_path), "meta": model.meta},
-        "instrument": _instrument(cell, tracker),
-        "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-        "smr": smr,
-        "simulated": cell.simulated,
+    meta = model.meta or {}
+    record = {
+        "model": {
+            "path": model_name or str(model_path),
+            "sha256": _sha256(model_path),
+            # what the certificate quotes of the model: its held-out RMS
+            "meta": {"diagnosis": {"final": meta.get("diagnosis", {}).get("final", {})}},
+        },
+        "smr": list(model.targets)[0],
         "cycles": opts.cycles,
         "directions": opts.directions,
         "approach_mm": APPROACH_MM,
+        "points": plan.names,
+        "points_mm": plan.points.tolist(),
+        "visit": plan.visit.tolist(),
+        "point": plan.point.tolist(),
+        "cycle": plan.cycle.tolist(),
+        "direction": plan.direction.tolist(),
+    }
+    geometry = {
+        "robot": robot_to_json(model.robot),
+        "base": np.asarray(model.base).tolist(),
+        "targets": {k: np.asarray(v).tolist() for k, v in model.targets.items()},
+    }
+    settings = {RECORD: record, PREDICTOR: geometry}
+    return np.vstack([joints[w] for w in RUNS]), pose_labels(plan), settings
+
+
+def pose_labels(plan: Plan) -> list[str]:
+    """The campaign's pose labels: the run, the point, the cycle and the direction of each."""
+    return [
+        f"{what}-p{j + 1}-c{c + 1}-d{d + 1}" + ("" if v else "-approach")
+        for what in RUNS
+        for j, c, d, v in zip(plan.point, plan.cycle, plan.direction, plan.visit)
+    ]
+
+
+def _layout(record: dict) -> Plan:
+    """The plan's layout as stored with the campaign (no desired positions, no reference)."""
+    return Plan(
+        np.empty((0, 0, 3)),
+        np.array(record["visit"], dtype=bool),
+        np.array(record["point"], dtype=int),
+        np.array(record["cycle"], dtype=int),
+        np.array(record["direction"], dtype=int),
+        np.array(record["points_mm"], dtype=float),
+        list(record["points"]),
+        None,
+    )
+
+
+def is_verification(info: store.CampaignInfo) -> bool:
+    return RECORD in (info.settings or {})
+
+
+def readings(db, campaign_id: int) -> tuple[store.CampaignInfo, Measurements]:
+    """A done verification campaign and its readings of the verification SMR; NotFound if the
+    campaign is no verification, Conflict until it is done."""
+    info = store.get_campaign(db, campaign_id=campaign_id)
+    if not is_verification(info):
+        raise store.NotFound(f"campaign {campaign_id} is not a verification run")
+    if info.status != "done":
+        raise store.Conflict(
+            f"campaign {campaign_id} is {info.status}; its figures come once it is done"
+        )
+    smr = info.settings[RECORD]["smr"]
+    return info, store.campaign_measurements(db, campaign_id=campaign_id, targets=[smr])
+
+
+def verification_report(info: store.CampaignInfo, meas: Measurements, report=None) -> dict:
+    """The verification report of a done campaign from its readings (readings() gives both)."""
+    record = info.settings[RECORD]
+    plan = _layout(record)
+    m = len(plan.visit)
+    row_of = {label: k for k, label in enumerate(pose_labels(plan))}
+    attained = np.full((2 * m, 3), np.nan)
+    times = np.full(2 * m, np.nan)
+    for row, label in enumerate(meas.pose_ids):
+        k = row_of.get(label)
+        if k is not None:
+            attained[k] = meas.xyz[row, 0]
+            if meas.time_s is not None:
+                times[k] = meas.time_s[row, 0]
+    runs, seconds = {}, {}
+    for h, what in enumerate(RUNS):
+        part = slice(h * m, (h + 1) * m)
+        runs[what] = figures(plan, attained[part]) | {"campaign": info.id}
+        t = times[part][np.isfinite(times[part])]
+        seconds[what] = float(t.max() - t.min()) if len(t) else None
+    cell = parse_cell(info.cell_json, f"<campaign {info.id} cell>")
+    return {
+        "robot": cell.robot.name if hasattr(cell.robot, "name") else str(cell.robot),
+        "model": record["model"],
+        "instrument": _instrument(cell, cell.tracker if cell.simulated else None),
+        "date": info.created_at.astimezone(dt.UTC).isoformat(timespec="seconds"),
+        "smr": record["smr"],
+        "simulated": cell.simulated,
+        "campaign": info.id,
+        "cycles": record["cycles"],
+        "directions": record["directions"],
+        "approach_mm": record["approach_mm"],
         "points": plan.names,
         "before": runs["nominal"],
         "after": runs["compensated"],
         "simulated_s": seconds if cell.simulated else None,
     }
+
+
+def acquire_options(cell: Cell, opts: VerifyOptions, poses: int, **more) -> AcquireOptions:
+    """How the verification campaign is acquired: on the calibration's simulated arm (its seed
+    and effects), read with noise of its own; under a name of its own."""
+    return AcquireOptions(
+        poses=poses,
+        seed=opts.seed,
+        name=f"{opts.name}-{dt.datetime.now(dt.UTC).strftime('%Y%m%dT%H%M%S%f')}",
+        pause_s=opts.pause_s,
+        effects=tuple(opts.effects),
+        noise_seed=[opts.seed, 9283] if cell.simulated else None,
+        **more,
+    )
+
+
+def certificate(info: store.CampaignInfo, meas: Measurements, report=None) -> str:
+    """The accuracy certificate's HTML of a done verification campaign."""
+    from .certificate import render
+
+    return render(verification_report(info, meas))
+
+
+def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> dict:
+    """Run the nominal and the compensated verification on the cell; the verification report."""
+    q_deg, labels, settings = prepare(cell, model_path, opts)
+    summary = acquire(
+        db_path,
+        cell,
+        acquire_options(cell, opts, len(q_deg)),
+        log=log,
+        poses_deg=q_deg,
+        labels=labels,
+        settings=settings,
+    )
+    if summary["state"] != "done":
+        raise RuntimeError(f"the verification run ended {summary['state']}")
+    return verification_report(*readings(store.open_database(db_path), summary["campaign"]))
 
 
 def _instrument(cell: Cell, tracker) -> dict:

@@ -6,8 +6,8 @@ from __future__ import annotations
 import asyncio
 
 from fastapi import APIRouter, Request
-from fastapi.responses import JSONResponse
-from robocal.server import store
+from fastapi.responses import HTMLResponse, JSONResponse
+from robocal.server import store, verification
 from robocal.server.acquire import AcquireOptions
 from robocal.server.campaign_planning import check_plan_size, plans_long
 
@@ -33,6 +33,7 @@ from .schemas import (
     JobPublic,
     RunPublic,
 )
+from .worker_calls import CALL_PROBLEMS, call_slot, run_call
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
 ESTOP_NOTE = (
@@ -49,7 +50,7 @@ CONFLICT: Responses = {
 }
 
 
-def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
+def public_campaign(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
     """The campaign as the API shows it: its life-cycle state and the actions it allows."""
     run = acquisitions.get(info.id)
     status = acquisitions.status_of(info)
@@ -57,6 +58,7 @@ def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
     return cls(
         id=info.id,
         name=info.name,
+        kind="verification" if verification.is_verification(info) else "measurement",
         created_at=info.created_at,
         status=status,
         actions=acquisitions.actions(info, status),
@@ -74,7 +76,7 @@ def _public(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
 def _acted(outcome, db, acquisitions, note: str) -> ActionPublic:
     """The campaign after the request, in the state the request left it in."""
     info = store.get_campaign(db, campaign_id=outcome.campaign_id)
-    now = _public(info, acquisitions).model_dump()
+    now = public_campaign(info, acquisitions).model_dump()
     now.update(status=outcome.status, actions=acquisitions.actions(info, outcome.status))
     return ActionPublic(**now, was=outcome.was, note=outcome.note or note)
 
@@ -119,7 +121,7 @@ def create_campaign(
             headers={"Location": f"/api/jobs/{job.id}"},
         )
     cid = ops.plan_campaign(db, cell=cell, opts=opts)
-    return _public(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)
+    return public_campaign(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)
 
 
 @router.get("")
@@ -128,7 +130,7 @@ def list_campaigns(
 ) -> list[CampaignPublic]:
     """Every campaign, oldest first (or those with this status)."""
     return [
-        _public(acquisitions.refresh(c), acquisitions)
+        public_campaign(acquisitions.refresh(c), acquisitions)
         for c in store.list_campaigns(db, status=status)
     ]
 
@@ -139,7 +141,40 @@ def get_campaign(
 ) -> CampaignDetail:
     """One campaign with its state, the actions it allows, and its poses done of total."""
     info = acquisitions.refresh(store.get_campaign(db, campaign_id=campaign_id))
-    return _public(info, acquisitions, CampaignDetail)
+    return public_campaign(info, acquisitions, CampaignDetail)
+
+
+VERIFICATION_PROBLEMS: Responses = {
+    404: {"description": "no such campaign, or it is no verification run"},
+    409: {"description": "the verification run is not done yet"},
+    422: {"description": "a test point's reading is missing"},
+    **CALL_PROBLEMS,
+}
+
+
+def _verification(jobs, db, campaign_id: int, target):
+    """target(campaign, readings) of a done verification run, in a worker."""
+    with call_slot(jobs):
+        info, meas = verification.readings(db, campaign_id)
+        return run_call(jobs, target, info, meas)
+
+
+@router.get("/{campaign_id}/verification", responses=VERIFICATION_PROBLEMS)
+def get_verification(campaign_id: CampaignId, db: DbDep, jobs: JobsDep) -> dict:
+    """A done verification run's ISO 9283 figures (mm), before (nominal joints) and after
+    (compensated): per test point AP, RP and vAP, per pair of points AD and RD."""
+    return _verification(jobs, db, campaign_id, verification.verification_report)
+
+
+@router.get(
+    "/{campaign_id}/certificate",
+    response_class=HTMLResponse,
+    responses={200: {"content": {"text/html": {}}}, **VERIFICATION_PROBLEMS},
+)
+def get_certificate(campaign_id: CampaignId, db: DbDep, jobs: JobsDep) -> HTMLResponse:
+    """A done verification run's accuracy certificate: one HTML page with its plots and tables,
+    printable to PDF (A4)."""
+    return HTMLResponse(_verification(jobs, db, campaign_id, verification.certificate))
 
 
 def _action(name: str, doc: str, note: str, status_code: int = 200):

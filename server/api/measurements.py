@@ -6,12 +6,12 @@ from typing import Annotated
 
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import StreamingResponse
-from robocal.drivers.lifecycle import allowed
 from robocal.server import store
 from starlette.concurrency import iterate_in_threadpool, run_in_threadpool
 
 from . import ops
-from .deps import Authorized, CampaignId, DbDep, SettingsDep
+from .campaigns import public_campaign
+from .deps import AcquisitionsDep, Authorized, CampaignId, DbDep, SettingsDep
 from .schemas import MAX_ID, PRINTABLE, CampaignPublic, ReadingPublic
 
 router = APIRouter(tags=["measurements"])
@@ -99,6 +99,7 @@ async def import_readings(
     request: Request,
     db: DbDep,
     settings: SettingsDep,
+    acquisitions: AcquisitionsDep,
     name: Annotated[str | None, Query(max_length=200, pattern=PRINTABLE)] = None,
     filename: Annotated[str, Query(max_length=255, pattern=PRINTABLE)] = "meas.csv",
     cell_id: Annotated[str, Query(max_length=64)] = "default",
@@ -109,15 +110,4 @@ async def import_readings(
     cid = await run_in_threadpool(
         ops.import_campaign_csv, db, data=data, filename=filename, cell=cell, name=name or filename
     )
-    info = store.get_campaign(db, campaign_id=cid)
-    return CampaignPublic(
-        id=info.id,
-        name=info.name,
-        created_at=info.created_at,
-        status=info.status,
-        actions=allowed(info.status),
-        simulated=info.simulated,
-        notes=info.notes,
-        poses_total=info.n_poses,
-        poses_done=info.n_done,
-    )
+    return public_campaign(store.get_campaign(db, campaign_id=cid), acquisitions)

@@ -1,5 +1,6 @@
 """Models: the model.json a done calibration job wrote, its accuracy on a campaign, the joint
-commands it compensates for a targets.csv, and its exports (RAPID, parameter table, URDF)."""
+commands it compensates for a targets.csv, its exports (RAPID, parameter table, URDF), and a
+verification run of it on the cell."""
 
 from __future__ import annotations
 
@@ -7,15 +8,17 @@ from typing import Annotated, Literal
 
 from fastapi import APIRouter, HTTPException, Query, Request, Response
 from fastapi.responses import FileResponse
-from robocal.server import charts, model_files, store
+from robocal.server import charts, model_files, store, verification
 from robocal.server.compensation import MAX_ERROR_MM, parse_tcp
 from robocal.server.formats.cell_json import parse_cell
 from robocal.solver.finite import require_inputs
 from starlette.concurrency import run_in_threadpool
 
-from .deps import Authorized, CampaignQuery, DbDep, JobId, JobsDep
+from . import ops
+from .campaigns import public_campaign
+from .deps import AcquisitionsDep, Authorized, CampaignQuery, DbDep, JobId, JobsDep
 from .problems import Responses
-from .schemas import PRINTABLE
+from .schemas import PRINTABLE, CampaignDetail, VerifyCreate
 from .worker_calls import CALL_PROBLEMS, PROBLEM, call_slot, run_call
 
 router = APIRouter(prefix="/models", tags=["models"])
@@ -157,3 +160,64 @@ async def export(
         media_type=model_files.MEDIA[format],
         headers={"Content-Disposition": f'attachment; filename="{name}"'},
     )
+
+
+@router.post(
+    "/{job_id}/verify",
+    status_code=201,
+    dependencies=[Authorized],
+    response_model=CampaignDetail,
+    responses={
+        409: {"description": "the arm runs another campaign, or no cell to verify on"},
+        422: {"description": "a test point the arm cannot reach, or bad options"},
+        **CALL_PROBLEMS,
+    },
+)
+def verify_model(
+    job_id: JobId, body: VerifyCreate, jobs: JobsDep, db: DbDep, acquisitions: AcquisitionsDep
+):
+    """Plan an ISO 9283 verification run of the job's model on the cell its campaign was measured
+    on (the same simulated arm, on a simulated cell), store it as a campaign and start it (unless
+    `start` is false): follow it as any campaign (pause, e-stop, reset, resume); once done, its
+    figures are at GET /api/campaigns/{id}/verification and its certificate at .../certificate."""
+    path, job = jobs.model_path(job_id), store.get_job(db, job_id=job_id)
+    if job.campaign_id is None:  # a planning job (model_path refused it already)
+        raise store.NotFound(f"job {job_id} has no model")
+    source = store.get_campaign(db, campaign_id=job.campaign_id)
+    cell = parse_cell(source.cell_json, f"<campaign {source.id} cell>")
+    measured = (source.settings or {}).get("options")
+    if cell.simulated and measured is None:
+        raise store.Conflict(
+            f"campaign {source.id}'s readings were imported on a simulated cell: there is no "
+            "simulated arm to verify this model on"
+        )
+    busy = acquisitions.running()
+    if body.start and busy is not None:
+        raise store.Conflict(f"campaign {busy} is running; one at a time")
+    opts = verification.VerifyOptions(
+        cycles=body.cycles,
+        directions=body.directions,
+        points=None
+        if body.points is None
+        else ([p.point for p in body.points], [[p.x_mm, p.y_mm, p.z_mm] for p in body.points]),
+        side_mm=body.side_mm,
+        seed=measured["seed"] if measured else 0,
+        name=body.name,
+        effects=tuple(measured.get("effects", ())) if measured else (),
+        pause_s=body.pause_s,
+    )
+    with call_slot(jobs):
+        q_deg, labels, settings = run_call(
+            jobs, verification.prepare, cell, path, opts, f"job-{job_id}.model.json"
+        )
+    cid = ops.plan_given(
+        db,
+        cell=cell,
+        opts=verification.acquire_options(cell, opts, len(q_deg)),
+        poses_deg=q_deg,
+        labels=labels,
+        settings={**settings, "model_job": job_id},
+    )
+    if body.start:
+        acquisitions.request(campaign_id=cid, action="start")
+    return public_campaign(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)

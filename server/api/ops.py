@@ -76,6 +76,22 @@ def plan_campaign(db: store.Database, *, cell: Cell, opts: AcquireOptions, progr
     return cid
 
 
+def plan_given(db: store.Database, *, cell: Cell, opts: AcquireOptions, poses_deg, **stored) -> int:
+    """Store a campaign of given joint commands (a verification's) `planned`, on the cell as
+    `robocal acquire` would run it; stored: its pose labels and settings of its own."""
+    check_options(cell, opts)
+    cid, _ = plan_and_store(
+        db,
+        name=opts.name or "verify",
+        cell=cell,
+        opts=opts,
+        base=base_guess(cell, opts.seed),
+        poses_deg=poses_deg,
+        **stored,
+    )
+    return cid
+
+
 # --- readings and files ------------------------------------------------------------------------
 
 

@@ -9,6 +9,8 @@ from pydantic import BaseModel, Field
 from robocal.drivers.lifecycle import ACTIONS, STATES
 from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
 from robocal.server.formats.cell_doc import CellDoc
+from robocal.server.formats.limits import COORD_MAX_MM
+from robocal.server.verification import CUBE_SIDE_MM, DIRECTIONS
 
 # Ids are SQLite rowids.
 MAX_ID = 2**63 - 1
@@ -53,6 +55,34 @@ class CampaignCreate(BaseModel):
     samples: int = Field(1000, ge=1, le=100_000)
 
 
+Coordinate = Field(ge=-COORD_MAX_MM, le=COORD_MAX_MM)
+
+
+class PointIn(BaseModel):
+    """A test point: where the model's first SMR must go, in the cell (tracker) frame, mm."""
+
+    point: str = Field(min_length=1, max_length=64, pattern=PRINTABLE)
+    x_mm: float = Coordinate
+    y_mm: float = Coordinate
+    z_mm: float = Coordinate
+
+
+class VerifyCreate(BaseModel):
+    """An ISO 9283 verification run of a job's model on the cell its campaign was measured on:
+    each test point visited from several directions, several cycles, with the nominal joints and
+    then with the compensated ones."""
+
+    name: str = Field("verify", min_length=1, max_length=100, pattern=PRINTABLE)
+    cycles: int = Field(3, ge=1, le=30)
+    directions: int = Field(3, ge=1, le=len(DIRECTIONS))
+    side_mm: float = Field(CUBE_SIDE_MM, gt=0, le=5000, description="the ISO cube's side")
+    points: list[PointIn] | None = Field(
+        None, min_length=1, max_length=20, description="test points (default: the ISO cube's five)"
+    )
+    pause_s: float = Field(10.0, ge=0.0, le=600.0)
+    start: bool = Field(True, description="start the run at once (else POST .../start)")
+
+
 class RunPublic(BaseModel):
     """What this service's acquisition worker did with the campaign since the server started
     (detail only: the campaign's state is `status`)."""
@@ -71,6 +101,9 @@ ACTIONS_FIELD = Field(
 class CampaignPublic(BaseModel):
     id: int
     name: str
+    kind: Literal["measurement", "verification"] = Field(
+        description="a verification run has figures and a certificate"
+    )
     created_at: dt.datetime
     status: State = Field(description="the engine's life-cycle state")
     actions: list[Action] = ACTIONS_FIELD
