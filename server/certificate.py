@@ -154,9 +154,9 @@ def render(report: dict) -> str:
 <html lang="en"><head><meta charset="utf-8"><title>Accuracy certificate - {escape(report["robot"])}</title>
 <style>{CSS}</style></head><body>
 <h1>Accuracy certificate</h1>
-<p class="note">Positioning accuracy and repeatability after calibration, measured per ISO 9283
-(7.2.1 AP, 7.2.2 RP, 7.3 vAP, 7.4 AD/RD), commanded once with the nominal joints and once with
-the model's compensated joints.</p>
+<p class="note">Positioning accuracy and repeatability after calibration, measured per ISO 9283:1998
+(clause 7.2: AP, RP and vAP; 7.3: AD and RD), commanded once with the nominal joints
+and once with the model's compensated joints.</p>
 {_table([], ident, "id")}
 <p class="verdict" id="verdict">Worst-point accuracy AP: <b>{b["AP_max_mm"]:.4f} mm</b> with the
 nominal joints, <b>{a["AP_max_mm"]:.4f} mm</b> compensated ({gain:.0f}x better); worst

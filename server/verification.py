@@ -57,6 +57,8 @@ class VerifyOptions:
     name: str = "verify"
     effects: tuple = ()
     pause_s: float = 10.0
+    samples: int = 1000  # tracker samples a reading, as the calibration campaign took them
+    settle: str = "fixed"
 
 
 def read_points(path) -> tuple[list[str], np.ndarray]:
@@ -373,7 +375,7 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
     }
 
 
-def acquire_options(cell: Cell, opts: VerifyOptions, poses: int, **more) -> AcquireOptions:
+def acquire_options(cell: Cell, opts: VerifyOptions, poses: int) -> AcquireOptions:
     """How the verification campaign is acquired: on the calibration's simulated arm (its seed
     and effects), read with noise of its own; under a name of its own."""
     return AcquireOptions(
@@ -381,9 +383,10 @@ def acquire_options(cell: Cell, opts: VerifyOptions, poses: int, **more) -> Acqu
         seed=opts.seed,
         name=f"{opts.name}-{dt.datetime.now(dt.UTC).strftime('%Y%m%dT%H%M%S%f')}",
         pause_s=opts.pause_s,
+        samples=opts.samples,
+        settle=opts.settle,
         effects=tuple(opts.effects),
         noise_seed=[opts.seed, 9283] if cell.simulated else None,
-        **more,
     )
 
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# 6.2: P2..P5 lie on the measuring plane's diagonals, this fraction of a diagonal from its corners
+# 6.8: P2..P5 lie on the measuring plane's diagonals, this fraction of a diagonal from its corners
 CORNER_FRACTION = 0.1
 
 
@@ -38,8 +38,8 @@ class DistanceFigures:
 
 
 def position_figures(attained, commanded) -> PositionFigures:
-    """7.2.1 pose accuracy, position part: AP = |x_bar - x_c| with x_bar the barycentre of the n
-    attained positions; 7.2.2 pose repeatability, position part: RP = l_bar + 3 S_l, l_j the
+    """7.2 pose accuracy, position part: AP = |x_bar - x_c| with x_bar the barycentre of the n
+    attained positions; 7.2 pose repeatability, position part: RP = l_bar + 3 S_l, l_j the
     distance of attained position j to the barycentre, S_l their standard deviation (n - 1)."""
     a = np.asarray(attained, dtype=float)
     c = np.asarray(commanded, dtype=float)
@@ -58,7 +58,7 @@ def position_figures(attained, commanded) -> PositionFigures:
 
 
 def multidirectional_variation(attained, direction) -> np.ndarray:
-    """7.3 multi-directional pose accuracy variation, position part: vAP per point (p,), the
+    """7.2 (multi-directional) pose accuracy variation, position part: vAP per point (p,), the
     largest distance between the barycentres of the positions reached from each approach
     direction; direction (n,) labels each of the n attained positions."""
     a = np.asarray(attained, dtype=float)
@@ -70,8 +70,8 @@ def multidirectional_variation(attained, direction) -> np.ndarray:
 
 
 def distance_figures(attained, commanded, pairs) -> DistanceFigures:
-    """7.4.1 distance accuracy: AD = D_bar - D_c, D_j the attained distance between the two
-    points in cycle j, D_c the commanded one (components likewise, per axis); 7.4.2 distance
+    """7.3 distance accuracy: AD = D_bar - D_c, D_j the attained distance between the two
+    points in cycle j, D_c the commanded one (components likewise, per axis); 7.3 distance
     repeatability: RD = 3 sqrt(sum (D_j - D_bar)^2 / (n - 1)). Attained position j of each point
     belongs to the same cycle."""
     a = np.asarray(attained, dtype=float)
@@ -87,7 +87,7 @@ def distance_figures(attained, commanded, pairs) -> DistanceFigures:
 
 
 def cube_points(centre, side, rotation=None) -> np.ndarray:
-    """6.2 the test cube's five points (5, 3): P1 at the cube's centre, P2..P5 on the diagonals
+    """6.8 the test cube's five points (5, 3): P1 at the cube's centre, P2..P5 on the diagonals
     of the measuring plane (the plane through two opposite edges, here the edges (-,-,-)..(-,-,+)
     and (+,+,-)..(+,+,+) in the cube's axes) at CORNER_FRACTION of the diagonal from its corners.
     rotation (3, 3) turns the cube's axes into the cell frame."""

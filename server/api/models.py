@@ -185,8 +185,8 @@ def verify_model(
         raise store.NotFound(f"job {job_id} has no model")
     source = store.get_campaign(db, campaign_id=job.campaign_id)
     cell = parse_cell(source.cell_json, f"<campaign {source.id} cell>")
-    measured = (source.settings or {}).get("options")
-    if cell.simulated and measured is None:
+    was = (source.settings or {}).get("options") or {}  # how the campaign was acquired
+    if cell.simulated and not was:
         raise store.Conflict(
             f"campaign {source.id}'s readings were imported on a simulated cell: there is no "
             "simulated arm to verify this model on"
@@ -201,10 +201,13 @@ def verify_model(
         if body.points is None
         else ([p.point for p in body.points], [[p.x_mm, p.y_mm, p.z_mm] for p in body.points]),
         side_mm=body.side_mm,
-        seed=measured["seed"] if measured else 0,
+        seed=was.get("seed", 0),
         name=body.name,
-        effects=tuple(measured.get("effects", ())) if measured else (),
+        effects=tuple(was.get("effects", ())),
         pause_s=body.pause_s,
+        # the tracker reads the SMRs as it did for the calibration
+        samples=was.get("samples", verification.VerifyOptions.samples),
+        settle=was.get("settle", verification.VerifyOptions.settle),
     )
     with call_slot(jobs):
         q_deg, labels, settings = run_call(

@@ -266,3 +266,45 @@ def test_simulation_only_options_are_refused_on_a_real_cell(live, devices):
     assert r.status_code == 422 and "beam_break_rate" in r.json()["detail"], r.text
     # Motion needs the token, on a real cell as on the simulated one.
     assert live.anonymous.post("/api/campaigns", json={"cell_id": cell_id}).status_code == 401
+
+
+@pytest.mark.sqlite_only  # a minute of wall clock; the store's part runs on both elsewhere
+def test_verification_on_real_devices(live, devices):
+    """A model calibrated on the real cell is verified there: both joint sets go to the
+    controller over its socket on the wall clock, and compensation brings AP down tenfold."""
+    c = live.client
+    cell_id = c.post("/api/cells", json=cell_json(devices)).json()["id"]
+    run = {**RUN, "poses": 30}
+    cid = c.post("/api/campaigns", json={"name": "cal", "cell_id": cell_id, **run}).json()["id"]
+    assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
+    assert finished(c, cid, timeout=120)["status"] == "done"
+    job = c.post("/api/jobs", json={"campaign_id": cid, "method": "ls-sum"}).json()
+    job = wait_for(
+        lambda: c.get(f"/api/jobs/{job['id']}").json(),
+        lambda j: j["state"] in ("done", "failed"),
+        timeout=60,
+    )
+    assert job["state"] == "done", job
+
+    moves = len(devices.controller.moves)
+    r = c.post(
+        f"/api/models/{job['id']}/verify",
+        json={"cycles": 2, "directions": 1, "pause_s": run["pause_s"]},
+    )
+    assert r.status_code == 201, r.text
+    v = r.json()
+    assert v["simulated"] is False and v["settings"]["options"]["samples"] == run["samples"]
+    t0 = time.monotonic()
+    done = finished(c, v["id"], timeout=180)
+    took = time.monotonic() - t0
+    assert done["status"] == "done", done
+    assert len(devices.controller.moves) - moves == v["poses_total"] == 5 * 2 * 2 * 2
+    rep = c.get(f"/api/campaigns/{v['id']}/verification").json()
+    assert rep["simulated"] is False and rep["instrument"]["kind"] == "laser tracker"
+    print(
+        f"real-device verification: {v['poses_total']} poses in {took:.1f} s; worst AP "
+        f"{rep['before']['AP_max_mm']:.3f} mm nominal, {rep['after']['AP_max_mm']:.4f} mm "
+        f"compensated; RP {rep['before']['RP_max_mm']:.4f} / {rep['after']['RP_max_mm']:.4f} mm"
+    )
+    assert rep["before"]["AP_max_mm"] >= 10 * rep["after"]["AP_max_mm"], rep
+    assert c.get(f"/api/campaigns/{v['id']}/certificate").text.count("real devices") == 1
