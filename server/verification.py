@@ -353,7 +353,7 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
     runs, seconds = {}, {}
     for h, what in enumerate(RUNS):
         part = slice(h * m, (h + 1) * m)
-        runs[what] = figures(plan, attained[part]) | {"campaign": info.id}
+        runs[what] = figures(plan, attained[part])
         t = times[part][np.isfinite(times[part])]
         seconds[what] = float(t.max() - t.min()) if len(t) else None
     cell = parse_cell(info.cell_json, f"<campaign {info.id} cell>")
