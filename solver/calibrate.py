@@ -149,6 +149,7 @@ def calibrate(
             first.A, st.free, lay.names(), 3 * int(fit.mask.sum()), prob.q.shape[0]
         )
         x, res = fit.fit(first)
+        del first  # its twists, as large as a Jacobian, would sit beside minimax's own
         own["start"] = fit.start
         if name == "ls-single":
             x = fit_targets(prob, x, [k for k in range(len(target_names)) if k not in rows])

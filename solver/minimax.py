@@ -10,6 +10,7 @@ import numpy as np
 
 from .identify import Problem
 from .kinematics import predict, predict_rows
+from .normal import PointNormal
 from .qp import SOLVERS
 
 
@@ -57,8 +58,10 @@ class _Objective:
     Jacobian columns at x0, so that every variable moves the SMRs alike.
     """
 
-    def __init__(self, prob: Problem, x0, free, rows, epsilon):
+    def __init__(self, prob: Problem, x0, free, rows, epsilon, derivatives="twist"):
         self.prob, self.x0 = prob, np.array(x0, float)
+        self.derivatives = derivatives
+        self.points: PointNormal | None = None
         self.idx = np.flatnonzero(free)
         self.rows = list(rows)
         sel = np.zeros(prob.meas.shape[1], dtype=bool)
@@ -103,20 +106,38 @@ class _Objective:
         return np.sum(r * r, axis=1) @ self.onehot, self.constraints(x)[0]
 
     def __call__(self, z=None):
-        """F_i (K,), c (L,), gradients of F_i (K, n) (eq. 26), of c (L, n), and Jt (n, N*3)."""
+        """F_i (K,), c (L,), gradients of F_i (K, n) (eq. 26), of c (L, n), all in the scaled
+        variables, and at the first call (z None) the Gauss-Newton Hessian J'J (n, n) of the
+        summed squares (None after: BFGS updates the Hessian from there)."""
         first = self.scale is None
         x = self.x0 if first else self.x(z)
+        r, JtJ, grad = self._full(x, first) if self.derivatives == "full" else self._twist(x, first)
+        if first:  # the norms of the Jacobian's columns at x0
+            self.scale = np.sqrt(np.clip(np.diag(JtJ), 0.0, None))
+            self.scale[self.scale == 0] = 1.0
+            JtJ = JtJ / np.outer(self.scale, self.scale)
+        F = np.sum(r * r, axis=1) @ self.onehot
+        c, A = self.constraints(x)
+        return F, c, grad / self.scale[None, :], A, JtJ
+
+    def _twist(self, x, first: bool):
+        """Residuals, J'J (first) and each SMR's gradient from the twist normal equations, as
+        ls-sum assembles them: time and memory grow like ls-sum's, J is never formed."""
+        if self.points is None:
+            self.points = PointNormal(
+                self.prob.layout, self.prob.q, self.mask, self.prob.meas, self.idx
+            )
+        r, jt = self.points.operator(x)
+        JtJ = self.points(x).A if first else None
+        return r.reshape(-1, 3), JtJ, 2.0 * jt.per_target(r)[self.rows]
+
+    def _full(self, x, first: bool):
+        """The same from the full Jacobian (n x 3N): the reference the twist path must equal."""
         p, Jt = predict_rows(self.prob.layout, x, self.prob.q, self.mask, self.idx)
         Jt = Jt.reshape(len(self.idx), -1)
-        if first:
-            self.scale = np.linalg.norm(Jt, axis=1)
-            self.scale[self.scale == 0] = 1.0
-        Jt = Jt / self.scale[:, None]
         r = p - self.meas
-        F = np.sum(r * r, axis=1) @ self.onehot
-        g = 2.0 * (Jt * r.ravel()).reshape(len(self.idx), -1, 3).sum(axis=2) @ self.onehot
-        c, A = self.constraints(x)
-        return F, c, g.T, A, Jt
+        grad = 2.0 * (Jt * r.ravel()).reshape(len(self.idx), -1, 3).sum(axis=2) @ self.onehot
+        return r, Jt @ Jt.T if first else None, grad.T
 
 
 def _merit(F, c, rho):
@@ -124,23 +145,32 @@ def _merit(F, c, rho):
 
 
 def minimax(
-    prob: Problem, x0, free, rows=None, qp="primal-dual", epsilon=None, max_iter=100, tol=1e-10
+    prob: Problem,
+    x0,
+    free,
+    rows=None,
+    qp="primal-dual",
+    epsilon=None,
+    max_iter=100,
+    tol=1e-10,
+    derivatives="twist",
 ) -> MinimaxResult:
     """SQP on the epigraph form (eq. 16-18) from x0 (the ls-sum solution, eq. 32).
 
     The Hessian starts at the Gauss-Newton Hessian of the Lagrangian with equal SMR weights
     and is then updated by damped BFGS; each step is accepted by a backtracking line search on
-    max_i F_i plus a penalty on the distance constraints.
+    max_i F_i plus a penalty on the distance constraints. derivatives: "twist" (the twist normal
+    equations, no Jacobian) or "full" (the full Jacobian, the reference).
     """
     t0 = time.perf_counter()
     rows = list(range(prob.meas.shape[1])) if rows is None else list(rows)
-    obj = _Objective(prob, x0, free, rows, epsilon)
+    obj = _Objective(prob, x0, free, rows, epsilon, derivatives)
     solve = SOLVERS[qp]
     n = len(obj.idx)
     z = np.zeros(n)
-    F, c, g, A, Jt = obj()
+    F, c, g, A, JtJ = obj()
     K = len(rows)
-    H = (2.0 / K) * (Jt @ Jt.T) + 1e-12 * np.eye(n)
+    H = (2.0 / K) * JtJ + 1e-12 * np.eye(n)
     lam, mu = np.full(K, 1.0 / K), np.zeros(len(c))
     history = [float(np.max(F))]
     qp_iters, qp_missed, converged, message = 0, 0, False, "iteration limit reached"

@@ -201,6 +201,16 @@ class PointNormal:
         moved.layout = Layout(lay.robot, T @ lay.base_ref, lay.target_names)
         return moved, moved._assemble(start, tc, M, U)
 
+    def operator(self, x) -> tuple[np.ndarray, _Jt]:
+        """The residuals `jt` takes and r' -> J'r' at x, without J'J (for gradients alone)."""
+        start, tc, M, U = self._twists(x)
+        R = M[:, :3]
+        p = np.einsum("ijm,kj->mki", R, tc) + M[:, 3].T[:, None]
+        root, inv = _root_weight(tc)
+        ng = len(self.gcols)
+        U[:ng] *= root[:, None]
+        return (p[self.mask] - self.meas_rows).ravel(), _Jt(self, tc, start, R, U[:ng], inv)
+
     def _assemble(self, start, tc, M, U) -> Normal:
         """J'J, J'r and the cost from the SMR frame's poses M and its twists U (see flange_twists).
 
@@ -298,7 +308,8 @@ class _Jt:
     def __init__(self, normal: PointNormal, tc, start, R, U, inv):
         self.normal, self.tc, self.start, self.R, self.U, self.inv = normal, tc, start, R, U, inv
 
-    def __call__(self, res: np.ndarray) -> np.ndarray:
+    def _rho(self, res: np.ndarray) -> np.ndarray:
+        """The residuals (3, K, m) pose-last, zero where missing, in the SMR frame."""
         nm = self.normal
         m, K = nm.mask.shape
         r = np.zeros((3, K, m))  # pose-last, as the normal equations hold their residuals
@@ -306,7 +317,26 @@ class _Jt:
             r[:] = res.reshape(m, K, 3).T
         else:
             r.transpose(0, 2, 1)[:, nm.mask] = res.reshape(-1, 3).T
-        rho = np.einsum("ijm,ikm->jkm", self.R, r)
+        return np.einsum("ijm,ikm->jkm", self.R, r)
+
+    def __call__(self, res: np.ndarray) -> np.ndarray:
+        nm = self.normal
+        rho = self._rho(res)
         b = _twist_sums(self.tc, rho)
         g = self.U.reshape(len(self.U), -1) @ (b * self.inv[:, None]).ravel()  # U is scaled
         return np.concatenate([g, nm._target_gradient(self.start, rho)])[nm.perm]
+
+    def per_target(self, res: np.ndarray) -> np.ndarray:
+        """J_k'r_k of each SMR k's own residuals (K, n), in one pass over the twists."""
+        nm = self.normal
+        rho = self._rho(res)
+        B = np.empty((6,) + rho.shape[1:])  # per SMR, A_k' rho_k = (rho_k, t_k x rho_k)
+        B[:3] = rho
+        B[3:] = np.einsum("abc,kb,ckm->akm", LEVI, self.tc, rho)
+        B *= self.inv[:, None, None]
+        K = rho.shape[1]
+        g = np.zeros((K, len(self.U) + len(nm.tcols)))
+        g[:, : len(self.U)] = np.einsum("gim,ikm->kg", self.U, B, optimize=True)
+        own = (self.start[:, :3] @ rho.sum(axis=2))[nm.tk_ax, nm.tk_k]  # each column's SMR only
+        g[nm.tk_k, len(self.U) + np.arange(len(nm.tcols))] = own
+        return g[:, nm.perm]
