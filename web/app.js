@@ -9,7 +9,8 @@ const FINAL = new Set(["done", "aborted"]);
 const BUSY_JOB = new Set(["queued", "running"]);
 const $ = (id) => document.getElementById(id);
 const state = { campaign: null, status: null, job: null, diag: null, campaignTimer: null,
-                jobTimer: null, diagTimer: null, failureShown: null };
+                jobTimer: null, diagTimer: null, failureShown: null,
+                verify: null };  // the verification run started from the results: {campaign, job}
 const READINGS_SHOWN = 6;  // the latest readings table keeps this many rows
 
 /** Show a message at the corner (an error unless ok). */
@@ -38,7 +39,10 @@ async function request(method, path, body, raw = false, contentType = "applicati
     const type = r.headers.get("content-type") || "";
     const data = type.includes("json") ? await r.json() : { detail: await r.text() };
     // RFC 9457 problem details: the API's own words are the useful part.
-    const detail = (data && data.detail) || r.statusText;
+    // A request the schema refuses names its fields in `errors`: "body.cycles: ..." is the help.
+    const fields = Array.isArray(data && data.errors) ? data.errors.map(
+      (e) => `${(e.loc || []).join(".")}: ${e.msg}`).join("; ") : "";
+    const detail = ((data && data.detail) || r.statusText) + (fields ? ` (${fields})` : "");
     throw new Error(`${method} /api${path}: ${r.status} ${data.title || r.statusText}: ${detail}`);
   }
   return r;
@@ -117,11 +121,12 @@ $("cell-upload-btn").addEventListener("click", async () => {
   } catch (e) { say(e.message); }  // a 422 names the line and column of the problem
 });
 
-/** A campaign becomes the page's current one: progress, readings, calibration enabled if done. */
-function useCampaign(c) {
+/** A campaign becomes the page's current one: progress, readings, calibration enabled if done.
+ * The results stay shown for a verification run of their model (keepResults). */
+function useCampaign(c, keepResults = false) {
   state.campaign = c.id;
   showCampaign(c);
-  $("results").hidden = true;
+  $("results").hidden = !keepResults;
   $("readings").innerHTML = '<p class="muted">none yet</p>';
 }
 
@@ -217,6 +222,7 @@ function showCampaign(c) {
     say(`campaign ${c.id} failed${detail ? `: ${detail}` : ""}`);
   }
   state.status = c.status;
+  if (c.kind === "verification") showVerifyState(c);
   refreshCalibrate();
 }
 
@@ -241,7 +247,11 @@ async function pollCampaign() {
     showCampaign(c);
     await pollReadings(id);
     // done, until the run has also stored its summary (the state ends a moment before it)
-    if (FINAL.has(c.status) && !(c.run && c.run.active)) return;
+    if (FINAL.has(c.status) && !(c.run && c.run.active)) {
+      // a verification's figures come from its stored readings: only once the run has ended
+      if (c.kind === "verification" && c.status === "done") await showVerification(c.id);
+      return;
+    }
   } catch (e) { say(e.message); }
   state.campaignTimer = setTimeout(pollCampaign, POLL_MS);
 }
@@ -489,6 +499,7 @@ async function pollJob() {
 
 function showResults(j) {
   $("results").hidden = false;
+  if (!state.verify || state.verify.job !== j.id) resetVerification();  // another model's run
   $("model-link").href = j.model_url;
   $("model-link").setAttribute("download", `job-${j.id}.model.json`);
   // The Rerun recording: absent if the server could not write one.
@@ -546,6 +557,90 @@ $("t-rapid").addEventListener("click", async () => {
 [["x-params", "params", "csv"], ["x-urdf", "urdf", "urdf"]].forEach(([id, format, suffix]) => {
   $(id).addEventListener("click", () => postDownload(
     `/models/${state.job}/export?format=${format}`, undefined, `job-${state.job}.${suffix}`));
+});
+
+/** Clear the verification block: no run of the shown model yet. */
+function resetVerification() {
+  state.verify = null;
+  $("v-state").textContent = "";
+  $("v-report").hidden = true;
+  $("v-table").replaceChildren();
+}
+
+// A verification run of the shown job's model: planned and started by the API, then followed as
+// the page's current campaign, so the progress bar and the campaign buttons (e-stop) are its.
+$("v-start").addEventListener("click", async () => {
+  const job = state.job;
+  const body = { cycles: Number($("v-cycles").value), directions: Number($("v-directions").value) };
+  $("v-start").disabled = true;  // planning takes a moment: no second run on a second click
+  const shown = $("v-state").textContent;
+  $("v-state").textContent = `planning a verification run of job ${job}'s model...`;
+  try {
+    const c = await api("POST", `/models/${job}/verify`, body);
+    resetVerification();  // a refused run (409, 422) leaves the one shown as it was
+    state.verify = { campaign: c.id, job };
+    useCampaign(c, true);
+    pollCampaign();
+    say(`verification campaign ${c.id} of job ${job}'s model started`, true);
+  } catch (e) { $("v-state").textContent = shown; say(e.message); }
+  $("v-start").disabled = false;
+});
+
+/** The verification block's status line, from its campaign as the progress poll reads it. */
+function showVerifyState(c) {
+  if (!state.verify || state.verify.campaign !== c.id) return;
+  $("v-state").textContent = `verification campaign ${c.id}: ${c.status}`
+    + ` (${c.poses_done} / ${c.poses_total} poses)`
+    + (FINAL.has(c.status) || c.status === "failed" ? "" : "; its figures come once it is done");
+}
+
+/** AP before over AP after, as the certificate says it ("246x"), with a decimal under 10x. */
+function gainText(before, after) {
+  if (!(after > 0)) return "-";
+  const g = before / after;
+  return `${g >= 10 ? g.toFixed(0) : g.toFixed(1)}x`;
+}
+
+/** A done verification run's worst-point figures, before and after, and its certificate. */
+async function showVerification(id) {
+  if (!state.verify || state.verify.campaign !== id || state.verify.shown) return;
+  try {
+    const r = await api("GET", `/campaigns/${id}/verification`);
+    if (!state.verify || state.verify.campaign !== id) return;
+    state.verify.shown = true;
+    const b = r.before, a = r.after;
+    const table = makeTable("v-summary", ["", "worst-point AP / mm", "worst-point RP / mm"], [
+      ["before (nominal joints)", fmt(b.AP_max_mm), fmt(b.RP_max_mm)],
+      ["after (compensated)", fmt(a.AP_max_mm), fmt(a.RP_max_mm)],
+      ["gain (AP before / AP after)", gainText(b.AP_max_mm, a.AP_max_mm), ""],
+    ]);
+    table.createCaption().textContent = `${r.robot}, model ${r.model.path}: ${r.cycles} cycles`
+      + ` x ${r.directions} approach directions, ${r.date}`;
+    $("v-table").replaceChildren(table);
+    $("v-certificate").dataset.campaign = id;
+    $("v-report").hidden = false;
+    $("v-state").textContent = `verification campaign ${id}: done`;
+  } catch (e) { say(e.message); }
+}
+
+// The certificate is fetched with the token (a link cannot carry it) and shown in a new tab from
+// memory; the tab is opened at the click, as popup blockers allow, and filled once it is here.
+$("v-certificate").addEventListener("click", async () => {
+  const id = $("v-certificate").dataset.campaign;
+  const tab = window.open("", "_blank");
+  if (tab) tab.document.title = "loading the accuracy certificate...";
+  try {
+    const blob = await (await request("GET", `/campaigns/${id}/certificate`)).blob();
+    const url = URL.createObjectURL(blob);
+    if (tab) {
+      tab.opener = null;  // the certificate needs nothing from this page
+      tab.location.href = url;
+    } else {  // no tab allowed: saved as a file instead
+      Object.assign(document.createElement("a"), { href: url, download: `certificate-${id}.html` })
+        .click();
+    }
+    setTimeout(() => URL.revokeObjectURL(url), 60000);
+  } catch (e) { if (tab) tab.close(); say(e.message); }
 });
 
 function fmt(v) {
