@@ -371,9 +371,15 @@ def _goals(sizes: dict) -> dict:
 
 
 def run_solver_bench(
-    sizes=(100, 1000, 10000), reference=True, reference_max=10000, seed=SEED, repeats=None
+    sizes=(100, 1000, 10000),
+    reference=True,
+    reference_max=10000,
+    seed=SEED,
+    repeats=None,
+    scale_poses=50_000,
 ) -> dict:
-    """Time our solvers and scipy's finite-difference reference on virtual-cell campaigns of each size."""
+    """Time our solvers and scipy's finite-difference reference on virtual-cell campaigns of each
+    size; then ls-sum, minimax and the meas.csv reader at scale_poses (time and peak memory)."""
     from .formats.cell_json import default_cell
 
     cell = default_cell()
@@ -401,6 +407,12 @@ def run_solver_bench(
                 + ", ".join(f"{k} {v:.1f}x" for k, v in entry["comparison"]["speedup"].items())
             )
         results[str(m)] = entry
+    scale = None
+    if scale_poses:
+        from .bench_scale import run_scale
+
+        _log(f"{scale_poses} poses: time and peak memory of ls-sum and minimax, meas.csv read")
+        scale = run_scale(cell, _campaign(cell, int(scale_poses), seed))
     return {
         "benchmark": "solver",
         "machine": _machine(),
@@ -419,5 +431,6 @@ def run_solver_bench(
             "ours' fastest run right after a reference run, caches cold)",
         },
         "sizes": results,
+        "scale": scale,
         **_goals(results),
     }

@@ -62,6 +62,7 @@ class _Objective:
         self.prob, self.x0 = prob, np.array(x0, float)
         self.derivatives = derivatives
         self.points: PointNormal | None = None
+        self._kept: tuple | None = None  # (z bytes, residuals, J' operator) of the last trial
         self.idx = np.flatnonzero(free)
         self.rows = list(rows)
         sel = np.zeros(prob.meas.shape[1], dtype=bool)
@@ -100,10 +101,27 @@ class _Objective:
         return c, A
 
     def values(self, z):
-        """F_i and c at z, without derivatives (for the line search)."""
+        """F_i and c at z (for the line search). On the twist path the walk down the chain that
+        gives the residuals also gives the derivatives, kept for the step it accepts."""
         x = self.x(z)
-        r = predict(self.prob.layout, x, self.prob.q)[self.mask] - self.meas
+        if self.derivatives == "full":
+            r = predict(self.prob.layout, x, self.prob.q)[self.mask] - self.meas
+        else:
+            self._kept = None  # one set of twists alive at a time
+            r, jt = self._operator(x)
+            self._kept = (z.tobytes(), r, jt)
+            r = r.reshape(-1, 3)
         return np.sum(r * r, axis=1) @ self.onehot, self.constraints(x)[0]
+
+    def _points(self) -> PointNormal:
+        if self.points is None:
+            self.points = PointNormal(
+                self.prob.layout, self.prob.q, self.mask, self.prob.meas, self.idx
+            )
+        return self.points
+
+    def _operator(self, x):
+        return self._points().operator(x)
 
     def __call__(self, z=None):
         """F_i (K,), c (L,), gradients of F_i (K, n) (eq. 26), of c (L, n), all in the scaled
@@ -111,7 +129,10 @@ class _Objective:
         summed squares (None after: BFGS updates the Hessian from there)."""
         first = self.scale is None
         x = self.x0 if first else self.x(z)
-        r, JtJ, grad = self._full(x, first) if self.derivatives == "full" else self._twist(x, first)
+        if self.derivatives == "full":
+            r, JtJ, grad = self._full(x, first)
+        else:
+            r, JtJ, grad = self._twist(x, None if first else z)
         if first:  # the norms of the Jacobian's columns at x0
             self.scale = np.sqrt(np.clip(np.diag(JtJ), 0.0, None))
             self.scale[self.scale == 0] = 1.0
@@ -120,15 +141,19 @@ class _Objective:
         c, A = self.constraints(x)
         return F, c, grad / self.scale[None, :], A, JtJ
 
-    def _twist(self, x, first: bool):
-        """Residuals, J'J (first) and each SMR's gradient from the twist normal equations, as
-        ls-sum assembles them: time and memory grow like ls-sum's, J is never formed."""
-        if self.points is None:
-            self.points = PointNormal(
-                self.prob.layout, self.prob.q, self.mask, self.prob.meas, self.idx
-            )
-        r, jt = self.points.operator(x)
-        JtJ = self.points(x).A if first else None
+    def _twist(self, x, z):
+        """Residuals, J'J (at the start, z None) and each SMR's gradient from the twist normal
+        equations, as ls-sum assembles them: time and memory grow like ls-sum's, J is never
+        formed."""
+        JtJ = None
+        kept, self._kept = self._kept, None
+        if z is not None and kept is not None and kept[0] == z.tobytes():
+            _, r, jt = kept  # the line search's last trial, the step taken
+        else:
+            del kept
+            if z is None:
+                JtJ = self._points()(x).A  # its twists freed before the next ones
+            r, jt = self._operator(x)
         return r.reshape(-1, 3), JtJ, 2.0 * jt.per_target(r)[self.rows]
 
     def _full(self, x, first: bool):

@@ -330,13 +330,14 @@ class _Jt:
         """J_k'r_k of each SMR k's own residuals (K, n), in one pass over the twists."""
         nm = self.normal
         rho = self._rho(res)
-        B = np.empty((6,) + rho.shape[1:])  # per SMR, A_k' rho_k = (rho_k, t_k x rho_k)
-        B[:3] = rho
-        B[3:] = np.einsum("abc,kb,ckm->akm", LEVI, self.tc, rho)
-        B *= self.inv[:, None, None]
-        K = rho.shape[1]
+        K, m = rho.shape[1:]
+        B = np.empty((K, 6, m))  # per SMR, A_k' rho_k = (rho_k, t_k x rho_k), SMR-major
+        B[:, :3] = rho.transpose(1, 0, 2)
+        B[:, 3:] = np.einsum("abc,kb,ckm->kam", LEVI, self.tc, rho)
+        B *= self.inv[None, :, None]
         g = np.zeros((K, len(self.U) + len(nm.tcols)))
-        g[:, : len(self.U)] = np.einsum("gim,ikm->kg", self.U, B, optimize=True)
+        # one product reads the twists once: (K, 6m) x (6m, ng)
+        g[:, : len(self.U)] = B.reshape(K, -1) @ self.U.reshape(len(self.U), -1).T
         own = (self.start[:, :3] @ rho.sum(axis=2))[nm.tk_ax, nm.tk_k]  # each column's SMR only
         g[nm.tk_k, len(self.U) + np.arange(len(nm.tcols))] = own
         return g[:, nm.perm]

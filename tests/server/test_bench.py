@@ -10,7 +10,23 @@ from robocal.server.bench import GOALS, run_solver_bench
 @pytest.fixture(scope="module")
 def bench():
     """One small benchmark with the finite-difference reference, shared by the tests."""
-    return run_solver_bench(sizes=(60,), reference=True, repeats=3)
+    return run_solver_bench(sizes=(60,), reference=True, repeats=3, scale_poses=2000)
+
+
+def test_the_scale_point_has_time_memory_and_the_file(bench):
+    """At scale: ls-sum and minimax with peak memory, their ratios, and the meas.csv read."""
+    scale = bench["scale"]
+    assert scale["poses"] == 2000 and scale["readings"] == 6000
+    for key in ("ls_sum", "minimax"):
+        assert scale[key]["seconds"] > 0 and scale[key]["peak_mb"] > 0
+    ratio = scale["minimax_over_ls_sum"]
+    assert ratio["peak_mb"] == pytest.approx(
+        scale["minimax"]["peak_mb"] / scale["ls_sum"]["peak_mb"]
+    )
+    assert scale["minimax"]["objective"] < scale["ls_sum"]["objective"]  # max F_i < sum F_i
+    f = scale["meas_csv"]
+    assert f["rows"] == 6000 and f["bytes"] > 6000 * 50
+    assert f["read_seconds"] > 0 and f["reference_seconds"] > 0
 
 
 def test_report_structure(bench):
@@ -57,7 +73,9 @@ def test_ours_at_least_as_good_as_reference(bench):
 
 def test_reference_skipped_above_reference_max():
     """Without a reference there are no comparisons and the speed-up target is not judged."""
-    res = run_solver_bench(sizes=(30,), reference=True, reference_max=20, repeats=2)
+    res = run_solver_bench(
+        sizes=(30,), reference=True, reference_max=20, repeats=2, scale_poses=None
+    )
     size = res["sizes"]["30"]
     assert "reference" not in size and "comparison" not in size
     assert res["met"]["speedup_min"] is None and res["achieved"]["speedup_min"] is None
