@@ -13,7 +13,7 @@ from .files import read_text
 from .limits import CSV_ROWS_MAX, NUMBER_MAX, bad_text
 
 # Plain decimal notation only: float() would also take '1_000', 'nan' and 'infinity'.
-_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
 _NOT_FINITE = {"nan", "inf", "infinity"}
 
 
@@ -167,7 +167,7 @@ class Table:
             if blank is not None:
                 return blank
             raise self.error(row, name, "empty field, expected a number")
-        if _NUMBER.fullmatch(s):
+        if NUMBER.fullmatch(s):
             value = float(s)
             lo, hi = bounds
             if math.isfinite(value) and lo <= value <= hi:
