@@ -29,40 +29,48 @@ class _Columns:
 
     def __init__(self, text: str):
         self.ok = False
-        text = text.replace("\r\n", "\n")
-        if '"' in text or not self._clean(text):
-            return  # quoting, lone carriage returns, tabs, control characters: csv's rules
-        text = text.rstrip(" \n") + "\n"
-        if "\n\n" in text or "\n " in text or text.startswith(" "):  # maybe blank lines
-            text = "\n".join(ln for ln in text.split("\n") if ln.strip()) + "\n"
-        head, _, body = text.partition("\n")
-        self.header = [h.strip().lower() for h in head.split(",")]
-        self.n = body.count("\n")
+        if "\r" in text:
+            text = text.replace("\r\n", "\n")  # a lone \r is a control character, below
+        if '"' in text:
+            return  # quoting: csv's rules
+        if text.startswith((" ", "\n")) or "\n\n" in text or "\n " in text:  # maybe blank lines
+            text = "\n".join(ln for ln in text.split("\n") if ln.strip())
+        if not text.endswith("\n"):
+            text += "\n"
+        raw = self._bytes(text)
+        if raw is None:
+            return  # tabs and other control characters: the row reader names them
+        ends = np.flatnonzero(raw == ord("\n"))
+        self.header = [h.strip().lower() for h in text[: text.index("\n")].split(",")]
+        self.n = len(ends) - 1
         if len(set(self.header)) != len(self.header) or not 1 <= self.n <= csv_table.CSV_ROWS_MAX:
             return
         # every row exactly as wide as the header (numpy would take a longer row)
-        raw = np.frombuffer(body.encode(), dtype=np.uint8)
-        commas = np.flatnonzero(raw == ord(","))
-        per_row = np.diff(np.searchsorted(commas, np.flatnonzero(raw == ord("\n"))), prepend=0)
-        if np.any(per_row != len(self.header) - 1):
+        commas = np.searchsorted(np.flatnonzero(raw == ord(",")), ends)
+        if np.any(np.diff(commas) != len(self.header) - 1):
             return
-        self.body = body
+        self.file = io.StringIO(text)
         self.ok = True
 
     @staticmethod
-    def _clean(text: str) -> bool:
-        """No control character but the line breaks (no tab either)."""
-        if not text.isascii():
-            return not _CONTROL.search(text.replace("\n", ""))
-        raw = np.frombuffer(text.encode("ascii"), dtype=np.uint8)
-        return not np.any(((raw < 32) & (raw != ord("\n"))) | (raw == 127))
+    def _bytes(text: str) -> np.ndarray | None:
+        """The text's bytes if it holds no control character but line breaks (no tab either)."""
+        if text.isascii():
+            raw = np.frombuffer(text.encode("ascii"), dtype=np.uint8)
+            return None if np.any(((raw < 32) & (raw != ord("\n"))) | (raw == 127)) else raw
+        if _CONTROL.search(text.replace("\n", "")):
+            return None
+        # a multi-byte character holds no comma or line break byte: the counts stand
+        return np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
 
     def has(self, name: str) -> bool:
         return name in self.header
 
     def _load(self, names: list[str], dtype):
+        self.file.seek(0)
         return np.loadtxt(
-            io.StringIO(self.body),
+            self.file,
+            skiprows=1,
             delimiter=",",
             comments=None,
             usecols=[self.header.index(n) for n in names],
@@ -155,9 +163,10 @@ def read_campaign_columns(
         return None
     if not all(_within(cols[c], *bounds[c][0]) for c in [*measured, *present]):
         return None
-    names, k = np.unique(labels["target"], return_inverse=True)
+    names = np.array(sorted(set(labels["target"].tolist())))
     if not all(TARGET_NAME.fullmatch(n) for n in names.tolist()):
         return None
+    k = np.searchsorted(names, labels["target"])
     poses = _poses(labels["pose"], q, same_tol)
     if poses is None:
         return None
