@@ -176,18 +176,19 @@ def _log_per_pose(
 
 
 def _summary(calibration, sets: list[PoseSet], magnify: float, top: float, frames_at: str) -> str:
-    names = sets[0].meas.target_names
-    lines = [
-        "# Calibration",
-        f"method: {calibration.method}",
-        f"targets: {', '.join(names)}",
-    ]
+    """Markdown: the RMS errors first (what fits the view), then how to read the cell."""
+    rows = ["| poses | readings | RMS before | RMS after |", "|---|---|---|---|"]
     for s in sets:
         rms = {k: float(np.sqrt(np.nanmean(np.sum(e * e, axis=-1)))) for k, e in s.err.items()}
-        lines.append(
-            f"{s.name} poses: {s.meas.n_poses}, readings: {s.meas.n_readings}; RMS error before "
-            f"(nominal model) {rms['before']:.4f} mm, after {rms['after']:.4f} mm"
+        rows.append(
+            f"| {s.name}: {s.meas.n_poses} | {s.meas.n_readings} | {rms['before']:.4f} mm "
+            f"| {rms['after']:.4f} mm |"
         )
+    lines = [
+        f"**{calibration.method}** on targets {', '.join(sets[0].meas.target_names)}; before: "
+        "the nominal model, after: the identified one",
+        "\n".join(rows),
+    ]
     if len(sets) == 1:
         lines.append("no held-out poses: every pose of the campaign was fitted")
     lines += [
@@ -244,7 +245,7 @@ def record_calibration(
     for s in sets:
         log_poses(rec, s, magnify, top)
     at = representative(meas.q)
-    log_frames(rec, models, meas, at)
+    arm = log_frames(rec, models, meas, at)
     _log_per_pose(rec, sets, models, magnify, top)
     summary = _summary(calibration, sets, magnify, top, meas.pose_ids[at])
     rec.log("summary", rr.TextDocument(summary, media_type=rr.MediaType.MARKDOWN), static=True)
@@ -261,7 +262,13 @@ def record_calibration(
     if diagnosis is not None and diagnosis.figures:
         figures = _log_diagnosis(rec, diagnosis.figures)
     eye = cell_eye(np.vstack([readings, np.zeros((1, 3))]), calibration.base)
-    rec.send_blueprint(calibration_blueprint(eye=eye, has_solver=bool(history), figures=figures))
+    blueprint = calibration_blueprint(
+        eye=eye,
+        arm_eye=cell_eye(arm, calibration.base),
+        has_solver=bool(history),
+        figures=figures,
+    )
+    rec.send_blueprint(blueprint)
     rec.flush()
     rec.disconnect()  # closes the file sink so the footer is written before we return
     return path

@@ -17,15 +17,20 @@ def cell_eye(points: np.ndarray, base: np.ndarray) -> rrb.EyeControls3D:
     up = base[:3, 2]
     side = base[:3, 0] - 0.8 * base[:3, 1]  # look from the front-left of the arm, down 30 deg
     side /= np.linalg.norm(side)
-    position = target + 1.6 * span * (side + 0.6 * up)
+    position = target + 1.3 * span * (side + 0.6 * up)
     return rrb.EyeControls3D(position=position, look_target=target, eye_up=up)
 
 
 def calibration_blueprint(
-    *, eye: rrb.EyeControls3D, has_solver: bool, figures: list[tuple[str, str]] = ()
+    *,
+    eye: rrb.EyeControls3D,
+    arm_eye: rrb.EyeControls3D,
+    has_solver: bool,
+    figures: list[tuple[str, str]] = (),
 ) -> rrb.Blueprint:
     """The cell with every pose left, charts right; the time panel on the solver's timeline.
 
+    eye: on the whole cell; arm_eye: on the arm at the pose its frames are drawn at.
     figures: (entity, title) of each diagnosis figure, one tab each.
     """
     cell = rrb.Spatial3DView(
@@ -46,6 +51,7 @@ def calibration_blueprint(
         name="nominal and identified frames",
         origin="world",
         contents=["+ world/frames/**", "+ world/base/**", "+ world/floor/**"],
+        eye_controls=arm_eye,
         line_grid=rrb.LineGrid3D(visible=False),
     )
     series = [
@@ -67,7 +73,7 @@ def calibration_blueprint(
     )
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Tabs(cell, one_pose, frames), charts, column_shares=[3, 2]),
-        rrb.TimePanel(timeline="iteration" if has_solver else "pose"),
+        rrb.TimePanel(timeline="iteration" if has_solver else "pose", state="collapsed"),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
     )

@@ -161,8 +161,11 @@ def representative(q: np.ndarray) -> int:
 
 def log_frames(
     rec: rr.RecordingStream, models: dict[str, Calibration], meas: Measurements, i: int
-) -> None:
-    """Joint frames, links and the flange of both models at pose i, nominal beside identified."""
+) -> np.ndarray:
+    """Joint frames, links and the flange of both models at pose i, nominal beside identified.
+
+    Returns the identified chain's points (base, joints, flange, SMRs), to aim a view at.
+    """
     q = meas.q[i : i + 1]
     for k, model in MODELS.items():
         c = models[k]
@@ -189,6 +192,7 @@ def log_frames(
             ),
             static=True,
         )
+    return np.vstack([chain, smr])
 
 
 __all__ = [

@@ -159,7 +159,7 @@ def test_recording_reads_back_with_the_cell_every_pose_and_the_blueprint(campaig
     np.testing.assert_allclose(floor[0], cal.base[:3, 3], atol=1e-2)
     assert _static(chunks, "/world/tracker", "Transform3D:translation") == [[0.0, 0.0, 0.0]]
     summary = _static(chunks, "/summary", "TextDocument:text")[0]
-    assert "held_out poses: 10" in summary and "x100" in summary
+    assert "| held_out: 10 |" in summary and "x100" in summary
 
 
 def _rows(text: str, entity: str) -> set[int]:
