@@ -116,9 +116,9 @@ def _log_per_pose(
         err = np.concatenate([s.err[k] for s in sets])
         # the chain to the flange, then the flange to each SMR it carries (the tool)
         strips = [
-            s
+            strip
             for i in range(len(q))
-            for s in [pts[i], *(np.stack([pts[i, -1], p]) for p in pred[i])]
+            for strip in [pts[i], *(np.stack([pts[i, -1], p]) for p in pred[i])]
         ]
         per = 1 + pred.shape[1]
         rec.send_columns(
@@ -147,6 +147,10 @@ def _log_per_pose(
                 colors=error_colors(np.linalg.norm(e, axis=-1), top),
             ).partition(counts),
         )
+
+
+def _log_error_per_pose(rec: rr.RecordingStream, sets: list[PoseSet]) -> None:
+    """Each pose's RMS error before and after: a series on timeline "pose", and static bars."""
     start = 0
     for s in sets:
         for k, color in (("before", BEFORE), ("after", AFTER)):
@@ -247,6 +251,7 @@ def record_calibration(
     at = representative(meas.q)
     arm = log_frames(rec, models, meas, at)
     _log_per_pose(rec, sets, models, magnify, top)
+    _log_error_per_pose(rec, sets)
     summary = _summary(calibration, sets, magnify, top, meas.pose_ids[at])
     rec.log("summary", rr.TextDocument(summary, media_type=rr.MediaType.MARKDOWN), static=True)
 

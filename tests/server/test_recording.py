@@ -140,36 +140,44 @@ def test_recording_reads_back_with_the_cell_every_pose_and_the_blueprint(campaig
         assert view in verbose, view
     assert "TimePanelBlueprint:timeline" in verbose and "┆ iteration " in verbose
 
-    # every pose at once: one arrow and one point per reading, per kind of pose and model
+    # every pose at once: one arrow and one point per reading, per kind of pose and model,
+    # each arrow 100 x its error and coloured by its size on one scale for both models
     chunks = _chunks(out)
-    for kind, m in (("calibration", meas), ("held_out", held)):
+    models = {"before": run_method(cell, meas, "nominal"), "after": cal}
+    sets = {k: PoseSet.of(k, m, models) for k, m in (("calibration", meas), ("held_out", held))}
+    top = color_scale(list(sets.values()))
+    for kind, s in sets.items():
+        m = s.meas
         assert len(_static(chunks, f"/world/poses/{kind}/measured", "Points3D:positions")) == (
             m.n_readings
         )
         for model in ("before", "after"):
             entity = f"/world/poses/{kind}/error/{model}"
             vectors = np.array(_static(chunks, entity, "Arrows3D:vectors"))
-            assert len(vectors) == m.n_readings == len(_static(chunks, entity, "Arrows3D:colors"))
-            c = {"before": nominal_model(cell, meas), "after": cal}[model]
-            err = m.xyz - predict(c.layout, c.x, m.q)
+            assert len(vectors) == m.n_readings
+            err = m.xyz - predict(models[model].layout, models[model].x, m.q)
             np.testing.assert_allclose(vectors, 100.0 * err[m.mask], rtol=1e-4, atol=1e-3)
+            packed = np.array(_static(chunks, entity, "Arrows3D:colors"), dtype=np.uint32)
+            rgb = np.stack([(packed >> 24) & 255, (packed >> 16) & 255, (packed >> 8) & 255], 1)
+            expected = error_colors(np.linalg.norm(err[m.mask], axis=-1), top)
+            np.testing.assert_array_equal(rgb, expected)
+            if model == "before":  # errors of 0.2-3 mm: the colours run the scale
+                assert len(np.unique(expected, axis=0)) > 10
+            else:  # errors of hundredths of a mm: all green
+                assert (expected[:, 1] > 150).all() and (expected[:, 0] < 80).all()
     assert meas.n_readings < 3 * meas.n_poses  # beam breaks: counts are readings, not 3 x poses
     # the floor stands on the identified base; the tracker sits at the origin of the readings
     floor = _static(chunks, "/world/floor", "Transform3D:translation")
     np.testing.assert_allclose(floor[0], cal.base[:3, 3], atol=1e-2)
     assert _static(chunks, "/world/tracker", "Transform3D:translation") == [[0.0, 0.0, 0.0]]
     summary = _static(chunks, "/summary", "TextDocument:text")[0]
-    assert "| held_out: 10 |" in summary and "x100" in summary
+    assert "| held_out: 10 |" in summary and "x100" in summary and f"red {top:g} mm" in summary
 
 
 def _rows(text: str, entity: str) -> set[int]:
     """The row counts of an entity's chunks, as `rerun rrd print` lists them."""
     found = re.findall(rf"with (\d+) rows .* - /{re.escape(entity)} - ", text)
     return {int(n) for n in found}
-
-
-def nominal_model(cell, meas):
-    return run_method(cell, meas, "nominal")
 
 
 def test_recording_without_history_or_held_out_poses(campaign, tmp_path):
