@@ -486,6 +486,7 @@ def cmd_demo(args) -> None:
         meas=cal_meas,
         calibration=cal,
         nominal=rows["nominal"][0],
+        held_out=hold,
         diagnosis=diagnosis,
     )
     ext = workflow.evaluate(workflow.read_model(out / "model-extended.json"), hold)

@@ -1,4 +1,4 @@
-"""A calibration as a Rerun recording (.rrd): the arm at each pose, SMRs, errors and the solver."""
+"""A calibration as a Rerun recording (.rrd): the cell with every pose, each pose, the solver."""
 
 from __future__ import annotations
 
@@ -14,12 +14,22 @@ os.environ.setdefault("RERUN_ANALYTICS", "0")
 
 import rerun as rr  # noqa: E402
 from robocal.solver.calibrate import Calibration  # noqa: E402
-from robocal.solver.kinematics import flange_frames, joint_frames, predict  # noqa: E402
+from robocal.solver.kinematics import flange_frames, joint_frames  # noqa: E402
 from robocal.solver.measurements import Measurements  # noqa: E402
 
 from .formats.cell_json import Cell  # noqa: E402
+from .recording_blueprint import calibration_blueprint, cell_eye  # noqa: E402
+from .recording_cell import (  # noqa: E402
+    MEASURED,
+    PoseSet,
+    color_scale,
+    error_colors,
+    log_frames,
+    log_poses,
+    log_tracker_and_base,
+    representative,
+)
 
-MEASURED = (220, 220, 220)
 BEFORE = (255, 140, 0)
 AFTER = (40, 140, 255)
 ARM = {"before": (255, 190, 110), "after": (120, 180, 255)}
@@ -47,10 +57,14 @@ def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]+", "_", text).strip("_") or "effect"
 
 
-def _log_diagnosis(rec: rr.RecordingStream, figures: list[dict]) -> None:
-    """Each figure as 2-D scatters (before, expected, after) and as the PNG server/plots.py draws."""
+def _log_diagnosis(rec: rr.RecordingStream, figures: list[dict]) -> list[tuple[str, str]]:
+    """Each figure as 2-D scatters (before, expected, after) and as the PNG server/plots.py draws.
+
+    Returns (entity, title) of each figure's image, for the blueprint.
+    """
     from .plots import effect_figure  # matplotlib only when there is something to draw
 
+    shown = []
     with tempfile.TemporaryDirectory() as tmp:
         for i, fig in enumerate(figures, start=1):
             root = f"diagnosis/{i}_{_slug(fig.get('name', fig['label']))}"
@@ -74,6 +88,122 @@ def _log_diagnosis(rec: rr.RecordingStream, figures: list[dict]) -> None:
                 rr.EncodedImage(contents=png.read_bytes(), media_type="image/png"),
                 static=True,
             )
+            shown.append((f"{root}/figure", fig["label"]))
+    return shown
+
+
+def _log_per_pose(
+    rec: rr.RecordingStream, sets: list[PoseSet], models: dict, magnify: float, top: float
+) -> None:
+    """Timeline "pose" (calibration poses, then held-out ones): the arm, its SMRs and errors.
+
+    Sent as columns, one call per entity: a thousand poses cost milliseconds, not a log call each.
+    """
+    q = np.concatenate([s.meas.q for s in sets])
+    xyz = np.concatenate([s.meas.xyz for s in sets])
+    ok = np.all(np.isfinite(xyz), axis=-1)
+    counts = ok.sum(axis=1)
+    pose = [rr.TimeColumn("pose", sequence=np.arange(len(q)))]
+    rec.send_columns(
+        "world/pose/smr/measured",
+        pose,
+        rr.Points3D.columns(positions=xyz[ok]).partition(counts),
+    )
+    rec.log("world/pose/smr/measured", rr.Points3D.from_fields(colors=MEASURED), static=True)
+    for k, model in models.items():
+        pts, R = _chain(model, q)
+        pred = np.concatenate([s.pred[k] for s in sets])
+        err = np.concatenate([s.err[k] for s in sets])
+        # the chain to the flange, then the flange to each SMR it carries (the tool)
+        strips = [
+            strip
+            for i in range(len(q))
+            for strip in [pts[i], *(np.stack([pts[i, -1], p]) for p in pred[i])]
+        ]
+        per = 1 + pred.shape[1]
+        rec.send_columns(
+            f"world/pose/arm/{k}",
+            pose,
+            rr.LineStrips3D.columns(strips=strips).partition(np.full(len(q), per)),
+        )
+        rec.log(
+            f"world/pose/arm/{k}",
+            rr.LineStrips3D.from_fields(colors=ARM[k], radii=rr.Radius.ui_points(2.0)),
+            static=True,
+        )
+        rec.send_columns(
+            f"world/pose/arm/{k}/flange",
+            pose,
+            rr.Transform3D.columns(translation=pts[:, -1], mat3x3=R),
+        )
+        rec.log(f"world/pose/arm/{k}/flange", rr.TransformAxes3D(axis_length=100.0), static=True)
+        e = err[ok]
+        rec.send_columns(
+            f"world/pose/error/{k}",
+            pose,
+            rr.Arrows3D.columns(
+                origins=pred[ok],
+                vectors=magnify * e,
+                colors=error_colors(np.linalg.norm(e, axis=-1), top),
+            ).partition(counts),
+        )
+
+
+def _log_error_per_pose(rec: rr.RecordingStream, sets: list[PoseSet]) -> None:
+    """Each pose's RMS error before and after: a series on timeline "pose", and static bars."""
+    start = 0
+    for s in sets:
+        for k, color in (("before", BEFORE), ("after", AFTER)):
+            rms = _rms(s.err[k])
+            good = np.isfinite(rms)
+            path = f"errors/rms/{s.name}/{k}"
+            rec.log(path, rr.SeriesLines(colors=color, names=f"{s.name} {k} / mm"), static=True)
+            if good.any():
+                rec.send_columns(
+                    path,
+                    [rr.TimeColumn("pose", sequence=start + np.flatnonzero(good))],
+                    rr.Scalars.columns(scalars=rms[good]),
+                )
+            # the same as bars, static: seen whichever timeline the viewer is on
+            offset = -0.2 if k == "before" else 0.2
+            rec.log(
+                f"errors/per_pose/{s.name}/{k}",
+                rr.BarChart(
+                    np.nan_to_num(rms),
+                    abscissa=start + np.arange(len(rms)) + offset,
+                    widths=np.full(len(rms), 0.4),
+                    color=color if s.name == "calibration" else tuple(c // 2 for c in color),
+                ),
+                static=True,
+            )
+        start += s.meas.n_poses
+
+
+def _summary(calibration, sets: list[PoseSet], magnify: float, top: float, frames_at: str) -> str:
+    """Markdown: the RMS errors first (what fits the view), then how to read the cell."""
+    rows = ["| poses | readings | RMS before | RMS after |", "|---|---|---|---|"]
+    for s in sets:
+        rms = {k: float(np.sqrt(np.nanmean(np.sum(e * e, axis=-1)))) for k, e in s.err.items()}
+        rows.append(
+            f"| {s.name}: {s.meas.n_poses} | {s.meas.n_readings} | {rms['before']:.4f} mm "
+            f"| {rms['after']:.4f} mm |"
+        )
+    lines = [
+        f"**{calibration.method}** on targets {', '.join(sets[0].meas.target_names)}; before: "
+        "the nominal model, after: the identified one",
+        "\n".join(rows),
+    ]
+    if len(sets) == 1:
+        lines.append("no held-out poses: every pose of the campaign was fitted")
+    lines += [
+        f"error arrows: measured less predicted, from the predicted SMR, magnified x{magnify:g} "
+        f"(1 mm error = {magnify:g} mm arrow); colour by size, green 0 mm, yellow "
+        f"{top / 2:g} mm, red {top:g} mm and above",
+        f"frames: nominal and identified joint frames at pose {frames_at} "
+        "(nearest the mean joint vector)",
+        "timelines: pose (one pose at a time), iteration (the solver)",
+    ]
+    return "\n\n".join(lines)
 
 
 def record_calibration(
@@ -83,14 +213,17 @@ def record_calibration(
     meas: Measurements,
     calibration: Calibration,
     nominal: Calibration | None = None,
+    held_out: Measurements | None = None,
     diagnosis=None,
     magnify: float = 100.0,
     viewer_url: str | None = None,
 ) -> Path:
-    """Write a .rrd of a calibration: per pose (timeline "pose") arm, SMRs, errors; the solver's history.
+    """Write a .rrd of a calibration: the cell with every pose, each pose, the solver's history.
 
-    With viewer_url (a running viewer's gRPC address, e.g. rerun+http://127.0.0.1:9876/proxy)
-    the same data is also streamed to it live.
+    meas: the poses the calibration was fitted on; held_out: poses it did not see, if any.
+    nominal: the nominal model registered on meas (fitted here when not given). With viewer_url
+    (a running viewer's gRPC address, e.g. rerun+http://127.0.0.1:9876/proxy) the same data is
+    also streamed to it live.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -98,13 +231,11 @@ def record_calibration(
         from .workflow import run_method  # workflow imports heavy pieces; keep this module light
 
         nominal = run_method(cell, meas, "nominal")
-    q, xyz = meas.q, meas.xyz
     models = {"before": nominal, "after": calibration}
-    pred = {k: predict(c.layout, c.x, q) for k, c in models.items()}
-    chain = {k: _chain(c, q) for k, c in models.items()}
-    err = {k: p - xyz for k, p in pred.items()}  # NaN where the reading is missing
-    rms = {k: _rms(e) for k, e in err.items()}
-    names = list(meas.target_names)
+    sets = [PoseSet.of("calibration", meas, models)]
+    if held_out is not None and held_out.n_poses:
+        sets.append(PoseSet.of("held_out", held_out, models))
+    top = color_scale(sets)
 
     # An explicit stream, not the global one: several recordings may be written in one process,
     # and nothing is sent anywhere but the file (and the viewer, when one is configured).
@@ -113,63 +244,36 @@ def record_calibration(
         rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(viewer_url))
     else:
         rec.save(path)
-    summary = (
-        f"# Calibration\n\nmethod: {calibration.method}\n\nposes: {meas.n_poses}, "
-        f"readings: {meas.n_readings}, targets: {', '.join(names)}\n\n"
-        f"RMS error before: {np.sqrt(np.nanmean(rms['before'] ** 2)):.4f} mm, "
-        f"after: {np.sqrt(np.nanmean(rms['after'] ** 2)):.4f} mm\n\n"
-        f"error arrows magnified x{magnify:g}"
-    )
+    readings = np.concatenate([s.meas.xyz[s.meas.mask] for s in sets])
+    log_tracker_and_base(rec, models, readings)
+    for s in sets:
+        log_poses(rec, s, magnify, top)
+    at = representative(meas.q)
+    arm = log_frames(rec, models, meas, at)
+    _log_per_pose(rec, sets, models, magnify, top)
+    _log_error_per_pose(rec, sets)
+    summary = _summary(calibration, sets, magnify, top, meas.pose_ids[at])
     rec.log("summary", rr.TextDocument(summary, media_type=rr.MediaType.MARKDOWN), static=True)
-    for k, color in (("before", BEFORE), ("after", AFTER)):
-        rec.log(f"errors/rms/{k}", rr.SeriesLines(colors=color, names=f"RMS {k} / mm"), static=True)
-
-    for i in range(meas.n_poses):
-        rec.set_time("pose", sequence=i)
-        ok = np.all(np.isfinite(xyz[i]), axis=-1)
-        labels = [n for n, good in zip(names, ok) if good]
-        rec.log(
-            "world/smr/measured",
-            rr.Points3D(xyz[i][ok], labels=labels, colors=MEASURED, radii=rr.Radius.ui_points(5.0)),
-        )
-        for k, color in (("before", BEFORE), ("after", AFTER)):
-            pts, R = chain[k]
-            # the chain to the flange, then the flange to each SMR it carries (the tool)
-            strips = [pts[i]] + [np.stack([pts[i, -1], p]) for p in pred[k][i]]
-            rec.log(
-                f"world/arm/{k}",
-                rr.LineStrips3D(strips, colors=ARM[k], radii=rr.Radius.ui_points(2.0)),
-            )
-            rec.log(
-                f"world/arm/{k}/flange",
-                rr.Transform3D(translation=pts[i, -1], mat3x3=R[i]),
-                rr.TransformAxes3D(axis_length=100.0),
-            )
-            rec.log(
-                f"world/smr/{k}",
-                rr.Points3D(pred[k][i], labels=names, colors=color, radii=rr.Radius.ui_points(4.0)),
-            )
-            rec.log(
-                f"world/error_vectors/{k}",
-                rr.Arrows3D(
-                    origins=xyz[i][ok],
-                    vectors=magnify * err[k][i][ok],
-                    colors=color,
-                    radii=rr.Radius.ui_points(1.5),
-                ),
-            )
-            if np.isfinite(rms[k][i]):
-                rec.log(f"errors/rms/{k}", rr.Scalars(rms[k][i]))
 
     history = calibration.get("history")
     if history:
         rec.log("solver/max_F", rr.SeriesLines(colors=AFTER, names="max F_i / mm^2"), static=True)
-        rec.disable_timeline("pose")
-        for it, value in enumerate(history):
-            rec.set_time("iteration", sequence=it)
-            rec.log("solver/max_F", rr.Scalars(float(value)))
+        rec.send_columns(
+            "solver/max_F",
+            [rr.TimeColumn("iteration", sequence=np.arange(len(history)))],
+            rr.Scalars.columns(scalars=np.asarray(history, dtype=float)),
+        )
+    figures = []
     if diagnosis is not None and diagnosis.figures:
-        _log_diagnosis(rec, diagnosis.figures)
+        figures = _log_diagnosis(rec, diagnosis.figures)
+    eye = cell_eye(np.vstack([readings, np.zeros((1, 3))]), calibration.base)
+    blueprint = calibration_blueprint(
+        eye=eye,
+        arm_eye=cell_eye(arm, calibration.base),
+        has_solver=bool(history),
+        figures=figures,
+    )
+    rec.send_blueprint(blueprint)
     rec.flush()
     rec.disconnect()  # closes the file sink so the footer is written before we return
     return path
