@@ -26,7 +26,7 @@ def calibration_blueprint(
     eye: rrb.EyeControls3D,
     arm_eye: rrb.EyeControls3D,
     has_solver: bool,
-    figures: list[tuple[str, str]] = (),
+    figures: tuple[tuple[str, str], ...] | list[tuple[str, str]] = (),
 ) -> rrb.Blueprint:
     """The cell with every pose left, charts right; the time panel on the solver's timeline.
 
@@ -54,7 +54,7 @@ def calibration_blueprint(
         eye_controls=arm_eye,
         line_grid=rrb.LineGrid3D(visible=False),
     )
-    series = [
+    series: list[rrb.TimeSeriesView | rrb.Spatial2DView] = [
         rrb.TimeSeriesView(name="RMS error per pose / mm (timeline: pose)", origin="errors/rms")
     ]
     if has_solver:

@@ -52,7 +52,9 @@ def color_scale(sets: list[PoseSet]) -> float:
 
 def _frame(rec: rr.RecordingStream, path: str, T: np.ndarray, axes_mm: float | None) -> None:
     """A 4x4 transform (tracker frame) on an entity, with its axes drawn axes_mm long."""
-    parts = [rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3])]
+    parts: list[rr.Transform3D | rr.TransformAxes3D] = [
+        rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3])
+    ]
     if axes_mm:
         parts.append(rr.TransformAxes3D(axis_length=axes_mm))
     rec.log(path, *parts, static=True)
