@@ -91,9 +91,16 @@ def cmd_calibrate(args) -> None:
         f"in {cal.seconds * 1000:.0f} ms"
     )
     _print_screening(cal)
+    if "validation" in model.meta:  # the held-out figure first: it is the headline
+        for line in tables.validation_lines(model.meta["validation"]):
+            console.print(line)
     console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
     console.print(tables.identified_geometry(cal.robot, cell.robot, model.meta["uncertainty"]))
-    console.print(tables.frame_errors(model.meta["uncertainty"], meas.target_names))
+    if "identified" in model.meta:
+        console.print(tables.frames_table(model.meta["identified"]))
+        console.print(tables.correlations(model.meta["identified"]))
+    else:
+        console.print(tables.frame_errors(model.meta["uncertainty"], meas.target_names))
     console.print(
         f"condition number {cal.condition:.3g}; "
         + ", ".join(f"F_{k} {v:.4f} mm^2" for k, v in fit["F_mm2"].items())
@@ -109,6 +116,16 @@ def cmd_calibrate(args) -> None:
         f"model written to {args.out}"
         + (f", rerun recording to {args.recording}" if args.recording else "")
     )
+    _warn_undeployable(model.meta, args.out)
+
+
+def _warn_undeployable(meta: dict, path) -> None:
+    """One line on stderr when a model's validation says it is not to be deployed."""
+    from .validation import refusal
+
+    why = refusal(meta)
+    if why:
+        print(f"robocal: warning: {path}: {why}", file=sys.stderr)
 
 
 def cmd_predict(args) -> None:
