@@ -10,11 +10,10 @@ from robocal.solver.kinematics import BASE_NAMES, rot, translation
 from robocal.solver.uncertainty import ParameterErrors, propagate
 from robocal.solver.validation import strongest_correlations
 
-from .exports.params import base_entries, entries
+from .exports.params import Entry, base_entries, entries
 from .formats.model_json import ModelFile
 
 CORRELATIONS = 5  # the strongest |r| listed
-KINDS = ("theta", "d", "a", "alpha", "beta")  # the table's column order within a joint
 
 
 def base_standard_errors(base: np.ndarray, errors: ParameterErrors) -> dict[str, float]:
@@ -32,6 +31,44 @@ def base_standard_errors(base: np.ndarray, errors: ParameterErrors) -> dict[str,
     return {n: se.get(n, se.get(f"{n}_deg")) for n in names}
 
 
+def _row(e: Entry, fixed, nominal: float | None, standard_error: float | None) -> dict:
+    """One table row of a params entry: where it sits (joint, base, SMR) and its change."""
+    if e.joint is not None:
+        group, kind, where = "joint", e.name.rstrip("0123456789"), {"joint": e.joint}
+    elif e.name in BASE_NAMES:
+        group, kind, where = "base", e.name[len("base_") :], {}
+    else:
+        target, kind = e.name.rsplit("_", 1)
+        group, where = "smr", {"target": target}
+    return {
+        "parameter": e.name,
+        "group": group,
+        "kind": kind,
+        **where,
+        "unit": e.unit,
+        "nominal": nominal,
+        "calibrated": e.calibrated,
+        "change": None if nominal is None else e.calibrated - nominal,
+        "standard_error": standard_error,
+        "status": "held fixed" if e.name in fixed else "identified",
+    }
+
+
+def _block(model: ModelFile, rows, fixed, condition, estimator, correlations) -> dict:
+    return {
+        "convention": model.robot.convention,
+        "units": "mm; degrees for theta, alpha, beta, rz, ry, rx",
+        "frames": "joints in the robot's convention; base x, y, z and Rz Ry Rx in the tracker "
+        "frame (base = Trans(x, y, z) Rz(rz) Ry(ry) Rx(rx)); SMRs in the flange frame, their "
+        "change the offset from the cell's nominal position",
+        "estimator": estimator,
+        "rows": rows,
+        "fixed": [{"parameter": n, "why": why} for n, why in fixed.items()],
+        "condition_number": condition,
+        "correlations": correlations,
+    }
+
+
 def identified_block(
     model: ModelFile,
     errors: ParameterErrors,
@@ -42,62 +79,39 @@ def identified_block(
     nominal_base: np.ndarray | None = None,
 ) -> dict:
     """model.json's `identified` block: one row per parameter (edge units), the held-fixed
-    parameters with why, the condition number and the strongest correlations."""
+    parameters with why, the condition number and the strongest correlations (between
+    identified parameters; the base's are of its small motions along and about its axes)."""
     base_se = base_standard_errors(model.base, errors)
     nominal = {}
     if nominal_base is not None:
         nominal.update({n: v for n, _, v in base_entries(np.asarray(nominal_base, dtype=float))})
     for t, xyz in (nominal_targets or {}).items():
         nominal.update({f"{t}_{c}": float(v) for c, v in zip("xyz", xyz)})
-    rows = []
-    for e in entries(model):
-        if e.joint is not None:
-            group, kind, where = "joint", e.name.rstrip("0123456789"), {"joint": e.joint}
-        elif e.name in BASE_NAMES:
-            group, kind, where = "base", e.name[len("base_") :], {}
-        else:
-            target, kind = e.name.rsplit("_", 1)
-            group, where = "smr", {"target": target}
-        ref = e.nominal if e.nominal is not None else nominal.get(e.name)
-        se = base_se.get(e.name) if group == "base" else e.standard_error
-        rows.append(
-            {
-                "parameter": e.name,
-                "group": group,
-                "kind": kind,
-                **where,
-                "unit": e.unit,
-                "nominal": ref,
-                "calibrated": e.calibrated,
-                "change": None if ref is None else e.calibrated - ref,
-                "standard_error": se,
-                "status": "held fixed" if e.name in fixed else "identified",
-            }
+    rows = [
+        _row(
+            e,
+            fixed,
+            e.nominal if e.nominal is not None else nominal.get(e.name),
+            base_se.get(e.name) if e.name in BASE_NAMES else e.standard_error,
         )
+        for e in entries(model)
+    ]
     by_column = {int(c): n for n, c in zip(errors.names, errors.column) if c >= 0}
     top = strongest_correlations(errors.cov, CORRELATIONS) if len(errors.cov) > 1 else []
-    return {
-        "convention": model.robot.convention,
-        "units": "mm; degrees for theta, alpha, beta, rz, ry, rx",
-        "frames": "joints in the robot's convention; base x, y, z and Rz Ry Rx in the tracker "
-        "frame (base = Trans(x, y, z) Rz(rz) Ry(ry) Rx(rx)); SMRs in the flange frame, their "
-        "change the offset from the cell's nominal position",
-        "estimator": errors.estimator,
-        "rows": rows,
-        "fixed": [{"parameter": n, "why": why} for n, why in fixed.items()],
-        "condition_number": condition,
-        "correlations": [
-            {"a": by_column[i], "b": by_column[j], "r": round(r, 6)} for i, j, r in top
-        ],
-        "correlations_note": "between identified parameters; the base's are of its small "
-        "motions along and about its own axes",
-    }
+    pairs = [{"a": by_column[i], "b": by_column[j], "r": round(r, 6)} for i, j, r in top]
+    return _block(model, rows, fixed, condition, errors.estimator, pairs)
 
 
-def joint_table(block: dict) -> list[dict]:
-    """Per joint, kind -> its row (the table calibrate prints)."""
-    joints: dict[int, dict] = {}
-    for r in block["rows"]:
-        if r["group"] == "joint":
-            joints.setdefault(r["joint"], {})[r["kind"]] = r
-    return [{"joint": j, **joints[j]} for j in sorted(joints)]
+def parameters_of(model: ModelFile) -> dict:
+    """A model file's identified block; rebuilt from its parameters and standard errors (no
+    correlations, no base standard errors) for a model without one (a diagnosis's, or older)."""
+    if "identified" in model.meta:
+        return model.meta["identified"]
+    fit = model.meta.get("fit") or {}
+    fixed = fit.get("fixed_parameters") or {}
+    rows = [
+        _row(e, fixed, e.nominal, None if e.name in BASE_NAMES else e.standard_error)
+        for e in entries(model)
+    ]
+    estimator = (model.meta.get("uncertainty") or {}).get("estimator", "none")
+    return _block(model, rows, fixed, fit.get("condition_number"), estimator, [])

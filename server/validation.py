@@ -94,15 +94,30 @@ def cell_mismatch(model: ModelFile, cell: Cell) -> str | None:
     return None
 
 
-def absurd_errors(result: dict) -> str | None:
+def absurd_errors(result: dict, meta: dict | None = None) -> str | None:
     """Why an evaluation's errors say the data is of another cell (a moved tracker, another
-    robot): the model's RMS error past ABSURD_MM; None otherwise."""
+    robot), or the model unfit: the model's RMS error past ABSURD_MM; None otherwise."""
     rms = result["model"]["rmse"]
     if np.isfinite(rms) and rms <= ABSURD_MM:
         return None
     nominal = result.get("nominal", {}).get("rmse")
+    unfit = refusal(meta or {}) is not None
     return (
         f"the model's predictions are {rms:.1f} mm RMS from the readings (limit {ABSURD_MM:g} "
         "mm): the data is not of the model's cell (another robot, or the tracker or base moved)"
+        + (", or the model is unfit (its validation says not deployable)" if unfit else "")
         + (f"; the nominal robot registered on it errs {nominal:.3f} mm RMS" if nominal else "")
     )
+
+
+def file_refusal(path) -> str | None:
+    """refusal() of a model file's validation; None when the file cannot be read as JSON (its
+    reader then says what is wrong with it)."""
+    import json
+    from pathlib import Path
+
+    try:
+        meta = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return refusal(meta) if isinstance(meta, dict) else None
