@@ -96,9 +96,11 @@ def identified_block(
         )
         for e in entries(model)
     ]
-    by_column = {int(c): n for n, c in zip(errors.names, errors.column) if c >= 0}
-    top = strongest_correlations(errors.cov, CORRELATIONS) if len(errors.cov) > 1 else []
-    pairs = [{"a": by_column[i], "b": by_column[j], "r": round(r, 6)} for i, j, r in top]
+    # the named parameters' columns (ls-pose's covariance has its first stage's SMRs besides)
+    named = [(int(c), n) for n, c in zip(errors.names, errors.column) if c >= 0]
+    cols = [c for c, _ in named]
+    top = strongest_correlations(errors.cov[np.ix_(cols, cols)], CORRELATIONS)
+    pairs = [{"a": named[i][1], "b": named[j][1], "r": round(r, 6)} for i, j, r in top]
     return _block(model, rows, fixed, condition, errors.estimator, pairs)
 
 
