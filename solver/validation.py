@@ -27,8 +27,9 @@ NOISE_FLOOR_FRACTION = 0.6
 # Jacobi-scaled condition number of the identification past which the model is not deployed
 # (healthy campaigns of 20 poses or more: 10 to 100; identifiability refuses past 1e7).
 MAX_CONDITION = 1e3
-# Held-out RMS more than this multiple of the fit RMS: the model does not predict new poses.
-# A sound least-squares fit expects equations / (equations - free): 1.14 at 30 poses of 3 SMRs.
+# Held-out RMS more than this multiple of the fit RMS (or of the noise floor, if larger): the
+# model does not predict new poses. A sound least-squares fit expects equations / (equations -
+# free): 1.14 at 30 poses of 3 SMRs.
 MAX_HOLDOUT_RATIO = 2.0
 # The smallest singular value of I - H_p below which pose p cannot be held out.
 UNSUPPORTED = 1e-9
@@ -163,11 +164,19 @@ def judge(
             f"{len(holdout.unsupported)} of {poses} poses cannot be held out: without any one of "
             "them the other poses cannot identify the model"
         )
-    ratio = v.holdout_rms_mm / fit_rms_mm if fit_rms_mm > 0 else float("inf")
+    # against the fit RMS, or the noise floor where the fit went below it: a held-out error
+    # near the tracker's noise is as good as any model predicts, however small the fit's
+    ref = max(fit_rms_mm, noise_floor_mm or 0.0)
+    ratio = v.holdout_rms_mm / ref if ref > 0 else float("inf")
     if np.isfinite(v.holdout_rms_mm) and not ratio <= MAX_HOLDOUT_RATIO:
         v.reasons.append(
-            f"held-out RMS {v.holdout_rms_mm:.4g} mm is {ratio:.3g} x the fit RMS "
-            f"{fit_rms_mm:.4f} mm (limit {MAX_HOLDOUT_RATIO:g} x): the model does not predict "
-            "poses it was not fitted on"
+            f"held-out RMS {v.holdout_rms_mm:.4g} mm is {ratio:.3g} x the "
+            + (
+                f"fit RMS {fit_rms_mm:.4f} mm"
+                if ref == fit_rms_mm
+                else f"noise floor {ref:.4f} mm (the fit RMS {fit_rms_mm:.4f} mm is below it)"
+            )
+            + f" (limit {MAX_HOLDOUT_RATIO:g} x): the model does not predict poses it was not "
+            "fitted on"
         )
     return v

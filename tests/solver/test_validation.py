@@ -97,7 +97,10 @@ def test_each_limit_gives_its_reason_and_a_healthy_fit_none():
             fit_rms_mm=0.005, holdout=_Holdout(0.006)
         ),
         "condition number 2e+03 exceeds 1000": dict(condition_number=2000.0),
-        "held-out RMS 0.04 mm is 2.67 x the fit RMS": dict(holdout=_Holdout(0.04)),
+        "held-out RMS 0.04 mm is 2.67 x the fit RMS": dict(
+            holdout=_Holdout(0.04), noise_floor_mm=0.0145
+        ),
+        "held-out RMS 0.04 mm is 2.58 x the noise floor 0.0155 mm": dict(holdout=_Holdout(0.04)),
         "2 of 100 poses cannot be held out": dict(holdout=_Holdout(0.016, [3, 9])),
     }
     for start, change in cases.items():
@@ -105,4 +108,6 @@ def test_each_limit_gives_its_reason_and_a_healthy_fit_none():
         assert not v.deployable and len(v.reasons) == 1, (start, v.reasons)
         assert v.reasons[0].startswith(start), v.reasons
     assert "measure at least 11 poses" in verdict(equations=90, poses=10).reasons[0]
+    # a held-out error near the tracker's noise is no alarm, however small the fit's
+    assert verdict(fit_rms_mm=0.01, holdout=_Holdout(0.025), noise_floor_mm=0.015).deployable
     assert verdict(condition_number=float("nan")).reasons  # not a figure: not deployable
