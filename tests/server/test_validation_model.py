@@ -55,3 +55,28 @@ def test_the_identified_block_names_every_parameter():
     assert set(names) == set(cal.layout.names())
     assert {f["parameter"] for f in ident["fixed"]} == set(cal.fixed)
     assert model.meta["validation"]["deployable"] is True, model.meta["validation"]["reasons"]
+
+
+def test_a_model_without_an_identified_block_still_has_its_table():
+    from robocal.server.api.model_schemas import ModelParameters
+    from robocal.server.identified import parameters_of
+
+    cell, meas = campaign(30, seed=7)
+    model = workflow.model_file(workflow.run_method(cell, meas, "ls-sum"), cell, meas)
+    full = parameters_of(model)
+    del model.meta["identified"]  # as a diagnosis's model, or one written before
+    table = parameters_of(model)
+    ModelParameters.model_validate(
+        {"job_id": 1, "method": "ls-sum", "identified": table, "validation": None}
+    )
+    ModelParameters.model_validate(
+        {
+            "job_id": 1,
+            "method": "ls-sum",
+            "identified": full,
+            "validation": model.meta["validation"],
+        }
+    )
+    rows = {r["parameter"]: r for r in table["rows"]}
+    assert rows["a2"] == {r["parameter"]: r for r in full["rows"]}["a2"]
+    assert rows["base_x"]["standard_error"] is None and table["correlations"] == []
