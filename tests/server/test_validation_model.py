@@ -80,3 +80,34 @@ def test_a_model_without_an_identified_block_still_has_its_table():
     rows = {r["parameter"]: r for r in table["rows"]}
     assert rows["a2"] == {r["parameter"]: r for r in full["rows"]}["a2"]
     assert rows["base_x"]["standard_error"] is None and table["correlations"] == []
+
+
+def test_the_params_table_gives_the_base_standard_errors_and_smr_nominals():
+    import csv
+    import io
+
+    from robocal.server.exports.params import params_text
+
+    cell, meas = campaign(30, seed=8)
+    model = workflow.model_file(workflow.run_method(cell, meas, "ls-sum"), cell, meas)
+    rows = {r["parameter"]: r for r in csv.DictReader(io.StringIO(params_text(model)))}
+    ident = {r["parameter"]: r for r in model.meta["identified"]["rows"]}
+    for n in ("base_x", "base_rz"):
+        assert float(rows[n]["standard_error"]) == pytest.approx(ident[n]["standard_error"], 1e-2)
+    assert float(rows["B_y"]["nominal"]) == cell.targets["B"][1]
+    assert float(rows["B_y"]["difference"]) == pytest.approx(ident["B_y"]["change"])
+
+
+def test_the_base_standard_errors_are_those_of_the_tracker_frame():
+    from robocal.server.identified import base_standard_errors
+    from robocal.solver.fit_errors import calibration_errors
+
+    cell, meas = campaign(30, seed=9)
+    cal = workflow.run_method(cell, meas, "ls-sum", screening=False)
+    errors = calibration_errors(cal, meas.q, meas.xyz)
+    se = base_standard_errors(cal.base, errors)
+    R = cal.base[:3, :3]  # the base's translation moves along its own axes
+    C = R @ errors.block(["base_x", "base_y", "base_z"]) @ R.T
+    want = np.sqrt(np.diag(C))
+    assert [se["base_x"], se["base_y"], se["base_z"]] == pytest.approx(want.tolist(), rel=1e-4)
+    assert all(se[n] > 0 for n in ("base_rz", "base_ry", "base_rx"))
