@@ -91,9 +91,16 @@ def cmd_calibrate(args) -> None:
         f"in {cal.seconds * 1000:.0f} ms"
     )
     _print_screening(cal)
+    if "validation" in model.meta:  # the held-out figure first: it is the headline
+        for line in tables.validation_lines(model.meta["validation"]):
+            console.print(line)
     console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
     console.print(tables.identified_geometry(cal.robot, cell.robot, model.meta["uncertainty"]))
-    console.print(tables.frame_errors(model.meta["uncertainty"], meas.target_names))
+    if "identified" in model.meta:
+        console.print(tables.frames_table(model.meta["identified"]))
+        console.print(tables.correlations(model.meta["identified"]))
+    else:
+        console.print(tables.frame_errors(model.meta["uncertainty"], meas.target_names))
     console.print(
         f"condition number {cal.condition:.3g}; "
         + ", ".join(f"F_{k} {v:.4f} mm^2" for k, v in fit["F_mm2"].items())
@@ -109,6 +116,16 @@ def cmd_calibrate(args) -> None:
         f"model written to {args.out}"
         + (f", rerun recording to {args.recording}" if args.recording else "")
     )
+    _warn_undeployable(model.meta, args.out)
+
+
+def _warn_undeployable(meta: dict, path) -> None:
+    """One line on stderr when a model's validation says it is not to be deployed."""
+    from .validation import refusal
+
+    why = refusal(meta)
+    if why:
+        print(f"robocal: warning: {path}: {why}", file=sys.stderr)
 
 
 def cmd_predict(args) -> None:
@@ -135,9 +152,23 @@ def _tcp(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
+def _require_deployable(args) -> None:
+    """Refuse a model its validation marks not deployable, unless --force (then warn)."""
+    from .validation import file_refusal
+
+    why = file_refusal(args.model)
+    if why and not args.force:
+        from .workflow import DataError
+
+        raise DataError(f"{args.model}: {why}; --force to use it anyway")
+    if why:
+        print(f"robocal: warning: {args.model}: {why}", file=sys.stderr)
+
+
 def cmd_compensate(args) -> None:
     from .compensation import run
 
+    _require_deployable(args)
     s = run(args.model, args.targets, args.out, args.tcp, args.max_error_mm)
     # plain print, as predict: the command starts with numpy alone
     print(
@@ -156,6 +187,13 @@ def cmd_evaluate(args) -> None:
 
     meas = workflow.load_campaign(args.meas, Cell(model.robot, model.targets, None, {}, None))
     res = workflow.evaluate(model, meas)
+    from .validation import absurd_errors
+
+    why = absurd_errors(res, model.meta)
+    if why and not args.force:
+        raise workflow.DataError(f"{args.meas}: {why}; --force to evaluate anyway")
+    if why:
+        print(f"robocal: warning: {args.meas}: {why}", file=sys.stderr)
     if "nominal" in res:
         console.print(
             tables.accuracy(
@@ -511,6 +549,7 @@ def cmd_export(args) -> None:
 
     # plain print: the exports need numpy and the model code only, not rich
     fmt = format_for(args.format, args.out)
+    _require_deployable(args)
     for line in export(args.model, fmt, args.out, args.joints, args.targets):
         print(line)
 
@@ -685,12 +724,16 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.1,
         help="refuse a pose the model cannot bring closer than this (default 0.1 mm RMS)",
     )
+    cp.add_argument("--force", action="store_true", help="use a model marked not deployable")
     cp.set_defaults(func=cmd_compensate)
 
     e = sub.add_parser("evaluate", help="accuracy of a model on measured data")
     e.add_argument("model")
     e.add_argument("meas")
     e.add_argument("--json", help="also write the figures as JSON")
+    e.add_argument(
+        "--force", action="store_true", help="evaluate data whose errors say another cell"
+    )
     e.set_defaults(func=cmd_evaluate)
 
     co = sub.add_parser("compare", help="every method side by side (the paper's Table 3)")
@@ -809,6 +852,7 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument(
         "--out", required=True, help="file to write (the RAPID module's name is its stem)"
     )
+    ex.add_argument("--force", action="store_true", help="export a model marked not deployable")
     ex.set_defaults(func=cmd_export)
 
     sc = sub.add_parser("schema", help="the JSON Schema of cell.json, model.json or report.json")

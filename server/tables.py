@@ -166,3 +166,50 @@ def verification_table(report: dict) -> Table:
             "",
         )
     return t
+
+
+def frames_table(identified: dict) -> Table:
+    """The base (tracker frame) and each SMR (flange frame), one coordinate a row: calibrated
+    value ± standard error, and the change from the cell's nominal where it has one."""
+    t = Table(title="Identified base and SMR frames (mm, deg)")
+    for col in ("frame", "", "calibrated ± standard error", "change from nominal"):
+        t.add_column(col, justify="right" if col.startswith(("cal", "change")) else "left")
+    for r in identified["rows"]:
+        if r["group"] == "joint":
+            continue
+        frame = "base (tracker)" if r["group"] == "base" else f"SMR {r['target']} (flange)"
+        value = (
+            f"{_f(r['calibrated'])} fixed"
+            if r["status"] == "held fixed"
+            else plus_minus(r["calibrated"], r["standard_error"])
+        )
+        change = "" if r["change"] is None else f"{r['change']:+.4f}"
+        t.add_row(frame, f"{r['kind']} / {r['unit']}", value, change)
+    return t
+
+
+def correlations(identified: dict) -> str:
+    """One line: the strongest correlations between identified parameters."""
+    pairs = identified.get("correlations") or []
+    return "strongest correlations: " + (
+        ", ".join(f"{c['a']}~{c['b']} {c['r']:+.3f}" for c in pairs) or "none"
+    )
+
+
+def validation_lines(v: dict) -> list[str]:
+    """The held-out figure (headline) beside the fit's, and the verdict with its reasons."""
+
+    def mm(x):
+        return "-" if x is None else f"{x:.4f} mm" if abs(x) < 1000 else f"{x:.3g} mm"
+
+    out = [
+        f"[bold]held-out RMS {mm(v['holdout_rms_mm'])}[/bold] (leave-one-pose-out, max "
+        f"{mm(v['holdout_max_mm'])}); fit RMS {mm(v['fit_rms_mm'])}; condition number "
+        f"{_f(v['condition_number'], 3)}; noise floor {mm(v['noise_floor_mm'])}"
+    ]
+    if v["deployable"]:
+        out.append("[green]deployable[/green]: every validation limit holds")
+    else:
+        out.append("[bold red]NOT DEPLOYABLE[/bold red]:")
+        out += [f"  - {r}" for r in v["reasons"]]
+    return out

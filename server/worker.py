@@ -128,7 +128,13 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.J
         calibration=cal,
         viewer_url=setup.viewer_url,
     )
-    return {"model": str(path), "recording": str(rrd)}
+    v = model.get("validation") or {}
+    keep = ("deployable", "reasons", "holdout_rms_mm", "fit_rms_mm")
+    return {
+        "model": str(path),
+        "recording": str(rrd),
+        **({"validation": {k: v[k] for k in keep}} if v else {}),
+    }
 
 
 def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.JobInfo) -> dict:

@@ -151,12 +151,17 @@ def run_method(
 def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None) -> ModelFile:
     """The self-contained model file of a calibration."""
     from robocal.solver import metrics
-    from robocal.solver.fit_errors import calibration_errors
+    from robocal.solver.fit_errors import angles, calibration_rows
+    from robocal.solver.uncertainty import errors_from_rows
+
+    from .identified import identified_block
 
     screening = cal.get("screening")
     used = without_outliers(meas, screening)
     pred = predict(cal.layout, cal.x, meas.q)
     acc = metrics.accuracy(pred, used.xyz, meas.target_names)
+    rows, column = calibration_rows(cal, meas.q, used.xyz)
+    errors = errors_from_rows(rows, cal.layout.names(), column, angles(cal.layout))
     data = {"poses": meas.n_poses, "readings": meas.n_readings, "targets": list(meas.target_names)}
     if data_path is not None and "://" not in str(data_path):  # a server's database: no file
         data.update(file=Path(data_path).name, sha256=file_digest(data_path))
@@ -178,19 +183,49 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         "method": cal.method,
         "data": data,
         "fit": fit,
-        "uncertainty": uncertainty_to_json(
-            calibration_errors(cal, meas.q, used.xyz), cal.layout.names()
-        ),
+        "uncertainty": uncertainty_to_json(errors, cal.layout.names()),
     }
     if "qp" in cal:  # minimax
         meta["qp"] = cal.qp
-    return ModelFile(
+    model = ModelFile(
         cal.robot,
         cal.base,
         dict(zip(meas.target_names, cal.targets)),
         nominal=cell.robot,
         meta=meta,
     )
+    if cal.method != "nominal":  # nothing identified, nothing to guard
+        model.meta["identified"] = identified_block(
+            model,
+            errors,
+            fixed=cal.fixed,
+            condition=cal.condition,
+            nominal_targets={t: cell.targets[t] for t in meas.target_names},
+            nominal_base=cell.base,
+        )
+        model.meta["validation"] = validate(cal, cell, used, rows, errors, acc["rmse"])
+    return model
+
+
+def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit_rms) -> dict:
+    """model.json's `validation` block of a calibration on the readings it used."""
+    from robocal.solver import validation as guard
+    from robocal.solver.fit_errors import point_errors
+
+    from .validation import noise_floor, validation_block
+
+    floor, source = noise_floor(cell, used)
+    v = guard.judge(
+        fit_rms_mm=fit_rms,
+        holdout=guard.leave_one_pose_out(rows, point_errors(cal, rows)),
+        condition_number=cal.condition,
+        equations=3 * int(np.isfinite(used.xyz[..., 0]).sum()),
+        free_parameters=int(np.count_nonzero(errors.column >= 0)),
+        poses=int(np.any(np.isfinite(used.xyz[..., 0]), axis=1).sum()),
+        noise_floor_mm=floor,
+        noise_floor_source=source,
+    )
+    return validation_block(v, list(used.pose_ids), source)
 
 
 def model_predict(model: ModelFile, q, time_s=None, temp_c=None) -> np.ndarray:

@@ -44,7 +44,20 @@ def _in(cols, which) -> np.ndarray:
 
 
 def calibration_errors(cal: Calibration, q, meas) -> ParameterErrors:
-    """Standard errors of a calibration's identified parameters (every method of `calibrate`).
+    """Standard errors of a calibration's identified parameters (every method of `calibrate`)."""
+    rows, column = calibration_rows(cal, q, meas)
+    return errors_from_rows(rows, cal.layout.names(), column, angles(cal.layout))
+
+
+def point_errors(cal: Calibration, rows: Rows) -> np.ndarray:
+    """Which of calibration_rows' rows are point errors (ls-pose's first stage is not)."""
+    if parse_method(cal.method, list(cal.layout.target_names))[0] == "ls-pose":
+        return rows.stage == 1
+    return np.ones(len(rows.r), dtype=bool)
+
+
+def calibration_rows(cal: Calibration, q, meas) -> tuple[Rows, np.ndarray]:
+    """A calibration's residual rows and each parameter's column in them (-1 where held fixed).
 
     ls-sum and nominal are least squares over every reading; minimax's optimum is a least-squares
     stationary point weighted per SMR by its multipliers (the distance constraints are left
@@ -82,7 +95,7 @@ def calibration_errors(cal: Calibration, q, meas) -> ParameterErrors:
                 point_rows(lay, x, q, meas, mask & ~sel, cols, _in(cols, smr(others)), stage=1)
             )
         column[cols] = np.arange(len(cols))
-    return errors_from_rows(Rows.stack(parts), names, column, angles(lay))
+    return Rows.stack(parts), column
 
 
 def _pose_stages(cal: Calibration, q, meas, mask, free):

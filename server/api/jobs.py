@@ -30,6 +30,8 @@ def public_job(job: Job) -> JobPublic:
             campaign_url=(
                 f"/api/campaigns/{job.results['campaign']}" if "campaign" in job.results else None
             ),
+            parameters_url=f"/api/models/{job.id}/parameters" if "model" in job.results else None,
+            validation=job.results.get("validation"),
         )
     return JobPublic(
         id=job.id,

@@ -11,12 +11,16 @@ from fastapi.responses import FileResponse
 from robocal.server import charts, model_files, store, verification
 from robocal.server.compensation import MAX_ERROR_MM, parse_tcp
 from robocal.server.formats.cell_json import parse_cell
+from robocal.server.formats.model_json import read_model
+from robocal.server.identified import parameters_of
+from robocal.server.validation import absurd_errors, cell_mismatch, file_refusal
 from robocal.solver.finite import require_inputs
 from starlette.concurrency import run_in_threadpool
 
 from . import ops
 from .campaigns import public_campaign
 from .deps import AcquisitionsDep, Authorized, CampaignQuery, DbDep, JobId, JobsDep
+from .model_schemas import ModelParameters
 from .problems import Responses
 from .schemas import PRINTABLE, CampaignDetail, VerifyCreate
 from .worker_calls import CALL_PROBLEMS, PROBLEM, call_slot, run_call
@@ -34,16 +38,76 @@ def get_model(job_id: JobId, jobs: JobsDep) -> FileResponse:
     )
 
 
-@router.get("/{job_id}/evaluate", responses=CALL_PROBLEMS)
-def evaluate_model(job_id: JobId, campaign_id: CampaignQuery, jobs: JobsDep, db: DbDep) -> dict:
+@router.get(
+    "/{job_id}/parameters",
+    response_model=ModelParameters,
+    responses={409: {"description": "the job is not done", "content": PROBLEM}},
+)
+def model_parameters(job_id: JobId, jobs: JobsDep) -> dict:
+    """The identified parameters of a done job's model: per joint the change of theta, d, a,
+    alpha (and beta) from nominal, the base (tracker frame) and SMR (flange frame) frames, each
+    with its standard error (mm, degrees); the parameters held fixed and why; the condition
+    number; the strongest correlations. With the model's validation: whether it is deployable,
+    why not, and its held-out RMS (the headline) beside the fit RMS."""
+    model = read_model(jobs.model_path(job_id))
+    return {
+        "job_id": job_id,
+        "method": model.meta.get("method"),
+        "identified": parameters_of(model),
+        "validation": model.meta.get("validation"),
+    }
+
+
+Force = Annotated[
+    bool,
+    Query(description="go on although the model is not deployable or the data not of its cell"),
+]
+
+
+@router.get(
+    "/{job_id}/evaluate",
+    responses={
+        422: {
+            "description": "the campaign is not of the model's cell (another robot, or "
+            "errors of metres); force=true evaluates anyway",
+            "content": PROBLEM,
+        },
+        **CALL_PROBLEMS,
+    },
+)
+def evaluate_model(
+    job_id: JobId, campaign_id: CampaignQuery, jobs: JobsDep, db: DbDep, force: Force = False
+) -> dict:
     """Accuracy of a job's model on a campaign's readings, next to the nominal model (computed
-    in a worker process under a wall-clock limit: 504 past it)."""
+    in a worker process under a wall-clock limit: 504 past it). A campaign of another cell
+    (another robot, other SMRs, or model errors past 100 mm RMS) is refused (422) unless
+    force=true, which answers with the reason in `warnings`."""
     path = jobs.model_path(job_id)
+    warnings = []
     with call_slot(jobs):  # loading the readings is heavy too: at most call_workers at once
         cell = parse_cell(store.get_campaign(db, campaign_id=campaign_id).cell_json)
+        model = read_model(path)
+        why = cell_mismatch(model, cell)
+        if why:
+            if not force:
+                raise HTTPException(422, f"campaign {campaign_id}: {why}; force=true to go on")
+            warnings.append(why)
         meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
         require_inputs(meas.q, meas.xyz)  # a non-finite campaign: 422 at once, no worker
-        return run_call(jobs, charts.evaluation, path, meas)
+        result = run_call(jobs, charts.evaluation, path, meas)
+    why = absurd_errors(result, model.meta)
+    if why:
+        if not force:
+            raise HTTPException(422, f"campaign {campaign_id}: {why}; force=true to go on")
+        warnings.append(why)
+    return {**result, "warnings": warnings} if warnings else result
+
+
+def _deployable(path, force: bool) -> None:
+    """409 with the reasons when the model is not deployable, unless forced."""
+    why = file_refusal(path)
+    if why and not force:
+        raise HTTPException(409, f"{why}; force=true to use it anyway")
 
 
 TARGETS_BODY = {
@@ -57,6 +121,13 @@ TARGETS_BODY = {
 }
 BAD_FILE: Responses = {
     422: {"description": "A bad targets.csv (its line) or query", "content": PROBLEM}
+}
+NOT_DEPLOYABLE: Responses = {
+    409: {
+        "description": "The model is not deployable (its validation's reasons); force=true "
+        "uses it anyway",
+        "content": PROBLEM,
+    }
 }
 CSV_ANSWER: Responses = {200: {"content": {"text/csv": {"schema": {"type": "string"}}}}}
 EXPORT_ANSWER: Responses = {
@@ -88,7 +159,7 @@ def _tcp(text: str | None) -> list[float] | None:
     dependencies=[Authorized],
     openapi_extra={"requestBody": {**TARGETS_BODY["requestBody"], "required": True}},
     response_class=Response,
-    responses={**CSV_ANSWER, **BAD_FILE, **CALL_PROBLEMS},
+    responses={**CSV_ANSWER, **BAD_FILE, **NOT_DEPLOYABLE, **CALL_PROBLEMS},
 )
 async def compensate(
     job_id: JobId,
@@ -97,14 +168,18 @@ async def compensate(
     tcp: Tcp = None,
     max_error_mm: Annotated[float, Query(gt=0, le=1000)] = MAX_ERROR_MM,
     filename: Filename = "targets.csv",
+    force: Force = False,
 ) -> Response:
     """The joint commands (joints.csv) that put the SMRs (or the tool) where the uploaded
-    targets.csv wants them, by this job's model; an unreachable pose is 422 with its line."""
+    targets.csv wants them, by this job's model; an unreachable pose is 422 with its line.
+    A model its validation marks not deployable is refused (409 with the reasons) unless
+    force=true."""
     data = await request.body()
     text = await run_in_threadpool(
         _with_model,
         jobs,
         job_id,
+        force,
         model_files.compensated_csv,
         data,
         filename,
@@ -118,9 +193,11 @@ async def compensate(
     )
 
 
-def _with_model(jobs, job_id, target, *args) -> str:
-    """target(model path, *args) in a worker, once a worker slot is free."""
+def _with_model(jobs, job_id, force, target, *args) -> str:
+    """target(model path, *args) in a worker, once a worker slot is free; 409 if the model is
+    not deployable, unless forced."""
     path = jobs.model_path(job_id)
+    _deployable(path, force)
     with call_slot(jobs):
         return run_call(jobs, target, path, *args)
 
@@ -130,7 +207,7 @@ def _with_model(jobs, job_id, target, *args) -> str:
     dependencies=[Authorized],
     openapi_extra=TARGETS_BODY,
     response_class=Response,
-    responses={**EXPORT_ANSWER, **BAD_FILE, **CALL_PROBLEMS},
+    responses={**EXPORT_ANSWER, **BAD_FILE, **NOT_DEPLOYABLE, **CALL_PROBLEMS},
 )
 async def export(
     job_id: JobId,
@@ -138,10 +215,12 @@ async def export(
     jobs: JobsDep,
     format: Annotated[Literal["rapid", "params", "urdf"], Query(description="the export")],
     filename: Filename = "targets.csv",
+    force: Force = False,
 ) -> Response:
     """The model for the controller and other tools: `rapid`, a RAPID module of the joint
     targets compensated for the uploaded targets.csv; `params`, the identified parameters in the
-    robot's convention (CSV); `urdf`, calibrated joint origins (no body for these two)."""
+    robot's convention (CSV); `urdf`, calibrated joint origins (no body for these two). A model
+    its validation marks not deployable is refused (409 with the reasons) unless force=true."""
     data = await request.body()
     if format == "rapid" and not data:
         raise HTTPException(422, "a RAPID export needs a targets.csv as the request body")
@@ -149,6 +228,7 @@ async def export(
         _with_model,
         jobs,
         job_id,
+        force,
         model_files.exported,
         format,
         data if format == "rapid" else None,

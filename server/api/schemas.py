@@ -12,6 +12,8 @@ from robocal.server.formats.cell_doc import CellDoc
 from robocal.server.formats.limits import COORD_MAX_MM
 from robocal.server.verification import CUBE_SIDE_MM, DIRECTIONS
 
+from .model_schemas import ValidationSummary
+
 # Ids are SQLite rowids.
 MAX_ID = 2**63 - 1
 # A name or label: printable, no control characters (NUL, newline, escape, DEL, U+2028/9), so
@@ -177,6 +179,10 @@ class JobPublic(BaseModel):
     report_url: str | None = None
     figures_url: str | None = None
     campaign_url: str | None = None
+    parameters_url: str | None = None
+    validation: ValidationSummary | None = Field(
+        None, description="a done calibration's: is its model deployable, and why not"
+    )
 
 
 class FigurePublic(BaseModel):

@@ -68,8 +68,12 @@ def base_from_entries(values: dict[str, float]) -> np.ndarray:
 
 
 def entries(model: ModelFile) -> list[Entry]:
-    """Every row of the table, joints first (a, alpha, d, theta, beta), then base and SMRs."""
+    """Every row of the table, joints first (a, alpha, d, theta, beta), then base and SMRs.
+
+    A model with an `identified` block (written since the table was) gives the base's standard
+    errors in these tracker-frame coordinates and the SMRs' nominal positions."""
     unc = (model.meta.get("uncertainty") or {}).get("standard_errors") or {}
+    known = {r["parameter"]: r for r in (model.meta.get("identified") or {}).get("rows", [])}
     fixed = (model.meta.get("fit") or {}).get("fixed_parameters") or {}
     has_fit = bool(model.meta.get("fit"))
 
@@ -100,13 +104,26 @@ def entries(model: ModelFile) -> list[Entry]:
                     status(name),
                 )
             )
-    # the model's standard errors of the base are along and about the calibrated base's own
-    # axes, not of these tracker-frame coordinates and angles: left blank
-    rows += [Entry(n, None, u, v, status=status(n)) for n, u, v in base_entries(model.base)]
+    # the uncertainty block's standard errors of the base are along and about the calibrated
+    # base's own axes, not of these tracker-frame coordinates and angles: taken from the
+    # identified block (propagated to them), else left blank
+    rows += [
+        Entry(
+            n,
+            None,
+            u,
+            v,
+            known.get(n, {}).get("nominal"),
+            known.get(n, {}).get("standard_error"),
+            status(n),
+        )
+        for n, u, v in base_entries(model.base)
+    ]
     for t, xyz in model.targets.items():
         for c, v in zip("xyz", xyz):
             name = f"{t}_{c}"
-            rows.append(Entry(name, None, "mm", float(v), None, unc.get(name), status(name)))
+            nominal = known.get(name, {}).get("nominal")
+            rows.append(Entry(name, None, "mm", float(v), nominal, unc.get(name), status(name)))
     return rows
 
 

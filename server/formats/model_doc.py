@@ -108,6 +108,18 @@ class ModelDoc(Doc):
     )
     extensions: list[ExtensionDoc] = []
     created: Label | None = None
+    identified: dict | None = Field(
+        None,
+        description="a calibration's identified parameters: `rows` (per parameter: group, "
+        "nominal, calibrated, change, standard_error in mm and degrees), `fixed` (held and "
+        "why), `condition_number`, `correlations` (the strongest |r|)",
+    )
+    validation: dict | None = Field(
+        None,
+        description="whether the data supports the model: `deployable`, `reasons`, "
+        "`holdout_rms_mm` (leave-one-pose-out, the headline), `fit_rms_mm`, "
+        "`condition_number`, `noise_floor_mm`, `limits`",
+    )
 
     @field_validator("targets")
     @classmethod

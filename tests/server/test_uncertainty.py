@@ -79,7 +79,8 @@ def test_calibrate_writes_and_prints_standard_errors(compliance, capsys, monkeyp
     for method in ("minimax", "ls-sum", "ls-single:B", "ls-pose"):
         assert main(["calibrate", "meas.csv", "--method", method, "--out", "cal.json"]) == 0
         out = capsys.readouterr().out
-        assert "±" in out and "fixed" in out and "SMRs x/y/z" in out
+        assert "±" in out and "fixed" in out and "Identified base and SMR frames" in out
+        assert "SMR C (flange)" in out
         model = json.loads((d / "cal.json").read_text())
         unc = model["uncertainty"]
         assert unc["estimator"].startswith("pose-clustered") and unc["poses"] == 60

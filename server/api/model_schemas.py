@@ -1,0 +1,92 @@
+"""The answers of the model routes that describe a model: its identified parameters and its
+validation (model.json's `identified` and `validation` blocks)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, Field
+
+
+class ParameterRow(BaseModel):
+    """One identified parameter in edge units (mm, degrees)."""
+
+    parameter: str = Field(description="e.g. theta2, base_x, A_y")
+    group: Literal["joint", "base", "smr"]
+    kind: str = Field(description="theta, d, a, alpha, beta; x, y, z, rz, ry, rx")
+    joint: int | None = Field(None, description="joints from 1 (group joint)")
+    target: str | None = Field(None, description="the SMR (group smr)")
+    unit: Literal["mm", "deg"]
+    nominal: float | None = Field(description="the cell's nominal value, if it has one")
+    calibrated: float
+    change: float | None = Field(description="calibrated - nominal")
+    standard_error: float | None = Field(description="none where held fixed")
+    status: Literal["identified", "held fixed"]
+
+
+class FixedParameter(BaseModel):
+    parameter: str
+    why: str = Field(description="unidentifiable or redundant with the parameters named")
+
+
+class Correlation(BaseModel):
+    a: str
+    b: str
+    r: float = Field(ge=-1, le=1)
+
+
+class Identified(BaseModel):
+    """The identified-parameter table of a calibration."""
+
+    convention: str
+    units: str
+    frames: str
+    estimator: str = Field(description="how the standard errors were estimated")
+    rows: list[ParameterRow]
+    fixed: list[FixedParameter]
+    condition_number: float | None
+    correlations: list[Correlation] = Field(description="the strongest |r|, largest first")
+
+
+class ValidationLimits(BaseModel):
+    min_equations_per_parameter: float
+    noise_floor_fraction: float
+    max_condition_number: float
+    max_holdout_ratio: float
+
+
+class Validation(BaseModel):
+    """Whether the data supports the model; held-out RMS is the headline figure."""
+
+    deployable: bool
+    reasons: list[str] = Field(description="each limit the fit breaks, with its figures")
+    holdout_rms_mm: float | None = Field(description="leave-one-pose-out RMS per reading")
+    holdout_max_mm: float | None
+    fit_rms_mm: float | None
+    holdout: str
+    condition_number: float | None
+    equations: int
+    free_parameters: int
+    noise_floor_mm: float | None
+    noise_floor_source: str
+    unsupported_poses: list = Field(description="poses the others cannot do without")
+    limits: ValidationLimits
+
+
+class ModelParameters(BaseModel):
+    """A done job's identified parameters and its validation (none for models written before
+    them, or a diagnosis's extended model: its table is then rebuilt from model.json)."""
+
+    job_id: int
+    method: str | None
+    identified: Identified
+    validation: Validation | None
+
+
+class ValidationSummary(BaseModel):
+    """A calibration job's verdict (GET /api/models/{id}/parameters has the whole)."""
+
+    deployable: bool
+    reasons: list[str]
+    holdout_rms_mm: float | None
+    fit_rms_mm: float | None

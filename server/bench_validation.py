@@ -1,0 +1,114 @@
+"""The validation guard's false alarms and catches, as JSON: healthy simulated campaigns (30 to
+200 poses, with and without hidden effects) and the real campaigns must be deployable; small
+ones (5 poses) must not.
+
+    python -m robocal.server.bench_validation [--seeds 20] [--method minimax] [--real DIR...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+POSES = (30, 50, 100, 150, 200)
+EFFECTS = (
+    "joint_compliance:2",
+    "joint_periodic:3:1",
+    "thermal_drift",
+    "joint_scale:2",
+    "base_shift",
+    "joint_backlash:3",
+    "joint_coupling:5",
+)
+SMALL = (5, 8)  # campaigns the guard must flag
+
+
+def simulated(seed: int, poses: int, effects: list[str], method: str) -> dict:
+    """The verdict on one simulated campaign of the default cell."""
+    from robocal.drivers.cell import TrackerSpec, VirtualCell
+    from robocal.drivers.effects import make_effects
+
+    from . import workflow
+
+    cell = workflow.load_cell(None)
+    vc = VirtualCell.random(
+        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(**cell.tracker)
+    )
+    vc.effects.extend(make_effects(effects, vc, seed))
+    meas = vc.campaign(poses, seed=seed)
+    return _verdict(cell, meas, method) | {"seed": seed, "poses": poses, "effects": effects}
+
+
+def real(folder: Path, method: str) -> dict:
+    """The verdict on a real campaign: its train.csv with its cell.json."""
+    from . import workflow
+
+    cell, meas = workflow.load_data(folder / "train.csv", folder / "cell.json")
+    return _verdict(cell, meas, method) | {"campaign": folder.name, "poses": meas.n_poses}
+
+
+def _verdict(cell, meas, method) -> dict:
+    from robocal.solver.identifiability import NotIdentifiable
+
+    from . import workflow
+
+    t0 = time.perf_counter()
+    try:
+        cal = workflow.run_method(cell, meas, method)
+    except NotIdentifiable as e:  # refused before any model: as good as flagged
+        return {"deployable": False, "reasons": [f"refused: {e}"], "refused": True}
+    v = workflow.model_file(cal, cell, meas).meta["validation"]
+    return {
+        "deployable": v["deployable"],
+        "reasons": v["reasons"],
+        "holdout_rms_mm": v["holdout_rms_mm"],
+        "fit_rms_mm": v["fit_rms_mm"],
+        "condition_number": v["condition_number"],
+        "noise_floor_mm": v["noise_floor_mm"],
+        "seconds": round(time.perf_counter() - t0, 3),
+    }
+
+
+def run(seeds: int, method: str, real_dirs: list[Path]) -> dict:
+    healthy = []
+    for seed in range(seeds):
+        effects = [] if seed % 2 == 0 else [EFFECTS[(seed // 2) % len(EFFECTS)]]
+        healthy.append(simulated(seed, POSES[seed % len(POSES)], effects, method))
+    small = [simulated(seed, n, [], method) for n in SMALL for seed in range(5)]
+    reals = [real(d, method) for d in real_dirs]
+    return {
+        "method": method,
+        "healthy": {
+            "campaigns": len(healthy),
+            "flagged": sum(not c["deployable"] for c in healthy),
+            "cases": healthy,
+        },
+        "small": {
+            "campaigns": len(small),
+            "flagged": sum(not c["deployable"] for c in small),
+            "cases": small,
+        },
+        "real": {
+            "campaigns": len(reals),
+            "flagged": sum(not c["deployable"] for c in reals),
+            "cases": reals,
+        },
+    }
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m robocal.server.bench_validation")
+    p.add_argument("--seeds", type=int, default=20, help="healthy simulated campaigns")
+    p.add_argument("--method", default="minimax", help="calibration method")
+    p.add_argument("--real", nargs="*", default=[], help="folders with train.csv and cell.json")
+    args = p.parse_args(argv)
+    json.dump(run(args.seeds, args.method, [Path(d) for d in args.real]), sys.stdout, indent=1)
+    print()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,123 @@
+"""The guard between a fit and its use: whether its data supports the model (model.json's
+`validation` block, solver.validation), whether it may be deployed (compensate, export), and
+whether data it is evaluated on is of its cell."""
+
+from __future__ import annotations
+
+import numpy as np
+from robocal.solver import validation as guard
+from robocal.solver.effects import Inputs
+from robocal.solver.measurements import Measurements
+
+from .formats.cell_json import Cell
+from .formats.model_json import ModelFile
+
+HOLDOUT_METHOD = "leave-one-pose-out cross-validation, linearised at the fit"
+DATA_FLOOR = "from the spread of SMR-to-SMR distances in the data"
+SPEC_FLOOR = "from the cell's tracker spec, MPE/2 per axis at the readings' ranges"
+# Model errors (RMS, mm) on data past which the data cannot be of the model's cell.
+ABSURD_MM = 100.0
+
+
+def noise_floor(cell: Cell, meas: Measurements) -> tuple[float | None, str]:
+    """The tracker's noise (3-D RMS per reading, mm) and where it comes from: measured in the
+    data when it has 10 poses with two SMRs or more, else the cell's tracker spec."""
+    from robocal.solver.diagnose import noise_floor as measured
+
+    floor = measured(meas.xyz, Inputs(meas.q, meas.time_s, meas.temp_c))
+    if floor:
+        return floor, DATA_FLOOR
+    spec = cell.tracker or {}
+    if "mpe_um" not in spec:
+        return None, ""
+    r = np.linalg.norm(meas.xyz, axis=-1)
+    r = r[np.isfinite(r)]
+    sigma = 0.5e-3 * (spec["mpe_um"] + spec.get("mpe_um_per_m", 0.0) * r / 1000.0)
+    return float(np.sqrt(np.mean(3.0 * sigma**2))), SPEC_FLOOR
+
+
+def validation_block(v: guard.Validation, pose_ids, source: str) -> dict:
+    """model.json's `validation` block: the verdict, its reasons, the held-out figure (the
+    headline) beside the fit's, and the limits applied."""
+    return {
+        "deployable": v.deployable,
+        "reasons": list(v.reasons),
+        "holdout_rms_mm": _num(v.holdout_rms_mm),
+        "holdout_max_mm": _num(v.holdout_max_mm),
+        "fit_rms_mm": _num(v.fit_rms_mm),
+        "holdout": HOLDOUT_METHOD,
+        "condition_number": _num(v.condition_number),
+        "equations": v.equations,
+        "free_parameters": v.free_parameters,
+        "noise_floor_mm": _num(v.noise_floor_mm),
+        "noise_floor_source": source,
+        "unsupported_poses": [pose_ids[i] for i in v.unsupported_poses],
+        "limits": {
+            "min_equations_per_parameter": guard.MIN_EQUATIONS_PER_PARAMETER,
+            "noise_floor_fraction": guard.NOISE_FLOOR_FRACTION,
+            "max_condition_number": guard.MAX_CONDITION,
+            "max_holdout_ratio": guard.MAX_HOLDOUT_RATIO,
+        },
+    }
+
+
+def _num(v):
+    """A JSON-safe number: None for NaN and infinity (JSON has neither)."""
+    return None if v is None or not np.isfinite(v) else float(v)
+
+
+def refusal(meta: dict) -> str | None:
+    """Why a model must not be deployed (its validation's reasons), None if it may be; models
+    written before the guard have no validation and are not judged."""
+    v = meta.get("validation") or {}
+    if v.get("deployable", True):
+        return None
+    return "the model is not deployable: " + "; ".join(v.get("reasons") or ["see its validation"])
+
+
+def cell_mismatch(model: ModelFile, cell: Cell) -> str | None:
+    """Why data measured on `cell` is not of the model's cell: another robot (name, joint count
+    or nominal geometry) or SMRs the model does not have; None if it may be."""
+    nominal = model.nominal or model.robot
+    robot = cell.robot
+    if robot.name != nominal.name:
+        return f"the data is of robot {robot.name!r}, the model of {nominal.name!r}"
+    if robot.param_names() != nominal.param_names() or not np.allclose(
+        robot.param_vector(), nominal.param_vector(), atol=1e-6
+    ):
+        return f"the data's robot {robot.name!r} has another nominal geometry than the model's"
+    unknown = [t for t in cell.targets if t not in model.targets]
+    if unknown:
+        return (
+            f"the data's SMR {unknown[0]!r} is not among the model's ({', '.join(model.targets)})"
+        )
+    return None
+
+
+def absurd_errors(result: dict, meta: dict | None = None) -> str | None:
+    """Why an evaluation's errors say the data is of another cell (a moved tracker, another
+    robot), or the model unfit: the model's RMS error past ABSURD_MM; None otherwise."""
+    rms = result["model"]["rmse"]
+    if np.isfinite(rms) and rms <= ABSURD_MM:
+        return None
+    nominal = result.get("nominal", {}).get("rmse")
+    unfit = refusal(meta or {}) is not None
+    return (
+        f"the model's predictions are {rms:.1f} mm RMS from the readings (limit {ABSURD_MM:g} "
+        "mm): the data is not of the model's cell (another robot, or the tracker or base moved)"
+        + (", or the model is unfit (its validation says not deployable)" if unfit else "")
+        + (f"; the nominal robot registered on it errs {nominal:.3f} mm RMS" if nominal else "")
+    )
+
+
+def file_refusal(path) -> str | None:
+    """refusal() of a model file's validation; None when the file cannot be read as JSON (its
+    reader then says what is wrong with it)."""
+    import json
+    from pathlib import Path
+
+    try:
+        meta = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return refusal(meta) if isinstance(meta, dict) else None

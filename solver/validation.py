@@ -1,0 +1,182 @@
+"""Whether a fit's data can support its model: held-out error, noise floor, conditioning, size.
+
+The held-out error is leave-one-pose-out cross-validation taken one Gauss-Newton step from the
+fit: without pose p the estimating equations G'r = 0 of the other poses move the parameters by
+(G'J - G_p'J_p)^-1 G_p'r_p, so pose p's residuals become (I - H_p)^-1 r_p with
+H_p = J_p (G'J)^-1 G_p' (Woodbury). Exact for a linear model (the PRESS residuals of least
+squares), and the fit's Jacobian is what every refit would start from, so it costs one small
+solve per pose instead of a refit. A pose the others cannot do without (I - H_p singular) has no
+held-out figure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .finite import finite
+from .uncertainty import Rows
+
+# A deployable model has at least this many equations (3 per reading) per free parameter.
+MIN_EQUATIONS_PER_PARAMETER = 3
+# A fit RMS below this fraction of the tracker's noise floor has absorbed measurement noise.
+# A sound least-squares fit leaves sqrt(1 - free/equations) of the noise: 0.94 at 30 poses of
+# 3 SMRs and 33 free parameters, 0.6 only below 1.6 equations per parameter.
+NOISE_FLOOR_FRACTION = 0.6
+# Jacobi-scaled condition number of the identification past which the model is not deployed
+# (healthy campaigns of 20 poses or more: 10 to 100; identifiability refuses past 1e7).
+MAX_CONDITION = 1e3
+# Held-out RMS more than this multiple of the fit RMS (or of the noise floor, if larger): the
+# model does not predict new poses. A sound least-squares fit expects equations / (equations -
+# free): 1.14 at 30 poses of 3 SMRs.
+MAX_HOLDOUT_RATIO = 2.0
+# The smallest singular value of I - H_p below which pose p cannot be held out.
+UNSUPPORTED = 1e-9
+
+
+@dataclass
+class Holdout:
+    """Leave-one-pose-out residuals of a fit."""
+
+    residuals: np.ndarray  # (N, 3) per reading, NaN for poses that cannot be held out
+    unsupported: np.ndarray  # poses the other poses cannot identify the model without
+
+    def rms(self) -> float:
+        """3-D RMS per reading (mm) over the poses that can be held out."""
+        r = self.residuals[np.all(np.isfinite(self.residuals), axis=1)]
+        return float(np.sqrt(np.mean(np.sum(r * r, axis=1)))) if r.size else float("nan")
+
+    def max(self) -> float:
+        """Largest held-out reading error (mm)."""
+        r = self.residuals
+        n = np.linalg.norm(r, axis=1)
+        n = n[np.isfinite(n)]
+        return float(n.max()) if n.size else float("nan")
+
+
+def leave_one_pose_out(rows: Rows, point: np.ndarray | None = None) -> Holdout:
+    """Held-out point errors of every reading, linearised at the fit (see the module's
+    docstring). point (N,) bool: the rows that are point errors (predicted - measured, three
+    consecutive rows a reading), default all; other rows (ls-pose's pose residuals) only move
+    the parameters."""
+    A = finite(rows.G.T @ rows.J, "the normal matrix")
+    d = np.sqrt(np.abs(np.diag(A)))
+    d[d == 0] = 1.0
+    Ai = np.linalg.pinv(A / np.outer(d, d)) / np.outer(d, d)
+    out = np.full(len(rows.r), np.nan)
+    unsupported = []
+    order = np.argsort(rows.pose, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(rows.pose[order]) != 0])
+    blocks = np.split(order, starts[1:])
+    for n in {len(b) for b in blocks}:
+        idx = np.array([b for b in blocks if len(b) == n])  # (poses, n)
+        J, G, r = rows.J[idx], rows.G[idx], rows.r[idx]
+        P = J.shape[-1]
+        H = np.einsum("bip,bjp->bij", (J.reshape(-1, P) @ Ai).reshape(J.shape), G)
+        M = np.eye(n) - H
+        s = np.linalg.svd(finite(M, "the held-out blocks"), compute_uv=False)
+        ok = s[:, -1] > UNSUPPORTED
+        e = np.full(r.shape, np.nan)
+        if ok.any():
+            e[ok] = np.linalg.solve(M[ok], r[ok][..., None])[..., 0]
+        out[idx] = e
+        unsupported.extend(rows.pose[idx[~ok, 0]].tolist())
+    point = np.ones(len(out), dtype=bool) if point is None else np.asarray(point, dtype=bool)
+    return Holdout(out[point].reshape(-1, 3), np.array(sorted(set(unsupported)), dtype=int))
+
+
+def strongest_correlations(cov: np.ndarray, k: int = 5) -> list[tuple[int, int, float]]:
+    """The k largest |correlation| between distinct parameters of cov: (i, j, r), i < j."""
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    ok = sd > 0
+    R = np.zeros_like(cov)
+    R[np.ix_(ok, ok)] = cov[np.ix_(ok, ok)] / np.outer(sd[ok], sd[ok])
+    i, j = np.triu_indices(len(cov), 1)
+    r = np.clip(R[i, j], -1.0, 1.0)
+    top = np.argsort(-np.abs(r), kind="stable")[:k]
+    return [(int(i[t]), int(j[t]), float(r[t])) for t in top]
+
+
+@dataclass
+class Validation:
+    """The guard's verdict on a fit, in mm; reasons are empty when it is deployable."""
+
+    fit_rms_mm: float
+    holdout_rms_mm: float
+    holdout_max_mm: float
+    condition_number: float
+    equations: int
+    free_parameters: int
+    noise_floor_mm: float | None
+    unsupported_poses: list = field(default_factory=list)
+    reasons: list[str] = field(default_factory=list)
+
+    @property
+    def deployable(self) -> bool:
+        return not self.reasons
+
+
+def judge(
+    *,
+    fit_rms_mm: float,
+    holdout: Holdout,
+    condition_number: float,
+    equations: int,
+    free_parameters: int,
+    poses: int,
+    noise_floor_mm: float | None,
+    noise_floor_source: str = "",
+) -> Validation:
+    """The guard: each limit the fit breaks is one reason, naming its figures and the limit."""
+    v = Validation(
+        fit_rms_mm,
+        holdout.rms(),
+        holdout.max(),
+        condition_number,
+        equations,
+        free_parameters,
+        noise_floor_mm,
+        holdout.unsupported.tolist(),
+    )
+    need = MIN_EQUATIONS_PER_PARAMETER * free_parameters
+    if equations < need:
+        per_pose = equations / max(poses, 1)
+        v.reasons.append(
+            f"too few poses: {poses} poses give {equations} equations (3 per reading) for "
+            f"{free_parameters} free parameters, fewer than {MIN_EQUATIONS_PER_PARAMETER} per "
+            f"parameter ({need}): measure at least {int(np.ceil(need / max(per_pose, 1)))} poses"
+        )
+    if noise_floor_mm and fit_rms_mm < NOISE_FLOOR_FRACTION * noise_floor_mm:
+        v.reasons.append(
+            f"fit RMS {fit_rms_mm:.4f} mm is below {NOISE_FLOOR_FRACTION:g} x the tracker's "
+            f"noise floor {noise_floor_mm:.4f} mm"
+            + (f" ({noise_floor_source})" if noise_floor_source else "")
+            + ": the fit absorbed measurement noise"
+        )
+    if not condition_number <= MAX_CONDITION:
+        v.reasons.append(
+            f"condition number {condition_number:.3g} exceeds {MAX_CONDITION:.0f}: the poses "
+            "barely separate some parameters; measure more poses, spread over the joint ranges"
+        )
+    if len(holdout.unsupported):
+        v.reasons.append(
+            f"{len(holdout.unsupported)} of {poses} poses cannot be held out: without any one of "
+            "them the other poses cannot identify the model"
+        )
+    # against the fit RMS, or the noise floor where the fit went below it: a held-out error
+    # near the tracker's noise is as good as any model predicts, however small the fit's
+    ref = max(fit_rms_mm, noise_floor_mm or 0.0)
+    ratio = v.holdout_rms_mm / ref if ref > 0 else float("inf")
+    if np.isfinite(v.holdout_rms_mm) and not ratio <= MAX_HOLDOUT_RATIO:
+        v.reasons.append(
+            f"held-out RMS {v.holdout_rms_mm:.4g} mm is {ratio:.3g} x the "
+            + (
+                f"fit RMS {fit_rms_mm:.4f} mm"
+                if ref == fit_rms_mm
+                else f"noise floor {ref:.4f} mm (the fit RMS {fit_rms_mm:.4f} mm is below it)"
+            )
+            + f" (limit {MAX_HOLDOUT_RATIO:g} x): the model does not predict poses it was not "
+            "fitted on"
+        )
+    return v

@@ -1,0 +1,85 @@
+"""The validation guard on the command line: `robocal simulate --poses 5` + `calibrate` prints a
+model not to deploy with its reasons (the held-out figure first), compensate and export refuse
+it without --force; a healthy campaign and both real campaigns are deployable; `evaluate` on
+another cell's data is refused with the reason."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from robocal.server import workflow
+
+from tests.server.test_cli import robocal
+
+REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
+
+
+@pytest.fixture(scope="module")
+def five(tmp_path_factory):
+    d = tmp_path_factory.mktemp("five")
+    assert robocal("simulate", "--poses", 5, "--seed", 1, "--out", "m5.csv", cwd=d).returncode == 0
+    r = robocal("calibrate", "m5.csv", "--method", "ls-sum", "--out", "m5.json", cwd=d)
+    assert r.returncode == 0, r.stderr  # written, and said to be unfit
+    return d, r
+
+
+def test_five_poses_give_a_model_marked_not_deployable(five):
+    d, r = five
+    out = r.stdout
+    assert "NOT DEPLOYABLE" in out and "too few poses: 5 poses give 45 equations" in out, out
+    assert out.index("held-out RMS") < out.index("Identified geometry")  # the headline first
+    err = r.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("robocal: warning: m5.json: the model is not deploy")
+    v = json.loads((d / "m5.json").read_text())["validation"]
+    assert v["deployable"] is False and v["reasons"][0].startswith("too few poses"), v
+    assert v["limits"]["min_equations_per_parameter"] == 3 and v["equations"] == 45
+
+
+def test_compensate_and_export_refuse_it_without_force(five):
+    d, _ = five
+    (d / "targets.csv").write_text("pose,target,x,y,z\n1,A,1000,200,900\n")
+    for args in (("compensate", "m5.json", "targets.csv"), ("export", "m5.json", "--out", "p.csv")):
+        r = robocal(*args, cwd=d)
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert "m5.json: the model is not deployable: too few poses" in r.stderr
+        assert "--force to use it anyway" in r.stderr and "Traceback" not in r.stderr
+    r = robocal("export", "m5.json", "--out", "p.csv", "--force", cwd=d)
+    assert r.returncode == 0 and r.stderr.startswith("robocal: warning: m5.json"), r.stderr
+    assert (d / "p.csv").exists()
+
+
+def test_a_healthy_campaign_is_deployable_and_another_cell_is_refused(tmp_path):
+    for seed in (2, 3):
+        args = ("simulate", "--poses", 60, "--seed", seed, "--out", f"m{seed}.csv")
+        assert robocal(*args, cwd=tmp_path).returncode == 0
+    r = robocal("calibrate", "m2.csv", "--out", "m2.json", cwd=tmp_path)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    assert "deployable: every validation limit holds" in r.stdout
+    assert "Identified base and SMR frames" in r.stdout and "strongest correlations:" in r.stdout
+    line = next(x for x in r.stdout.splitlines() if x.startswith("held-out RMS"))
+    assert line.index("held-out RMS") < line.index("fit RMS")
+    model = json.loads((tmp_path / "m2.json").read_text())
+    assert model["validation"]["deployable"] is True
+    assert model["identified"]["fixed"][0] == {
+        "parameter": "theta1",
+        "why": "redundant with base_rz",
+    }
+    # seed 3 is another simulated arm on another tracker stand: errors of metres
+    r = robocal("evaluate", "m2.json", "m3.csv", cwd=tmp_path)
+    assert r.returncode == 1 and "m3.csv: the model's predictions are" in r.stderr, r.stderr
+    assert "not of the model's cell" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = robocal("evaluate", "m2.json", "m3.csv", "--force", cwd=tmp_path)
+    assert r.returncode == 0 and r.stderr.startswith("robocal: warning: m3.csv"), r.stderr
+    r = robocal("evaluate", "m2.json", "m2.csv", cwd=tmp_path)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+
+
+@pytest.mark.parametrize("name", ["irb120_wu", "qkm_hl6"])
+def test_the_real_campaigns_are_deployable(name):
+    cell, meas = workflow.load_data(REAL / name / "train.csv", REAL / name / "cell.json")
+    cal = workflow.run_method(cell, meas, "minimax")
+    v = workflow.model_file(cal, cell, meas).meta["validation"]
+    assert v["deployable"] is True, v["reasons"]
+    assert v["holdout_rms_mm"] > v["fit_rms_mm"] > v["noise_floor_mm"]
