@@ -46,10 +46,15 @@ class _Columns:
         if len(set(self.header)) != len(self.header) or not 1 <= self.n <= csv_table.CSV_ROWS_MAX:
             return
         # every row exactly as wide as the header (numpy would take a longer row)
-        commas = np.searchsorted(np.flatnonzero(raw == ord(",")), ends)
-        if np.any(np.diff(commas) != len(self.header) - 1):
+        commas = np.flatnonzero(raw == ord(","))
+        if np.any(np.diff(np.searchsorted(commas, ends)) != len(self.header) - 1):
             return
         self.file = io.StringIO(text)
+        self.ascii = text.isascii()
+        if self.ascii:  # where each field of each row begins and ends, for the labels
+            self.raw, self.ends = raw, ends
+            self.starts = np.concatenate([[0], ends[:-1] + 1])
+            self.commas = commas.reshape(len(ends), len(self.header) - 1)
         self.ok = True
 
     @staticmethod
@@ -106,12 +111,31 @@ class _Columns:
 
     def labels(self, names: list[str]) -> dict[str, np.ndarray] | None:
         """The stripped labels, or None if one is blank or too long (control characters were
-        refused for the whole file)."""
-        out = np.char.strip(self._load(names, str))
-        lengths = np.char.str_len(out)
-        if np.any(lengths == 0) or np.any(lengths > LABEL_CHARS_MAX):
-            return None
-        return {n: out[:, j] for j, n in enumerate(names)}
+        refused for the whole file). An ASCII file's come straight from its bytes."""
+        if self.ascii:
+            out = {n: self._field_bytes(self.header.index(n)) for n in names}
+        else:
+            loaded = np.char.strip(self._load(names, str))
+            out = {n: loaded[:, j] for j, n in enumerate(names)}
+        for v in out.values():
+            lengths = np.char.str_len(v)
+            if np.any(lengths == 0) or np.any(lengths > LABEL_CHARS_MAX):
+                return None
+        return out
+
+    def _field_bytes(self, j: int) -> np.ndarray:
+        """Field j of every data row, stripped of spaces, as fixed-width bytes (numpy 'S')."""
+        left = self.starts[1:] if j == 0 else self.commas[1:, j - 1] + 1
+        right = self.ends[1:] if j == self.commas.shape[1] else self.commas[1:, j]
+        width = int(max(1, (right - left).max()))
+        at = np.minimum(left[:, None] + np.arange(width), len(self.raw) - 1)
+        cells = np.where(at < right[:, None], self.raw[at], ord(" ")).astype(np.uint8)
+        return np.strings.strip(cells.view(f"S{width}").ravel())
+
+
+def _text(label) -> str:
+    """A label as text (an ASCII file's labels are bytes)."""
+    return label.decode("ascii") if isinstance(label, bytes) else label
 
 
 def _within(v: np.ndarray, lo: float, hi: float) -> bool:
@@ -134,14 +158,14 @@ def _poses(ids: np.ndarray, q_deg: np.ndarray, same_tol_deg: float):
     pose's rows disagree on a joint."""
     # a pose's rows are usually together: look the ids up once per run of equal ids
     starts = np.flatnonzero(np.concatenate([[True], ids[1:] != ids[:-1]]))
-    index: dict[str, int] = {}
+    index: dict = {}
     run_pose = [index.setdefault(p, len(index)) for p in ids[starts].tolist()]
     inv = np.repeat(np.array(run_pose, dtype=np.intp), np.diff(np.append(starts, len(ids))))
     first = np.full(len(index), len(ids), dtype=np.intp)
     np.minimum.at(first, inv, np.arange(len(ids)))
     if np.any(np.abs(q_deg - q_deg[first[inv]]) > same_tol_deg):
         return None
-    return list(index), inv, first
+    return [_text(p) for p in index], inv, first
 
 
 def read_campaign_columns(
@@ -164,7 +188,8 @@ def read_campaign_columns(
     if not all(_within(cols[c], *bounds[c][0]) for c in [*measured, *present]):
         return None
     names = np.array(sorted(set(labels["target"].tolist())))
-    if not all(TARGET_NAME.fullmatch(n) for n in names.tolist()):
+    found = [_text(n) for n in names.tolist()]
+    if not all(TARGET_NAME.fullmatch(n) for n in found):
         return None
     k = np.searchsorted(names, labels["target"])
     poses = _poses(labels["pose"], q, same_tol)
@@ -172,7 +197,7 @@ def read_campaign_columns(
         return None
     pose_ids, inv, first = poses
     m, K = len(pose_ids), len(names)
-    if len(np.unique(inv * K + k)) != t.n:  # a (pose, target) twice
+    if np.bincount(inv * K + k, minlength=m * K).max() > 1:  # a (pose, target) twice
         return None
     xyz = np.full((m, K, 3), np.nan)
     xyz[inv, k] = points
@@ -183,7 +208,7 @@ def read_campaign_columns(
     return Measurements(
         pose_ids,
         np.deg2rad(q[first]),
-        tuple(names.tolist()),
+        tuple(found),
         xyz,
         extra.get("time_s"),
         extra.get("temp_c"),
