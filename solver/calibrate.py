@@ -161,7 +161,9 @@ def calibrate(
         "message": res.message,
     }
     if name == "minimax":
-        own["ls_sum_F"] = prob.sum_squares(x).tolist()
+        # the fit's last residuals, when it kept them, are those of x over every target
+        start_F = fit.per_target(res.r) if res.r is not None else prob.sum_squares(x)
+        own["ls_sum_F"] = start_F.tolist()
         mm = minimax(prob, x, st.free, rows=rows, qp=qp, epsilon=epsilon)
         x = mm.x
         iters, message = mm.iterations, mm.message
@@ -175,8 +177,15 @@ def calibrate(
             constraints=mm.constraints.tolist(),
             sqp_seconds=mm.seconds,
         )
-    # ls-sum's last residuals, when the fit kept them, are those of x over every target
-    F = fit.per_target(res.r) if name == "ls-sum" and res.r is not None else prob.sum_squares(x)
+    # ls-sum's last residuals, when the fit kept them, are those of x over every target;
+    # minimax's F_i of its last step too when it fitted every target
+    if name == "ls-sum" and res.r is not None:
+        F = fit.per_target(res.r)
+    elif name == "minimax" and sorted(rows) == list(range(len(target_names))):
+        F = np.empty(len(target_names))
+        F[rows] = mm.F
+    else:
+        F = prob.sum_squares(x)
     if name == "minimax":
         worst = rows[int(np.argmax(F[rows]))]
         cost = float(F[worst])

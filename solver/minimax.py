@@ -108,7 +108,7 @@ class _Objective:
             r = predict(self.prob.layout, x, self.prob.q)[self.mask] - self.meas
         else:
             self._kept = None  # one set of twists alive at a time
-            r, jt = self._operator(x)
+            r, jt, _ = self._points().operator(x)
             self._kept = (z.tobytes(), r, jt)
             r = r.reshape(-1, 3)
         return np.sum(r * r, axis=1) @ self.onehot, self.constraints(x)[0]
@@ -119,9 +119,6 @@ class _Objective:
                 self.prob.layout, self.prob.q, self.mask, self.prob.meas, self.idx
             )
         return self.points
-
-    def _operator(self, x):
-        return self._points().operator(x)
 
     def __call__(self, z=None):
         """F_i (K,), c (L,), gradients of F_i (K, n) (eq. 26), of c (L, n), all in the scaled
@@ -151,9 +148,8 @@ class _Objective:
             _, r, jt = kept  # the line search's last trial, the step taken
         else:
             del kept
-            if z is None:
-                JtJ = self._points()(x).A  # its twists freed before the next ones
-            r, jt = self._operator(x)
+            r, jt, ne = self._points().operator(x, normal=z is None)
+            JtJ = None if ne is None else ne.A
         return r.reshape(-1, 3), JtJ, 2.0 * jt.per_target(r)[self.rows]
 
     def _full(self, x, first: bool):

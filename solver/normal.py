@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import cast
 
 import numpy as np
 
@@ -201,15 +202,21 @@ class PointNormal:
         moved.layout = Layout(lay.robot, T @ lay.base_ref, lay.target_names)
         return moved, moved._assemble(start, tc, M, U)
 
-    def operator(self, x) -> tuple[np.ndarray, _Jt]:
-        """The residuals `jt` takes and r' -> J'r' at x, without J'J (for gradients alone)."""
+    def operator(self, x, normal: bool = False) -> tuple[np.ndarray, _Jt, Normal | None]:
+        """The residuals `jt` takes, r' -> J'r' at x and, if asked, the normal equations there,
+        all from one walk down the chain (J'J costs a product over the poses: gradients alone
+        go without)."""
         start, tc, M, U = self._twists(x)
         R = M[:, :3]
         p = np.einsum("ijm,kj->mki", R, tc) + M[:, 3].T[:, None]
+        r = (p[self.mask] - self.meas_rows).ravel()
+        if normal:
+            ne = self._assemble(start, tc, M, U)  # scales U as below
+            return r, cast(_Jt, ne.jt), ne
         root, inv = _root_weight(tc)
         ng = len(self.gcols)
         U[:ng] *= root[:, None]
-        return (p[self.mask] - self.meas_rows).ravel(), _Jt(self, tc, start, R, U[:ng], inv)
+        return r, _Jt(self, tc, start, R, U[:ng], inv), None
 
     def _assemble(self, start, tc, M, U) -> Normal:
         """J'J, J'r and the cost from the SMR frame's poses M and its twists U (see flange_twists).
