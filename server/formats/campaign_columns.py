@@ -86,19 +86,17 @@ class _Columns:
     def numbers(self, names: list[str], blank_ok=()) -> dict[str, np.ndarray] | None:
         """Each column as floats (NaN for a blank in the blank_ok ones), or None if the row reader
         would refuse a value (bounds are the caller's)."""
-        try:
-            v = self._load(names, float)
-            return {n: v[:, j] for j, n in enumerate(names)}
-        except ValueError:  # a blank, or no number: the row reader says which
-            pass
         strict = [n for n in names if n not in blank_ok]
-        try:
-            out = self.numbers(strict) if strict else {}
-        except RecursionError:  # pragma: no cover - strict has no blank_ok column
-            return None
-        if out is None or strict == names:
-            return None
         loose = [n for n in names if n in blank_ok]
+        try:
+            return dict(zip(names, self._load(names, float).T, strict=True))
+        except ValueError:  # a blank, or no number: the row reader says which
+            if not loose:
+                return None
+        try:
+            out = dict(zip(strict, self._load(strict, float).T, strict=True)) if strict else {}
+        except ValueError:
+            return None
         s = np.char.strip(self._load(loose, str))
         blank = s == ""
         given = s[~blank]
@@ -106,28 +104,36 @@ class _Columns:
             return None
         v = np.full(s.shape, np.nan)
         v[~blank] = given.astype(float)
-        out.update({n: v[:, j] for j, n in enumerate(loose)})
+        out.update(zip(loose, v.T, strict=True))
         return out
 
     def labels(self, names: list[str]) -> dict[str, np.ndarray] | None:
         """The stripped labels, or None if one is blank or too long (control characters were
         refused for the whole file). An ASCII file's come straight from its bytes."""
+        out: dict[str, np.ndarray] = {}
         if self.ascii:
-            out = {n: self._field_bytes(self.header.index(n)) for n in names}
+            for n in names:
+                field = self._field_bytes(self.header.index(n))
+                if field is None:
+                    return None
+                out[n] = field
         else:
             loaded = np.char.strip(self._load(names, str))
-            out = {n: loaded[:, j] for j, n in enumerate(names)}
+            out.update(zip(names, loaded.T, strict=True))
         for v in out.values():
             lengths = np.char.str_len(v)
             if np.any(lengths == 0) or np.any(lengths > LABEL_CHARS_MAX):
                 return None
         return out
 
-    def _field_bytes(self, j: int) -> np.ndarray:
-        """Field j of every data row, stripped of spaces, as fixed-width bytes (numpy 'S')."""
+    def _field_bytes(self, j: int) -> np.ndarray | None:
+        """Field j of every data row, stripped of spaces, as fixed-width bytes (numpy 'S'); None
+        for a field wider than a label may be (the row reader judges it)."""
         left = self.starts[1:] if j == 0 else self.commas[1:, j - 1] + 1
         right = self.ends[1:] if j == self.commas.shape[1] else self.commas[1:, j]
         width = int(max(1, (right - left).max()))
+        if width > LABEL_CHARS_MAX:
+            return None
         at = np.minimum(left[:, None] + np.arange(width), len(self.raw) - 1)
         cells = np.where(at < right[:, None], self.raw[at], ord(" ")).astype(np.uint8)
         return np.strings.strip(cells.view(f"S{width}").ravel())
