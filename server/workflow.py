@@ -80,9 +80,23 @@ def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurement
         raise DataError(f"{path}: no campaign in the database")
     if campaign_id is None:
         campaign_id = max(c.id for c in campaigns)
-    info = store.get_campaign(db, campaign_id=campaign_id)
+    info = next((c for c in campaigns if c.id == campaign_id), None)
+    if info is None:
+        raise DataError(
+            f"{path}: no campaign {campaign_id}; it has "
+            + ", ".join(f"{c.id} ({c.name}, {c.status})" for c in campaigns[-10:])
+        )
+    if info.n_done == 0:
+        raise DataError(
+            f"{path}: campaign {campaign_id} ({info.name}) has no measured pose yet "
+            f"(it is {info.status}): run it with `robocal acquire --db {path} --name {info.name}`"
+        )
     cell = load_cell(cell_path) if cell_path else parse_cell(info.cell_json)
     meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
+    if meas.n_poses == 0:
+        raise DataError(
+            f"{path}: campaign {campaign_id} ({info.name}) has no reading (all missing)"
+        )
     return cell, meas
 
 
