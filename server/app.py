@@ -18,6 +18,7 @@ from .acquisitions import Acquisitions
 from .api import OPEN_ROUTERS, ROUTERS, problems
 from .api.deps import TOKEN_CHECKS
 from .api.problems import Responses
+from .api_docs import mount_docs
 from .events import Events
 from .job_queue import Jobs
 from .security import ensure_token, require_reader
@@ -67,7 +68,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             db.close()
 
     app = FastAPI(
-        title="robocal", summary="Robot calibration workstation", version="0.1.0", lifespan=lifespan
+        title="robocal",
+        summary="Robot calibration workstation",
+        version="0.1.0",
+        lifespan=lifespan,
+        docs_url=None,  # mount_docs serves it without a CDN
+        redoc_url=None,  # ReDoc would load from a CDN, blank offline
     )
     app.state.settings = settings
     problems.install(app)
@@ -85,6 +91,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for router in OPEN_ROUTERS:
         app.include_router(router, prefix=API_PREFIX)
     check_authorized(app)
+    mount_docs(app)
     mount_web(app)  # last: a mount at / hides any route added after it
     return app
 
