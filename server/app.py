@@ -255,7 +255,6 @@ def listening_socket(host: str, port: int) -> socket.socket:
             else ""
         )
         raise CannotListen(f"cannot listen on {host}:{port}: {e.strerror}{hint}") from None
-    sock.set_inheritable(True)
     return sock
 
 
