@@ -357,9 +357,9 @@ def _print_diagnosis(report) -> None:
     )
     if not report["effects"]:
         console.print("no effect beyond geometry pays off on held-out poses")
-    for e in report["effects"]:
+    for number, e in enumerate(report["effects"], start=1):  # as the figures are numbered
         console.print(
-            f"[bold]{e['name']}[/bold]"
+            f"[bold]effect {number}: {e['name']}[/bold]"
             + (f" joint {e['joint']}" if "joint" in e else "")
             + (f" harmonic {e['harmonic']}" if "harmonic" in e else "")
             + (f" at {e['at_s']:.0f} s" if "at_s" in e else "")

@@ -350,9 +350,14 @@ def write_diagnosis(
     from .plots import write_figures
 
     report = d.report
-    figures = write_figures(d.figures, report_path)
-    by_label = {f["label"]: path.name for f, path in zip(d.figures, figures)}
-    for e, ext in zip(report["effects"], _report_order(report, d.extensions)):
+    exts = _report_order(report, d.extensions)
+    # One numbering everywhere: effect N is report["effects"][N - 1], its figure REPORT_N_*.png,
+    # and `diagnose` prints it as "effect N" (the order the report ranks them in, not found in).
+    rank = {x.label(): k for k, x in enumerate(exts)}
+    ranked = sorted(d.figures, key=lambda f: rank.get(f["label"], len(rank)))
+    figures = write_figures(ranked, report_path)
+    by_label = {f["label"]: path.name for f, path in zip(ranked, figures)}
+    for e, ext in zip(report["effects"], exts):
         e["figure"] = by_label.get(ext.label())
     if list_figures:
         report["figures"] = [p.name for p in figures]
