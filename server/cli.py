@@ -135,6 +135,10 @@ def cmd_calibrate(args) -> None:
     from .tables import console
 
     _campaign_only_with_database(args)
+    if args.recording:  # refused now, not after the calibration
+        from .formats.files import check_writable
+
+        check_writable(args.recording)
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
     parse_method(args.method, meas.target_names)
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
@@ -500,7 +504,7 @@ def cmd_serve(args) -> None:
 def cmd_token(args) -> None:
     from .security import reset_token
 
-    settings = _settings(args)
+    settings = _settings(args, make_folder=args.action == "reset")
     path = settings.token_file
     if args.action == "reset":
         token = reset_token(path)
@@ -524,8 +528,10 @@ def cmd_token(args) -> None:
         )
 
 
-def _settings(args):
-    """The service's settings: ROBOCAL_* variables, overridden by the options given."""
+def _settings(args, make_folder: bool = True):
+    """The service's settings: ROBOCAL_* variables, overridden by the options given; its data
+    folder made (refused in one line if it is a file)."""
+    from . import workflow
     from .settings import Settings
 
     overrides = {
@@ -538,7 +544,12 @@ def _settings(args):
         )
         if v is not None
     }
-    return Settings(**overrides)
+    settings = Settings(**overrides)
+    if settings.data_dir.exists() and not settings.data_dir.is_dir():
+        raise workflow.DataError(f"{settings.data_dir}: the data folder is a file, not a folder")
+    if make_folder:
+        settings.data_dir.mkdir(parents=True, exist_ok=True)
+    return settings
 
 
 def cmd_demo(args) -> None:

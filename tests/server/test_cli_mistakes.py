@@ -100,6 +100,13 @@ CASES = [
     ),
     (("bench", "solver", "--sizes", 0), ["--sizes", "'0'"]),
     (("schema", "modle"), ["did you mean 'model'?"]),
+    (("calibrate", "meas.csv", "--recording", "folder"), ["folder", "is a folder"]),
+    (("serve", "--data-dir", "meas.csv", "--db", "s.db"), ["meas.csv", "data folder is a file"]),
+    (("token", "reset", "--data-dir", "meas.csv"), ["meas.csv", "data folder is a file"]),
+    (("token", "rest"), ["did you mean 'reset'?"]),
+    (("serve", "--db", "folder"), ["folder", "is a folder"]),
+    (("acquire", "--cell", "meas.csv", "--poses", 3), ["meas.csv", "invalid JSON"]),
+    (("export", "model.json", "--out", "x.xyz"), ["x.xyz", "--format"]),
 ]
 
 

@@ -28,3 +28,14 @@ def test_a_three_pose_campaign_runs_and_reads_back(live):
     )
     assert j["state"] == "failed" and "measure at least" in j["reason"], j
     assert "\n" not in j["reason"]
+
+
+@pytest.mark.sqlite_only
+def test_a_misspelt_method_is_answered_with_a_suggestion(live):
+    r = live.client.post("/api/jobs", json={"campaign_id": 1, "method": "minmax"})
+    assert r.status_code == 422, r.text
+    assert "did you mean 'minimax'?" in r.text and "Traceback" not in r.text
+    # the OpenAPI still documents the methods as a pattern
+    spec = live.client.get("/openapi.json").json()
+    method = spec["components"]["schemas"]["JobCreate"]["properties"]["method"]
+    assert "minimax" in method["pattern"]
