@@ -142,10 +142,21 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 def open_database(url_or_path) -> Database:
     """Open (creating it and its folder if needed) the store and migrate it to the latest schema;
     StoreError, in one line, if it is not a database (a CSV, a folder) or cannot be opened."""
-    url = database_url(url_or_path)
+    try:
+        url = database_url(url_or_path)
+    except SQLAlchemyError as e:
+        raise StoreError(f"{url_or_path}: not a database file or URL: {e}") from None
     if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
         _check_sqlite_file(Path(url.database), url_or_path)
-    engine = make_engine(url)
+    try:
+        engine = make_engine(url)
+    except (SQLAlchemyError, ImportError) as e:
+        # e.g. mysql://: a dialect whose driver is not installed (robocal ships SQLite's and
+        # PostgreSQL's)
+        raise StoreError(
+            f"{_shown(url_or_path)}: cannot use this database ({type(e).__name__}: {e}); "
+            "robocal works with SQLite files and PostgreSQL"
+        ) from None
     try:
         migrate(engine)
     except SQLAlchemyError as e:

@@ -8,6 +8,8 @@ import sys
 import numpy as np
 import pytest
 
+from tests.server.api.conftest import free_port
+
 from .test_cli import robocal
 
 
@@ -107,12 +109,20 @@ CASES = [
     (("serve", "--db", "folder"), ["folder", "is a folder"]),
     (("acquire", "--cell", "meas.csv", "--poses", 3), ["meas.csv", "invalid JSON"]),
     (("export", "model.json", "--out", "x.xyz"), ["x.xyz", "--format"]),
+    (("calibrate", "mysql://host/db"), ["mysql://host/db", "SQLite files and PostgreSQL"]),
+    (("calibrate", "::://"), ["not a database file or URL"]),
 ]
 
 
 @pytest.mark.parametrize("args,words", CASES, ids=[" ".join(map(str, a)) for a, _ in CASES])
 def test_a_mistake_is_one_line(files, args, words):
     one_line_error(robocal(*args, cwd=files), *words)
+
+
+def test_an_unreachable_database_is_one_line_without_its_password(files):
+    url = f"postgresql+psycopg://robocal:secret@127.0.0.1:{free_port()}/robocal"
+    line = one_line_error(robocal("calibrate", url, cwd=files), "cannot open the database")
+    assert "secret" not in line and "***" in line
 
 
 def test_nothing_half_written_on_a_mistake(files):
