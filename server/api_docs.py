@@ -17,11 +17,12 @@ def mount_docs(app: FastAPI) -> None:
     """Serve Swagger UI at /docs with its JavaScript and CSS from this machine; the app must
     have been made with docs_url=None (FastAPI's own page loads them from a CDN)."""
     redirect_url = app.swagger_ui_oauth2_redirect_url
+    openapi_url = app.openapi_url or "/openapi.json"
 
     @app.get(DOCS_URL, include_in_schema=False)
     async def swagger_ui() -> HTMLResponse:
         return get_swagger_ui_html(
-            openapi_url=app.openapi_url,
+            openapi_url=openapi_url,
             title=f"{app.title} - API",
             oauth2_redirect_url=redirect_url,
             swagger_js_url=f"{ASSETS_URL}/swagger-ui-bundle.js",
