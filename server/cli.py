@@ -46,6 +46,11 @@ def cmd_simulate(args) -> None:
     )
 
 
+def _note(text: str) -> None:
+    """A fact the user should know, on stderr, the results going on."""
+    print(f"robocal: note: {text}", file=sys.stderr)
+
+
 def _campaign_only_with_database(args) -> None:
     """--campaign picks a campaign of a database; with a meas.csv it would be silently ignored."""
     from . import workflow
@@ -139,7 +144,7 @@ def cmd_calibrate(args) -> None:
         from .formats.files import check_writable
 
         check_writable(args.recording)
-    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
+    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)
     parse_method(args.method, meas.target_names)
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
     model = workflow.model_file(cal, cell, meas, data_path=args.meas)
@@ -220,7 +225,7 @@ def cmd_evaluate(args) -> None:
     _campaign_only_with_database(args)
     if workflow.is_database(args.meas):
         # The model's own robot reads the joints: the campaign's cell may differ in its targets.
-        _, meas = workflow.load_data(args.meas, None, args.campaign)
+        _, meas = workflow.load_data(args.meas, None, args.campaign, note=_note)
     else:
         from .formats.cell_json import Cell
 
@@ -253,7 +258,7 @@ def cmd_compare(args) -> None:
     from .tables import console
 
     _campaign_only_with_database(args)
-    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
+    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)
     rows = workflow.compare(cell, meas, screen=not args.keep_outliers)
     _print_screening(next(iter(rows.values()))[0])
     console.print(tables.table3(rows, meas.target_names))
@@ -287,7 +292,7 @@ def cmd_diagnose(args) -> None:
     from .tables import console
 
     _campaign_only_with_database(args)
-    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
+    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)
     report, figures, _ = _diagnose_to_files(
         cell, meas, args.meas, args.out, args.model_out, screen=not args.keep_outliers
     )

@@ -63,9 +63,10 @@ def is_database(path) -> bool:
     return "://" in str(path) or str(path).lower().endswith(DB_SUFFIXES)
 
 
-def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurements]:
+def load_data(path, cell_path=None, campaign_id=None, note=None) -> tuple[Cell, Measurements]:
     """A campaign from a meas.csv, or from the store's database (latest campaign unless given);
-    the cell from cell_path, else the database campaign's own, else the built-in default."""
+    the cell from cell_path, else the database campaign's own, else the built-in default.
+    note(text) is told when a database campaign is not done (its measured poses are used)."""
     if not is_database(path):
         cell = load_cell(cell_path)
         return cell, load_campaign(path, cell)
@@ -90,6 +91,11 @@ def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurement
         raise DataError(
             f"{path}: campaign {campaign_id} ({info.name}) has no measured pose yet "
             f"(it is {info.status}): run it with `robocal acquire --db {path} --name {info.name}`"
+        )
+    if info.status != "done" and note is not None:
+        note(
+            f"{path}: campaign {campaign_id} ({info.name}) is {info.status}, not done: using its "
+            f"{info.n_done} of {info.n_poses} poses measured so far"
         )
     cell = load_cell(cell_path) if cell_path else parse_cell(info.cell_json)
     meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)

@@ -175,3 +175,18 @@ def test_every_option_and_argument_has_help():
 
     walk(build_parser(), "robocal")
     assert not missing, "no help text: " + ", ".join(missing)
+
+
+def test_a_campaign_not_done_is_used_with_a_note(files, tmp_path):
+    """An e-stopped campaign's measured poses are calibrated on, and the user is told so."""
+    import shutil
+    import sqlite3
+
+    shutil.copy(files / "a.db", tmp_path / "stopped.db")
+    with sqlite3.connect(tmp_path / "stopped.db") as c:
+        c.execute("UPDATE campaign SET status = 'estopped' WHERE id = 1")
+    r = robocal("calibrate", "stopped.db", "--campaign", 1, "--out", "m.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    (line,) = r.stderr.strip().splitlines()
+    assert "note: stopped.db: campaign 1" in line and "estopped, not done" in line, line
+    assert "30 of 30 poses" in line
