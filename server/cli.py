@@ -726,7 +726,23 @@ class Parser(argparse.ArgumentParser):
             close = difflib.get_close_matches(m.group(1), choices, n=1)
             if close:
                 message += f"; did you mean {close[0]!r}?"
+        elif message.startswith("unrecognized arguments:"):
+            known = self._option_strings()
+            for word in message.split(":", 1)[1].split():
+                close = difflib.get_close_matches(word.split("=")[0], known, n=1)
+                if word.startswith("--") and close:
+                    message += f"; {word}: did you mean {close[0]}?"
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def _option_strings(self) -> list[str]:
+        """Every long option of this parser and of its commands."""
+        out = []
+        for action in self._actions:
+            out += [o for o in action.option_strings if o.startswith("--")]
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    out += sub._option_strings()
+        return sorted(set(out))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -111,6 +111,7 @@ CASES = [
     (("export", "model.json", "--out", "x.xyz"), ["x.xyz", "--format"]),
     (("calibrate", "mysql://host/db"), ["mysql://host/db", "SQLite files and PostgreSQL"]),
     (("calibrate", "::://"), ["not a database file or URL"]),
+    (("simulate", "--posess", 3, "--out", "x.csv"), ["--posess", "did you mean --poses?"]),
 ]
 
 
