@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import math
 
 import numpy as np
@@ -362,8 +363,11 @@ def make_effect(spec: str, cell, rng):
     name, *fields = [f.strip() for f in head.split(":")]
     cls = EFFECTS.get(name)
     if cls is None:
+        close = difflib.get_close_matches(name, list(EFFECTS), n=1)
         raise ValueError(
-            f"effect {spec!r}: unknown effect {name!r}; choose from {', '.join(EFFECTS)}"
+            f"effect {spec!r}: unknown effect {name!r}; "
+            + (f"did you mean {close[0]!r}? " if close else "")
+            + f"choose from {', '.join(EFFECTS)}"
         )
     n = cell.true_robot.n_joints
     allowed = int(cls.takes_joint) + int(cls.takes_harmonic)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import errno
 import signal
+import socket
 import sys
 from contextlib import asynccontextmanager
 
@@ -16,6 +18,7 @@ from .acquisitions import Acquisitions
 from .api import OPEN_ROUTERS, ROUTERS, problems
 from .api.deps import TOKEN_CHECKS
 from .api.problems import Responses
+from .api_docs import mount_docs
 from .events import Events
 from .job_queue import Jobs
 from .security import ensure_token, require_reader
@@ -33,10 +36,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        token = ensure_token(settings.token_file)
-        if token is not None:
-            # Shown this once only: the file keeps just its sha256.
-            print(f"robocal: API token (shown once, keep it): {token}", file=sys.stderr, flush=True)
+        # Shown by Server.startup once the service listens (the file keeps just its sha256);
+        # serve() deletes it again if the service never got that far, so none is lost unseen.
+        app.state.new_token = ensure_token(settings.token_file)
         reports_dir = settings.data_dir / "reports"
         for d in (settings.models_dir, settings.recordings_dir, settings.cells_dir, reports_dir):
             d.mkdir(parents=True, exist_ok=True)
@@ -66,7 +68,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             db.close()
 
     app = FastAPI(
-        title="robocal", summary="Robot calibration workstation", version="0.1.0", lifespan=lifespan
+        title="robocal",
+        summary="Robot calibration workstation",
+        version="0.1.0",
+        lifespan=lifespan,
+        docs_url=None,  # mount_docs serves it without a CDN
+        redoc_url=None,  # ReDoc would load from a CDN, blank offline
     )
     app.state.settings = settings
     problems.install(app)
@@ -84,6 +91,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for router in OPEN_ROUTERS:
         app.include_router(router, prefix=API_PREFIX)
     check_authorized(app)
+    mount_docs(app)
     mount_web(app)  # last: a mount at / hides any route added after it
     return app
 
@@ -164,6 +172,26 @@ class Server(uvicorn.Server):
         super().__init__(config)
         self.app = app
 
+    async def startup(self, sockets=None) -> None:
+        await super().startup(sockets)
+        settings = self.app.state.settings
+        if not self.started:
+            return
+        token = getattr(self.app.state, "new_token", None)
+        if token is not None:
+            print(f"robocal: API token (shown once, keep it): {token}", file=sys.stderr, flush=True)
+            self.app.state.new_token = None
+        else:
+            print(
+                f"robocal: API token: the one shown at its first start (kept only as a hash in "
+                f"{settings.token_file}); lost it? `robocal token reset"
+                f"{_data_dir_option(settings)}` prints a new one",
+                file=sys.stderr,
+                flush=True,
+            )
+        if sockets is not None:  # uvicorn says where it runs only for sockets it bound itself
+            self._log_started_message(sockets)
+
     def handle_exit(self, sig, frame) -> None:
         acquisitions = getattr(self.app.state, "acquisitions", None)
         if acquisitions is not None and not self.should_exit:
@@ -184,14 +212,53 @@ def serve(settings: Settings | None = None) -> None:
     # A thread waiting for the GIL gets it after at most this long: the e-stop's threads must
     # not queue behind request threads for the default 5 ms per turn.
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+    sock = listening_socket(settings.host, settings.port)
     app = create_app(settings)
-    Server(
-        uvicorn.Config(
+    try:
+        Server(
+            uvicorn.Config(
+                app,
+                host=settings.host,
+                port=settings.port,
+                log_level="info",
+                timeout_graceful_shutdown=GRACE_S,
+            ),
             app,
-            host=settings.host,
-            port=settings.port,
-            log_level="info",
-            timeout_graceful_shutdown=GRACE_S,
-        ),
-        app,
-    ).run()
+        ).run(sockets=[sock])
+    finally:
+        sock.close()
+        if getattr(app.state, "new_token", None) is not None:
+            # Made but never shown (the service failed to start): the next start makes another.
+            settings.token_file.unlink(missing_ok=True)
+
+
+class CannotListen(OSError):
+    """The service's address is taken or not this machine's; the message says which."""
+
+
+def listening_socket(host: str, port: int) -> socket.socket:
+    """A socket bound to host:port, before anything else starts (the token is not made, nor
+    shown, for a service that cannot listen)."""
+    try:
+        family, kind, proto, _, addr = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+    except socket.gaierror as e:
+        raise CannotListen(f"cannot listen on {host}:{port}: {e.strerror}") from None
+    sock = socket.socket(family, kind, proto)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn does
+    try:
+        sock.bind(addr)
+    except OSError as e:
+        sock.close()
+        hint = (
+            ": is another robocal serve running? stop it, or choose another --port"
+            if e.errno == errno.EADDRINUSE
+            else ""
+        )
+        raise CannotListen(f"cannot listen on {host}:{port}: {e.strerror}{hint}") from None
+    return sock
+
+
+def _data_dir_option(settings: Settings) -> str:
+    """The `--data-dir` a command needs to find this service's data, if not the default."""
+    default = Settings.model_fields["data_dir"].default
+    return "" if settings.data_dir == default else f" --data-dir {settings.data_dir}"

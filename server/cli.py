@@ -46,10 +46,75 @@ def cmd_simulate(args) -> None:
     )
 
 
+def _note(text: str) -> None:
+    """A fact the user should know, on stderr, the results going on."""
+    print(f"robocal: note: {text}", file=sys.stderr)
+
+
+def _campaign_only_with_database(args) -> None:
+    """--campaign picks a campaign of a database; with a meas.csv it would be silently ignored."""
+    from . import workflow
+
+    if args.campaign is not None and not workflow.is_database(args.meas):
+        raise workflow.DataError(
+            f"{args.meas}: --campaign picks a campaign of a database (.db), not of a CSV file"
+        )
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+
+
 def _nonnegative(text: str) -> float:
-    v = float(text)
+    v = _number(text)
     if not np.isfinite(v) or v < 0:
         raise argparse.ArgumentTypeError(f"{text!r} is not a finite number >= 0")
+    return v
+
+
+def _positive(text: str) -> float:
+    v = _nonnegative(text)
+    if v == 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number > 0")
+    return v
+
+
+def _rate(text: str) -> float:
+    """A probability per reading: 1 would lose every reading."""
+    v = _nonnegative(text)
+    if v >= 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a rate from 0 up to (not including) 1")
+    return v
+
+
+def _nonnegative_int(text: str) -> int:
+    v = _integer(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number >= 0")
+    return v
+
+
+def _port(text: str) -> int:
+    v = _integer(text)
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a TCP port (0 to 65535)")
+    return v
+
+
+def _directions(text: str) -> int:
+    v = _integer(text)
+    if not 1 <= v <= 6:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a count of directions from 1 to 6")
     return v
 
 
@@ -61,7 +126,7 @@ def _fraction(text: str) -> float:
 
 
 def _positive_int(text: str) -> int:
-    v = int(text)
+    v = _integer(text)
     if v < 1:
         raise argparse.ArgumentTypeError(f"{text!r} is not a positive integer")
     return v
@@ -74,7 +139,12 @@ def cmd_calibrate(args) -> None:
     from .formats.model_json import write_model
     from .tables import console
 
-    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
+    _campaign_only_with_database(args)
+    if args.recording:  # refused now, not after the calibration
+        from .formats.files import check_writable
+
+        check_writable(args.recording)
+    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)
     parse_method(args.method, meas.target_names)
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
     model = workflow.model_file(cal, cell, meas, data_path=args.meas)
@@ -183,10 +253,18 @@ def cmd_evaluate(args) -> None:
     from .tables import console
 
     model = workflow.read_model(args.model)
-    from .formats.cell_json import Cell
+    _campaign_only_with_database(args)
+    if workflow.is_database(args.meas):
+        # The model's own robot reads the joints: the campaign's cell may differ in its targets.
+        _, meas = workflow.load_data(args.meas, None, args.campaign, note=_note)
+    else:
+        from .formats.cell_json import Cell
 
-    meas = workflow.load_campaign(args.meas, Cell(model.robot, model.targets, None, {}, None))
-    res = workflow.evaluate(model, meas)
+        meas = workflow.load_campaign(args.meas, Cell(model.robot, model.targets, None, {}, None))
+    try:
+        res = workflow.evaluate(model, meas)
+    except workflow.DataError as e:
+        raise workflow.DataError(f"{args.meas}: {e}") from None
     from .validation import absurd_errors
 
     why = absurd_errors(res, model.meta)
@@ -217,7 +295,8 @@ def cmd_compare(args) -> None:
     from .formats.model_json import write_json_atomic
     from .tables import console
 
-    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
+    _campaign_only_with_database(args)
+    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)
     rows = workflow.compare(cell, meas, screen=not args.keep_outliers)
     _print_screening(next(iter(rows.values()))[0])
     console.print(tables.table3(rows, meas.target_names))
@@ -250,7 +329,8 @@ def cmd_diagnose(args) -> None:
     from . import workflow
     from .tables import console
 
-    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign)
+    _campaign_only_with_database(args)
+    cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)
     report, figures, _ = _diagnose_to_files(
         cell, meas, args.meas, args.out, args.model_out, screen=not args.keep_outliers
     )
@@ -324,9 +404,9 @@ def _print_diagnosis(report) -> None:
     )
     if not report["effects"]:
         console.print("no effect beyond geometry pays off on held-out poses")
-    for e in report["effects"]:
+    for number, e in enumerate(report["effects"], start=1):  # as the figures are numbered
         console.print(
-            f"[bold]{e['name']}[/bold]"
+            f"[bold]effect {number}: {e['name']}[/bold]"
             + (f" joint {e['joint']}" if "joint" in e else "")
             + (f" harmonic {e['harmonic']}" if "harmonic" in e else "")
             + (f" at {e['at_s']:.0f} s" if "at_s" in e else "")
@@ -453,7 +533,48 @@ def _verify(args, cell) -> None:
 
 
 def cmd_serve(args) -> None:
-    from .app import serve
+    settings = _settings(args)
+    from . import store
+    from .app import CannotListen, serve
+
+    store.open_database(settings.database).close()  # a wrong --db: one line, before listening
+    try:
+        serve(settings)
+    except CannotListen as e:
+        raise SystemExit(f"robocal: error: {e}") from None
+
+
+def cmd_token(args) -> None:
+    from .security import reset_token
+
+    settings = _settings(args, make_folder=args.action == "reset")
+    path = settings.token_file
+    if args.action == "reset":
+        token = reset_token(path)
+        print(token)
+        print(
+            f"robocal: a new API token (shown once, keep it); its hash is in {path}. The old "
+            "token stops working at once, a running service included (it reads the file on "
+            "each request): give the new one to every client and the page",
+            file=sys.stderr,
+        )
+    elif path.exists():
+        print(
+            f"the token itself is kept nowhere, only its hash, in {path}; "
+            f"`robocal token reset{' --data-dir ' + str(settings.data_dir) if args.data_dir else ''}`"
+            " makes and prints a new one"
+        )
+    else:
+        print(
+            f"no token yet ({path} is absent): `robocal serve` makes one at its first start, "
+            "or `robocal token reset` now"
+        )
+
+
+def _settings(args, make_folder: bool = True):
+    """The service's settings: ROBOCAL_* variables, overridden by the options given; its data
+    folder made (refused in one line if it is a file)."""
+    from . import workflow
     from .settings import Settings
 
     overrides = {
@@ -466,7 +587,12 @@ def cmd_serve(args) -> None:
         )
         if v is not None
     }
-    serve(Settings(**overrides))
+    settings = Settings(**overrides)
+    if settings.data_dir.exists() and not settings.data_dir.is_dir():
+        raise workflow.DataError(f"{settings.data_dir}: the data folder is a file, not a folder")
+    if make_folder:
+        settings.data_dir.mkdir(parents=True, exist_ok=True)
+    return settings
 
 
 def cmd_demo(args) -> None:
@@ -607,9 +733,14 @@ def cmd_bench(args) -> None:
 def _data_arguments(p) -> None:
     """A campaign to read: a meas.csv or a database (with its campaign id), and the cell."""
     p.add_argument("meas", help="meas.csv, or a campaign database (.db file or URL)")
-    p.add_argument("--cell")
     p.add_argument(
-        "--campaign", type=int, help="campaign id when MEAS is a database (default: latest)"
+        "--cell",
+        help="cell.json (default: a database campaign's own cell, else the built-in IRB 2600 one)",
+    )
+    p.add_argument(
+        "--campaign",
+        type=_positive_int,
+        help="campaign id when MEAS is a database (default: latest)",
     )
 
 
@@ -622,17 +753,56 @@ def _outlier_argument(p) -> None:
     )
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse, but a mistake is one line (not the usage block), with a "did you mean"."""
+
+    def error(self, message: str):
+        import difflib
+        import re
+
+        m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if m:
+            choices = [c.strip(" '") for c in m.group(2).split(",")]
+            close = difflib.get_close_matches(m.group(1), choices, n=1)
+            if close:
+                message += f"; did you mean {close[0]!r}?"
+        elif message.startswith("unrecognized arguments:"):
+            known = self._option_strings()
+            for word in message.split(":", 1)[1].split():
+                close = difflib.get_close_matches(word.split("=")[0], known, n=1)
+                if word.startswith("--") and close:
+                    message += f"; {word}: did you mean {close[0]}?"
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def _option_strings(self) -> list[str]:
+        """Every long option of this parser and of its commands."""
+        out = []
+        for action in self._actions:
+            out += [o for o in action.option_strings if o.startswith("--")]
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    out += sub._option_strings()
+        return sorted(set(out))
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="robocal", description="Robot calibration with a laser tracker."
-    )
-    sub = p.add_subparsers(dest="command", required=True)
+    p = Parser(prog="robocal", description="Robot calibration with a laser tracker.")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", help="what to do")
 
     s = sub.add_parser("simulate", help="a campaign from the virtual cell")
     s.add_argument("--cell", help="cell.json (default: the built-in IRB 2600 cell)")
-    s.add_argument("--poses", type=int, default=100)
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--beam-break-rate", type=float, default=0.0)
+    s.add_argument(
+        "--poses", type=_positive_int, default=100, help="poses to measure (default 100)"
+    )
+    s.add_argument(
+        "--seed", type=_nonnegative_int, default=0, help="random seed of the cell and the poses"
+    )
+    s.add_argument(
+        "--beam-break-rate",
+        type=_rate,
+        default=0.0,
+        help="fraction of readings lost to a broken beam (0 up to 1, default 0)",
+    )
     s.add_argument(
         "--arm-scatter-deg",
         type=_nonnegative,
@@ -679,7 +849,9 @@ def build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("calibrate", help="identify a model from a campaign")
     _data_arguments(c)
     c.add_argument(
-        "--method", default="minimax", help="minimax (default), ls-sum, ls-single:A, ls-pose"
+        "--method",
+        default="minimax",
+        help="minimax (default), ls-sum, ls-single:TARGET (one SMR, default the first), ls-pose",
     )
     c.add_argument(
         "--qp",
@@ -687,7 +859,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="primal-dual",
         help="minimax's QP subsolver: the paper's primal-dual method or Clarabel",
     )
-    c.add_argument("--out", default="model.json")
+    c.add_argument("--out", default="model.json", help="model.json to write (default model.json)")
     _outlier_argument(c)
     c.add_argument("--recording", help="also write a rerun recording (.rrd) of the calibration")
     c.add_argument(
@@ -699,17 +871,19 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_calibrate)
 
     pr = sub.add_parser("predict", help="SMR positions a model predicts for poses")
-    pr.add_argument("model")
-    pr.add_argument("poses")
-    pr.add_argument("--out", default="pred.csv")
+    pr.add_argument("model", help="model.json (robocal calibrate)")
+    pr.add_argument("poses", help="poses.csv: pose, q1..qN [, time_s, temp_c] (deg)")
+    pr.add_argument("--out", default="pred.csv", help="predictions to write (default pred.csv)")
     pr.set_defaults(func=cmd_predict)
 
     cp = sub.add_parser(
         "compensate", help="joint commands that put the SMRs (or a tool point) where wanted"
     )
-    cp.add_argument("model")
+    cp.add_argument("model", help="model.json (robocal calibrate)")
     cp.add_argument("targets", help="targets.csv: pose, target, x, y, z [, q1..qN, time_s, temp_c]")
-    cp.add_argument("--out", default="joints.csv")
+    cp.add_argument(
+        "--out", default="joints.csv", help="joint commands to write (default joints.csv)"
+    )
     cp.add_argument(
         "--tcp",
         type=_tcp,
@@ -728,8 +902,13 @@ def build_parser() -> argparse.ArgumentParser:
     cp.set_defaults(func=cmd_compensate)
 
     e = sub.add_parser("evaluate", help="accuracy of a model on measured data")
-    e.add_argument("model")
-    e.add_argument("meas")
+    e.add_argument("model", help="model.json (robocal calibrate)")
+    e.add_argument("meas", help="meas.csv, or a campaign database (.db file or URL)")
+    e.add_argument(
+        "--campaign",
+        type=_positive_int,
+        help="campaign id when MEAS is a database (default: latest)",
+    )
     e.add_argument("--json", help="also write the figures as JSON")
     e.add_argument(
         "--force", action="store_true", help="evaluate data whose errors say another cell"
@@ -757,9 +936,13 @@ def build_parser() -> argparse.ArgumentParser:
     aq.add_argument(
         "--db", default="robocal.db", help="SQLite file (created if absent) or database URL"
     )
-    aq.add_argument("--cell")
-    aq.add_argument("--poses", type=int, default=100)
-    aq.add_argument("--seed", type=int, default=0)
+    aq.add_argument("--cell", help="cell.json (default: the built-in IRB 2600 cell)")
+    aq.add_argument(
+        "--poses", type=_positive_int, default=100, help="poses to measure (default 100)"
+    )
+    aq.add_argument(
+        "--seed", type=_nonnegative_int, default=0, help="random seed of the poses (and the cell)"
+    )
     aq.add_argument("--name", help="campaign name; an unfinished campaign of that name is resumed")
     aq.add_argument(
         "--settle",
@@ -767,16 +950,23 @@ def build_parser() -> argparse.ArgumentParser:
         default="fixed",
         help="fixed pause (the paper's 10 s) or end it once readings agree",
     )
-    aq.add_argument("--pause", type=float, default=10.0, help="pause at each pose, s")
+    aq.add_argument(
+        "--pause", type=_nonnegative, default=10.0, help="pause at each pose, s (default 10)"
+    )
     aq.add_argument("--order", action="store_true", help="order poses to shorten the motion")
     aq.add_argument(
         "--choose-from",
-        type=int,
+        type=_nonnegative_int,
         default=0,
         metavar="N",
         help="choose the poses out of N candidates by D-optimality",
     )
-    aq.add_argument("--beam-break-rate", type=float, default=0.0)
+    aq.add_argument(
+        "--beam-break-rate",
+        type=_rate,
+        default=0.0,
+        help="simulated cell: fraction of readings lost to a broken beam (0 up to 1)",
+    )
     aq.add_argument(
         "--effect",
         action="append",
@@ -791,9 +981,9 @@ def build_parser() -> argparse.ArgumentParser:
         "directions and cycles, with the nominal joints and the compensated ones",
     )
     aq.add_argument("--points", help="verify at these points (points.csv), not the ISO cube")
-    aq.add_argument("--cycles", type=int, default=3, help="verification cycles")
-    aq.add_argument("--directions", type=int, default=3, help="approach directions (1-6)")
-    aq.add_argument("--side", type=float, default=400.0, help="the ISO cube's side, mm")
+    aq.add_argument("--cycles", type=_positive_int, default=3, help="verification cycles")
+    aq.add_argument("--directions", type=_directions, default=3, help="approach directions (1-6)")
+    aq.add_argument("--side", type=_positive, default=400.0, help="the ISO cube's side, mm")
     aq.add_argument("--out", default="verification.json", help="the verification's figures")
     aq.add_argument("--certificate", help="also write the accuracy certificate (HTML) here")
     aq.add_argument(
@@ -808,17 +998,36 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sv.add_argument("--db", help="database file or URL (default robocal.db, or ROBOCAL_DATABASE)")
     sv.add_argument("--host", help="address to listen on (default 127.0.0.1)")
-    sv.add_argument("--port", type=int, help="port (default 8000)")
+    sv.add_argument("--port", type=_port, help="port (default 8000)")
     sv.add_argument(
         "--data-dir", help="models, recordings and the token hash (default robocal-data)"
     )
     sv.set_defaults(func=cmd_serve)
 
+    tk = sub.add_parser(
+        "token",
+        help="the service's API token: reset makes a new one (the old one stops working), "
+        "show says where its hash is kept",
+    )
+    tk.add_argument("action", choices=("reset", "show"), help="reset: a new token; show: where")
+    tk.add_argument(
+        "--data-dir",
+        help="the service's data folder (default robocal-data, or ROBOCAL_DATA_DIR)",
+    )
+    tk.set_defaults(func=cmd_token, db=None, host=None, port=None)
+
     d = sub.add_parser("demo", help="simulate, calibrate with every method, evaluate held-out")
-    d.add_argument("--out", default="robocal-demo")
-    d.add_argument("--poses", type=int, default=100)
-    d.add_argument("--holdout", type=int, default=50)
-    d.add_argument("--seed", type=int, default=1)
+    d.add_argument("--out", default="robocal-demo", help="folder for the demo's files")
+    d.add_argument(
+        "--poses", type=_positive_int, default=100, help="poses to calibrate on (default 100)"
+    )
+    d.add_argument(
+        "--holdout",
+        type=_positive_int,
+        default=50,
+        help="further poses to evaluate the models on (default 50)",
+    )
+    d.add_argument("--seed", type=_nonnegative_int, default=1, help="random seed (default 1)")
     d.add_argument(
         "--effect",
         action="append",
@@ -856,7 +1065,7 @@ def build_parser() -> argparse.ArgumentParser:
     ex.set_defaults(func=cmd_export)
 
     sc = sub.add_parser("schema", help="the JSON Schema of cell.json, model.json or report.json")
-    sc.add_argument("file", choices=("cell", "model", "report"))
+    sc.add_argument("file", choices=("cell", "model", "report"), help="which file's schema")
     sc.set_defaults(func=cmd_schema)
 
     b = sub.add_parser("bench", help="benchmarks printing JSON")
@@ -872,13 +1081,17 @@ def build_parser() -> argparse.ArgumentParser:
             "compensate",
             "verify",
         ),
+        help="what to time",
     )
     b.add_argument(
-        "--repeats", type=int, default=7, help="startup: runs of each command (median reported)"
+        "--repeats",
+        type=_positive_int,
+        default=7,
+        help="startup: runs of each command (median reported)",
     )
     b.add_argument(
         "--poses",
-        type=int,
+        type=_positive_int,
         nargs="+",
         default=[100, 1000],
         help="diagnose: sizes of the campaigns timed one at a time",
@@ -888,16 +1101,26 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="diagnose: a short run (10 effect cases, 10 clean campaigns)",
     )
-    b.add_argument("--cases", type=int, help="diagnose: effect cases of the suite (default 60)")
-    b.add_argument("--clean", type=int, help="diagnose: clean campaigns (default 200)")
-    b.add_argument("--workers", type=int, default=2, help="diagnose: processes in the pool")
-    b.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000])
+    b.add_argument(
+        "--cases", type=_positive_int, help="diagnose: effect cases of the suite (default 60)"
+    )
+    b.add_argument("--clean", type=_positive_int, help="diagnose: clean campaigns (default 200)")
+    b.add_argument(
+        "--workers", type=_positive_int, default=2, help="diagnose: processes in the pool"
+    )
+    b.add_argument(
+        "--sizes",
+        type=_positive_int,
+        nargs="+",
+        default=[100, 1000, 10000],
+        help="solver: pose counts timed (default 100 1000 10000)",
+    )
     b.add_argument(
         "--no-reference", action="store_true", help="skip the finite-difference scipy reference"
     )
     b.add_argument(
         "--reference-max",
-        type=int,
+        type=_positive_int,
         default=10000,
         help="largest pose count for which to run the reference",
     )
@@ -932,11 +1155,34 @@ def main(argv=None) -> int:
         if isinstance(e, FileNotFoundError):
             print(f"robocal: error: {e.filename}: no such file", file=sys.stderr)
             return 1
+        if isinstance(e, OSError) and e.filename is not None:  # a folder, no permission...
+            print(f"robocal: error: {e.filename}: {e.strerror or e}", file=sys.stderr)
+            return 1
+        if _is_settings_error(e):
+            print(f"robocal: error: {_settings_error_line(e)}", file=sys.stderr)
+            return 1
         if isinstance(e, ValueError):
             print(f"robocal: error: {e}", file=sys.stderr)
             return 1
         raise
     return 0
+
+
+def _is_settings_error(e: Exception) -> bool:
+    # pydantic is imported only if the settings were built: `robocal --help` stays light.
+    pydantic = sys.modules.get("pydantic")
+    return pydantic is not None and isinstance(e, pydantic.ValidationError)
+
+
+def _settings_error_line(e) -> str:
+    """A settings ValidationError (from ROBOCAL_* variables) as one line naming the setting."""
+    first = e.errors()[0]
+    name = ".".join(str(x) for x in first["loc"])
+    more = f" (and {e.error_count() - 1} more)" if e.error_count() > 1 else ""
+    return (
+        f"setting {name!r} (ROBOCAL_{name.upper()}): {first['msg']}, "
+        f"not {first.get('input')!r}{more}"
+    )
 
 
 if __name__ == "__main__":

@@ -63,9 +63,10 @@ def is_database(path) -> bool:
     return "://" in str(path) or str(path).lower().endswith(DB_SUFFIXES)
 
 
-def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurements]:
+def load_data(path, cell_path=None, campaign_id=None, note=None) -> tuple[Cell, Measurements]:
     """A campaign from a meas.csv, or from the store's database (latest campaign unless given);
-    the cell from cell_path, else the database campaign's own, else the built-in default."""
+    the cell from cell_path, else the database campaign's own, else the built-in default.
+    note(text) is told when a database campaign is not done (its measured poses are used)."""
     if not is_database(path):
         cell = load_cell(cell_path)
         return cell, load_campaign(path, cell)
@@ -80,9 +81,28 @@ def load_data(path, cell_path=None, campaign_id=None) -> tuple[Cell, Measurement
         raise DataError(f"{path}: no campaign in the database")
     if campaign_id is None:
         campaign_id = max(c.id for c in campaigns)
-    info = store.get_campaign(db, campaign_id=campaign_id)
+    info = next((c for c in campaigns if c.id == campaign_id), None)
+    if info is None:
+        raise DataError(
+            f"{path}: no campaign {campaign_id}; it has "
+            + ", ".join(f"{c.id} ({c.name}, {c.status})" for c in campaigns[-10:])
+        )
+    if info.n_done == 0:
+        raise DataError(
+            f"{path}: campaign {campaign_id} ({info.name}) has no measured pose yet "
+            f"(it is {info.status}): run it with `robocal acquire --db {path} --name {info.name}`"
+        )
+    if info.status != "done" and note is not None:
+        note(
+            f"{path}: campaign {campaign_id} ({info.name}) is {info.status}, not done: using its "
+            f"{info.n_done} of {info.n_poses} poses measured so far"
+        )
     cell = load_cell(cell_path) if cell_path else parse_cell(info.cell_json)
     meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
+    if meas.n_poses == 0:
+        raise DataError(
+            f"{path}: campaign {campaign_id} ({info.name}) has no reading (all missing)"
+        )
     return cell, meas
 
 
@@ -371,9 +391,14 @@ def write_diagnosis(
     from .plots import write_figures
 
     report = d.report
-    figures = write_figures(d.figures, report_path)
-    by_label = {f["label"]: path.name for f, path in zip(d.figures, figures)}
-    for e, ext in zip(report["effects"], _report_order(report, d.extensions)):
+    exts = _report_order(report, d.extensions)
+    # One numbering everywhere: effect N is report["effects"][N - 1], its figure REPORT_N_*.png,
+    # and `diagnose` prints it as "effect N" (the order the report ranks them in, not found in).
+    rank = {x.label(): k for k, x in enumerate(exts)}
+    ranked = sorted(d.figures, key=lambda f: rank.get(f["label"], len(rank)))
+    figures = write_figures(ranked, report_path)
+    by_label = {f["label"]: path.name for f, path in zip(ranked, figures)}
+    for e, ext in zip(report["effects"], exts):
         e["figure"] = by_label.get(ext.label())
     if list_figures:
         report["figures"] = [p.name for p in figures]

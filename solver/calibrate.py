@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import time
 
 import numpy as np
@@ -67,8 +68,12 @@ def parse_method(method: str, target_names) -> tuple[str, list[int]]:
     """Method name and the targets it fits: `ls-single:B` fits B only."""
     name, _, arg = method.partition(":")
     if name not in METHODS:
+        shown = ("minimax", "ls-sum", "ls-single", "ls-pose")
+        close = difflib.get_close_matches(name, shown, n=1)
         raise ValueError(
-            f"unknown method {method!r}: choose from minimax, ls-sum, ls-single:T, ls-pose"
+            f"unknown method {name!r}; "
+            + (f"did you mean {close[0]!r}? " if close else "")
+            + "choose from minimax, ls-sum, ls-single:TARGET, ls-pose"
         )
     if name == "ls-single":
         arg = arg or target_names[0]

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import datetime as dt
+import difflib
+import re
 from typing import Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, field_validator
 from robocal.drivers.lifecycle import ACTIONS, STATES
 from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
 from robocal.server.formats.cell_doc import CellDoc
@@ -21,6 +23,7 @@ MAX_ID = 2**63 - 1
 _CTRL = r"\x00-\x1f\x7f-\x9f\u2028\u2029"
 PRINTABLE = rf"^[^{_CTRL}]*[^\s{_CTRL}][^{_CTRL}]*$"  # and not blank
 METHOD = r"^(minimax|ls-sum|ls-pose|nominal|ls-single(:[A-Za-z][A-Za-z0-9_]{0,15})?)$"
+METHOD_NAMES = ("minimax", "ls-sum", "ls-single", "ls-pose", "nominal")
 # the engine's states and the user's actions, listed in the OpenAPI; mypy takes only literals
 # written out in a Literal
 State = Literal[STATES]  # type: ignore[valid-type]
@@ -158,9 +161,24 @@ class JobCreate(BaseModel):
     kind: Literal["calibration", "diagnosis"] = "calibration"
     method: str = Field(
         "minimax",
-        pattern=METHOD,
+        max_length=64,
+        # documented as a pattern, checked by _known_method: a misspelt one gets a suggestion
+        json_schema_extra={"pattern": METHOD},
         description="minimax, ls-sum, ls-single[:T], ls-pose, nominal (calibration only)",
     )
+
+    @field_validator("method")
+    @classmethod
+    def _known_method(cls, method: str) -> str:
+        if re.fullmatch(METHOD, method):
+            return method
+        name = method.partition(":")[0]
+        close = difflib.get_close_matches(name, METHOD_NAMES, n=1)
+        raise ValueError(
+            f"unknown method {name!r}"
+            + (f"; did you mean {close[0]!r}?" if close else "")
+            + f" (one of {', '.join(METHOD_NAMES)}; ls-single:TARGET)"
+        )
 
 
 class JobPublic(BaseModel):

@@ -32,10 +32,21 @@ def read_text(path) -> str:
         ) from None
 
 
+def check_writable(path) -> None:
+    """InputError, before any work, if path is a folder or its folder does not exist."""
+    directory = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise InputError(path, None, None, "is a folder: give a file name to write")
+    if not os.path.isdir(directory):
+        raise InputError(path, None, None, f"cannot write: no folder {directory}")
+
+
 def atomic_write_text(path, text: str) -> None:
     """Write text (UTF-8) to path via a temporary file in the same directory and os.replace."""
     path = os.fspath(path)
     directory = os.path.dirname(os.path.abspath(path))
+    # Said up front: otherwise the error would name the temporary file, not the one asked for.
+    check_writable(path)
     # mkstemp makes the file 0600; keep the mode the user had, or the usual 0644 for new files.
     try:
         mode = os.stat(path).st_mode & 0o7777

@@ -12,7 +12,10 @@ from alembic import command
 from alembic.config import Config
 from sqlalchemy import Engine, create_engine, event
 from sqlalchemy.engine import URL, make_url
+from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
+
+from .errors import StoreError
 
 MIGRATIONS = Path(__file__).resolve().parents[2] / "migrations"
 # How long a writer waits for another process's write lock before "database is locked".
@@ -133,12 +136,67 @@ class Database:
         self.close()
 
 
+SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
 def open_database(url_or_path) -> Database:
-    """Open (creating it and its folder if needed) the store and migrate it to the latest schema."""
-    engine = make_engine(url_or_path)
+    """Open (creating it and its folder if needed) the store and migrate it to the latest schema;
+    StoreError, in one line, if it is not a database (a CSV, a folder) or cannot be opened."""
+    try:
+        url = database_url(url_or_path)
+    except SQLAlchemyError as e:
+        raise StoreError(f"{url_or_path}: not a database file or URL: {e}") from None
+    if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
+        _check_sqlite_file(Path(url.database), url_or_path)
+    try:
+        engine = make_engine(url)
+    except (SQLAlchemyError, ImportError) as e:
+        # e.g. mysql://: a dialect whose driver is not installed (robocal ships SQLite's and
+        # PostgreSQL's)
+        raise StoreError(
+            f"{_shown(url_or_path)}: cannot use this database ({type(e).__name__}: {e}); "
+            "robocal works with SQLite files and PostgreSQL"
+        ) from None
     try:
         migrate(engine)
+    except SQLAlchemyError as e:
+        engine.dispose()
+        # The driver's own first line names the cause; the rest is SQLAlchemy's help link.
+        cause = str(getattr(e, "orig", None) or e).splitlines()[0]
+        raise StoreError(f"{_shown(url_or_path)}: cannot open the database: {cause}") from None
     except Exception:
         engine.dispose()
         raise
     return Database(engine)
+
+
+def _check_sqlite_file(path: Path, given) -> None:
+    """Refuse a folder, or a file that is something else than SQLite (a meas.csv, a model.json)."""
+    if path.is_dir():
+        raise StoreError(f"{_shown(given)}: is a folder, not a database file")
+    if path.suffix.lower() in NOT_DATABASES:
+        raise StoreError(
+            f"{_shown(given)}: a {path.suffix} file is not a database; give a .db file "
+            "(a meas.csv is read by calibrate, evaluate, compare and diagnose directly)"
+        )
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(SQLITE_MAGIC))
+    except FileNotFoundError:
+        return  # created on first use
+    except OSError as e:
+        raise StoreError(f"{_shown(given)}: cannot read the file: {e.strerror or e}") from None
+    if head and head != SQLITE_MAGIC:
+        raise StoreError(f"{_shown(given)}: not a SQLite database (the file holds something else)")
+
+
+# Suffixes of robocal's own text files: given as a database, they are a mistake, not a new store.
+NOT_DATABASES = (".csv", ".json", ".txt", ".rrd", ".html", ".mod", ".urdf")
+
+
+def _shown(given) -> str:
+    """The database as the user wrote it, its password hidden."""
+    if isinstance(given, URL):
+        return given.render_as_string(hide_password=True)
+    text = os.fspath(given)
+    return make_url(text).render_as_string(hide_password=True) if "://" in text else text

@@ -1,0 +1,41 @@
+"""Bad requests answered in one clear line over a real server (issue 14, item 7)."""
+
+import pytest
+
+from .conftest import wait_for
+
+
+@pytest.mark.sqlite_only
+def test_a_three_pose_campaign_runs_and_reads_back(live):
+    """Was "Out of range float values are not JSON compliant": 3 poses measured, then read."""
+    c = live.client
+    r = c.post("/api/campaigns", json={"poses": 3, "seed": 1, "pause_s": 0})
+    assert r.status_code == 201, r.text
+    cid = r.json()["id"]
+    assert c.post(f"/api/campaigns/{cid}/start").status_code in (200, 202), r.text
+    done = wait_for(lambda: c.get(f"/api/campaigns/{cid}").json(), lambda j: j["status"] == "done")
+    assert done["poses_done"] == 3
+    for path in ("", "/measurements", "/measurements.csv"):
+        r = c.get(f"/api/campaigns/{cid}{path}")
+        assert r.status_code == 200, (path, r.text)
+    assert c.get("/api/campaigns").status_code == 200
+    # Too few poses for the geometric model: the job fails, saying so in one line.
+    r = c.post("/api/jobs", json={"campaign_id": cid})
+    assert r.status_code == 202, r.text
+    job = r.json()["id"]
+    j = wait_for(
+        lambda: c.get(f"/api/jobs/{job}").json(), lambda j: j["state"] in ("done", "failed")
+    )
+    assert j["state"] == "failed" and "measure at least" in j["reason"], j
+    assert "\n" not in j["reason"]
+
+
+@pytest.mark.sqlite_only
+def test_a_misspelt_method_is_answered_with_a_suggestion(live):
+    r = live.client.post("/api/jobs", json={"campaign_id": 1, "method": "minmax"})
+    assert r.status_code == 422, r.text
+    assert "did you mean 'minimax'?" in r.text and "Traceback" not in r.text
+    # the OpenAPI still documents the methods as a pattern
+    spec = live.client.get("/openapi.json").json()
+    method = spec["components"]["schemas"]["JobCreate"]["properties"]["method"]
+    assert "minimax" in method["pattern"]

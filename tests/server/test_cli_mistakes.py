@@ -1,0 +1,193 @@
+"""Every mistake one clear line: each bad input named on one line of stderr, a non-zero exit,
+never a traceback (issue 14, item 7), and the `robocal token` command."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from tests.server.api.conftest import free_port
+
+from .test_cli import robocal
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """A small campaign as CSV and in a database, its model, and files that are not what is
+    asked for: a folder, an empty file, a CSV named .db, a database with a planned campaign."""
+    d = tmp_path_factory.mktemp("mistakes")
+    for args in (
+        ("simulate", "--poses", 30, "--seed", 2, "--out", "meas.csv"),
+        ("calibrate", "meas.csv", "--out", "model.json"),
+        ("acquire", "--db", "a.db", "--poses", 30, "--pause", 0, "--seed", 2),
+    ):
+        r = robocal(*args, cwd=d)
+        assert r.returncode == 0, r.stderr
+    (d / "folder").mkdir()
+    (d / "empty.csv").write_text("")
+    (d / "empty.json").write_text("")
+    (d / "fake.db").write_bytes((d / "meas.csv").read_bytes())
+    (d / "poses.csv").write_text("pose,q1,q2,q3,q4,q5,q6\n1,0,10,0,0,20,0\n")
+    from robocal.server import store
+
+    with store.open_database(d / "a.db") as a:
+        cell = store.get_campaign(a, campaign_id=1).cell_json
+    with store.open_database(d / "planned.db") as db:
+        store.create_campaign(db, name="later", cell_json=cell, poses_deg=np.full((4, 6), 10.0))
+    return d
+
+
+def one_line_error(r, *words):
+    """The run failed with one line on stderr that holds every word."""
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode != 0, r.stdout
+    assert len(lines) == 1, r.stderr
+    assert "Traceback" not in r.stderr
+    for w in words:
+        assert w in lines[0], lines[0]
+    return lines[0]
+
+
+CASES = [
+    # the issue's cases
+    (("calibrate", "a.db", "--campaign", 7), ["a.db", "no campaign 7", "1 ("]),
+    (("calibrate", "planned.db"), ["planned.db", "campaign 1 (later)", "no measured pose"]),
+    (("diagnose", "planned.db", "--campaign", 1), ["planned.db", "planned"]),
+    (("compare", "planned.db"), ["planned.db", "no measured pose"]),
+    (("acquire", "--db", "meas.csv", "--poses", 3, "--pause", 0), ["meas.csv", "not a database"]),
+    (("acquire", "--db", "empty.csv", "--poses", 3, "--pause", 0), ["empty.csv", "not a database"]),
+    (("acquire", "--db", "folder", "--poses", 3, "--pause", 0), ["folder", "is a folder"]),
+    (("calibrate", "fake.db"), ["fake.db", "not a SQLite database"]),
+    (("diagnose", "fake.db"), ["fake.db", "not a SQLite database"]),
+    (("simulate", "--poses", 0, "--out", "x.csv"), ["--poses", "'0' is not a positive integer"]),
+    (("simulate", "--poses", -3, "--out", "x.csv"), ["--poses", "'-3'"]),
+    (("simulate", "--poses", "ten", "--out", "x.csv"), ["--poses", "'ten' is not a whole number"]),
+    (("acquire", "--poses", 0), ["--poses", "'0'"]),
+    (("serve", "--port", 80000), ["--port", "'80000' is not a TCP port"]),
+    # more of the same kind
+    (("simulate", "--beam-break-rate", 2, "--out", "x.csv"), ["--beam-break-rate", "'2'"]),
+    (("simulate", "--beam-break-rate", -1, "--out", "x.csv"), ["--beam-break-rate", "'-1'"]),
+    (("simulate", "--poses", 3, "--out", "folder"), ["folder", "is a folder"]),
+    (("simulate", "--poses", 3, "--out", "nowhere/x.csv"), ["nowhere/x.csv", "no folder"]),
+    (("calibrate", "meas.csv", "--out", "folder"), ["folder", "is a folder"]),
+    (("calibrate", "meas.csv", "--campaign", 1), ["meas.csv", "--campaign", "database"]),
+    (("calibrate", "meas.csv", "--method", "minmax"), ["did you mean 'minimax'?"]),
+    (("calibrate", "meas.csv", "--method", "ls-sun"), ["did you mean 'ls-sum'?"]),
+    (("calibrat", "meas.csv"), ["invalid choice: 'calibrat'", "did you mean 'calibrate'?"]),
+    (("calibrate", "missing.csv"), ["missing.csv", "No such file"]),
+    (("calibrate", "missing.db"), ["missing.db", "no such file"]),
+    (("calibrate", "folder"), ["folder", "Is a directory"]),
+    (("calibrate", "empty.csv"), ["empty.csv", "empty file"]),
+    (("calibrate", "model.json"), ["model.json"]),
+    (("calibrate", "meas.csv", "--cell", "empty.json"), ["empty.json", "empty file"]),
+    (("evaluate", "model.json", "missing.csv"), ["missing.csv", "No such file"]),
+    (("evaluate", "model.json", "a.db", "--campaign", 9), ["a.db", "no campaign 9"]),
+    (("evaluate", "meas.csv", "meas.csv"), ["meas.csv", "invalid JSON"]),
+    (("evaluate", "folder", "meas.csv"), ["folder", "Is a directory"]),
+    (("predict", "empty.json", "poses.csv"), ["empty.json", "empty file"]),
+    (("predict", "model.json", "empty.csv"), ["empty.csv", "empty file"]),
+    (("predict", "model.json", "poses.csv", "--out", "folder"), ["folder", "is a folder"]),
+    (("compensate", "model.json", "missing.csv"), ["missing.csv"]),
+    (("export", "missing.json", "--out", "x.csv"), ["missing.json"]),
+    (("acquire", "--pause", -1, "--poses", 3), ["--pause", "'-1'"]),
+    (("acquire", "--choose-from", -1, "--poses", 3), ["--choose-from", "'-1'"]),
+    (("acquire", "--verify", "model.json", "--directions", 7), ["--directions", "'7'"]),
+    (("acquire", "--verify", "model.json", "--cycles", 0), ["--cycles", "'0'"]),
+    (("demo", "--holdout", 0), ["--holdout", "'0'"]),
+    (
+        ("simulate", "--poses", 3, "--out", "x.csv", "--effect", "joint_complance:2"),
+        ["unknown effect 'joint_complance'", "did you mean 'joint_compliance'?"],
+    ),
+    (("bench", "solver", "--sizes", 0), ["--sizes", "'0'"]),
+    (("schema", "modle"), ["did you mean 'model'?"]),
+    (("calibrate", "meas.csv", "--recording", "folder"), ["folder", "is a folder"]),
+    (("serve", "--data-dir", "meas.csv", "--db", "s.db"), ["meas.csv", "data folder is a file"]),
+    (("token", "reset", "--data-dir", "meas.csv"), ["meas.csv", "data folder is a file"]),
+    (("token", "rest"), ["did you mean 'reset'?"]),
+    (("serve", "--db", "folder"), ["folder", "is a folder"]),
+    (("acquire", "--cell", "meas.csv", "--poses", 3), ["meas.csv", "invalid JSON"]),
+    (("export", "model.json", "--out", "x.xyz"), ["x.xyz", "--format"]),
+    (("calibrate", "mysql://host/db"), ["mysql://host/db", "SQLite files and PostgreSQL"]),
+    (("calibrate", "::://"), ["not a database file or URL"]),
+    (("simulate", "--posess", 3, "--out", "x.csv"), ["--posess", "did you mean --poses?"]),
+]
+
+
+@pytest.mark.parametrize("args,words", CASES, ids=[" ".join(map(str, a)) for a, _ in CASES])
+def test_a_mistake_is_one_line(files, args, words):
+    one_line_error(robocal(*args, cwd=files), *words)
+
+
+def test_an_unreachable_database_is_one_line_without_its_password(files):
+    url = f"postgresql+psycopg://robocal:secret@127.0.0.1:{free_port()}/robocal"
+    line = one_line_error(robocal("calibrate", url, cwd=files), "cannot open the database")
+    assert "secret" not in line and "***" in line
+
+
+def test_nothing_half_written_on_a_mistake(files):
+    """A refused run leaves no output file behind."""
+    r = robocal("simulate", "--poses", 0, "--out", "never.csv", cwd=files)
+    assert r.returncode != 0 and not (files / "never.csv").exists()
+    assert not (files / "meas.db").exists()  # `acquire --db meas.csv` made no database either
+
+
+def test_evaluate_reads_a_database_as_calibrate_does(files):
+    """`evaluate model.json a.db --campaign N` gives the figures of that campaign exported."""
+    from robocal.server import store
+
+    with store.open_database(files / "a.db") as db:
+        store.export_csv(db, campaign_id=1, path=files / "a.csv")
+    r = robocal("evaluate", "model.json", "a.db", "--campaign", 1, "--json", "db.json", cwd=files)
+    assert r.returncode == 0, r.stderr
+    r = robocal("evaluate", "model.json", "a.csv", "--json", "csv.json", cwd=files)
+    assert r.returncode == 0, r.stderr
+    from_db = json.loads((files / "db.json").read_text())
+    from_csv = json.loads((files / "csv.json").read_text())
+    assert from_db["model"]["rmse"] == pytest.approx(from_csv["model"]["rmse"], rel=1e-9)
+    assert from_db["nominal"]["rmse"] > 10 * from_db["model"]["rmse"]
+
+
+def test_settings_from_the_environment_are_one_line(files):
+    r = subprocess.run(
+        [sys.executable, "-m", "robocal.server.cli", "serve", "--db", "s.db"],
+        cwd=files,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**__import__("os").environ, "ROBOCAL_JOB_WORKERS": "lots"},
+    )
+    one_line_error(r, "ROBOCAL_JOB_WORKERS", "'lots'")
+
+
+def test_every_option_and_argument_has_help():
+    from robocal.server.cli import build_parser
+
+    missing = []
+
+    def walk(parser, where):
+        for action in parser._actions:
+            if isinstance(action, __import__("argparse")._SubParsersAction):
+                for name, sub in action.choices.items():
+                    walk(sub, f"{where} {name}")
+            if not action.help:
+                missing.append(f"{where} {'/'.join(action.option_strings) or action.dest}")
+
+    walk(build_parser(), "robocal")
+    assert not missing, "no help text: " + ", ".join(missing)
+
+
+def test_a_campaign_not_done_is_used_with_a_note(files, tmp_path):
+    """An e-stopped campaign's measured poses are calibrated on, and the user is told so."""
+    import shutil
+    import sqlite3
+
+    shutil.copy(files / "a.db", tmp_path / "stopped.db")
+    with sqlite3.connect(tmp_path / "stopped.db") as c:
+        c.execute("UPDATE campaign SET status = 'estopped' WHERE id = 1")
+    r = robocal("calibrate", "stopped.db", "--campaign", 1, "--out", "m.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    (line,) = r.stderr.strip().splitlines()
+    assert "note: stopped.db: campaign 1" in line and "estopped, not done" in line, line
+    assert "30 of 30 poses" in line
