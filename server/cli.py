@@ -721,6 +721,18 @@ def cmd_bench(args) -> None:
         from .bench_acquire import run_acquire_bench
 
         result = run_acquire_bench()
+    elif args.what == "recording":
+        from .bench_recording import run_recording_bench
+
+        result = run_recording_bench()
+    elif args.what == "validation":
+        from . import bench_validation
+
+        # the real campaigns beside a checkout (../shared/data/real), when they are there
+        real = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+        result = bench_validation.run(
+            20, "minimax", sorted(p for p in real.glob("*") if p.is_dir())
+        )
     else:
         from .bench import run_solver_bench
 
@@ -1080,8 +1092,11 @@ def build_parser() -> argparse.ArgumentParser:
             "startup",
             "compensate",
             "verify",
+            "recording",
+            "validation",
         ),
-        help="what to time",
+        help="what to time (validation: the deployment guard's flags on healthy, small and "
+        "real campaigns)",
     )
     b.add_argument(
         "--repeats",
