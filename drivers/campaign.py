@@ -102,6 +102,8 @@ class _Pose:
     # whether that lock needed a search
     locked_on: str | None = None
     lock_searched: bool = False
+    # targets the widest search worth making missed while the arm stood here: out of sight
+    unseen: set = field(default_factory=set)
 
 
 class CampaignEngine:
@@ -464,8 +466,11 @@ class CampaignEngine:
             self._count_lock(msg.pose, searched=work.lock_searched)
             work.aims[msg.target] = (aim, True)
             return
+        if msg.target in work.unseen:  # the beam stays where it is
+            work.aims[msg.target] = (aim, False)
+            return
         work.locked_on = None
-        work.aims[msg.target] = (aim, self._lock_on(msg.pose, aim, 0))
+        work.aims[msg.target] = (aim, self._lock_on(work, msg.target, aim, 0))
 
     def _count_lock(self, i: int, searched: bool) -> None:
         if searched:
@@ -475,20 +480,17 @@ class CampaignEngine:
         if i >= 10:
             self.stats.locked_after_10 += 1
 
-    def _lock_on(self, i: int, aim, attempt: int) -> bool:
+    def _lock_on(self, work: _Pose, name: str, aim, attempt: int) -> bool:
         """Point at aim, search only if not locked; True once locked."""
-        s = self.settings
+        i = work.index
         try:
             locked = self.tracker.point(aim)
             if locked and attempt == 0:
-                self.stats.locked_first_try += 1
-                if i >= 10:
-                    self.stats.locked_after_10 += 1
+                self._count_lock(i, searched=False)
             if locked:
                 return True
             self.stats.searched += 1
-            radius = s.search_radius_mm if attempt == 0 else s.wide_search_radius_mm
-            return bool(self.tracker.search(radius))
+            return self._search(work, name, attempt)
         except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
             code = _code(e)
             if code is None:
@@ -496,6 +498,22 @@ class CampaignEngine:
             if code == "BEAM_BROKEN":
                 self.stats.beam_breaks += 1
             return False
+
+    def _search(self, work: _Pose, name: str, attempt: int) -> bool:
+        """Search around the aim: narrow first, wide on a later attempt unless the model is
+        trusted; a miss of the last search worth making marks the target out of sight here."""
+        s = self.settings
+        # no further than the prediction may be off: a target missed within that is out of sight
+        # (facing away), and a calibrated model's reach is inside the narrow search
+        reach = min(s.wide_search_radius_mm, getattr(self.predictor, "reach_mm", np.inf))
+        last = reach <= s.search_radius_mm or attempt > 0
+        if self.tracker.search(
+            max(reach, s.search_radius_mm) if attempt > 0 else s.search_radius_mm
+        ):
+            return True
+        if last:  # the arm stands still: searching the same place again is no use
+            work.unseen.add(name)
+        return False
 
     def _measure(self, msg: Measure, work: _Pose) -> None:
         """Measure; after a beam break, a failed search or an inaccurate reading, aim again."""
@@ -505,8 +523,10 @@ class CampaignEngine:
         aim, locked = work.aims[name]
         m = None
         for attempt in range(s.retries + 1):
+            if name in work.unseen:
+                break
             if attempt > 0:
-                locked = self._lock_on(i, aim, attempt)
+                locked = self._lock_on(work, name, aim, attempt)
             if not locked:
                 continue
             try:
@@ -566,16 +586,22 @@ class CampaignEngine:
         t0 = self.clock.now()
         look_s = s.settle_look_samples / NOMINAL_SAMPLE_RATE_HZ
         still: list[np.ndarray] = []
-        misses = 0
+        names = list(self.predictor.names)
+        watched, attempt = name, 0
         while self.clock.now() - t0 < s.pause_s:
-            radius = s.search_radius_mm if misses == 0 else s.wide_search_radius_mm
-            m = self._look(work, name, work.predicted[0], s.settle_look_samples, radius)
-            if m is None:
-                still = []
-                misses += 1
-                if misses > 1:  # not even the wide search finds it: wait the pause out
+            if watched in work.unseen:  # watch the next SMR in sight, if any
+                still, attempt = [], 0
+                left = [n for n in names if n not in work.unseen]
+                if not left:
                     self.clock.sleep(s.pause_s - (self.clock.now() - t0))
-                self.clock.sleep(look_s)  # no reading: give the arm time rather than spin
+                    break
+                watched = left[0]
+            aim = work.predicted[names.index(watched)]
+            m = self._look(work, watched, aim, s.settle_look_samples, attempt)
+            if m is None:
+                still, attempt = [], attempt + 1
+                if watched not in work.unseen:
+                    self.clock.sleep(look_s)  # a lost beam: give it time rather than spin
                 continue
             if getattr(m, "status", "OK") not in ("OK", None):
                 still = []
@@ -585,14 +611,14 @@ class CampaignEngine:
                 break
         self.stats.settle_s.append(self.clock.now() - t0)
 
-    def _look(self, work: _Pose, name: str, aim, samples, radius_mm: float):
+    def _look(self, work: _Pose, name: str, aim, samples, attempt: int):
         """A short measurement of `name`, locking on it first unless the beam holds it."""
         try:
             if work.locked_on != name:
                 work.locked_on = None
                 if self.tracker.point(aim):
                     work.lock_searched = False
-                elif self.tracker.search(radius_mm):
+                elif self._search(work, name, attempt):
                     work.lock_searched = True
                 else:
                     return None
@@ -614,9 +640,10 @@ class CampaignEngine:
 
 
 def _spread(points) -> float:
-    """The largest distance between two of the points."""
+    """The largest difference between two of the points along any axis (the tolerance is a
+    multiple of the tracker's per-axis repeatability)."""
     p = np.asarray(points)
-    return float(np.max(np.linalg.norm(p[:, None] - p[None], axis=-1)))
+    return float(np.max(np.ptp(p, axis=0)))
 
 
 __all__ = ["CampaignEngine", "EngineBusy", "Settings", "StateError", "Stats"]

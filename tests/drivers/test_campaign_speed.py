@@ -6,6 +6,7 @@ import pytest
 from robocal.drivers import predictor as predictor_module
 from robocal.drivers.campaign import Settings
 from robocal.drivers.cell import VirtualCell
+from robocal.drivers.plan import Move
 from robocal.drivers.planning import (
     _nearest_neighbour,
     _path_cost,
@@ -185,3 +186,25 @@ def test_the_order_is_shorter_than_nearest_neighbour_and_two_opt_on_the_move_tim
 def test_the_settle_defaults_look_at_the_tracker_rate():
     s = Settings(settle="adaptive")
     assert s.settle_look_samples / 1000 <= 0.1 and s.settle_looks >= 3
+
+
+def test_a_target_out_of_sight_costs_one_narrow_search_once_the_model_is_calibrated():
+    with simulated_engine(seed=3, n=20) as (engine, poses, sim):
+        dev, names = sim.tracker_device, list(sim.cell.target_names)
+        facing, search, hidden = dev._facing, dev.search, {"on": False}
+        mask = np.array([n == "B" for n in names])
+        dev._facing = lambda p: facing(p) & ~(mask & hidden["on"])
+        searches = []
+
+        def logged(radius):
+            searches.append((hidden["on"], radius))
+            return search(radius)
+
+        dev.search = logged
+        # B faces away at pose 18 only
+        engine.trace = lambda msg: isinstance(msg, Move) and hidden.update(on=msg.pose == 18)
+        stats = engine.run(poses)
+    assert engine.predictor.stage == "calibrated"
+    assert stats.missing == 1 and stats.readings == 20 * 3 - 1
+    # before: a narrow search, then two wide ones of 8 s each
+    assert [r for on, r in searches if on] == [engine.settings.search_radius_mm]
