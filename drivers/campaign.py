@@ -439,10 +439,11 @@ class CampaignEngine:
         """Aim at the first SMR's predicted position as the move ends, so the beam is there when
         the arm arrives. Only a POINT: nothing is measured until the controller reports the arm
         in position (the tracker cannot lock on a moving SMR, and any motion breaks a lock)."""
-        if getattr(self.predictor, "stage", "nominal") == "nominal" or not isinstance(
-            duration, int | float
-        ):
+        if getattr(self.predictor, "stage", "nominal") == "nominal":
             return  # a rough base puts the aim beyond the capture radius: the search comes later
+        last = getattr(self.controller, "last_move", None)
+        if not isinstance(duration, int | float) or getattr(last, "duration_s", 0.0) is None:
+            return  # the MOVEJ reply was lost: the duration is only a bound, no time to aim at
         name = self.predictor.names[0]
         aim = self.predictor.predict(np.deg2rad(work.q_deg))[0]
         self.clock.sleep(t0 + float(duration) - self.settings.point_lead_s - self.clock.now())
