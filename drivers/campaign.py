@@ -20,6 +20,7 @@ from . import lifecycle
 from .lifecycle import StateError
 from .plan import Aim, Checkpoint, Measure, Move, Save, Settle, campaign_plan
 from .predictor import SmrPredictor
+from .tracker.protocol import NOMINAL_SAMPLE_RATE_HZ
 
 # Real seconds between re-checks of a paused run's state: the condition's notify wakes it at
 # once; this bounds the wait even if a clock is virtual or a notify were ever missed.
@@ -35,11 +36,18 @@ class Settings:
     """How to acquire: the paper's procedure by default (fixed 10 s pause at each pose)."""
 
     pause_s: float = 10.0
-    settle: str = "fixed"  # or "adaptive": end the pause once the first SMR's readings agree
-    # two successive readings of a settled SMR differ by noise alone: about 3 sqrt(2) times a
-    # tracker's per-axis repeatability at a few metres
+    settle: str = "fixed"  # or "adaptive": end the pause once the first SMR is seen still
+    # readings of a still SMR differ by noise alone: about 3 sqrt(2) times a tracker's per-axis
+    # repeatability at a few metres
     settle_tol_mm: float = 0.03
-    settle_poll_s: float = 1.0
+    # adaptive settling watches the first SMR in back-to-back looks of this many samples (50 ms
+    # at 1 kHz, a fraction of an arm's ringing period) and calls it still once this many
+    # successive looks, each with a spread the tracker calls OK, agree within settle_tol_mm
+    settle_look_samples: int = 50
+    settle_looks: int = 3
+    # the tracker's head slew (POINT): issued this long before a move's expected end, at the
+    # first SMR's predicted position, the beam is there as the arm arrives
+    point_lead_s: float = 0.05
     samples: int = 1000
     search_radius_mm: float = 10.0
     wide_search_radius_mm: float = 50.0
@@ -90,6 +98,12 @@ class _Pose:
     predicted: np.ndarray | None = None
     skipped: bool = False
     aims: dict = field(default_factory=dict)  # target -> (aim xyz, locked on it)
+    # the target the beam holds since the arm arrived (pointed ahead or settled on), and
+    # whether that lock needed a search
+    locked_on: str | None = None
+    lock_searched: bool = False
+    # targets the widest search worth making missed while the arm stood here: out of sight
+    unseen: set = field(default_factory=set)
 
 
 class CampaignEngine:
@@ -305,8 +319,7 @@ class CampaignEngine:
                     raise AssertionError(f"{type(msg).__name__} before its pose's Move")
                 elif isinstance(msg, Settle):
                     if not work.skipped:
-                        assert work.predicted is not None  # _move predicts every pose it reaches
-                        self._settle(work.predicted[0])
+                        self._settle(work, names[0])
                 elif isinstance(msg, Aim):
                     self._aim(msg, work, names)
                 elif isinstance(msg, Measure):
@@ -409,16 +422,37 @@ class CampaignEngine:
                     return None
                 if self._state == "running":
                     break
+        t0 = self.clock.now()
         try:
-            self.controller.move_abs_j(q_deg)
+            duration = self.controller.move_abs_j(q_deg)
         except ValueError as e:  # the controller client refused the target: nothing moved
             self.log(f"pose {i}: skipped, {e}")
             work.skipped = True
             return work
+        self._point_ahead(work, t0, duration)
         self.controller.wait_in_position(self.clock)
         work.q_rad = np.deg2rad(np.asarray(self.controller.joints(), dtype=float))
         work.predicted = self.predictor.predict(work.q_rad)
         return work
+
+    def _point_ahead(self, work: _Pose, t0: float, duration) -> None:
+        """Aim at the first SMR's predicted position as the move ends, so the beam is there when
+        the arm arrives. Only a POINT: nothing is measured until the controller reports the arm
+        in position (the tracker cannot lock on a moving SMR, and any motion breaks a lock)."""
+        if getattr(self.predictor, "stage", "nominal") == "nominal":
+            return  # a rough base puts the aim beyond the capture radius: the search comes later
+        last = getattr(self.controller, "last_move", None)
+        if not isinstance(duration, int | float) or getattr(last, "duration_s", 0.0) is None:
+            return  # the MOVEJ reply was lost: the duration is only a bound, no time to aim at
+        name = self.predictor.names[0]
+        aim = self.predictor.predict(np.deg2rad(work.q_deg))[0]
+        self.clock.sleep(t0 + float(duration) - self.settings.point_lead_s - self.clock.now())
+        try:
+            if self.tracker.point(aim):
+                work.locked_on, work.lock_searched = name, False
+        except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
+            if _code(e) is None:
+                raise
 
     def _aim(self, msg: Aim, work: _Pose, names) -> None:
         if work.skipped:
@@ -428,22 +462,36 @@ class CampaignEngine:
         self.stats.aimed += 1
         if msg.pose >= 10:
             self.stats.aimed_after_10 += 1
-        work.aims[msg.target] = (aim, self._lock_on(msg.pose, aim, 0))
+        if work.locked_on == msg.target:  # the beam holds it since the arm arrived
+            work.locked_on = None
+            self._count_lock(msg.pose, searched=work.lock_searched)
+            work.aims[msg.target] = (aim, True)
+            return
+        if msg.target in work.unseen:  # the beam stays where it is
+            work.aims[msg.target] = (aim, False)
+            return
+        work.locked_on = None
+        work.aims[msg.target] = (aim, self._lock_on(work, msg.target, aim, 0))
 
-    def _lock_on(self, i: int, aim, attempt: int) -> bool:
+    def _count_lock(self, i: int, searched: bool) -> None:
+        if searched:
+            self.stats.searched += 1
+            return
+        self.stats.locked_first_try += 1
+        if i >= 10:
+            self.stats.locked_after_10 += 1
+
+    def _lock_on(self, work: _Pose, name: str, aim, attempt: int) -> bool:
         """Point at aim, search only if not locked; True once locked."""
-        s = self.settings
+        i = work.index
         try:
             locked = self.tracker.point(aim)
             if locked and attempt == 0:
-                self.stats.locked_first_try += 1
-                if i >= 10:
-                    self.stats.locked_after_10 += 1
+                self._count_lock(i, searched=False)
             if locked:
                 return True
             self.stats.searched += 1
-            radius = s.search_radius_mm if attempt == 0 else s.wide_search_radius_mm
-            return bool(self.tracker.search(radius))
+            return self._search(work, name, attempt)
         except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
             code = _code(e)
             if code is None:
@@ -451,6 +499,22 @@ class CampaignEngine:
             if code == "BEAM_BROKEN":
                 self.stats.beam_breaks += 1
             return False
+
+    def _search(self, work: _Pose, name: str, attempt: int) -> bool:
+        """Search around the aim: narrow first, wide on a later attempt unless the model is
+        trusted; a miss of the last search worth making marks the target out of sight here."""
+        s = self.settings
+        # no further than the prediction may be off: a target missed within that is out of sight
+        # (facing away), and a calibrated model's reach is inside the narrow search
+        reach = min(s.wide_search_radius_mm, getattr(self.predictor, "reach_mm", np.inf))
+        last = reach <= s.search_radius_mm or attempt > 0
+        if self.tracker.search(
+            max(reach, s.search_radius_mm) if attempt > 0 else s.search_radius_mm
+        ):
+            return True
+        if last:  # the arm stands still: searching the same place again is no use
+            work.unseen.add(name)
+        return False
 
     def _measure(self, msg: Measure, work: _Pose) -> None:
         """Measure; after a beam break, a failed search or an inaccurate reading, aim again."""
@@ -460,8 +524,10 @@ class CampaignEngine:
         aim, locked = work.aims[name]
         m = None
         for attempt in range(s.retries + 1):
+            if name in work.unseen:
+                break
             if attempt > 0:
-                locked = self._lock_on(i, aim, attempt)
+                locked = self._lock_on(work, name, aim, attempt)
             if not locked:
                 continue
             try:
@@ -508,35 +574,61 @@ class CampaignEngine:
         self.stats.poses += 1
         return work.q_rad, row
 
-    def _settle(self, first_aim) -> None:
+    def _settle(self, work: _Pose, name: str) -> None:
         s = self.settings
         if s.settle == "fixed":
             self.clock.sleep(s.pause_s)
             self.stats.settle_s.append(s.pause_s)
             return
-        # adaptive: watch the first SMR until two successive readings agree within tolerance
+        # adaptive: watch the first SMR in back-to-back looks at the tracker's own rate until
+        # settle_looks successive ones are still (spread OK) and agree within tolerance; looks
+        # spanning part of a ringing period see it as disagreeing means or as spread
+        assert work.predicted is not None  # _move predicts every pose it reaches
         t0 = self.clock.now()
-        last = None
+        look_s = s.settle_look_samples / NOMINAL_SAMPLE_RATE_HZ
+        still: list[np.ndarray] = []
+        names = list(self.predictor.names)
+        watched, attempt = name, 0
         while self.clock.now() - t0 < s.pause_s:
-            m = self._try_measure(first_aim, samples=max(50, s.samples // 10))
-            if m is not None:
-                cur = np.asarray(m.mean_mm, dtype=float)
-                if last is not None and np.linalg.norm(cur - last) <= s.settle_tol_mm:
+            if watched in work.unseen:  # watch the next SMR in sight, if any
+                still, attempt = [], 0
+                left = [n for n in names if n not in work.unseen]
+                if not left:
+                    self.clock.sleep(s.pause_s - (self.clock.now() - t0))
                     break
-                last = cur
-            self.clock.sleep(s.settle_poll_s)
+                watched = left[0]
+            aim = work.predicted[names.index(watched)]
+            m = self._look(work, watched, aim, s.settle_look_samples, attempt)
+            if m is None:
+                still, attempt = [], attempt + 1
+                if watched not in work.unseen:
+                    self.clock.sleep(look_s)  # a lost beam: give it time rather than spin
+                continue
+            if getattr(m, "status", "OK") not in ("OK", None):
+                still = []
+                continue
+            still = [*still, np.asarray(m.mean_mm, dtype=float)][-s.settle_looks :]
+            if len(still) == s.settle_looks and _spread(still) <= s.settle_tol_mm:
+                break
         self.stats.settle_s.append(self.clock.now() - t0)
 
-    def _try_measure(self, aim, samples):
+    def _look(self, work: _Pose, name: str, aim, samples, attempt: int):
+        """A short measurement of `name`, locking on it first unless the beam holds it."""
         try:
-            if not self.tracker.point(aim) and not self.tracker.search(
-                self.settings.search_radius_mm
-            ):
-                return None
+            if work.locked_on != name:
+                work.locked_on = None
+                if self.tracker.point(aim):
+                    work.lock_searched = False
+                elif self._search(work, name, attempt):
+                    work.lock_searched = True
+                else:
+                    return None
+                work.locked_on = name
             return self.tracker.measure(samples)
         except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
             if _code(e) is None:
                 raise
+            work.locked_on = None
             return None
 
     def _weather(self):
@@ -546,6 +638,13 @@ class CampaignEngine:
             if _code(e) is None:
                 raise
             return None
+
+
+def _spread(points) -> float:
+    """The largest difference between two of the points along any axis (the tolerance is a
+    multiple of the tracker's per-axis repeatability)."""
+    p = np.asarray(points)
+    return float(np.max(np.ptp(p, axis=0)))
 
 
 __all__ = ["CampaignEngine", "EngineBusy", "Settings", "StateError", "Stats"]

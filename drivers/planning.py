@@ -146,8 +146,46 @@ def _two_opt(D: np.ndarray, path: np.ndarray) -> np.ndarray:
     return path
 
 
+OR_OPT_SEGMENT = 3  # longest run of poses Or-opt moves elsewhere in the path
+
+
+def _or_opt(D: np.ndarray, path: np.ndarray) -> np.ndarray:
+    """Move runs of up to OR_OPT_SEGMENT poses (either way round) elsewhere in the open path
+    (path[0] fixed) while that shortens it; the best move of each pass first."""
+    path = path.copy()
+    while True:
+        best_delta, best = -1e-9, None
+        L = len(path)
+        for length in range(1, min(OR_OPT_SEGMENT, L - 2) + 1):
+            for i in range(1, L - length + 1):
+                seg = path[i : i + length]
+                a, b = seg[0], seg[-1]
+                prev = path[i - 1]
+                nxt = path[i + length] if i + length < L else None
+                gain = D[prev, a] + (0.0 if nxt is None else D[b, nxt] - D[prev, nxt])
+                rest = np.concatenate([path[:i], path[i + length :]])
+                lo, hi = rest, np.append(rest[1:], -1)  # insert between lo[j] and hi[j]
+                end = hi < 0
+                hi_ = np.where(end, 0, hi)
+                base = np.where(end, 0.0, D[lo, hi_])
+                fwd = D[lo, a] + np.where(end, 0.0, D[b, hi_]) - base
+                rev = D[lo, b] + np.where(end, 0.0, D[a, hi_]) - base
+                for cost, flip in ((fwd, False), (rev, True)):
+                    j = int(np.argmin(cost))
+                    delta = cost[j] - gain
+                    if delta < best_delta:
+                        best_delta, best = delta, (i, length, j, flip)
+        if best is None:
+            return path
+        i, length, j, flip = best
+        seg = path[i : i + length][::-1] if best[3] else path[i : i + length]
+        rest = np.concatenate([path[:i], path[i + length :]])
+        path = np.concatenate([rest[: j + 1], seg, rest[j + 1 :]])
+
+
 def order_poses(q, start=None, speeds=None) -> np.ndarray:
-    """Deterministic order of q (n, N), never slower than as given: nearest neighbour + 2-opt."""
+    """Deterministic order of q (n, N), never slower than as given: nearest neighbour, then
+    2-opt and Or-opt in turn until neither shortens the path, on the controller's move time."""
     # The path is open; without a start it may begin at any pose.
     q = np.asarray(q, dtype=float)
     n = len(q)
@@ -171,7 +209,10 @@ def order_poses(q, start=None, speeds=None) -> np.ndarray:
         if best is None or _path_cost(D, path) < _path_cost(D, best):
             best = path
     assert best is not None  # n >= 1 poses: at least one path was built
-    best = _two_opt(D, best)
+    cost = np.inf
+    while _path_cost(D, best) < cost - 1e-9:
+        cost = _path_cost(D, best)
+        best = _or_opt(D, _two_opt(D, best))
     given = np.arange(n + 1)
     if _path_cost(D, given) <= _path_cost(D, best):
         best = given

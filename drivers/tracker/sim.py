@@ -30,6 +30,7 @@ INACCURATE_SPREAD = 3.0  # sample std above this many sigma: the target moved wh
 PRESSURE_HPA, HUMIDITY_PCT = 1013.25, 45.0
 WEATHER_NOISE = (0.02, 0.05, 0.2)  # degC, hPa, %
 LOCK_EPS_S = 1e-9
+SAMPLE_RATE_HZ = 1000.0  # samples per second of MEASURE
 
 
 class SimulatedTracker:
@@ -50,7 +51,7 @@ class SimulatedTracker:
         settle_amplitude_mm: float = 0.05,
         settle_tau_s: float = 1.5,
         settle_hz: float = 3.0,
-        sample_rate_hz: float = 1000,
+        sample_rate_hz: float = SAMPLE_RATE_HZ,
         seed: int = 0,
     ):
         if capture_radius_mm <= 0 or sample_rate_hz <= 0 or settle_tau_s <= 0:
