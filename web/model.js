@@ -59,7 +59,9 @@ function renderParameters(p) {
   const rows = id.rows;
   const why = Object.fromEntries(id.fixed.map((f) => [f.parameter, f.why]));
   const group = (g) => rows.filter((r) => r.group === g);
-  const present = (list, kinds) => kinds.filter((k) => list.some((r) => r.kind === k));
+  // The kinds a group has: the usual ones in their order, then any other the convention has.
+  const present = (list, kinds) => [...new Set([...kinds, ...list.map((r) => r.kind)])]
+    .filter((k) => list.some((r) => r.kind === k));
   const joints = group("joint"), base = group("base"), smrs = group("smr");
   const parts = [heading(`Identified parameters (${p.method || "model"}, ${id.convention})`, "h3"),
     Object.assign(document.createElement("p"), {
@@ -93,8 +95,9 @@ function renderParameters(p) {
   $("m-parameters").hidden = false;
 }
 
-/** The validation headline: held-out RMS, the fit RMS beside it; a warning when not deployable. */
-function renderValidation(v, full = null) {
+/** The validation headline: held-out RMS, the fit RMS beside it; a warning when not deployable.
+ * The job's summary has no noise floor nor hold-out method; the parameters' whole block has. */
+function renderValidation(v) {
   const box = $("m-validation");
   box.hidden = !v;
   const unfit = !!v && !v.deployable;
@@ -110,8 +113,8 @@ function renderValidation(v, full = null) {
       textContent: `Held-out RMS ${fmt(v.holdout_rms_mm)} mm` }),
     Object.assign(document.createElement("span"), { id: "m-fit", className: "muted",
       textContent: ` · fit RMS ${fmt(v.fit_rms_mm)} mm`
-        + (full && full.noise_floor_mm ? ` · noise floor ${fmt(full.noise_floor_mm)} mm` : "")
-        + (full ? ` (held out: ${full.holdout})` : "") }));
+        + (v.noise_floor_mm ? ` · noise floor ${fmt(v.noise_floor_mm)} mm` : "")
+        + (v.holdout ? ` (held out: ${v.holdout})` : "") }));
   const parts = [headline];
   if (unfit) {
     const warn = document.createElement("div");
@@ -145,7 +148,7 @@ async function showModel(j) {
   try {
     const p = await api("GET", j.parameters_url.slice(4));
     if (j.id !== state.job) return;  // another job was shown meanwhile
-    if (p.validation) renderValidation(p.validation, p.validation);
+    if (p.validation) renderValidation(p.validation);
     renderParameters(p);
   } catch (e) { say(e.message); }
 }
