@@ -441,9 +441,9 @@ async function showDiagnosis(d) {
     // Optional columns (FORMATS.md section 5), shown only when some effect carries them.
     const extra = EFFECT_EXTRAS.filter(([key]) => report.effects.some((e) => e[key] !== undefined));
     extra.forEach(([, h]) => { head.appendChild(document.createElement("th")).textContent = h; });
-    report.effects.forEach((e) => {
+    report.effects.forEach((e, i) => {
       const tr = body.insertRow();
-      const name = e.name + (e.harmonic ? ` (harmonic ${e.harmonic})` : "")
+      const name = `Effect ${i + 1}: ${e.name}` + (e.harmonic ? ` (harmonic ${e.harmonic})` : "")
         + (e.at_s !== undefined && e.at_s !== null ? ` at ${e.at_s.toFixed(0)} s` : "");
       [name, e.joint ?? "-", e.evidence, formatParameters(e.parameters, e.uncertainty),
        fmt(e.holdout_rmse_before_mm), fmt(e.holdout_rmse_after_mm),
@@ -515,6 +515,7 @@ function showResults(j) {
   $("table3").innerHTML = '<p class="muted">computing every method on this campaign...</p>';
   api("GET", `${charts.slice(4)}/table3`).then(renderTable3)
     .catch((e) => { $("table3").textContent = e.message; });
+  showModel(j);  // web/model.js: validation, identified parameters, recording hint
 }
 
 /** Save a POST answer (a compensation or an export of the shown job's model) as a file. */

@@ -123,7 +123,8 @@ def test_hidden_effect_is_named_with_its_evidence_and_figure(served, page, tmp_p
     # The first effect, most important first, is the hidden one: its type, joint and harmonic.
     row = page.locator("#effects-table tbody tr").first
     cells = row.locator("td").all_text_contents()
-    assert cells[0].split()[0] == name, (hidden, cells)
+    # numbered as the report's effects and their figures are: effect N is effects[N-1]
+    assert cells[0].split()[:3] == ["Effect", "1:", name], (hidden, cells)
     assert cells[1] == (str(joint) if joint is not None else "-"), (hidden, cells)
     if harmonic is not None:
         assert f"(harmonic {harmonic})" in cells[0], (hidden, cells)
