@@ -48,6 +48,7 @@ async function connectEvents() {
       headers: { Accept: "text/event-stream", Authorization: `Bearer ${token}` },
       signal: ctl.signal, cache: "no-store",
     });
+    if (r.status === 401) $("token-state").textContent = "the service refuses this token (see below)";
     if (!r.ok) throw new Error(`GET /api/events: ${r.status}`);
     // The server subscribes before answering: from here on no event is missed.
     live.retryMs = RETRY_MIN_MS;
@@ -89,14 +90,16 @@ function setLive(up) {
   }
 }
 
-/** Read the current campaign, the followed jobs and the lists once. */
+/** Read the current campaign, the followed jobs and the lists once (quietly: a service that
+ * does not answer is already said by the stream's state). */
 async function catchUp() {
   if (campaignLive()) refreshCampaign();
-  refreshHistory();
+  refreshCampaigns().catch(() => {});
+  refreshJobs().catch(() => {});
   for (const id of live.watchers.keys()) {
     try {
       const j = await api("GET", `/jobs/${id}`);
-      if (FINAL_JOB.has(j.state)) endJob(j.id, j); else tellWatchers(j);
+      if (FINAL_JOB.has(j.state)) endJob(j.id, j, true); else tellWatchers(j);
     } catch (e) { /* the next round asks again */ }
   }
 }
@@ -159,8 +162,8 @@ function tellWatchers(j) {
 }
 
 /** A job ended: its watchers get the whole job from the job list (one request, which the
- * history shows too), and a notice says so if it came from the stream. */
-async function endJob(id, job = null, fromStream = false) {
+ * history shows too), and a notice says so if it was seen ending (not found ended). */
+async function endJob(id, job = null, announce = false) {
   if (!job) {
     try { job = (await refreshJobs()).find((x) => x.id === id); } catch (e) { return; }
   }
@@ -170,7 +173,7 @@ async function endJob(id, job = null, fromStream = false) {
   if (w) w.fns.forEach((fn) => fn(job));
   // every calibration's end is announced; a diagnosis's only if it is the page's own
   const announced = job.kind === "calibration" || (job.kind === "diagnosis" && id === state.diag);
-  if (fromStream && announced && !live.noticed.has(id)) {
+  if (announce && announced && !live.noticed.has(id)) {
     live.noticed.add(id);
     jobNotice(job);
   }

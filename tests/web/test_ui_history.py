@@ -9,7 +9,7 @@ from __future__ import annotations
 import re
 
 from tests.server.api.conftest import wait_for
-from tests.web.conftest import shot
+from tests.web.conftest import ARTIFACTS, shot
 
 POSES = 120  # long enough to reload the page while it runs
 
@@ -26,10 +26,14 @@ def _calibrate(page, method: str, requests: list) -> int:
     """Calibrate the page's campaign; the job id, once the notice says it is done."""
     page.select_option("#j-method", method)
     page.wait_for_function("!document.getElementById('calibrate').disabled")
+    shown = page.text_content("#j-state")  # the job shown before (its line changes)
     del requests[:]
     page.click("#calibrate")
     page.wait_for_function(
-        "document.getElementById('j-state').textContent.startsWith('job ')", timeout=30_000
+        "([shown]) => { const t = document.getElementById('j-state').textContent;"
+        " return t.startsWith('job ') && t !== shown; }",
+        arg=[shown],
+        timeout=30_000,
     )
     job = int(re.match(r"job (\d+)", page.text_content("#j-state")).group(1))
     page.wait_for_selector("#notice:not([hidden])", timeout=300_000)
@@ -183,6 +187,8 @@ def test_history_reload_stream_notice_and_compare(served, page):
     # The layout: no horizontal overflow at a laptop's size and at a phone's width.
     _no_overflow(page)
     shot(page, "page-1366x768")
+    page.evaluate("window.scrollTo(0, 0)")  # what the screen shows first
+    page.screenshot(path=str(ARTIFACTS / "page-1366x768-screen.png"))
     page.set_viewport_size({"width": 390, "height": 844})
     _no_overflow(page)
     shot(page, "page-390")
