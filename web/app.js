@@ -3,13 +3,14 @@
 "use strict";
 
 const TOKEN_KEY = "robocal.token";
-const POLL_MS = 400;
-// Final campaign states (drivers/lifecycle.py): nothing more can happen, so polling stops.
+// Final campaign states (drivers/lifecycle.py): nothing more can happen, so no more refreshes.
 const FINAL = new Set(["done", "aborted"]);
 const BUSY_JOB = new Set(["queued", "running"]);
 const $ = (id) => document.getElementById(id);
-const state = { campaign: null, status: null, job: null, diag: null, campaignTimer: null,
-                jobTimer: null, diagTimer: null, failureShown: null,
+// The page's current campaign and jobs; campaign and job are kept in the URL (history.js) so a
+// reload finds them again. Updates come from the event stream (live.js), not from polling.
+const state = { campaign: null, status: null, job: null, diag: null, failureShown: null,
+                jobInfo: null,  // the shown calibration job as last seen
                 verify: null };  // the verification run started from the results: {campaign, job}
 const READINGS_SHOWN = 6;  // the latest readings table keeps this many rows
 
@@ -21,6 +22,13 @@ function say(text, ok = false) {
   m.hidden = false;
   clearTimeout(say.timer);
   say.timer = setTimeout(() => { m.hidden = true; }, ok ? 3000 : 10000);
+}
+
+/** Draw the eye to an element that just changed (a short highlight). */
+function flash(el) {
+  el.classList.remove("flash");
+  void el.offsetWidth;  // restart the animation
+  el.classList.add("flash");
 }
 
 /** Call the API with the tab's token (reads need it too); the Response, or throw with the
@@ -43,7 +51,8 @@ async function request(method, path, body, raw = false, contentType = "applicati
     const fields = Array.isArray(data && data.errors) ? data.errors.map(
       (e) => `${(e.loc || []).join(".")}: ${e.msg}`).join("; ") : "";
     const detail = ((data && data.detail) || r.statusText) + (fields ? ` (${fields})` : "");
-    throw new Error(`${method} /api${path}: ${r.status} ${data.title || r.statusText}: ${detail}`);
+    const hint = r.status === 401 ? " (where the token comes from: section 1)" : "";
+    throw new Error(`${method} /api${path}: ${r.status} ${data.title || r.statusText}: ${detail}${hint}`);
   }
   return r;
 }
@@ -57,11 +66,20 @@ async function api(method, path, body, raw = false, contentType = "application/j
 
 /** An <img> of an API picture: fetched with the token (an src URL cannot carry it). */
 async function showImage(img, url) {
+  img.dataset.url = url;  // the picture this <img> is to show; an older answer is dropped
   try {
     const blob = await (await request("GET", url.replace(/^\/api/, ""))).blob();
+    if (img.dataset.url !== url) return;
     if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
     img.src = URL.createObjectURL(blob);
   } catch (e) { say(e.message); }
+}
+
+/** Empty an <img> of an API picture (another job's is not to be seen meanwhile). */
+function clearImage(img) {
+  if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+  img.removeAttribute("src");
+  delete img.dataset.url;
 }
 
 // Download links to the API (model, recording, report) keep their /api href for people to
@@ -90,7 +108,7 @@ $("token-form").addEventListener("submit", (ev) => {
   if (t) sessionStorage.setItem(TOKEN_KEY, t); else sessionStorage.removeItem(TOKEN_KEY);
   $("token").value = "";
   showTokenState();
-  loadCells();  // the first load, without a token, was refused
+  tokenChanged();  // the first loads, without a token, were refused (history.js)
 });
 
 /** A cell's picker label: simulated, or the real devices a campaign on it will drive. */
@@ -100,14 +118,19 @@ function cellLabel(c) {
     : `${c.id} (real: tracker ${d.tracker.host}:${d.tracker.port}, controller ${d.controller.url})`;
 }
 
+// SMRs per cell id, for the duration estimate (plan.js).
+const cellSmrs = new Map();
+
 /** Fill the cell picker from GET /api/cells, keeping (or setting) the selection. */
 async function loadCells(select) {
   try {
     const ids = await api("GET", "/cells");
     const cells = await Promise.all(ids.map((id) => api("GET", `/cells/${id}`)));
+    cells.forEach((c) => cellSmrs.set(c.id, Object.keys(c.cell.targets || {}).length));
     const pick = select || $("c-cell").value || "default";
     $("c-cell").replaceChildren(...cells.map((c) => new Option(cellLabel(c), c.id)));
     $("c-cell").value = ids.includes(pick) ? pick : ids[0];
+    showEstimate();
   } catch (e) { say(e.message); }
 }
 
@@ -124,10 +147,22 @@ $("cell-upload-btn").addEventListener("click", async () => {
 /** A campaign becomes the page's current one: progress, readings, calibration enabled if done.
  * The results stay shown for a verification run of their model (keepResults). */
 function useCampaign(c, keepResults = false) {
+  const other = state.campaign !== c.id;
   state.campaign = c.id;
+  if (other) readingsSeen.total = 0;
   showCampaign(c);
-  $("results").hidden = !keepResults;
-  $("readings").innerHTML = '<p class="muted">none yet</p>';
+  if (!keepResults) {
+    $("results").hidden = true;
+    forgetJob();
+  }
+  if (other) $("readings").innerHTML = '<p class="muted">none yet</p>';
+  rememberView();  // history.js: the URL says what the page shows
+}
+
+/** No calibration job shown any more (another campaign became the page's). */
+function forgetJob() {
+  state.job = state.jobInfo = null;
+  $("j-state").textContent = "";
 }
 
 // A meas.csv measured elsewhere (or by `robocal simulate`) becomes a done campaign on the chosen
@@ -140,40 +175,36 @@ $("m-import-btn").addEventListener("click", async () => {
   try {
     const c = await api("POST", `/measurements/import?${query}`, await file.text(), true, "text/csv");
     useCampaign(c);
-    await pollReadings(c.id);
+    await refreshReadings(c.id);
     say(`${file.name} imported as campaign ${c.id} (${c.poses_done} poses)`, true);
   } catch (e) { say(e.message); }
 });
 
 $("campaign-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
-  const body = {
-    poses: Number($("c-poses").value), seed: Number($("c-seed").value),
-    settle: $("c-settle").value, cell_id: $("c-cell").value || "default",
-  };
-  if ($("c-name").value.trim()) body.name = $("c-name").value.trim();
-  if (Number($("c-choose").value) > 0) body.choose_from = Number($("c-choose").value);
+  const body = planBody();  // plan.js: the form's fields as CampaignCreate takes them
   try {
     const r = await request("POST", "/campaigns", body);
     // 202: a planning that takes seconds (a D-optimal choice) is a job; follow it to its campaign.
     const c = r.status === 202 ? await planned(await r.json()) : await r.json();
+    plannedSmrs.set(c.id, cellSmrs.get(body.cell_id));
     useCampaign(c);
     say(`campaign ${c.id} planned on cell ${body.cell_id}`, true);
   } catch (e) { say(e.message); }
 });
 
-/** Follow a planning job until it is done (its campaign) or failed (throws its reason). */
+/** Follow a planning job, from the event stream, until it is done (its campaign) or failed
+ * (throws its reason). */
 async function planned(job) {
   const shown = $("c-planning");
   shown.hidden = false;
   try {
-    for (;;) {
-      shown.textContent = `planning... ${Math.round(job.progress * 100)} %`;
-      if (job.state === "done") return await api("GET", `/campaigns/${job.campaign_id}`);
-      if (job.state === "failed") throw new Error(`planning job ${job.id} failed: ${job.reason}`);
-      await new Promise((ok) => setTimeout(ok, POLL_MS));
-      job = await api("GET", `/jobs/${job.id}`);
-    }
+    const end = await new Promise((ok) => watchJob(job, (j) => {
+      shown.textContent = `planning... ${Math.round(j.progress * 100)} %`;
+      if (!BUSY_JOB.has(j.state)) ok(j);
+    }));
+    if (end.state === "failed") throw new Error(`planning job ${end.id} failed: ${end.reason}`);
+    return await api("GET", `/campaigns/${end.campaign_id}`);
   } finally { shown.hidden = true; }
 }
 
@@ -181,12 +212,12 @@ async function planned(job) {
 // API reports for the campaign's state, so a click the state does not allow cannot be made.
 document.querySelectorAll("button[data-action]").forEach((b) => b.addEventListener("click", async () => {
   const action = b.dataset.action;
-  b.disabled = true;  // no double click while the request is out; the next poll re-enables
+  b.disabled = true;  // no double click while the request is out; the refresh re-enables
   try {
     const r = await api("POST", `/campaigns/${state.campaign}/${action}`);
     say(`${action}: ${r.status || "ok"}${r.note ? ` (${r.note})` : ""}`, true);
   } catch (e) { say(e.message); }
-  pollCampaign();  // the action may have changed the state either way
+  refreshCampaign();  // the action may have changed the state either way
 }));
 
 // The header's emergency stop: whatever campaign runs, whichever page state this is.
@@ -197,8 +228,15 @@ $("estop-all").addEventListener("click", async () => {
       : `emergency stop: campaign ${r.campaign_id} stopped${r.note ? ` (${r.note})` : ""}`,
     true);
   } catch (e) { say(e.message); }
-  if (state.campaign !== null) pollCampaign();
+  if (state.campaign !== null) refreshCampaign();
 });
+
+/** The progress bar and count (also from each pose's event, without asking the API). */
+function showPoseCount(done, total) {
+  $("p-bar").max = total || 1;
+  $("p-bar").value = done;
+  $("p-count").textContent = `${done} / ${total} poses`;
+}
 
 function showCampaign(c) {
   $("progress").hidden = false;
@@ -207,9 +245,8 @@ function showCampaign(c) {
   $("p-status").textContent = c.status;
   $("p-run").textContent = c.run && c.run.detail
     ? `${c.run.active ? "run" : "last run"}: ${c.run.detail}` : "";
-  $("p-bar").max = c.poses_total || 1;
-  $("p-bar").value = c.poses_done;
-  $("p-count").textContent = `${c.poses_done} / ${c.poses_total} poses`;
+  showPoseCount(c.poses_done, c.poses_total);
+  if (c.settings) showPlannedEstimate(c);  // plan.js
   const actions = new Set(c.actions || []);
   document.querySelectorAll("button[data-action]").forEach((b) => {
     b.disabled = !actions.has(b.dataset.action);
@@ -231,42 +268,58 @@ async function refreshCalibrate() {
   const id = state.campaign;
   if (state.status !== "done") { $("calibrate").disabled = true; return; }
   try {
-    const jobs = await api("GET", "/jobs");
+    const jobs = await refreshJobs();  // history.js: the job list, shown there too
     if (id !== state.campaign) return;
     $("calibrate").disabled = jobs.some((j) => j.campaign_id === id && j.kind === "calibration"
                                               && BUSY_JOB.has(j.state));
   } catch (e) { $("calibrate").disabled = false; }  // the API refuses a duplicate anyway (409)
 }
 
-async function pollCampaign() {
-  clearTimeout(state.campaignTimer);
-  const id = state.campaign;
-  try {
-    const c = await api("GET", `/campaigns/${id}`);
-    if (id !== state.campaign) return;  // another campaign was created meanwhile
-    showCampaign(c);
-    await pollReadings(id);
-    // done, until the run has also stored its summary (the state ends a moment before it)
-    if (FINAL.has(c.status) && !(c.run && c.run.active)) {
-      // a verification's figures come from its stored readings: only once the run has ended
-      if (c.kind === "verification" && c.status === "done") await showVerification(c.id);
-      return;
-    }
-  } catch (e) { say(e.message); }
-  state.campaignTimer = setTimeout(pollCampaign, POLL_MS);
+/** Whether the current campaign may still change: not final, or its run not yet wound up (the
+ * state ends a moment before the run has stored its summary). */
+function campaignLive() {
+  return state.campaign !== null && (!FINAL.has(state.status) || state.runActive);
 }
 
-/** The last few readings of the campaign, newest last: the total from a one-reading page,
- * then the last page (readings come in pages). */
-async function pollReadings(id) {
+/** Read the current campaign and its latest readings once (on its events, after an action). */
+async function refreshCampaign() {
+  const id = state.campaign;
+  if (id === null) return;
   try {
-    const first = await request("GET", `/campaigns/${id}/measurements?limit=1`);
-    const total = Number(first.headers.get("X-Total-Count") || 0);
-    const offset = Math.max(0, total - READINGS_SHOWN);
-    const rows = total ? await api("GET",
-      `/campaigns/${id}/measurements?offset=${offset}&limit=${READINGS_SHOWN}`) : [];
+    const c = await api("GET", `/campaigns/${id}`);
+    if (id !== state.campaign) return;  // another campaign was opened meanwhile
+    state.runActive = !!(c.run && c.run.active);
+    showCampaign(c);
+    await refreshReadings(id);
+    // a verification's figures come from its stored readings: only once the run has ended
+    if (c.kind === "verification" && c.status === "done" && !state.runActive) {
+      await showVerification(c.id);
+    }
+  } catch (e) { say(e.message); }
+}
+
+// The readings total last seen: the next page asked for starts just before it, so one request
+// usually brings the last rows (a second one only when more came than that page holds).
+const readingsSeen = { total: 0 };
+const READINGS_AHEAD = 60;
+
+/** The last few readings of the campaign, newest last (readings come in pages). */
+async function refreshReadings(id) {
+  try {
+    let offset = Math.max(0, readingsSeen.total - READINGS_SHOWN);
+    let r = await request("GET",
+      `/campaigns/${id}/measurements?offset=${offset}&limit=${READINGS_SHOWN + READINGS_AHEAD}`);
+    let total = Number(r.headers.get("X-Total-Count") || 0);
+    let rows = await r.json();
+    if (offset + rows.length < total || (offset > 0 && offset >= total)) {  // missed the end
+      offset = Math.max(0, total - READINGS_SHOWN);
+      r = await request("GET", `/campaigns/${id}/measurements?offset=${offset}&limit=${READINGS_SHOWN}`);
+      total = Number(r.headers.get("X-Total-Count") || 0);
+      rows = await r.json();
+    }
     if (id !== state.campaign) return;
-    renderReadings(rows, total);
+    readingsSeen.total = total;
+    renderReadings(rows.slice(-READINGS_SHOWN), total);
   } catch (e) { say(e.message); }
 }
 
@@ -298,11 +351,11 @@ $("job-form").addEventListener("submit", async (ev) => {
     const j = await api("POST", "/jobs", { campaign_id: state.campaign, method: $("j-method").value });
     state.job = j.id;
     state.diag = null;
-    clearTimeout(state.diagTimer);
     $("results").hidden = true;
     $("diagnosis").hidden = true;
     showJob(j);
-    pollJob();
+    rememberView();
+    watchJob(j, followJob);
     // Automatic extensions: a diagnosis job on the same campaign, alongside the calibration.
     if ($("j-auto").checked) {
       const d = await api("POST", "/jobs", { campaign_id: state.campaign, kind: "diagnosis" });
@@ -312,24 +365,20 @@ $("job-form").addEventListener("submit", async (ev) => {
       $("d-unexplained").hidden = $("d-outliers").hidden = true;
       $("d-figures").replaceChildren();
       $("d-links").replaceChildren();
-      pollDiagnosis();
+      watchJob(d, followDiagnosis);
     }
   } catch (e) { say(e.message); refreshCalibrate(); }
 });
 
-async function pollDiagnosis() {
-  clearTimeout(state.diagTimer);
-  const id = state.diag;
+/** The diagnosis job's state as its events (live.js) tell it; its report once done. */
+async function followDiagnosis(d) {
+  if (d.id !== state.diag) return;
+  $("d-state").textContent = `diagnosis job ${d.id}: ${d.state}`
+    + (d.state === "running" ? ` (${Math.round(d.progress * 100)} %)` : "")
+    + (d.reason ? `: ${d.reason}` : "");
   try {
-    const d = await api("GET", `/jobs/${id}`);
-    if (id !== state.diag) return;
-    $("d-state").textContent = `diagnosis job ${d.id}: ${d.state}`
-      + (d.state === "running" ? ` (${Math.round(d.progress * 100)} %)` : "")
-      + (d.reason ? `: ${d.reason}` : "");
-    if (d.state === "done") return await showDiagnosis(d);
-    if (d.state === "failed") return say(`diagnosis job ${d.id} failed: ${d.reason}`);
-  } catch (e) { say(e.message); return; }
-  state.diagTimer = setTimeout(pollDiagnosis, POLL_MS);
+    if (d.state === "done") await showDiagnosis(d);
+  } catch (e) { say(e.message); }
 }
 
 const UNITS = [["_ppm_per_c", "ppm/°C"], ["_ppm_per_hour", "ppm/h"], ["_deg", "deg"],
@@ -480,25 +529,24 @@ async function showDiagnosis(d) {
 }
 
 function showJob(j) {
-  $("j-state").textContent = `job ${j.id} (${j.method}): ${j.state}${j.reason ? `: ${j.reason}` : ""}`;
+  state.jobInfo = j;
+  $("j-state").textContent = `job ${j.id} (${j.method}): ${j.state}`
+    + (j.state === "running" && j.progress ? ` (${Math.round(j.progress * 100)} %)` : "")
+    + (j.reason ? `: ${j.reason}` : "");
 }
 
-async function pollJob() {
-  clearTimeout(state.jobTimer);
-  const id = state.job;
-  try {
-    const j = await api("GET", `/jobs/${id}`);
-    if (id !== state.job) return;
-    showJob(j);
-    if (!BUSY_JOB.has(j.state)) refreshCalibrate();
-    if (j.state === "done") return showResults(j);
-    if (j.state === "failed") return say(`job ${j.id} failed: ${j.reason}`);
-  } catch (e) { say(e.message); }
-  state.jobTimer = setTimeout(pollJob, POLL_MS);
+/** The shown calibration job as its events (live.js) tell it; its results once done (the
+ * job-end notice is live.js's, for every job). */
+function followJob(j) {
+  if (j.id !== state.job) return;
+  showJob(j);
+  if (!BUSY_JOB.has(j.state)) refreshCalibrate();
+  if (j.state === "done") showResults(j);
 }
 
 function showResults(j) {
   $("results").hidden = false;
+  flash($("results"));
   if (!state.verify || state.verify.job !== j.id) resetVerification();  // another model's run
   $("model-link").href = j.model_url;
   $("model-link").setAttribute("download", `job-${j.id}.model.json`);
@@ -510,11 +558,11 @@ function showResults(j) {
     $("recording-link").setAttribute("download", `job-${j.id}.rrd`);
   }
   const charts = `/api/charts/jobs/${j.id}`;
-  showImage($("boxplot"), `${charts}/boxplot.png`);
-  showImage($("errors"), `${charts}/errors.png`);
+  ["boxplot", "errors"].forEach((id) => { clearImage($(id)); showImage($(id), `${charts}/${id}.png`); });
   $("table3").innerHTML = '<p class="muted">computing every method on this campaign...</p>';
-  api("GET", `${charts.slice(4)}/table3`).then(renderTable3)
-    .catch((e) => { $("table3").textContent = e.message; });
+  // an answer for a job no longer shown is dropped
+  api("GET", `${charts.slice(4)}/table3`).then((t) => { if (state.job === j.id) renderTable3(t); })
+    .catch((e) => { if (state.job === j.id) $("table3").textContent = e.message; });
   showModel(j);  // web/model.js: validation, identified parameters, recording hint
 }
 
@@ -581,7 +629,7 @@ $("v-start").addEventListener("click", async () => {
     resetVerification();  // a refused run (409, 422) leaves the one shown as it was
     state.verify = { campaign: c.id, job };
     useCampaign(c, true);
-    pollCampaign();
+    refreshCampaign();
     say(`verification campaign ${c.id} of job ${job}'s model started`, true);
   } catch (e) { $("v-state").textContent = shown; say(e.message); }
   $("v-start").disabled = false;
@@ -675,5 +723,4 @@ function renderTable3(t) {
   $("table3").replaceChildren(table);
 }
 
-showTokenState();
-if (sessionStorage.getItem(TOKEN_KEY)) loadCells();
+// The page starts in history.js, the last script: it restores the view the URL names.

@@ -47,7 +47,7 @@ def calibrate_on_page(served, page, cid: int) -> dict:
     page.click("#token-form button[type=submit]")
     page.wait_for_selector("#c-cell option[value=default]", state="attached")
     page.evaluate(
-        "async (cid) => { useCampaign(await api('GET', `/campaigns/${cid}`)); pollCampaign(); }",
+        "async (cid) => { useCampaign(await api('GET', `/campaigns/${cid}`)); refreshCampaign(); }",
         cid,
     )
     page.wait_for_function("!document.getElementById('calibrate').disabled")
