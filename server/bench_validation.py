@@ -57,10 +57,13 @@ def _verdict(cell, meas, method) -> dict:
 
     t0 = time.perf_counter()
     try:
-        cal = workflow.run_method(cell, meas, method)
+        if method == "diagnose":  # the diagnosis's final model, its extensions included
+            v = workflow.diagnose(cell, meas, screen=False)[1].meta["validation"]
+        else:
+            cal = workflow.run_method(cell, meas, method)
+            v = workflow.model_file(cal, cell, meas).meta["validation"]
     except NotIdentifiable as e:  # refused before any model: as good as flagged
         return {"deployable": False, "reasons": [f"refused: {e}"], "refused": True}
-    v = workflow.model_file(cal, cell, meas).meta["validation"]
     return {
         "deployable": v["deployable"],
         "reasons": v["reasons"],
@@ -102,7 +105,9 @@ def run(seeds: int, method: str, real_dirs: list[Path]) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m robocal.server.bench_validation")
     p.add_argument("--seeds", type=int, default=20, help="healthy simulated campaigns")
-    p.add_argument("--method", default="minimax", help="calibration method")
+    p.add_argument(
+        "--method", default="minimax", help="calibration method, or diagnose (its final model)"
+    )
     p.add_argument("--real", nargs="*", default=[], help="folders with train.csv and cell.json")
     args = p.parse_args(argv)
     json.dump(run(args.seeds, args.method, [Path(d) for d in args.real]), sys.stdout, indent=1)

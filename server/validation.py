@@ -36,7 +36,9 @@ def noise_floor(cell: Cell, meas: Measurements) -> tuple[float | None, str]:
     return float(np.sqrt(np.mean(3.0 * sigma**2))), SPEC_FLOOR
 
 
-def validation_block(v: guard.Validation, pose_ids, source: str) -> dict:
+def validation_block(
+    v: guard.Validation, pose_ids, source: str, holdout_method: str = HOLDOUT_METHOD
+) -> dict:
     """model.json's `validation` block: the verdict, its reasons, the held-out figure (the
     headline) beside the fit's, and the limits applied."""
     return {
@@ -45,7 +47,7 @@ def validation_block(v: guard.Validation, pose_ids, source: str) -> dict:
         "holdout_rms_mm": _num(v.holdout_rms_mm),
         "holdout_max_mm": _num(v.holdout_max_mm),
         "fit_rms_mm": _num(v.fit_rms_mm),
-        "holdout": HOLDOUT_METHOD,
+        "holdout": holdout_method,
         "condition_number": _num(v.condition_number),
         "equations": v.equations,
         "free_parameters": v.free_parameters,

@@ -128,13 +128,13 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.J
         calibration=cal,
         viewer_url=setup.viewer_url,
     )
-    v = model.get("validation") or {}
+    return {"model": str(path), "recording": str(rrd), **_verdict(model.get("validation"))}
+
+
+def _verdict(v: dict | None) -> dict:
+    """A job's results' summary of its model's validation block (none: nothing)."""
     keep = ("deployable", "reasons", "holdout_rms_mm", "fit_rms_mm")
-    return {
-        "model": str(path),
-        "recording": str(rrd),
-        **({"validation": {k: v[k] for k in keep}} if v else {}),
-    }
+    return {"validation": {k: v[k] for k in keep}} if v else {}
 
 
 def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.JobInfo) -> dict:
@@ -155,4 +155,9 @@ def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.Jo
         path,
         list_figures=True,
     )
-    return {"model": str(path), "report": str(report_path), "figures": [str(p) for p in figures]}
+    return {
+        "model": str(path),
+        "report": str(report_path),
+        "figures": [str(p) for p in figures],
+        **_verdict(model.meta.get("validation")),
+    }

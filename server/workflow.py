@@ -379,7 +379,39 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     if d.errors is not None:
         model.meta["uncertainty"] = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
+        model.meta["validation"] = validate_diagnosis(d, cell, meas, model)
     return d, model
+
+
+def validate_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> dict:
+    """model.json's `validation` block of a diagnosis's final model: its own cross-validated
+    held-out figures against its fit, the geometry's condition number as ls-sum finds it."""
+    from robocal.solver import validation as guard
+    from robocal.solver.calibrate import calibrate
+    from robocal.solver.diagnose import FOLDS
+
+    from .validation import noise_floor, validation_block
+
+    targets = np.array([cell.targets[t] for t in meas.target_names])
+    geometric = calibrate(
+        cell.robot, targets, meas.target_names, meas.q, meas.xyz, "ls-sum", base_guess=cell.base
+    )
+    r = np.linalg.norm(model_predict(model, meas.q, meas.time_s, meas.temp_c) - meas.xyz, axis=-1)
+    r = r[np.isfinite(r)]
+    floor, source = noise_floor(cell, meas)
+    final = d.report["final"]
+    v = guard.judge(
+        fit_rms_mm=float(np.sqrt(np.mean(r * r))),
+        holdout=guard.CrossValidated(final["holdout_rmse_mm"], final["holdout_max_mm"]),
+        condition_number=geometric.condition,
+        equations=3 * int(meas.mask.sum()),
+        free_parameters=int(np.count_nonzero(d.errors.parameters.column >= 0)),
+        poses=int(np.any(meas.mask, axis=1).sum()),
+        noise_floor_mm=floor,
+        noise_floor_source=source,
+    )
+    method = f"{FOLDS}-fold cross-validation of the diagnosis"
+    return validation_block(v, list(meas.pose_ids), source, method)
 
 
 def write_diagnosis(

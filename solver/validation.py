@@ -55,6 +55,21 @@ class Holdout:
         return float(n.max()) if n.size else float("nan")
 
 
+@dataclass
+class CrossValidated:
+    """Held-out figures a cross-validation gave elsewhere (a diagnosis's folds), in mm."""
+
+    rms_mm: float
+    max_mm: float
+    unsupported: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+
+    def rms(self) -> float:
+        return self.rms_mm
+
+    def max(self) -> float:
+        return self.max_mm
+
+
 def leave_one_pose_out(rows: Rows, point: np.ndarray | None = None) -> Holdout:
     """Held-out point errors of every reading, linearised at the fit (see the module's
     docstring). point (N,) bool: the rows that are point errors (predicted - measured, three
@@ -120,7 +135,7 @@ class Validation:
 def judge(
     *,
     fit_rms_mm: float,
-    holdout: Holdout,
+    holdout: Holdout | CrossValidated,
     condition_number: float,
     equations: int,
     free_parameters: int,

@@ -111,3 +111,17 @@ def test_the_base_standard_errors_are_those_of_the_tracker_frame():
     want = np.sqrt(np.diag(C))
     assert [se["base_x"], se["base_y"], se["base_z"]] == pytest.approx(want.tolist(), rel=1e-4)
     assert all(se[n] > 0 for n in ("base_rz", "base_ry", "base_rx"))
+
+
+@pytest.mark.parametrize(
+    ("poses", "effects", "deployable"), [(8, (), False), (60, ("joint_compliance:2",), True)]
+)
+def test_a_diagnosis_model_is_judged_on_its_own_cross_validation(poses, effects, deployable):
+    cell, meas = campaign(poses, 21, effects)
+    d, model = workflow.diagnose(cell, meas, screen=False)
+    v = model.meta["validation"]
+    assert v["deployable"] is deployable, v["reasons"]
+    assert v["holdout"].startswith("5-fold cross-validation")
+    assert v["holdout_rms_mm"] == pytest.approx(d.report["final"]["holdout_rmse_mm"])
+    if not deployable:
+        assert any(r.startswith("too few poses") for r in v["reasons"])
