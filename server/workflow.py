@@ -379,23 +379,42 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     if d.errors is not None:
         model.meta["uncertainty"] = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
-        model.meta["validation"] = validate_diagnosis(d, cell, meas, model)
+        _judge_diagnosis(d, cell, meas, model)
     return d, model
 
 
-def validate_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> dict:
-    """model.json's `validation` block of a diagnosis's final model: its own cross-validated
-    held-out figures against its fit, the geometry's condition number as ls-sum finds it."""
-    from robocal.solver import validation as guard
+def _judge_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> None:
+    """The `identified` and `validation` blocks of a diagnosis's final model, as a calibration's:
+    the held-fixed parameters and the condition number of the geometry as ls-sum finds them."""
     from robocal.solver.calibrate import calibrate
-    from robocal.solver.diagnose import FOLDS
 
-    from .validation import noise_floor, validation_block
+    from .identified import identified_block
 
     targets = np.array([cell.targets[t] for t in meas.target_names])
     geometric = calibrate(
         cell.robot, targets, meas.target_names, meas.q, meas.xyz, "ls-sum", base_guess=cell.base
     )
+    model.meta["identified"] = identified_block(
+        model,
+        d.errors.parameters,
+        fixed=geometric.fixed,
+        condition=geometric.condition,
+        nominal_targets={t: cell.targets[t] for t in meas.target_names},
+        nominal_base=cell.base,
+    )
+    model.meta["validation"] = validate_diagnosis(d, cell, meas, model, geometric.condition)
+
+
+def validate_diagnosis(
+    d, cell: Cell, meas: Measurements, model: ModelFile, condition: float
+) -> dict:
+    """model.json's `validation` block of a diagnosis's final model: its own cross-validated
+    held-out figures against its fit, with the geometry's condition number."""
+    from robocal.solver import validation as guard
+    from robocal.solver.diagnose import FOLDS
+
+    from .validation import noise_floor, validation_block
+
     r = np.linalg.norm(model_predict(model, meas.q, meas.time_s, meas.temp_c) - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
     floor, source = noise_floor(cell, meas)
@@ -403,7 +422,7 @@ def validate_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> d
     v = guard.judge(
         fit_rms_mm=float(np.sqrt(np.mean(r * r))),
         holdout=guard.CrossValidated(final["holdout_rmse_mm"], final["holdout_max_mm"]),
-        condition_number=geometric.condition,
+        condition_number=condition,
         equations=3 * int(meas.mask.sum()),
         free_parameters=int(np.count_nonzero(d.errors.parameters.column >= 0)),
         poses=int(np.any(meas.mask, axis=1).sum()),
