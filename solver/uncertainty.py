@@ -23,6 +23,16 @@ CLUSTERED = "pose-clustered sandwich (CR2)"
 ABSORBED = 1e-9
 
 
+def pose_blocks(pose: np.ndarray):
+    """The rows of each pose, grouped by their count: (n, (poses, n) row indices) pairs, so that
+    poses with as many rows are handled at once."""
+    order = np.argsort(pose, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(pose[order]) != 0])
+    blocks = np.split(order, starts[1:])
+    for n in sorted({len(b) for b in blocks}):
+        yield n, np.array([b for b in blocks if len(b) == n])
+
+
 @dataclass
 class Rows:
     """The residual rows of a fit: Jacobian, estimating weights, residuals, pose and stage of each.
@@ -78,12 +88,8 @@ def clustered(rows: Rows) -> np.ndarray:
     Ai = _bread(rows)
     C = Ai @ (rows.G.T @ rows.G) @ Ai.T
     meat = np.zeros_like(Ai)
-    order = np.argsort(rows.pose, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(rows.pose[order]) != 0])
-    blocks = np.split(order, starts[1:])
     # poses with as many rows (all readings present) are done at once
-    for n in {len(b) for b in blocks}:
-        idx = np.array([b for b in blocks if len(b) == n])  # (poses, n)
+    for n, idx in pose_blocks(rows.pose):
         J, G, r = rows.J[idx], rows.G[idx], rows.r[idx]
         P = J.shape[-1]
         # one large product each, then the small per-pose ones

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .finite import finite
-from .uncertainty import Rows
+from .uncertainty import Rows, pose_blocks
 
 # A deployable model has at least this many equations (3 per reading) per free parameter.
 MIN_EQUATIONS_PER_PARAMETER = 3
@@ -81,11 +81,7 @@ def leave_one_pose_out(rows: Rows, point: np.ndarray | None = None) -> Holdout:
     Ai = np.linalg.pinv(A / np.outer(d, d)) / np.outer(d, d)
     out = np.full(len(rows.r), np.nan)
     unsupported = []
-    order = np.argsort(rows.pose, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(rows.pose[order]) != 0])
-    blocks = np.split(order, starts[1:])
-    for n in {len(b) for b in blocks}:
-        idx = np.array([b for b in blocks if len(b) == n])  # (poses, n)
+    for n, idx in pose_blocks(rows.pose):
         J, G, r = rows.J[idx], rows.G[idx], rows.r[idx]
         P = J.shape[-1]
         H = np.einsum("bip,bjp->bij", (J.reshape(-1, P) @ Ai).reshape(J.shape), G)

@@ -113,6 +113,18 @@ def finished(c, cid, timeout=90.0) -> dict:
     )
 
 
+def calibrated(c, cid) -> dict:
+    """The done ls-sum calibration job of the campaign."""
+    job = c.post("/api/jobs", json={"campaign_id": cid, "method": "ls-sum"}).json()
+    job = wait_for(
+        lambda: c.get(f"/api/jobs/{job['id']}").json(),
+        lambda j: j["state"] in ("done", "failed"),
+        timeout=60,
+    )
+    assert job["state"] == "done", job
+    return job
+
+
 def test_campaign_on_real_devices_survives_a_lost_controller_resumes_and_calibrates(live, devices):
     c = live.client
     r = c.post("/api/cells", json=cell_json(devices))
@@ -160,13 +172,7 @@ def test_campaign_on_real_devices_survives_a_lost_controller_resumes_and_calibra
     assert RUN["poses"] <= len(devices.controller.moves) <= RUN["poses"] + 1
     assert time.monotonic() - t0 > RUN["poses"] * RUN["pause_s"]
 
-    job = c.post("/api/jobs", json={"campaign_id": cid, "method": "ls-sum"}).json()
-    job = wait_for(
-        lambda: c.get(f"/api/jobs/{job['id']}").json(),
-        lambda j: j["state"] in ("done", "failed"),
-        timeout=60,
-    )
-    assert job["state"] == "done", job
+    job = calibrated(c, cid)
     model = c.get(job["model_url"]).json()
     assert model["method"] == "ls-sum" and model["data"]["poses"] == RUN["poses"]
 
@@ -278,13 +284,7 @@ def test_verification_on_real_devices(live, devices):
     cid = c.post("/api/campaigns", json={"name": "cal", "cell_id": cell_id, **run}).json()["id"]
     assert c.post(f"/api/campaigns/{cid}/start").status_code == 202
     assert finished(c, cid, timeout=120)["status"] == "done"
-    job = c.post("/api/jobs", json={"campaign_id": cid, "method": "ls-sum"}).json()
-    job = wait_for(
-        lambda: c.get(f"/api/jobs/{job['id']}").json(),
-        lambda j: j["state"] in ("done", "failed"),
-        timeout=60,
-    )
-    assert job["state"] == "done", job
+    job = calibrated(c, cid)
 
     moves = len(devices.controller.moves)
     r = c.post(

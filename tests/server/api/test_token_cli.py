@@ -11,18 +11,9 @@ import time
 import httpx
 
 from tests.server.api.conftest import free_port
+from tests.server.test_cli import robocal
 
 TOKEN = re.compile(r"API token \(shown once, keep it\): (\S+)")
-
-
-def robocal(*args, cwd):
-    return subprocess.run(
-        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
 
 
 def start(tmp_path, port):
