@@ -213,10 +213,10 @@ class PointNormal:
         if normal:
             ne = self._assemble(start, tc, M, U)  # scales U as below
             return r, cast(_Jt, ne.jt), ne
-        root, inv = _root_weight(tc)
-        ng = len(self.gcols)
-        U[:ng] *= root[:, None]
-        return r, _Jt(self, tc, start, R, U[:ng], inv), None
+        # U as it is with unit weights: scaling it by the weight's root and its products by the
+        # inverse (as _assemble's rank-k update needs) would cancel, dead rows aside, whose
+        # twist sums are zero (no SMR off their axis)
+        return r, _Jt(self, tc, start, R, U[: len(self.gcols)], np.ones(6)), None
 
     def _assemble(self, start, tc, M, U) -> Normal:
         """J'J, J'r and the cost from the SMR frame's poses M and its twists U (see flange_twists).
@@ -340,7 +340,10 @@ class _Jt:
         K, m = rho.shape[1:]
         B = np.empty((K, 6, m))  # per SMR, A_k' rho_k = (rho_k, t_k x rho_k), SMR-major
         B[:, :3] = rho.transpose(1, 0, 2)
-        B[:, 3:] = np.einsum("abc,kb,ckm->kam", LEVI, self.tc, rho)
+        t = self.tc[:, :, None]  # t_k x rho_k, written out: einsum with LEVI is slower here
+        B[:, 3] = t[:, 1] * rho[2] - t[:, 2] * rho[1]
+        B[:, 4] = t[:, 2] * rho[0] - t[:, 0] * rho[2]
+        B[:, 5] = t[:, 0] * rho[1] - t[:, 1] * rho[0]
         B *= self.inv[None, :, None]
         g = np.zeros((K, len(self.U) + len(nm.tcols)))
         # one product reads the twists once: (K, 6m) x (6m, ng)
