@@ -124,6 +124,9 @@ function onCampaignEvent(type, e) {
   if (e.campaign_id === state.campaign) {
     if (type === "campaign.pose") {
       showPoseCount(e.poses_done, e.poses_total);
+      // a pose done means the run moves: a status still shown otherwise is stale (the start
+      // request's answer, "planned", can land after the state event it preceded)
+      if ($("p-status").textContent !== "running") later("campaign", refreshCampaign, 100);
       later("readings", () => refreshReadings(state.campaign), 700);
       later("estimate", () => showTimeLeft(e.poses_done, e.poses_total), 700);
     } else {
