@@ -97,38 +97,28 @@ def _rate(text: str) -> float:
     return v
 
 
-def _nonnegative_int(text: str) -> int:
-    v = _integer(text)
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number >= 0")
-    return v
+def _whole(lo: int, hi: int | None, what: str):
+    """An argparse type: a whole number from lo to hi (None: no top), else `what` it must be."""
+
+    def check(text: str) -> int:
+        v = _integer(text)
+        if v < lo or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"{text!r} is not {what}")
+        return v
+
+    return check
 
 
-def _port(text: str) -> int:
-    v = _integer(text)
-    if not 0 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a TCP port (0 to 65535)")
-    return v
-
-
-def _directions(text: str) -> int:
-    v = _integer(text)
-    if not 1 <= v <= 6:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a count of directions from 1 to 6")
-    return v
+_nonnegative_int = _whole(0, None, "a whole number >= 0")
+_positive_int = _whole(1, None, "a positive integer")
+_port = _whole(0, 65535, "a TCP port (0 to 65535)")
+_directions = _whole(1, 6, "a count of directions from 1 to 6")
 
 
 def _fraction(text: str) -> float:
     v = _nonnegative(text)
     if v > 1:
         raise argparse.ArgumentTypeError(f"{text!r} is not a fraction between 0 and 1")
-    return v
-
-
-def _positive_int(text: str) -> int:
-    v = _integer(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive integer")
     return v
 
 

@@ -23,6 +23,13 @@ def verified(request, tmp_path_factory):
     """(verification report, the model's held-out RMS mm, folder) for a cell drawn from the seed."""
     seed = request.param
     d = tmp_path_factory.mktemp(f"verify{seed}")
+    report, model = calibrated_and_verified(d, seed)
+    return report, model.meta["diagnosis"]["final"]["holdout_rmse_mm"], d
+
+
+def calibrated_and_verified(d, seed: int):
+    """(verification report, model) of a simulated cell: a 100-pose campaign diagnosed, its
+    model written to d/model.json, then verified on the cube (database d/cell.db)."""
     db_path, cell = d / "cell.db", default_cell()
     s = acquire(db_path, cell, AcquireOptions(poses=100, seed=seed, effects=(EFFECT,), name="cal"))
     db = store.open_database(db_path)
@@ -31,9 +38,8 @@ def verified(request, tmp_path_factory):
     )
     _, model = workflow.diagnose(cell, meas, screen=False)
     write_model(d / "model.json", model)
-    holdout = model.meta["diagnosis"]["final"]["holdout_rmse_mm"]
     report = verify(db_path, cell, d / "model.json", VerifyOptions(seed=seed, effects=(EFFECT,)))
-    return report, holdout, d
+    return report, model
 
 
 def test_compensation_brings_accuracy_to_the_models_own_and_keeps_repeatability(verified):

@@ -7,31 +7,19 @@ from __future__ import annotations
 import re
 
 import pytest
-from robocal.server import store, workflow
-from robocal.server.acquire import AcquireOptions, acquire
 from robocal.server.certificate import write_certificate
-from robocal.server.formats.cell_json import default_cell
-from robocal.server.formats.model_json import write_model
-from robocal.server.verification import VerifyOptions, verify
 
+from ..server.test_verification import calibrated_and_verified
 from .conftest import ARTIFACTS, shot
 
-SEED, EFFECT = 6, "joint_compliance:2=1.0"
+SEED = 6
 
 
 @pytest.fixture(scope="module")
 def certificate(tmp_path_factory):
     """(certificate.html, the verification report) of a calibrated simulated cell."""
     d = tmp_path_factory.mktemp("certificate")
-    db_path, cell = d / "cell.db", default_cell()
-    s = acquire(db_path, cell, AcquireOptions(poses=100, seed=SEED, effects=(EFFECT,), name="cal"))
-    db = store.open_database(db_path)
-    meas = store.campaign_measurements(
-        db, campaign_id=s["campaign"], targets=tuple(sorted(cell.targets))
-    )
-    _, model = workflow.diagnose(cell, meas, screen=False)
-    write_model(d / "model.json", model)
-    report = verify(db_path, cell, d / "model.json", VerifyOptions(seed=SEED, effects=(EFFECT,)))
+    report, _ = calibrated_and_verified(d, SEED)
     return write_certificate(report, d / "certificate.html"), report
 
 
