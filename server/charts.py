@@ -8,7 +8,6 @@ trailing `report` (unused: they report nothing on the way).
 from __future__ import annotations
 
 import io
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +19,7 @@ from robocal.solver.measurements import Measurements
 
 from .formats.cell_json import parse_cell
 from .formats.model_json import read_model
+from .validation import json_number
 from .workflow import compare, evaluate, model_predict, paper_methods, run_method
 
 
@@ -107,11 +107,6 @@ def errors_png(
     return _png(fig)
 
 
-def _num(v) -> float | None:
-    """JSON has no NaN: missing values are null."""
-    return None if v is None or not math.isfinite(v) else float(v)
-
-
 def table3(cell_json: str, meas: Measurements, report=None) -> dict:
     """The paper's Table 3 for a campaign: every method on its data, side by side (columns and
     rows; the route adds the job's ids)."""
@@ -136,7 +131,9 @@ def table3(cell_json: str, meas: Measurements, report=None) -> dict:
         "poses": meas.n_poses,
         "targets": list(meas.target_names),
         "columns": list(rows),
-        "rows": [{"label": label, "values": [_num(v) for v in values]} for label, values in table],
+        "rows": [
+            {"label": label, "values": [json_number(v) for v in values]} for label, values in table
+        ],
     }
 
 

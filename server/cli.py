@@ -51,6 +51,29 @@ def _note(text: str) -> None:
     print(f"robocal: note: {text}", file=sys.stderr)
 
 
+def _held_out_data(args, cell):
+    """The --held-out readings (None without it); DataError if they are not of the cell."""
+    from . import workflow
+    from .validation import data_mismatch
+
+    if args.held_out is None:
+        if args.held_out_campaign is not None:
+            raise workflow.DataError(
+                "--held-out-campaign picks a campaign of --held-out's database"
+            )
+        return None
+    if args.held_out_campaign is not None and not workflow.is_database(args.held_out):
+        raise workflow.DataError(
+            f"{args.held_out}: --held-out-campaign picks a campaign of a database (.db), "
+            "not of a CSV file"
+        )
+    held_cell, hold = workflow.load_data(args.held_out, args.cell, args.held_out_campaign)
+    why = data_mismatch(cell.robot, list(cell.targets), held_cell)
+    if why:
+        raise workflow.DataError(f"{args.held_out}: {why}")
+    return hold
+
+
 def _campaign_only_with_database(args) -> None:
     """--campaign picks a campaign of a database; with a meas.csv it would be silently ignored."""
     from . import workflow
@@ -135,15 +158,29 @@ def cmd_calibrate(args) -> None:
 
         check_writable(args.recording)
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)
+    hold = _held_out_data(args, cell)
     parse_method(args.method, meas.target_names)
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
     model = workflow.model_file(cal, cell, meas, data_path=args.meas)
+    if hold is not None:  # the separate validation figure beside the leave-one-out one
+        from .validation import held_out_errors
+
+        model.meta.setdefault("validation", {})["held_out"] = {
+            "file": Path(args.held_out).name,
+            **({"campaign_id": args.held_out_campaign} if args.held_out_campaign else {}),
+            **held_out_errors(model, hold),
+        }
     write_model(args.out, model)
     if args.recording:
         from .recording import record_calibration
 
         record_calibration(
-            args.recording, cell=cell, meas=meas, calibration=cal, viewer_url=args.rerun_viewer
+            args.recording,
+            cell=cell,
+            meas=meas,
+            calibration=cal,
+            held_out=hold,
+            viewer_url=args.rerun_viewer,
         )
     fit = model.meta["fit"]
     console.print(
@@ -152,6 +189,8 @@ def cmd_calibrate(args) -> None:
     )
     _print_screening(cal)
     if "validation" in model.meta:  # the held-out figure first: it is the headline
+        if "held_out" in model.meta["validation"]:
+            console.print(tables.held_out_line(model.meta["validation"]["held_out"]))
         for line in tables.validation_lines(model.meta["validation"]):
             console.print(line)
     console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
@@ -421,6 +460,16 @@ def _print_diagnosis(report) -> None:
         f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)"
     )
     _print_unexplained(report.get("unexplained"))
+    if "validation" in report:  # the final model, judged as a calibration is
+        for line in tables.validation_lines(report["validation"]):
+            console.print(line)
+    if "identified" in report:
+        ident = report["identified"]
+        console.print("held fixed: " + tables.fixed_parameters(
+            {f["parameter"]: f["why"] for f in ident["fixed"]}))  # fmt: skip
+        console.print(tables.joints_table(ident))
+        console.print(tables.frames_table(ident))
+        console.print(tables.correlations(ident))
 
 
 def _print_unexplained(block) -> None:
@@ -862,6 +911,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="minimax's QP subsolver: the paper's primal-dual method or Clarabel",
     )
     c.add_argument("--out", default="model.json", help="model.json to write (default model.json)")
+    c.add_argument(
+        "--held-out",
+        metavar="MEAS",
+        help="readings of the same cell not to fit on (meas.csv or database): the model's error "
+        "on them is printed first and kept in model.json; the recording shows them apart",
+    )
+    c.add_argument(
+        "--held-out-campaign",
+        type=int,
+        metavar="N",
+        help="the campaign of --held-out's database (default its latest)",
+    )
     _outlier_argument(c)
     c.add_argument("--recording", help="also write a rerun recording (.rrd) of the calibration")
     c.add_argument(

@@ -72,6 +72,28 @@ def check_job(db: store.Database, *, kind: str, campaign_id: int, method: str) -
         parse_method(method, targets)
 
 
+def check_holdout(db: store.Database, *, campaign_id: int, holdout_campaign_id: int) -> None:
+    """Refuse a held-out campaign a calibration cannot be validated on: NotFound, Conflict if
+    it is not done, ValueError if it is the fitted campaign or of another cell."""
+    from .validation import data_mismatch
+
+    if holdout_campaign_id == campaign_id:
+        raise ValueError("the held-out campaign must be another than the one fitted")
+    try:
+        info = store.get_campaign(db, campaign_id=holdout_campaign_id)
+    except store.NotFound as e:
+        raise store.NotFound(f"held-out campaign: {e}") from None
+    if info.status != "done":
+        raise store.Conflict(
+            f"held-out campaign {holdout_campaign_id} is {info.status}; it must be done"
+        )
+    fitted = parse_cell(store.get_campaign(db, campaign_id=campaign_id).cell_json)
+    held = parse_cell(info.cell_json, f"<campaign {holdout_campaign_id} cell>")
+    why = data_mismatch(fitted.robot, list(fitted.targets), held)
+    if why:
+        raise ValueError(f"held-out campaign {holdout_campaign_id}: {why}")
+
+
 def check_method(db: store.Database, *, campaign_id: int, method: str) -> None:
     """Refuse a calibration before queueing it (see check_job)."""
     check_job(db, kind="calibration", campaign_id=campaign_id, method=method)
@@ -164,18 +186,33 @@ class Jobs:
     # --- the API's verbs ------------------------------------------------------------------------
 
     def submit(
-        self, *, campaign_id: int, method: str = "minimax", kind: str = "calibration"
+        self,
+        *,
+        campaign_id: int,
+        method: str = "minimax",
+        kind: str = "calibration",
+        holdout_campaign_id: int | None = None,
     ) -> Job:
         """Check and queue a job; the job as queued. DuplicateJob (a Conflict) if the same
         calibration is queued or running."""
         if kind == "diagnosis":
             method = "diagnose"
         check_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
+        if holdout_campaign_id is not None:
+            if kind != "calibration":
+                raise ValueError("only a calibration takes a held-out campaign")
+            check_holdout(self.db, campaign_id=campaign_id, holdout_campaign_id=holdout_campaign_id)
         with self._lock:  # the check and the insert together: two clicks make one job
             if self._closing:
                 raise store.Conflict("the service is stopping; no new jobs")
             check_duplicate(self.db, kind=kind, campaign_id=campaign_id, method=method)
-            job = store.create_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
+            job = store.create_job(
+                self.db,
+                kind=kind,
+                campaign_id=campaign_id,
+                method=method,
+                holdout_campaign_id=holdout_campaign_id,
+            )
             self._queue.append(job.id)
         self._publish(job)
         self._wake()

@@ -168,6 +168,26 @@ def verification_table(report: dict) -> Table:
     return t
 
 
+def joints_table(identified: dict) -> Table:
+    """Each joint's identified parameters from an `identified` block: change from nominal ±
+    standard error ('fixed' where held), in mm and degrees."""
+    kinds = ("theta", "d", "a", "alpha", "beta")
+    t = Table(title="Identified geometry: change from nominal ± standard error (mm, deg)")
+    for col in ("joint",) + kinds:
+        t.add_column(col, justify="right")
+    by_joint: dict[int, dict[str, str]] = {}
+    for r in identified["rows"]:
+        if r["group"] != "joint" or r["change"] is None:
+            continue
+        held = r["status"] == "held fixed"
+        by_joint.setdefault(r["joint"], {})[r["kind"]] = (
+            "fixed" if held else plus_minus(r["change"], r["standard_error"], "+")
+        )
+    for j in sorted(by_joint):
+        t.add_row(str(j), *(by_joint[j].get(k, "") for k in kinds))
+    return t
+
+
 def frames_table(identified: dict) -> Table:
     """The base (tracker frame) and each SMR (flange frame), one coordinate a row: calibrated
     value ± standard error, and the change from the cell's nominal where it has one."""
@@ -196,14 +216,35 @@ def correlations(identified: dict) -> str:
     )
 
 
+def _mm(x) -> str:
+    """A length in mm, "-" for none; past a metre in three significant digits."""
+    return "-" if x is None else f"{x:.4f} mm" if abs(x) < 1000 else f"{x:.3g} mm"
+
+
+def held_out_line(h: dict) -> str:
+    """The model's error on readings it was not fitted on (a file or campaign), beside the
+    nominal model's on them."""
+    where = h.get("file") or f"campaign {h['campaign_id']}"
+    mm = _mm
+    return (
+        f"[bold]on held-out {where} ({h['poses']} poses, {h['readings']} readings): RMS "
+        f"{mm(h['rms_mm'])}[/bold], max {mm(h['max_mm'])}; nominal RMS {mm(h['nominal_rms_mm'])}"
+        + (f"\n[bold red]warning[/bold red]: {h['warning']}" if h.get("warning") else "")
+    )
+
+
+def _holdout_kind(v: dict) -> str:
+    """How the held-out figure was had, in a few words: "leave-one-pose-out", "5-fold"."""
+    how = v.get("holdout") or "leave-one-pose-out"
+    return how.split(" cross-validation")[0]
+
+
 def validation_lines(v: dict) -> list[str]:
     """The held-out figure (headline) beside the fit's, and the verdict with its reasons."""
 
-    def mm(x):
-        return "-" if x is None else f"{x:.4f} mm" if abs(x) < 1000 else f"{x:.3g} mm"
-
+    mm = _mm
     out = [
-        f"[bold]held-out RMS {mm(v['holdout_rms_mm'])}[/bold] (leave-one-pose-out, max "
+        f"[bold]held-out RMS {mm(v['holdout_rms_mm'])}[/bold] ({_holdout_kind(v)}, max "
         f"{mm(v['holdout_max_mm'])}); fit RMS {mm(v['fit_rms_mm'])}; condition number "
         f"{_f(v['condition_number'], 3)}; noise floor {mm(v['noise_floor_mm'])}"
     ]

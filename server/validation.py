@@ -44,14 +44,14 @@ def validation_block(
     return {
         "deployable": v.deployable,
         "reasons": list(v.reasons),
-        "holdout_rms_mm": _num(v.holdout_rms_mm),
-        "holdout_max_mm": _num(v.holdout_max_mm),
-        "fit_rms_mm": _num(v.fit_rms_mm),
+        "holdout_rms_mm": json_number(v.holdout_rms_mm),
+        "holdout_max_mm": json_number(v.holdout_max_mm),
+        "fit_rms_mm": json_number(v.fit_rms_mm),
         "holdout": holdout_method,
-        "condition_number": _num(v.condition_number),
+        "condition_number": json_number(v.condition_number),
         "equations": v.equations,
         "free_parameters": v.free_parameters,
-        "noise_floor_mm": _num(v.noise_floor_mm),
+        "noise_floor_mm": json_number(v.noise_floor_mm),
         "noise_floor_source": source,
         "unsupported_poses": [pose_ids[i] for i in v.unsupported_poses],
         "limits": {
@@ -63,7 +63,7 @@ def validation_block(
     }
 
 
-def _num(v):
+def json_number(v) -> float | None:
     """A JSON-safe number: None for NaN and infinity (JSON has neither)."""
     return None if v is None or not np.isfinite(v) else float(v)
 
@@ -80,7 +80,12 @@ def refusal(meta: dict) -> str | None:
 def cell_mismatch(model: ModelFile, cell: Cell) -> str | None:
     """Why data measured on `cell` is not of the model's cell: another robot (name, joint count
     or nominal geometry) or SMRs the model does not have; None if it may be."""
-    nominal = model.nominal or model.robot
+    return data_mismatch(model.nominal or model.robot, list(model.targets), cell)
+
+
+def data_mismatch(nominal, targets: list[str], cell: Cell) -> str | None:
+    """Why data measured on `cell` is not of a robot with this nominal geometry and these SMRs
+    (see cell_mismatch); None if it may be."""
     robot = cell.robot
     if robot.name != nominal.name:
         return f"the data is of robot {robot.name!r}, the model of {nominal.name!r}"
@@ -88,11 +93,9 @@ def cell_mismatch(model: ModelFile, cell: Cell) -> str | None:
         robot.param_vector(), nominal.param_vector(), atol=1e-6
     ):
         return f"the data's robot {robot.name!r} has another nominal geometry than the model's"
-    unknown = [t for t in cell.targets if t not in model.targets]
+    unknown = [t for t in cell.targets if t not in targets]
     if unknown:
-        return (
-            f"the data's SMR {unknown[0]!r} is not among the model's ({', '.join(model.targets)})"
-        )
+        return f"the data's SMR {unknown[0]!r} is not among the model's ({', '.join(targets)})"
     return None
 
 
@@ -123,3 +126,20 @@ def file_refusal(path) -> str | None:
     except (OSError, ValueError):
         return None
     return refusal(meta) if isinstance(meta, dict) else None
+
+
+def held_out_errors(model: ModelFile, meas: Measurements) -> dict:
+    """A calibration's errors on readings it was not fitted on (mm; RMS and max per reading,
+    the nominal model's RMS registered on them), with a warning when they say the data is not
+    of the model's cell."""
+    from .workflow import evaluate
+
+    result = evaluate(model, meas)
+    return {
+        "poses": int(np.any(meas.mask, axis=1).sum()),
+        "readings": int(meas.mask.sum()),
+        "rms_mm": json_number(result["model"]["rmse"]),
+        "max_mm": json_number(result["model"]["ap"]["max"]),
+        "nominal_rms_mm": json_number(result["nominal"]["rmse"]) if "nominal" in result else None,
+        "warning": absurd_errors(result, model.meta),
+    }

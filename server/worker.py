@@ -14,6 +14,7 @@ from . import store
 from .formats.cell_json import parse_cell
 from .formats.model_json import model_to_json, to_plain, write_json_atomic
 from .processes import one_line
+from .validation import held_out_errors
 from .workflow import model_file, run_method
 
 Report = Callable[[dict], None]  # sends a job event to the service
@@ -114,9 +115,15 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.J
     from .recording import record_calibration  # rerun is heavy; load it with the first job
 
     cell, meas = campaign_data(db, job.campaign_id)
+    hold = None if job.holdout_campaign_id is None else campaign_data(db, job.holdout_campaign_id)
     _update(db, report, job.id, progress=0.1)
     cal = run_method(cell, meas, job.method)
-    model = model_to_json(model_file(cal, cell, meas))
+    fitted = model_file(cal, cell, meas)
+    summary = None
+    if hold is not None:  # the separate validation figure beside the leave-one-out one
+        summary = {"campaign_id": job.holdout_campaign_id, **held_out_errors(fitted, hold[1])}
+        fitted.meta.setdefault("validation", {})["held_out"] = summary
+    model = model_to_json(fitted)
     model["data"]["campaign"] = job.campaign_id
     path = setup.models_dir / f"job-{job.id}.model.json"
     write_json_atomic(path, model)
@@ -126,9 +133,15 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.J
         cell=cell,
         meas=meas,
         calibration=cal,
+        held_out=None if hold is None else hold[1],
         viewer_url=setup.viewer_url,
     )
-    return {"model": str(path), "recording": str(rrd), **_verdict(model.get("validation"))}
+    return {
+        "model": str(path),
+        "recording": str(rrd),
+        **_verdict(model.get("validation")),
+        **({"holdout": summary} if summary else {}),
+    }
 
 
 def _verdict(v: dict | None) -> dict:

@@ -453,6 +453,9 @@ def write_diagnosis(
         e["figure"] = by_label.get(ext.label())
     if list_figures:
         report["figures"] = [p.name for p in figures]
+    for block in ("identified", "validation"):  # the final model's table, in the report too
+        if block in model.meta:
+            report[block] = model.meta[block]
     model.meta["data"] = data
     write_json_atomic(report_path, report)
     if model_path:

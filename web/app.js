@@ -163,6 +163,7 @@ function useCampaign(c, keepResults = false) {
 function forgetJob() {
   state.job = state.jobInfo = null;
   $("j-state").textContent = "";
+  resetVerification();  // the run shown was of that job's model
 }
 
 // A meas.csv measured elsewhere (or by `robocal simulate`) becomes a done campaign on the chosen
@@ -281,13 +282,20 @@ function campaignLive() {
   return state.campaign !== null && (!FINAL.has(state.status) || state.runActive);
 }
 
+// Campaign reads in the order asked: an answer can land after a later one (a read asked before
+// the run began, answered once poses come in), and the older state must not overwrite the newer.
+const campaignReads = { asked: 0, shown: 0 };
+
 /** Read the current campaign and its latest readings once (on its events, after an action). */
 async function refreshCampaign() {
   const id = state.campaign;
   if (id === null) return;
+  const n = ++campaignReads.asked;
   try {
     const c = await api("GET", `/campaigns/${id}`);
     if (id !== state.campaign) return;  // another campaign was opened meanwhile
+    if (n < campaignReads.shown) return;  // a later read is shown already
+    campaignReads.shown = n;
     state.runActive = !!(c.run && c.run.active);
     showCampaign(c);
     await refreshReadings(id);
@@ -348,7 +356,9 @@ $("job-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
   $("calibrate").disabled = true;  // until this job ends: no duplicate on a second click
   try {
-    const j = await api("POST", "/jobs", { campaign_id: state.campaign, method: $("j-method").value });
+    const body = { campaign_id: state.campaign, method: $("j-method").value };
+    if ($("j-holdout").value) body.holdout_campaign_id = Number($("j-holdout").value);
+    const j = await api("POST", "/jobs", body);
     state.job = j.id;
     state.diag = null;
     $("results").hidden = true;

@@ -58,6 +58,19 @@ function renderCampaigns() {
     if (c.id === state.campaign) tr.className = "current";
   });
   $("h-campaigns").replaceChildren(table);
+  fillHoldoutChoices();
+}
+
+/** The calibration's held-out campaign: none, or a done measurement campaign other than the
+ * page's (the service refuses one of another cell, with the reason). */
+function fillHoldoutChoices() {
+  const sel = $("j-holdout");
+  const was = sel.value;
+  const others = past.campaigns.filter((c) => c.kind === "measurement" && c.status === "done"
+    && c.poses_done > 0 && c.id !== state.campaign).reverse();
+  sel.replaceChildren(new Option("none (leave-one-pose-out)", ""),
+    ...others.map((c) => new Option(`campaign ${c.id}: ${c.name} (${c.poses_done} poses)`, c.id)));
+  sel.value = others.some((c) => String(c.id) === was) ? was : "";
 }
 
 function renderJobs() {
@@ -89,10 +102,17 @@ $("history").addEventListener("click", (ev) => {
   else if (b.dataset.job) openJob(Number(b.dataset.job), true);
 });
 
-/** Make a stored campaign the page's current one: its progress, readings and buttons. */
+/** Make a stored campaign the page's current one: its progress, readings and buttons. A
+ * verification run of a job's model opens under that job's results, where its figures are. */
 async function openCampaign(id, keepResults = false) {
   try {
     const c = await api("GET", `/campaigns/${id}`);
+    const model = c.kind === "verification" ? (c.settings || {}).model_job : undefined;
+    if (model && !keepResults) return await openVerification(c.id, model);
+    if (c.kind === "verification" && !model) {
+      say(`verification campaign ${id} checks a model file, not a job of this service: its`
+        + ` figures are at /api/campaigns/${id}/verification and its certificate beside them`, true);
+    }
     useCampaign(c, keepResults);
     renderCampaigns();
     renderJobs();
@@ -100,6 +120,21 @@ async function openCampaign(id, keepResults = false) {
     if (!keepResults) $("campaign").scrollIntoView({ block: "start" });
     return c;
   } catch (e) { say(e.message); return null; }
+}
+
+/** A verification campaign with the results of the job whose model it ran: its status, and its
+ * figures once it is done. */
+async function openVerification(id, job) {
+  if (state.job !== job) await openJob(job);
+  const c = await openCampaign(id, true);
+  if (c) {
+    state.verify = { campaign: c.id, job };
+    showVerifyState(c);
+    if (c.status === "done") await showVerification(c.id);
+    rememberView();
+    $("v-state").scrollIntoView({ block: "center" });
+  }
+  return c;
 }
 
 /** Show a calibration job: its campaign becomes the page's, then its results if it is done (or
@@ -142,7 +177,7 @@ async function restoreView() {
   if (jid) await openJob(jid);
   if (cid && cid !== state.campaign) {
     const c = await openCampaign(cid, state.job !== null);
-    if (c && c.kind === "verification" && state.job !== null) {
+    if (c && c.kind === "verification" && state.job !== null && !state.verify) {
       state.verify = { campaign: c.id, job: state.job };
       showVerifyState(c);
       if (c.status === "done") showVerification(c.id);

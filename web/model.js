@@ -107,15 +107,24 @@ function renderValidation(v) {
     $(b).title = unfit ? "not fit to deploy: refused unless \"export anyway\" is ticked" : "";
   });
   if (!v) return box.replaceChildren();
+  const h = v.held_out;  // a separate held-out campaign's figure comes first, when there is one
   const headline = Object.assign(document.createElement("p"), { id: "m-headline" });
   headline.append(
     Object.assign(document.createElement("span"), { className: "m-big",
-      textContent: `Held-out RMS ${fmt(v.holdout_rms_mm)} mm` }),
+      textContent: h ? `Held-out ${h.file || `campaign ${h.campaign_id}`} RMS ${fmt(h.rms_mm)} mm`
+        : `Held-out RMS ${fmt(v.holdout_rms_mm)} mm` }),
     Object.assign(document.createElement("span"), { id: "m-fit", className: "muted",
-      textContent: ` · fit RMS ${fmt(v.fit_rms_mm)} mm`
+      textContent: (h ? ` (${h.poses} poses, max ${fmt(h.max_mm)} mm, nominal model`
+          + ` ${fmt(h.nominal_rms_mm)} mm) · leave-one-pose-out RMS ${fmt(v.holdout_rms_mm)} mm`
+        : "")
+        + ` · fit RMS ${fmt(v.fit_rms_mm)} mm`
         + (v.noise_floor_mm ? ` · noise floor ${fmt(v.noise_floor_mm)} mm` : "")
-        + (v.holdout ? ` (held out: ${v.holdout})` : "") }));
+        + (v.holdout && !h ? ` (held out: ${v.holdout})` : "") }));
   const parts = [headline];
+  if (h && h.warning) {
+    parts.push(Object.assign(document.createElement("p"), { id: "m-held-warning",
+      className: "error", role: "alert", textContent: `Held-out campaign: ${h.warning}` }));
+  }
   if (unfit) {
     const warn = document.createElement("div");
     warn.id = "m-unfit";
@@ -140,7 +149,7 @@ function renderRecordingHint(j) {
 /** The shown job's model: validation, recording hint, then its parameter tables. */
 async function showModel(j) {
   $("m-force").checked = false;  // each model is exported anyway only on its own say-so
-  renderValidation(j.validation);
+  renderValidation(j.validation && { ...j.validation, held_out: j.holdout });
   renderRecordingHint(j);
   $("m-parameters").hidden = true;
   $("m-parameters").replaceChildren();

@@ -32,6 +32,7 @@ def public_job(job: Job) -> JobPublic:
             ),
             parameters_url=f"/api/models/{job.id}/parameters" if "model" in job.results else None,
             validation=job.results.get("validation"),
+            holdout=job.results.get("holdout"),
         )
     return JobPublic(
         id=job.id,
@@ -44,6 +45,7 @@ def public_job(job: Job) -> JobPublic:
         created_at=job.created_at,
         started_at=job.started_at,
         finished_at=job.finished_at,
+        holdout_campaign_id=job.holdout_campaign_id,
         **urls,
     )
 
@@ -71,7 +73,12 @@ def create_job(body: JobCreate, jobs: JobsDep, request: Request) -> JobPublic | 
     refused (409); another method is accepted."""
     try:
         return public_job(
-            jobs.submit(campaign_id=body.campaign_id, method=body.method, kind=body.kind)
+            jobs.submit(
+                campaign_id=body.campaign_id,
+                method=body.method,
+                kind=body.kind,
+                holdout_campaign_id=body.holdout_campaign_id,
+            )
         )
     except DuplicateJob as e:
         return problems.problem(request, 409, str(e), job_id=e.job_id)

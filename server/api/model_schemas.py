@@ -55,6 +55,20 @@ class ValidationLimits(BaseModel):
     max_holdout_ratio: float
 
 
+class HoldoutSummary(BaseModel):
+    """A calibration's errors on readings it was not fitted on: a held-out campaign (a job's) or
+    file (`robocal calibrate --held-out`), mm per reading."""
+
+    campaign_id: int | None = None
+    file: str | None = None
+    poses: int
+    readings: int
+    rms_mm: float | None = Field(description="the calibrated model's 3-D RMS error")
+    max_mm: float | None
+    nominal_rms_mm: float | None = Field(description="the nominal model's, registered on them")
+    warning: str | None = Field(None, description="why the figures may not be of this cell")
+
+
 class Validation(BaseModel):
     """Whether the data supports the model; held-out RMS is the headline figure."""
 
@@ -71,6 +85,9 @@ class Validation(BaseModel):
     noise_floor_source: str
     unsupported_poses: list = Field(description="poses the others cannot do without")
     limits: ValidationLimits
+    held_out: HoldoutSummary | None = Field(
+        None, description="the errors on a separate held-out campaign, when there is one"
+    )
 
 
 class ModelParameters(BaseModel):

@@ -14,7 +14,7 @@ from robocal.server.formats.cell_doc import CellDoc
 from robocal.server.formats.limits import COORD_MAX_MM
 from robocal.server.verification import CUBE_SIDE_MM, DIRECTIONS
 
-from .model_schemas import ValidationSummary
+from .model_schemas import HoldoutSummary, ValidationSummary
 
 # Ids are SQLite rowids.
 MAX_ID = 2**63 - 1
@@ -166,6 +166,14 @@ class JobCreate(BaseModel):
         json_schema_extra={"pattern": METHOD},
         description="minimax, ls-sum, ls-single[:T], ls-pose, nominal (calibration only)",
     )
+    holdout_campaign_id: int | None = Field(
+        None,
+        ge=1,
+        le=MAX_ID,
+        description="a calibration's held-out campaign: a done campaign of the same cell it is "
+        "not fitted on; the model's error on it is the validation figure, and its poses are the "
+        "held-out ones of the recording",
+    )
 
     @field_validator("method")
     @classmethod
@@ -200,6 +208,10 @@ class JobPublic(BaseModel):
     parameters_url: str | None = None
     validation: ValidationSummary | None = Field(
         None, description="a done calibration's: is its model deployable, and why not"
+    )
+    holdout_campaign_id: int | None = Field(None, description="a calibration's held-out campaign")
+    holdout: HoldoutSummary | None = Field(
+        None, description="a done calibration's errors on its held-out campaign"
     )
 
 

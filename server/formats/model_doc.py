@@ -118,7 +118,8 @@ class ModelDoc(Doc):
         None,
         description="whether the data supports the model: `deployable`, `reasons`, "
         "`holdout_rms_mm` (leave-one-pose-out, the headline), `fit_rms_mm`, "
-        "`condition_number`, `noise_floor_mm`, `limits`",
+        "`condition_number`, `noise_floor_mm`, `limits`; `held_out` with the errors on a "
+        "separate held-out campaign or file, when there is one",
     )
 
     @field_validator("targets")

@@ -71,3 +71,14 @@ class ReportDoc(Open):
     final: Fit
     outliers: list[Outlier] | None = Field(None, description="readings excluded as gross errors")
     unexplained: Unexplained | None = None
+    identified: dict | None = Field(
+        None,
+        description="the final model's identified parameters, as model.json's `identified` "
+        "(per parameter: change from nominal and standard error; held-fixed parameters and "
+        "why; condition number; strongest correlations)",
+    )
+    validation: dict | None = Field(
+        None,
+        description="whether the data supports the final model, as model.json's `validation` "
+        "(`deployable`, `reasons`, the cross-validated held-out RMS beside the fit RMS)",
+    )

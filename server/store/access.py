@@ -720,19 +720,29 @@ class JobInfo:
     started_at: dt.datetime | None
     finished_at: dt.datetime | None
     results: dict
+    holdout_campaign_id: int | None = None  # a calibration's held-out campaign, if it has one
 
 
-def create_job(db: Database, *, kind: str, campaign_id: int | None, method: str) -> JobInfo:
+def create_job(
+    db: Database,
+    *,
+    kind: str,
+    campaign_id: int | None,
+    method: str,
+    holdout_campaign_id: int | None = None,
+) -> JobInfo:
     """Store a queued job on an existing campaign (none for a planning job); the job."""
     checks.one_of(kind, JOB_KINDS, "kind")
     if (campaign_id is None) != (kind == "planning"):
         raise ValueError("a planning job has no campaign yet; every other job has one")
     with db.session(write=True) as s:
-        if campaign_id is not None:
-            _campaign(s, campaign_id)
+        for cid in (campaign_id, holdout_campaign_id):
+            if cid is not None:
+                _campaign(s, cid)
         job = Job(
             kind=kind,
             campaign_id=campaign_id,
+            holdout_campaign_id=holdout_campaign_id,
             method=str(method),
             state="queued",
             progress=0.0,
@@ -824,6 +834,7 @@ def _job_info(j: Job) -> JobInfo:
         j.started_at,
         j.finished_at,
         dict(j.results or {}),
+        j.holdout_campaign_id,
     )
 
 

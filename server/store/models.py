@@ -205,6 +205,10 @@ class Job(Base):
         ID, ForeignKey("campaign.id", ondelete="CASCADE")
     )
     method: Mapped[str] = mapped_column(Text)
+    # A calibration's held-out campaign: same cell, not fitted on (validation, the recording).
+    holdout_campaign_id: Mapped[int | None] = mapped_column(
+        ID, ForeignKey("campaign.id", ondelete="SET NULL")
+    )
     state: Mapped[str] = mapped_column(String(16), default="queued")
     reason: Mapped[str | None] = mapped_column(Text)
     progress: Mapped[float] = mapped_column(Float, default=0.0)  # 0..1

@@ -83,3 +83,53 @@ def test_the_real_campaigns_are_deployable(name):
     v = workflow.model_file(cal, cell, meas).meta["validation"]
     assert v["deployable"] is True, v["reasons"]
     assert v["holdout_rms_mm"] > v["fit_rms_mm"] > v["noise_floor_mm"]
+
+
+def test_diagnose_reports_the_final_models_parameter_table_and_verdict(tmp_path):
+    real = REAL / "irb120_wu"
+    args = ("diagnose", real / "train.csv", "--cell", real / "cell.json", "--out", "report.json")
+    r = robocal(*args, "--model-out", "model.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    report = json.loads((tmp_path / "report.json").read_text())
+    model = json.loads((tmp_path / "model.json").read_text())
+    for block in ("identified", "validation"):  # the report carries the final model's own
+        assert report[block] == model[block]
+    assert report["validation"]["holdout_rms_mm"] == report["final"]["holdout_rmse_mm"]
+    rows = {row["parameter"]: row for row in report["identified"]["rows"]}
+    assert rows["theta2"]["status"] == "identified" and rows["theta2"]["standard_error"] > 0
+    assert {"parameter": "theta1", "why": "redundant with base_rz"} in report["identified"]["fixed"]
+    out = r.stdout
+    assert "(5-fold, max" in out and "deployable: every validation limit holds" in out, out
+    assert out.index("held-out RMS") < out.index("Identified geometry") < out.index("SMR A")
+    assert "strongest correlations: " in out
+
+
+def test_calibrate_on_held_out_readings(tmp_path):
+    from tests.server.test_recording import _cli
+
+    assert (
+        robocal("simulate", "--poses", 55, "--seed", 4, "--out", "all.csv", cwd=tmp_path).returncode
+        == 0
+    )
+    head, *rows = (tmp_path / "all.csv").read_text().splitlines()
+    for name, keep in (("fit.csv", lambda p: p <= 40), ("hold.csv", lambda p: p > 40)):
+        lines = [r for r in rows if keep(int(r.split(",")[0]))]
+        (tmp_path / name).write_text("\n".join([head, *lines]) + "\n")
+    args = ("calibrate", "fit.csv", "--held-out", "hold.csv", "--recording", "c.rrd")
+    r = robocal(*args, cwd=tmp_path)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    first = next(x for x in r.stdout.splitlines() if "held-out" in x)
+    assert first.startswith("on held-out hold.csv (15 poses, 45 readings): RMS "), r.stdout
+    h = json.loads((tmp_path / "model.json").read_text())["validation"]["held_out"]
+    assert (h["file"], h["poses"], h["readings"], h["warning"]) == ("hold.csv", 15, 45, None)
+    assert h["rms_mm"] < h["nominal_rms_mm"] / 10, h  # poses it never saw, calibrated
+    assert "/world/poses/held_out/error/after" in _cli("print", str(tmp_path / "c.rrd")).stdout
+
+    for bad, words in (
+        (("--held-out-campaign", 2), "--held-out-campaign picks a campaign of --held-out's"),
+        (("--held-out", "hold.csv", "--held-out-campaign", 2), "hold.csv: --held-out-campaign"),
+        (("--held-out", "nope.csv"), "nope.csv: cannot read the file"),
+    ):
+        r = robocal("calibrate", "fit.csv", "--out", "bad.json", *bad, cwd=tmp_path)
+        assert r.returncode == 1 and words in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "bad.json").exists()

@@ -90,7 +90,10 @@ def test_history_reload_stream_notice_and_compare(served, page):
         timeout=120_000,
     )
     before = _done_count(page)
-    assert _status(page) == "running"
+    # poses come in: the status follows within a read of the campaign (an event asks for one)
+    page.wait_for_function(
+        "document.getElementById('p-status').textContent === 'running'", timeout=10_000
+    )
     assert f"campaign={cid}" in page.url
     page.reload()
     page.wait_for_function(f"document.getElementById('p-id').textContent === '{cid}'")
@@ -183,6 +186,21 @@ def test_history_reload_stream_notice_and_compare(served, page):
         ev = c.get(f"/api/models/{job}/evaluate", params={"campaign_id": vid}).json()
         assert abs(shown - ev["model"]["ap"]["mean"]) < 1e-3, (job, shown)
     assert values[1] < values[0] and values[2] < values[0]  # both beat the nominal arm
+
+    # A calibration validated on that campaign (not fitted on): its error there is the headline.
+    options = page.locator("#j-holdout option").all_text_contents()
+    assert options[0].startswith("none") and not any(f"campaign {cid}:" in o for o in options)
+    page.select_option("#j-holdout", str(vid))
+    held = _calibrate(page, "minimax", requests)
+    page.click("#notice-text")
+    page.wait_for_function(
+        f"document.getElementById('m-headline').textContent.startsWith('Held-out campaign {vid}')"
+    )
+    h = c.get(f"/api/jobs/{held}").json()["holdout"]
+    assert h["campaign_id"] == vid and h["poses"] == 30 and h["warning"] is None, h
+    headline = page.text_content("#m-headline")
+    assert f"RMS {h['rms_mm']:.4f} mm (30 poses" in headline, headline
+    assert "leave-one-pose-out RMS" in headline and "fit RMS" in headline, headline
 
     # The layout: no horizontal overflow at a laptop's size and at a phone's width.
     _no_overflow(page)
