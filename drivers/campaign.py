@@ -140,6 +140,7 @@ class CampaignEngine:
         self._cond = threading.Condition()  # guards _state, _estops, _active, _pending
         self._estops = 0  # e-stops so far: a run ends at once when the count changes under it
         self._active = False  # a run() is executing
+        self._stopping = 0  # e-stops between their transition and the controller's answer
         self._halted_on_fault = False  # the engine latched the controller itself after a fault
         self._pending: deque = deque()  # transitions not yet told to on_state
         self._telling = threading.RLock()  # one teller at a time: on_state hears them in order
@@ -203,7 +204,13 @@ class CampaignEngine:
                 self._apply("estop")
             except StateError as e:
                 refused = e
-        ok = self._stop_arm()
+            self._stopping += 1
+        try:
+            ok = self._stop_arm()
+        finally:
+            with self._cond:
+                self._stopping -= 1
+                self._cond.notify_all()
         self._tell()
         if refused is not None:
             if strict:
@@ -353,6 +360,9 @@ class CampaignEngine:
             raise
         finally:
             with self._cond:
+                # an e-stop that came as the run ended must reach the controller before the
+                # run's owner may close it: else the STOP finds no connection to go out on
+                self._cond.wait_for(lambda: self._stopping == 0, TELL_WAIT_S)
                 self._active = False
                 self._cond.notify_all()
             # an e-stop's transition may still be on its request's thread: the run's listener

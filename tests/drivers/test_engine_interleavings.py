@@ -582,3 +582,35 @@ def test_a_user_estop_after_a_fault_keeps_its_latch_until_reset():
     assert rig.engine.reset() == "paused"
     assert "error" not in rig.run(**rig.resume_args())
     check_complete(rig)
+
+
+def test_a_run_ending_as_an_estop_lands_returns_only_once_the_stop_went_out():
+    """An e-stop that lands on the run's last message: run() returns only after the STOP has
+    gone to the controller (its owner closes the controller once run() returns)."""
+    rig = Rig()
+    inside, release = threading.Event(), threading.Event()
+    stop = rig.engine.controller.emergency_stop
+
+    def slow_stop():  # the transition is made; the STOP is still on its way
+        inside.set()
+        assert release.wait(WAIT_S)
+        return stop()
+
+    rig.engine.controller.emergency_stop = slow_stop
+    last = len(PLAN) - 1
+
+    def at(k, msg):
+        if k == last:
+            threading.Thread(target=rig.engine.estop, daemon=True).start()
+            assert inside.wait(WAIT_S)
+
+    rig.at_message = at
+    runner = threading.Thread(target=rig.engine.run, args=(POSES,))
+    runner.start()
+    runner.join(0.5)
+    assert runner.is_alive()  # held while the STOP is on its way
+    assert ("STOP",) not in rig.cell.timeline
+    release.set()
+    runner.join(WAIT_S)
+    assert not runner.is_alive() and ("STOP",) in rig.cell.timeline
+    assert rig.engine.state == "estopped"
