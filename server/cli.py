@@ -67,6 +67,9 @@ def _held_out_data(args, cell):
             f"{args.held_out}: --held-out-campaign picks a campaign of a database (.db), "
             "not of a CSV file"
         )
+    same_file = Path(args.held_out).resolve() == Path(args.meas).resolve()
+    if same_file and args.held_out_campaign == args.campaign:
+        raise workflow.DataError(f"{args.held_out}: the held-out readings are the fitted ones")
     held_cell, hold = workflow.load_data(args.held_out, args.cell, args.held_out_campaign)
     why = data_mismatch(cell.robot, list(cell.targets), held_cell)
     if why:

@@ -225,10 +225,10 @@ def held_out_line(h: dict) -> str:
     """The model's error on readings it was not fitted on (a file or campaign), beside the
     nominal model's on them."""
     where = h.get("file") or f"campaign {h['campaign_id']}"
-    mm = _mm
     return (
         f"[bold]on held-out {where} ({h['poses']} poses, {h['readings']} readings): RMS "
-        f"{mm(h['rms_mm'])}[/bold], max {mm(h['max_mm'])}; nominal RMS {mm(h['nominal_rms_mm'])}"
+        f"{_mm(h['rms_mm'])}[/bold], max {_mm(h['max_mm'])}; nominal RMS "
+        f"{_mm(h['nominal_rms_mm'])}"
         + (f"\n[bold red]warning[/bold red]: {h['warning']}" if h.get("warning") else "")
     )
 
@@ -242,11 +242,10 @@ def _holdout_kind(v: dict) -> str:
 def validation_lines(v: dict) -> list[str]:
     """The held-out figure (headline) beside the fit's, and the verdict with its reasons."""
 
-    mm = _mm
     out = [
-        f"[bold]held-out RMS {mm(v['holdout_rms_mm'])}[/bold] ({_holdout_kind(v)}, max "
-        f"{mm(v['holdout_max_mm'])}); fit RMS {mm(v['fit_rms_mm'])}; condition number "
-        f"{_f(v['condition_number'], 3)}; noise floor {mm(v['noise_floor_mm'])}"
+        f"[bold]held-out RMS {_mm(v['holdout_rms_mm'])}[/bold] ({_holdout_kind(v)}, max "
+        f"{_mm(v['holdout_max_mm'])}); fit RMS {_mm(v['fit_rms_mm'])}; condition number "
+        f"{_f(v['condition_number'], 3)}; noise floor {_mm(v['noise_floor_mm'])}"
     ]
     if v["deployable"]:
         out.append("[green]deployable[/green]: every validation limit holds")

@@ -129,6 +129,7 @@ def test_calibrate_on_held_out_readings(tmp_path):
         (("--held-out-campaign", 2), "--held-out-campaign picks a campaign of --held-out's"),
         (("--held-out", "hold.csv", "--held-out-campaign", 2), "hold.csv: --held-out-campaign"),
         (("--held-out", "nope.csv"), "nope.csv: cannot read the file"),
+        (("--held-out", "./fit.csv"), "./fit.csv: the held-out readings are the fitted ones"),
     ):
         r = robocal("calibrate", "fit.csv", "--out", "bad.json", *bad, cwd=tmp_path)
         assert r.returncode == 1 and words in r.stderr, r.stderr
