@@ -190,7 +190,9 @@ def test_timeout_when_silent(quick, server):
     wall = time.monotonic()
     with pytest.raises(ControllerTimeout):
         quick.status()
-    assert time.monotonic() - wall < 3 * SHORT + 0.1  # 1 + 2 retries, each SHORT
+    # 1 + 2 retries, each SHORT: none of them is answered, so a client waiting for a reply would
+    # wait for ever (the margin is for a loaded machine)
+    assert time.monotonic() - wall < 3 * SHORT + 2.0
 
 
 def test_connection_refused(server):

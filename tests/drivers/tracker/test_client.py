@@ -55,12 +55,14 @@ def test_device_errors(rig):
 
 
 def test_silent_server_times_out(rig):
-    rig.server.go_silent(1)
+    rig.server.go_silent(1)  # that request is never answered
     with client(rig, timeout_s=0.05, retries=0) as c:
         t0 = time.monotonic()
         with pytest.raises(TrackerTimeout, match="STATUS"):
             c.status()
-        assert 0.05 <= time.monotonic() - t0 < 0.5
+        # its own timeout: a client waiting for the answer would wait for ever (the margin is
+        # for a loaded machine)
+        assert 0.05 <= time.monotonic() - t0 < 2.0
         assert c.ident().model == "SimTracker"  # on a new connection
         assert c.connections == 2
 
