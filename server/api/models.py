@@ -67,6 +67,7 @@ Force = Annotated[
 @router.get(
     "/{job_id}/evaluate",
     responses={
+        409: {"description": "the campaign has no measured pose (reading) yet", "content": PROBLEM},
         422: {
             "description": "the campaign is not of the model's cell (another robot, or "
             "errors of metres); force=true evaluates anyway",
@@ -81,11 +82,13 @@ def evaluate_model(
     """Accuracy of a job's model on a campaign's readings, next to the nominal model (computed
     in a worker process under a wall-clock limit: 504 past it). A campaign of another cell
     (another robot, other SMRs, or model errors past 100 mm RMS) is refused (422) unless
-    force=true, which answers with the reason in `warnings`."""
+    force=true, which answers with the reason in `warnings`; one without a reading yet (planned)
+    is 409."""
     path = jobs.model_path(job_id)
     warnings = []
     with call_slot(jobs):  # loading the readings is heavy too: at most call_workers at once
-        cell = parse_cell(store.get_campaign(db, campaign_id=campaign_id).cell_json)
+        info = store.get_campaign(db, campaign_id=campaign_id)
+        cell = parse_cell(info.cell_json)
         model = read_model(path)
         why = cell_mismatch(model, cell)
         if why:
@@ -93,6 +96,8 @@ def evaluate_model(
                 raise HTTPException(422, f"campaign {campaign_id}: {why}; force=true to go on")
             warnings.append(why)
         meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
+        if meas.n_poses == 0:  # nothing to compare with: the statistics would divide by zero
+            raise store.Conflict(unmeasured(info))
         require_inputs(meas.q, meas.xyz)  # a non-finite campaign: 422 at once, no worker
         result = run_call(jobs, charts.evaluation, path, meas)
     why = absurd_errors(result, model.meta)
@@ -101,6 +106,16 @@ def evaluate_model(
             raise HTTPException(422, f"campaign {campaign_id}: {why}; force=true to go on")
         warnings.append(why)
     return {**result, "warnings": warnings} if warnings else result
+
+
+def unmeasured(info: store.CampaignInfo) -> str:
+    """Why a campaign without a single reading cannot be evaluated, and what to do."""
+    if info.n_done == 0:
+        return (
+            f"campaign {info.id} ({info.name}) has no measured pose yet (it is {info.status}): "
+            f"run it (POST /api/campaigns/{info.id}/start), then evaluate"
+        )
+    return f"campaign {info.id} ({info.name}) has no reading: every target was missing"
 
 
 def _deployable(path, force: bool) -> None:

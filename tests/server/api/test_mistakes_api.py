@@ -2,6 +2,8 @@
 
 import pytest
 
+from tests.server.api.test_compensate_api import PROBLEM, model_job  # noqa: F401 - a fixture
+
 from .conftest import wait_for
 
 
@@ -39,3 +41,21 @@ def test_a_misspelt_method_is_answered_with_a_suggestion(live):
     spec = live.client.get("/openapi.json").json()
     method = spec["components"]["schemas"]["JobCreate"]["properties"]["method"]
     assert "minimax" in method["pattern"]
+
+
+@pytest.mark.sqlite_only  # the store's part runs on both backends in test_flow
+def test_evaluating_on_a_planned_campaign_says_it_has_no_measured_pose(live, model_job):
+    """Was 422 "slice step cannot be zero": a campaign planned but never run has no reading."""
+    job, _ = model_job
+    c = live.client
+    planned = c.post("/api/campaigns", json={"poses": 5, "name": "later"})
+    assert planned.status_code == 201, planned.text
+    cid = planned.json()["id"]
+    r = c.get(f"/api/models/{job}/evaluate", params={"campaign_id": cid})
+    assert r.status_code == 409 and r.headers["content-type"] == PROBLEM, r.text
+    detail = r.json()["detail"]
+    assert detail.startswith(f"campaign {cid} (later) has no measured pose yet (it is planned)")
+    assert f"/api/campaigns/{cid}/start" in detail and "\n" not in detail
+    # forcing does not make readings appear
+    r = c.get(f"/api/models/{job}/evaluate", params={"campaign_id": cid, "force": "true"})
+    assert r.status_code == 409, r.text
