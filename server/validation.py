@@ -116,16 +116,11 @@ def absurd_errors(result: dict, meta: dict | None = None) -> str | None:
 
 
 def file_refusal(path) -> str | None:
-    """refusal() of a model file's validation; None when the file cannot be read as JSON (its
-    reader then says what is wrong with it)."""
-    import json
-    from pathlib import Path
+    """refusal() of a model file's validation; InputError, from the model reader, when the file
+    is not a readable model (so a bad file is refused in one line before any work)."""
+    from .formats.model_json import read_model
 
-    try:
-        meta = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return refusal(meta) if isinstance(meta, dict) else None
+    return refusal(read_model(path).meta)
 
 
 def held_out_errors(model: ModelFile, meas: Measurements) -> dict:

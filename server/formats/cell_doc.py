@@ -8,6 +8,7 @@ from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import (
+    AfterValidator,
     ConfigDict,
     Discriminator,
     Field,
@@ -191,7 +192,7 @@ class CellDoc(Doc):
             "propertyNames": {"pattern": f"^{TARGET_NAME_PATTERN}$"},
         },
     )
-    base: Matrix4 | None = Field(
+    base: RigidTransform | None = Field(
         None, description="4x4 guess of the robot base in the tracker frame"
     )
     tracker: TrackerDoc = Field(default_factory=TrackerDoc)
@@ -202,13 +203,6 @@ class CellDoc(Doc):
     @classmethod
     def _targets(cls, targets: dict) -> dict:
         return check_targets(targets)
-
-    @field_validator("base")
-    @classmethod
-    def _base(cls, base):
-        if base is not None:
-            check_transform(np.array(base))
-        return base
 
     @field_validator("robot")
     @classmethod
@@ -267,6 +261,15 @@ def check_transform(T: np.ndarray) -> None:
         )
     if np.linalg.det(R) < 0:
         raise located("rotation part is a reflection (determinant -1), not a rotation")
+
+
+def _rigid(T: list) -> list:
+    check_transform(np.array(T, dtype=float))
+    return T
+
+
+# A 4x4 homogeneous transform of a rigid motion (cell.json's base guess, model.json's base)
+RigidTransform = Annotated[Matrix4, AfterValidator(_rigid)]
 
 
 def builtin_named(name: str) -> Robot | None:

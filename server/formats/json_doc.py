@@ -11,6 +11,10 @@ from pydantic_core import ErrorDetails
 
 from .errors import InputError
 
+# Levels of arrays and objects a document may nest: the formats use at most five.
+MAX_DEPTH = 32
+NESTED_TOO_DEEPLY = f"invalid JSON: nested too deeply (more than {MAX_DEPTH} levels)"
+
 
 def field_name(at: tuple) -> str:
     """A readable name for a location, e.g. ('robot', 'joints', 2, 'alpha') -> robot.joints[2].alpha."""
@@ -44,7 +48,11 @@ class JsonDoc:
         except json.JSONDecodeError as e:
             raise InputError(path, e.lineno, e.colno, f"invalid JSON: {e.msg}") from None
         except RecursionError:
-            raise InputError(path, 1, None, "invalid JSON: nested too deeply") from None
+            raise InputError(path, 1, None, NESTED_TOO_DEEPLY) from None
+        if _nested_deeper(value, MAX_DEPTH):
+            # Below the parser's own limit, the recursive source map and validators would still
+            # run out of stack on it.
+            raise InputError(path, 1, None, NESTED_TOO_DEEPLY)
         return doc, value
 
     def _source_map(self, text: str) -> dict:
@@ -97,6 +105,18 @@ class JsonDoc:
         except ValidationError as e:
             at, message, key = explain(e.errors()[0])
             raise self.error(at, message, key) from None
+
+
+def _nested_deeper(value, limit: int) -> bool:
+    """Whether arrays and objects nest more than `limit` levels in `value` (without recursion)."""
+    stack = [(value, 1)] if isinstance(value, (dict, list)) else []
+    while stack:
+        node, depth = stack.pop()
+        if depth > limit:
+            return True
+        children = node.values() if isinstance(node, dict) else node
+        stack.extend((c, depth + 1) for c in children if isinstance(c, (dict, list)))
+    return False
 
 
 class _DuplicateKey(Exception):

@@ -17,8 +17,8 @@ from pydantic import (
 from robocal.solver.effects import Extension
 from robocal.solver.vocabulary import KINDS
 
-from .cell_doc import RobotDoc, check_targets
-from .fields import TARGET_NAME_PATTERN, Doc, Integer, Label, Matrix4, Number, Point, located
+from .cell_doc import RigidTransform, RobotDoc, check_targets
+from .fields import TARGET_NAME_PATTERN, Doc, Integer, Label, Number, Point, located
 
 SCHEMA = 1
 # The typed reads an effect's `from_json` asks for (`read.number(key)` ...), by their types.
@@ -98,7 +98,7 @@ class ModelDoc(Doc):
     schema_: Literal[1] = Field(alias="schema")
     robot: RobotDoc
     nominal_robot: RobotDoc | None = None
-    base: Matrix4 = Field(description="the robot base in the tracker frame, mm")
+    base: RigidTransform = Field(description="the robot base in the tracker frame, mm")
     targets: dict[str, Point] = Field(
         description="SMR positions in the flange frame, mm",
         json_schema_extra={

@@ -30,6 +30,19 @@ def files(tmp_path_factory):
     (d / "empty.json").write_text("")
     (d / "fake.db").write_bytes((d / "meas.csv").read_bytes())
     (d / "poses.csv").write_text("pose,q1,q2,q3,q4,q5,q6\n1,0,10,0,0,20,0\n")
+    (d / "targets.csv").write_text("pose,target,x,y,z,q1,q2,q3,q4,q5,q6\n1,A,0,0,0,0,0,0,0,0,0\n")
+    model = (d / "model.json").read_text().rstrip().removesuffix("}")
+    # past the JSON parser's own recursion limit, and below it in a file with a mistake (whose
+    # placing walked the document recursively)
+    (d / "deep.json").write_text(model + ', "notes": ' + "[" * 5000 + "]" * 5000 + "}")
+    bad = model.replace('"schema": 1', '"schema": 2', 1)
+    (d / "deep_bad.json").write_text(bad + ', "notes": ' + "[" * 600 + "]" * 600 + "}")
+    zero = json.loads((d / "model.json").read_text())
+    zero["base"] = [[0.0, 0.0, 0.0, 1000.0], [0.0] * 4, [0.0] * 4, [0.0, 0.0, 0.0, 1.0]]
+    (d / "zero_base.json").write_text(json.dumps(zero, indent=2))
+    reflected = json.loads((d / "model.json").read_text())
+    reflected["base"][2] = [-v for v in reflected["base"][2][:3]] + [reflected["base"][2][3]]
+    (d / "mirror_base.json").write_text(json.dumps(reflected, indent=2))
     from robocal.server import store
 
     with store.open_database(d / "a.db") as a:
@@ -112,6 +125,24 @@ CASES = [
     (("calibrate", "mysql://host/db"), ["mysql://host/db", "SQLite files and PostgreSQL"]),
     (("calibrate", "::://"), ["not a database file or URL"]),
     (("simulate", "--posess", 3, "--out", "x.csv"), ["--posess", "did you mean --poses?"]),
+    # issue 20: a model nested too deeply, or whose base is no rotation, by every reader
+    *[
+        (tuple(model if a == "MODEL" else a for a in cmd), [model, why])
+        for cmd in (
+            ("compensate", "MODEL", "targets.csv", "--out", "j.csv"),
+            ("export", "MODEL", "--format", "params", "--out", "p.csv"),
+            ("predict", "MODEL", "poses.csv", "--out", "pred.csv"),
+            ("evaluate", "MODEL", "meas.csv"),
+            ("acquire", "--db", "v.db", "--pause", 0, "--verify", "MODEL"),
+        )
+        for model, why in (
+            ("deep.json", "nested too deeply"),
+            ("deep_bad.json", "nested too deeply"),
+            ("zero_base.json", "base: rotation part is not orthonormal"),
+            ("mirror_base.json", "base: rotation part is a reflection"),
+        )
+    ],
+    (("calibrate", "meas.csv", "--cell", "deep.json"), ["deep.json", "nested too deeply"]),
 ]
 
 
