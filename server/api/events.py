@@ -2,16 +2,92 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import json
+from typing import Any, Literal, get_args
 
 from fastapi import APIRouter, Request
+from pydantic import BaseModel, Field
 from sse_starlette import EventSourceResponse, ServerSentEvent
 
 from .deps import EventsDep
+from .schemas import State
 
 router = APIRouter(tags=["events"])
 # Comments at this interval keep proxies and browsers from dropping a quiet stream.
 PING_S = 15
+
+
+class CampaignStateEvent(BaseModel):
+    """A campaign's life-cycle state changed."""
+
+    type: Literal["campaign.state"]
+    campaign_id: int
+    state: State
+    was: State
+    time: dt.datetime = Field(description="when the service published it (UTC)")
+
+
+class CampaignPoseEvent(BaseModel):
+    """A pose of a running campaign was measured (or skipped)."""
+
+    type: Literal["campaign.pose"]
+    campaign_id: int
+    pose_index: int
+    pose_state: str = Field(description="the pose's outcome (measured, unreachable...)")
+    poses_done: int
+    poses_total: int
+    readings: int = Field(description="readings taken so far in this run")
+    missing: int = Field(description="targets missing so far in this run (beam breaks)")
+    state: State
+    time: dt.datetime
+
+
+class CampaignRunEvent(BaseModel):
+    """This service's run of a campaign ended: the campaign's state then, and why."""
+
+    type: Literal["campaign.run"]
+    campaign_id: int
+    state: State | None
+    detail: str | None
+    time: dt.datetime
+
+
+class JobEvent(BaseModel):
+    """A job was queued, progressed or ended."""
+
+    type: Literal["job"]
+    job_id: int
+    kind: Literal["calibration", "diagnosis", "planning"]
+    campaign_id: int | None
+    state: Literal["queued", "running", "done", "failed"]
+    progress: float
+    reason: str | None
+    time: dt.datetime
+
+
+EVENTS = (CampaignStateEvent, CampaignPoseEvent, CampaignRunEvent, JobEvent)
+
+
+def event_item_schema() -> dict[str, Any]:
+    """One server-sent event as OpenAPI's `itemSchema` of text/event-stream says it (as FastAPI's
+    own SSE routes document theirs): `event` its type, `data` its JSON object, `id` its number."""
+    return {
+        "type": "object",
+        "required": ["event", "data", "id"],
+        "properties": {
+            "event": {
+                "type": "string",
+                "enum": [get_args(e.model_fields["type"].annotation)[0] for e in EVENTS],
+            },
+            "id": {"type": "string", "pattern": "^[0-9]+$"},
+            "data": {
+                "type": "string",
+                "contentMediaType": "application/json",
+                "contentSchema": {"oneOf": [e.model_json_schema() for e in EVENTS]},
+            },
+        },
+    }
 
 
 @router.get(
@@ -19,11 +95,8 @@ PING_S = 15
     response_class=EventSourceResponse,
     responses={
         200: {
-            "content": {
-                "text/event-stream": {
-                    "schema": {"type": "string", "description": "server-sent events, endless"}
-                }
-            }
+            "description": "server-sent events, endless; `: ping` comments keep it open",
+            "content": {"text/event-stream": {"itemSchema": event_item_schema()}},
         }
     },
 )

@@ -22,7 +22,14 @@ CSV_BODY = {
     "requestBody": {
         "required": True,
         "content": {
-            "text/csv": {"schema": {"type": "string", "description": "a meas.csv (spec section 1)"}}
+            # non-empty: spec section 1 requires the header row, so an empty file is refused
+            "text/csv": {
+                "schema": {
+                    "type": "string",
+                    "minLength": 1,
+                    "description": "a meas.csv (spec section 1): a header row, then readings",
+                }
+            }
         },
     }
 }

@@ -129,7 +129,12 @@ TARGETS_BODY = {
     "requestBody": {
         "content": {
             "text/csv": {
-                "schema": {"type": "string", "description": "a targets.csv (spec section 7)"}
+                # a header row at least: an empty body is no targets.csv
+                "schema": {
+                    "type": "string",
+                    "minLength": 1,
+                    "description": "a targets.csv (spec section 7)",
+                }
             }
         },
     }

@@ -5,27 +5,28 @@ from __future__ import annotations
 import datetime as dt
 import difflib
 import re
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, Field, field_validator
 from robocal.drivers.lifecycle import ACTIONS, STATES
 from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
 from robocal.server.formats.cell_doc import CellDoc
-from robocal.server.formats.limits import COORD_MAX_MM
+from robocal.server.formats.fields import Integer, Whole
+from robocal.server.formats.limits import COORD_MAX_MM, PRINTABLE
 from robocal.server.verification import CUBE_SIDE_MM, DIRECTIONS
 
 from .model_schemas import HoldoutSummary, ValidationSummary
 
 # Ids are SQLite rowids.
 MAX_ID = 2**63 - 1
-# A name or label: printable, no control characters (NUL, newline, escape, DEL, U+2028/9), so
-# that it cannot break a CSV row, a log line or a terminal.
-_CTRL = r"\x00-\x1f\x7f-\x9f\u2028\u2029"
-PRINTABLE = rf"^[^{_CTRL}]*[^\s{_CTRL}][^{_CTRL}]*$"  # and not blank
 METHOD = r"^(minimax|ls-sum|ls-pose|nominal|ls-single(:[A-Za-z][A-Za-z0-9_]{0,15})?)$"
 METHOD_NAMES = ("minimax", "ls-sum", "ls-single", "ls-pose", "nominal")
 # the engine's states and the user's actions, listed in the OpenAPI; mypy takes only literals
 # written out in a Literal
+# A request's numbers and flags as JSON has them: pydantic's lax mode would take false for 0, true
+# for 1 and "0.5" for 0.5 (Integer: a whole number, never true or "3")
+Real = Annotated[float, Field(strict=True)]
+Flag = Annotated[bool, Field(strict=True)]
 State = Literal[STATES]  # type: ignore[valid-type]
 Action = Literal[ACTIONS]  # type: ignore[valid-type]
 
@@ -42,12 +43,12 @@ class CampaignCreate(BaseModel):
 
     name: str | None = Field(None, min_length=1, max_length=200, pattern=PRINTABLE)
     cell_id: str = Field("default", max_length=64)
-    poses: int = Field(20, ge=3, le=5000)
-    seed: int = Field(0, ge=0, le=2**32 - 1)
+    poses: Integer = Field(20, ge=3, le=5000)
+    seed: Integer = Field(0, ge=0, le=2**32 - 1)
     settle: Literal["fixed", "adaptive"] = "fixed"
-    pause_s: float = Field(10.0, ge=0.0, le=600.0)
-    order: bool = False
-    choose_from: int = Field(
+    pause_s: Real = Field(10.0, ge=0.0, le=600.0)
+    order: Flag = False
+    choose_from: Integer = Field(
         0,
         ge=0,
         le=MAX_CANDIDATES,
@@ -56,8 +57,8 @@ class CampaignCreate(BaseModel):
             f"poses x choose_from at most {MAX_CHOICE_WORK}"
         ),
     )
-    beam_break_rate: float = Field(0.0, ge=0.0, lt=1.0, description="simulated cell only")
-    samples: int = Field(1000, ge=1, le=100_000)
+    beam_break_rate: Real = Field(0.0, ge=0.0, lt=1.0, description="simulated cell only")
+    samples: Integer = Field(1000, ge=1, le=100_000)
 
 
 Coordinate = Field(ge=-COORD_MAX_MM, le=COORD_MAX_MM)
@@ -67,9 +68,9 @@ class PointIn(BaseModel):
     """A test point: where the model's first SMR must go, in the cell (tracker) frame, mm."""
 
     point: str = Field(min_length=1, max_length=64, pattern=PRINTABLE)
-    x_mm: float = Coordinate
-    y_mm: float = Coordinate
-    z_mm: float = Coordinate
+    x_mm: Real = Coordinate
+    y_mm: Real = Coordinate
+    z_mm: Real = Coordinate
 
 
 class VerifyCreate(BaseModel):
@@ -78,14 +79,14 @@ class VerifyCreate(BaseModel):
     then with the compensated ones."""
 
     name: str = Field("verify", min_length=1, max_length=100, pattern=PRINTABLE)
-    cycles: int = Field(3, ge=1, le=30)
-    directions: int = Field(3, ge=1, le=len(DIRECTIONS))
-    side_mm: float = Field(CUBE_SIDE_MM, gt=0, le=5000, description="the ISO cube's side")
+    cycles: Integer = Field(3, ge=1, le=30)
+    directions: Integer = Field(3, ge=1, le=len(DIRECTIONS))
+    side_mm: Real = Field(CUBE_SIDE_MM, gt=0, le=5000, description="the ISO cube's side")
     points: list[PointIn] | None = Field(
         None, min_length=1, max_length=20, description="test points (default: the ISO cube's five)"
     )
-    pause_s: float = Field(10.0, ge=0.0, le=600.0)
-    start: bool = Field(True, description="start the run at once (else POST .../start)")
+    pause_s: Real = Field(10.0, ge=0.0, le=600.0)
+    start: Flag = Field(True, description="start the run at once (else POST .../start)")
 
 
 class RunPublic(BaseModel):
@@ -157,7 +158,7 @@ class ReadingPublic(BaseModel):
 
 
 class JobCreate(BaseModel):
-    campaign_id: int = Field(ge=1, le=MAX_ID)
+    campaign_id: Integer = Field(ge=1, le=MAX_ID)
     kind: Literal["calibration", "diagnosis"] = "calibration"
     method: str = Field(
         "minimax",
@@ -166,10 +167,8 @@ class JobCreate(BaseModel):
         json_schema_extra={"pattern": METHOD},
         description="minimax, ls-sum, ls-single[:T], ls-pose, nominal (calibration only)",
     )
-    holdout_campaign_id: int | None = Field(
+    holdout_campaign_id: Annotated[int, Field(ge=1, le=MAX_ID), Whole] | None = Field(
         None,
-        ge=1,
-        le=MAX_ID,
         description="a calibration's held-out campaign: a done campaign of the same cell it is "
         "not fitted on; the model's error on it is the validation figure, and its poses are the "
         "held-out ones of the recording",

@@ -28,6 +28,7 @@ from .fields import (
     Matrix4,
     NonNegative,
     Point,
+    Whole,
     located,
 )
 
@@ -114,8 +115,20 @@ def builtin_robot(name: str) -> Robot:
     return robot
 
 
+def _any_case(name: str) -> str:
+    return "".join(f"[{c.lower()}{c.upper()}]" if c.isalpha() else re.escape(c) for c in name)
+
+
 BuiltinName = Annotated[
-    str, Field(strict=True, description=f"a built-in robot: {', '.join(sorted(BUILTIN))}")
+    str,
+    Field(
+        strict=True,
+        description=f"a built-in robot: {', '.join(sorted(BUILTIN))}",
+        # builtin_robot's rule (any case, blanks around), so the schema allows no other name
+        json_schema_extra={
+            "pattern": rf"^\s*({'|'.join(_any_case(n) for n in sorted(BUILTIN))})\s*$"
+        },
+    ),
 ]
 RobotField = Annotated[
     Annotated[BuiltinName, Tag("built-in robot")] | Annotated[RobotDoc, Tag("inline robot")],
@@ -133,7 +146,7 @@ class TrackerDoc(Doc):
 
 class TrackerAddress(Doc):
     host: Label
-    port: Annotated[int, Field(ge=1, le=65535)]
+    port: Annotated[int, Field(ge=1, le=65535), Whole]
     timeout_s: Timeout = 5.0
 
     @field_validator("host")
@@ -147,7 +160,7 @@ class TrackerAddress(Doc):
 
 class ControllerAddress(Doc):
     url: Label = Field(description="socket://host:port, rfc2217://host:port or a serial port")
-    baudrate: Annotated[int, Field(ge=50, le=4_000_000)] = 9600
+    baudrate: Annotated[int, Field(ge=50, le=4_000_000), Whole] = 9600
     timeout_s: Timeout = 5.0
 
     @field_validator("url")

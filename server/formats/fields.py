@@ -9,7 +9,7 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fie
 from pydantic.fields import FieldInfo
 from pydantic_core import PydanticCustomError
 
-from .limits import ANGLE_MAX_DEG, COORD_MAX_MM, NUMBER_MAX, bad_text
+from .limits import ANGLE_MAX_DEG, COORD_MAX_MM, LABEL_CHARS_MAX, NUMBER_MAX, PRINTABLE, bad_text
 
 # Letters like the spec's A, B, C, or short identifiers such as SMR1: they become CSV values
 # and parameter names (A_x), so no spaces or punctuation.
@@ -45,7 +45,9 @@ def _whole(value):
     return value
 
 
-Integer = Annotated[int, BeforeValidator(_whole)]
+# for any type of whole-number values (an int, a Literal[1])
+Whole = BeforeValidator(_whole)
+Integer = Annotated[int, Whole]
 
 
 def _label(text: str) -> str:
@@ -57,7 +59,15 @@ def _label(text: str) -> str:
     return text
 
 
-Label = Annotated[str, Field(strict=True), AfterValidator(_label)]
+# The schema states _label's rule, so that what it allows the reader takes.
+Label = Annotated[
+    str,
+    Field(
+        strict=True,
+        json_schema_extra={"minLength": 1, "maxLength": LABEL_CHARS_MAX, "pattern": PRINTABLE},
+    ),
+    AfterValidator(_label),
+]
 Point = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
 Row4 = Annotated[list[Coordinate], Field(min_length=4, max_length=4)]
 Matrix4 = Annotated[list[Row4], Field(min_length=4, max_length=4)]

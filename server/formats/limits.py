@@ -25,6 +25,10 @@ CSV_ROWS_MAX = 250_000
 FILE_BYTES_MAX = 64 * 1024 * 1024
 # Pose ids and names: a label, not a document.
 LABEL_CHARS_MAX = 200
+# A name or label: printable, no control characters (NUL, newline, escape, DEL, U+2028/9), so
+# that it cannot break a CSV row, a log line or a terminal; bad_text's rule as a pattern.
+_CTRL = r"\x00-\x1f\x7f-\x9f\u2028\u2029"
+PRINTABLE = rf"^[^{_CTRL}]*[^\s{_CTRL}][^{_CTRL}]*$"  # and not blank
 
 
 def bad_text(text: str) -> str | None:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import (
@@ -18,7 +18,7 @@ from robocal.solver.effects import Extension
 from robocal.solver.vocabulary import KINDS
 
 from .cell_doc import RigidTransform, RobotDoc, check_targets
-from .fields import TARGET_NAME_PATTERN, Doc, Integer, Label, Number, Point, located
+from .fields import TARGET_NAME_PATTERN, Doc, Integer, Label, Number, Point, Whole, located
 
 SCHEMA = 1
 # The typed reads an effect's `from_json` asks for (`read.number(key)` ...), by their types.
@@ -63,7 +63,10 @@ class ExtensionDoc(Doc):
 
     model_config = ConfigDict(extra="allow")
     name: str = Field(json_schema_extra={"enum": list(KINDS)})
-    joint: Integer | None = Field(None, ge=1, description="joints are numbered from 1")
+    # the bound inside the type: after Integer's check, the schema would say "ge", not "minimum"
+    joint: Annotated[int, Field(ge=1), Whole] | None = Field(
+        None, description="joints are numbered from 1"
+    )
     coef: list[Number] = Field(description="model-internal coefficients")
     parameters: dict | None = Field(None, description="the coefficients in degrees, ppm and mm")
     coef_standard_errors: list | None = None
@@ -95,7 +98,7 @@ class ModelDoc(Doc):
     fit statistics, created) are kept as written."""
 
     model_config = ConfigDict(extra="allow", title="model.json")
-    schema_: Literal[1] = Field(alias="schema")
+    schema_: Annotated[Literal[1], Whole] = Field(alias="schema")
     robot: RobotDoc
     nominal_robot: RobotDoc | None = None
     base: RigidTransform = Field(description="the robot base in the tracker frame, mm")

@@ -40,6 +40,14 @@ SPEC_REPORT = {
 }
 
 
+JOINT = {"a": 0, "d": 0, "theta": 0, "alpha": 0}
+IDENTITY = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+DEVICES = {
+    "tracker": {"host": "127.0.0.1", "port": 5000},
+    "controller": {"url": "socket://127.0.0.1:5001"},
+}
+
+
 def validator(name):
     return jsonschema_rs.validator_for(json.loads(committed(name).read_text()))
 
@@ -88,6 +96,20 @@ def test_schemas_accept_the_spec_examples_and_what_the_program_writes(tmp_path):
         {"robot": {"convention": "dh", "joints": [{"a": 1e6, "d": 0, "theta": 0, "alpha": 0}]}},
         {"payload_kg": -1},
         {"tracker": {"mpe_um": "10"}},
+        # issue 20: the schema allowed these, the reader refused them
+        {"robot": ""},
+        {"robot": " "},
+        {"robot": "irb2601"},
+        {"robot": {"name": "", "convention": "dh", "joints": [JOINT]}},
+        {"robot": {"name": "arm\u2028", "convention": "dh", "joints": [JOINT]}},
+        {"robot": {"name": "a" * 201, "convention": "dh", "joints": [JOINT]}},
+        # and bools taken for numbers by both
+        {"payload_kg": False},
+        {"base": IDENTITY, "devices": {**DEVICES, "tracker": {"host": "127.0.0.1", "port": True}}},
+        {
+            "base": IDENTITY,
+            "devices": {**DEVICES, "controller": {"url": "/dev/ttyS0", "baudrate": "9600"}},
+        },
     ],
 )
 def test_cell_schema_refuses_what_the_reader_refuses(change):
@@ -97,6 +119,37 @@ def test_cell_schema_refuses_what_the_reader_refuses(change):
     assert not validator("cell").is_valid(doc)
     with pytest.raises(InputError):
         parse_cell(json.dumps(doc))
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"robot": " IRB2600 "},
+        {"robot": {"name": "arm 2 (cell 3)", "convention": "dh", "joints": [JOINT]}},
+        {"base": IDENTITY, "devices": DEVICES},
+        {
+            "base": IDENTITY,
+            "devices": {**DEVICES, "controller": {"url": "COM3", "baudrate": 9600.0}},
+        },
+    ],
+)
+def test_cell_reader_takes_what_the_schema_allows(change):
+    from robocal.server.formats import parse_cell
+
+    doc = {**SPEC_CELL, **change}
+    assert validator("cell").is_valid(doc), list(validator("cell").iter_errors(doc))
+    parse_cell(json.dumps(doc))
+
+
+def test_no_bound_is_lost_from_a_schema(tmp_path):
+    """A bound on an Integer (a wrapped int) was once written "ge" instead of "minimum", which
+    no validator reads."""
+    from robocal.server.app import create_app
+
+    texts = [committed(name).read_text() for name in MODELS]
+    texts.append(json.dumps(create_app(settings_for(tmp_path)).openapi()))
+    for text in texts:
+        assert '"ge":' not in text and '"le":' not in text and '"gt":' not in text
 
 
 def test_api_upload_is_validated_by_the_cell_model(tmp_path):

@@ -660,3 +660,37 @@ def test_bad_extensions_in_a_model_file_are_refused(tmp_path, name, old, new, wo
     with pytest.raises(InputError, match=words) as info:
         read_model(path)
     assert str(info.value).startswith(f"{path}:") and "extensions[0]" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "change, field, words",
+    [
+        ({"schema": True}, "schema", "expected an integer, got true"),
+        ({"base": [[0.0] * 4, [0.0] * 4, [0.0] * 4, [0, 0, 0, 1]]}, "base", "not orthonormal"),
+        (
+            {"base": [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, -1.0, 0], [0, 0, 0, 1]]},
+            "base",
+            "a reflection (determinant -1)",
+        ),
+        (
+            {"base": [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 1, 1]]},
+            "base",
+            "[0, 0, 0, 1]",
+        ),
+        ({"robot": {"name": "", "convention": "dh", "joints": []}}, "robot.name", "non-empty"),
+        ({"notes": json.loads("[" * 40 + "]" * 40)}, "", "too deeply"),
+    ],
+)
+def test_model_file_refuses_what_cell_json_refuses(tmp_path, change, field, words):
+    """Issue 20: a model whose base is no rotation (all zeros) was taken by predict and export;
+    `schema: true` passed as 1; a document nested too deeply overflowed the reader."""
+    from robocal.server.formats.model_json import model_to_json, read_model
+
+    model, *_ = every_effect(0)
+    obj = {**model_to_json(model), **change}
+    path = put(tmp_path, "model.json", json.dumps(obj, indent=2))
+    with pytest.raises(InputError) as info:
+        read_model(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}:") and words in message and "\n" not in message, message
+    assert f": {field}" in message if field else "nested" in message, message

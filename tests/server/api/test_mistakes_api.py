@@ -59,3 +59,49 @@ def test_evaluating_on_a_planned_campaign_says_it_has_no_measured_pose(live, mod
     # forcing does not make readings appear
     r = c.get(f"/api/models/{job}/evaluate", params={"campaign_id": cid, "force": "true"})
     assert r.status_code == 409, r.text
+
+
+@pytest.mark.sqlite_only  # refused before the store: once is enough
+def test_a_boolean_or_text_for_a_number_is_refused_naming_the_field(live):
+    """Issue 20: `beam_break_rate: false` was taken as 0 (and `seed: true` as 1, `order: 1` as
+    true); the body's numbers and flags are JSON's own."""
+    c = live.client
+    for url, body, field in (
+        ("/api/campaigns", {"poses": 5, "beam_break_rate": False}, "beam_break_rate"),
+        ("/api/campaigns", {"poses": 5, "seed": True}, "seed"),
+        ("/api/campaigns", {"poses": 5, "pause_s": "0"}, "pause_s"),
+        ("/api/campaigns", {"poses": 5, "order": 1}, "order"),
+        ("/api/jobs", {"campaign_id": True}, "campaign_id"),
+        ("/api/jobs", {"campaign_id": 1, "holdout_campaign_id": True}, "holdout_campaign_id"),
+        ("/api/models/1/verify", {"cycles": True}, "cycles"),
+        ("/api/models/1/verify", {"start": "false"}, "start"),
+        (
+            "/api/models/1/verify",
+            {"points": [{"point": "p", "x_mm": False, "y_mm": 0, "z_mm": 0}]},
+            "x_mm",
+        ),
+    ):
+        r = c.post(url, json=body)
+        assert r.status_code == 422 and r.headers["content-type"] == PROBLEM, (body, r.text)
+        assert r.json()["errors"][0]["loc"][-1] == field, (body, r.text)
+    # numbers as JSON writes them are taken: an integer for a real, a whole real for a count
+    r = c.post("/api/campaigns", json={"poses": 5.0, "pause_s": 0, "beam_break_rate": 0})
+    assert r.status_code == 201, r.text
+    assert c.get(f"/api/campaigns/{r.json()['id']}").json()["poses_total"] == 5
+
+
+@pytest.mark.sqlite_only
+def test_the_openapi_says_what_the_uploads_refuse(live):
+    """Issue 20: an empty meas.csv or targets.csv was refused though the schema allowed it."""
+    c = live.client
+    spec = c.get("/openapi.json").json()["paths"]
+    for path in ("/api/measurements/import", "/api/models/{job_id}/compensate"):
+        body = spec[path]["post"]["requestBody"]
+        assert body["required"] and body["content"]["text/csv"]["schema"]["minLength"] == 1
+    r = c.post("/api/measurements/import", content=b"", headers={"content-type": "text/csv"})
+    assert r.status_code == 422 and "empty file" in r.json()["detail"], r.text
+    # a body nested past the parser's limit is a 4xx too, not a 500
+    deep = "[" * 100_000 + "]" * 100_000
+    for url in ("/api/campaigns", "/api/cells"):
+        r = c.post(url, content=deep, headers={"content-type": "application/json"})
+        assert 400 <= r.status_code < 500 and r.headers["content-type"] == PROBLEM, r.text
