@@ -173,6 +173,7 @@ EXPECTED = {
     "int_type": "an integer",
     "int_from_float": "an integer",
     "string_type": "a string",
+    "bool_type": "true or false",
     "list_type": "an array [...]",
     "dict_type": "an object {...}",
     "model_type": "an object {...}",

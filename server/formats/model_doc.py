@@ -93,6 +93,47 @@ class ExtensionDoc(Doc):
         return self._extension
 
 
+class _Open(Doc):
+    """A block the program writes and partly reads back: what it reads is typed, the rest kept."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+# A statistic read back (a standard error, a nominal value): any finite JSON number
+Statistic = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+Text = Annotated[str, Field(strict=True)]
+
+
+class IdentifiedRow(_Open):
+    parameter: Text = Field(description="its name: a1, theta2, base_x, A_y...")
+    nominal: Statistic | None = Field(None, description="the cell's value, mm or degrees")
+    standard_error: Statistic | None = Field(None, description="null where held fixed")
+
+
+class IdentifiedDoc(_Open):
+    rows: list[IdentifiedRow] = Field([], description="one per parameter")
+
+
+class FitDoc(_Open):
+    fixed_parameters: dict[str, Text] | None = Field(
+        None, description="parameters held fixed, and why"
+    )
+
+
+class UncertaintyDoc(_Open):
+    estimator: Text | None = Field(None, description="how the covariance was estimated")
+    standard_errors: dict[str, Statistic | None] | None = Field(
+        None, description="per parameter, mm or degrees (null: held fixed)"
+    )
+
+
+class ValidationDoc(_Open):
+    deployable: Annotated[bool, Field(strict=True)] = Field(
+        True, description="false: compensate and export refuse the model unless forced"
+    )
+    reasons: list[Text] = Field([], description="why not deployable, one sentence each")
+
+
 class ModelDoc(Doc):
     """A model.json: the calibrated robot, base, SMRs, extensions; other keys (method, data,
     fit statistics, created) are kept as written."""
@@ -111,13 +152,17 @@ class ModelDoc(Doc):
     )
     extensions: list[ExtensionDoc] = []
     created: Label | None = None
-    identified: dict | None = Field(
+    fit: FitDoc | None = Field(None, description="the fit's statistics")
+    uncertainty: UncertaintyDoc | None = Field(
+        None, description="the parameters' standard errors (mm, degrees) and how estimated"
+    )
+    identified: IdentifiedDoc | None = Field(
         None,
         description="a calibration's identified parameters: `rows` (per parameter: group, "
         "nominal, calibrated, change, standard_error in mm and degrees), `fixed` (held and "
         "why), `condition_number`, `correlations` (the strongest |r|)",
     )
-    validation: dict | None = Field(
+    validation: ValidationDoc | None = Field(
         None,
         description="whether the data supports the model: `deployable`, `reasons`, "
         "`holdout_rms_mm` (leave-one-pose-out, the headline), `fit_rms_mm`, "

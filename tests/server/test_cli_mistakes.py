@@ -43,6 +43,12 @@ def files(tmp_path_factory):
     reflected = json.loads((d / "model.json").read_text())
     reflected["base"][2] = [-v for v in reflected["base"][2][:3]] + [reflected["base"][2][3]]
     (d / "mirror_base.json").write_text(json.dumps(reflected, indent=2))
+    # blocks the program reads back from a model (the deployment verdict, the parameter table's
+    # standard errors): a hand edit of the wrong type was a traceback, "no" was deployable
+    for name, key, value, _ in META_EDITS:
+        edited = json.loads((d / "model.json").read_text())
+        edited[key] = value
+        (d / name).write_text(json.dumps(edited, indent=2))
     from robocal.server import store
 
     with store.open_database(d / "a.db") as a:
@@ -50,6 +56,21 @@ def files(tmp_path_factory):
     with store.open_database(d / "planned.db") as db:
         store.create_campaign(db, name="later", cell_json=cell, poses_deg=np.full((4, 6), 10.0))
     return d
+
+
+META_EDITS = [
+    ("rows.json", "identified", {"rows": [1]}, "identified.rows[0]: expected an object"),
+    (
+        "deployable.json",
+        "validation",
+        {"deployable": "no"},
+        "validation.deployable: expected true or false",
+    ),
+    ("reasons.json", "validation", {"deployable": False, "reasons": [1]}, "validation.reasons[0]"),
+    ("uncertainty.json", "uncertainty", "x", "uncertainty: expected an object"),
+    ("fixed.json", "fit", {"fixed_parameters": 3}, "fit.fixed_parameters: expected an object"),
+    ("errors.json", "uncertainty", {"standard_errors": {"a1": "0.1"}}, "standard_errors.a1"),
+]
 
 
 def one_line_error(r, *words):
@@ -143,6 +164,14 @@ CASES = [
         )
     ],
     (("calibrate", "meas.csv", "--cell", "deep.json"), ["deep.json", "nested too deeply"]),
+    *[
+        ((cmd, name, *rest), [name, why])
+        for name, _, _, why in META_EDITS
+        for cmd, *rest in (
+            ("export", "--format", "params", "--out", "p.csv"),
+            ("compensate", "targets.csv", "--out", "j.csv"),
+        )
+    ],
 ]
 
 

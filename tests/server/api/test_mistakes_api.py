@@ -59,6 +59,14 @@ def test_evaluating_on_a_planned_campaign_says_it_has_no_measured_pose(live, mod
     # forcing does not make readings appear
     r = c.get(f"/api/models/{job}/evaluate", params={"campaign_id": cid, "force": "true"})
     assert r.status_code == 409, r.text
+    # run, but every beam broken: no reading either
+    body = {"poses": 3, "name": "dark", "pause_s": 0, "beam_break_rate": 0.9999}
+    dark = c.post("/api/campaigns", json=body).json()["id"]
+    assert c.post(f"/api/campaigns/{dark}/start").status_code in (200, 202)
+    wait_for(lambda: c.get(f"/api/campaigns/{dark}").json(), lambda j: j["status"] == "done")
+    r = c.get(f"/api/models/{job}/evaluate", params={"campaign_id": dark})
+    assert r.status_code == 409, r.text
+    assert r.json()["detail"] == f"campaign {dark} (dark) has no reading: every target was missing"
 
 
 @pytest.mark.sqlite_only  # refused before the store: once is enough
