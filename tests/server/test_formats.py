@@ -694,3 +694,17 @@ def test_model_file_refuses_what_cell_json_refuses(tmp_path, change, field, word
     message = str(info.value)
     assert message.startswith(f"{path}:") and words in message and "\n" not in message, message
     assert f": {field}" in message if field else "nested" in message, message
+
+
+def test_nesting_is_bounded_at_the_parse():
+    """32 levels parse; 33, or past the parser's own recursion limit, are one line naming the file."""
+    from robocal.server.formats.json_doc import MAX_DEPTH, JsonDoc
+
+    assert MAX_DEPTH == 32
+    doc, value = JsonDoc.parse("x.json", "[" * 32 + "]" * 32)
+    assert json.dumps(value, separators=(",", ":")) == "[" * 32 + "]" * 32
+    for depth in (33, 100_000):
+        for text in ("[" * depth + "]" * depth, '{"a":' * depth + "1" + "}" * depth):
+            with pytest.raises(InputError, match="nested too deeply") as info:
+                JsonDoc.parse("x.json", text)
+            assert str(info.value).startswith("x.json:1: ")
