@@ -140,6 +140,8 @@ class Acquisitions:
         StateError if its state does not allow it, Conflict if this service cannot."""
         if action == "estop":
             return self.estop(campaign_id)
+        if action in ("start", "resume"):
+            self.db.check_file()  # DatabaseGone (503): a run would store into a deleted file
         engine = self._engine_of(campaign_id)
         if engine is not None:
             was = engine.state
@@ -313,7 +315,7 @@ class Acquisitions:
         try:
             opts = AcquireOptions(**{**info.settings.get("options", {}), "name": info.name})
             summary = acquire(
-                self.database_url,
+                self.db,  # the service's own store: its file checked, its connections kept
                 parse_cell(info.cell_json),
                 opts,
                 campaign_id=cid,
