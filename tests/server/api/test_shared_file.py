@@ -19,6 +19,7 @@ import pytest
 from tests.server.api.conftest import free_port, wait_for
 from tests.server.api.test_real_devices import cell_json, devices, finished  # noqa: F401 - a fixture
 from tests.server.api.test_sigterm import Wire, start_service
+from tests.server.store.test_sharing import other_process_opens_and_closes, shared_locks
 
 ROOT = Path(__file__).resolve().parents[3]
 # Simulated devices on the virtual clock: a campaign takes seconds of wall time.
@@ -53,27 +54,6 @@ def readings(c, cid) -> list[dict]:
     assert r.status_code == 200, r.text
     assert len(r.json()) == int(r.headers["X-Total-Count"]) > 0
     return r.json()
-
-
-def shared_locks(pid: int, path: Path) -> list[str]:
-    """The READ (SQLite SHARED) locks process `pid` holds on the file, from /proc/locks."""
-    ino = os.stat(path).st_ino
-    with open("/proc/locks") as f:  # a proc file, not the database
-        rows = [line.split() for line in f]
-    return [
-        " ".join(r)
-        for r in rows
-        if len(r) >= 6 and r[3] == "READ" and r[4] == str(pid) and r[5].endswith(f":{ino}")
-    ]
-
-
-def other_process_opens_and_closes(db: Path) -> None:
-    """A plain sqlite3 reader in its own process: it opens, reads and closes the file."""
-    code = (
-        "import sqlite3, sys; c = sqlite3.connect(sys.argv[1]); "
-        "c.execute('SELECT count(*) FROM reading').fetchall(); c.close()"
-    )
-    subprocess.run([sys.executable, "-c", code, str(db)], check=True, timeout=60)
 
 
 def kill_dash_nine(proc) -> None:
