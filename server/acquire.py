@@ -78,9 +78,8 @@ class StoreSink:
                 "humidity_pct": getattr(weather, "humidity_pct", None),
             }
         )
-        store.record_reading(
-            self.db,
-            campaign_id=self.campaign_id,
+        self._stored(
+            store.record_reading,
             pose_index=pose_index,
             target=target,
             xyz=measurement.mean_mm,
@@ -89,16 +88,21 @@ class StoreSink:
             time_s=time_s,
             **w,
         )
-        self.db.check_file()
 
     def pose_done(self, *, pose_index, state, q_deg):
-        store.record_pose_outcome(
-            self.db,
-            campaign_id=self.campaign_id,
+        self._stored(
+            store.record_pose_outcome,
             pose_index=pose_index,
             state=state,
             reached_deg=list(map(float, q_deg)),
         )
+
+    def _stored(self, write, **kw) -> None:
+        try:
+            write(self.db, campaign_id=self.campaign_id, **kw)
+        except Exception:
+            self.db.check_file()  # a write that failed on a replaced file: say that first
+            raise
         self.db.check_file()
 
 

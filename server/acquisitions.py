@@ -10,6 +10,7 @@ is never held while a device or the database is called.
 from __future__ import annotations
 
 import datetime as dt
+import logging
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
@@ -25,6 +26,7 @@ from .events import Events
 from .formats.cell_json import parse_cell
 from .formats.model_json import to_plain
 
+log = logging.getLogger("robocal.acquisitions")
 # The states in which an engine's run() has ended (or is ending): requests go to the store.
 ENDED = ("estopped", "aborted", "done", "failed")
 # How long a request waits for a run that has just ended to store its last state.
@@ -328,6 +330,8 @@ class Acquisitions:
             change = dict(detail="stopped before the arm moved")
         except Exception as e:  # a device fault (the engine reported failed), or a refusal
             change = dict(detail=f"{type(e).__name__}: {e}")
+            if isinstance(e.__cause__ or e, store.DatabaseGone):  # the service's, said loudly
+                log.error("%s", change["detail"])
         with self._lock:
             self._runs[cid] = run = replace(self._runs[cid], active=False, **change)
             self._current, self._engine = None, None

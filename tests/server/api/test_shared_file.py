@@ -200,6 +200,8 @@ def test_a_database_file_gone_mid_campaign_stops_it_within_a_pose(tmp_path, devi
             assert len(moves_after) <= 1, f"{len(moves_after)} moves after the file went"
             assert stop_at is not None, "no STOP reached the controller"
             assert all(t < stop_at for t in moves_after)
+            # the service's own log says it too (read from its output on another thread)
+            wait_for(lambda: any(detail in line for line in out), bool, timeout=30)
             again = c.post(f"/api/campaigns/{cid}/resume")
             assert again.status_code == 503, again.text
             assert "the database file was deleted" in again.json()["detail"], again.text

@@ -17,6 +17,7 @@ from robocal.server.store import (
     create_campaign,
     list_campaigns,
     open_database,
+    set_status,
 )
 
 from .conftest import POSES_DEG
@@ -119,3 +120,26 @@ def test_the_header_is_read_through_sqlite(tmp_path):
     (tmp_path / "text.db").write_text("pose,q1\n1,0\n" * 100)
     with pytest.raises(StoreError, match=r"text\.db: not a SQLite database"):
         open_database(tmp_path / "text.db")
+
+
+@pytest.mark.parametrize("pooled", [True, False], ids=["old connection", "new connection"])
+def test_a_run_storing_into_a_replaced_file_is_told_why(tmp_path, cell_json, pooled):
+    """The campaign's sink after the file was replaced: whether its write still reaches the old
+    file (a pooled connection) or a new connection's (what is at the path now, read through the
+    old log: neither file's data), DatabaseGone."""
+    from types import SimpleNamespace
+
+    from robocal.server.acquire import StoreSink
+
+    path = tmp_path / "s.db"
+    with open_database(path) as db:
+        cid = create_campaign(db, name="r", cell_json=cell_json, poses_deg=POSES_DEG)
+        set_status(db, campaign_id=cid, status="running")
+        sink = StoreSink(db, cid)
+        m = SimpleNamespace(mean_mm=[1.0, 2.0, 3.0], std_mm=[0.01] * 3, samples=20)
+        sink.reading(pose_index=0, target="A", measurement=m, time_s=0.0, weather=None)
+        replace(path)
+        if not pooled:
+            db.engine.dispose()  # the next write opens the file now at the path
+        with pytest.raises(DatabaseGone, match="was deleted or replaced"):
+            sink.reading(pose_index=0, target="B", measurement=m, time_s=1.0, weather=None)
