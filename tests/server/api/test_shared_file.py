@@ -15,6 +15,7 @@ from pathlib import Path
 
 import httpx
 import pytest
+from robocal.drivers.lifecycle import MOVING
 
 from tests.server.api.conftest import free_port, wait_for
 from tests.server.api.test_real_devices import cell_json, devices, finished  # noqa: F401 - a fixture
@@ -46,6 +47,12 @@ def done_campaign(c, name: str, seed: int) -> int:
     last = finished(c, cid, timeout=180)
     assert last["status"] == "done", last
     return cid
+
+
+def ended(campaign: dict) -> bool:
+    """The campaign's run has ended and stored its last state."""
+    run = campaign["run"]
+    return run is not None and not run["active"] and campaign["status"] not in MOVING
 
 
 def readings(c, cid) -> list[dict]:
@@ -188,7 +195,13 @@ def test_a_database_file_gone_mid_campaign_stops_it_within_a_pose(tmp_path, devi
             else:
                 replace_with_another_database(db)
             gone_at = time.monotonic()
-            end = finished(c, cid)
+            # polled with the service's connections to a file that is gone: a new one it opens
+            # finds an empty file there, and that read may fail; the next is read again
+            end = wait_for(
+                lambda: c.get(f"/api/campaigns/{cid}"),
+                lambda r: r.status_code == 200 and ended(r.json()),
+                interval=0.05,
+            ).json()
             moves_after = [t for t, line in wire.lines if " MOVEJ" in line and t > gone_at]
             stop_at = wire.first("STOP", after=gone_at)
             assert end["status"] == "failed", end
