@@ -25,6 +25,8 @@ from tests.server.store.test_sharing import other_process_opens_and_closes, shar
 ROOT = Path(__file__).resolve().parents[3]
 # Simulated devices on the virtual clock: a campaign takes seconds of wall time.
 QUICK = {"poses": 30, "pause_s": 0.0, "samples": 20}
+# The campaign the service writes while the other process runs: long enough to overlap it.
+SECOND = 200
 # The cell's devices on the wall clock: poses slow enough to delete the file mid-campaign.
 LIVE = {"poses": 30, "pause_s": 0.1, "samples": 20, "seed": 2}
 
@@ -37,16 +39,26 @@ def client(port, token) -> httpx.Client:
     )
 
 
-def done_campaign(c, name: str, seed: int) -> int:
-    """A simulated campaign created, started and done through the API; its id."""
-    r = c.post("/api/campaigns", json={"name": name, "seed": seed, **QUICK})
+def started_campaign(c, name: str, seed: int, poses: int = QUICK["poses"]) -> int:
+    """A simulated campaign created and started through the API; its id."""
+    r = c.post("/api/campaigns", json={"name": name, "seed": seed, **QUICK, "poses": poses})
     assert r.status_code == 201, r.text
     cid = r.json()["id"]
     r = c.post(f"/api/campaigns/{cid}/start")
     assert r.status_code == 202, r.text
+    return cid
+
+
+def done(c, cid: int) -> int:
+    """The campaign, once its run has ended done; its id."""
     last = finished(c, cid, timeout=180)
     assert last["status"] == "done", last
     return cid
+
+
+def done_campaign(c, name: str, seed: int) -> int:
+    """A simulated campaign created, started and done through the API; its id."""
+    return done(c, started_campaign(c, name, seed))
 
 
 def ended(campaign: dict) -> bool:
@@ -93,9 +105,10 @@ def nothing_lost(tmp_path, token, acknowledged: dict[int, list[dict]]) -> None:
 
 @pytest.mark.parametrize("beside", ["calibrate", "second service"])
 def test_another_process_beside_the_service_loses_nothing(tmp_path, beside):
-    """Serve, run a campaign; `robocal calibrate DB --campaign 1` (or a second service on the
-    same file, started and stopped); the service keeps its lock and log, its second campaign
-    completes; kill -9 and restart: every reading the API answered is there."""
+    """Serve, run a campaign; while the service writes a second one, `robocal calibrate DB
+    --campaign 1` (or a second service on the same file, started and stopped); the service keeps
+    its lock and log, its second and third campaigns complete; kill -9 and restart: every
+    reading the API answered is there."""
     db = tmp_path / "s.db"
     port = free_port()
     proc, token, out = start_service(tmp_path, port)
@@ -105,6 +118,7 @@ def test_another_process_beside_the_service_loses_nothing(tmp_path, beside):
             first = done_campaign(c, "first", seed=1)
             # a campaign start opened the store again in the service: its lock must survive it
             assert shared_locks(proc.pid, db), "the service lost its SHARED lock on the file"
+            second = started_campaign(c, "second", seed=2, poses=SECOND)  # written meanwhile
             if beside == "calibrate":
                 r = subprocess.run(
                     [sys.executable, "-m", "robocal.server.cli", "calibrate", str(db)]
@@ -121,16 +135,22 @@ def test_another_process_beside_the_service_loses_nothing(tmp_path, beside):
                 assert again is None
                 try:
                     with client(port2, token) as c2:
-                        (seen,) = c2.get("/api/campaigns").json()
-                        assert (seen["id"], seen["status"]) == (first, "done")
+                        seen = c2.get(f"/api/campaigns/{first}").json()
+                        assert seen["status"] == "done", seen
                         assert readings(c2, first) == readings(c, first)
                 finally:
                     stop(proc2)
+            meanwhile = c.get(f"/api/campaigns/{second}").json()
+            print(
+                f"\n{beside} done with the second campaign {meanwhile['status']} at pose "
+                f"{meanwhile['poses_done']} of {SECOND}"
+            )
             # the other process closed the file last but one: the service's log stays
             assert Path(f"{db}-wal").exists(), "the service's write-ahead log was deleted"
             assert shared_locks(proc.pid, db)
-            second = done_campaign(c, "second", seed=2)
-            acknowledged = {cid: readings(c, cid) for cid in (first, second)}
+            done(c, second)
+            third = done_campaign(c, "third", seed=3)
+            acknowledged = {cid: readings(c, cid) for cid in (first, second, third)}
     except BaseException:
         kill_dash_nine(proc)
         print("".join(out))
