@@ -103,12 +103,19 @@ def nothing_lost(tmp_path, token, acknowledged: dict[int, list[dict]]) -> None:
         stop(proc)
 
 
-@pytest.mark.parametrize("beside", ["calibrate", "second service"])
+# The command lines run beside the service on its file: a reader, and a writer of its own.
+COMMANDS = {
+    "calibrate": ["calibrate", "{db}", "--campaign", "{first}", "--out", "model.json"],
+    "acquire": ["acquire", "--db", "{db}", "--name", "cli", "--poses", "30", "--seed", "5"],
+}
+
+
+@pytest.mark.parametrize("beside", ["calibrate", "acquire", "second service"])
 def test_another_process_beside_the_service_loses_nothing(tmp_path, beside):
     """Serve, run a campaign; while the service writes a second one, `robocal calibrate DB
-    --campaign 1` (or a second service on the same file, started and stopped); the service keeps
-    its lock and log, its second and third campaigns complete; kill -9 and restart: every
-    reading the API answered is there."""
+    --campaign 1` (or `robocal acquire --db DB`, or a second service on the same file, started
+    and stopped); the service keeps its lock and log, its second and third campaigns complete;
+    kill -9 and restart: every reading the API answered is there."""
     db = tmp_path / "s.db"
     port = free_port()
     proc, token, out = start_service(tmp_path, port)
@@ -119,16 +126,18 @@ def test_another_process_beside_the_service_loses_nothing(tmp_path, beside):
             # a campaign start opened the store again in the service: its lock must survive it
             assert shared_locks(proc.pid, db), "the service lost its SHARED lock on the file"
             second = started_campaign(c, "second", seed=2, poses=SECOND)  # written meanwhile
-            if beside == "calibrate":
+            own = []  # the campaigns the other process wrote itself
+            if beside in COMMANDS:
                 r = subprocess.run(
-                    [sys.executable, "-m", "robocal.server.cli", "calibrate", str(db)]
-                    + ["--campaign", str(first), "--out", str(tmp_path / "model.json")],
+                    [sys.executable, "-m", "robocal.server.cli"]
+                    + [a.format(db=db, first=first) for a in COMMANDS[beside]],
                     cwd=tmp_path,
                     capture_output=True,
                     text=True,
                     timeout=300,
                 )
                 assert r.returncode == 0, r.stderr
+                own = [x["id"] for x in c.get("/api/campaigns").json() if x["name"] == "cli"]
             else:
                 port2 = free_port()
                 proc2, again, _ = start_service(tmp_path, port2)
@@ -150,7 +159,8 @@ def test_another_process_beside_the_service_loses_nothing(tmp_path, beside):
             assert shared_locks(proc.pid, db)
             done(c, second)
             third = done_campaign(c, "third", seed=3)
-            acknowledged = {cid: readings(c, cid) for cid in (first, second, third)}
+            acknowledged = {cid: readings(c, cid) for cid in (first, second, third, *own)}
+            assert len(own) == (beside == "acquire") and len(acknowledged) == 3 + len(own)
     except BaseException:
         kill_dash_nine(proc)
         print("".join(out))
