@@ -283,13 +283,18 @@ def _delete_under_a_run(c, acquisitions, db: Path, seed: int) -> dict:
     t0 = time.perf_counter()
     run = _until(lambda: r if not (r := acquisitions.get(cid)).active else None, "run end", 120)
     took = time.perf_counter() - t0
-    end = c.get(f"/api/campaigns/{cid}").json()
+    # read on a connection the service opened before the file went (a new one answers 503)
+    end = _until(lambda: _json_if_ok(c.get(f"/api/campaigns/{cid}")), "campaign read", 30)
     return {
         "detect_ms": took * 1000,
         "poses_after": end["poses_done"] - before,
         "status": end["status"],
         "told": end["status"] == "failed" and "was deleted" in (run.detail or ""),
     }
+
+
+def _json_if_ok(response):
+    return response.json() if response.status_code == 200 else None
 
 
 def demo_time() -> dict:

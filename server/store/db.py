@@ -141,6 +141,11 @@ class Database:
         self._keeper = keeper
         wal = path.with_name(path.name + "-wal")
         self._files = ((path, _identity(path)), (wal, _identity(wal)))
+        # A new pooled connection would open (or create, empty) whatever is at the path now.
+        event.listen(self.engine, "do_connect", self._before_connect)
+
+    def _before_connect(self, _dialect, _record, _cargs, _cparams) -> None:
+        self.check_file()
 
     def check_file(self) -> None:
         """DatabaseGone if the SQLite file or its log is not the one opened (deleted, replaced):

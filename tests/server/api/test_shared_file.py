@@ -241,6 +241,8 @@ def test_a_database_file_gone_mid_campaign_stops_it_within_a_pose(tmp_path, devi
             assert fault == "deleted" or "or replaced" in detail, detail
             assert "the arm halted" in detail, detail
             assert len(moves_after) <= 1, f"{len(moves_after)} moves after the file went"
+            # nor did a new connection make an empty database where the file was
+            assert fault == "replaced" or not db.exists()
             assert stop_at is not None, "no STOP reached the controller"
             assert all(t < stop_at for t in moves_after)
             # the service's own log says it too (read from its output on another thread)

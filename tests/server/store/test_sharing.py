@@ -143,3 +143,15 @@ def test_a_run_storing_into_a_replaced_file_is_told_why(tmp_path, cell_json, poo
             db.engine.dispose()  # the next write opens the file now at the path
         with pytest.raises(DatabaseGone, match="was deleted or replaced"):
             sink.reading(pose_index=0, target="B", measurement=m, time_s=1.0, weather=None)
+
+
+def test_no_new_connection_to_whatever_is_at_the_path_now(tmp_path):
+    """The pool's next new connection, after the file was deleted: DatabaseGone, and no empty
+    database made where it was (a restart would have opened that as an empty store)."""
+    path = tmp_path / "s.db"
+    with open_database(path) as db:
+        path.unlink()
+        db.engine.dispose()  # the next session needs a new connection
+        with pytest.raises(DatabaseGone, match="the database file was deleted"):
+            list_campaigns(db)
+        assert not path.exists()
