@@ -123,7 +123,7 @@ class Database:
         self._files: tuple[tuple[Path, tuple[int, int] | None], ...] = ()
         url = engine.url
         if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
-            self._keep(Path(url.database))
+            self._keep(Path(url.database).absolute())
 
     def _keep(self, path: Path) -> None:
         # SQLite deletes the -wal when its last connection closes if no other process holds a
