@@ -12,8 +12,9 @@ from __future__ import annotations
 import datetime as dt
 import json
 import threading
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -60,7 +61,9 @@ class AcquireOptions:
 
 
 class StoreSink:
-    """Hands the engine's readings to the store, each committed before the next measurement."""
+    """Hands the engine's readings to the store, each committed before the next measurement;
+    after each, DatabaseGone if the file was deleted or replaced meanwhile (the engine then
+    halts the arm and fails the campaign)."""
 
     def __init__(self, db, campaign_id):
         self.db, self.campaign_id = db, campaign_id
@@ -75,9 +78,8 @@ class StoreSink:
                 "humidity_pct": getattr(weather, "humidity_pct", None),
             }
         )
-        store.record_reading(
-            self.db,
-            campaign_id=self.campaign_id,
+        self._stored(
+            store.record_reading,
             pose_index=pose_index,
             target=target,
             xyz=measurement.mean_mm,
@@ -88,13 +90,20 @@ class StoreSink:
         )
 
     def pose_done(self, *, pose_index, state, q_deg):
-        store.record_pose_outcome(
-            self.db,
-            campaign_id=self.campaign_id,
+        self._stored(
+            store.record_pose_outcome,
             pose_index=pose_index,
             state=state,
             reached_deg=list(map(float, q_deg)),
         )
+
+    def _stored(self, write, **kw) -> None:
+        try:
+            write(self.db, campaign_id=self.campaign_id, **kw)
+        except Exception:
+            self.db.check_file()  # a write that failed on a replaced file: say that first
+            raise
+        self.db.check_file()
 
 
 def base_guess(cell: Cell, seed: int, sim: SimulatedCell | None = None) -> np.ndarray:
@@ -289,6 +298,7 @@ def acquire(
 ) -> dict:
     """Run (or resume) a campaign on the cell's devices; a summary with the campaign time.
 
+    db_path is a database file or URL, or an open store.Database (the service's own).
     campaign_id runs that stored campaign (else the latest unfinished one named opts.name, or a
     new one); the run holds the campaign's lease for `owner` (default: this process), LeaseHeld
     if another live process drives it. on_engine(engine) is called before the run so another
@@ -297,16 +307,16 @@ def acquire(
     poses_deg (m, n) makes a new campaign run these joint commands instead of planned poses,
     stored with their labels and these settings.
     """
-    db = store.open_database(db_path)
     owner = owner or process_owner()
     name = opts.name or f"campaign-seed{opts.seed}"
-    if campaign_id is not None:
-        existing = store.get_campaign(db, campaign_id=campaign_id)
-        name = existing.name
-    else:
-        existing = find_unfinished(db, name)
     stopper = _Stopper(log)
     with ExitStack() as stack:
+        db = stack.enter_context(_opened(db_path))  # closed last, after the lease and devices
+        if campaign_id is not None:
+            existing = store.get_campaign(db, campaign_id=campaign_id)
+            name = existing.name
+        else:
+            existing = find_unfinished(db, name)
         if existing is not None:
             stack.enter_context(Lease(db, existing.id, owner, on_lost=stopper.estop, log=log))
             existing = store.get_campaign(db, campaign_id=existing.id)  # as of the lease
@@ -398,6 +408,11 @@ def acquire(
                 f"after {engine.stats.poses} poses; its readings are stored, run "
                 "again with --reset to resume"
             ) from None
+        except store.DatabaseGone as e:
+            raise AcquisitionFailed(
+                f"campaign {cid} ({name}) stopped at pose {engine.stats.poses + (start or 0) + 1}"
+                f", the arm halted: {e}"
+            ) from e
         except Exception as e:
             raise AcquisitionFailed(
                 f"campaign {cid} ({name}) stopped at pose "
@@ -424,6 +439,18 @@ def acquire(
         "skipped_poses": stats.skipped,
         "simulated": cell.simulated,
     }
+
+
+@contextmanager
+def _opened(db_or_path) -> Iterator[store.Database]:
+    """The service's open store as it is (checked: a file deleted under it is refused before the
+    arm moves), or the store at a path or URL, opened for the run and closed after it."""
+    if isinstance(db_or_path, store.Database):
+        db_or_path.check_file()
+        yield db_or_path
+    else:
+        with store.open_database(db_or_path) as db:
+            yield db
 
 
 def _predictor(cell: Cell, names, base, geometry: dict | None) -> SmrPredictor:

@@ -10,6 +10,7 @@ is never held while a device or the database is called.
 from __future__ import annotations
 
 import datetime as dt
+import logging
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
@@ -25,6 +26,7 @@ from .events import Events
 from .formats.cell_json import parse_cell
 from .formats.model_json import to_plain
 
+log = logging.getLogger("robocal.acquisitions")
 # The states in which an engine's run() has ended (or is ending): requests go to the store.
 ENDED = ("estopped", "aborted", "done", "failed")
 # How long a request waits for a run that has just ended to store its last state.
@@ -140,6 +142,8 @@ class Acquisitions:
         StateError if its state does not allow it, Conflict if this service cannot."""
         if action == "estop":
             return self.estop(campaign_id)
+        if action in ("start", "resume"):
+            self.db.check_file()  # DatabaseGone (503): a run would store into a deleted file
         engine = self._engine_of(campaign_id)
         if engine is not None:
             was = engine.state
@@ -313,7 +317,7 @@ class Acquisitions:
         try:
             opts = AcquireOptions(**{**info.settings.get("options", {}), "name": info.name})
             summary = acquire(
-                self.database_url,
+                self.db,  # the service's own store: its file checked, its connections kept
                 parse_cell(info.cell_json),
                 opts,
                 campaign_id=cid,
@@ -326,6 +330,8 @@ class Acquisitions:
             change = dict(detail="stopped before the arm moved")
         except Exception as e:  # a device fault (the engine reported failed), or a refusal
             change = dict(detail=f"{type(e).__name__}: {e}")
+            if isinstance(e.__cause__ or e, store.DatabaseGone):  # the service's, said loudly
+                log.error("%s", change["detail"])
         with self._lock:
             self._runs[cid] = run = replace(self._runs[cid], active=False, **change)
             self._current, self._engine = None, None

@@ -235,6 +235,68 @@ def _swallow(call, errors):
     return run
 
 
+def deleted_database(repeats: int = 3) -> dict:
+    """Time from deleting the database files (`rm robocal.db*`) under a running campaign to its
+    run ending failed, and the poses it measured after; a fresh service on 127.0.0.1 with the
+    simulated cell (virtual clock) each time."""
+    import httpx
+
+    from .security import ensure_token
+    from .settings import Settings
+
+    runs = []
+    for i in range(repeats):
+        with tempfile.TemporaryDirectory() as tmp:
+            db = Path(tmp) / "b.db"
+            settings = Settings(database=str(db), data_dir=Path(tmp) / "data", port=_free_port())
+            token = ensure_token(settings.token_file)
+            server, thread, app = _serve(settings)
+            try:
+                with httpx.Client(
+                    base_url=f"http://127.0.0.1:{settings.port}",
+                    headers={"Authorization": f"Bearer {token}"},
+                    timeout=30.0,
+                ) as c:
+                    runs.append(_delete_under_a_run(c, app.state.acquisitions, db, seed=i))
+            finally:
+                server.should_exit = True
+                thread.join(timeout=10)
+    ms = np.array([r["detect_ms"] for r in runs])
+    return {
+        "repeats": repeats,
+        "cell": "simulated, virtual clock, 127.0.0.1",
+        "detect_p50_ms": float(np.percentile(ms, 50)),
+        "detect_max_ms": float(ms.max()),
+        "poses_after_max": max(r["poses_after"] for r in runs),
+        "all_failed_with_reason": all(r["told"] for r in runs),
+        "runs": runs,
+    }
+
+
+def _delete_under_a_run(c, acquisitions, db: Path, seed: int) -> dict:
+    cid = c.post("/api/campaigns", json={"poses": 40, "seed": seed, "name": "gone"}).json()["id"]
+    c.post(f"/api/campaigns/{cid}/start").raise_for_status()
+    _wait(c, f"/api/campaigns/{cid}", lambda b: b["poses_done"] >= 3, timeout=120)
+    before = c.get(f"/api/campaigns/{cid}").json()["poses_done"]
+    for f in (db, db.with_name(db.name + "-wal"), db.with_name(db.name + "-shm")):
+        f.unlink()
+    t0 = time.perf_counter()
+    run = _until(lambda: r if not (r := acquisitions.get(cid)).active else None, "run end", 120)
+    took = time.perf_counter() - t0
+    # read on a connection the service opened before the file went (a new one answers 503)
+    end = _until(lambda: _json_if_ok(c.get(f"/api/campaigns/{cid}")), "campaign read", 30)
+    return {
+        "detect_ms": took * 1000,
+        "poses_after": end["poses_done"] - before,
+        "status": end["status"],
+        "told": end["status"] == "failed" and "was deleted" in (run.detail or ""),
+    }
+
+
+def _json_if_ok(response):
+    return response.json() if response.status_code == 200 else None
+
+
 def demo_time() -> dict:
     """Wall time of `robocal demo` in a fresh folder (a subprocess, as a user runs it)."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -266,4 +328,10 @@ def run_service_bench() -> dict:
         "demo": demo,
         "live_state_latency": live,
         "stop_latency": stop_latency(),
+        "deleted_database": _deleted_database_figure(),
     }
+
+
+def _deleted_database_figure() -> dict:
+    print("[bench] time to detect a deleted database", file=sys.stderr, flush=True)
+    return deleted_database()

@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict
 from robocal.drivers.lifecycle import StateError
 from robocal.server.acquisitions import ControllerUnreachable
 from robocal.server.formats.errors import InputError
-from robocal.server.store import Conflict, NotFound, StoreError
+from robocal.server.store import Conflict, DatabaseGone, NotFound, StoreError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 MEDIA_TYPE = "application/problem+json"
@@ -141,6 +141,7 @@ def install(app: FastAPI) -> None:
     statuses = (
         (NotFound, 404),
         (Conflict, 409),
+        (DatabaseGone, 503),  # the service's, not the user's: restart it on its file
         (StoreError, 422),
         (ControllerUnreachable, 502),
         (ValueError, 422),

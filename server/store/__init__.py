@@ -32,7 +32,7 @@ from .access import (
     update_job,
 )
 from .db import Database, open_database
-from .errors import Conflict, NotFound, StoreError
+from .errors import Conflict, DatabaseGone, NotFound, StoreError
 
 __all__ = [
     "JobInfo",
@@ -44,6 +44,7 @@ __all__ = [
     "CampaignInfo",
     "Conflict",
     "Database",
+    "DatabaseGone",
     "NotFound",
     "PoseInfo",
     "ReadingInfo",

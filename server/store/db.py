@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sqlite3
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -15,7 +16,7 @@ from sqlalchemy.engine import URL, make_url
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
-from .errors import StoreError
+from .errors import DatabaseGone, StoreError
 
 MIGRATIONS = Path(__file__).resolve().parents[2] / "migrations"
 # How long a writer waits for another process's write lock before "database is locked".
@@ -112,11 +113,53 @@ def migrate(engine: Engine, revision: str = "head") -> None:
 
 
 class Database:
-    """An open store: the engine and its sessions."""
+    """An open store: the engine and its sessions; on a SQLite file, a connection kept open for
+    the store's life and the file's identity, to tell a file deleted or replaced under it."""
 
     def __init__(self, engine: Engine):
         self.engine = engine
         self._sessions = sessionmaker(engine, expire_on_commit=False)
+        self._keeper: sqlite3.Connection | None = None
+        self._files: tuple[tuple[Path, tuple[int, int] | None], ...] = ()
+        url = engine.url
+        if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
+            self._keep(Path(url.database).absolute())
+
+    def _keep(self, path: Path) -> None:
+        # SQLite deletes the -wal when its last connection closes if no other process holds a
+        # lock on the file: the keeper's SHARED lock means this process is never that last user
+        # while the store is open, whatever the pool closes. Same library as the engine's
+        # (pysqlite is the sqlite3 module), so it shares the file's locks, never drops them.
+        keeper = sqlite3.connect(path, isolation_level=None, check_same_thread=False)
+        try:
+            keeper.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+            # a read takes the lock and opens the log; in WAL mode the lock stays after it
+            keeper.execute("SELECT count(*) FROM sqlite_master").fetchall()
+        except BaseException:
+            keeper.close()
+            raise
+        self._keeper = keeper
+        wal = path.with_name(path.name + "-wal")
+        self._files = ((path, _identity(path)), (wal, _identity(wal)))
+        # A new pooled connection would open (or create, empty) whatever is at the path now.
+        event.listen(self.engine, "do_connect", self._before_connect)
+
+    def _before_connect(self, _dialect, _record, _cargs, _cparams) -> None:
+        self.check_file()
+
+    def check_file(self) -> None:
+        """DatabaseGone if the SQLite file or its log is not the one opened (deleted, replaced):
+        what is written from then on is lost when the process ends. Two stat() calls."""
+        for (path, opened), what in zip(self._files, ("the database file", "its write-ahead log")):
+            now = _identity(path)
+            if opened is not None and now != opened:
+                # (a pool's new connection may have made a new empty file where it was)
+                how = "deleted" if now is None else "deleted or replaced by another file"
+                raise DatabaseGone(
+                    f"{self._files[0][0]}: {what} was {how} while the service had it open; "
+                    "what is stored since is lost when the service stops: put the file back "
+                    "or restart the service"
+                )
 
     @contextmanager
     def session(self, *, write: bool = False) -> Iterator[Session]:
@@ -128,6 +171,9 @@ class Database:
 
     def close(self) -> None:
         self.engine.dispose()
+        if self._keeper is not None:  # last, so the store's log is checkpointed by its owner
+            self._keeper.close()
+            self._keeper = None
 
     def __enter__(self) -> Database:
         return self
@@ -136,7 +182,13 @@ class Database:
         self.close()
 
 
-SQLITE_MAGIC = b"SQLite format 3\x00"
+def _identity(path: Path) -> tuple[int, int] | None:
+    """The file's (device, inode), None if it is not there."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None
+    return st.st_dev, st.st_ino
 
 
 def open_database(url_or_path) -> Database:
@@ -159,7 +211,8 @@ def open_database(url_or_path) -> Database:
         ) from None
     try:
         migrate(engine)
-    except SQLAlchemyError as e:
+        return Database(engine)
+    except (SQLAlchemyError, sqlite3.Error) as e:
         engine.dispose()
         # The driver's own first line names the cause; the rest is SQLAlchemy's help link.
         cause = str(getattr(e, "orig", None) or e).splitlines()[0]
@@ -167,11 +220,15 @@ def open_database(url_or_path) -> Database:
     except Exception:
         engine.dispose()
         raise
-    return Database(engine)
 
 
 def _check_sqlite_file(path: Path, given) -> None:
-    """Refuse a folder, or a file that is something else than SQLite (a meas.csv, a model.json)."""
+    """Refuse a folder, or a file that is something else than SQLite (a meas.csv, a model.json).
+
+    The header is read through SQLite, never with open(): closing any descriptor of a file drops
+    every POSIX lock the process holds on it, and a service that lost its SHARED lock has its
+    write-ahead log checkpointed and deleted under it by the next process that closes the file.
+    """
     if path.is_dir():
         raise StoreError(f"{_shown(given)}: is a folder, not a database file")
     if path.suffix.lower() in NOT_DATABASES:
@@ -179,15 +236,26 @@ def _check_sqlite_file(path: Path, given) -> None:
             f"{_shown(given)}: a {path.suffix} file is not a database; give a .db file "
             "(a meas.csv is read by calibrate, evaluate, compare and diagnose directly)"
         )
-    try:
-        with open(path, "rb") as f:
-            head = f.read(len(SQLITE_MAGIC))
-    except FileNotFoundError:
+    if not path.exists():
         return  # created on first use
-    except OSError as e:
-        raise StoreError(f"{_shown(given)}: cannot read the file: {e.strerror or e}") from None
-    if head and head != SQLITE_MAGIC:
-        raise StoreError(f"{_shown(given)}: not a SQLite database (the file holds something else)")
+    if not os.access(path, os.R_OK):
+        raise StoreError(f"{_shown(given)}: cannot read the file: permission denied")
+    try:
+        probe = sqlite3.connect(f"{path.absolute().as_uri()}?mode=ro", uri=True)
+    except sqlite3.Error:
+        return  # the engine's own open says why, in one line
+    try:
+        probe.execute("PRAGMA schema_version").fetchall()  # reads the header
+    except sqlite3.DatabaseError as e:
+        if getattr(e, "sqlite_errorcode", None) == SQLITE_NOTADB:
+            raise StoreError(
+                f"{_shown(given)}: not a SQLite database (the file holds something else)"
+            ) from None
+    finally:
+        probe.close()
+
+
+SQLITE_NOTADB = 26  # "file is not a database"
 
 
 # Suffixes of robocal's own text files: given as a database, they are a mistake, not a new store.

@@ -13,3 +13,7 @@ class NotFound(StoreError):
 
 class Conflict(StoreError):
     """The request contradicts what is already recorded (or the campaign's status)."""
+
+
+class DatabaseGone(StoreError):
+    """The database file (or its log) was deleted or replaced under the running service."""

@@ -240,12 +240,14 @@ def test_every_option_and_argument_has_help():
 
 def test_a_campaign_not_done_is_used_with_a_note(files, tmp_path):
     """An e-stopped campaign's measured poses are calibrated on, and the user is told so."""
-    import shutil
     import sqlite3
 
-    shutil.copy(files / "a.db", tmp_path / "stopped.db")
-    with sqlite3.connect(tmp_path / "stopped.db") as c:
+    # copied through SQLite (its backup), never by hand: a copy of the bare file misses the log
+    with sqlite3.connect(files / "a.db") as a, sqlite3.connect(tmp_path / "stopped.db") as c:
+        a.backup(c)
         c.execute("UPDATE campaign SET status = 'estopped' WHERE id = 1")
+    a.close()
+    c.close()
     r = robocal("calibrate", "stopped.db", "--campaign", 1, "--out", "m.json", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     (line,) = r.stderr.strip().splitlines()
