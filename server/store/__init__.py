@@ -32,7 +32,7 @@ from .access import (
     update_job,
 )
 from .db import Database, open_database
-from .errors import Conflict, NotFound, StoreError
+from .errors import Conflict, NotFound, StoreError, StoreUnavailable
 
 __all__ = [
     "JobInfo",
@@ -48,6 +48,7 @@ __all__ = [
     "PoseInfo",
     "ReadingInfo",
     "StoreError",
+    "StoreUnavailable",
     "campaign_measurements",
     "create_campaign",
     "discard_unfinished_pose",
