@@ -80,17 +80,27 @@ class Acquisitions:
         self._cancelled = False  # a stop landed before that engine existed
         self._future: Future | None = None
         # Nothing drives a campaign whose process is gone: one left moving is failed, so a
-        # resume continues it at its next unmeasured pose.
+        # resume continues it at its next unmeasured pose. A store that cannot write now leaves
+        # that to the campaign's next action (it shows failed meanwhile).
         for c in store.list_campaigns(db):
             if c.status in MOVING:
-                self.refresh(c)
+                try:
+                    self.refresh(c)
+                except store.StoreUnavailable:
+                    pass
 
     # -- what the API shows ---------------------------------------------------------------------
+    def shown(self, info: store.CampaignInfo) -> store.CampaignInfo:
+        """The campaign as the API shows it, read only: one left moving by a process that is
+        gone shows failed (refresh(), by its next action or the service's start, stores it)."""
+        if not self._orphaned(info):
+            return info
+        return replace(info, status=lifecycle.next_state(info.status, "fail"))
+
     def refresh(self, info: store.CampaignInfo) -> store.CampaignInfo:
-        """The campaign, failed first if it was left moving by a process that is gone."""
-        with self._lock:
-            ours = self._current == info.id
-        if info.status not in MOVING or ours or self._foreign(info):
+        """The campaign, failed first if it was left moving by a process that is gone: a write
+        (the campaign's lease), for the actions only; StoreUnavailable if the store cannot."""
+        if not self._orphaned(info):
             return info
         try:
             lease.claim(self.db, info.id, self.owner)
@@ -104,6 +114,13 @@ class Acquisitions:
         finally:
             store.release_lease(self.db, campaign_id=info.id, owner=self.owner)
         return store.get_campaign(self.db, campaign_id=info.id)
+
+    def _orphaned(self, info: store.CampaignInfo) -> bool:
+        """True if the campaign was left moving by a run that is gone (this service's own, whose
+        last state the store could not take, or another process's)."""
+        with self._lock:
+            ours = self._current == info.id
+        return info.status in MOVING and not ours and not self._foreign(info)
 
     def status_of(self, info: store.CampaignInfo) -> str:
         """The life-cycle state: the live engine's if this service runs the campaign."""
@@ -330,7 +347,7 @@ class Acquisitions:
             self._runs[cid] = run = replace(self._runs[cid], active=False, **change)
             self._current, self._engine = None, None
         try:
-            state = store.get_campaign(self.db, campaign_id=cid).status
+            state = self.shown(store.get_campaign(self.db, campaign_id=cid)).status
         except store.StoreError:
             state = None
         self.events.publish(
