@@ -33,12 +33,14 @@ SETTLE_S = 5.0
 
 @dataclass(frozen=True)
 class Run:
-    """What this service's worker did with a campaign since it started (detail, not a state)."""
+    """What this service's worker did with a campaign since it started (the state is the
+    store's; `ended` only while the store could not take the run's last state)."""
 
     campaign_id: int
     active: bool = True  # queued or running on this service's worker
     detail: str | None = None
     summary: dict | None = None
+    ended: str | None = None  # the engine's last state, kept in case the store could not take it
 
 
 @dataclass(frozen=True)
@@ -91,16 +93,15 @@ class Acquisitions:
 
     # -- what the API shows ---------------------------------------------------------------------
     def shown(self, info: store.CampaignInfo) -> store.CampaignInfo:
-        """The campaign as the API shows it, read only: one left moving by a process that is
-        gone shows failed (refresh(), by its next action or the service's start, stores it)."""
-        if not self._orphaned(info):
-            return info
-        return replace(info, status=lifecycle.next_state(info.status, "fail"))
+        """The campaign as the API shows it, read only: in the state the store should hold but
+        does not (see _left_in; refresh(), by its next action or the service's start, stores it)."""
+        left = self._left_in(info)
+        return info if left is None else replace(info, status=left)
 
     def refresh(self, info: store.CampaignInfo) -> store.CampaignInfo:
-        """The campaign, failed first if it was left moving by a process that is gone: a write
+        """The campaign, its state stored first where the store lags (see _left_in): a write
         (the campaign's lease), for the actions only; StoreUnavailable if the store cannot."""
-        if not self._orphaned(info):
+        if self._left_in(info) is None:
             return info
         try:
             lease.claim(self.db, info.id, self.owner)
@@ -108,19 +109,31 @@ class Acquisitions:
             return info  # taken meanwhile by a live process
         try:
             now = store.get_campaign(self.db, campaign_id=info.id)
-            if now.status in MOVING:
-                store.set_status(self.db, campaign_id=info.id, status="failed")
-                self._publish(info.id, "failed", now.status)
+            left = self._left_in(now)
+            if left is not None:
+                store.set_status(self.db, campaign_id=info.id, status=left)
+                self._publish(info.id, left, now.status)
+            with self._lock:  # the store has the run's last state now
+                if info.id in self._runs:
+                    self._runs[info.id] = replace(self._runs[info.id], ended=None)
         finally:
             store.release_lease(self.db, campaign_id=info.id, owner=self.owner)
         return store.get_campaign(self.db, campaign_id=info.id)
 
-    def _orphaned(self, info: store.CampaignInfo) -> bool:
-        """True if the campaign was left moving by a run that is gone (this service's own, whose
-        last state the store could not take, or another process's)."""
+    def _left_in(self, info: store.CampaignInfo) -> str | None:
+        """The state the store should hold but does not, if any: the last state this service's
+        run of the campaign reached when the store could not take it (a full disk: an e-stop
+        stays an e-stop), else failed for a campaign left moving by a run that is gone."""
         with self._lock:
-            ours = self._current == info.id
-        return info.status in MOVING and not ours and not self._foreign(info)
+            if self._current == info.id:
+                return None  # the live engine's state is shown (status_of)
+            run = self._runs.get(info.id)
+        if self._foreign(info):
+            return None
+        ended = None if run is None or info.lease_owner not in (None, self.owner) else run.ended
+        if ended is not None and ended != info.status and lifecycle.reachable(info.status, ended):
+            return ended
+        return lifecycle.next_state(info.status, "fail") if info.status in MOVING else None
 
     def status_of(self, info: store.CampaignInfo) -> str:
         """The life-cycle state: the live engine's if this service runs the campaign."""
@@ -344,7 +357,15 @@ class Acquisitions:
         except Exception as e:  # a device fault (the engine reported failed), or a refusal
             change = dict(detail=f"{type(e).__name__}: {e}")
         with self._lock:
-            self._runs[cid] = run = replace(self._runs[cid], active=False, **change)
+            engine = self._engine
+        try:
+            stored = store.get_campaign(self.db, campaign_id=cid).status
+        except store.StoreError:
+            stored = None
+        # the run's last state, kept if the store could not take it (a full disk)
+        ended = None if engine is None or engine.state == stored else engine.state
+        with self._lock:
+            self._runs[cid] = run = replace(self._runs[cid], active=False, ended=ended, **change)
             self._current, self._engine = None, None
         try:
             state = self.shown(store.get_campaign(self.db, campaign_id=cid)).status

@@ -186,6 +186,38 @@ def test_write_fault_mid_campaign_stops_the_arm_and_resume_loses_nothing(live, d
         )
 
 
+def test_an_estop_the_store_cannot_take_stays_an_estop(live, devices):
+    """E-stopped while the store cannot write: the arm stops (the STOP needs no store), the
+    campaign shows estopped, not the paused the store still holds, and once the store writes
+    again it must be reset before it resumes, as after any e-stop."""
+    c, database = live.client, live.settings.database
+    cid, _ = start_campaign(c, devices, "estop")
+    wait_for(lambda: len(devices.controller.moves), lambda n: n >= 2, timeout=60, interval=0.02)
+    assert c.post(f"/api/campaigns/{cid}/pause").status_code == 200
+    wait_for(
+        lambda: c.get(f"/api/campaigns/{cid}").json()["status"], lambda s: s == "paused", timeout=60
+    )
+    with WriteFault("full") as fault:
+        fault.armed.set()
+        r = c.post(f"/api/campaigns/{cid}/estop")
+        assert r.status_code == 200 and r.json()["confirmed"] is True, r.text
+        shown = finished(c, cid)
+        assert shown["status"] == "estopped" and "resume" not in shown["actions"], shown
+        stopped_after_fault(controller_lines(devices))
+        stored = execute(database, "select status from campaign where id = :c", c=cid)
+        assert stored == [("paused",)]  # the store could not take the e-stop
+        refused_503(c.post(f"/api/campaigns/{cid}/resume"), "full")
+        fault.armed.clear()
+    r = c.post(f"/api/campaigns/{cid}/resume")
+    assert r.status_code == 409 and r.json()["state"] == "estopped", r.text
+    assert c.post(f"/api/campaigns/{cid}/reset").status_code == 200
+    assert c.post(f"/api/campaigns/{cid}/resume").status_code == 202
+    wait_for(
+        lambda: c.get(f"/api/campaigns/{cid}").json()["status"], lambda s: s == "done", timeout=90
+    )
+    complete_once(database, cid, RUN["poses"])
+
+
 def test_reads_never_write_an_orphan_shows_failed_and_its_action_stores_it(live, devices):
     """A campaign left running by a process that is gone shows failed on a store that cannot
     write (its reads take no lease); resuming it answers 503 until the store writes again."""
