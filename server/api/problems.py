@@ -14,7 +14,7 @@ from robocal.drivers.lifecycle import StateError
 from robocal.server.acquisitions import ControllerUnreachable
 from robocal.server.formats.errors import InputError
 from robocal.server.store import Conflict, NotFound, StoreError, StoreUnavailable
-from robocal.server.store.errors import RETRY_AFTER_S
+from robocal.server.store.errors import RETRY_AFTER_S, unavailable
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 MEDIA_TYPE = "application/problem+json"
@@ -153,6 +153,14 @@ def install(app: FastAPI) -> None:
             headers={"Retry-After": str(RETRY_AFTER_S)},
             reason=exc.reason,
         )
+
+    @app.exception_handler(OSError)
+    async def os_error(request: Request, exc: OSError):
+        # A file of the data dir (a cell, an upload) on a full or read-only disk: the same 503.
+        fault = unavailable(exc)
+        if fault is None:
+            raise exc  # any other OSError is a bug: the server's own 500
+        return await store_unavailable(request, fault)
 
     # Store and device errors map to one status each; the store and the solver front ends raise
     # ValueError for bad arguments only. A 502 means the arm may still move: said loudly.

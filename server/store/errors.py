@@ -25,11 +25,12 @@ RETRY_AFTER_S = 30
 
 
 class StoreUnavailable(StoreError):
-    """The store could not read or write (a full or read-only disk, an I/O error): nothing of the
-    request was stored; it may succeed once the disk is fixed. `.reason` says what failed."""
+    """The store (the database, or the service's files) could not read or write: a full or
+    read-only disk, an I/O error. Nothing of the request was stored; it may succeed once the
+    disk is fixed. `.reason` says what failed."""
 
     def __init__(self, reason: str):
-        super().__init__(f"the database is unavailable: {reason}")
+        super().__init__(f"the service's storage failed: {reason}")
         self.reason = reason
 
 

@@ -139,7 +139,9 @@ def start_campaign(c, devices, name: str) -> tuple[int, str]:
     return cid, cell_id
 
 
-def fault_then_resume(c, devices, database: str, *, fault, fix, reason: str) -> None:
+def fault_then_resume(
+    c, devices, database: str, *, fault, fix, reason: str, files: bool = False
+) -> None:
     """Run a campaign; the disk fails as pose 3's second SMR is measured: the run stops the arm
     and fails saying why, reads work, actions answer 503; once fixed, resume completes it with
     every reading stored once and pose 3's first SMR not measured again."""
@@ -158,6 +160,10 @@ def fault_then_resume(c, devices, database: str, *, fault, fix, reason: str) -> 
     assert c.get(f"/api/campaigns/{cid}/measurements").status_code == 200
     refused_503(c.post(f"/api/campaigns/{cid}/resume"), reason)
     refused_503(c.post("/api/campaigns", json={"cell_id": cell_id, **RUN}), reason)
+    if files:  # the data dir on the same disk: a new cell's file cannot be written either
+        other = cell_json(devices)
+        other["targets"]["A"][2] += 1.0
+        refused_503(c.post("/api/cells", json=other), reason)
     assert len(devices.controller.moves) == moves  # nothing moved the arm meanwhile
     fix()
     assert c.post(f"/api/campaigns/{cid}/resume").status_code == 202
@@ -302,7 +308,8 @@ def test_full_tmpfs_stops_the_arm_and_resumes_once_space_returns(tmp_path, devic
     mount("-t", "tmpfs", "-o", "size=16m", "tmpfs", str(disk))
     try:
         database = str(disk / "robocal.db")
-        running = serve(settings_for(tmp_path, database))
+        settings = settings_for(tmp_path, database).model_copy(update={"data_dir": disk / "data"})
+        running = serve(settings)
         live = next(running)
         try:
             fault_then_resume(
@@ -312,6 +319,7 @@ def test_full_tmpfs_stops_the_arm_and_resumes_once_space_returns(tmp_path, devic
                 fault=lambda: fill(disk),
                 fix=lambda: (disk / "filler").unlink(),
                 reason="full",
+                files=True,
             )
         finally:
             running.close()

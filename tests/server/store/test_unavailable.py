@@ -33,7 +33,7 @@ def wrapped(error: Exception) -> OperationalError:
 def test_faults_of_the_disk_say_which(error, says):
     fault = unavailable(error)
     assert isinstance(fault, store.StoreUnavailable) and says in fault.reason
-    assert str(fault).startswith("the database is unavailable: ")
+    assert str(fault).startswith("the service's storage failed: ")
 
 
 @pytest.mark.parametrize(
