@@ -61,20 +61,10 @@ class WriteFault:
 
             if self.kind == "full":
                 return psycopg.errors.DiskFull("could not extend file: No space left on device")
-            if self.kind == "disk I/O error":
-                return psycopg.errors.IoError("could not write block 7: I/O error")
             return psycopg.errors.ReadOnlySqlTransaction("cannot execute INSERT in a read-only")
         return sqlite3.OperationalError(
             "database or disk is full" if self.kind == "full" else self.kind
         )
-
-
-REASONS = {
-    "full": "full",
-    "oserror": "full",
-    "attempt to write a readonly database": "read-only",
-    "disk I/O error": "I/O error",
-}
 
 
 def on_measure(devices, pose: int, target: str, action) -> None:
@@ -191,7 +181,9 @@ def fault_then_resume(
     assert [r for r in after if r[:2] in {x[:2] for x in before}] == before  # kept, not redone
 
 
-@pytest.mark.parametrize("kind", list(REASONS))
+# The driver's full disk and the OS's (a campaign each per backend); the other faults' words
+# are tests/server/store/test_unavailable.py's, a real read-only disk is the last test here.
+@pytest.mark.parametrize("kind", ["full", "oserror"])
 def test_write_fault_mid_campaign_stops_the_arm_and_resume_loses_nothing(live, devices, kind):
     with WriteFault(kind) as fault:
         fault_then_resume(
@@ -200,7 +192,7 @@ def test_write_fault_mid_campaign_stops_the_arm_and_resume_loses_nothing(live, d
             live.settings.database,
             fault=fault.armed.set,
             fix=fault.armed.clear,
-            reason=REASONS[kind],
+            reason="full",
         )
 
 

@@ -3,6 +3,7 @@
 import errno
 import sqlite3
 
+import psycopg.errors as pg
 import pytest
 from robocal.server import store
 from robocal.server.store.errors import unavailable
@@ -25,6 +26,9 @@ def wrapped(error: Exception) -> OperationalError:
         (wrapped(sqlite3.OperationalError("database or disk is full")), "disk is full"),
         (wrapped(sqlite3.OperationalError("attempt to write a readonly database")), "read-only"),
         (wrapped(sqlite3.OperationalError("disk I/O error")), "I/O error"),
+        (wrapped(pg.DiskFull("could not extend file")), "disk is full"),
+        (wrapped(pg.ReadOnlySqlTransaction("cannot execute INSERT")), "read-only"),
+        (wrapped(pg.IoError("could not write block 7")), "I/O error"),
         (OSError(errno.ENOSPC, "No space left on device"), "disk is full"),
         (OSError(errno.EROFS, "Read-only file system"), "read-only"),
         (OSError(errno.EIO, "Input/output error"), "I/O error"),
