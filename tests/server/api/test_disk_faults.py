@@ -204,8 +204,11 @@ def test_an_estop_the_store_cannot_take_stays_an_estop(live, devices):
     cid, _ = start_campaign(c, devices, "estop")
     wait_for(lambda: len(devices.controller.moves), lambda n: n >= 2, timeout=60, interval=0.02)
     assert c.post(f"/api/campaigns/{cid}/pause").status_code == 200
+    # paused in the store itself (the API shows the engine's state before the store has it)
     wait_for(
-        lambda: c.get(f"/api/campaigns/{cid}").json()["status"], lambda s: s == "paused", timeout=60
+        lambda: execute(database, "select status from campaign where id = :c", c=cid),
+        lambda rows: rows == [("paused",)],
+        timeout=60,
     )
     with WriteFault("full") as fault:
         fault.armed.set()
