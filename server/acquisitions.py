@@ -35,12 +35,14 @@ SETTLE_S = 5.0
 
 @dataclass(frozen=True)
 class Run:
-    """What this service's worker did with a campaign since it started (detail, not a state)."""
+    """What this service's worker did with a campaign since it started (the state is the
+    store's; `ended` only while the store could not take the run's last state)."""
 
     campaign_id: int
     active: bool = True  # queued or running on this service's worker
     detail: str | None = None
     summary: dict | None = None
+    ended: str | None = None  # the engine's last state, kept in case the store could not take it
 
 
 @dataclass(frozen=True)
@@ -82,17 +84,26 @@ class Acquisitions:
         self._cancelled = False  # a stop landed before that engine existed
         self._future: Future | None = None
         # Nothing drives a campaign whose process is gone: one left moving is failed, so a
-        # resume continues it at its next unmeasured pose.
+        # resume continues it at its next unmeasured pose. A store that cannot write now leaves
+        # that to the campaign's next action (it shows failed meanwhile).
         for c in store.list_campaigns(db):
             if c.status in MOVING:
-                self.refresh(c)
+                try:
+                    self.refresh(c)
+                except store.StoreUnavailable:
+                    pass
 
     # -- what the API shows ---------------------------------------------------------------------
+    def shown(self, info: store.CampaignInfo) -> store.CampaignInfo:
+        """The campaign as the API shows it, read only: in the state the store should hold but
+        does not (see _left_in; refresh(), by its next action or the service's start, stores it)."""
+        left = self._left_in(info)
+        return info if left is None else replace(info, status=left)
+
     def refresh(self, info: store.CampaignInfo) -> store.CampaignInfo:
-        """The campaign, failed first if it was left moving by a process that is gone."""
-        with self._lock:
-            ours = self._current == info.id
-        if info.status not in MOVING or ours or self._foreign(info):
+        """The campaign, its state stored first where the store lags (see _left_in): a write
+        (the campaign's lease), for the actions only; StoreUnavailable if the store cannot."""
+        if self._left_in(info) is None:
             return info
         try:
             lease.claim(self.db, info.id, self.owner)
@@ -100,12 +111,31 @@ class Acquisitions:
             return info  # taken meanwhile by a live process
         try:
             now = store.get_campaign(self.db, campaign_id=info.id)
-            if now.status in MOVING:
-                store.set_status(self.db, campaign_id=info.id, status="failed")
-                self._publish(info.id, "failed", now.status)
+            left = self._left_in(now)
+            if left is not None:
+                store.set_status(self.db, campaign_id=info.id, status=left)
+                self._publish(info.id, left, now.status)
+            with self._lock:  # the store has the run's last state now
+                if info.id in self._runs:
+                    self._runs[info.id] = replace(self._runs[info.id], ended=None)
         finally:
             store.release_lease(self.db, campaign_id=info.id, owner=self.owner)
         return store.get_campaign(self.db, campaign_id=info.id)
+
+    def _left_in(self, info: store.CampaignInfo) -> str | None:
+        """The state the store should hold but does not, if any: the last state this service's
+        run of the campaign reached when the store could not take it (a full disk: an e-stop
+        stays an e-stop), else failed for a campaign left moving by a run that is gone."""
+        with self._lock:
+            if self._current == info.id:
+                return None  # the live engine's state is shown (status_of)
+            run = self._runs.get(info.id)
+        if self._foreign(info):
+            return None
+        ended = None if run is None or info.lease_owner not in (None, self.owner) else run.ended
+        if ended is not None and ended != info.status and lifecycle.reachable(info.status, ended):
+            return ended
+        return lifecycle.next_state(info.status, "fail") if info.status in MOVING else None
 
     def status_of(self, info: store.CampaignInfo) -> str:
         """The life-cycle state: the live engine's if this service runs the campaign."""
@@ -333,10 +363,18 @@ class Acquisitions:
             if isinstance(e.__cause__ or e, store.DatabaseGone):  # the service's, said loudly
                 log.error("%s", change["detail"])
         with self._lock:
-            self._runs[cid] = run = replace(self._runs[cid], active=False, **change)
+            engine = self._engine
+        try:
+            stored = store.get_campaign(self.db, campaign_id=cid).status
+        except store.StoreError:
+            stored = None
+        # the run's last state, kept if the store could not take it (a full disk)
+        ended = None if engine is None or engine.state == stored else engine.state
+        with self._lock:
+            self._runs[cid] = run = replace(self._runs[cid], active=False, ended=ended, **change)
             self._current, self._engine = None, None
         try:
-            state = store.get_campaign(self.db, campaign_id=cid).status
+            state = self.shown(store.get_campaign(self.db, campaign_id=cid)).status
         except store.StoreError:
             state = None
         self.events.publish(

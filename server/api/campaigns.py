@@ -52,6 +52,7 @@ CONFLICT: Responses = {
 
 def public_campaign(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
     """The campaign as the API shows it: its life-cycle state and the actions it allows."""
+    info = acquisitions.shown(info)
     run = acquisitions.get(info.id)
     status = acquisitions.status_of(info)
     extra = {"settings": info.settings} if cls is CampaignDetail else {}
@@ -128,19 +129,18 @@ def create_campaign(
 def list_campaigns(
     db: DbDep, acquisitions: AcquisitionsDep, status: CampaignStatus | None = None
 ) -> list[CampaignPublic]:
-    """Every campaign, oldest first (or those with this status)."""
-    return [
-        public_campaign(acquisitions.refresh(c), acquisitions)
-        for c in store.list_campaigns(db, status=status)
-    ]
+    """Every campaign, oldest first (or those with this status, as shown)."""
+    shown = [public_campaign(c, acquisitions) for c in store.list_campaigns(db)]
+    return [c for c in shown if status is None or c.status == status]
 
 
 @router.get("/{campaign_id}")
 def get_campaign(
     campaign_id: CampaignId, db: DbDep, acquisitions: AcquisitionsDep
 ) -> CampaignDetail:
-    """One campaign with its state, the actions it allows, and its poses done of total."""
-    info = acquisitions.refresh(store.get_campaign(db, campaign_id=campaign_id))
+    """One campaign with its state, the actions it allows, and its poses done of total (read
+    only: a campaign left moving by a process that is gone shows failed)."""
+    info = store.get_campaign(db, campaign_id=campaign_id)
     return public_campaign(info, acquisitions, CampaignDetail)
 
 

@@ -13,7 +13,8 @@ from pydantic import BaseModel, ConfigDict
 from robocal.drivers.lifecycle import StateError
 from robocal.server.acquisitions import ControllerUnreachable
 from robocal.server.formats.errors import InputError
-from robocal.server.store import Conflict, DatabaseGone, NotFound, StoreError
+from robocal.server.store import Conflict, DatabaseGone, NotFound, StoreError, StoreUnavailable
+from robocal.server.store.errors import RETRY_AFTER_S, unavailable
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 MEDIA_TYPE = "application/problem+json"
@@ -49,6 +50,11 @@ READ_ERRORS: Responses = {
     422: problem_response(
         "the request (or an uploaded file) is invalid; the "
         "detail names the field, or the file's line and column"
+    ),
+    503: problem_response(
+        "the database could not read or write (a full or read-only disk, an I/O error): the "
+        "service's fault, nothing of the request was stored; `reason` says what failed, "
+        "Retry-After when to ask again"
     ),
 }
 WRITE_ERRORS: Responses = {
@@ -135,6 +141,26 @@ def install(app: FastAPI) -> None:
     async def state_error(request: Request, exc: StateError):
         # The campaign's state does not allow the action: say the state and what it allows.
         return problem(request, 409, str(exc), state=exc.state, allowed_actions=exc.allowed)
+
+    @app.exception_handler(StoreUnavailable)
+    async def store_unavailable(request: Request, exc: StoreUnavailable):
+        # The disk's fault, not the request's: nothing was stored, the same request may succeed
+        # once the disk is fixed.
+        return problem(
+            request,
+            503,
+            str(exc),
+            headers={"Retry-After": str(RETRY_AFTER_S)},
+            reason=exc.reason,
+        )
+
+    @app.exception_handler(OSError)
+    async def os_error(request: Request, exc: OSError):
+        # A file of the data dir (a cell, an upload) on a full or read-only disk: the same 503.
+        fault = unavailable(exc)
+        if fault is None:
+            raise exc  # any other OSError is a bug: the server's own 500
+        return await store_unavailable(request, fault)
 
     # Store and device errors map to one status each; the store and the solver front ends raise
     # ValueError for bad arguments only. A 502 means the arm may still move: said loudly.

@@ -32,7 +32,7 @@ from .access import (
     update_job,
 )
 from .db import Database, open_database
-from .errors import Conflict, DatabaseGone, NotFound, StoreError
+from .errors import Conflict, DatabaseGone, NotFound, StoreError, StoreUnavailable
 
 __all__ = [
     "JobInfo",
@@ -49,6 +49,7 @@ __all__ = [
     "PoseInfo",
     "ReadingInfo",
     "StoreError",
+    "StoreUnavailable",
     "campaign_measurements",
     "create_campaign",
     "discard_unfinished_pose",

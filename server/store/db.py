@@ -13,10 +13,10 @@ from alembic import command
 from alembic.config import Config
 from sqlalchemy import Engine, create_engine, event
 from sqlalchemy.engine import URL, make_url
-from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy.exc import DBAPIError, SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
-from .errors import DatabaseGone, StoreError
+from .errors import DatabaseGone, StoreError, unavailable
 
 MIGRATIONS = Path(__file__).resolve().parents[2] / "migrations"
 # How long a writer waits for another process's write lock before "database is locked".
@@ -163,11 +163,21 @@ class Database:
 
     @contextmanager
     def session(self, *, write: bool = False) -> Iterator[Session]:
-        """One transaction, committed on leaving or rolled back on error; `write` locks first."""
-        with self._sessions() as session, session.begin():
-            if write:
-                session.connection(execution_options={WRITE_OPTION: True})
-            yield session
+        """One transaction, committed on leaving or rolled back on error; `write` locks first.
+        A fault of the disk or the database server raises StoreUnavailable, a write into a file
+        deleted or replaced under the store DatabaseGone (nothing stored, nothing acknowledged)."""
+        if write:
+            self.check_file()
+        try:
+            with self._sessions() as session, session.begin():
+                if write:
+                    session.connection(execution_options={WRITE_OPTION: True})
+                yield session
+        except (DBAPIError, OSError) as e:
+            fault = unavailable(e)
+            if fault is None:
+                raise
+            raise fault from e
 
     def close(self) -> None:
         self.engine.dispose()
