@@ -37,6 +37,9 @@ STREAM_PAUSE_S = 0.001  # between the streamed body's chunks
 # refuses it unread has answered by then, whatever the machine's load.
 HOLD_BYTES = 1024 * 1024
 HOLD_S = 10.0
+# Once both bodies are in flight, this long for the server to read the rest of the whole one
+# off the socket, so that the e-stop meets a server parsing it if it parses what it is sent.
+SETTLE_S = 0.1
 JUNK_ROUTES = ("/api/campaigns", "/api/jobs")  # the whole body's, the streamed body's
 
 
@@ -187,7 +190,7 @@ class LargeBody(threading.Thread):
     """A POST of `body` on a raw loopback socket: all of it at once with its Content-Length
     (whole), or streamed in chunks with no length (chunked transfer), stopping at the answer and
     holding at HOLD_BYTES until it comes (HOLD_S at most). `in_flight` is set once it is sent
-    whole, has begun streaming, or was answered."""
+    whole, has streamed HOLD_BYTES, or was answered."""
 
     def __init__(self, port: int, token: str, route: str, body: bytes, whole: bool):
         super().__init__(daemon=True)
@@ -231,13 +234,13 @@ class LargeBody(threading.Thread):
         view = memoryview(self.body)
         for start in range(0, len(view), CHUNK):
             if start >= HOLD_BYTES:
+                self.in_flight.set()
                 self.answered.wait(HOLD_S)
             if self.answered.is_set():
                 return
             chunk = view[start : start + CHUNK]
             s.sendall(b"%x\r\n" % len(chunk) + chunk + b"\r\n")
             self.outcome.sent = start + len(chunk)
-            self.in_flight.set()
             time.sleep(STREAM_PAUSE_S)
         s.sendall(b"0\r\n\r\n")
 
@@ -262,7 +265,7 @@ class LargeBody(threading.Thread):
 @contextmanager
 def bodies_in_flight(port: int, token: str, body: bytes) -> Iterator[list[BodyOutcome]]:
     """Two large bodies to the JSON routes, one whole and one streamed; the block runs once
-    both are in flight, and ends once both are answered or refused."""
+    both are in flight (and SETTLE_S), and ends once both are answered or refused."""
     senders = [
         LargeBody(port, token, route, body, whole)
         for route, whole in zip(JUNK_ROUTES, (True, False), strict=True)
@@ -271,6 +274,7 @@ def bodies_in_flight(port: int, token: str, body: bytes) -> Iterator[list[BodyOu
         s.start()
     for s in senders:
         s.in_flight.wait(timeout=120)
+    time.sleep(SETTLE_S)
     try:
         yield [s.outcome for s in senders]
     finally:
