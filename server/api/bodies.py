@@ -3,8 +3,8 @@ requests validated off the event loop, so that no body holds up the e-stop.
 
 Why a bound and not only a thread: json and pydantic parse in C and hold the GIL for the whole
 call (30 MB: over a second, every thread of the service waiting), so what keeps the loop and the
-stop threads free is that no route parses more than a few milliseconds' worth at once. Only the
-file uploads whose parsing yields the GIL (meas.csv, targets.csv) take max_upload_bytes."""
+stop threads free is that no route parses more than a few milliseconds' worth in the service.
+Only the file uploads parsed in a worker process (meas.csv, targets.csv) take max_upload_bytes."""
 
 from __future__ import annotations
 
@@ -29,8 +29,8 @@ JSON_BODY_BYTES = 64 * 1024
 # A cell.json: a robot, at most a few SMRs, a base, its devices: a few kilobytes. Its parse
 # holds the GIL too, so it is bounded as tightly as a plausible cell allows.
 CELL_BODY_BYTES = 256 * 1024
-# The routes whose body is a file of measurements or targets, parsed by code that yields the
-# GIL as it goes: these take max_upload_bytes. Paths as served (under /api).
+# The routes whose body is a file of measurements or targets, parsed in a worker process: these
+# take max_upload_bytes. Paths as served (under /api).
 UPLOADS = frozenset(
     {
         ("POST", "/api/measurements/import"),
