@@ -15,7 +15,7 @@ from fastapi.routing import APIRoute
 
 from . import store
 from .acquisitions import Acquisitions
-from .api import OPEN_ROUTERS, ROUTERS, problems
+from .api import OPEN_ROUTERS, ROUTERS, bodies, problems
 from .api.deps import TOKEN_CHECKS
 from .api.problems import Responses
 from .api_docs import mount_docs
@@ -77,6 +77,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     problems.install(app)
+    bodies.install(app, settings.max_upload_bytes)
     if settings.cors_origins:  # closed unless origins are listed
         app.add_middleware(
             CORSMiddleware,
@@ -85,7 +86,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_headers=["Authorization", "Content-Type"],
         )
     for router in ROUTERS:
-        document_errors(router)
+        document_errors(router, settings.max_upload_bytes)
         # Reads need the token too (unless reads are open on loopback); writes list their own.
         app.include_router(router, prefix=API_PREFIX, dependencies=[Depends(require_reader)])
     for router in OPEN_ROUTERS:
@@ -96,10 +97,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     return app
 
 
-def document_errors(router) -> None:
+def document_errors(router, max_upload_bytes: int) -> None:
     """Add to each route's OpenAPI the problem-details answers it can give: 401 (the token),
-    404/409/422 (the store and validation), 413 on writes, 502 where a device is driven. A
-    route's own `responses=` entries win."""
+    404/409/422 (the store and validation), 413 on writes (with the route's limit), 502 where a
+    device is driven. A route's own `responses=` entries win."""
     for route in router.routes:
         if not isinstance(route, APIRoute):
             continue
@@ -109,6 +110,7 @@ def document_errors(router) -> None:
             if route.path.startswith(("/campaigns", "/estop")):
                 extra.update(problems.DEVICE_ERRORS)
         route.responses = {**extra, **route.responses}
+        bodies.document_limit(route, API_PREFIX + route.path, max_upload_bytes)
 
 
 def unguarded_routes(app: FastAPI) -> list[str]:

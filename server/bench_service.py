@@ -1,5 +1,5 @@
-"""Service benchmark: `robocal demo` end to end, the live-state endpoint's latency under load, and
-the emergency stop's latency against a stalled controller."""
+"""Service benchmark: `robocal demo` end to end, the live-state endpoint's latency under load, the
+emergency stop's latency against a stalled controller, and with large request bodies in flight."""
 
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+
+from .bench_stop_bodies import estop_with_bodies
 
 DEMO_TARGET_S = 60.0
 
@@ -323,11 +325,14 @@ def run_service_bench() -> dict:
     print("[bench] live-state latency under load", file=sys.stderr, flush=True)
     live = latency_under_load()
     print("[bench] stop latency against a stalled controller", file=sys.stderr, flush=True)
+    stop = stop_latency()
+    print("[bench] e-stop latency with large request bodies in flight", file=sys.stderr, flush=True)
     return {
         "benchmark": "service",
         "demo": demo,
         "live_state_latency": live,
-        "stop_latency": stop_latency(),
+        "stop_latency": stop,
+        "estop_with_bodies": estop_with_bodies(),
         "deleted_database": _deleted_database_figure(),
     }
 

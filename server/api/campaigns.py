@@ -4,14 +4,16 @@ life cycle (start, pause, resume, abort, reset, e-stop), each request checked ag
 from __future__ import annotations
 
 import asyncio
+from typing import Annotated
 
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Depends, Request
 from fastapi.responses import HTMLResponse, JSONResponse
 from robocal.server import store, verification
 from robocal.server.acquire import AcquireOptions
 from robocal.server.campaign_planning import check_plan_size, plans_long
 
 from . import ops
+from .bodies import json_body, read_json
 from .deps import (
     AcquisitionsDep,
     Authorized,
@@ -36,6 +38,7 @@ from .schemas import (
 from .worker_calls import CALL_PROBLEMS, call_slot, run_call
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
+CampaignBody = Annotated[CampaignCreate, Depends(read_json(CampaignCreate))]
 ESTOP_NOTE = (
     "STOP sent to the controller (the arm halts where it is), the campaign e-stopped; "
     "POST .../reset, then .../resume, continues it; the cell's hardware e-stop rules"
@@ -99,9 +102,10 @@ PLANNING_JOB: Responses = {
     dependencies=[Authorized],
     response_model=CampaignDetail,
     responses=PLANNING_JOB,
+    openapi_extra=json_body(CampaignCreate),
 )
 def create_campaign(
-    body: CampaignCreate,
+    body: CampaignBody,
     db: DbDep,
     settings: SettingsDep,
     acquisitions: AcquisitionsDep,

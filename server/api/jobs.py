@@ -4,17 +4,19 @@
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, JSONResponse
 from robocal.server.job_queue import DuplicateJob, Job
 
 from . import problems
+from .bodies import json_body, read_json
 from .deps import Authorized, JobId, JobsDep
 from .schemas import FigurePublic, JobCreate, JobPublic
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
+JobBody = Annotated[JobCreate, Depends(read_json(JobCreate))]
 
 
 def public_job(job: Job) -> JobPublic:
@@ -66,8 +68,9 @@ PROBLEM: dict[str, Any] = {"content": {"application/problem+json": {}}}
             **PROBLEM,
         }
     },
+    openapi_extra=json_body(JobCreate),
 )
-def create_job(body: JobCreate, jobs: JobsDep, request: Request) -> JobPublic | JSONResponse:
+def create_job(body: JobBody, jobs: JobsDep, request: Request) -> JobPublic | JSONResponse:
     """Queue a calibration or diagnosis of a done campaign; poll GET /jobs/{id} or /api/events.
     A second calibration of a campaign with the same method while one is queued or running is
     refused (409); another method is accepted."""

@@ -6,13 +6,14 @@ from typing import Annotated
 
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import StreamingResponse
-from robocal.server import store
+from robocal.server import store, uploads
 from starlette.concurrency import iterate_in_threadpool, run_in_threadpool
 
 from . import ops
 from .campaigns import public_campaign
-from .deps import AcquisitionsDep, Authorized, CampaignId, DbDep, SettingsDep
+from .deps import AcquisitionsDep, Authorized, CampaignId, DbDep, JobsDep, SettingsDep
 from .schemas import MAX_ID, PRINTABLE, CampaignPublic, ReadingPublic
+from .worker_calls import CALL_PROBLEMS, run_call
 
 router = APIRouter(tags=["measurements"])
 # Readings per page of GET .../measurements: a page stays a few megabytes whatever the campaign.
@@ -100,13 +101,18 @@ async def export_readings(campaign_id: CampaignId, db: DbDep) -> StreamingRespon
 
 
 @router.post(
-    "/measurements/import", status_code=201, dependencies=[Authorized], openapi_extra=CSV_BODY
+    "/measurements/import",
+    status_code=201,
+    dependencies=[Authorized],
+    openapi_extra=CSV_BODY,
+    responses=CALL_PROBLEMS,
 )
 async def import_readings(
     request: Request,
     db: DbDep,
     settings: SettingsDep,
     acquisitions: AcquisitionsDep,
+    jobs: JobsDep,
     name: Annotated[str | None, Query(max_length=200, pattern=PRINTABLE)] = None,
     filename: Annotated[str, Query(max_length=255, pattern=PRINTABLE)] = "meas.csv",
     cell_id: Annotated[str, Query(max_length=64)] = "default",
@@ -114,7 +120,11 @@ async def import_readings(
     """Store a meas.csv as a done campaign; a bad file is 422 with its line and nothing stored."""
     data = await request.body()
     cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=cell_id)
-    cid = await run_in_threadpool(
-        ops.import_campaign_csv, db, data=data, filename=filename, cell=cell, name=name or filename
-    )
+    cid = await run_in_threadpool(_import, jobs, db, data, filename, cell, name or filename)
     return public_campaign(store.get_campaign(db, campaign_id=cid), acquisitions)
+
+
+def _import(jobs, db, data: bytes, filename: str, cell, name: str) -> int:
+    """The file read in a worker process (no parse holds this one's GIL), stored from here."""
+    meas = run_call(jobs, uploads.read_measurements, data, filename, cell.robot)
+    return ops.import_campaign(db, measurements=meas, filename=filename, cell=cell, name=name)

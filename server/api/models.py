@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, HTTPException, Query, Request, Response
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.responses import FileResponse
 from robocal.server import charts, model_files, store, verification
 from robocal.server.compensation import MAX_ERROR_MM, parse_tcp
@@ -18,6 +18,7 @@ from robocal.solver.finite import require_inputs
 from starlette.concurrency import run_in_threadpool
 
 from . import ops
+from .bodies import json_body, read_json
 from .campaigns import public_campaign
 from .deps import AcquisitionsDep, Authorized, CampaignQuery, DbDep, JobId, JobsDep
 from .model_schemas import ModelParameters
@@ -26,6 +27,7 @@ from .schemas import PRINTABLE, CampaignDetail, VerifyCreate
 from .worker_calls import CALL_PROBLEMS, PROBLEM, call_slot, run_call
 
 router = APIRouter(prefix="/models", tags=["models"])
+VerifyBody = Annotated[VerifyCreate, Depends(read_json(VerifyCreate))]
 
 
 @router.get(
@@ -272,9 +274,10 @@ async def export(
         422: {"description": "a test point the arm cannot reach, or bad options"},
         **CALL_PROBLEMS,
     },
+    openapi_extra=json_body(VerifyCreate),
 )
 def verify_model(
-    job_id: JobId, body: VerifyCreate, jobs: JobsDep, db: DbDep, acquisitions: AcquisitionsDep
+    job_id: JobId, body: VerifyBody, jobs: JobsDep, db: DbDep, acquisitions: AcquisitionsDep
 ):
     """Plan an ISO 9283 verification run of the job's model on the cell its campaign was measured
     on (the same simulated arm, on a simulated cell), store it as a campaign and start it (unless

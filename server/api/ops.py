@@ -5,7 +5,6 @@ from __future__ import annotations
 import hashlib
 import json
 import re
-import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -95,15 +94,15 @@ def plan_given(db: store.Database, *, cell: Cell, opts: AcquireOptions, poses_de
 # --- readings and files ------------------------------------------------------------------------
 
 
-def import_campaign_csv(
-    db: store.Database, *, data: bytes, filename: str, cell: Cell, name: str
+def import_campaign(
+    db: store.Database, *, measurements, filename: str, cell: Cell, name: str
 ) -> int:
-    """Store an uploaded meas.csv as a done campaign; InputError naming `filename`:line:column."""
+    """Store an uploaded meas.csv, read already (uploads.read_measurements), as a done campaign;
+    InputError naming `filename`."""
     filename = Path(filename).name or "meas.csv"  # only a label: never a path on this machine
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / filename
-        path.write_bytes(data)
-        try:
-            return store.import_csv(db, path=path, cell_json=cell_to_json(cell), name=name)
-        except InputError as e:
-            raise InputError(filename, e.line, e.column, e.message) from None
+    try:
+        return store.import_csv(
+            db, path=filename, cell_json=cell_to_json(cell), name=name, measurements=measurements
+        )
+    except InputError as e:
+        raise InputError(filename, e.line, e.column, e.message) from None

@@ -59,7 +59,8 @@ READ_ERRORS: Responses = {
 }
 WRITE_ERRORS: Responses = {
     400: problem_response("the body is not valid JSON"),
-    413: problem_response("the request body is larger than max_upload_bytes"),
+    # server.app replaces it with the route's own limit (api.bodies)
+    413: problem_response("the request body is larger than the route takes"),
 }
 DEVICE_ERRORS: Responses = {
     502: problem_response(
@@ -83,45 +84,8 @@ def problem(request: Request, status: int, detail: str, headers=None, **extra) -
     )
 
 
-class UploadLimit:
-    """Refuse (413, problem details) a request body over the limit: at once when its
-    Content-Length says so, else as soon as the streamed bytes pass it, so no upload is held in
-    memory beyond the limit."""
-
-    def __init__(self, app, max_bytes: int):
-        self.app, self.max_bytes = app, max_bytes
-
-    async def __call__(self, scope, receive, send):
-        if scope["type"] != "http":
-            return await self.app(scope, receive, send)
-        length = dict(scope["headers"]).get(b"content-length", b"")
-        if length.isdigit() and int(length) > self.max_bytes:
-            response = problem(Request(scope), 413, too_large(self.max_bytes))
-            return await response(scope, receive, send)
-        seen = 0
-
-        async def counted():
-            nonlocal seen
-            message = await receive()
-            seen += len(message.get("body", b""))
-            if seen > self.max_bytes:
-                # Raised inside the route's body read: the exception handlers answer it.
-                raise StarletteHTTPException(413, too_large(self.max_bytes))
-            return message
-
-        await self.app(scope, counted, send)
-
-
-def too_large(max_bytes: int) -> str:
-    return (
-        f"the request body is larger than {max_bytes} bytes (setting max_upload_bytes, "
-        "env ROBOCAL_MAX_UPLOAD_BYTES); split the file"
-    )
-
-
 def install(app: FastAPI) -> None:
     """Register the handlers that turn every refusal into a problem-details body."""
-    app.add_middleware(UploadLimit, max_bytes=app.state.settings.max_upload_bytes)
 
     @app.exception_handler(StarletteHTTPException)
     async def http_error(request: Request, exc: StarletteHTTPException):

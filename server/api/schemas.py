@@ -7,7 +7,7 @@ import difflib
 import re
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 from robocal.drivers.lifecycle import ACTIONS, STATES
 from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
 from robocal.server.formats.cell_doc import CellDoc
@@ -17,6 +17,8 @@ from robocal.server.verification import CUBE_SIDE_MM, DIRECTIONS
 
 from .model_schemas import HoldoutSummary, ValidationSummary
 
+# A request's unknown field is refused (422), never ignored: a misspelt option is no default.
+REQUEST = ConfigDict(extra="forbid")
 # Ids are SQLite rowids.
 MAX_ID = 2**63 - 1
 METHOD = r"^(minimax|ls-sum|ls-pose|nominal|ls-single(:[A-Za-z][A-Za-z0-9_]{0,15})?)$"
@@ -41,6 +43,7 @@ class CampaignCreate(BaseModel):
     """A campaign to plan (as `robocal acquire` plans it), on the cell's real devices if it has
     `devices`, else on the simulated ones."""
 
+    model_config = REQUEST
     name: str | None = Field(None, min_length=1, max_length=200, pattern=PRINTABLE)
     cell_id: str = Field("default", max_length=64)
     poses: Integer = Field(20, ge=3, le=5000)
@@ -67,6 +70,7 @@ Coordinate = Field(ge=-COORD_MAX_MM, le=COORD_MAX_MM)
 class PointIn(BaseModel):
     """A test point: where the model's first SMR must go, in the cell (tracker) frame, mm."""
 
+    model_config = REQUEST
     point: str = Field(min_length=1, max_length=64, pattern=PRINTABLE)
     x_mm: Real = Coordinate
     y_mm: Real = Coordinate
@@ -78,6 +82,7 @@ class VerifyCreate(BaseModel):
     each test point visited from several directions, several cycles, with the nominal joints and
     then with the compensated ones."""
 
+    model_config = REQUEST
     name: str = Field("verify", min_length=1, max_length=100, pattern=PRINTABLE)
     cycles: Integer = Field(3, ge=1, le=30)
     directions: Integer = Field(3, ge=1, le=len(DIRECTIONS))
@@ -158,6 +163,7 @@ class ReadingPublic(BaseModel):
 
 
 class JobCreate(BaseModel):
+    model_config = REQUEST
     campaign_id: Integer = Field(ge=1, le=MAX_ID)
     kind: Literal["calibration", "diagnosis"] = "calibration"
     method: str = Field(

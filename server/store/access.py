@@ -522,9 +522,11 @@ def import_csv(
     name: str,
     robot: Robot | None = None,
     notes: str = "",
+    measurements: Measurements | None = None,
 ) -> int:
     """Store a `meas.csv` as a `done` campaign; its id. All or nothing: InputError on a bad file
-    (or cell), and then nothing is written.
+    (or cell), and then nothing is written. `measurements`: the file at `path` read already (by
+    a worker process), for this robot.
 
     The whole file is checked first; then the campaign is written in short transactions
     (IMPORT_CHUNK rows each), marked `failed` ("import in progress") until the last one turns
@@ -533,7 +535,8 @@ def import_csv(
     """
     cell, cell_text = checks.cell_text(cell_json)
     robot = checks.matching_robot(robot, cell)
-    meas = read_campaign(path, robot)  # the whole file is checked before the database is touched
+    # the whole file is checked before the database is touched
+    meas = read_campaign(path, robot) if measurements is None else measurements
     q = np.rad2deg(meas.q)
     mask = meas.mask
     settings = {"source": "csv", "file": os.path.basename(os.fspath(path))}
