@@ -8,7 +8,7 @@ from robocal.solver.identifiability import structural
 from robocal.solver.kinematics import Layout, predict, predict_rows
 from robocal.solver.robot import Robot
 
-from .cell import LIMIT_MARGIN_RAD, VirtualCell
+from .cell import LIMIT_MARGIN_RAD, VirtualCell, too_constrained
 from .world import ACCEL_S, DEFAULT_SPEEDS_DEG_S
 
 
@@ -81,12 +81,7 @@ def plan_poses(
         count += len(found[-1])
         if count >= n:
             return np.concatenate(found)[:n]
-    drawn = max_batches * batch
-    rates = ", ".join(f"{k} {v / drawn:.1%}" for k, v in passed.items())
-    raise RuntimeError(
-        f"constraints too tight: only {count} of {n} poses valid after {drawn} "
-        f"draws (pass rate per check: {rates})"
-    )
+    raise too_constrained(n, count, max_batches * batch, passed)
 
 
 def default_speeds(n_joints: int) -> np.ndarray:
