@@ -133,27 +133,23 @@ def _o5(M: np.ndarray) -> np.ndarray:
 CRITERIA = {"D": _log_det, "O5": _o5}
 
 
-def _scores(criterion: str, M: np.ndarray, J: PoseJacobians) -> np.ndarray:
-    """The criterion of M + J_j'J_j for every pose j, a block of poses at a time (each block's
-    dense rows about SCORE_ROWS: memory linear in the SMRs, whatever the number of poses)."""
-    step = max(1, SCORE_ROWS // J.rows_per_pose)
+def _scores(criterion: str, M: np.ndarray, rows, n: int, per_pose: int) -> np.ndarray:
+    """The criterion of M + J_j'J_j for each of the n poses, a block of poses at a time (each
+    block's dense rows, rows(start, stop), about SCORE_ROWS: memory linear in the SMRs)."""
+    step = max(1, SCORE_ROWS // per_pose)
     if criterion == "D":
         # determinant lemma: log det(M + J'J) = log det M + log det(I + J M^-1 J'), rows << P
         Minv = np.linalg.inv(finite(M, "the information matrix"))
         base = _log_det(M[None])[0]
     out = []
-    for start in range(0, len(J), step):
-        Jc = J[start : start + step].dense()
+    for start in range(0, n, step):
+        Jc = rows(start, start + step)
         if criterion == "O5":
             out.append(_o5(M + information(Jc)))
         else:
             S = np.eye(Jc.shape[1]) + (Jc @ Minv) @ Jc.transpose(0, 2, 1)
             out.append(base + _log_det(S))
     return np.concatenate(out)
-
-
-def _pose_information(J: PoseJacobians, j: int) -> np.ndarray:
-    return information(J[j : j + 1].dense())[0]
 
 
 def select_poses(J_per_pose, k: int, criterion: str = "D", progress=None) -> np.ndarray:
@@ -170,16 +166,28 @@ def select_poses(J_per_pose, k: int, criterion: str = "D", progress=None) -> np.
     # trace of the summed information: the squared norms of all the columns
     trace = float(np.sum(J.shared**2) + np.sum(J.own**2))
     M = RIDGE * trace / (N * P) * np.eye(P)
+    # Few SMRs: the dense rows cost at most twice the compact ones (still linear in the SMRs),
+    # so they are built once rather than for every score.
+    whole = J.dense() if P <= 2 * (J.shared.shape[-1] + J.own.shape[-1]) else None
+
+    def rows(start: int, stop: int) -> np.ndarray:
+        return whole[start:stop] if whole is not None else J[start:stop].dense()
+
+    def scores(criterion: str, M: np.ndarray) -> np.ndarray:
+        return np.where(free, _scores(criterion, M, rows, N, J.rows_per_pose), -np.inf)
+
+    def pose_information(j: int) -> np.ndarray:
+        return information(rows(j, j + 1))[0]
+
     free = np.ones(N, dtype=bool)
     chosen = []
     # The greedy start is always D: O5 stays zero until the design has full rank, so it
     # cannot tell the first poses apart.
     for _ in range(k):
-        score = np.where(free, _scores("D", M, J), -np.inf)
-        j = int(np.argmax(score))
+        j = int(np.argmax(scores("D", M)))
         chosen.append(j)
         free[j] = False
-        M = M + _pose_information(J, j)
+        M = M + pose_information(j)
         if progress is not None:
             progress(0.5 * len(chosen) / k)
     best = float(CRITERIA[criterion](M[None])[0])
@@ -190,12 +198,12 @@ def select_poses(J_per_pose, k: int, criterion: str = "D", progress=None) -> np.
             progress(1.0 - 0.5 ** (sweep + 2))
         improved = False
         for pos in range(k):
-            rest = M - _pose_information(J, chosen[pos])
-            score = np.where(free, _scores(criterion, rest, J), -np.inf)
+            rest = M - pose_information(chosen[pos])
+            score = scores(criterion, rest)
             j = int(np.argmax(score))
             if score[j] > best + EXCHANGE_TOL * max(1.0, abs(best)):
                 free[chosen[pos]], free[j] = True, False
-                chosen[pos], M, best = j, rest + _pose_information(J, j), float(score[j])
+                chosen[pos], M, best = j, rest + pose_information(j), float(score[j])
                 improved = True
         if not improved:
             break
