@@ -20,6 +20,36 @@ OUTLIER_MM = (0.3, 2.0)  # a mis-lock or a bumped SMR: a reading this far off, i
 EXTRAS_STREAM = 0xCA4B  # scatter, absent SMRs and outliers draw from their own stream per seed
 
 
+# What to change when a pose check passes too rarely: named in the refusal, per check.
+CHECK_FIXES = {
+    "limits": "widen the joint limits",
+    "floor": "keep the SMRs above the floor: check the link lengths (mm) and the targets",
+    "facing": "turn the SMRs towards the tracker: check the targets and the base guess",
+    "range": "move the tracker at least 1 m from every SMR: check the base guess",
+    "base_axis": "keep the flange 300 mm off the base's z axis: check the link lengths (mm)",
+    "wrist": "keep the wrist off its singularity: check the last joints' twists (alpha)",
+    "bounds": "widen the bounds",
+}
+
+
+class PosesTooConstrained(ValueError):
+    """Too few random poses meet the pose checks; the message names the check to relax."""
+
+
+def too_constrained(n: int, found: int, drawn: int, passed: dict[str, int]) -> PosesTooConstrained:
+    """The refusal of a draw that found `found` of `n` poses: each check's pass rate, and what
+    to change for the checks that pass least (under 1%, else the rarest)."""
+    rates = {k: v / drawn for k, v in passed.items()}
+    worst = [k for k, r in rates.items() if r < 0.01] or [min(rates, key=lambda k: rates[k])]
+    fixes = "; ".join(f"{k}: {CHECK_FIXES.get(k, 'relax it')}" for k in worst)
+    fewer = " or ask for fewer poses," if found else ""
+    shown = ", ".join(f"{k} {r:.1%}" for k, r in rates.items())
+    return PosesTooConstrained(
+        f"constraints too tight: only {found} of {n} poses valid after {drawn} draws (pass "
+        f"rate per check: {shown}):{fewer} {fixes}"
+    )
+
+
 @dataclass(frozen=True)
 class TrackerSpec:
     """Tracker accuracy as a maximum permissible error MPE = mpe_um + mpe_um_per_m * range."""
@@ -168,12 +198,7 @@ class VirtualCell:
             found.append(q[np.logical_and.reduce(list(checks.values()))])
             if sum(len(f) for f in found) >= n:
                 return np.concatenate(found)[:n]
-        drawn = max_batches * batch
-        rates = ", ".join(f"{k} {v / drawn:.0%}" for k, v in passed.items())
-        raise RuntimeError(
-            f"only {sum(len(f) for f in found)} of {n} poses valid after {drawn} "
-            f"draws (pass rate per check: {rates})"
-        )
+        raise too_constrained(n, sum(len(f) for f in found), max_batches * batch, passed)
 
     def true_points(self, q, time_s=None, temp_c=None, pose_dq=None) -> np.ndarray:
         """Noise-free SMR centres (m, K, 3) in the tracker frame, with every effect applied.

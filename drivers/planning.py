@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from robocal.solver import observability as obs
 from robocal.solver.identifiability import structural
-from robocal.solver.kinematics import Layout, predict, predict_rows
+from robocal.solver.kinematics import Layout, flange_frames, predict, predict_rows
 from robocal.solver.robot import Robot
 
-from .cell import LIMIT_MARGIN_RAD, VirtualCell
+from .cell import LIMIT_MARGIN_RAD, VirtualCell, too_constrained
 from .world import ACCEL_S, DEFAULT_SPEEDS_DEG_S
 
 
@@ -81,12 +81,7 @@ def plan_poses(
         count += len(found[-1])
         if count >= n:
             return np.concatenate(found)[:n]
-    drawn = max_batches * batch
-    rates = ", ".join(f"{k} {v / drawn:.1%}" for k, v in passed.items())
-    raise RuntimeError(
-        f"constraints too tight: only {count} of {n} poses valid after {drawn} "
-        f"draws (pass rate per check: {rates})"
-    )
+    raise too_constrained(n, count, max_batches * batch, passed)
 
 
 def default_speeds(n_joints: int) -> np.ndarray:
@@ -219,16 +214,27 @@ def order_poses(q, start=None, speeds=None) -> np.ndarray:
     return best[1:] - 1
 
 
-def candidate_jacobians(robot: Robot, base_in_tracker, targets, q) -> np.ndarray:
-    """Per pose, the nominal ls-sum identification Jacobian (m, 3K, P) on the free parameters."""
+def candidate_jacobians(robot: Robot, base_in_tracker, targets, q) -> obs.PoseJacobians:
+    """Per pose, the nominal ls-sum identification Jacobian on the free parameters, without
+    the zeros of each SMR's rows in the other SMRs' coordinates (memory linear in the SMRs)."""
     # free parameters as calibrate() picks them, so the design is for what will be identified
     names, t = _targets(targets)
     lay = Layout(robot, np.asarray(base_in_tracker, dtype=float), names)
     x = lay.initial(t)
-    cols = np.flatnonzero(structural(lay, x, np.ones(lay.n_params, dtype=bool)).free)
+    free = structural(lay, x, np.ones(lay.n_params, dtype=bool)).free
+    ts = lay.target_slice
+    shared = np.flatnonzero(free[: ts.start])  # geometry and base: every reading moves with them
     q = np.atleast_2d(np.asarray(q, dtype=float))
-    _, Jt = predict_rows(lay, x, q, np.ones((len(q), len(names)), dtype=bool), cols)
-    return Jt.reshape(len(cols), len(q), 3 * len(names)).transpose(1, 2, 0)
+    m, K = len(q), len(names)
+    _, Jt = predict_rows(lay, x, q, np.ones((m, K), dtype=bool), shared)
+    own_free = free[ts].reshape(K, 3)
+    # an SMR's point moves with its own coordinates (flange frame) through the flange rotation
+    R = flange_frames(lay, x, q)[0]
+    return obs.PoseJacobians(
+        Jt.reshape(len(shared), m, K, 3).transpose(1, 2, 3, 0),
+        R[:, None, :, :] * own_free[None, :, None, :],
+        own_free,
+    )
 
 
 def plan_campaign(

@@ -123,8 +123,22 @@ def base_guess(cell: Cell, seed: int, sim: SimulatedCell | None = None) -> np.nd
     return surveyed_base(true.base, seed)
 
 
+def check_drivable(cell: Cell) -> None:
+    """Refuse a robot the controller protocol cannot drive (ValueError naming the joints)."""
+    from robocal.drivers.abb.protocol import MAX_JOINTS
+
+    n = cell.robot.n_joints
+    if n > MAX_JOINTS:
+        raise ValueError(
+            f"robot.joints: {n} joints; the controller protocol drives at most {MAX_JOINTS}, so "
+            f"this cell is for files only (simulate, calibrate, diagnose)"
+        )
+
+
 def check_options(cell: Cell, opts: AcquireOptions) -> None:
-    """Refuse simulation-only options on a real cell (ValueError naming them)."""
+    """Refuse a robot the controller cannot drive and simulation-only options on a real cell
+    (ValueError naming them)."""
+    check_drivable(cell)
     if cell.simulated:
         return
     bad = [
@@ -307,6 +321,7 @@ def acquire(
     poses_deg (m, n) makes a new campaign run these joint commands instead of planned poses,
     stored with their labels and these settings.
     """
+    check_drivable(cell)  # before the database is created
     owner = owner or process_owner()
     name = opts.name or f"campaign-seed{opts.seed}"
     stopper = _Stopper(log)

@@ -1,6 +1,7 @@
 """The solvers and the meas.csv reader at scale (50,000 poses by default): wall time and peak
 memory of ls-sum and minimax, and the file's reading time, each next to a reference measured in
-the same run (ls-sum for minimax; numpy's loadtxt of the same numbers for the reader)."""
+the same run (ls-sum for minimax; numpy's loadtxt of the same numbers for the reader); and
+planning's peak memory at 3 and 16 SMRs (linear in the SMRs since issue 20)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ def _timed(fn, repeats: int) -> tuple[float, Any]:
     return best, out
 
 
-def _peak_mb(fn) -> float:
+def peak_mb(fn) -> float:
     """Peak memory (MiB) that fn() allocates, as tracemalloc sees it (numpy reports there)."""
     tracemalloc.start()
     try:
@@ -31,6 +32,50 @@ def _peak_mb(fn) -> float:
         return tracemalloc.get_traced_memory()[1] / 2**20
     finally:
         tracemalloc.stop()
+
+
+PLAN_SMRS = (3, 16)
+PLAN_CANDIDATES, PLAN_POSES = 300, 10
+
+
+def smr_ring(k: int) -> np.ndarray:
+    """k SMRs (k, 3) mm on a 60 mm ring of the flange, slightly out of plane."""
+    w = np.linspace(0.0, 2 * np.pi, k, endpoint=False)
+    return np.column_stack([60 * np.cos(w), 60 * np.sin(w), 35 + 5 * np.sin(3 * w)])
+
+
+def plan_at(smrs: int):
+    """A D-optimal plan of PLAN_POSES of PLAN_CANDIDATES poses with `smrs` SMRs on the IRB
+    2600, from its first run (the structural check's cache emptied): a function to measure."""
+    from robocal.drivers.cell import VirtualCell
+    from robocal.drivers.planning import plan_campaign
+    from robocal.solver import identifiability
+    from robocal.solver.robot import IRB2600
+
+    from .formats.cell_json import default_cell
+
+    base = VirtualCell.random(IRB2600, default_cell().targets, seed=1).base
+    targets = smr_ring(smrs)
+
+    def plan():
+        identifiability._structural.cache_clear()
+        rng = np.random.default_rng(0)
+        return plan_campaign(IRB2600, base, targets, PLAN_CANDIDATES, rng, k=PLAN_POSES)
+
+    return plan
+
+
+def run_planning() -> dict:
+    """Planning's peak memory and time per SMR count; memory linear in the SMRs keeps the
+    ratio of the largest to the smallest under the ratio of the counts."""
+    out: dict = {"candidates": PLAN_CANDIDATES, "poses": PLAN_POSES}
+    for smrs in PLAN_SMRS:
+        seconds, _ = _timed(plan_at(smrs), 1)
+        out[f"{smrs}_smrs"] = {"seconds": seconds, "peak_mb": peak_mb(plan_at(smrs))}
+    lo, hi = out[f"{PLAN_SMRS[0]}_smrs"], out[f"{PLAN_SMRS[-1]}_smrs"]
+    out["peak_mb_ratio"] = hi["peak_mb"] / lo["peak_mb"]
+    out["linear_bound"] = PLAN_SMRS[-1] / PLAN_SMRS[0]
+    return out
 
 
 def run_scale(cell, meas, repeats: int = 2) -> dict:
@@ -52,7 +97,7 @@ def run_scale(cell, meas, repeats: int = 2) -> dict:
         seconds, cal = _timed(fit, repeats)
         out[method.replace("-", "_")] = {
             "seconds": seconds,
-            "peak_mb": _peak_mb(fit),
+            "peak_mb": peak_mb(fit),
             "objective": float(cal.F.max() if method == "minimax" else cal.F.sum()),
         }
     ls, mm = out["ls_sum"], out["minimax"]
@@ -74,10 +119,11 @@ def run_scale(cell, meas, repeats: int = 2) -> dict:
             "bytes": path.stat().st_size,
             "rows": meas.n_readings,
             "read_seconds": ours,
-            "peak_mb": _peak_mb(lambda: read_campaign(path, cell.robot)),
+            "peak_mb": peak_mb(lambda: read_campaign(path, cell.robot)),
             "reference": "np.loadtxt of the numeric columns",
             "reference_seconds": ref,
             "ratio": ours / ref,
             "target_seconds": 0.3 if meas.n_poses <= 50_000 else None,
         }
+    out["planning"] = run_planning()
     return out

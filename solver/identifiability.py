@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import cast
 
 import numpy as np
 
 from .finite import finite
 from .kinematics import Layout, predict_rows, predict_with_jacobian
+from .observability import BLOCK_ROWS, stacked_r
 
 # Singular values of the unit-norm Jacobian columns below this fraction of the largest count as
 # zero: exact redundancies sit near 1e-14, weak but real ones far above.
@@ -108,8 +108,10 @@ def _explain(R: np.ndarray, j: int, kept: np.ndarray, names) -> str:
         finite(R[:, j] / np.linalg.norm(R[:, j]), "a parameter's column"),
         rcond=None,
     )
-    top = idx[np.argsort(-np.abs(coef))[:3]]
-    labels = [names[i] for i, c in zip(top, np.sort(-np.abs(coef))[:3]) if -c > 0.05]
+    share = np.abs(coef)
+    # Equal shares (SMRs placed symmetrically) name the columns in order, whatever the rounding.
+    top = np.lexsort((idx, -np.round(share / max(share.max(), 1e-300), 6)))[:3]
+    labels = [names[idx[i]] for i in top if share[i] > 0.05]
     return "redundant with " + ", ".join(labels) if labels else "no effect on the measured SMRs"
 
 
@@ -143,27 +145,43 @@ def structural(
 
 @lru_cache(maxsize=64)
 def _structural(robot, names, targets, candidates, rows, weight) -> Identifiability:
-    from .identify import pose_residuals
-
     layout = Layout(robot, np.eye(4), names)
     x = layout.initial(np.reshape(targets, (-1, 3)))
     candidates = np.frombuffer(candidates, dtype=bool)
     rng = np.random.default_rng(0)
     q = rng.uniform(robot.lower, robot.upper, size=(STRUCTURAL_POSES, robot.n_joints))
-    p, J, _ = predict_with_jacobian(layout, x, q)
-    if weight is None:
-        J = J[:, list(rows)].reshape(-1, layout.n_params)
-    else:
-        J = pose_residuals(p, p, J, weight)[1].reshape(-1, layout.n_params)
-    # numpy's stubs type every qr() as the (Q, R) pair; mode="r" returns R alone
-    R = cast(np.ndarray, np.linalg.qr(finite(J, "the identification Jacobian"), mode="r"))
+    R = structural_r(layout, x, q, rows, weight)
     kept = choose_free(R, preference_order(layout), candidates, STRUCTURAL_TOL)
     names_ = layout.names()
     fixed = {
         names_[j]: _explain(R, int(j), kept, names_) for j in np.flatnonzero(candidates & ~kept)
     }
     kept.setflags(write=False)
-    return Identifiability(kept, fixed, condition_number(J[:, kept]))
+    # J = QR with Q orthonormal: R's columns have J's norms and its singular values
+    return Identifiability(kept, fixed, condition_number(R[:, kept]))
+
+
+def structural_r(layout: Layout, x, q, rows, weight) -> np.ndarray:
+    """The R of a QR of the identification Jacobian at poses q, built a block of poses at a time.
+
+    The whole Jacobian has (poses x SMRs x 3) rows of (3 x SMRs + geometry) columns, quadratic
+    in the SMRs; a block of about BLOCK_ROWS rows stacked under the R so far keeps the memory
+    linear in them (R'R is J'J, so everything taken from R is as from J itself).
+    """
+    from .identify import pose_residuals
+
+    per_pose = 3 * len(rows) if weight is None else 6
+    step = max(1, BLOCK_ROWS // per_pose)
+
+    def blocks():
+        for start in range(0, len(q), step):
+            p, J, _ = predict_with_jacobian(layout, x, q[start : start + step])
+            if weight is None:
+                yield J[:, list(rows)].reshape(-1, layout.n_params)
+            else:
+                yield pose_residuals(p, p, J, weight)[1].reshape(-1, layout.n_params)
+
+    return stacked_r(blocks(), layout.n_params)
 
 
 def condition_number(J: np.ndarray) -> float:

@@ -16,7 +16,7 @@ from robocal.solver.robot import Robot
 from . import csv_table
 from .cell_json import TARGET_NAME
 from .csv_table import NUMBER
-from .limits import LABEL_CHARS_MAX, NUMBER_MAX
+from .limits import LABEL_CHARS_MAX, NUMBER_MAX, SMRS_MAX
 
 # The characters a label may not hold (Unicode Cc, Zl and Zp, as limits.bad_text says); in the
 # whole file, any of them (a tab too) leaves the file to the row reader.
@@ -194,6 +194,8 @@ def read_campaign_columns(
     if not all(_within(cols[c], *bounds[c][0]) for c in [*measured, *present]):
         return None
     names = np.array(sorted(set(labels["target"].tolist())))
+    if len(names) > SMRS_MAX:  # the row reader names the line
+        return None
     found = [_text(n) for n in names.tolist()]
     if not all(TARGET_NAME.fullmatch(n) for n in found):
         return None

@@ -13,7 +13,7 @@ from .campaign_columns import read_campaign_columns, read_poses_columns
 from .cell_json import TARGET_NAME
 from .csv_table import Row, Table
 from .files import atomic_write_text, read_text
-from .limits import COORD_MAX_MM, TEMP_RANGE_C, TIME_MAX_S
+from .limits import COORD_MAX_MM, SMRS_MAX, TEMP_RANGE_C, TIME_MAX_S
 
 # Rows of one pose come from one controller reading; anything beyond print rounding is a mix-up.
 SAME_POSE_TOL_DEG = 1e-6
@@ -104,6 +104,7 @@ def read_campaign_rows(path, robot: Robot, text: str | None = None) -> Measureme
     t.require_rows()
     poses = _Poses(t, robot)
     seen: dict[tuple[str, str], Row] = {}
+    targets: set[str] = set()
     readings = []  # (pose index, target, xyz, extras)
     for row in t.rows:
         k, _ = poses.add(row)
@@ -114,6 +115,12 @@ def read_campaign_rows(path, robot: Robot, text: str | None = None) -> Measureme
                 "target",
                 f"{target!r} is not a target name (a letter, then up "
                 "to 15 letters, digits or '_', as in cell.json)",
+            )
+        targets.add(target)
+        if len(targets) > SMRS_MAX:
+            # The readings become a (poses, targets) table: bounded before it is built.
+            raise t.error(
+                row, "target", f"{target!r} is target {len(targets)}; a cell has at most {SMRS_MAX}"
             )
         key = (poses.ids[k], target)
         if key in seen:

@@ -22,15 +22,16 @@ from robocal.solver.robot import BUILTIN, Joint, Robot, detect_parallel
 from .fields import (
     TARGET_NAME_PATTERN,
     Angle,
-    Coordinate,
     Doc,
     Label,
+    Link,
     Matrix4,
     NonNegative,
     Point,
     Whole,
     located,
 )
+from .limits import JOINTS_MAX, REACH_MIN_MM, SMRS_MAX
 
 TARGET_NAME = re.compile(TARGET_NAME_PATTERN)
 DEFAULT_LIMITS_DEG = (-180.0, 180.0)
@@ -45,8 +46,8 @@ Timeout = Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0.0, le=60
 class JointDoc(Doc):
     """One row of the DH (or modified DH) table: mm and degrees."""
 
-    a: Coordinate
-    d: Coordinate
+    a: Link
+    d: Link
     theta: Angle = Field(description="zero offset added to the joint reading, degrees")
     alpha: Angle
     limits: Annotated[list[Angle], Field(min_length=2, max_length=2)] = list(DEFAULT_LIMITS_DEG)
@@ -78,13 +79,29 @@ class RobotDoc(Doc):
     convention: Literal["dh", "mdh"] = Field(
         description="dh: Rz(theta) Tz(d) Tx(a) Rx(alpha); mdh: Rx(alpha) Tx(a) Rz(theta) Tz(d)"
     )
-    joints: list[JointDoc] = Field(json_schema_extra={"minItems": 1})
+    joints: list[JointDoc] = Field(
+        description=f"from the base; their links (sqrt(a^2 + d^2)) add up to at least "
+        f"{REACH_MIN_MM:g} mm",
+        json_schema_extra={"minItems": 1, "maxItems": JOINTS_MAX},
+    )
     _robot: Robot = PrivateAttr()
 
     @model_validator(mode="after")
     def _build(self):
         if not self.joints:
             raise located("at least one joint is needed", "joints")
+        if len(self.joints) > JOINTS_MAX:
+            raise located(
+                f"{len(self.joints)} joints; a serial arm has at most {JOINTS_MAX}", "joints"
+            )
+        reach = sum(float(np.hypot(j.a, j.d)) for j in self.joints)
+        if reach < REACH_MIN_MM:
+            # All zeros (or metres for mm) would plan no pose and fit nothing: refused here.
+            raise located(
+                f"the links add up to {reach:g} mm (the sum of sqrt(a^2 + d^2)); an arm's add "
+                f"up to at least {REACH_MIN_MM:g} mm: give a and d in mm",
+                "joints",
+            )
         joints = [j.joint() for j in self.joints]
         detected = detect_parallel(self.convention, joints)
         for i, (det, row) in enumerate(zip(detected, self.joints)):
@@ -202,6 +219,7 @@ class CellDoc(Doc):
         description="nominal SMR positions in the flange frame, mm",
         json_schema_extra={
             "minProperties": 1,
+            "maxProperties": SMRS_MAX,
             "propertyNames": {"pattern": f"^{TARGET_NAME_PATTERN}$"},
         },
     )
@@ -250,6 +268,11 @@ class CellDoc(Doc):
 def check_targets(targets: dict) -> dict:
     if not targets:
         raise located("at least one target is needed")
+    if len(targets) > SMRS_MAX:
+        raise located(
+            f"{len(targets)} targets; a cell has at most {SMRS_MAX} SMRs (three fix the "
+            "flange's pose, each more costs planning and calibration time)"
+        )
     for name in targets:
         if not TARGET_NAME.fullmatch(name):
             raise located(

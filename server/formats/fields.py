@@ -9,7 +9,15 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fie
 from pydantic.fields import FieldInfo
 from pydantic_core import PydanticCustomError
 
-from .limits import ANGLE_MAX_DEG, COORD_MAX_MM, LABEL_CHARS_MAX, NUMBER_MAX, PRINTABLE, bad_text
+from .limits import (
+    ANGLE_MAX_DEG,
+    COORD_MAX_MM,
+    LABEL_CHARS_MAX,
+    LINK_MAX_MM,
+    NUMBER_MAX,
+    PRINTABLE,
+    bad_text,
+)
 
 # Letters like the spec's A, B, C, or short identifiers such as SMR1: they become CSV values
 # and parameter names (A_x), so no spaces or punctuation.
@@ -36,6 +44,7 @@ Number = Annotated[float, _bounded(NUMBER_MAX)]
 NonNegative = Annotated[float, _bounded(NUMBER_MAX, minimum=0.0)]
 Coordinate = Annotated[float, _bounded(COORD_MAX_MM, "mm")]
 Angle = Annotated[float, _bounded(ANGLE_MAX_DEG, "degrees")]
+Link = Annotated[float, _bounded(LINK_MAX_MM, "mm")]
 
 
 def _whole(value):

@@ -148,6 +148,21 @@ def type_of(spec: dict) -> str:
     return f"{kind} ({unit})" if unit in ("mm", "degrees") else kind
 
 
+def bounds_of(spec: dict) -> str:
+    """A field's size or range bound in a few words ("at most 16 keys", "-5000 to 5000")."""
+    if "maxProperties" in spec:
+        return f"{spec.get('minProperties', 0)} to {spec['maxProperties']} keys"
+    if "maxItems" in spec and spec.get("minItems") != spec["maxItems"]:
+        return f"{spec.get('minItems', 0)} to {spec['maxItems']} elements"
+    if spec.get("type") in ("number", "integer") and "maximum" in spec and "minimum" in spec:
+        return f"{_number(spec['minimum'])} to {_number(spec['maximum'])}"
+    return ""
+
+
+def _number(x: float) -> str:
+    return f"{x:.0f}" if x == int(x) and abs(x) < 1e7 else f"{x:g}"
+
+
 def fields_table(schema: dict) -> list[str]:
     required = set(schema.get("required", ()))
     lines = ["| field | type | required | meaning |", "| --- | --- | --- | --- |"]
@@ -155,6 +170,8 @@ def fields_table(schema: dict) -> list[str]:
         meaning = spec.get("description", "")
         if spec.get("type") in ("number", "integer") and meaning in ("mm", "degrees"):
             meaning = ""
+        bound = bounds_of(spec)
+        meaning = f"{meaning}; {bound}" if meaning and bound else meaning or bound
         lines.append(
             f"| `{name}` | {type_of(spec)} | {'yes' if name in required else 'no'} | "
             f"{' '.join(meaning.split())} |"

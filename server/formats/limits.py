@@ -13,6 +13,17 @@ import unicodedata
 COORD_MAX_MM = 100_000.0
 # Three full turns: beyond the widest joint ranges sold (+-720 deg on some wrist axes).
 ANGLE_MAX_DEG = 1080.0
+# A cell's SMRs: a handful on a flange fixture (three fix the flange's pose). Planning and
+# calibration carry three parameters per SMR, so every count beyond this only costs.
+SMRS_MAX = 16
+# Joints of a serial arm: the kinematics handles any chain, and the arms sold have up to seven
+# axes (a redundant arm); the ABB controller protocol drives at most six (drivers.abb.protocol).
+JOINTS_MAX = 7
+# A link's length a and offset d: the largest arms sold reach under 5 m in all.
+LINK_MAX_MM = 5_000.0
+# The links of an arm add up (sum of sqrt(a^2 + d^2)) to at least this: below it the table is
+# degenerate (all zeros) or given in metres.
+REACH_MIN_MM = 100.0
 # Seconds since a campaign's start: 30 years.
 TIME_MAX_S = 1e9
 # Air temperature at a tracker's weather station.

@@ -119,7 +119,7 @@ def test_sampled_poses_meet_every_constraint():
 
 def test_impossible_constraints_raise():
     cell = irb_cell(3, floor_clearance_mm=5000.0)
-    with pytest.raises(RuntimeError, match="floor"):
+    with pytest.raises(ValueError, match="floor: keep the SMRs above the floor"):
         cell.sample_poses(10, np.random.default_rng(0), max_batches=3)
 
 

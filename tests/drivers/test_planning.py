@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from robocal.drivers.cell import VirtualCell
+from robocal.drivers.cell import PosesTooConstrained, VirtualCell
 from robocal.drivers.clock import VirtualClock
 from robocal.drivers.planning import (
     candidate_jacobians,
@@ -85,7 +85,10 @@ def test_planning_is_deterministic():
 
 def test_too_tight_constraints_raise_with_pass_rates():
     tiny = ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
-    with pytest.raises(RuntimeError, match=r"only 0 of 10 poses valid.*bounds 0\.0%"):
+    # a ValueError (422 in the API, one line in the CLI) naming the check and what to change
+    with pytest.raises(
+        PosesTooConstrained, match=r"only 0 of 10 poses valid.*bounds 0\.0%.*bounds: widen"
+    ):
         plan_poses(
             IRB2600, cell().base, T, 10, np.random.default_rng(0), bounds=tiny, max_batches=2
         )

@@ -27,6 +27,9 @@ def test_the_scale_point_has_time_memory_and_the_file(bench):
     f = scale["meas_csv"]
     assert f["rows"] == 6000 and f["bytes"] > 6000 * 50
     assert f["read_seconds"] > 0 and f["reference_seconds"] > 0
+    plan = scale["planning"]  # peak memory per SMR count: linear, under the counts' ratio
+    assert plan["3_smrs"]["peak_mb"] > 0 and plan["16_smrs"]["seconds"] > 0
+    assert plan["peak_mb_ratio"] < plan["linear_bound"]
 
 
 def test_report_structure(bench):
