@@ -375,8 +375,13 @@ def diagnose(
     log=None,
     screen_outliers=True,
     pose_ids=None,
+    noise_floor_mm=None,
 ) -> Diagnosis:
-    """Baseline geometric calibration, candidate effects, selection and the extended model."""
+    """Baseline geometric calibration, candidate effects, selection and the extended model.
+
+    noise_floor_mm: the tracker's noise (3-D RMS a reading) when the data cannot measure it
+    (one SMR), with noise_source saying where it comes from.
+    """
     t0 = time.perf_counter()
     require_inputs(q, meas, targets, base_guess)
     clock = {}
@@ -391,10 +396,12 @@ def diagnose(
     prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
     st = ident.structural(prob.layout, x0, np.ones(prob.layout.n_params, dtype=bool))
     J = ident.jacobian_rows(prob.layout, x0, q, prob.mask)
-    ident.check_data(ident.gram(J, st.free), st.free, prob.layout.names(), J.shape[0], q.shape[0])
+    data = ident.check_data(
+        ident.gram(J, st.free), st.free, prob.layout, J.shape[0], q.shape[0], noise_floor_mm
+    )
     inputs = Inputs(q, time_s, temp_c)
     clock["setup"] = time.perf_counter() - t0
-    diag = Diagnoser(prob, x0, st.free, inputs)
+    diag = Diagnoser(prob, x0, data.free, inputs)
     cands = candidates(prob.layout, x0, inputs)
     t1 = time.perf_counter()
     steps, base, final = select(diag, cands, log)
