@@ -7,43 +7,16 @@ import pytest
 from robocal.drivers.cell import VirtualCell
 from robocal.solver.calibrate import calibrate
 from robocal.solver.kinematics import predict
-from robocal.solver.robot import IRB2600, robot_from_degrees
+from robocal.solver.robot import IRB2600
 
-from tests.robots import KUKA_LIKE, PUMA_LIKE
+from tests.robots import IIWA_LIKE, KUKA_LIKE, PUMA_LIKE, UR5
 
-# UR5's DH table (a, d, theta, alpha): no parallel-axis Hayati beta, a wrist offset at joint 4
-UR5 = robot_from_degrees(
-    "ur5",
-    "dh",
-    [
-        (0.0, 89.159, 0.0, 90.0, (-360.0, 360.0)),
-        (-425.0, 0.0, 0.0, 0.0, (-180.0, 0.0)),
-        (-392.25, 0.0, 0.0, 0.0, (-160.0, 160.0)),
-        (0.0, 109.15, 0.0, 90.0, (-360.0, 360.0)),
-        (0.0, 94.65, 0.0, -90.0, (-360.0, 360.0)),
-        (0.0, 82.3, 0.0, 0.0, (-360.0, 360.0)),
-    ],
-)
-# A 7-axis arm (KUKA LBR iiwa 14-like, standard DH)
-IIWA = robot_from_degrees(
-    "iiwa-like",
-    "dh",
-    [
-        (0.0, 360.0, 0.0, -90.0, (-170.0, 170.0)),
-        (0.0, 0.0, 0.0, 90.0, (-120.0, 120.0)),
-        (0.0, 420.0, 0.0, 90.0, (-170.0, 170.0)),
-        (0.0, 0.0, 0.0, -90.0, (-120.0, 120.0)),
-        (0.0, 400.0, 0.0, -90.0, (-170.0, 170.0)),
-        (0.0, 0.0, 0.0, 90.0, (-120.0, 120.0)),
-        (0.0, 126.0, 0.0, 0.0, (-175.0, 175.0)),
-    ],
-)
 ROBOTS = {
     "irb2600": IRB2600,
     "kuka-like": KUKA_LIKE,
     "puma-like": PUMA_LIKE,
     "ur5": UR5,
-    "iiwa": IIWA,
+    "iiwa": IIWA_LIKE,
 }
 METHODS = ["ls-sum", "ls-single:A", "minimax"]
 ON_AXIS = {"A": [0.0, 0.0, 35.0]}
