@@ -59,3 +59,25 @@ def test_one_smr_on_the_axis_calibrates_and_diagnoses(name, tmp_path):
     assert f"noise floor {floor:.4f} mm (from the tracker specification (" in out
     assert model["validation"]["noise_floor_mm"] == pytest.approx(floor)
     assert model["validation"]["noise_floor_source"] == source
+
+
+def test_one_smr_error_above_the_spec_floor_is_reported_unexplained(tmp_path):
+    """An unmodelled wrist coupling with one SMR: the `unexplained` block is judged against the
+    tracker spec's floor (there was none with one SMR)."""
+    cell = {"robot": "irb2600", "targets": {"A": [60.0, 0.0, 35.0]}}
+    (tmp_path / "cell.json").write_text(json.dumps(cell))
+    r = robocal(
+        "simulate",
+        *("--cell", "cell.json", "--poses", 40, "--seed", 4, "--out", "m.csv"),
+        *("--effect", "joint_coupling:5=300"),
+        cwd=tmp_path,
+    )
+    assert r.returncode == 0, r.stderr
+    r = robocal("diagnose", "m.csv", "--cell", "cell.json", "--out", "report.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    report = json.loads((tmp_path / "report.json").read_text())
+    floor = report["noise_floor_mm"]
+    assert report["final"]["holdout_rmse_mm"] > 1.5 * floor
+    ratio = report["unexplained"]["noise_floor_ratio"]
+    assert ratio == pytest.approx(report["unexplained"]["holdout_rmse_mm"] / floor)
+    assert f"{ratio:.1f}x the noise floor" in " ".join(r.stdout.split())
