@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import identifiability as ident
 from . import vocabulary
 from .effects import Extension, Inputs, point_shift, prepare
 from .extended import extension_rows, fit_extended, predict_extended
@@ -369,18 +368,23 @@ def diagnose(
     prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
     inputs = Inputs(q, time_s, temp_c)
     noise = tracker_noise(q, meas, inputs, tracker_spec)
-    # the nominal SMRs decide the structure, as calibrate's: the held parameters agree with its
-    lay0 = prob.layout
-    st = ident.structural(lay0, lay0.initial(targets), np.ones(lay0.n_params, dtype=bool))
-    # and the data's check is taken at them too, as calibrate's first normal equations are
-    at_nominal = np.array(x0, dtype=float)
-    at_nominal[lay0.target_slice] = np.asarray(targets, dtype=float).ravel()
-    J = ident.jacobian_rows(lay0, at_nominal, q, prob.mask)
-    data = ident.check_data(
-        ident.gram(J, st.free), st.free, prob.layout, J.shape[0], q.shape[0], noise.mm
+    # the geometric calibration decides what is identified (and refuses too few poses) before
+    # any selection, so the held parameters agree with the ls-sum model the report judges
+    from .calibrate import calibrate
+
+    geo = calibrate(
+        robot,
+        targets,
+        target_names,
+        q,
+        meas,
+        "ls-sum",
+        base_guess=base_guess,
+        noise_floor_mm=noise.mm,
     )
+    free = np.array([n not in geo.fixed for n in prob.layout.names()])
     clock["setup"] = time.perf_counter() - t0
-    diag = Diagnoser(prob, x0, data.free, inputs)
+    diag = Diagnoser(prob, x0, free, inputs)
     cands = candidates(prob.layout, x0, inputs)
     t1 = time.perf_counter()
     steps, base, final = select(diag, cands, log)
