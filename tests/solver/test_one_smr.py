@@ -54,3 +54,15 @@ def test_ls_pose_needs_three_smrs_whatever_their_layout():
     cell, cal, _ = one_smr(IRB2600, 3, True)
     with pytest.raises(ValueError, match="three targets"):
         calibrate(IRB2600, np.array([ON_AXIS["A"]]), ("A",), cal.q, cal.xyz, method="ls-pose")
+
+
+def test_diagnose_refuses_too_few_poses_before_any_selection():
+    """Too few poses are refused by the geometric check up front, not after the selection."""
+    from robocal.solver.diagnose import diagnose
+    from robocal.solver.identifiability import NotIdentifiable
+
+    _, cal, _ = one_smr(IRB2600, 3, True, n_cal=6, n_hold=0)
+    said = []
+    with pytest.raises(NotIdentifiable, match="poses"):
+        diagnose(IRB2600, np.array([ON_AXIS["A"]]), ("A",), cal.q, cal.xyz, log=said.append)
+    assert said == []
