@@ -9,7 +9,7 @@ import numpy as np
 from scipy.optimize import OptimizeResult
 
 from . import identifiability as ident
-from .finite import require_inputs
+from .finite import finite, require_inputs
 from .identify import fit_targets, pose_fit, pose_residuals, pose_weight, register, start_fit
 from .kinematics import Layout, predict_with_jacobian
 from .minimax import minimax
@@ -166,7 +166,8 @@ def calibrate(
         del first  # its twists, as large as a Jacobian, would sit beside minimax's own
         # Residuals well above the tracker's noise (the arm's repeatability, unmodelled effects)
         # pin the parameters less than the noise alone would: judged again at their level.
-        scatter = float(np.sqrt(prob.sum_squares(x)[rows].sum() / max(1, fit.mask.sum())))
+        F = finite(prob.sum_squares(x)[rows], "the fit's residuals")
+        scatter = float(np.sqrt(F.sum() / max(1, fit.mask.sum())))
         floor = noise_floor_mm or ident.DEFAULT_NOISE_FLOOR_MM
         if scatter > RESIDUAL_OVER_FLOOR * floor:
             again = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], scatter)

@@ -235,8 +235,12 @@ def check_data(
         else:
             held[names[p]] = _why_held(B, i, info, kept, idx, names, angle[p], sigma * np.sqrt(3.0))
     keep = np.zeros_like(np.asarray(free, dtype=bool))
-    keep[idx[sorted(kept)]] = True
-    sub = np.sort(kept)
+    if not kept:
+        raise NotIdentifiable(
+            "the data moves none of the parameters: measure poses that move the SMRs"
+        )
+    sub = np.array(sorted(kept), dtype=int)
+    keep[idx[sub]] = True
     Ak = A[np.ix_(sub, sub)]
     norms = np.sqrt(np.diag(Ak))
     As = Ak / np.outer(norms, norms)
