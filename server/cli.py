@@ -432,7 +432,12 @@ def _print_diagnosis(report) -> None:
     console.print(
         f"baseline (geometric) held-out RMS {report['baseline']['holdout_rmse_mm']:.4f} mm, "
         f"max {report['baseline']['holdout_max_mm']:.4f} mm; noise floor "
-        + (f"{floor:.4f} mm" if floor else "unknown (one SMR)")
+        + (f"{floor:.4f} mm" if floor else "unknown")
+        + (
+            f" (from the {report['noise_floor_source']})"
+            if report.get("noise_floor_source")
+            else ""
+        )
     )
     if not report["effects"]:
         console.print("no effect beyond geometry pays off on held-out poses")

@@ -13,27 +13,23 @@ from .formats.cell_json import Cell
 from .formats.model_json import ModelFile
 
 HOLDOUT_METHOD = "leave-one-pose-out cross-validation, linearised at the fit"
-DATA_FLOOR = "from the spread of SMR-to-SMR distances in the data"
-SPEC_FLOOR = "from the cell's tracker spec, MPE/2 per axis at the readings' ranges"
 # Model errors (RMS, mm) on data past which the data cannot be of the model's cell.
 ABSURD_MM = 100.0
 
 
-def noise_floor(cell: Cell, meas: Measurements) -> tuple[float | None, str]:
+def noise_floor(cell: Cell, meas: Measurements) -> tuple[float, str]:
     """The tracker's noise (3-D RMS per reading, mm) and where it comes from: measured in the
-    data when it has 10 poses with two SMRs or more, else the cell's tracker spec."""
-    from robocal.solver.diagnose import noise_floor as measured
+    data (SMR distances with two SMRs or more, else repeated poses), else the cell's tracker
+    spec, else the default spec (said so)."""
+    from robocal.solver.noise import noise_floor as floor
 
-    floor = measured(meas.xyz, Inputs(meas.q, meas.time_s, meas.temp_c))
-    if floor:
-        return floor, DATA_FLOOR
-    spec = cell.tracker or {}
-    if "mpe_um" not in spec:
-        return None, ""
-    r = np.linalg.norm(meas.xyz, axis=-1)
-    r = r[np.isfinite(r)]
-    sigma = 0.5e-3 * (spec["mpe_um"] + spec.get("mpe_um_per_m", 0.0) * r / 1000.0)
-    return float(np.sqrt(np.mean(3.0 * sigma**2))), SPEC_FLOOR
+    f = floor(meas.q, meas.xyz, Inputs(meas.q, meas.time_s, meas.temp_c), tracker_spec(cell))
+    return f.mm, f.source
+
+
+def tracker_spec(cell: Cell) -> dict | None:
+    """The cell's tracker spec when its cell.json gave one, None for the default."""
+    return cell.tracker if cell.tracker_spec_given else None
 
 
 def validation_block(

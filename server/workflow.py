@@ -149,6 +149,8 @@ def run_method(
     every reading, a Screening reuses one already made (compare screens once for all methods)."""
     from robocal.solver.calibrate import calibrate
 
+    from .validation import noise_floor
+
     screened = screen_campaign(cell, meas) if screening is True else screening or None
     use = without_outliers(meas, screened)
     targets = np.array([cell.targets[t] for t in meas.target_names])
@@ -161,6 +163,7 @@ def run_method(
         method=method,
         base_guess=cell.base,
         qp=qp,
+        noise_floor_mm=noise_floor(cell, use)[0],
     )
     if screened is not None:
         cal.screening = screened
@@ -344,6 +347,8 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
     from robocal.solver.diagnose import diagnose as run_diagnosis
 
+    from .validation import tracker_spec
+
     targets = np.array([cell.targets[t] for t in meas.target_names])
     d = run_diagnosis(
         cell.robot,
@@ -357,6 +362,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
         log=log,
         screen_outliers=screen,
         pose_ids=meas.pose_ids,
+        tracker_spec=tracker_spec(cell),
     )
     lay, x = d.layout, d.x
     robot = lay.robot.with_params(x[: lay.n_geo])
@@ -372,6 +378,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
             "diagnosis": {
                 "final": d.report["final"],
                 "noise_floor_mm": d.report["noise_floor_mm"],
+                "noise_floor_source": d.report["noise_floor_source"],
                 **({"outliers": d.report["outliers"]} if "outliers" in d.report else {}),
             },
         },
@@ -392,7 +399,14 @@ def _judge_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> Non
 
     targets = np.array([cell.targets[t] for t in meas.target_names])
     geometric = calibrate(
-        cell.robot, targets, meas.target_names, meas.q, meas.xyz, "ls-sum", base_guess=cell.base
+        cell.robot,
+        targets,
+        meas.target_names,
+        meas.q,
+        meas.xyz,
+        "ls-sum",
+        base_guess=cell.base,
+        noise_floor_mm=d.report["noise_floor_mm"],
     )
     model.meta["identified"] = identified_block(
         model,

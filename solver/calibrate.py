@@ -9,13 +9,16 @@ import numpy as np
 from scipy.optimize import OptimizeResult
 
 from . import identifiability as ident
-from .finite import require_inputs
+from .finite import finite, require_inputs
 from .identify import fit_targets, pose_fit, pose_residuals, pose_weight, register, start_fit
 from .kinematics import Layout, predict_with_jacobian
 from .minimax import minimax
 from .robot import Robot
 
 METHODS = ("minimax", "ls-sum", "ls-single", "ls-pose", "nominal")
+# Fit residuals (RMS a reading) past this multiple of the noise floor set the level at which
+# the parameters are judged identified instead of the floor.
+RESIDUAL_OVER_FLOOR = 2.0
 
 
 # An OptimizeResult (a dict with attribute access) rather than a dataclass: every method adds
@@ -97,10 +100,13 @@ def calibrate(
     base_guess=None,
     qp="primal-dual",
     epsilon=None,
+    noise_floor_mm=None,
 ) -> Calibration:
     """Fit geometry, base frame and SMR positions to measurements with the chosen method.
 
-    q: (m, n) joint readings in rad; meas: (m, K, 3) mm with NaN for missing readings.
+    q: (m, n) joint readings in rad; meas: (m, K, 3) mm with NaN for missing readings;
+    noise_floor_mm: the tracker's noise (3-D RMS a reading), against which the parameters the
+    data moves too little are held (default: the default tracker spec's).
     """
     t0 = time.perf_counter()
     name, rows = parse_method(method, list(target_names))
@@ -141,20 +147,37 @@ def calibrate(
         full = np.all(prob.mask, axis=1)
         p, J, _ = predict_with_jacobian(lay, x0, q[full])
         Jd = pose_residuals(p, p, J, weight)[1].reshape(-1, lay.n_params)
-        cond = ident.check_data(
-            ident.gram(Jd, st.free), st.free, lay.names(), Jd.shape[0], int(full.sum())
+        data = ident.check_data(
+            ident.gram(Jd, st.free), st.free, lay, Jd.shape[0], int(full.sum()), noise_floor_mm
         )
-        x, res = pose_fit(prob, x0, st.free, weight)
+        x, res = pose_fit(prob, x0, data.free, weight)
         x = fit_targets(prob, x, range(len(target_names)))
         own["pose_weight_mm_per_rad"] = weight
     else:
         fit, first = start_fit(robot, targets, target_names, q, meas, st.free, rows, base_guess)
         prob = fit.prob
-        cond = ident.check_data(
-            first.A, st.free, lay.names(), 3 * int(fit.mask.sum()), prob.q.shape[0]
-        )
+        A, n_rows = first.A, 3 * int(fit.mask.sum())
+        data = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], noise_floor_mm)
+        if data.held:  # the start's normal equations were of the structurally free columns
+            fit, first = start_fit(
+                robot, targets, target_names, q, meas, data.free, rows, base_guess
+            )
         x, res = fit.fit(first)
         del first  # its twists, as large as a Jacobian, would sit beside minimax's own
+        # Residuals well above the tracker's noise (the arm's repeatability, unmodelled effects)
+        # pin the parameters less than the noise alone would: judged again at their level.
+        F = finite(prob.sum_squares(x)[rows], "the fit's residuals")
+        scatter = float(np.sqrt(F.sum() / max(1, fit.mask.sum())))
+        floor = noise_floor_mm or ident.DEFAULT_NOISE_FLOOR_MM
+        if scatter > RESIDUAL_OVER_FLOOR * floor:
+            again = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], scatter)
+            if set(again.held) - set(data.held):
+                data = again
+                fit, first = start_fit(
+                    robot, targets, target_names, q, meas, data.free, rows, base_guess
+                )
+                x, res = fit.fit(first)
+                del first
         own["start"] = fit.start
         if name == "ls-single":
             x = fit_targets(prob, x, [k for k in range(len(target_names)) if k not in rows])
@@ -169,7 +192,7 @@ def calibrate(
         # the fit's last residuals, when it kept them, are those of x over every target
         start_F = fit.per_target(res.r) if res.r is not None else prob.sum_squares(x)
         own["ls_sum_F"] = start_F.tolist()
-        mm = minimax(prob, x, st.free, rows=rows, qp=qp, epsilon=epsilon)
+        mm = minimax(prob, x, data.free, rows=rows, qp=qp, epsilon=epsilon)
         x = mm.x
         iters, message = mm.iterations, mm.message
         own.update(
@@ -208,8 +231,8 @@ def calibrate(
         status=status,
         message=message,
         nit=iters,
-        fixed=st.fixed,
-        condition=cond,
+        fixed={**st.fixed, **data.held},
+        condition=data.condition,
         F=F,
         seconds=time.perf_counter() - t0,
         **own,

@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import identifiability as ident
 from . import vocabulary
 from .effects import Extension, Inputs, point_shift, prepare
 from .extended import extension_rows, fit_extended, predict_extended
@@ -23,6 +22,8 @@ from .finite import finite, require_inputs
 from .identify import Problem, register
 from .kinematics import Layout, predict_rows
 from .motion import visit_order
+from .noise import from_distances as noise_floor  # noqa: F401 (the tests' measured floor)
+from .noise import noise_floor as tracker_noise
 from .robot import Robot
 from .screen import screen_readings
 from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
@@ -72,35 +73,6 @@ class Diagnosis:
     figures: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     errors: ExtendedErrors | None = None  # the final model's standard errors
-
-
-def noise_floor(meas: np.ndarray, inputs: Inputs) -> float | None:
-    """Tracker noise (3-D RMS) from the spread of SMR-to-SMR distances, which no model error changes.
-
-    Each distance's error is the difference of two readings' noise along the pair, of variance
-    2 sigma^2; trends with temperature and time (thermal growth) are removed first.
-    """
-    K = meas.shape[1]
-    var = []
-    for i in range(K):
-        for j in range(i + 1, K):
-            d = np.linalg.norm(meas[:, i] - meas[:, j], axis=-1)
-            cols = [np.ones_like(d)]
-            for a in (inputs.temp_c, inputs.time_s):
-                if a is not None:
-                    cols.append(a[:, [i, j]].mean(axis=1))  # NaN where d is NaN too
-            A = np.stack(cols, axis=1)
-            ok = np.isfinite(d) & np.all(np.isfinite(A), axis=1)
-            if ok.sum() < 10:
-                continue
-            coef, *_ = np.linalg.lstsq(
-                finite(A[ok], "the noise floor's design"),
-                finite(d[ok], "the noise floor's distances"),
-                rcond=None,
-            )
-            r = d[ok] - A[ok] @ coef
-            var.append(np.sum(r * r) / (ok.sum() - A.shape[1]) / 2.0)
-    return float(np.sqrt(3.0 * np.mean(var))) if var else None
 
 
 def folds(m: int, k: int = FOLDS, seed: int = 0) -> list[np.ndarray]:
@@ -375,8 +347,13 @@ def diagnose(
     log=None,
     screen_outliers=True,
     pose_ids=None,
+    tracker_spec: dict | None = None,
 ) -> Diagnosis:
-    """Baseline geometric calibration, candidate effects, selection and the extended model."""
+    """Baseline geometric calibration, candidate effects, selection and the extended model.
+
+    tracker_spec: the cell's tracker block (mpe_um, mpe_um_per_m), the noise floor when the data
+    cannot measure it (one SMR, no repeated pose); without it the default specification's.
+    """
     t0 = time.perf_counter()
     require_inputs(q, meas, targets, base_guess)
     clock = {}
@@ -389,12 +366,25 @@ def diagnose(
     meas = meas if screening is None else screening.apply(meas)
     clock["screening"] = time.perf_counter() - t0
     prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
-    st = ident.structural(prob.layout, x0, np.ones(prob.layout.n_params, dtype=bool))
-    J = ident.jacobian_rows(prob.layout, x0, q, prob.mask)
-    ident.check_data(ident.gram(J, st.free), st.free, prob.layout.names(), J.shape[0], q.shape[0])
     inputs = Inputs(q, time_s, temp_c)
+    noise = tracker_noise(q, meas, inputs, tracker_spec)
+    # the geometric calibration decides what is identified (and refuses too few poses) before
+    # any selection, so the held parameters agree with the ls-sum model the report judges
+    from .calibrate import calibrate
+
+    geo = calibrate(
+        robot,
+        targets,
+        target_names,
+        q,
+        meas,
+        "ls-sum",
+        base_guess=base_guess,
+        noise_floor_mm=noise.mm,
+    )
+    free = np.array([n not in geo.fixed for n in prob.layout.names()])
     clock["setup"] = time.perf_counter() - t0
-    diag = Diagnoser(prob, x0, st.free, inputs)
+    diag = Diagnoser(prob, x0, free, inputs)
     cands = candidates(prob.layout, x0, inputs)
     t1 = time.perf_counter()
     steps, base, final = select(diag, cands, log)
@@ -403,7 +393,7 @@ def diagnose(
     exts = [s[0] for s in steps]
     x, ee = diag.fit(exts)
     clock["final_fit"] = time.perf_counter() - t2
-    floor = noise_floor(meas, inputs)
+    floor = noise.mm
     from .diagnosis_report import build_report, figure_series
 
     params, report = build_report(diag, steps, base, final, ee, x, floor, len(cands))
@@ -419,6 +409,8 @@ def diagnose(
     clock["total"] = time.perf_counter() - t0
     if screening is not None:
         report["outliers"] = screening.report(pose_ids, target_names)
+    head = {k: report.pop(k) for k in ("schema", "noise_floor_mm")}
+    report = {**head, "noise_floor_source": noise.source, **report}
     report["seconds"] = {k: round(v, 3) for k, v in clock.items()}
     report["cross_validation"] = {
         "folds": len(diag.folds),

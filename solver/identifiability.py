@@ -14,10 +14,18 @@ from .observability import BLOCK_ROWS, stacked_r
 # Singular values of the unit-norm Jacobian columns below this fraction of the largest count as
 # zero: exact redundancies sit near 1e-14, weak but real ones far above.
 STRUCTURAL_TOL = 1e-8
+# A column whose norm is below this fraction of the largest one's has no effect at all: lengths
+# move the SMRs ~1 mm/mm and angles ~1000 mm/rad, rounding leaves ~1e-13 mm/rad.
+DEAD = 1e-10
 # A column adding less than this fraction of its norm is kept only if the rank needs it.
 CLEAR_NEW = 0.1
-# Refuse data whose Jacobi-scaled Jacobian is worse conditioned than this.
-MAX_CONDITION = 1e7
+# The error a parameter may plausibly have: the data must pin a parameter better than this
+# (at the tracker's noise) for it to be identified, else it is held at nominal.
+PRIOR_MM = 1.0
+PRIOR_DEG = 1.0
+# The tracker noise (3-D RMS per reading) when the caller knows none: the default tracker spec,
+# MPE 10 um + 2.5 um/m halved per axis, at 2 m.
+DEFAULT_NOISE_FLOOR_MM = float(np.sqrt(3.0) * 0.5e-3 * (10.0 + 2.5 * 2.0))
 STRUCTURAL_POSES = 240
 
 
@@ -73,7 +81,8 @@ def choose_free(R: np.ndarray, order, candidates: np.ndarray, tol: float) -> np.
     cols = [j for j in order if candidates[j]]
     A = R[:, cols]
     norms = np.linalg.norm(A, axis=0)
-    live = [c for c, n in zip(cols, norms) if n > 0]
+    # a column this small against the largest is rounding, not an effect (an SMR on the axis)
+    live = [c for c, n in zip(cols, norms) if n > DEAD * norms.max()]
     if not live:
         return np.zeros(R.shape[1], dtype=bool)
     s = np.linalg.svd(
@@ -101,6 +110,8 @@ def choose_free(R: np.ndarray, order, candidates: np.ndarray, tol: float) -> np.
 
 def _explain(R: np.ndarray, j: int, kept: np.ndarray, names) -> str:
     """Name the kept parameters that the redundant column j is mostly made of."""
+    if np.linalg.norm(R[:, j]) <= DEAD * np.max(np.linalg.norm(R, axis=0)):
+        return "no effect on the measured SMRs"
     idx = np.flatnonzero(kept)
     A = R[:, idx] / np.linalg.norm(R[:, idx], axis=0)
     coef, *_ = np.linalg.lstsq(
@@ -192,35 +203,92 @@ def condition_number(J: np.ndarray) -> float:
     return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
 
 
-def check_data(A: np.ndarray, free: np.ndarray, names, n_rows: int, n_poses: int) -> float:
-    """Condition number of the data's Jacobian on the free parameters; refuse data that cannot identify them.
+@dataclass
+class DataCheck:
+    """What the data itself identifies: the free parameters left, those it holds and why, and
+    the condition number of the free ones."""
 
-    A is J'J over the free parameters (n_rows rows of J): its scaled eigenvalues are the squared
-    singular values of the unit-column Jacobian, resolved down to ~1e-7 of the largest singular value.
+    free: np.ndarray  # bool (P,)
+    held: dict[str, str]  # name -> why the data cannot identify it
+    condition: float
+
+
+def check_data(
+    A: np.ndarray, free: np.ndarray, layout: Layout, n_rows: int, n_poses: int, noise_mm=None
+) -> DataCheck:
+    """Hold the parameters this data cannot identify; refuse only too few equations.
+
+    A is J'J over the free parameters (n_rows rows of J). A parameter is identified when the
+    data pins it, given the parameters kept before it (preference order), to better than
+    PRIOR_MM or PRIOR_DEG at the tracker's noise: a column the data does not move (one SMR on
+    the last joint's axis and its offset), or moves below the noise, or only together with
+    others, is held at nominal with the reason. The condition number is that of the
+    unit-column Jacobian of what stays free.
     """
+    names = layout.names()
     idx = np.flatnonzero(free)
     if n_rows < len(idx):
         raise NotIdentifiable(
             f"{n_poses} poses give {n_rows} equations for {len(idx)} parameters: "
             f"measure at least {int(np.ceil(len(idx) / max(1, n_rows // max(n_poses, 1))))} poses"
         )
-    norms = np.sqrt(np.diag(A))
-    if not norms.all():
-        dead = [names[i] for i, n in zip(idx, norms) if n == 0]
-        raise NotIdentifiable("the data does not move with: " + ", ".join(dead))
-    As = A / np.outer(norms, norms)
-    s = np.sqrt(np.clip(np.linalg.eigvalsh(finite(As, "the normal matrix"))[::-1], 0.0, None))
-    cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
-    if cond > MAX_CONDITION:
-        V = np.linalg.eigh(As)[1]
-        weak = V[:, ::-1].T[s < s[0] / MAX_CONDITION]
-        score = np.max(np.abs(weak), axis=0)
-        worst = [names[idx[i]] for i in np.argsort(-score)[:4] if score[i] > 0.2]
+    sigma = (DEFAULT_NOISE_FLOOR_MM if not noise_mm else float(noise_mm)) / np.sqrt(3.0)
+    angle = np.zeros(layout.n_params, dtype=bool)
+    angle[[op.param for op in layout.ops() if op.kind == "r"]] = True
+    prior = np.where(angle[idx], np.deg2rad(PRIOR_DEG), PRIOR_MM)
+    # information in units of the prior: a direction below 1 is known no better than the prior
+    B = finite(A, "the normal matrix") * np.outer(prior, prior) / sigma**2
+    at = {int(p): i for i, p in enumerate(idx)}
+    kept: list[int] = []
+    held: dict[str, str] = {}
+    for p in (p for p in preference_order(layout) if p in at):
+        i = at[p]
+        info = B[i, i]
+        if kept:
+            L = np.linalg.cholesky(B[np.ix_(kept, kept)])
+            v = np.linalg.solve(L, B[kept, i])
+            info = B[i, i] - v @ v
+        if info >= 1.0:
+            kept.append(i)
+        else:
+            held[names[p]] = _why_held(B, i, info, kept, idx, names, angle[p], sigma * np.sqrt(3.0))
+    keep = np.zeros_like(np.asarray(free, dtype=bool))
+    if not kept:
         raise NotIdentifiable(
-            f"the poses cannot separate {', '.join(worst)} (condition number {cond:.3g}): "
-            "measure more poses, spread over the joint ranges"
+            "the data moves none of the parameters: measure poses that move the SMRs"
         )
-    return cond
+    sub = np.array(sorted(kept), dtype=int)
+    keep[idx[sub]] = True
+    Ak = A[np.ix_(sub, sub)]
+    norms = np.sqrt(np.diag(Ak))
+    As = Ak / np.outer(norms, norms)
+    s = np.sqrt(np.clip(np.linalg.eigvalsh(finite(As, "the normal matrix"))[::-1], 0.0, None))
+    cond = float(s[0] / s[-1]) if len(s) and s[-1] > 0 else float("inf")
+    return DataCheck(keep, held, cond)
+
+
+def _why_held(B, i, info, kept, idx, names, is_angle, floor) -> str:
+    """Why column i of the information matrix B (prior units) is held: unmoved, below the noise,
+    or moved only with the kept parameters (info: what it adds to them)."""
+    unit, scale = ("deg", PRIOR_DEG) if is_angle else ("mm", PRIOR_MM)
+    if B[i, i] <= 0.0:
+        return "no effect on the measured SMRs in this data"
+    alone = scale / np.sqrt(B[i, i])
+    if B[i, i] < 1.0:
+        return (
+            f"moves the measured SMRs below the noise (standard error "
+            f"{alone:.3g} {unit} alone, at {floor:.4f} mm noise)"
+        )
+    d = np.sqrt(np.diag(B))
+    Bn = B[np.ix_(kept, kept)] / np.outer(d[kept], d[kept])
+    coef = np.linalg.lstsq(Bn, B[kept, i] / d[kept] / d[i], rcond=None)[0]
+    top = [names[idx[kept[k]]] for k in np.argsort(-np.abs(coef))[:3] if abs(coef[k]) > 0.05]
+    return (
+        "the data moves it only together with "
+        + (", ".join(top) if top else "the other parameters")
+        + f" (standard error {alone:.3g} {unit} alone, {scale / np.sqrt(max(info, 1e-300)):.3g} {unit}"
+        " with them)"
+    )
 
 
 def gram(J: np.ndarray, free: np.ndarray) -> np.ndarray:

@@ -162,7 +162,7 @@ def judge(
         v.reasons.append(
             f"fit RMS {fit_rms_mm:.4f} mm is below {NOISE_FLOOR_FRACTION:g} x the tracker's "
             f"noise floor {noise_floor_mm:.4f} mm"
-            + (f" ({noise_floor_source})" if noise_floor_source else "")
+            + (f" (from the {noise_floor_source})" if noise_floor_source else "")
             + ": the fit absorbed measurement noise"
         )
     if not condition_number <= MAX_CONDITION:

@@ -41,6 +41,7 @@ class Cell:
     tracker: dict = field(default_factory=lambda: dict(TRACKER_DEFAULTS))
     payload_kg: float | None = None
     devices: Devices | None = None  # None: the simulated cell
+    tracker_spec_given: bool = False  # tracker holds the default spec unless the file gave one
 
     @property
     def simulated(self) -> bool:
@@ -78,6 +79,7 @@ def cell_from_doc(c: CellDoc) -> Cell:
         c.tracker.model_dump(),
         c.payload_kg,
         devices,
+        bool({"mpe_um", "mpe_um_per_m"} & c.tracker.model_fields_set),
     )
 
 

@@ -66,6 +66,11 @@ class ReportDoc(Open):
     model_config = ConfigDict(title="report.json")
     schema_: int = Field(1, alias="schema")
     noise_floor_mm: float
+    noise_floor_source: str | None = Field(
+        None,
+        description="where the floor comes from: SMR-to-SMR distances or repeated readings in "
+        "the data, else the cell's tracker specification (or the default one, said so)",
+    )
     baseline: Fit
     effects: list[Effect] = Field(description="effects judged real, most important first")
     final: Fit

@@ -91,17 +91,19 @@ def test_redundant_parameters_are_named():
 def test_too_few_poses_are_refused():
     _, cal, _ = campaign(IRB2600, 6)
     with pytest.raises(NotIdentifiable, match="poses"):
-        fit(IRB2600, cal.subset(np.arange(4)), "ls-sum")
+        fit(IRB2600, cal.subset(np.arange(2)), "ls-sum")
 
 
-def test_too_similar_poses_are_refused_by_name():
+def test_too_similar_poses_hold_what_they_cannot_separate_by_name():
     cell, cal, _ = campaign(IRB2600, 7)
     q = np.repeat(cal.q[:1], 30, axis=0)
     q[:, 0] += np.linspace(-0.5, 0.5, 30)  # only joint 1 moves
     xyz = cell.measure(q, np.random.default_rng(0))
     targets = np.array([TARGETS[t] for t in NAMES])
-    with pytest.raises(NotIdentifiable, match=r"cannot separate .*(theta|alpha|a\d|d\d|beta)"):
-        calibrate(IRB2600, targets, NAMES, q, xyz, method="ls-sum")
+    c = calibrate(IRB2600, targets, NAMES, q, xyz, method="ls-sum")
+    for p in ("theta2", "a2", "theta3", "d4", "theta5"):
+        assert "only together with" in c.fixed[p]
+    assert np.isfinite(c.condition) and c.condition < 1e4
 
 
 def test_missing_readings_are_tolerated():
