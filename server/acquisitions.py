@@ -106,10 +106,31 @@ class Acquisitions:
         return store.get_campaign(self.db, campaign_id=info.id)
 
     def status_of(self, info: store.CampaignInfo) -> str:
-        """The life-cycle state: the live engine's if this service runs the campaign."""
+        """The life-cycle state: the live engine's if this service runs the campaign (see
+        _state)."""
+        return _state(self._live_state(info.id), info)
+
+    def shown(self, campaign_id: int) -> tuple[store.CampaignInfo, str]:
+        """The stored campaign and its life-cycle state, the engine's read before the store: the
+        counts then hold every pose the state implies (read after, a run ending between the two
+        reads would show done with its last pose missing)."""
+        live = self._live_state(campaign_id)
+        info = self.refresh(store.get_campaign(self.db, campaign_id=campaign_id))
+        return info, _state(live, info)
+
+    def shown_all(self, status: str | None = None) -> list[tuple[store.CampaignInfo, str]]:
+        """Every stored campaign (or those with this stored status) and its state, as shown()."""
         with self._lock:
-            engine = self._engine if self._current == info.id else None
-        return info.status if engine is None else engine.state
+            current = self._current
+        live = None if current is None else self._live_state(current)
+        return [
+            (info, _state(live if info.id == current else None, info))
+            for info in map(self.refresh, store.list_campaigns(self.db, status=status))
+        ]
+
+    def _live_state(self, campaign_id: int) -> str | None:
+        engine = self._engine_of(campaign_id)
+        return None if engine is None else engine.state
 
     def actions(self, info: store.CampaignInfo, status: str | None = None) -> list[str]:
         """The actions legal in the campaign's state that this service can carry out."""
@@ -336,6 +357,14 @@ class Acquisitions:
         self.events.publish(
             {"type": "campaign.run", "campaign_id": cid, "state": state, "detail": run.detail}
         )
+
+
+def _state(live: str | None, info: store.CampaignInfo) -> str:
+    """The engine's state `live` (None: no run here) over the stored one; a final state only once
+    stored, as jobs and reports go by the store: a campaign shown done is one they accept."""
+    if live is None or (live in lifecycle.FINAL and info.status != live):
+        return info.status
+    return live
 
 
 class ControllerUnreachable(RuntimeError):

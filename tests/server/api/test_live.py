@@ -118,11 +118,11 @@ def test_pause_resume_estop_reset_resume_completes(live):
         r = c.post(f"/api/campaigns/{cid}/reset")
         assert r.status_code == 200 and r.json()["status"] == "paused", r.text
         assert c.post(f"/api/campaigns/{cid}/resume").status_code == 202
-        done = wait_for(
-            lambda: c.get(f"/api/campaigns/{cid}").json(),
-            lambda j: j["status"] == "done",
-            timeout=180,
-        )
+        # The stream tells a state once the store has it; GET shows the engine's at once, so a
+        # GET saying done is no sign that the stream has said it yet: wait for the stream's.
+        reader.wait(lambda k, e: k == "campaign.state" and e["state"] == "done", timeout=180)
+        done = c.get(f"/api/campaigns/{cid}").json()
+        assert done["status"] == "done", done
         assert done["poses_done"] == 40 and done["actions"] == []
         after = readings(live, cid)
         assert set(after.values()) == {1}  # none duplicated
