@@ -94,7 +94,7 @@ class Acquisitions:
                     pass
 
     # -- what the API shows ---------------------------------------------------------------------
-    def shown(self, info: store.CampaignInfo) -> store.CampaignInfo:
+    def _as_shown(self, info: store.CampaignInfo) -> store.CampaignInfo:
         """The campaign as the API shows it, read only: in the state the store should hold but
         does not (see _left_in; refresh(), by its next action or the service's start, stores it)."""
         left = self._left_in(info)
@@ -138,10 +138,32 @@ class Acquisitions:
         return lifecycle.next_state(info.status, "fail") if info.status in MOVING else None
 
     def status_of(self, info: store.CampaignInfo) -> str:
-        """The life-cycle state: the live engine's if this service runs the campaign."""
+        """The life-cycle state: the live engine's if this service runs the campaign (see
+        _state)."""
+        return _state(self._live_state(info.id), info)
+
+    def shown(self, campaign_id: int) -> tuple[store.CampaignInfo, str]:
+        """The stored campaign and its life-cycle state, the engine's read before the store: the
+        counts then hold every pose the state implies (read after, a run ending between the two
+        reads would show done with its last pose missing)."""
+        live = self._live_state(campaign_id)
+        info = self._as_shown(store.get_campaign(self.db, campaign_id=campaign_id))
+        return info, _state(live, info)
+
+    def shown_all(self, status: str | None = None) -> list[tuple[store.CampaignInfo, str]]:
+        """Every stored campaign (or those shown with this status) and its state, as shown()."""
         with self._lock:
-            engine = self._engine if self._current == info.id else None
-        return info.status if engine is None else engine.state
+            current = self._current
+        live = None if current is None else self._live_state(current)
+        every = (
+            (info, _state(live if info.id == current else None, info))
+            for info in map(self._as_shown, store.list_campaigns(self.db))
+        )
+        return [(info, shown) for info, shown in every if status is None or shown == status]
+
+    def _live_state(self, campaign_id: int) -> str | None:
+        engine = self._engine_of(campaign_id)
+        return None if engine is None else engine.state
 
     def actions(self, info: store.CampaignInfo, status: str | None = None) -> list[str]:
         """The actions legal in the campaign's state that this service can carry out."""
@@ -374,12 +396,20 @@ class Acquisitions:
             self._runs[cid] = run = replace(self._runs[cid], active=False, ended=ended, **change)
             self._current, self._engine = None, None
         try:
-            state = self.shown(store.get_campaign(self.db, campaign_id=cid)).status
+            state = self._as_shown(store.get_campaign(self.db, campaign_id=cid)).status
         except store.StoreError:
             state = None
         self.events.publish(
             {"type": "campaign.run", "campaign_id": cid, "state": state, "detail": run.detail}
         )
+
+
+def _state(live: str | None, info: store.CampaignInfo) -> str:
+    """The engine's state `live` (None: no run here) over the stored one; a final state only once
+    stored, as jobs and reports go by the store: a campaign shown done is one they accept."""
+    if live is None or (live in lifecycle.FINAL and info.status != live):
+        return info.status
+    return live
 
 
 class ControllerUnreachable(RuntimeError):

@@ -53,11 +53,13 @@ CONFLICT: Responses = {
 }
 
 
-def public_campaign(info: store.CampaignInfo, acquisitions, cls=CampaignPublic):
-    """The campaign as the API shows it: its life-cycle state and the actions it allows."""
-    info = acquisitions.shown(info)
+def public_campaign(
+    info: store.CampaignInfo, acquisitions, cls=CampaignPublic, status: str | None = None
+):
+    """The campaign as the API shows it: its life-cycle state (`status` if read already, see
+    Acquisitions.shown) and the actions it allows."""
     run = acquisitions.get(info.id)
-    status = acquisitions.status_of(info)
+    status = status or acquisitions.status_of(info)
     extra = {"settings": info.settings} if cls is CampaignDetail else {}
     return cls(
         id=info.id,
@@ -131,21 +133,21 @@ def create_campaign(
 
 @router.get("")
 def list_campaigns(
-    db: DbDep, acquisitions: AcquisitionsDep, status: CampaignStatus | None = None
+    acquisitions: AcquisitionsDep, status: CampaignStatus | None = None
 ) -> list[CampaignPublic]:
     """Every campaign, oldest first (or those with this status, as shown)."""
-    shown = [public_campaign(c, acquisitions) for c in store.list_campaigns(db)]
-    return [c for c in shown if status is None or c.status == status]
+    return [
+        public_campaign(info, acquisitions, status=shown)
+        for info, shown in acquisitions.shown_all(status)
+    ]
 
 
 @router.get("/{campaign_id}")
-def get_campaign(
-    campaign_id: CampaignId, db: DbDep, acquisitions: AcquisitionsDep
-) -> CampaignDetail:
+def get_campaign(campaign_id: CampaignId, acquisitions: AcquisitionsDep) -> CampaignDetail:
     """One campaign with its state, the actions it allows, and its poses done of total (read
     only: a campaign left moving by a process that is gone shows failed)."""
-    info = store.get_campaign(db, campaign_id=campaign_id)
-    return public_campaign(info, acquisitions, CampaignDetail)
+    info, status = acquisitions.shown(campaign_id)
+    return public_campaign(info, acquisitions, CampaignDetail, status)
 
 
 VERIFICATION_PROBLEMS: Responses = {

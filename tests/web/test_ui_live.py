@@ -12,6 +12,7 @@ def test_the_page_polls_while_the_stream_is_down_and_reconnects(served, page):
     requests: list[str] = []
     page.on("request", lambda r: requests.append(r.url))
     page.route("**/api/events", lambda route: route.abort())  # the stream cannot be had
+    page.clock.install()  # the page's timers on a clock that runs, and that the test can advance
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
@@ -40,6 +41,7 @@ def test_the_page_polls_while_the_stream_is_down_and_reconnects(served, page):
 
     # The stream answers again: the page takes it up (within its backoff) and stops polling.
     page.unroute("**/api/events")
+    page.clock.fast_forward("00:30")  # the longest backoff (live.js RETRY_MAX_MS), not waited
     page.wait_for_function("document.getElementById('live').textContent === 'live'", timeout=90_000)
     del requests[:]
     served.client.post("/api/jobs", json={"campaign_id": cid, "method": "ls-sum"})

@@ -21,6 +21,12 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+# No connection kept between requests: uvicorn closes one idle for 5 s, and a request sent as it
+# does (a loaded machine waits that long between two) is cut off with "Server disconnected
+# without sending a response"; the test clients ask on a fresh connection instead.
+ONE_CONNECTION_A_REQUEST = httpx.Limits(max_keepalive_connections=0)
+
+
 @dataclass
 class Live:
     """A running server: its settings, token and clients with and without the token."""
@@ -71,9 +77,12 @@ def serve(settings: Settings):
     url = f"http://{settings.host}:{settings.port}"
     with (
         httpx.Client(
-            base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=30
+            base_url=url,
+            headers={"Authorization": f"Bearer {token}"},
+            timeout=30,
+            limits=ONE_CONNECTION_A_REQUEST,
         ) as client,
-        httpx.Client(base_url=url, timeout=30) as anonymous,
+        httpx.Client(base_url=url, timeout=30, limits=ONE_CONNECTION_A_REQUEST) as anonymous,
     ):
         yield Live(settings, token, url, client, anonymous)
     server.should_exit = True

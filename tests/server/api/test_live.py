@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import socket
 import threading
 import time
 
@@ -27,6 +29,7 @@ class EventReader:
             timeout=httpx.Timeout(30, read=None),
             headers={"Authorization": f"Bearer {token}"},
         )
+        self._socket: socket.socket | None = None
         self._thread = threading.Thread(target=self._read, daemon=True)
         self._thread.start()
         assert self.connected.wait(10), "no event stream"
@@ -35,6 +38,7 @@ class EventReader:
         try:
             with self._client.stream("GET", "/api/events") as r:
                 assert r.headers["content-type"].startswith("text/event-stream")
+                self._socket = r.extensions["network_stream"].get_extra_info("socket")
                 self.connected.set()
                 kind = None
                 for line in r.iter_lines():
@@ -55,6 +59,12 @@ class EventReader:
         raise AssertionError(f"no such event; seen {self.events[-10:]}")
 
     def close(self):
+        # Hang up at once (closing the client would not wake the read): an open stream holds
+        # the server's stop for its whole grace period.
+        if self._socket is not None:
+            with contextlib.suppress(OSError):
+                self._socket.shutdown(socket.SHUT_RDWR)
+        self._thread.join(10)
         self._client.close()
 
 
@@ -118,11 +128,11 @@ def test_pause_resume_estop_reset_resume_completes(live):
         r = c.post(f"/api/campaigns/{cid}/reset")
         assert r.status_code == 200 and r.json()["status"] == "paused", r.text
         assert c.post(f"/api/campaigns/{cid}/resume").status_code == 202
-        done = wait_for(
-            lambda: c.get(f"/api/campaigns/{cid}").json(),
-            lambda j: j["status"] == "done",
-            timeout=180,
-        )
+        # The stream tells a state once the store has it; GET shows the engine's at once, so a
+        # GET saying done is no sign that the stream has said it yet: wait for the stream's.
+        reader.wait(lambda k, e: k == "campaign.state" and e["state"] == "done", timeout=180)
+        done = c.get(f"/api/campaigns/{cid}").json()
+        assert done["status"] == "done", done
         assert done["poses_done"] == 40 and done["actions"] == []
         after = readings(live, cid)
         assert set(after.values()) == {1}  # none duplicated

@@ -150,6 +150,13 @@ def test_sigterm_stops_the_arm_before_the_listener_closes(tmp_path, devices):
     assert any("SIGTERM: campaign" in line and "e-stopped" in line for line in out), out
 
 
+def ctrl_c_as_at_a_terminal():
+    """In the child before it starts: SIGINT at its default, as a terminal's foreground job has
+    it. A shell's background job (`nohup`, `&`: how a loaded CI box may run the suite) inherits it
+    ignored, and Python then never raises KeyboardInterrupt: the run went on, the test hung."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_of_acquire_sends_stop_then_resumes_with_reset(tmp_path, devices):
     wire = Wire(devices.controller)
     cell = tmp_path / "cell.json"
@@ -173,7 +180,12 @@ def test_ctrl_c_of_acquire_sends_stop_then_resumes_with_reset(tmp_path, devices)
         "2",
     ]
     proc = subprocess.Popen(
-        args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        args,
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=ctrl_c_as_at_a_terminal,
     )
     try:
         wait_for(lambda: len(devices.controller.moves), lambda n: n >= 2, timeout=60, interval=0.01)
