@@ -40,7 +40,7 @@ SPEC_REPORT = {
 }
 
 
-JOINT = {"a": 0, "d": 0, "theta": 0, "alpha": 0}
+JOINT = {"a": 0, "d": 400, "theta": 0, "alpha": 0}  # a link an arm can have (reach >= 100 mm)
 IDENTITY = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
 DEVICES = {
     "tracker": {"host": "127.0.0.1", "port": 5000},
