@@ -362,13 +362,11 @@ def test_read_only_disk_stops_the_arm_reads_work_and_resume_after_repair(tmp_pat
         headers = {"Authorization": f"Bearer {token}"}
         url = f"http://127.0.0.1:{port}"
         with httpx.Client(base_url=url, headers=headers, timeout=30) as c:
-            # What the store committed is on the disk first: with synchronous=NORMAL a commit
-            # reaches the disk at a checkpoint, so an OS-level failure (this one, a power cut)
-            # may lose the last commits; that is db.py's documented trade-off, not tested here.
+            # No os.sync() first: every commit the store acknowledged must already be on the
+            # disk (synchronous=FULL) when the kernel fails it, as at a power cut.
             failed_at: list[float] = []
 
             def fail_disk():
-                os.sync()
                 trigger.write_text("robocal test: disk fails\n")
                 failed_at.append(time.monotonic())
 
