@@ -132,11 +132,31 @@ def make_plan(model: ModelFile, opts: VerifyOptions) -> tuple[Plan, dict]:
     error = None
     for q_ref in reference_poses(model, opts.seed):
         plan = plan_about(model, opts, q_ref)
+        if error is None:
+            check_within_reach(model, plan)  # else every reference pose would be tried in vain
         try:
             return plan, {w: joints_for(model, plan, w) for w in ("nominal", "compensated")}
         except ValueError as e:
             error = e
     raise ValueError(f"no reference pose reaches every test point: {error}")
+
+
+# Beyond the links' bound: extensions (compliance, a gear's error) move the SMR well under this.
+REACH_MARGIN_MM = 10.0
+
+
+def check_within_reach(model: ModelFile, plan: Plan) -> None:
+    """ValueError at once for a test point farther from the arm's base than any pose can put the
+    verification SMR (its links plus its offset from the flange), naming the point."""
+    offset = float(np.linalg.norm(next(iter(model.targets.values()))))
+    robots = [model.robot] + ([model.nominal] if model.nominal is not None else [])
+    reach = max(r.reach_mm for r in robots) + offset + REACH_MARGIN_MM
+    far = np.linalg.norm(plan.points - np.asarray(model.base)[:3, 3], axis=1)
+    for j in np.flatnonzero(far > reach):
+        raise ValueError(
+            f"test point {plan.names[j]} is unreachable: {far[j]:.0f} mm from the arm's base, "
+            f"beyond its reach of {reach:.0f} mm (links plus the SMR's offset)"
+        )
 
 
 def plan_about(model: ModelFile, opts: VerifyOptions, q_ref) -> Plan:

@@ -43,6 +43,12 @@ class Robot:
         return len(self.joints)
 
     @property
+    def reach_mm(self) -> float:
+        """How far the flange can be from the base's origin at most: each link translates by a
+        and d along orthogonal axes, whatever the joints, in either convention."""
+        return float(sum(np.hypot(j.a, j.d) for j in self.joints))
+
+    @property
     def lower(self) -> np.ndarray:
         return np.array([j.limits[0] for j in self.joints])
 

@@ -103,3 +103,20 @@ def test_a_users_points_are_verified_like_the_cube(verified, tmp_path):
     np.testing.assert_allclose(r["after"]["points"][1]["commanded_mm"], cube["P4"], atol=1e-3)
     assert [x["pair"] for x in r["after"]["distances"]] == [["centre", "low"], ["centre", "high"]]
     assert r["after"]["AP_max_mm"] <= 1.5 * holdout < r["before"]["AP_max_mm"] / 10
+
+
+def test_a_point_beyond_the_arms_reach_is_refused_before_any_solve(verified, monkeypatch):
+    from robocal.server import verification
+    from robocal.server.formats.model_json import read_model
+
+    _, _, d = verified
+    model = read_model(d / "model.json")
+    solved = []
+    real = verification.compensate
+    monkeypatch.setattr(verification, "compensate", lambda *a: solved.append(1) or real(*a))
+    base = np.asarray(model.base)[:3, 3]
+    far = base + [model.robot.reach_mm + 500.0, 0.0, 0.0]
+    opts = VerifyOptions(points=(["near", "far"], [base + [900.0, 0.0, 600.0], far]))
+    with pytest.raises(ValueError, match=r"test point far is unreachable: \d+ mm from the arm's"):
+        verification.make_plan(model, opts)
+    assert solved == []  # refused by the bound (it took 60 solves, 3 s of CPU, before)
