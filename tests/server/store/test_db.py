@@ -86,7 +86,7 @@ def test_pragmas_on_every_connection(db):
             cur = conn.cursor()
             assert cur.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
             assert cur.execute("PRAGMA foreign_keys").fetchone()[0] == 1
-            assert cur.execute("PRAGMA synchronous").fetchone()[0] == 1  # NORMAL
+            assert cur.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL
             assert cur.execute("PRAGMA busy_timeout").fetchone()[0] > 0
     finally:
         a.close()
