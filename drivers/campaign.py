@@ -283,6 +283,12 @@ class CampaignEngine:
                 if not self._pending:  # else one was queued as we let go: tell it too
                     return
 
+    def _heard(self):
+        """The sink, once on_state has heard every transition so far: a listener that stores
+        the state (the campaign's "running") has it before the first reading taken in it."""
+        self._tell(wait_s=TELL_WAIT_S)
+        return self.sink
+
     def _stop_arm(self) -> bool:
         try:
             return bool(self.controller.emergency_stop())
@@ -564,23 +570,27 @@ class CampaignEngine:
         except Exception:
             # the reading is good: store it before the fault ends the run, so a resumed run
             # neither loses it nor measures it twice
-            self.sink.reading(pose_index=i, target=name, measurement=m, time_s=time_s, weather=None)
+            self._heard().reading(
+                pose_index=i, target=name, measurement=m, time_s=time_s, weather=None
+            )
             self.stats.readings += 1
             raise
-        self.sink.reading(pose_index=i, target=name, measurement=m, time_s=time_s, weather=weather)
+        self._heard().reading(
+            pose_index=i, target=name, measurement=m, time_s=time_s, weather=weather
+        )
         self.stats.readings += 1
 
     def _save(self, work: _Pose, names):
         """The pose's outcome to the sink; its joints (rad) and readings for the predictor."""
         i = work.index
         if work.skipped:
-            self.sink.pose_done(pose_index=i, state="skipped", q_deg=work.q_deg)
+            self._heard().pose_done(pose_index=i, state="skipped", q_deg=work.q_deg)
             self.stats.skipped += 1
             return np.deg2rad(work.q_deg), np.full((len(names), 3), np.nan)
         assert work.q_rad is not None  # _move reads the joints of every pose it reaches
         row = np.array([work.measured.get(n, np.full(3, np.nan)) for n in names])
         state = "measured" if len(work.measured) == len(names) else "missing-target"
-        self.sink.pose_done(pose_index=i, state=state, q_deg=np.rad2deg(work.q_rad))
+        self._heard().pose_done(pose_index=i, state=state, q_deg=np.rad2deg(work.q_rad))
         self.stats.poses += 1
         return work.q_rad, row
 

@@ -13,7 +13,7 @@ import datetime as dt
 import json
 import threading
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass
 
@@ -61,12 +61,13 @@ class AcquireOptions:
 
 
 class StoreSink:
-    """Hands the engine's readings to the store, each committed before the next measurement;
-    after each, DatabaseGone if the file was deleted or replaced meanwhile (the engine then
-    halts the arm and fails the campaign)."""
+    """Hands the engine's readings to the store, each committed before the next measurement
+    and after every state reported before it (settled() waits for those); after each,
+    DatabaseGone if the file was deleted or replaced meanwhile (the engine then halts the arm
+    and fails the campaign)."""
 
-    def __init__(self, db, campaign_id):
-        self.db, self.campaign_id = db, campaign_id
+    def __init__(self, db, campaign_id, settled=lambda: None):
+        self.db, self.campaign_id, self.settled = db, campaign_id, settled
 
     def reading(self, *, pose_index, target, measurement, time_s, weather):
         w = (
@@ -98,6 +99,7 @@ class StoreSink:
         )
 
     def _stored(self, write, **kw) -> None:
+        self.settled()  # the store has "running" before the run's first reading
         try:
             write(self.db, campaign_id=self.campaign_id, **kw)
         except Exception:
@@ -394,11 +396,11 @@ def acquire(
         known = (existing.settings if existing is not None else settings) or {}
         predictor = _predictor(cell, names, base, known.get(PREDICTOR))
         run = Settings(pause_s=opts.pause_s, settle=opts.settle, samples=opts.samples)
-        sink: StoreSink | _Progress | _Events = StoreSink(db, cid)
-        if progress:
-            sink = _Progress(sink, progress, len(poses_deg), start)
         writer = StateWriter(db, cid, on_event, log)
         stack.callback(writer.close)  # every state reported is stored before acquire returns
+        sink: StoreSink | _Progress | _Events = StoreSink(db, cid, writer.settled)
+        if progress:
+            sink = _Progress(sink, progress, len(poses_deg), start)
         engine = CampaignEngine(
             controller, tracker, clock, predictor, sink, run, log, state=state, on_state=writer
         )
@@ -519,10 +521,11 @@ class StateWriter:
         self.db, self.campaign_id, self.on_event = db, campaign_id, on_event
         self.log = log or (lambda msg: None)
         self._pool = ThreadPoolExecutor(1, thread_name_prefix=f"robocal-state-{campaign_id}")
+        self._last: Future | None = None
 
     def __call__(self, old: str, new: str) -> None:
         try:
-            self._pool.submit(self._write, old, new)
+            self._last = self._pool.submit(self._write, old, new)
         except RuntimeError:  # closed: the run is over, the store already has its end
             self.log(f"campaign {self.campaign_id}: late state {old} -> {new} not stored")
 
@@ -540,6 +543,12 @@ class StateWriter:
                     "was": old,
                 }
             )
+
+    def settled(self) -> None:
+        """Wait until every state reported so far is stored (or its failure logged)."""
+        last = self._last
+        if last is not None:
+            wait([last])  # one worker: the last submitted is the last to run
 
     def close(self) -> None:
         """Wait until every state reported so far is stored."""

@@ -182,3 +182,23 @@ def test_controller_fault_stops_keeps_readings_and_resumes(store_url, monkeypatc
     assert summary["resumed_at"] == 5 and summary["state"] == "done"
     ok, missing, dup, outcomes = counts(store_url)
     assert (ok + missing, dup, outcomes) == (36, 0, 12)
+
+
+def test_the_first_reading_waits_for_the_stored_running_state(tmp_path, monkeypatch):
+    """States are stored on their own thread; a slow "running" write must still land before
+    the run's first reading, which the store refuses for a campaign not yet running."""
+    from robocal.server import store
+    from robocal.server.acquire import AcquireOptions, acquire
+    from robocal.server.formats import default_cell
+
+    set_status = store.set_status
+
+    def slow_set_status(db, *, campaign_id, status):
+        if status == "running":
+            time.sleep(0.5)  # a loaded machine: the engine is at its first reading by now
+        return set_status(db, campaign_id=campaign_id, status=status)
+
+    monkeypatch.setattr(store, "set_status", slow_set_status)
+    out = acquire(tmp_path / "r.db", default_cell(), AcquireOptions(poses=3, seed=4))
+    assert (out["state"], out["measured_poses"], out["readings"]) == ("done", 3, 9)
+    assert counts(tmp_path / "r.db") == (9, 0, 0, 3)
