@@ -65,13 +65,12 @@ class Acquisitions:
 
     def __init__(
         self,
-        database_url: str,
         db: store.Database,
         events: Events | None = None,
         *,
         owner: str | None = None,
     ):
-        self.database_url, self.db = database_url, db
+        self.db = db
         self.events = events or Events()
         self.owner = owner or lease.process_owner()
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="robocal-acquire")

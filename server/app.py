@@ -58,7 +58,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             call_timeout_s=settings.call_timeout_s,
             call_workers=settings.call_workers,
         )
-        app.state.acquisitions = Acquisitions(settings.database, db, events)
+        app.state.acquisitions = Acquisitions(db, events)
         try:
             yield
         finally:

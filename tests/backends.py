@@ -9,9 +9,11 @@ where they fail: CI must run them.
 from __future__ import annotations
 
 import os
+import sqlite3
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 import pytest
 from sqlalchemy import create_engine, text
@@ -70,3 +72,12 @@ def execute(database: str, sql: str, **params) -> list[tuple]:
             return [tuple(row) for row in result] if result.returns_rows else []
     finally:
         engine.dispose()
+
+
+def replace_sqlite_file(path: Path) -> None:
+    """Swap another SQLite database in for the file at `path`, as a restore or a copy would."""
+    other = path.with_name("other.db")
+    with sqlite3.connect(other) as o:
+        o.execute("CREATE TABLE note (text TEXT)")
+    o.close()
+    os.replace(other, path)

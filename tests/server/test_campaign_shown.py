@@ -89,7 +89,7 @@ def running(tmp_path, monkeypatch):
     db = store.open_database(url)
     opts = AcquireOptions(poses=POSES, seed=1, name="shown", pause_s=0.0, samples=5)
     cid = plan_campaign(db, cell=default_cell(), opts=opts)
-    acq = Acquisitions(url, db)
+    acq = Acquisitions(db)
     run = Run(monkeypatch, db)
     try:
         acq.request(campaign_id=cid, action="start")

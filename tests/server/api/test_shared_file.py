@@ -5,9 +5,7 @@ running campaign stops it within a pose, the arm halted, the reason in the run's
 
 from __future__ import annotations
 
-import os
 import signal
-import sqlite3
 import subprocess
 import sys
 import time
@@ -17,6 +15,7 @@ import httpx
 import pytest
 from robocal.drivers.lifecycle import MOVING
 
+from tests.backends import replace_sqlite_file
 from tests.server.api.conftest import free_port, wait_for
 from tests.server.api.test_real_devices import cell_json, devices, finished  # noqa: F401 - a fixture
 from tests.server.api.test_sigterm import Wire, start_service
@@ -187,14 +186,6 @@ def test_a_reader_closing_the_file_leaves_the_service_its_log(tmp_path):
         stop(proc)
 
 
-def replace_with_another_database(db: Path) -> None:
-    other = db.with_name("other.db")
-    with sqlite3.connect(other) as o:
-        o.execute("CREATE TABLE note (text TEXT)")
-    o.close()
-    os.replace(other, db)
-
-
 @pytest.mark.parametrize("fault", ["deleted", "replaced"])
 def test_a_database_file_gone_mid_campaign_stops_it_within_a_pose(tmp_path, devices, fault):
     """The file deleted (as `rm s.db*` does) or replaced under a running campaign on a real
@@ -223,7 +214,7 @@ def test_a_database_file_gone_mid_campaign_stops_it_within_a_pose(tmp_path, devi
                 for suffix in ("", "-wal", "-shm"):
                     Path(f"{db}{suffix}").unlink()
             else:
-                replace_with_another_database(db)
+                replace_sqlite_file(db)
             gone_at = time.monotonic()
             # polled with the service's connections to a file that is gone: a new one it opens
             # finds an empty file there, and that read may fail; the next is read again

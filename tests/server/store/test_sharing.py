@@ -20,6 +20,8 @@ from robocal.server.store import (
     set_status,
 )
 
+from tests.backends import replace_sqlite_file
+
 from .conftest import POSES_DEG
 
 
@@ -79,19 +81,11 @@ def test_the_keeper_holds_the_lock_with_the_pool_empty(tmp_path):
     assert not wal(path).exists()
 
 
-def replace(path: Path) -> None:
-    other = path.with_name("other.db")
-    with sqlite3.connect(other) as o:
-        o.execute("CREATE TABLE note (text TEXT)")
-    o.close()
-    os.replace(other, path)
-
-
 @pytest.mark.parametrize(
     ("fault", "told"),
     [
         (lambda p: p.unlink(), "the database file was deleted while"),
-        (replace, "the database file was deleted or replaced by another file"),
+        (replace_sqlite_file, "the database file was deleted or replaced by another file"),
         (lambda p: wal(p).unlink(), "its write-ahead log was deleted"),
     ],
     ids=["file deleted", "file replaced", "log deleted"],
@@ -138,7 +132,7 @@ def test_a_run_storing_into_a_replaced_file_is_told_why(tmp_path, cell_json, poo
         sink = StoreSink(db, cid)
         m = SimpleNamespace(mean_mm=[1.0, 2.0, 3.0], std_mm=[0.01] * 3, samples=20)
         sink.reading(pose_index=0, target="A", measurement=m, time_s=0.0, weather=None)
-        replace(path)
+        replace_sqlite_file(path)
         if not pooled:
             db.engine.dispose()  # the next write opens the file now at the path
         with pytest.raises(DatabaseGone, match="was deleted or replaced"):
