@@ -18,6 +18,7 @@ import numpy as np
 from . import vocabulary
 from .effects import Extension, Inputs, point_shift, prepare
 from .extended import extension_rows, fit_extended, predict_extended
+from .extrapolation import FoldCheck, RegionFold, joint_ranges, region_folds
 from .finite import finite, require_inputs
 from .identify import Problem, register
 from .kinematics import Layout, predict_rows
@@ -247,6 +248,54 @@ class Diagnoser:
         x, ee, _ = fit_extended(self.prob, self.inputs, self.x0, self.free, exts, poses)
         return x, ee
 
+    def region_rms(self, exts, fold: RegionFold) -> float:
+        """Held-out RMS (mm) on the fold's test poses of the model fitted on the others; NaN
+        when the training side cannot fit it."""
+        train = np.setdiff1d(np.arange(self.prob.q.shape[0]), fold.test)
+        try:
+            x, ee = self.fit_plain(exts, train)
+        except (np.linalg.LinAlgError, ValueError):
+            return float("nan")
+        r = self.residuals(x, ee, fold.test)
+        return float(np.sqrt(np.nanmean(np.sum(r * r, axis=-1))))
+
+
+@dataclass
+class Extrapolation:
+    """The region folds' verdict: the checks of the model kept, and the effects refused."""
+
+    folds: list[RegionFold]
+    checks: list[FoldCheck]
+    refused: list[tuple[Extension, list[FoldCheck]]]
+
+
+def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapolation]:
+    """The accepted steps that hold off the training region: while the extended model tests worse
+    than geometry on any region fold (solver/extrapolation.py), its last effect is refused."""
+    q = diag.prob.q
+    per_pose = max(1, int(diag.prob.mask.any(axis=0).sum()))  # SMRs a pose
+    folds = region_folds(diag.prob.layout, diag.x0, q, int(np.ceil(diag.free.sum() / per_pose)) + 1)
+    if not folds:
+        return steps, Extrapolation(folds, [], [])
+    geo = [diag.region_rms([], f) for f in folds]
+    kept, refused = list(steps), []
+    while kept:
+        exts = [s[0] for s in kept]
+        checks = [FoldCheck(f, g, diag.region_rms(exts, f)) for f, g in zip(folds, geo)]
+        bad = [c for c in checks if c.worse]
+        if not bad:
+            return kept, Extrapolation(folds, checks, refused)
+        last = kept.pop()
+        refused.append((last[0], bad))
+        if "replaces" in last[3]:  # a richer variant refused: the simpler one it replaced stays
+            kept.append(last[3]["replaces"])
+        if log:
+            log(
+                f"  {last[0].label()} refused: worse than geometry off the training region "
+                f"({', '.join(c.fold.label() for c in bad)})"
+            )
+    return kept, Extrapolation(folds, [FoldCheck(f, g, g) for f, g in zip(folds, geo)], refused)
+
 
 def select(diag: Diagnoser, cands, log=None):
     """Forward selection; returns the accepted steps and the baseline's and final model's CV.
@@ -294,8 +343,14 @@ def select(diag: Diagnoser, cands, log=None):
         ok = [i for i in range(len(trial)) if sc.z[i] > thr and sc.gain[i] > MIN_GAIN * sc.sse]
         if not ok:
             break
-        best = max(ok, key=lambda i: sc.gain[i])
-        cv = diag.cross_validate(current + [trial[best]])
+        best = simplest_variant(trial, ok, max(ok, key=lambda i: sc.gain[i]), sc)
+        # a richer variant of an accepted effect replaces it (a compliance's masses fitted
+        # where the nominal mass model's one stiffness left a clear part of its signature)
+        replaced = next((k for k, st in enumerate(steps) if same_effect(st[0], trial[best])), None)
+        model = [e for e in current if not same_effect(e, trial[best])] + [trial[best]]
+        if replaced is not None:
+            diag.warm = {}  # the warm starts are laid out by the model's former order
+        cv = diag.cross_validate(model)
         if cv.mse >= cv_now.mse:
             break  # the linear picture promised a gain the fitted model does not keep
         alternatives = [
@@ -320,19 +375,41 @@ def select(diag: Diagnoser, cands, log=None):
             "holdout_gain_interval_mm": rmse_gain_interval(cv_now.sq, cv.sq, cv.n),
         }
         c = trial[best]
-        steps.append((cv.exts[-1], cv_now, cv, decision))
-        current = current + [c if c.kind.located_in_time else cv.exts[-1]]
-        # the same joint's other candidates of the same kind stay: two effects may share a joint
-        remaining = [
-            r
-            for r in remaining
-            if not (r.name == c.name and r.joint == c.joint and r.harmonic == c.harmonic)
-        ]
+        before = cv_now
+        if replaced is not None:
+            decision["replaces"] = steps.pop(replaced)
+            before = decision["replaces"][1]
+            decision["holdout_gain_interval_mm"] = rmse_gain_interval(before.sq, cv.sq, cv.n)
+        steps.append((cv.exts[-1], before, cv, decision))
+        current = model[:-1] + [c if c.kind.located_in_time else cv.exts[-1]]
+        # the same joint's other candidates of the same kind stay: two effects may share a joint;
+        # of this one, only its richer variants stay
+        remaining = [r for r in remaining if not same_effect(r, c) or r.n_params > c.n_params]
         if c.kind.once:
             remaining = [r for r in remaining if r.name != c.name]
         cv_now = cv
         diag.warm = cv.fits
     return steps, base, cv_now
+
+
+def same_effect(a: Extension, b: Extension) -> bool:
+    """Two variants of one effect: the same kind on the same joint and harmonic."""
+    return a.name == b.name and a.joint == b.joint and a.harmonic == b.harmonic
+
+
+def simplest_variant(trial, ok, best: int, sc) -> int:
+    """The variant of the best candidate's effect (same kind and joint) with the fewest
+    parameters that the data cannot tell from it: a compliance on the nominal mass model rather
+    than the masses fitted, unless the richer model clearly pays off on held-out poses."""
+    b = trial[best]
+    tied = [
+        i
+        for i in ok
+        if same_effect(trial[i], b)
+        and trial[i].n_params < b.n_params
+        and paired_t(sc.pose_sse - sc.pose_gain[i], sc.pose_sse - sc.pose_gain[best]) < T_SIMPLER
+    ]
+    return min(tied, key=lambda i: (trial[i].n_params, -sc.gain[i])) if tied else best
 
 
 def diagnose(
@@ -389,6 +466,12 @@ def diagnose(
     t1 = time.perf_counter()
     steps, base, final = select(diag, cands, log)
     clock["selection"] = time.perf_counter() - t1
+    t_region = time.perf_counter()
+    kept, region = extrapolating(diag, steps, log)
+    if region.refused:
+        diag.warm = {}
+        steps, final = kept, (diag.cross_validate([st[0] for st in kept]) if kept else base)
+    clock["extrapolation"] = time.perf_counter() - t_region
     t2 = time.perf_counter()
     exts = [s[0] for s in steps]
     x, ee = diag.fit(exts)
@@ -411,6 +494,7 @@ def diagnose(
         report["outliers"] = screening.report(pose_ids, target_names)
     head = {k: report.pop(k) for k in ("schema", "noise_floor_mm")}
     report = {**head, "noise_floor_source": noise.source, **report}
+    report["extrapolation"] = extrapolation_report(region, prob.q)
     report["seconds"] = {k: round(v, 3) for k, v in clock.items()}
     report["cross_validation"] = {
         "folds": len(diag.folds),
@@ -418,3 +502,40 @@ def diagnose(
         "candidates": len(cands),
     }
     return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors)
+
+
+def extrapolation_report(region: Extrapolation, q) -> dict:
+    """The report's `extrapolation` block: how far from its training poses the model was tested,
+    the effects refused there, and the joint-space box the data covers (where it may be trusted)."""
+    from .extrapolation import MAX_RATIO
+
+    def num(v):
+        return None if not np.isfinite(v) else float(v)
+
+    return {
+        "method": "train on one side of a gravity-loaded joint's median, test on the other",
+        "max_ratio_to_geometric": MAX_RATIO,
+        "folds": [
+            {
+                "test": c.fold.label(),
+                "test_poses": len(c.fold.test),
+                "beyond_training_deg": float(np.degrees(c.fold.beyond_rad)),
+                "geometric_rmse_mm": num(c.geometric_rms),
+                "final_rmse_mm": num(c.extended_rms),
+            }
+            for c in region.checks
+        ],
+        "refused": [
+            {
+                "name": e.name,
+                "label": e.label(),
+                **({} if e.joint is None else {"joint": e.joint + 1}),
+                "worse_on": [
+                    f"{c.fold.label()}: {c.extended_rms:.4f} mm vs geometric {c.geometric_rms:.4f}"
+                    for c in bad
+                ],
+            }
+            for e, bad in region.refused
+        ],
+        "joint_range_deg": np.degrees(joint_ranges(q)).round(3).tolist(),
+    }

@@ -56,6 +56,9 @@ class Extension:
     # compliance: raw gravity-basis columns kept and the gravity direction in the base frame
     keep: np.ndarray | None = None
     gravity: np.ndarray | None = None
+    # compliance under the nominal mass model: fixed weights of the raw gravity basis (one
+    # stiffness fitted), instead of the kept columns' masses fitted one by one
+    masses: np.ndarray | None = None
 
     @property
     def kind(self):
@@ -93,6 +96,31 @@ def gravity_basis(layout: Layout, x, q, joint: int, gravity: np.ndarray) -> np.n
         for a in range(3):
             cols.append(np.einsum("mi,mi->m", zj, np.cross(Ri[:, :, a], gravity)))
     return np.stack(cols, axis=1) / 1000.0  # per metre of lever: coefficients in N m-ish units
+
+
+# The wrist, its motors and the tool, lumped at the last joint: this share of the links' mass.
+WRIST_SHARE = 0.25
+
+
+def nominal_masses(layout: Layout, x, joint: int) -> np.ndarray:
+    """Weights of gravity_basis(joint)'s columns for a nominal mass model: each link a uniform
+    rod from its joint to the next (mass per metre of length), the wrist lumped at the last
+    joint. The arm's real masses are unknown; their shape, not their scale, sets the torque a
+    single stiffness multiplies (its scale is the fitted coefficient)."""
+    lay = Layout(layout.robot, np.eye(4), layout.target_names)
+    frames = joint_frames(lay, x, np.zeros((1, layout.robot.n_joints)))
+    origins = [o[0] for _, o in frames]
+    rods = []
+    for i, (R, o) in enumerate(frames):
+        half = (origins[i + 1] - o[0]) / 2.0 if i + 1 < len(frames) else np.zeros(3)
+        rods.append((np.linalg.norm(2.0 * half) / 1000.0, R[0].T @ half))  # kg per m, mm
+    wrist = WRIST_SHARE * sum(m for m, _ in rods)
+    w = []
+    for i, (m, r) in enumerate(rods[joint:], start=joint):
+        if i == len(rods) - 1:
+            m, r = m + wrist, r * m / (m + wrist) if m + wrist > 0 else r
+        w.extend([m, *(m * r)])
+    return np.asarray(w)
 
 
 def gravity_in_base(layout: Layout, x) -> np.ndarray:

@@ -12,7 +12,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .effects import Extension, Inputs, gravity_basis, gravity_in_base, select_independent
+from .effects import (
+    Extension,
+    Inputs,
+    gravity_basis,
+    gravity_in_base,
+    nominal_masses,
+    select_independent,
+)
 
 MDEG_PER_RAD = np.degrees(1.0) * 1000.0
 THERMAL_MIN_SPAN_C = 0.3  # below this air-temperature span, growth is sought against time instead
@@ -142,22 +149,37 @@ class JointScale(Effect):
 
 
 class JointCompliance(Effect):
-    """dq_j = gravity-torque terms of every link beyond j (masses and mass moments fitted)."""
+    """dq_j = one stiffness x the gravity torque of the nominal mass model (the physics'
+    parsimony: it extrapolates), or the torque's terms of every link beyond j with their masses
+    and mass moments fitted (a richer model, taken only where it pays off on its own test)."""
 
     name = "joint_compliance"
 
     def n_params(self, ext):
+        if ext.masses is not None:
+            return 1
         return 0 if ext.keep is None else int(ext.keep.sum())
 
+    def label(self, ext):
+        rich = "" if ext.masses is not None else ", masses fitted"
+        return f"{self.name}({ext.joint + 1}{rich})"
+
     def basis(self, ext, layout, x, inputs):
-        return gravity_basis(layout, x, inputs.q, ext.joint, ext.gravity)[:, ext.keep]
+        raw = gravity_basis(layout, x, inputs.q, ext.joint, ext.gravity)
+        return raw @ ext.masses[:, None] if ext.masses is not None else raw[:, ext.keep]
 
     def candidates(self, layout, x, inputs):
         g = gravity_in_base(layout, x)
         out = []
         for j in range(layout.robot.n_joints):
-            keep = select_independent(gravity_basis(layout, x, inputs.q, j, g))
-            if keep.any():
+            raw = gravity_basis(layout, x, inputs.q, j, g)
+            keep = select_independent(raw)
+            if not keep.any():
+                continue
+            w = nominal_masses(layout, x, j)
+            if select_independent(raw @ w[:, None]).any():
+                out.append(Extension(self.name, joint=j, gravity=g, masses=w))
+            if keep.sum() > 1:
                 out.append(Extension(self.name, joint=j, keep=keep, gravity=g))
         return out
 
@@ -168,6 +190,7 @@ class JointCompliance(Effect):
             "deflection_rms_deg": float(np.degrees(np.sqrt(np.mean(dq * dq)))),
             "deflection_range_deg": float(np.degrees(dq.max() - dq.min())),
             "gravity_terms": int(len(ext.coef)),
+            "mass_model": "nominal" if ext.masses is not None else "fitted",
         }
 
     def evidence(self, ext, p, gain):
@@ -177,6 +200,11 @@ class JointCompliance(Effect):
         )
 
     def to_json(self, ext):
+        if ext.masses is not None:
+            return {
+                "gravity": np.asarray(ext.gravity, dtype=float).tolist(),
+                "masses": np.asarray(ext.masses, dtype=float).tolist(),
+            }
         return {
             "gravity": np.asarray(ext.gravity, dtype=float).tolist(),
             "gravity_terms": np.flatnonzero(ext.keep).tolist(),
@@ -184,6 +212,8 @@ class JointCompliance(Effect):
         }
 
     def from_json(self, read):
+        if read.has("masses"):
+            return {"gravity": read.vector("gravity"), "masses": read.vector("masses")}
         keep = np.zeros(read.integer("gravity_terms_total"), dtype=bool)
         terms = read.vector("gravity_terms")
         if np.any(terms != np.round(terms)) or np.any((terms < 0) | (terms >= len(keep))):

@@ -39,6 +39,9 @@ class _Reader:
     def error(self, key, message):
         return located(message, key)
 
+    def has(self, key) -> bool:
+        return key in self.obj
+
     def __getattr__(self, kind):
         if kind not in _READS:
             raise AttributeError(kind)

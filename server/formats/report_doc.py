@@ -60,6 +60,35 @@ class Unexplained(Open):
     covariates: list[Covariate]
 
 
+class RegionFold(Open):
+    test: str = Field(description="the test poses' side of the split, e.g. `q2 >= 12.3 deg`")
+    test_poses: int
+    beyond_training_deg: float = Field(
+        description="how far the test poses reach past the training poses' range of that joint"
+    )
+    geometric_rmse_mm: float | None
+    final_rmse_mm: float | None
+
+
+class Refused(Open):
+    name: str
+    label: str
+    joint: int | None = None
+    worse_on: list[str] = Field(description="the region folds it made worse than geometry")
+
+
+class Extrapolation(Open):
+    method: str
+    max_ratio_to_geometric: float
+    folds: list[RegionFold]
+    refused: list[Refused] = Field(
+        description="effects the random folds accepted that did not hold off the training region"
+    )
+    joint_range_deg: list[list[float]] = Field(
+        description="per joint, the [min, max] the data covers: the model is trusted within it"
+    )
+
+
 class ReportDoc(Open):
     """A report.json: what the diagnosis found, most important effect first."""
 
@@ -76,6 +105,12 @@ class ReportDoc(Open):
     final: Fit
     outliers: list[Outlier] | None = Field(None, description="readings excluded as gross errors")
     unexplained: Unexplained | None = None
+    extrapolation: Extrapolation | None = Field(
+        None,
+        description="the final model tested off its training region: trained on one side of "
+        "each gravity-loaded joint's median, tested on the other; an effect that made any such "
+        "fold worse than geometry is refused",
+    )
     identified: dict | None = Field(
         None,
         description="the final model's identified parameters, as model.json's `identified` "

@@ -20,6 +20,13 @@ def test_real_campaign_names_joint_2_compliance(name):
     lo, hi = first["holdout_gain_interval_mm"]
     assert 0 < lo <= before - after <= hi
     assert first["significance"]["p_value"] < 0.005 and first["uncertainty"]
+    # the one-stiffness model of the physics, not the masses fitted one by one
+    assert first["parameters"]["mass_model"] == "nominal"
     for alt in first["alternatives"]:  # named beside it when the data cannot tell them apart
-        assert alt["holdout_rmse_mm"] > after
+        # a richer variant may score a little better on these poses: the data cannot tell
+        assert alt["holdout_rmse_mm"] > after or alt["label"].endswith("masses fitted)")
+    # and it holds off the training region: no region fold worse than geometry
+    assert r["extrapolation"]["refused"] == []
+    for fold in r["extrapolation"]["folds"]:
+        assert fold["final_rmse_mm"] <= fold["geometric_rmse_mm"], fold
     assert r["outliers"] == []
