@@ -278,7 +278,8 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
     if not folds:
         return steps, Extrapolation(folds, [], [])
     geo = [diag.region_rms([], f) for f in folds]
-    kept, refused = list(steps), []
+    kept = list(steps)
+    refused: list[tuple[Extension, list[FoldCheck]]] = []
     while kept:
         exts = [s[0] for s in kept]
         checks = [FoldCheck(f, g, diag.region_rms(exts, f)) for f, g in zip(folds, geo)]
