@@ -692,7 +692,8 @@ def cmd_demo(args) -> None:
     _print_diagnosis(report)
     from .recording import record_calibration
 
-    record_calibration(
+    extended = workflow.read_model(out / "model-extended.json")
+    record_calibration(  # "after" the final, extended model; the minimax one beside it
         out / "calibration.rrd",
         cell=cell,
         meas=cal_meas,
@@ -700,8 +701,9 @@ def cmd_demo(args) -> None:
         nominal=rows["nominal"][0],
         held_out=hold,
         diagnosis=diagnosis,
+        extended=extended,
     )
-    ext = workflow.evaluate(workflow.read_model(out / "model-extended.json"), hold)
+    ext = workflow.evaluate(extended, hold)
     console.print(
         tables.accuracy(
             ext["model"], f"extended model on the {args.holdout} held-out poses", hold.target_names

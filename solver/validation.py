@@ -177,8 +177,12 @@ def judge(
             + (f" (from the {noise_floor_source})" if noise_floor_source else "")
             + ": the fit absorbed measurement noise"
         )
-    # NaN: no identification to condition (the nominal arm, only registered)
-    if not np.isnan(condition_number) and not condition_number <= MAX_CONDITION:
+    if np.isnan(condition_number):
+        v.reasons.append(
+            "the condition number is not a figure: nothing of the arm was identified (the "
+            "nominal model, only registered on the data), or its identification failed"
+        )
+    elif not condition_number <= MAX_CONDITION:
         v.reasons.append(
             f"condition number {condition_number:.3g} exceeds {MAX_CONDITION:.0f}: the poses "
             "barely separate some parameters; measure more poses, spread over the joint ranges"
