@@ -163,7 +163,10 @@ def test_a_diagnosis_far_above_the_floor_is_not_deployable(tmp_path):
         "--effect", "joint_coupling:5=300", cwd=tmp_path,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
-    r = robocal("diagnose", "m.csv", "--out", "report.json", "--model-out", "x.json", cwd=tmp_path)
+    r = robocal(
+        "diagnose", "m.csv", "--out", "report.json", "--model-out", "x.json",
+        "--tolerance-mm", 0.1, cwd=tmp_path,
+    )  # fmt: skip
     assert r.returncode == 0, r.stderr
     report = json.loads((tmp_path / "report.json").read_text())
     floor, final = report["noise_floor_mm"], report["final"]["holdout_rmse_mm"]
@@ -171,6 +174,10 @@ def test_a_diagnosis_far_above_the_floor_is_not_deployable(tmp_path):
     v = json.loads((tmp_path / "x.json").read_text())["validation"]
     assert v["deployable"] is False and report["validation"] == v
     assert any("x the noise floor" in x and "(see unexplained)" in x for x in v["reasons"]), v
+    # the flag reaches the diagnosis's verdict too
+    assert v["tolerance_mm"] == 0.1 and f"held-out error {final:.3g} mm RMS exceeds the " in (
+        " ".join(v["reasons"])
+    )
     out = " ".join(r.stdout.split())
     assert "NOT DEPLOYABLE" in out and "deployable:" not in out
     assert v["noise_floor_mm"] == pytest.approx(floor)  # the report's floor, the verdict's
