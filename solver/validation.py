@@ -149,7 +149,9 @@ def judge(
 
     tolerance_mm: the application's accuracy, which the held-out RMS must not exceed;
     max_floor_ratio: the multiple of the noise floor past which the held-out RMS says the model
-    lacks an effect (a diagnosis, whose vocabulary was tried: MAX_FLOOR_RATIO), None: not judged.
+    lacks an effect (a diagnosis, whose vocabulary was tried: MAX_FLOOR_RATIO), None: not judged;
+    not said of a fit with too few poses or one that does not predict new poses (its held-out
+    excess is its own, not a missing effect's).
     """
     v = Validation(
         fit_rms_mm,
@@ -196,7 +198,8 @@ def judge(
     # near the tracker's noise is as good as any model predicts, however small the fit's
     ref = max(fit_rms_mm, noise_floor_mm or 0.0)
     ratio = v.holdout_rms_mm / ref if ref > 0 else float("inf")
-    if np.isfinite(v.holdout_rms_mm) and not ratio <= MAX_HOLDOUT_RATIO:
+    overfit = np.isfinite(v.holdout_rms_mm) and not ratio <= MAX_HOLDOUT_RATIO
+    if overfit:
         v.reasons.append(
             f"held-out RMS {v.holdout_rms_mm:.4g} mm is {ratio:.3g} x the "
             + (
@@ -208,7 +211,8 @@ def judge(
             "fitted on"
         )
     v.reasons += beyond_tolerance(v.holdout_rms_mm, tolerance_mm)
-    v.reasons += lacking_effect(v.holdout_rms_mm, noise_floor_mm, max_floor_ratio)
+    if not overfit and equations >= need:  # else the excess is the fit's, said above
+        v.reasons += lacking_effect(v.holdout_rms_mm, noise_floor_mm, max_floor_ratio)
     return v
 
 

@@ -153,6 +153,14 @@ def test_the_guard_judges_the_tolerance_at_its_edge_and_the_floor_past_three_tim
         "the model lacks (see unexplained)"
     ]
     assert judged(0.115).deployable
+    # a fit that does not predict new poses (or has too few) is told so, not blamed on an effect
+    for fit, equations in ((0.012, 900), (0.11, 90)):
+        v = guard.judge(
+            fit_rms_mm=fit, holdout=guard.CrossValidated(0.115, 0.3), condition_number=20.0,
+            equations=equations, free_parameters=40, poses=100, noise_floor_mm=0.01,
+            max_floor_ratio=guard.MAX_FLOOR_RATIO,
+        )  # fmt: skip
+        assert len(v.reasons) == 1 and "noise floor 0.010 mm (more" not in v.reasons[0], v.reasons
 
 
 def test_a_diagnosis_far_above_the_floor_is_not_deployable(tmp_path):
