@@ -227,7 +227,12 @@ def beyond_tolerance(holdout_rms_mm: float, tolerance_mm: float | None) -> list[
         ]
     if holdout_rms_mm <= tolerance_mm:
         return []
-    return [f"held-out error {holdout_rms_mm:.3g} mm RMS exceeds the tolerance {tolerance_mm:g} mm"]
+    # three digits, more where they would print the tolerance itself (0.30004 beyond 0.3)
+    digits = next((n for n in range(3, 8) if float(f"{holdout_rms_mm:.{n}g}") > tolerance_mm), 8)
+    return [
+        f"held-out error {holdout_rms_mm:.{digits}g} mm RMS exceeds the tolerance "
+        f"{tolerance_mm:g} mm"
+    ]
 
 
 def lacking_effect(

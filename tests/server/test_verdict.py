@@ -144,6 +144,8 @@ def test_the_guard_judges_the_tolerance_at_its_edge_and_the_floor_past_three_tim
     assert judged(0.3, tolerance_mm=0.3).deployable  # at the tolerance: within
     v = judged(0.412, tolerance_mm=0.3)
     assert v.reasons == ["held-out error 0.412 mm RMS exceeds the tolerance 0.3 mm"]
+    v = judged(0.30004, tolerance_mm=0.3)  # never "0.3 exceeds 0.3"
+    assert v.reasons == ["held-out error 0.30004 mm RMS exceeds the tolerance 0.3 mm"]
     # a diagnosis (its vocabulary tried) far above the floor lacks an effect; a calibration is
     # not judged so (its expected accuracy is said instead)
     assert judged(0.029, max_floor_ratio=guard.MAX_FLOOR_RATIO).deployable
