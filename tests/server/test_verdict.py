@@ -191,3 +191,13 @@ def test_a_diagnosis_far_above_the_floor_is_not_deployable(tmp_path):
     out = " ".join(r.stdout.split())
     assert "NOT DEPLOYABLE" in out and "deployable:" not in out
     assert v["noise_floor_mm"] == pytest.approx(floor)  # the report's floor, the verdict's
+
+
+def test_the_cells_tolerance_survives_its_json_round_trip():
+    """The service stores a campaign's cell as cell_to_json writes it: its jobs judge with it."""
+    from robocal.server.formats.cell_json import cell_to_json, parse_cell
+
+    cell = parse_cell(json.dumps({**CELL, "tolerance_mm": 0.25}))
+    assert cell.tolerance_mm == 0.25
+    assert parse_cell(json.dumps(cell_to_json(cell))).tolerance_mm == 0.25
+    assert parse_cell(json.dumps(CELL)).tolerance_mm is None
