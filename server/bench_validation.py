@@ -58,19 +58,20 @@ def _verdict(cell, meas, method) -> dict:
     t0 = time.perf_counter()
     try:
         if method == "diagnose":  # the diagnosis's final model, its extensions included
-            v = workflow.diagnose(cell, meas, screen=False)[1].meta["validation"]
+            v = workflow.diagnose(cell, meas, screen=False)[1].verdict
         else:
             cal = workflow.run_method(cell, meas, method)
-            v = workflow.model_file(cal, cell, meas).meta["validation"]
+            v = workflow.model_file(cal, cell, meas).verdict
     except NotIdentifiable as e:  # refused before any model: as good as flagged
         return {"deployable": False, "reasons": [f"refused: {e}"], "refused": True}
     return {
-        "deployable": v["deployable"],
-        "reasons": v["reasons"],
-        "holdout_rms_mm": v["holdout_rms_mm"],
-        "fit_rms_mm": v["fit_rms_mm"],
-        "condition_number": v["condition_number"],
-        "noise_floor_mm": v["noise_floor_mm"],
+        "deployable": v.deployable,
+        "reasons": list(v.reasons),
+        "holdout_rms_mm": v.holdout_rms_mm,
+        "holdout_max_mm": v.holdout_max_mm,
+        "fit_rms_mm": v.fit_rms_mm,
+        "condition_number": v.condition_number,
+        "noise_floor_mm": v.noise_floor_mm,
         "seconds": round(time.perf_counter() - t0, 3),
     }
 

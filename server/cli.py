@@ -161,6 +161,7 @@ def cmd_calibrate(args) -> None:
 
         check_writable(args.recording)
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)
+    cell = _with_tolerance(cell, args)
     hold = _held_out_data(args, cell)
     parse_method(args.method, meas.target_names)
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
@@ -191,11 +192,10 @@ def cmd_calibrate(args) -> None:
         f"in {cal.seconds * 1000:.0f} ms"
     )
     _print_screening(cal)
-    if "validation" in model.meta:  # the held-out figure first: it is the headline
-        if "held_out" in model.meta["validation"]:
-            console.print(tables.held_out_line(model.meta["validation"]["held_out"]))
-        for line in tables.validation_lines(model.meta["validation"]):
-            console.print(line)
+    if "held_out" in model.meta.get("validation", {}):  # the held-out figure is the headline
+        console.print(tables.held_out_line(model.meta["validation"]["held_out"]))
+    for line in tables.validation_lines(model.verdict):
+        console.print(line)
     console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
     console.print(tables.identified_geometry(cal.robot, cell.robot, model.meta["uncertainty"]))
     if "identified" in model.meta:
@@ -218,14 +218,12 @@ def cmd_calibrate(args) -> None:
         f"model written to {args.out}"
         + (f", rerun recording to {args.recording}" if args.recording else "")
     )
-    _warn_undeployable(model.meta, args.out)
+    _warn_undeployable(model.verdict, args.out)
 
 
-def _warn_undeployable(meta: dict, path) -> None:
-    """One line on stderr when a model's validation says it is not to be deployed."""
-    from .validation import refusal
-
-    why = refusal(meta)
+def _warn_undeployable(verdict, path) -> None:
+    """One line on stderr when a model's verdict says it is not to be deployed."""
+    why = verdict.refusal()
     if why:
         print(f"robocal: warning: {path}: {why}", file=sys.stderr)
 
@@ -299,7 +297,7 @@ def cmd_evaluate(args) -> None:
         raise workflow.DataError(f"{args.meas}: {e}") from None
     from .validation import absurd_errors
 
-    why = absurd_errors(res, model.meta)
+    why = absurd_errors(res, model.verdict)
     if why and not args.force:
         raise workflow.DataError(f"{args.meas}: {why}; --force to evaluate anyway")
     if why:
@@ -363,6 +361,7 @@ def cmd_diagnose(args) -> None:
 
     _campaign_only_with_database(args)
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)
+    cell = _with_tolerance(cell, args)
     report, figures, _ = _diagnose_to_files(
         cell, meas, args.meas, args.out, args.model_out, screen=not args.keep_outliers
     )
@@ -469,7 +468,9 @@ def _print_diagnosis(report) -> None:
     )
     _print_unexplained(report.get("unexplained"))
     if "validation" in report:  # the final model, judged as a calibration is
-        for line in tables.validation_lines(report["validation"]):
+        from .formats.verdict import Verdict
+
+        for line in tables.validation_lines(Verdict.of(report["validation"])):
             console.print(line)
     if "identified" in report:
         ident = report["identified"]
@@ -691,7 +692,8 @@ def cmd_demo(args) -> None:
     _print_diagnosis(report)
     from .recording import record_calibration
 
-    record_calibration(
+    extended = workflow.read_model(out / "model-extended.json")
+    record_calibration(  # "after" the final, extended model; the minimax one beside it
         out / "calibration.rrd",
         cell=cell,
         meas=cal_meas,
@@ -699,8 +701,9 @@ def cmd_demo(args) -> None:
         nominal=rows["nominal"][0],
         held_out=hold,
         diagnosis=diagnosis,
+        extended=extended,
     )
-    ext = workflow.evaluate(workflow.read_model(out / "model-extended.json"), hold)
+    ext = workflow.evaluate(extended, hold)
     console.print(
         tables.accuracy(
             ext["model"], f"extended model on the {args.holdout} held-out poses", hold.target_names
@@ -810,6 +813,26 @@ def _outlier_argument(p) -> None:
         help="use every reading: skip the screening for gross outliers (mis-locks, "
         "bumped SMRs) that otherwise excludes them and lists them",
     )
+
+
+def _tolerance_argument(p) -> None:
+    p.add_argument(
+        "--tolerance-mm",
+        type=_positive,
+        metavar="T",
+        help="the accuracy the application needs (mm): a model whose held-out error exceeds it "
+        "is not deployable (default the cell's tolerance_mm; none: the verdict states the "
+        "expected accuracy)",
+    )
+
+
+def _with_tolerance(cell, args):
+    """The cell with --tolerance-mm, which wins over its cell.json's tolerance_mm."""
+    if args.tolerance_mm is None:
+        return cell
+    from dataclasses import replace
+
+    return replace(cell, tolerance_mm=args.tolerance_mm)
 
 
 class Parser(argparse.ArgumentParser):
@@ -932,6 +955,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="the campaign of --held-out's database (default its latest)",
     )
     _outlier_argument(c)
+    _tolerance_argument(c)
     c.add_argument("--recording", help="also write a rerun recording (.rrd) of the calibration")
     c.add_argument(
         "--rerun-viewer",
@@ -997,6 +1021,7 @@ def build_parser() -> argparse.ArgumentParser:
     dg.add_argument("--out", default="report.json", help="report (figures are written beside it)")
     dg.add_argument("--model-out", help="the final, extended model.json")
     _outlier_argument(dg)
+    _tolerance_argument(dg)
     dg.set_defaults(func=cmd_diagnose)
 
     aq = sub.add_parser(

@@ -18,9 +18,11 @@ from robocal.solver.kinematics import flange_frames, joint_frames  # noqa: E402
 from robocal.solver.measurements import Measurements  # noqa: E402
 
 from .formats.cell_json import Cell  # noqa: E402
+from .formats.model_json import ModelFile  # noqa: E402
 from .recording_blueprint import calibration_blueprint, cell_eye  # noqa: E402
 from .recording_cell import (  # noqa: E402
     MEASURED,
+    Drawn,
     PoseSet,
     color_scale,
     error_colors,
@@ -32,10 +34,32 @@ from .recording_cell import (  # noqa: E402
 
 BEFORE = (255, 140, 0)
 AFTER = (40, 140, 255)
-ARM = {"before": (255, 190, 110), "after": (120, 180, 255)}
+GEOMETRIC = (150, 90, 220)
+SERIES = {"before": BEFORE, "after": AFTER, "geometric": GEOMETRIC}
+ARM = {"before": (255, 190, 110), "after": (120, 180, 255), "geometric": (170, 120, 230)}
 
 
-def _chain(cal: Calibration, q) -> tuple[np.ndarray, np.ndarray]:
+def extended_model(model: ModelFile) -> Drawn:
+    """A model file drawn with its extensions (a diagnosis's final model): its geometric arm,
+    and its predictions as `evaluate` makes them."""
+    from .workflow import model_predict
+
+    lay, x = model.layout()
+
+    def predicted(meas: Measurements) -> np.ndarray:
+        return model_predict(model, meas.q, _per_pose(meas.time_s), _per_pose(meas.temp_c))
+
+    return Drawn(lay, x, predicted)
+
+
+def _per_pose(a):
+    """A per-reading column's value per pose (its first measured reading), None for none."""
+    if a is None:
+        return None
+    return a[np.arange(len(a)), np.argmax(np.isfinite(a), axis=1)]
+
+
+def _chain(cal: Calibration | Drawn, q) -> tuple[np.ndarray, np.ndarray]:
     """Per pose, base origin, joint frame origins and flange (m, n+2, 3); flange R (m, 3, 3)."""
     q = np.atleast_2d(q)
     base = np.broadcast_to(cal.layout.base(cal.x)[:3, 3], (len(q), 3))
@@ -150,10 +174,11 @@ def _log_per_pose(
 
 
 def _log_error_per_pose(rec: rr.RecordingStream, sets: list[PoseSet]) -> None:
-    """Each pose's RMS error before and after: a series on timeline "pose", and static bars."""
+    """Each pose's RMS error before and after (and the geometric model's beside a diagnosis's
+    final one): a series on timeline "pose", and static bars."""
     start = 0
     for s in sets:
-        for k, color in (("before", BEFORE), ("after", AFTER)):
+        for k, color in ((k, SERIES[k]) for k in SERIES if k in s.err):
             rms = _rms(s.err[k])
             good = np.isfinite(rms)
             path = f"errors/rms/{s.name}/{k}"
@@ -165,13 +190,14 @@ def _log_error_per_pose(rec: rr.RecordingStream, sets: list[PoseSet]) -> None:
                     rr.Scalars.columns(scalars=rms[good]),
                 )
             # the same as bars, static: seen whichever timeline the viewer is on
-            offset = -0.2 if k == "before" else 0.2
+            width = 0.8 / len(s.err)
+            offset = (list(s.err).index(k) - (len(s.err) - 1) / 2) * width
             rec.log(
                 f"errors/per_pose/{s.name}/{k}",
                 rr.BarChart(
                     np.nan_to_num(rms),
                     abscissa=start + np.arange(len(rms)) + offset,
-                    widths=np.full(len(rms), 0.4),
+                    widths=np.full(len(rms), width),
                     color=color if s.name == "calibration" else tuple(c // 2 for c in color),
                 ),
                 static=True,
@@ -179,18 +205,30 @@ def _log_error_per_pose(rec: rr.RecordingStream, sets: list[PoseSet]) -> None:
         start += s.meas.n_poses
 
 
-def _summary(calibration, sets: list[PoseSet], magnify: float, top: float, frames_at: str) -> str:
+def _summary(
+    calibration, sets: list[PoseSet], magnify: float, top: float, frames_at: str, final=None
+) -> str:
     """Markdown: the RMS errors first (what fits the view), then how to read the cell."""
-    rows = ["| poses | readings | RMS before | RMS after |", "|---|---|---|---|"]
+    keys = list(sets[0].err)
+    rows = [
+        "| poses | readings | " + " | ".join(f"RMS {k}" for k in keys) + " |",
+        "|---|---|" + "---|" * len(keys),
+    ]
     for s in sets:
         rms = {k: float(np.sqrt(np.nanmean(np.sum(e * e, axis=-1)))) for k, e in s.err.items()}
         rows.append(
-            f"| {s.name}: {s.meas.n_poses} | {s.meas.n_readings} | {rms['before']:.4f} mm "
-            f"| {rms['after']:.4f} mm |"
+            f"| {s.name}: {s.meas.n_poses} | {s.meas.n_readings} | "
+            + " | ".join(f"{rms[k]:.4f} mm" for k in keys)
+            + " |"
         )
+    said = (
+        f"before: the nominal model, after: the diagnosis's final model **{final}**, geometric: "
+        f"the {calibration.method} calibration without extensions"
+        if final
+        else "before: the nominal model, after: the identified one"
+    )
     lines = [
-        f"**{calibration.method}** on targets {', '.join(sets[0].meas.target_names)}; before: "
-        "the nominal model, after: the identified one",
+        f"**{calibration.method}** on targets {', '.join(sets[0].meas.target_names)}; {said}",
         "\n".join(rows),
     ]
     if len(sets) == 1:
@@ -215,13 +253,16 @@ def record_calibration(
     nominal: Calibration | None = None,
     held_out: Measurements | None = None,
     diagnosis=None,
+    extended: ModelFile | None = None,
     magnify: float = 100.0,
     viewer_url: str | None = None,
 ) -> Path:
     """Write a .rrd of a calibration: the cell with every pose, each pose, the solver's history.
 
     meas: the poses the calibration was fitted on; held_out: poses it did not see, if any.
-    nominal: the nominal model registered on meas (fitted here when not given). With viewer_url
+    nominal: the nominal model registered on meas (fitted here when not given). extended: the
+    diagnosis's final model (its model file), then "after" and the calibration "geometric"
+    beside it. With viewer_url
     (a running viewer's gRPC address, e.g. rerun+http://127.0.0.1:9876/proxy) the same data is
     also streamed to it live.
     """
@@ -231,7 +272,9 @@ def record_calibration(
         from .workflow import run_method  # workflow imports heavy pieces; keep this module light
 
         nominal = run_method(cell, meas, "nominal")
-    models = {"before": nominal, "after": calibration}
+    models = {"before": Drawn.of(nominal), "after": Drawn.of(calibration)}
+    if extended is not None:
+        models = {**models, "after": extended_model(extended), "geometric": models["after"]}
     sets = [PoseSet.of("calibration", meas, models)]
     if held_out is not None and held_out.n_poses:
         sets.append(PoseSet.of("held_out", held_out, models))
@@ -252,7 +295,10 @@ def record_calibration(
     arm = log_frames(rec, models, meas, at)
     _log_per_pose(rec, sets, models, magnify, top)
     _log_error_per_pose(rec, sets)
-    summary = _summary(calibration, sets, magnify, top, meas.pose_ids[at])
+    final = None if extended is None else extended.meta.get("diagnosis", {}).get("final", {})
+    summary = _summary(
+        calibration, sets, magnify, top, meas.pose_ids[at], final and final.get("model")
+    )
     rec.log("summary", rr.TextDocument(summary, media_type=rr.MediaType.MARKDOWN), static=True)
 
     history = calibration.get("history")
@@ -266,10 +312,10 @@ def record_calibration(
     figures = []
     if diagnosis is not None and diagnosis.figures:
         figures = _log_diagnosis(rec, diagnosis.figures)
-    eye = cell_eye(np.vstack([readings, np.zeros((1, 3))]), calibration.base)
+    eye = cell_eye(np.vstack([readings, np.zeros((1, 3))]), models["after"].base)
     blueprint = calibration_blueprint(
         eye=eye,
-        arm_eye=cell_eye(arm, calibration.base),
+        arm_eye=cell_eye(arm, models["after"].base),
         has_solver=bool(history),
         figures=figures,
     )

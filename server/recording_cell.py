@@ -2,21 +2,54 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import rerun as rr
 from robocal.solver.calibrate import Calibration
-from robocal.solver.kinematics import flange_frames, joint_frames, predict
+from robocal.solver.kinematics import Layout, flange_frames, joint_frames, predict
 from robocal.solver.measurements import Measurements
 
 # green (no error) -> yellow -> red (at the top of the scale and above)
 STOPS = np.array([[40, 170, 60], [240, 200, 40], [220, 40, 40]], dtype=float)
 MEASURED = (200, 200, 200)
 FLOOR = (150, 150, 150)
-FRAMES = {"nominal": (255, 190, 110), "identified": (120, 180, 255)}
-MODELS = {"before": "nominal", "after": "identified"}  # error entity -> the model it judges
+FRAMES = {
+    "nominal": (255, 190, 110),
+    "identified": (120, 180, 255),
+    "geometric": (170, 120, 230),
+}
+# error entity -> the model it judges; "geometric" only beside a diagnosis's final model
+MODELS = {"before": "nominal", "after": "identified", "geometric": "geometric"}
 GRID_MM = 500.0
+
+
+@dataclass(frozen=True)
+class Drawn:
+    """A model as the recording draws it: the kinematics of its arm and what it predicts."""
+
+    layout: Layout
+    x: np.ndarray
+    predict: Callable[[Measurements], np.ndarray]  # SMR centres (m, K, 3), mm
+
+    @property
+    def base(self) -> np.ndarray:
+        return self.layout.base(self.x)
+
+    @classmethod
+    def of(cls, cal: Calibration) -> Drawn:
+        """A calibration's geometric model."""
+        return cls(cal.layout, cal.x, lambda meas: predict(cal.layout, cal.x, meas.q))
+
+
+def drawn(model: Drawn | Calibration) -> Drawn:
+    return model if isinstance(model, Drawn) else Drawn.of(model)
+
+
+def models_of(models: dict) -> dict:
+    """The entity keys (before, after, geometric) present, in MODELS' order."""
+    return {k: v for k, v in MODELS.items() if k in models}
 
 
 @dataclass
@@ -25,12 +58,13 @@ class PoseSet:
 
     name: str
     meas: Measurements
-    err: dict  # "before"/"after" -> (m, K, 3) measured less predicted, mm (NaN: no reading)
-    pred: dict  # "before"/"after" -> (m, K, 3) predicted SMR centres, mm
+    err: dict  # "before"/"after"/"geometric" -> (m, K, 3) measured less predicted, mm (NaN: none)
+    pred: dict  # the same keys -> (m, K, 3) predicted SMR centres, mm
 
     @classmethod
     def of(cls, name: str, meas: Measurements, models: dict) -> PoseSet:
-        pred = {k: predict(c.layout, c.x, meas.q) for k, c in models.items()}
+        """models: per key a Drawn model, or a calibration (drawn as its geometric model)."""
+        pred = {k: drawn(c).predict(meas) for k, c in models.items()}
         return cls(name, meas, {k: meas.xyz - p for k, p in pred.items()}, pred)
 
 
@@ -61,7 +95,7 @@ def _frame(rec: rr.RecordingStream, path: str, T: np.ndarray, axes_mm: float | N
 
 
 def log_tracker_and_base(
-    rec: rr.RecordingStream, models: dict[str, Calibration], points: np.ndarray
+    rec: rr.RecordingStream, models: dict[str, Drawn], points: np.ndarray
 ) -> None:
     """The tracker at the origin (readings are in its frame), both base frames, and the floor.
 
@@ -82,7 +116,7 @@ def log_tracker_and_base(
         static=True,
     )
     base = models["after"].base
-    for k, model in MODELS.items():
+    for k, model in models_of(models).items():
         T = models[k].base
         _frame(rec, f"world/base/{model}", T, 400.0)
         rec.log(
@@ -137,7 +171,7 @@ def log_poses(rec: rr.RecordingStream, s: PoseSet, magnify: float, top: float) -
         rr.Points3D(xyz[ok], colors=MEASURED, radii=rr.Radius.ui_points(3.0)),
         static=True,
     )
-    for k, model in MODELS.items():
+    for k, model in models_of(s.err).items():
         e = s.err[k][ok]
         rec.log(
             f"{root}/error/{k}",
@@ -162,14 +196,16 @@ def representative(q: np.ndarray) -> int:
 
 
 def log_frames(
-    rec: rr.RecordingStream, models: dict[str, Calibration], meas: Measurements, i: int
+    rec: rr.RecordingStream, models: dict[str, Drawn], meas: Measurements, i: int
 ) -> np.ndarray:
-    """Joint frames, links and the flange of both models at pose i, nominal beside identified.
+    """Joint frames, links and the flange of each model at pose i, nominal beside identified
+    (and the geometric one beside a diagnosis's final model).
 
     Returns the identified chain's points (base, joints, flange, SMRs), to aim a view at.
     """
     q = meas.q[i : i + 1]
-    for k, model in MODELS.items():
+    out = np.zeros((0, 3))
+    for k, model in models_of(models).items():
         c = models[k]
         root = f"world/frames/{model}"
         frames = joint_frames(c.layout, c.x, q)
@@ -194,11 +230,16 @@ def log_frames(
             ),
             static=True,
         )
-    return np.vstack([chain, smr])
+        if k == "after":
+            out = np.vstack([chain, smr])
+    return out
 
 
 __all__ = [
+    "Drawn",
     "PoseSet",
+    "drawn",
+    "models_of",
     "color_scale",
     "error_colors",
     "log_frames",

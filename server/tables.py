@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
 from rich.console import Console
 from rich.table import Table
+
+if TYPE_CHECKING:
+    from .formats.verdict import Verdict
 
 # Wide enough for Table 3's eight columns when the output is a file or a pipe.
 console = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
@@ -233,23 +237,28 @@ def held_out_line(h: dict) -> str:
     )
 
 
-def _holdout_kind(v: dict) -> str:
+def _holdout_kind(v: Verdict) -> str:
     """How the held-out figure was had, in a few words: "leave-one-pose-out", "5-fold"."""
-    how = v.get("holdout") or "leave-one-pose-out"
+    how = v.holdout or "leave-one-pose-out"
     return how.split(" cross-validation")[0]
 
 
-def validation_lines(v: dict) -> list[str]:
-    """The held-out figure (headline) beside the fit's, and the verdict with its reasons."""
-
-    out = [
-        f"[bold]held-out RMS {_mm(v['holdout_rms_mm'])}[/bold] ({_holdout_kind(v)}, max "
-        f"{_mm(v['holdout_max_mm'])}); fit RMS {_mm(v['fit_rms_mm'])}; condition number "
-        f"{_f(v['condition_number'], 3)}; noise floor {_mm(v['noise_floor_mm'])}"
-    ]
-    if v["deployable"]:
-        out.append("[green]deployable[/green]: every validation limit holds")
+def validation_lines(v: Verdict) -> list[str]:
+    """The held-out figure (headline) beside the fit's, and the verdict: the accuracy to expect
+    (within the tolerance, when one is given) or the reasons it is not deployable."""
+    out = []
+    if v.holdout_rms_mm is not None or v.fit_rms_mm is not None:
+        out.append(
+            f"[bold]held-out RMS {_mm(v.holdout_rms_mm)}[/bold] ({_holdout_kind(v)}, max "
+            f"{_mm(v.holdout_max_mm)}); fit RMS {_mm(v.fit_rms_mm)}; condition number "
+            f"{_f(v.condition_number, 3)}; noise floor {_mm(v.noise_floor_mm)}"
+            + (f" (from the {v.noise_floor_source})" if v.noise_floor_source else "")
+        )
+    if v.deployable:
+        out.append(f"[green]deployable[/green]: {v.summary or 'no limit of the guard is broken'}")
     else:
         out.append("[bold red]NOT DEPLOYABLE[/bold red]:")
-        out += [f"  - {r}" for r in v["reasons"]]
+        out += [f"  - {r}" for r in v.reasons]
+        if v.summary:
+            out.append(f"  ({v.summary})")
     return out

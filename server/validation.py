@@ -11,6 +11,7 @@ from robocal.solver.measurements import Measurements
 
 from .formats.cell_json import Cell
 from .formats.model_json import ModelFile
+from .formats.verdict import Verdict
 
 HOLDOUT_METHOD = "leave-one-pose-out cross-validation, linearised at the fit"
 # Model errors (RMS, mm) on data past which the data cannot be of the model's cell.
@@ -40,6 +41,8 @@ def validation_block(
     return {
         "deployable": v.deployable,
         "reasons": list(v.reasons),
+        "summary": expected_accuracy(v, holdout_method),
+        "tolerance_mm": json_number(v.tolerance_mm),
         "holdout_rms_mm": json_number(v.holdout_rms_mm),
         "holdout_max_mm": json_number(v.holdout_max_mm),
         "fit_rms_mm": json_number(v.fit_rms_mm),
@@ -59,18 +62,26 @@ def validation_block(
     }
 
 
+def expected_accuracy(v: guard.Validation, holdout_method: str = HOLDOUT_METHOD) -> str:
+    """The accuracy to expect on new poses in one sentence (the held-out RMS and max), and how
+    it stands against the tolerance; the verdict's reasons are said apart."""
+    how = holdout_method.split(" cross-validation")[0]
+    if not np.isfinite(v.holdout_rms_mm):
+        said = "expected accuracy unknown: no pose could be held out"
+    else:
+        said = (
+            f"expected accuracy on new poses {v.holdout_rms_mm:.3g} mm RMS, max "
+            f"{v.holdout_max_mm:.3g} mm (held out: {how})"
+        )
+    if v.tolerance_mm is None:
+        return said + "; no tolerance given (--tolerance-mm, or the cell's tolerance_mm)"
+    within = np.isfinite(v.holdout_rms_mm) and v.holdout_rms_mm <= v.tolerance_mm
+    return said + f"; {'within' if within else 'beyond'} the tolerance {v.tolerance_mm:g} mm"
+
+
 def json_number(v) -> float | None:
     """A JSON-safe number: None for NaN and infinity (JSON has neither)."""
     return None if v is None or not np.isfinite(v) else float(v)
-
-
-def refusal(meta: dict) -> str | None:
-    """Why a model must not be deployed (its validation's reasons), None if it may be; models
-    written before the guard have no validation and are not judged."""
-    v = meta.get("validation") or {}
-    if v.get("deployable", True):
-        return None
-    return "the model is not deployable: " + "; ".join(v.get("reasons") or ["see its validation"])
 
 
 def cell_mismatch(model: ModelFile, cell: Cell) -> str | None:
@@ -95,14 +106,14 @@ def data_mismatch(nominal, targets: list[str], cell: Cell) -> str | None:
     return None
 
 
-def absurd_errors(result: dict, meta: dict | None = None) -> str | None:
+def absurd_errors(result: dict, verdict: Verdict | None = None) -> str | None:
     """Why an evaluation's errors say the data is of another cell (a moved tracker, another
     robot), or the model unfit: the model's RMS error past ABSURD_MM; None otherwise."""
     rms = result["model"]["rmse"]
     if np.isfinite(rms) and rms <= ABSURD_MM:
         return None
     nominal = result.get("nominal", {}).get("rmse")
-    unfit = refusal(meta or {}) is not None
+    unfit = verdict is not None and not verdict.deployable
     return (
         f"the model's predictions are {rms:.1f} mm RMS from the readings (limit {ABSURD_MM:g} "
         "mm): the data is not of the model's cell (another robot, or the tracker or base moved)"
@@ -112,11 +123,12 @@ def absurd_errors(result: dict, meta: dict | None = None) -> str | None:
 
 
 def file_refusal(path) -> str | None:
-    """refusal() of a model file's validation; InputError, from the model reader, when the file
-    is not a readable model (so a bad file is refused in one line before any work)."""
+    """Why a model file must not be deployed (its verdict's reasons, or that it has none), None
+    if it may be; InputError, from the model reader, when the file is not a readable model (so a
+    bad file is refused in one line before any work)."""
     from .formats.model_json import read_model
 
-    return refusal(read_model(path).meta)
+    return read_model(path).verdict.refusal()
 
 
 def held_out_errors(model: ModelFile, meas: Measurements) -> dict:
@@ -132,5 +144,5 @@ def held_out_errors(model: ModelFile, meas: Measurements) -> dict:
         "rms_mm": json_number(result["model"]["rmse"]),
         "max_mm": json_number(result["model"]["ap"]["max"]),
         "nominal_rms_mm": json_number(result["nominal"]["rmse"]) if "nominal" in result else None,
-        "warning": absurd_errors(result, model.meta),
+        "warning": absurd_errors(result, model.verdict),
     }

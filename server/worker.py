@@ -13,6 +13,7 @@ from pathlib import Path
 from . import store
 from .formats.cell_json import parse_cell
 from .formats.model_json import model_to_json, to_plain, write_json_atomic
+from .formats.verdict import Verdict
 from .processes import one_line
 from .validation import held_out_errors
 from .workflow import model_file, run_method
@@ -139,15 +140,26 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.J
     return {
         "model": str(path),
         "recording": str(rrd),
-        **_verdict(model.get("validation")),
+        **_verdict(fitted.verdict),
         **({"holdout": summary} if summary else {}),
     }
 
 
-def _verdict(v: dict | None) -> dict:
-    """A job's results' summary of its model's validation block (none: nothing)."""
-    keep = ("deployable", "reasons", "holdout_rms_mm", "fit_rms_mm")
-    return {"validation": {k: v[k] for k in keep}} if v else {}
+def _verdict(v: Verdict) -> dict:
+    """A job's results' summary of its model's verdict (a model without one: not deployable)."""
+    return {
+        "validation": {
+            "deployable": v.deployable,
+            "reasons": list(v.reasons),
+            "summary": v.summary,
+            "holdout_rms_mm": v.holdout_rms_mm,
+            "holdout_max_mm": v.holdout_max_mm,
+            "fit_rms_mm": v.fit_rms_mm,
+            "tolerance_mm": v.tolerance_mm,
+            "noise_floor_mm": v.noise_floor_mm,
+            "noise_floor_source": v.noise_floor_source,
+        }
+    }
 
 
 def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.JobInfo) -> dict:
@@ -172,5 +184,5 @@ def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.Jo
         "model": str(path),
         "report": str(report_path),
         "figures": [str(p) for p in figures],
-        **_verdict(model.meta.get("validation")),
+        **_verdict(model.verdict),
     }

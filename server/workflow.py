@@ -217,7 +217,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         nominal=cell.robot,
         meta=meta,
     )
-    if cal.method != "nominal":  # nothing identified, nothing to guard
+    if cal.method != "nominal":  # nothing of the arm identified: no table of it
         model.meta["identified"] = identified_block(
             model,
             errors,
@@ -226,7 +226,9 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
             nominal_targets={t: cell.targets[t] for t in meas.target_names},
             nominal_base=cell.base,
         )
-        model.meta["validation"] = validate(cal, cell, used, rows, errors, acc["rmse"])
+    # the nominal arm, registered, is judged as any calibration: a model without a verdict is
+    # never deployable
+    model.meta["validation"] = validate(cal, cell, used, rows, errors, acc["rmse"])
     return model
 
 
@@ -247,6 +249,7 @@ def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit
         poses=int(np.any(np.isfinite(used.xyz[..., 0]), axis=1).sum()),
         noise_floor_mm=floor,
         noise_floor_source=source,
+        tolerance_mm=cell.tolerance_mm,
     )
     return validation_block(v, list(used.pose_ids), source)
 
@@ -423,15 +426,17 @@ def validate_diagnosis(
     d, cell: Cell, meas: Measurements, model: ModelFile, condition: float
 ) -> dict:
     """model.json's `validation` block of a diagnosis's final model: its own cross-validated
-    held-out figures against its fit, with the geometry's condition number."""
+    held-out figures against its fit, with the geometry's condition number; the report's noise
+    floor, past MAX_FLOOR_RATIO times which the model lacks an effect the report's `unexplained`
+    names."""
     from robocal.solver import validation as guard
     from robocal.solver.diagnose import FOLDS
 
-    from .validation import noise_floor, validation_block
+    from .validation import validation_block
 
     r = np.linalg.norm(model_predict(model, meas.q, meas.time_s, meas.temp_c) - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
-    floor, source = noise_floor(cell, meas)
+    floor, source = d.report["noise_floor_mm"], d.report["noise_floor_source"]
     final = d.report["final"]
     v = guard.judge(
         fit_rms_mm=float(np.sqrt(np.mean(r * r))),
@@ -442,6 +447,8 @@ def validate_diagnosis(
         poses=int(np.any(meas.mask, axis=1).sum()),
         noise_floor_mm=floor,
         noise_floor_source=source,
+        tolerance_mm=cell.tolerance_mm,
+        max_floor_ratio=guard.MAX_FLOOR_RATIO,
     )
     method = f"{FOLDS}-fold cross-validation of the diagnosis"
     return validation_block(v, list(meas.pose_ids), source, method)

@@ -59,10 +59,11 @@ def unexplained(
     """The `unexplained` block of the report (FORMATS.md section 5), or None when nothing is left.
 
     resid: (m, K, 3) held-out residual of the final model (prediction - reading), NaN if missing.
-    With a noise floor the block appears when the held-out RMS exceeds ABOVE_FLOOR times what a
-    correct model reaches held out (`reachable_mm`: the floor, raised by the noise its P fitted
-    columns carry to unseen readings, sqrt(1 + P / readings fitted) as for any least-squares
-    prediction; it matters on small campaigns). With none (one SMR a pose) the floor cannot tell
+    With a noise floor the block appears whenever the held-out RMS exceeds ABOVE_FLOOR times the
+    floor (the rule a user reads in the report); `reachable_mm` says what a correct model
+    reaches held out (the floor, raised by the noise its P fitted columns carry to unseen
+    readings, sqrt(1 + P / readings fitted), as for any least-squares prediction), so a small
+    campaign's remainder can be read against it. With none (one SMR a pose) the floor cannot tell
     noise from error, so the block appears only when some covariate explains at least STRONG of
     the remainder on left-out poses and more than any of NULL_DRAWS random deals of the
     covariates to the readings does (`chance_strength`).
@@ -77,8 +78,6 @@ def unexplained(
     pose = np.nonzero(mask)[0]
     fields = Fields(layout, x, extensions, inputs, mask)
     reach = None if floor is None else floor * np.sqrt(1.0 + fields.Q.shape[1] / (TRAINED * r.size))
-    if reach is not None and rmse <= ABOVE_FLOOR * reach:
-        return None
     cands = candidate_covariates(fields)
     covs = ranked(fields, r, pose, cands, MAX_COVARIATES)
     chance = None

@@ -31,6 +31,9 @@ MAX_CONDITION = 1e3
 # model does not predict new poses. A sound least-squares fit expects equations / (equations -
 # free): 1.14 at 30 poses of 3 SMRs.
 MAX_HOLDOUT_RATIO = 2.0
+# A diagnosed model whose held-out RMS exceeds this multiple of the noise floor lacks an effect
+# (its report's `unexplained` block says which covariates the remainder follows).
+MAX_FLOOR_RATIO = 3.0
 # The smallest singular value of I - H_p below which pose p cannot be held out.
 UNSUPPORTED = 1e-9
 
@@ -122,6 +125,7 @@ class Validation:
     noise_floor_mm: float | None
     unsupported_poses: list = field(default_factory=list)
     reasons: list[str] = field(default_factory=list)
+    tolerance_mm: float | None = None  # the accuracy the application needs, None: not given
 
     @property
     def deployable(self) -> bool:
@@ -138,8 +142,17 @@ def judge(
     poses: int,
     noise_floor_mm: float | None,
     noise_floor_source: str = "",
+    tolerance_mm: float | None = None,
+    max_floor_ratio: float | None = None,
 ) -> Validation:
-    """The guard: each limit the fit breaks is one reason, naming its figures and the limit."""
+    """The guard: each limit the fit breaks is one reason, naming its figures and the limit.
+
+    tolerance_mm: the application's accuracy, which the held-out RMS must not exceed;
+    max_floor_ratio: the multiple of the noise floor past which the held-out RMS says the model
+    lacks an effect (a diagnosis, whose vocabulary was tried: MAX_FLOOR_RATIO), None: not judged;
+    not said of a fit with too few poses or one that does not predict new poses (its held-out
+    excess is its own, not a missing effect's).
+    """
     v = Validation(
         fit_rms_mm,
         holdout.rms(),
@@ -149,6 +162,7 @@ def judge(
         free_parameters,
         noise_floor_mm,
         holdout.unsupported.tolist(),
+        tolerance_mm=tolerance_mm,
     )
     need = MIN_EQUATIONS_PER_PARAMETER * free_parameters
     if equations < need:
@@ -165,7 +179,12 @@ def judge(
             + (f" (from the {noise_floor_source})" if noise_floor_source else "")
             + ": the fit absorbed measurement noise"
         )
-    if not condition_number <= MAX_CONDITION:
+    if np.isnan(condition_number):
+        v.reasons.append(
+            "the condition number is not a figure: nothing of the arm was identified (the "
+            "nominal model, only registered on the data), or its identification failed"
+        )
+    elif not condition_number <= MAX_CONDITION:
         v.reasons.append(
             f"condition number {condition_number:.3g} exceeds {MAX_CONDITION:.0f}: the poses "
             "barely separate some parameters; measure more poses, spread over the joint ranges"
@@ -179,7 +198,8 @@ def judge(
     # near the tracker's noise is as good as any model predicts, however small the fit's
     ref = max(fit_rms_mm, noise_floor_mm or 0.0)
     ratio = v.holdout_rms_mm / ref if ref > 0 else float("inf")
-    if np.isfinite(v.holdout_rms_mm) and not ratio <= MAX_HOLDOUT_RATIO:
+    overfit = np.isfinite(v.holdout_rms_mm) and not ratio <= MAX_HOLDOUT_RATIO
+    if overfit:
         v.reasons.append(
             f"held-out RMS {v.holdout_rms_mm:.4g} mm is {ratio:.3g} x the "
             + (
@@ -190,4 +210,42 @@ def judge(
             + f" (limit {MAX_HOLDOUT_RATIO:g} x): the model does not predict poses it was not "
             "fitted on"
         )
+    v.reasons += beyond_tolerance(v.holdout_rms_mm, tolerance_mm)
+    if not overfit and equations >= need:  # else the excess is the fit's, said above
+        v.reasons += lacking_effect(v.holdout_rms_mm, noise_floor_mm, max_floor_ratio)
     return v
+
+
+def beyond_tolerance(holdout_rms_mm: float, tolerance_mm: float | None) -> list[str]:
+    """The reason a held-out error beyond the application's tolerance gives (none within)."""
+    if tolerance_mm is None:
+        return []
+    if not np.isfinite(holdout_rms_mm):
+        return [
+            f"the held-out error is unknown (no pose could be held out): it cannot be judged "
+            f"against the tolerance {tolerance_mm:g} mm"
+        ]
+    if holdout_rms_mm <= tolerance_mm:
+        return []
+    # three digits, more where they would print the tolerance itself (0.30004 beyond 0.3)
+    digits = next((n for n in range(3, 8) if float(f"{holdout_rms_mm:.{n}g}") > tolerance_mm), 8)
+    return [
+        f"held-out error {holdout_rms_mm:.{digits}g} mm RMS exceeds the tolerance "
+        f"{tolerance_mm:g} mm"
+    ]
+
+
+def lacking_effect(
+    holdout_rms_mm: float, noise_floor_mm: float | None, max_floor_ratio: float | None
+) -> list[str]:
+    """The reason a held-out error far above the noise floor gives: the model lacks an effect."""
+    if not max_floor_ratio or not noise_floor_mm or not np.isfinite(holdout_rms_mm):
+        return []
+    ratio = holdout_rms_mm / noise_floor_mm
+    if ratio <= max_floor_ratio:
+        return []
+    return [
+        f"held-out error {holdout_rms_mm:.3g} mm is {ratio:.3g}x the noise floor "
+        f"{noise_floor_mm:.3f} mm (more than {max_floor_ratio:g}x): an effect the model lacks "
+        "(see unexplained)"
+    ]

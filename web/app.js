@@ -487,7 +487,8 @@ async function showDiagnosis(d) {
   const b = report.baseline, f = report.final;
   $("d-state").textContent = `geometric model: held-out RMS ${fmt(b.holdout_rmse_mm)} mm; `
     + `${f.model}: ${fmt(f.holdout_rmse_mm)} mm (noise floor `
-    + `${report.noise_floor_mm ? `${fmt(report.noise_floor_mm)} mm` : "unknown"})`;
+    + `${report.noise_floor_mm ? `${fmt(report.noise_floor_mm)} mm` : "unknown"}`
+    + `${report.noise_floor_source ? `, from the ${report.noise_floor_source}` : ""})`;
   if (!report.effects.length) {
     $("d-effects").innerHTML = '<p id="d-none">No effect beyond geometry pays off on held-out poses.</p>';
   } else {

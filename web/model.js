@@ -119,6 +119,7 @@ function renderValidation(v) {
         : "")
         + ` · fit RMS ${fmt(v.fit_rms_mm)} mm`
         + (v.noise_floor_mm ? ` · noise floor ${fmt(v.noise_floor_mm)} mm` : "")
+        + (v.noise_floor_mm && v.noise_floor_source ? ` (from the ${v.noise_floor_source})` : "")
         + (v.holdout && !h ? ` (held out: ${v.holdout})` : "") }));
   const parts = [headline];
   if (h && h.warning) {
@@ -134,8 +135,15 @@ function renderValidation(v) {
     warn.append(heading("Not fit to deploy", "strong"), list);
     parts.push(warn);
   } else {
+    // the accuracy to expect, against the tolerance when one was given: never a bare "fit to
+    // deploy", which a user would read as "accurate enough for anything"
     parts.push(Object.assign(document.createElement("p"), { id: "m-fit-ok", className: "muted",
-      textContent: "The data supports this model: fit to deploy." }));
+      textContent: `Deployable: ${v.summary || `expected accuracy ${fmt(v.holdout_rms_mm)} mm `
+        + "RMS held out"}.` }));
+  }
+  if (unfit && v.summary) {
+    parts.push(Object.assign(document.createElement("p"), { id: "m-expected", className: "muted",
+      textContent: `${v.summary[0].toUpperCase()}${v.summary.slice(1)}.` }));
   }
   box.replaceChildren(...parts);
 }

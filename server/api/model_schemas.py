@@ -74,6 +74,8 @@ class Validation(BaseModel):
 
     deployable: bool
     reasons: list[str] = Field(description="each limit the fit breaks, with its figures")
+    summary: str | None = Field(None, description="the accuracy to expect on new poses")
+    tolerance_mm: float | None = Field(None, description="the accuracy the application needs")
     holdout_rms_mm: float | None = Field(description="leave-one-pose-out RMS per reading")
     holdout_max_mm: float | None
     fit_rms_mm: float | None
@@ -105,5 +107,10 @@ class ValidationSummary(BaseModel):
 
     deployable: bool
     reasons: list[str]
+    summary: str | None = Field(None, description="the accuracy to expect on new poses")
     holdout_rms_mm: float | None
+    holdout_max_mm: float | None = None
     fit_rms_mm: float | None
+    tolerance_mm: float | None = Field(None, description="the accuracy the application needs")
+    noise_floor_mm: float | None = None
+    noise_floor_source: str | None = Field(None, description="where the noise floor comes from")

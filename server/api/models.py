@@ -102,7 +102,7 @@ def evaluate_model(
             raise store.Conflict(unmeasured(info))
         require_inputs(meas.q, meas.xyz)  # a non-finite campaign: 422 at once, no worker
         result = run_call(jobs, charts.evaluation, path, meas)
-    why = absurd_errors(result, model.meta)
+    why = absurd_errors(result, model.verdict)
     if why:
         if not force:
             raise HTTPException(422, f"campaign {campaign_id}: {why}; force=true to go on")

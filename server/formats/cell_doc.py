@@ -210,6 +210,10 @@ class DevicesDoc(Doc):
     controller: ControllerAddress
 
 
+# a positive length in mm, at most a metre (a tolerance, not a coordinate)
+Tolerance = Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0.0, le=1000.0)]
+
+
 class CellDoc(Doc):
     """A cell.json: the robot, its SMR targets (flange frame, mm) and the tracker setup."""
 
@@ -228,6 +232,11 @@ class CellDoc(Doc):
     )
     tracker: TrackerDoc = Field(default_factory=TrackerDoc)
     payload_kg: NonNegative | None = None
+    tolerance_mm: Tolerance | None = Field(
+        None,
+        description="the positioning accuracy the application needs, mm: a model whose held-out "
+        "error exceeds it is not deployable",
+    )
     devices: DevicesDoc | None = None
 
     @field_validator("targets")

@@ -42,6 +42,7 @@ class Cell:
     payload_kg: float | None = None
     devices: Devices | None = None  # None: the simulated cell
     tracker_spec_given: bool = False  # tracker holds the default spec unless the file gave one
+    tolerance_mm: float | None = None  # the accuracy the application needs; None: not given
 
     @property
     def simulated(self) -> bool:
@@ -80,6 +81,7 @@ def cell_from_doc(c: CellDoc) -> Cell:
         c.payload_kg,
         devices,
         bool({"mpe_um", "mpe_um_per_m"} & c.tracker.model_fields_set),
+        c.tolerance_mm,
     )
 
 
@@ -136,6 +138,8 @@ def cell_to_json(cell: Cell) -> dict:
     }
     if cell.payload_kg is not None:
         out["payload_kg"] = float(cell.payload_kg)
+    if cell.tolerance_mm is not None:
+        out["tolerance_mm"] = float(cell.tolerance_mm)
     if cell.devices is not None:
         out["devices"] = devices_to_json(cell.devices)
     return out

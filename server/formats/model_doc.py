@@ -131,10 +131,21 @@ class UncertaintyDoc(_Open):
 
 
 class ValidationDoc(_Open):
-    deployable: Annotated[bool, Field(strict=True)] = Field(
-        True, description="false: compensate and export refuse the model unless forced"
+    deployable: Annotated[bool, Field(strict=True)] | None = Field(
+        None,
+        description="false, or missing: compensate and export refuse the model unless forced",
     )
     reasons: list[Text] = Field([], description="why not deployable, one sentence each")
+    holdout_rms_mm: Statistic | None = Field(None, description="the held-out RMS, mm")
+    holdout_max_mm: Statistic | None = Field(None, description="the held-out maximum, mm")
+    tolerance_mm: Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)] | None = Field(
+        None,
+        description="the accuracy the application needs (--tolerance-mm, else the cell's "
+        "`tolerance_mm`), mm; null: none given",
+    )
+    summary: Text | None = Field(
+        None, description="the accuracy to expect on new poses, in one sentence"
+    )
 
 
 class ModelDoc(Doc):
@@ -167,7 +178,8 @@ class ModelDoc(Doc):
     )
     validation: ValidationDoc | None = Field(
         None,
-        description="whether the data supports the model: `deployable`, `reasons`, "
+        description="whether the model may be deployed: `deployable` (false whenever the "
+        "held-out error exceeds `tolerance_mm`), `reasons`, `summary`, "
         "`holdout_rms_mm` (leave-one-pose-out, the headline), `fit_rms_mm`, "
         "`condition_number`, `noise_floor_mm`, `limits`; `held_out` with the errors on a "
         "separate held-out campaign or file, when there is one",

@@ -18,6 +18,7 @@ from .cell_json import robot_to_json
 from .files import atomic_write_text, read_text
 from .json_doc import JsonDoc
 from .model_doc import SCHEMA, ModelDoc
+from .verdict import Verdict
 
 # what ModelFile holds apart from `meta`
 MODEL_KEYS = ("schema", "robot", "nominal_robot", "base", "targets", "extensions")
@@ -36,6 +37,12 @@ class ModelFile:
     parameters: list | None = None  # per extension, its parameters in edge units (for people)
     # per extension: {"coef_standard_errors": [...], "uncertainty": {parameter: standard error}}
     extension_errors: list | None = None
+
+    @property
+    def verdict(self) -> Verdict:
+        """Its `validation` block, typed: what compensate, export, the service and the page
+        read (none: not deployable)."""
+        return Verdict.of(self.meta.get("validation"))
 
     def layout(self) -> tuple[Layout, np.ndarray]:
         """The kinematic layout and parameter vector that reproduce this model's predictions."""

@@ -219,3 +219,12 @@ def test_demo_runs_the_whole_job(tmp_path):
         timeout=120,
     )
     assert v.returncode == 0, v.stderr
+    # "after" is the final, extended model; the minimax calibration beside it as "geometric"
+    printed = subprocess.run(
+        [str(rerun), "rrd", "print", str(out / "calibration.rrd")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    ).stdout
+    assert "/world/poses/held_out/error/geometric" in printed
+    assert "/errors/per_pose/held_out/after" in printed

@@ -280,9 +280,18 @@ def test_extended_model_exports_its_geometry_and_says_so(tmp_path, capsys):
     model = random_model(cell.robot, seed=5)
     model.extensions = [Extension("joint_scale", joint=1, coef=np.array([2e-5]))]
     write_model(tmp_path / "model.json", model)
+    # a made-up model has no validation verdict: refused in one line, exported with --force
+    code, _, err = run_export(tmp_path / "model.json", "--out", tmp_path / "r.urdf", capsys=capsys)
+    assert code == 1 and len(err.strip().splitlines()) == 1, err
+    assert "the model is not deployable: the model has no validation verdict" in err, err
+    assert not (tmp_path / "r.urdf").exists()
     for name in ("robot.urdf", "params.csv"):
-        code, out, _ = run_export(tmp_path / "model.json", "--out", tmp_path / name, capsys=capsys)
+        path = tmp_path / name
+        code, out, err = run_export(
+            tmp_path / "model.json", "--out", path, "--force", capsys=capsys
+        )
         assert code == 0 and "note: the model's extensions (" in out and "geometric part" in out
+        assert err.startswith("robocal: warning: ") and "no validation verdict" in err, err
     back = read_model(tmp_path / "model.json")
     q = random_joints(back.robot, 10, seed=6)
     text = (tmp_path / "robot.urdf").read_text()

@@ -266,3 +266,42 @@ def test_recording_streams_live_to_a_viewer(tmp_path):
     finally:
         if server.poll() is None:
             server.kill()
+
+
+def test_a_diagnosis_recording_shows_the_final_model_after_and_the_geometric_beside(tmp_path):
+    """The demo's recording of a diagnosis: "after" is the final, extended model (its errors as
+    `evaluate` gives them), the geometric calibration beside it under its own entities."""
+    from robocal.server import workflow
+
+    from tests.server.test_validation_model import campaign as effect_campaign
+
+    cell, meas = effect_campaign(50, 21, ("joint_compliance:2",))
+    fit, held = meas.subset(np.arange(40)), meas.subset(np.arange(40, 50))
+    cal = run_method(cell, fit, "ls-sum")
+    d, model = workflow.diagnose(cell, fit, screen=False)
+    assert d.extensions, "the diagnosis found the compliance"
+    out = record_calibration(
+        tmp_path / "d.rrd", cell=cell, meas=fit, calibration=cal, held_out=held, extended=model
+    )
+    text = _cli("print", str(out)).stdout
+    for entity in (
+        "world/poses/held_out/error/geometric",
+        "world/frames/geometric/links",
+        "errors/per_pose/calibration/geometric",
+    ):
+        assert f"- /{entity} -" in text, entity
+    for entity in ("arm/geometric", "error/after", "error/geometric"):
+        assert 50 in _rows(text, f"world/pose/{entity}"), entity
+    chunks = _chunks(out)
+    for kind, m in (("calibration", fit), ("held_out", held)):
+        after = np.array(_static(chunks, f"/world/poses/{kind}/error/after", "Arrows3D:vectors"))
+        geo = np.array(_static(chunks, f"/world/poses/{kind}/error/geometric", "Arrows3D:vectors"))
+        rms_after = np.sqrt(np.mean(np.sum((after / 100.0) ** 2, axis=-1)))
+        rms_geo = np.sqrt(np.mean(np.sum((geo / 100.0) ** 2, axis=-1)))
+        assert rms_after == pytest.approx(workflow.evaluate(model, m)["model"]["rmse"], rel=1e-3)
+        e = np.linalg.norm(m.xyz - predict(cal.layout, cal.x, m.q), axis=-1)
+        assert rms_geo == pytest.approx(np.sqrt(np.nanmean(e * e)), rel=1e-3)
+        assert rms_after < 0.7 * rms_geo, (kind, rms_after, rms_geo)
+    summary = _static(chunks, "/summary", "TextDocument:text")[0]
+    assert f"after: the diagnosis's final model **{d.report['final']['model']}**" in summary
+    assert "| RMS before | RMS after | RMS geometric |" in summary

@@ -56,7 +56,7 @@ def test_a_healthy_campaign_is_deployable_and_another_cell_is_refused(tmp_path):
         assert robocal(*args, cwd=tmp_path).returncode == 0
     r = robocal("calibrate", "m2.csv", "--out", "m2.json", cwd=tmp_path)
     assert r.returncode == 0 and r.stderr == "", r.stderr
-    assert "deployable: every validation limit holds" in r.stdout
+    assert "deployable: expected accuracy on new poses " in r.stdout
     assert "Identified base and SMR frames" in r.stdout and "strongest correlations:" in r.stdout
     line = next(x for x in r.stdout.splitlines() if x.startswith("held-out RMS"))
     assert line.index("held-out RMS") < line.index("fit RMS")
@@ -99,7 +99,7 @@ def test_diagnose_reports_the_final_models_parameter_table_and_verdict(tmp_path)
     assert rows["theta2"]["status"] == "identified" and rows["theta2"]["standard_error"] > 0
     assert {"parameter": "theta1", "why": "redundant with base_rz"} in report["identified"]["fixed"]
     out = r.stdout
-    assert "(5-fold, max" in out and "deployable: every validation limit holds" in out, out
+    assert "(5-fold, max" in out and "deployable: expected accuracy on new poses " in out, out
     assert out.index("held-out RMS") < out.index("Identified geometry") < out.index("SMR A")
     assert "strongest correlations: " in out
 

@@ -253,3 +253,19 @@ def test_two_hidden_effects_are_the_first_two(seed):
     }, covs[:3]
     assert covs[2]["strength"] < 0.05, covs[2]
     assert "a further" in covs[1]["reading"]
+
+
+@pytest.mark.parametrize("ratio,shown", [(1.49, False), (1.51, True)])
+def test_the_block_appears_exactly_above_one_and_a_half_times_the_floor(ratio, shown):
+    """The rule the report states: a block whenever the held-out RMS exceeds 1.5x the floor, on
+    either side of it by 1% (a 30-pose campaign: what a correct model reaches held out is above
+    the floor there, which once kept the block away up to 1.6x)."""
+    cell, _, meas = campaign(7, poses=30)
+    cv, layout, x, exts, inputs, _ = geometric_remainder(cell, meas)
+    mask = np.all(np.isfinite(cv.resid), axis=-1)
+    rmse = float(np.sqrt(np.mean(np.sum(cv.resid[mask] ** 2, axis=-1))))
+    block = unexplained(cv.resid, layout, x, exts, inputs, rmse / ratio, cv.mse)
+    assert (block is not None) is shown, block
+    if shown:
+        assert block["noise_floor_ratio"] == pytest.approx(ratio)
+        assert block["reachable_mm"] > rmse / ratio  # said, no longer a gate

@@ -140,6 +140,7 @@ def test_hidden_effect_is_named_with_its_evidence_and_figure(served, page, tmp_p
     assert after < 0.7 * before, cells  # the extension removes most of the held-out error
     state = page.text_content("#d-state")
     assert "geometric model: held-out RMS" in state and f"+{name}" in state, state
+    assert " mm, from the SMR-to-SMR distances in the data)" in state, state  # the floor's source
 
     # Its figure: one per effect, loaded as a real picture, captioned with the effect it shows.
     n_effects = page.locator("#effects-table tbody tr").count()

@@ -118,6 +118,9 @@ def test_healthy_model_parameters_as_the_api_gives_them(served, page):
     assert page.text_content("#m-headline").startswith(
         f"Held-out RMS {fmt(v['holdout_rms_mm'])} mm · fit RMS {fmt(v['fit_rms_mm'])} mm"
     )
+    # the floor with its source; the accuracy to expect, never a bare "fit to deploy"
+    assert f"(from the {v['noise_floor_source']})" in page.text_content("#m-headline")
+    assert page.text_content("#m-fit-ok") == f"Deployable: {v['summary']}."
 
     # One row per joint, each kind's change ± its standard error, as the API gives them.
     ident = p["identified"]

@@ -5,9 +5,11 @@ refused with the reason."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
+from robocal.server.formats.verdict import NO_VERDICT
 
 from tests.server.api.test_verify_api import calibrate, run_campaign
 
@@ -73,9 +75,20 @@ def test_a_healthy_campaign_is_deployable_with_its_parameter_table(live):
     assert ident["condition_number"] == pytest.approx(v["condition_number"])
     r = c.post(f"/api/models/{job}/export", params={"format": "params"})
     assert r.status_code == 200, r.text
+    # the job's summary carries the accuracy to expect and the floor's source
+    assert j["validation"]["summary"].startswith("expected accuracy on new poses"), j
+    assert j["validation"]["noise_floor_source"] == v["noise_floor_source"]
     # its own campaign is of its cell: evaluated without a warning
     e = c.get(f"/api/models/{job}/evaluate", params={"campaign_id": cid})
     assert e.status_code == 200 and "warnings" not in e.json(), e.text
+    # the same model without its verdict (as written before the guard): never deployable
+    path = live.settings.models_dir / f"job-{job}.model.json"
+    model = json.loads(path.read_text())
+    del model["validation"]
+    path.write_text(json.dumps(model))
+    r = c.post(f"/api/models/{job}/export", params={"format": "params"})
+    assert r.status_code == 409 and r.headers["content-type"] == PROBLEM, r.text
+    assert f"the model is not deployable: {NO_VERDICT}" in r.json()["detail"], r.text
 
 
 @pytest.mark.sqlite_only
