@@ -37,16 +37,16 @@ def _named(paths: dict[str, str]):
 
 def compensated_csv(model_path, data: bytes, filename: str, tcp, max_error_mm, report=None):
     """joints.csv (text) for an uploaded targets.csv; InputError names the upload's line."""
-    from .compensation import compensate_file
+    from .compensation import Limits, compensate_file
     from .formats.joints_csv import write_joints
 
     with tempfile.TemporaryDirectory(prefix="robocal-compensate-") as tmp:
         folder = Path(tmp)
         targets = _upload(folder, filename, data)
         with _named({str(targets): filename, str(model_path): Path(model_path).name}):
-            ids, q_deg, err = compensate_file(model_path, targets, tcp, max_error_mm)
+            c = compensate_file(model_path, targets, tcp, Limits(max_error_mm=max_error_mm))
         out = folder / "joints.out.csv"
-        write_joints(out, ids, q_deg, err)
+        write_joints(out, c.pose_ids, c.q_deg, c.error_mm)
         return out.read_text(encoding="utf-8")
 
 

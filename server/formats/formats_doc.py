@@ -10,6 +10,8 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+from robocal.solver.configuration import CF_COLUMNS
+
 from .campaign_csv import BOUNDS, EXTRAS, MEASURED
 from .json_schema import MODELS, committed
 from .targets_csv import ANGLE_BOUNDS, ORIENTATION
@@ -63,11 +65,14 @@ CSV_FILES = (
         "targets.csv",
         "where the SMRs (or, with --tcp, the tool point) must go",
         ("pose", "target", *MEASURED),
-        (JOINTS, *EXTRAS, *ORIENTATION),
+        (JOINTS, *CF_COLUMNS, *EXTRAS, *ORIENTATION),
         "compensate, export --targets",
         "-",
-        f"{JOINTS} (all or none) start the search; {', '.join(ORIENTATION)} (all three, "
-        "degrees, Rz Ry Rx) give the tool's orientation with --tcp.",
+        f"Every pose gives {JOINTS} (all or none: the starting joints, which keep their "
+        f"configuration) or {', '.join(CF_COLUMNS)} (all or none: ABB's confdata, see "
+        "[configuration.md](configuration.md)); a pose with neither is refused. "
+        f"{', '.join(ORIENTATION)} (all three, degrees, Rz Ry Rx) give the tool's orientation "
+        "with --tcp.",
     ),
     CsvFile(
         "joints.csv",
@@ -96,6 +101,10 @@ def column_unit(column: str) -> str:
     if column in BOUNDS:
         (lo, hi), why = BOUNDS[column]
         return f"{why.split(' (')[0]}, {lo:g} to {hi:g}"
+    if column in CF_COLUMNS[:-1]:
+        return "integer: the quadrant of joint " + column[2:] + ", within its limits"
+    if column == CF_COLUMNS[-1]:
+        return "integer: the arm configuration, 0 to 7"
     if column == "predicted_error_mm":
         return "mm"
     if column == "pose":

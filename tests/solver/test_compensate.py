@@ -13,8 +13,10 @@ from robocal.server.compensation import solver_model
 from robocal.server.formats.cell_json import Cell, default_cell
 from robocal.solver.calibrate import calibrate
 from robocal.solver.compensate import Model, compensate
+from robocal.solver.configuration import confdata
+from robocal.solver.robot import IRB2600
 
-from tests.robots import PUMA_LIKE
+from tests.robots import PUMA_LIKE, UR5
 
 GRAVITY_JOINTS = (2, 3)  # joints carrying a large gravity torque on both arms
 
@@ -68,19 +70,61 @@ def test_compensated_joints_put_the_true_arm_on_target(robot, seed):
     assert miss(nominal.q) > max(0.5, 20 * miss(calibrated.q))
 
 
-def test_one_smr_a_pose_without_a_guess_and_the_models_own_prediction():
-    """One SMR a pose and no starting guess: the search finds joints the model puts there, and
-    its reported miss is the model file's own prediction's (workflow.model_predict)."""
+def test_one_smr_a_pose_in_a_configuration_and_the_models_own_prediction():
+    """One SMR a pose and only its configuration: joints in that configuration that the model
+    puts there, and the reported miss is the model file's own prediction's
+    (workflow.model_predict)."""
     cell, vc, meas, model = simulated("irb2600", 21)
     q_want = vc.sample_poses(40, np.random.default_rng(5))
     desired = vc.true_points(q_want)
     mask = np.zeros(desired.shape[:2], dtype=bool)
     mask[np.arange(40), np.arange(40) % 3] = True
-    res = compensate(solver_model(model), desired, mask)
+    cf = confdata(cell.robot, q_want)
+    res = compensate(solver_model(model), desired, mask, cf=cf)
     assert res.converged.all() and res.error_mm.max() < 1e-6
+    assert (confdata(cell.robot, res.q) == cf).all()
     pred = workflow.model_predict(model, res.q)
     assert np.abs(pred[mask] - desired[mask]).max() < 1e-6
     assert np.all((res.q >= vc.true_robot.lower) & (res.q <= vc.true_robot.upper))
+
+
+@pytest.mark.parametrize("robot", [IRB2600, PUMA_LIKE, UR5])
+def test_a_configuration_alone_gives_back_the_joints_it_was_taken_from(robot):
+    """Joints drawn at random, their confdata computed, the SMRs they put on target asked for
+    with the confdata alone: the same joints (one solution a configuration), where the old
+    search from fixed starts turned joint 1 or the wrist half a turn away."""
+    vc = VirtualCell.random(robot, default_cell().targets, seed=3)
+    model = Model(*_true_layout(vc), [], robot)
+    q = vc.sample_poses(30, np.random.default_rng(1))
+    desired = vc.true_points(q)
+    res = compensate(model, desired, np.ones(desired.shape[:2], dtype=bool), cf=confdata(robot, q))
+    assert res.error_mm.max() < 1e-6
+    assert np.degrees(np.abs(res.q - q)).max() < 1e-3
+
+
+def test_neither_joints_nor_configuration_is_refused():
+    vc = VirtualCell.random(IRB2600, default_cell().targets, seed=3)
+    model = Model(*_true_layout(vc), [], IRB2600)
+    q = vc.sample_poses(3, np.random.default_rng(1))
+    desired = vc.true_points(q)
+    q0 = q.copy()
+    q0[1] = np.nan
+    with pytest.raises(ValueError, match="pose 2 has neither starting joints nor a configuration"):
+        compensate(model, desired, np.ones(desired.shape[:2], dtype=bool), q0)
+
+
+def test_a_configuration_the_arm_cannot_take_there_has_no_solution():
+    """Joint 1 asked in the quadrant opposite the target: no joints, an infinite miss."""
+    vc = VirtualCell.random(IRB2600, default_cell().targets, seed=3)
+    model = Model(*_true_layout(vc), [], IRB2600)
+    q = vc.sample_poses(4, np.random.default_rng(1))
+    desired = vc.true_points(q)
+    cf = confdata(IRB2600, q)
+    cf[2, 0] = cf[2, 0] + 2 if cf[2, 0] < 0 else cf[2, 0] - 2
+    cf[2, 3] &= 3  # wrist centre in front of axis 1: the target is behind it
+    res = compensate(model, desired, np.ones(desired.shape[:2], dtype=bool), cf=cf)
+    assert np.isnan(res.q[2]).all() and np.isinf(res.error_mm[2])
+    assert res.error_mm[[0, 1, 3]].max() < 1e-6
 
 
 def test_a_target_out_of_reach_keeps_its_miss():
