@@ -235,9 +235,9 @@ def cmd_predict(args) -> None:
     from .formats.campaign_csv import read_poses, write_predictions
 
     model = workflow.read_model(args.model)
-    pose_ids, q, time_s, temp_c = read_poses(args.poses, model.robot)
+    pose_ids, q, time_s, temp_c, prev_q = read_poses(args.poses, model.robot)
     try:
-        xyz = workflow.model_predict(model, q, time_s, temp_c)
+        xyz = workflow.model_predict(model, q, time_s, temp_c, prev_q)
     except workflow.DataError as e:
         raise workflow.DataError(f"{args.poses}: {e}") from None
     write_predictions(args.out, pose_ids, list(model.targets), xyz)

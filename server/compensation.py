@@ -172,6 +172,7 @@ def compensate_targets(
         targets.time_s,
         targets.temp_c,
         cf=np.where(guess[:, None], np.nan, cf),
+        prev_q=targets.prev_q,
     )
     _refuse_first(
         targets,

@@ -39,18 +39,19 @@ class Model:
         lay = Layout(self.nominal, np.eye(4), self.layout.target_names)
         return lay, lay.initial(np.zeros((len(self.layout.target_names), 3)))
 
-    def evaluate(self, q, time_s=None, temp_c=None):
+    def evaluate(self, q, time_s=None, temp_c=None, prev_q=None):
         """SMR centres (m, K, 3) at joints q (m, n) rad and their joint Jacobian (m, K, 3, n).
 
-        time_s and temp_c are per reading (m, K) or None; the poses are taken as visited in
-        time_s order, else in row order (the backlash's approach direction).
+        time_s and temp_c are per reading (m, K) or None; the backlash's approach direction
+        comes from prev_q (m, n) rad, the joints the arm comes from (NaN rows: not given), else
+        from the poses as visited in time_s order, else in row order.
         """
         q = np.atleast_2d(np.asarray(q, dtype=float))
         m, K = q.shape[0], len(self.layout.target_names)
         dq = None
         shifts = []
         if self.extensions:
-            inputs = Inputs(q, time_s, temp_c)
+            inputs = Inputs(q, time_s, temp_c, prev_q=prev_q)
             blay, bx = self._basis_layout()
             bases = [prepare(e, blay, bx, inputs) for e in self.extensions]
             dq = joint_offsets(self.extensions, bases, q.shape[1])
@@ -64,8 +65,8 @@ class Model:
         J = np.moveaxis(Jq.reshape(q.shape[1], m, K, 3), 0, -1)
         return (p + moved).reshape(m, K, 3), J
 
-    def predict(self, q, time_s=None, temp_c=None) -> np.ndarray:
-        return self.evaluate(q, time_s, temp_c)[0]
+    def predict(self, q, time_s=None, temp_c=None, prev_q=None) -> np.ndarray:
+        return self.evaluate(q, time_s, temp_c, prev_q)[0]
 
 
 @dataclass
@@ -94,6 +95,7 @@ def solve(
     time_s=None,
     temp_c=None,
     max_iter: int = 100,
+    prev_q=None,
 ) -> Compensation:
     """Joints from the starts q0 (m, n) rad that put the model's SMRs on desired (m, K, 3) mm
     where mask (m, K) is set, within [lower, upper]; least squares per pose, all poses at once."""
@@ -102,7 +104,7 @@ def solve(
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     q = np.clip(np.array(q0, dtype=float), lower, upper)
     m, n = q.shape
-    p, J = model.evaluate(q, time_s, temp_c)
+    p, J = model.evaluate(q, time_s, temp_c, prev_q)
     r, cost = _cost(p, desired, w)
     mu = np.full(m, 1e-3)
     done = np.zeros(m, dtype=bool)
@@ -117,7 +119,7 @@ def solve(
         step = -np.linalg.solve(A + (mu[:, None, None] * scale) * eye, g[..., None])[..., 0]
         step[done] = 0.0
         trial = np.clip(q + step, lower, upper)
-        p_t, J_t = model.evaluate(trial, time_s, temp_c)
+        p_t, J_t = model.evaluate(trial, time_s, temp_c, prev_q)
         r_t, cost_t = _cost(p_t, desired, w)
         better = (cost_t <= cost) & ~done
         q[better], r[better], cost[better], J[better] = (
@@ -130,7 +132,7 @@ def solve(
         small = np.max(np.abs(step), axis=1) < STEP_TOL_RAD
         done |= (better & small) | (~better & (mu >= 1e12)) | (cost < 1e-24)
     # the backlash couples poses: report the miss of the joints as they stand, all together
-    p, _ = model.evaluate(q, time_s, temp_c)
+    p, _ = model.evaluate(q, time_s, temp_c, prev_q)
     r, cost = _cost(p, desired, w)
     count = np.maximum(w.sum(axis=1), 1.0)
     return Compensation(q, np.sqrt(cost / count), done, iterations)
@@ -145,6 +147,7 @@ def compensate(
     temp_c=None,
     max_iter: int = 100,
     cf=None,
+    prev_q=None,
 ) -> Compensation:
     """Joint commands (rad) for which the model puts its SMRs on desired (m, K, 3) where mask
     (m, K) is set, within the robot's limits.
@@ -154,7 +157,8 @@ def compensate(
     a guess is given): its joints are then solved in that configuration only, and a pose with no
     solution there keeps NaN joints and an infinite error. ValueError for a pose with neither:
     joints are never chosen in a configuration nobody asked for. time_s and temp_c are per
-    reading (m, K) or None, as the model's extensions need them.
+    reading (m, K) or None, as the model's extensions need them; prev_q (m, n) rad the joints
+    the arm comes from (NaN rows: not given; the backlash's approach).
     """
     desired = np.asarray(desired, dtype=float)
     mask = np.asarray(mask, dtype=bool)
@@ -177,7 +181,7 @@ def compensate(
         q[~guess], lower[~guess], upper[~guess] = found, lo, hi
     none = ~np.all(np.isfinite(q), axis=1)
     start = np.where(none[:, None], 0.5 * (lower + upper), q)
-    res = solve(model, desired, mask, start, lower, upper, time_s, temp_c, max_iter)
+    res = solve(model, desired, mask, start, lower, upper, time_s, temp_c, max_iter, prev_q)
     res.q[none] = np.nan
     res.error_mm[none] = np.inf
     res.converged[none] = False

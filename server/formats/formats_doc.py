@@ -18,6 +18,13 @@ from .targets_csv import ANGLE_BOUNDS, ORIENTATION
 
 PAGE = Path(__file__).resolve().parents[2] / "docs" / "formats.md"
 JOINTS = "q1..qN"  # one column per joint, in degrees, within the robot's joint limits
+PREV = "prev_q1..prev_qN"  # the joints the arm came from before the pose
+PREV_NOTE = (
+    f"{PREV} (all or none on a row, the same on every row of a pose) are the joints the arm came "
+    "from before the pose: where given, they set the direction of each joint's last motion "
+    "(backlash) in place of the visit order (time_s, else the file order), so a file split or "
+    "reordered keeps it."
+)
 
 
 @dataclass(frozen=True)
@@ -38,20 +45,20 @@ CSV_FILES = (
         "meas.csv",
         "a measurement campaign: one row per (pose, SMR) reading",
         ("pose", JOINTS, "target", *MEASURED),
-        EXTRAS,
+        (*EXTRAS, PREV),
         "calibrate, evaluate, compare, diagnose, predict (as poses)",
         "simulate; the API's measurements.csv",
         "Rows of one pose repeat its joints exactly; a (pose, target) pair appears once; "
-        "an SMR not measured at a pose has no row.",
+        "an SMR not measured at a pose has no row. " + PREV_NOTE,
     ),
     CsvFile(
         "poses.csv",
         "poses to predict SMR positions for",
         ("pose", JOINTS),
-        (*EXTRAS, "target"),
+        (*EXTRAS, "target", PREV),
         "predict",
         "-",
-        "A meas.csv is accepted: its measured columns are ignored.",
+        "A meas.csv is accepted: its measured columns are ignored. " + PREV_NOTE,
     ),
     CsvFile(
         "pred.csv",
@@ -65,14 +72,14 @@ CSV_FILES = (
         "targets.csv",
         "where the SMRs (or, with --tcp, the tool point) must go",
         ("pose", "target", *MEASURED),
-        (JOINTS, *CF_COLUMNS, *EXTRAS, *ORIENTATION),
+        (JOINTS, *CF_COLUMNS, *EXTRAS, PREV, *ORIENTATION),
         "compensate, export --targets",
         "-",
         f"Every pose gives {JOINTS} (all or none: the starting joints, which keep their "
         f"configuration) or {', '.join(CF_COLUMNS)} (all or none: ABB's confdata, see "
         "[configuration.md](configuration.md)); a pose with neither is refused. "
         f"{', '.join(ORIENTATION)} (all three, degrees, Rz Ry Rx) give the tool's orientation "
-        "with --tcp.",
+        "with --tcp. " + PREV_NOTE,
     ),
     CsvFile(
         "joints.csv",
@@ -93,7 +100,7 @@ JSON_FILES = {
 
 def column_unit(column: str) -> str:
     """A column's unit and range, from the bounds the readers enforce."""
-    if column == JOINTS:
+    if column in (JOINTS, PREV):
         return "deg, within the joint limits"
     if column in ORIENTATION:
         (lo, hi), unit = ANGLE_BOUNDS

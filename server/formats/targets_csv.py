@@ -8,7 +8,15 @@ import numpy as np
 from robocal.solver import configuration
 from robocal.solver.robot import Robot
 
-from .campaign_csv import BOUNDS, EXTRAS, MEASURED, joint_columns, joint_deg
+from .campaign_csv import (
+    BOUNDS,
+    EXTRAS,
+    MEASURED,
+    PrevJoints,
+    joint_columns,
+    joint_deg,
+    prev_header,
+)
 from .csv_table import Row, Table
 from .errors import InputError
 
@@ -31,6 +39,8 @@ class Targets:
     orientation: np.ndarray | None = None
     # per pose ABB's confdata cf1, cf4, cf6, cfx (m, 4), NaN where a pose gives none
     cf: np.ndarray | None = None
+    # per pose the joints the arm comes from (m, n) rad, NaN where a pose gives none
+    prev_q: np.ndarray | None = None
 
 
 ORIENTATION = ("rx", "ry", "rz")
@@ -59,6 +69,7 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
             f"missing column '{missing}': a tool orientation is rx, ry, rz",
         )
     cfs = _cf_columns(t, robot)
+    prev = PrevJoints(t, robot, prev_header(t, robot))
     t.require_rows()
     names = tuple(names)
     turn: dict[int, tuple[Row, list[float]]] = {}
@@ -95,6 +106,7 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
                 f"the starting guess differs from line {first[k].line}, an earlier row of "
                 f"pose {pid!r}",
             )
+        prev.add(row, k, pid)
         target = t.text(row, "target")
         if target not in col:
             raise t.error(
@@ -149,6 +161,7 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
         [r.line for r in first],
         _orientations(turn, m) if orientation else None,
         np.array([[np.nan] * 4 if c is None else c for c in confs], dtype=float).reshape(m, 4),
+        prev.rad(m),
     )
 
 

@@ -199,3 +199,24 @@ def test_a_pose_beyond_a_joint_limit_stays_within_it_and_keeps_its_miss():
     assert np.all((res.q >= vc.true_robot.lower) & (res.q <= vc.true_robot.upper))
     assert res.error_mm[2] > 10.0
     assert res.error_mm[[0, 1, 3]].max() < 1e-6
+
+
+def test_prev_q_gives_a_shuffled_program_its_approach_directions():
+    """The same backlash model and targets, shuffled, with the joints each pose comes from: the
+    joints found are those of the program in order; shuffled without them, they are not."""
+    from robocal.solver.effects import Extension
+
+    cell = default_cell()
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=4)
+    ext = Extension("joint_backlash", joint=1, coef=np.array([-np.deg2rad(0.05)]))
+    model = Model(*_true_layout(vc), [ext], cell.robot)
+    q = vc.sample_poses(21, np.random.default_rng(2))
+    desired = vc.true_points(q)[1:]
+    prev, q = q[:-1], q[1:]
+    mask = np.ones(desired.shape[:2], dtype=bool)
+    ordered = compensate(model, desired, mask, q, prev_q=prev)
+    perm = np.random.default_rng(0).permutation(len(q))
+    shuffled = compensate(model, desired[perm], mask[perm], q[perm], prev_q=prev[perm])
+    assert np.degrees(np.abs(shuffled.q - ordered.q[perm])).max() < 1e-6
+    blind = compensate(model, desired[perm], mask[perm], q[perm])
+    assert np.degrees(np.abs(blind.q - ordered.q[perm])).max() > 0.05
