@@ -274,17 +274,14 @@ def cmd_compensate(args) -> None:
     limits = Limits(args.max_error_mm, args.max_move_deg, args.max_jump_deg)
     s = run(args.model, args.targets, args.out, args.tcp, limits)
     for w in s["warnings"]:
-        print(f"robocal: warning: {w}", file=sys.stderr)
+        print(f"robocal: warning: {args.targets}: {w}", file=sys.stderr)
     # plain print, as predict: the command starts with numpy alone
     print(
         f"compensated {s['poses']} poses to {args.out}: predicted error RMS {s['rms_mm']:.4f} mm, "
         f"worst {s['worst_mm']:.4f} mm, in {s['seconds']:.2f} s"
     )
     if s["jumps"]:
-        print(
-            f"{len(s['jumps'])} jumps of more than {args.max_jump_deg:g} deg between consecutive "
-            f"poses: {'; '.join(s['jumps'][:5])}{'; ...' if len(s['jumps']) > 5 else ''}"
-        )
+        print(s["jumps"])
 
 
 def cmd_evaluate(args) -> None:

@@ -102,7 +102,8 @@ class Jump:
 @dataclass(frozen=True)
 class Compensated:
     """A targets file's joint commands (m, n) deg, their predicted miss (m,) mm, the warnings
-    (one line each) and the jumps between consecutive poses beyond the limit."""
+    (one line each, about the targets file) and the jumps between consecutive poses beyond the
+    limit."""
 
     pose_ids: list[str]
     q_deg: np.ndarray
@@ -228,7 +229,7 @@ def _orientation_warnings(targets: Targets, guess: np.ndarray, tcp) -> list[str]
         else "the starting joints or the configuration's search"
     )
     return [
-        f"{targets.path}: {len(ids)} poses (first {ids[0]!r}) give too few SMRs to fix the "
+        f"{len(ids)} poses (first {ids[0]!r}) give too few SMRs to fix the "
         f"flange's orientation: it comes from {source}, not from the targets"
     ]
 
@@ -258,7 +259,7 @@ def _kept(targets: Targets, res: Compensation, guess, nominal, max_move_deg: flo
         return []
     k = int(np.flatnonzero(guess)[changed[0]])
     return [
-        f"{targets.path}: {len(changed)} poses (first {targets.pose_ids[k]!r}, "
+        f"{len(changed)} poses (first {targets.pose_ids[k]!r}, "
         f"{configuration.describe(before[changed[0]])} -> "
         f"{configuration.describe(after[changed[0]])}) cross a configuration boundary within "
         f"{max_move_deg:g} deg of their starting joints"
@@ -320,5 +321,15 @@ def run(model_path, targets_path, out_path, tcp=None, limits: Limits = Limits())
         "rms_mm": float(np.sqrt(np.mean(c.error_mm**2))),
         "seconds": time.perf_counter() - t0,
         "warnings": c.warnings,
-        "jumps": [j.describe() for j in c.jumps],
+        "jumps": jumps_line(c.jumps, limits.max_jump_deg) if c.jumps else "",
     }
+
+
+def jumps_line(found: list[Jump], limit_deg: float, shown: int = 5) -> str:
+    """The jumps in one line for a summary."""
+    more = "; ..." if len(found) > shown else ""
+    return (
+        f"{len(found)} jumps of more than {limit_deg:g} deg between consecutive poses: "
+        + "; ".join(j.describe() for j in found[:shown])
+        + more
+    )
