@@ -233,9 +233,9 @@ def cmd_predict(args) -> None:
     from .formats.campaign_csv import read_poses, write_predictions
 
     model = workflow.read_model(args.model)
-    pose_ids, q, time_s, temp_c = read_poses(args.poses, model.robot)
+    pose_ids, q, time_s, temp_c, prev_q = read_poses(args.poses, model.robot)
     try:
-        xyz = workflow.model_predict(model, q, time_s, temp_c)
+        xyz = workflow.model_predict(model, q, time_s, temp_c, prev_q)
     except workflow.DataError as e:
         raise workflow.DataError(f"{args.poses}: {e}") from None
     write_predictions(args.out, pose_ids, list(model.targets), xyz)
@@ -266,15 +266,20 @@ def _require_deployable(args) -> None:
 
 
 def cmd_compensate(args) -> None:
-    from .compensation import run
+    from .compensation import Limits, run
 
     _require_deployable(args)
-    s = run(args.model, args.targets, args.out, args.tcp, args.max_error_mm)
+    limits = Limits(args.max_error_mm, args.max_move_deg, args.max_jump_deg)
+    s = run(args.model, args.targets, args.out, args.tcp, limits)
+    for w in s["warnings"]:
+        print(f"robocal: warning: {args.targets}: {w}", file=sys.stderr)
     # plain print, as predict: the command starts with numpy alone
     print(
         f"compensated {s['poses']} poses to {args.out}: predicted error RMS {s['rms_mm']:.4f} mm, "
         f"worst {s['worst_mm']:.4f} mm, in {s['seconds']:.2f} s"
     )
+    if s["jumps"]:
+        print(s["jumps"])
 
 
 def cmd_evaluate(args) -> None:
@@ -975,7 +980,11 @@ def build_parser() -> argparse.ArgumentParser:
         "compensate", help="joint commands that put the SMRs (or a tool point) where wanted"
     )
     cp.add_argument("model", help="model.json (robocal calibrate)")
-    cp.add_argument("targets", help="targets.csv: pose, target, x, y, z [, q1..qN, time_s, temp_c]")
+    cp.add_argument(
+        "targets",
+        help="targets.csv: pose, target, x, y, z and q1..qN or cf1, cf4, cf6, cfx "
+        "[, time_s, temp_c, prev_q1..prev_qN]",
+    )
     cp.add_argument(
         "--out", default="joints.csv", help="joint commands to write (default joints.csv)"
     )
@@ -992,6 +1001,19 @@ def build_parser() -> argparse.ArgumentParser:
         type=_nonnegative,
         default=0.1,
         help="refuse a pose the model cannot bring closer than this (default 0.1 mm RMS)",
+    )
+    cp.add_argument(
+        "--max-move-deg",
+        type=_nonnegative,
+        default=10.0,
+        help="refuse a pose whose joints move further than this from its starting joints: "
+        "another configuration (default 10 deg)",
+    )
+    cp.add_argument(
+        "--max-jump-deg",
+        type=_nonnegative,
+        default=90.0,
+        help="report consecutive poses whose joints turn more than this (default 90 deg)",
     )
     cp.add_argument("--force", action="store_true", help="use a model marked not deployable")
     cp.set_defaults(func=cmd_compensate)

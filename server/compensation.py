@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
+from robocal.solver import configuration
 from robocal.solver.compensate import Compensation, Model, compensate
 from robocal.solver.kinematics import Layout, rot
 
@@ -18,6 +19,11 @@ TCP_NAME = "TCP"  # the virtual SMR's name in targets.csv when a tool centre poi
 LEVER_MM = 100.0
 TOOL_POINTS = (TCP_NAME, "TCP_X", "TCP_Z")
 MAX_ERROR_MM = 0.1  # a pose the model cannot bring closer than this is refused as unreachable
+# a correction moves joints by hundredths of a degree: a joint that moved further than this from
+# its starting guess took the arm to another configuration (or the guess is not this pose's)
+MAX_MOVE_DEG = 10.0
+MAX_JUMP_DEG = 90.0  # consecutive poses whose joints turn more than this are reported
+ORIENTING_SMRS = 3  # SMRs that fix the flange's orientation
 
 
 def parse_tcp(text: str) -> list[float]:
@@ -80,11 +86,43 @@ def tool_targets(targets: Targets) -> Targets:
     )
 
 
+@dataclass(frozen=True)
+class Jump:
+    """Consecutive poses (file order) between which a joint turns further than the set limit."""
+
+    before: str
+    after: str
+    joint: int  # 1-based
+    deg: float
+
+    def describe(self) -> str:
+        return f"{self.before!r} -> {self.after!r}: joint {self.joint} turns {self.deg:.1f} deg"
+
+
+@dataclass(frozen=True)
+class Compensated:
+    """A targets file's joint commands (m, n) deg, their predicted miss (m,) mm, the warnings
+    (one line each, about the targets file) and the jumps between consecutive poses beyond the
+    limit."""
+
+    pose_ids: list[str]
+    q_deg: np.ndarray
+    error_mm: np.ndarray
+    warnings: list[str]
+    jumps: list[Jump]
+
+
 def compensate_targets(
-    model: ModelFile, targets: Targets, tcp=None, max_error_mm: float = MAX_ERROR_MM
-) -> Compensation:
-    """The joint commands for these targets; InputError naming the file, line and pose of the
-    first one the model cannot reach within the limits."""
+    model: ModelFile,
+    targets: Targets,
+    tcp=None,
+    max_error_mm: float = MAX_ERROR_MM,
+    max_move_deg: float = MAX_MOVE_DEG,
+) -> tuple[Compensation, list[str]]:
+    """The joint commands for these targets and the warnings; InputError naming the file, line
+    and pose of the first one given neither starting joints nor a configuration, that the model
+    cannot reach within the limits (in that configuration), or whose solution would leave its
+    starting joints' configuration."""
     for e in model.extensions:
         need = e.kind.needs(e)
         if need and getattr(targets, need) is None:
@@ -102,6 +140,29 @@ def compensate_targets(
                 None,
                 f"pose {targets.pose_ids[k]!r}: the model's {e.label()} needs its {need}",
             )
+    guess = np.all(np.isfinite(targets.q0), axis=1)
+    cf = targets.cf if targets.cf is not None else np.full((len(guess), 4), np.nan)
+    given = np.all(np.isfinite(cf), axis=1)
+    _refuse_first(
+        targets,
+        ~guess & ~given,
+        "has neither starting joints (q1 ... qN) nor a configuration (cf1, cf4, cf6, cfx): "
+        "an arm reaches most positions in several configurations, and none is chosen for you",
+    )
+    nominal = model.nominal or model.robot
+    if (guess & given).any():
+        have = np.full(cf.shape, np.nan)
+        have[guess & given] = configuration.confdata(nominal, targets.q0[guess & given])
+        clash = guess & given & np.any(have != cf, axis=1)
+        k = int(np.flatnonzero(clash)[0]) if clash.any() else -1
+        if k >= 0:
+            raise _pose_error(
+                targets,
+                k,
+                f"has starting joints in configuration {configuration.describe(have[k])} but "
+                f"cf columns {configuration.describe(cf[k])}",
+            )
+    warnings = _orientation_warnings(targets, guess, tcp)
     if tcp is not None:
         targets = tool_targets(targets)
     res = compensate(
@@ -111,47 +172,164 @@ def compensate_targets(
         targets.q0,
         targets.time_s,
         targets.temp_c,
+        cf=np.where(guess[:, None], np.nan, cf),
+        prev_q=targets.prev_q,
+    )
+    _refuse_first(
+        targets,
+        ~np.isfinite(res.error_mm),
+        f"has no solution in its configuration within the joint limits{_more_none(res)}",
     )
     bad = np.flatnonzero(~(res.error_mm <= max_error_mm))
     if len(bad):
         k = int(bad[0])
-        raise InputError(
-            targets.path,
-            targets.lines[k],
-            None,
-            f"pose {targets.pose_ids[k]!r} is unreachable within the joint limits: the model "
-            f"comes no closer than {res.error_mm[k]:.3f} mm RMS (at most {max_error_mm:g} mm "
-            f"allowed){_more(len(bad))}",
+        raise _pose_error(
+            targets,
+            k,
+            f"is unreachable within the joint limits: the model comes no closer than "
+            f"{res.error_mm[k]:.3f} mm RMS (at most {max_error_mm:g} mm allowed){_more(len(bad))}",
         )
-    return res
+    if guess.any():
+        warnings += _kept(targets, res, guess, nominal, max_move_deg)
+    return res, warnings
+
+
+def _pose_error(targets: Targets, k: int, what: str) -> InputError:
+    return InputError(targets.path, targets.lines[k], None, f"pose {targets.pose_ids[k]!r} {what}")
+
+
+def _refuse_first(targets: Targets, bad: np.ndarray, what: str) -> None:
+    if bad.any():
+        raise _pose_error(targets, int(np.flatnonzero(bad)[0]), what)
+
+
+def _more_none(res: Compensation) -> str:
+    count = int(np.sum(~np.isfinite(res.error_mm)))
+    return f"; {count - 1} more poses have none" if count > 1 else ""
+
+
+def _orientation_warnings(targets: Targets, guess: np.ndarray, tcp) -> list[str]:
+    """One line for the poses whose targets leave the flange's orientation free: fewer than three
+    SMRs (or a tool point without rx, ry, rz)."""
+    if tcp is not None:
+        oriented = (
+            np.all(np.isfinite(targets.orientation), axis=1)
+            if targets.orientation is not None
+            else np.zeros(len(guess), dtype=bool)
+        )
+        free = ~oriented
+    else:
+        free = targets.mask.sum(axis=1) < ORIENTING_SMRS
+    if not free.any():
+        return []
+    ids = [targets.pose_ids[k] for k in np.flatnonzero(free)]
+    source = (
+        "the starting joints"
+        if guess[free].all()
+        else "the starting joints or the configuration's search"
+    )
+    return [
+        f"{len(ids)} poses (first {ids[0]!r}) give too few SMRs to fix the "
+        f"flange's orientation: it comes from {source}, not from the targets"
+    ]
+
+
+def _kept(targets: Targets, res: Compensation, guess, nominal, max_move_deg: float) -> list[str]:
+    """Refuse a pose whose joints moved further from its starting guess than max_move_deg (the
+    solver left the guess's configuration); one warning for those whose confdata changed within
+    that (a guess by a quadrant's edge)."""
+    moved = np.where(guess[:, None], np.degrees(np.abs(res.q - targets.q0)), 0.0)
+    far = np.flatnonzero(moved.max(axis=1) > max_move_deg)
+    if len(far):
+        k = int(far[0])
+        j = int(np.argmax(moved[k]))
+        raise _pose_error(
+            targets,
+            k,
+            f"would leave its starting joints' configuration: joint {j + 1} moves "
+            f"{moved[k, j]:.1f} deg (more than {max_move_deg:g} deg; a correction needs far less: "
+            f"check the starting joints){_more(len(far))}",
+        )
+    if not configuration.supports(nominal):
+        return []
+    before = configuration.confdata(nominal, targets.q0[guess])
+    after = configuration.confdata(nominal, res.q[guess])
+    changed = np.flatnonzero(np.any(before != after, axis=1))
+    if not len(changed):
+        return []
+    k = int(np.flatnonzero(guess)[changed[0]])
+    return [
+        f"{len(changed)} poses (first {targets.pose_ids[k]!r}, "
+        f"{configuration.describe(before[changed[0]])} -> "
+        f"{configuration.describe(after[changed[0]])}) cross a configuration boundary within "
+        f"{max_move_deg:g} deg of their starting joints"
+    ]
+
+
+def jumps(pose_ids, q_deg, limit_deg: float = MAX_JUMP_DEG) -> list[Jump]:
+    """Consecutive poses (in file order) between which some joint turns more than limit_deg: the
+    largest such turn of each pair."""
+    q_deg = np.asarray(q_deg, dtype=float)
+    step = np.abs(np.diff(q_deg, axis=0))
+    out = []
+    for k in np.flatnonzero(step.max(axis=1, initial=0.0) > limit_deg) if len(step) else []:
+        j = int(np.argmax(step[k]))
+        out.append(Jump(str(pose_ids[k]), str(pose_ids[k + 1]), j + 1, float(step[k, j])))
+    return out
 
 
 def _more(count: int) -> str:
     return f"; {count - 1} more poses unreachable" if count > 1 else ""
 
 
-def compensate_file(model_path, targets_path, tcp=None, max_error_mm: float = MAX_ERROR_MM):
-    """(pose ids, joint commands (m, n) degrees, predicted_error_mm (m,)) for a model file and a
-    targets.csv; tcp (x, y, z[, rx, ry, rz]) mm and degrees in the flange frame makes `TCP` the
-    one target, with an optional orientation per pose (rx, ry, rz columns). InputError on bad
-    input or an unreachable pose (nothing is written here either way)."""
+@dataclass(frozen=True)
+class Limits:
+    """What a compensation refuses (a miss, a move from the starting joints) and reports (a jump
+    between consecutive poses)."""
+
+    max_error_mm: float = MAX_ERROR_MM
+    max_move_deg: float = MAX_MOVE_DEG
+    max_jump_deg: float = MAX_JUMP_DEG
+
+
+def compensate_file(model_path, targets_path, tcp=None, limits: Limits = Limits()) -> Compensated:
+    """The joint commands for a model file and a targets.csv; tcp (x, y, z[, rx, ry, rz]) mm and
+    degrees in the flange frame makes `TCP` the one target, with an optional orientation per pose
+    (rx, ry, rz columns). InputError on bad input, a pose without a configuration, or an
+    unreachable pose (nothing is written here either way)."""
     model = read_model(model_path)
     names = (TCP_NAME,) if tcp is not None else tuple(model.targets)
     targets = read_targets(targets_path, model.robot, names, orientation=tcp is not None)
-    res = compensate_targets(model, targets, tcp, max_error_mm)
-    return targets.pose_ids, np.rad2deg(res.q), res.error_mm
+    res, warnings = compensate_targets(
+        model, targets, tcp, limits.max_error_mm, limits.max_move_deg
+    )
+    q_deg = np.rad2deg(res.q)
+    found = jumps(targets.pose_ids, q_deg, limits.max_jump_deg)
+    return Compensated(targets.pose_ids, q_deg, res.error_mm, warnings, found)
 
 
-def run(model_path, targets_path, out_path, tcp=None, max_error_mm: float = MAX_ERROR_MM):
+def run(model_path, targets_path, out_path, tcp=None, limits: Limits = Limits()) -> dict:
     """Compensate and write joints.csv; returns a summary dict for the command's line."""
     from .formats.joints_csv import write_joints
 
     t0 = time.perf_counter()
-    ids, q_deg, err = compensate_file(model_path, targets_path, tcp, max_error_mm)
-    write_joints(out_path, ids, q_deg, err)
+    c = compensate_file(model_path, targets_path, tcp, limits)
+    write_joints(out_path, c.pose_ids, c.q_deg, c.error_mm)
     return {
-        "poses": len(ids),
-        "worst_mm": float(err.max()),
-        "rms_mm": float(np.sqrt(np.mean(err**2))),
+        "poses": len(c.pose_ids),
+        "worst_mm": float(c.error_mm.max()),
+        "rms_mm": float(np.sqrt(np.mean(c.error_mm**2))),
         "seconds": time.perf_counter() - t0,
+        "warnings": c.warnings,
+        "jumps": jumps_line(c.jumps, limits.max_jump_deg) if c.jumps else "",
     }
+
+
+def jumps_line(found: list[Jump], limit_deg: float, shown: int = 5) -> str:
+    """The jumps in one line for a summary."""
+    more = "; ..." if len(found) > shown else ""
+    return (
+        f"{len(found)} jumps of more than {limit_deg:g} deg between consecutive poses: "
+        + "; ".join(j.describe() for j in found[:shown])
+        + more
+    )

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import tempfile
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 from .formats.errors import InputError
@@ -35,19 +36,30 @@ def _named(paths: dict[str, str]):
         raise InputError(shown, e.line, e.column, e.message) from None
 
 
+@dataclass(frozen=True)
+class JointsText:
+    """joints.csv as text, and the compensation's warnings (one line each, jumps included)."""
+
+    csv: str
+    warnings: list[str]
+
+
 def compensated_csv(model_path, data: bytes, filename: str, tcp, max_error_mm, report=None):
-    """joints.csv (text) for an uploaded targets.csv; InputError names the upload's line."""
-    from .compensation import compensate_file
+    """joints.csv (text) for an uploaded targets.csv and its warnings; InputError names the
+    upload's line."""
+    from .compensation import Limits, compensate_file, jumps_line
     from .formats.joints_csv import write_joints
 
+    limits = Limits(max_error_mm=max_error_mm)
     with tempfile.TemporaryDirectory(prefix="robocal-compensate-") as tmp:
         folder = Path(tmp)
         targets = _upload(folder, filename, data)
         with _named({str(targets): filename, str(model_path): Path(model_path).name}):
-            ids, q_deg, err = compensate_file(model_path, targets, tcp, max_error_mm)
+            c = compensate_file(model_path, targets, tcp, limits)
         out = folder / "joints.out.csv"
-        write_joints(out, ids, q_deg, err)
-        return out.read_text(encoding="utf-8")
+        write_joints(out, c.pose_ids, c.q_deg, c.error_mm)
+        jumped = [jumps_line(c.jumps, limits.max_jump_deg)] if c.jumps else []
+        return JointsText(out.read_text(encoding="utf-8"), [*c.warnings, *jumped])
 
 
 def exported(model_path, fmt: str, data: bytes | None, filename: str, report=None) -> str:

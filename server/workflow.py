@@ -135,6 +135,7 @@ def without_outliers(meas: Measurements, screening: Screening | None) -> Measure
         screening.apply(meas.xyz),
         nan(meas.time_s),
         nan(meas.temp_c),
+        meas.prev_q,
     )
 
 
@@ -254,12 +255,13 @@ def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit
     return validation_block(v, list(used.pose_ids), source)
 
 
-def model_predict(model: ModelFile, q, time_s=None, temp_c=None) -> np.ndarray:
+def model_predict(model: ModelFile, q, time_s=None, temp_c=None, prev_q=None) -> np.ndarray:
     """SMR centres (m, K, 3) a model file predicts, with its extensions (time and temperature per
     pose (m,) or per reading (m, K)).
 
-    The poses are taken as visited in time_s order, else in the given order: backlash follows
-    each joint's last motion (Inputs computes it).
+    Backlash follows each joint's last motion (Inputs computes it): from the joints the arm came
+    from, prev_q (m, n) rad (NaN rows: not given), else the poses as visited in time_s order,
+    else in the given order.
     """
     lay, x = model.layout()
     if not model.extensions:
@@ -272,7 +274,7 @@ def model_predict(model: ModelFile, q, time_s=None, temp_c=None) -> np.ndarray:
         a = np.broadcast_to(np.reshape(np.asarray(a, dtype=float), (m, -1)), (m, K))
         return a
 
-    inputs = Inputs(q, per_reading(time_s, "time_s"), per_reading(temp_c, "temp_c"))
+    inputs = Inputs(q, per_reading(time_s, "time_s"), per_reading(temp_c, "temp_c"), prev_q=prev_q)
     for e in model.extensions:
         need = e.kind.needs(e)
         if need and getattr(inputs, need) is None:
@@ -326,7 +328,9 @@ def evaluate(model: ModelFile, meas: Measurements) -> dict:
     require_inputs(meas.q, meas.xyz)  # before any arithmetic on them: no overflow warnings
     names = meas.target_names
     order = [list(model.targets).index(t) for t in names]
-    pred = model_predict(model, meas.q, _pose_column(meas.time_s), _pose_column(meas.temp_c))
+    pred = model_predict(
+        model, meas.q, _pose_column(meas.time_s), _pose_column(meas.temp_c), meas.prev_q
+    )
     after = metrics.accuracy(pred[:, order], meas.xyz, names)
     out = {"model": after}
     if model.nominal is not None:
@@ -366,6 +370,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
         screen_outliers=screen,
         pose_ids=meas.pose_ids,
         tracker_spec=tracker_spec(cell),
+        prev_q=meas.prev_q,
     )
     lay, x = d.layout, d.x
     robot = lay.robot.with_params(x[: lay.n_geo])
@@ -434,7 +439,8 @@ def validate_diagnosis(
 
     from .validation import validation_block
 
-    r = np.linalg.norm(model_predict(model, meas.q, meas.time_s, meas.temp_c) - meas.xyz, axis=-1)
+    pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q)
+    r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
     floor, source = d.report["noise_floor_mm"], d.report["noise_floor_source"]
     final = d.report["final"]

@@ -16,14 +16,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import configuration
 from .effects import Extension, Inputs, joint_offsets, point_shift, prepare
 from .kinematics import Layout, predict_rows
 from .robot import Robot
 
 STEP_TOL_RAD = 1e-10  # a pose has converged once its step is below this (1e-7 mm per metre)
-STARTS = 24  # starting configurations tried for a pose given without a starting guess
-START_SEED = 20261202  # the starts are drawn, reproducibly, from this
-START_MARGIN_RAD = np.deg2rad(5.0)
+SEED_GRID = 4  # joints 2 and 3 each start from this many values in a configuration's search
 
 
 @dataclass
@@ -40,18 +39,19 @@ class Model:
         lay = Layout(self.nominal, np.eye(4), self.layout.target_names)
         return lay, lay.initial(np.zeros((len(self.layout.target_names), 3)))
 
-    def evaluate(self, q, time_s=None, temp_c=None):
+    def evaluate(self, q, time_s=None, temp_c=None, prev_q=None):
         """SMR centres (m, K, 3) at joints q (m, n) rad and their joint Jacobian (m, K, 3, n).
 
-        time_s and temp_c are per reading (m, K) or None; the poses are taken as visited in
-        time_s order, else in row order (the backlash's approach direction).
+        time_s and temp_c are per reading (m, K) or None; the backlash's approach direction
+        comes from prev_q (m, n) rad, the joints the arm comes from (NaN rows: not given), else
+        from the poses as visited in time_s order, else in row order.
         """
         q = np.atleast_2d(np.asarray(q, dtype=float))
         m, K = q.shape[0], len(self.layout.target_names)
         dq = None
         shifts = []
         if self.extensions:
-            inputs = Inputs(q, time_s, temp_c)
+            inputs = Inputs(q, time_s, temp_c, prev_q=prev_q)
             blay, bx = self._basis_layout()
             bases = [prepare(e, blay, bx, inputs) for e in self.extensions]
             dq = joint_offsets(self.extensions, bases, q.shape[1])
@@ -65,8 +65,8 @@ class Model:
         J = np.moveaxis(Jq.reshape(q.shape[1], m, K, 3), 0, -1)
         return (p + moved).reshape(m, K, 3), J
 
-    def predict(self, q, time_s=None, temp_c=None) -> np.ndarray:
-        return self.evaluate(q, time_s, temp_c)[0]
+    def predict(self, q, time_s=None, temp_c=None, prev_q=None) -> np.ndarray:
+        return self.evaluate(q, time_s, temp_c, prev_q)[0]
 
 
 @dataclass
@@ -95,6 +95,7 @@ def solve(
     time_s=None,
     temp_c=None,
     max_iter: int = 100,
+    prev_q=None,
 ) -> Compensation:
     """Joints from the starts q0 (m, n) rad that put the model's SMRs on desired (m, K, 3) mm
     where mask (m, K) is set, within [lower, upper]; least squares per pose, all poses at once."""
@@ -103,7 +104,7 @@ def solve(
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     q = np.clip(np.array(q0, dtype=float), lower, upper)
     m, n = q.shape
-    p, J = model.evaluate(q, time_s, temp_c)
+    p, J = model.evaluate(q, time_s, temp_c, prev_q)
     r, cost = _cost(p, desired, w)
     mu = np.full(m, 1e-3)
     done = np.zeros(m, dtype=bool)
@@ -118,7 +119,7 @@ def solve(
         step = -np.linalg.solve(A + (mu[:, None, None] * scale) * eye, g[..., None])[..., 0]
         step[done] = 0.0
         trial = np.clip(q + step, lower, upper)
-        p_t, J_t = model.evaluate(trial, time_s, temp_c)
+        p_t, J_t = model.evaluate(trial, time_s, temp_c, prev_q)
         r_t, cost_t = _cost(p_t, desired, w)
         better = (cost_t <= cost) & ~done
         q[better], r[better], cost[better], J[better] = (
@@ -131,19 +132,10 @@ def solve(
         small = np.max(np.abs(step), axis=1) < STEP_TOL_RAD
         done |= (better & small) | (~better & (mu >= 1e12)) | (cost < 1e-24)
     # the backlash couples poses: report the miss of the joints as they stand, all together
-    p, _ = model.evaluate(q, time_s, temp_c)
+    p, _ = model.evaluate(q, time_s, temp_c, prev_q)
     r, cost = _cost(p, desired, w)
     count = np.maximum(w.sum(axis=1), 1.0)
     return Compensation(q, np.sqrt(cost / count), done, iterations)
-
-
-def starts(lower, upper, count: int = STARTS) -> np.ndarray:
-    """Starting configurations (count, n) rad within the limits: mid-range, then a seeded draw."""
-    lo, hi = np.asarray(lower) + START_MARGIN_RAD, np.asarray(upper) - START_MARGIN_RAD
-    rng = np.random.default_rng(START_SEED)
-    out = rng.uniform(lo, hi, size=(count, lo.size))
-    out[0] = 0.5 * (lo + hi)
-    return out
 
 
 def compensate(
@@ -154,42 +146,87 @@ def compensate(
     time_s=None,
     temp_c=None,
     max_iter: int = 100,
+    cf=None,
+    prev_q=None,
 ) -> Compensation:
     """Joint commands (rad) for which the model puts its SMRs on desired (m, K, 3) where mask
     (m, K) is set, within the robot's limits.
 
-    q0 (m, n) rad is each pose's starting guess (it also chooses the arm's configuration); a row
-    of NaN, or q0 None, has no guess: that pose starts from the best of a fixed set of
-    configurations, tried on the geometric part of the model alone. time_s and temp_c are per
-    reading (m, K) or None, as the model's extensions need them.
+    q0 (m, n) rad is each pose's starting guess, which keeps the arm's configuration; a pose
+    without one (a row of NaN) needs its ABB confdata in cf (m, 4) (cf1, cf4, cf6, cfx; NaN where
+    a guess is given): its joints are then solved in that configuration only, and a pose with no
+    solution there keeps NaN joints and an infinite error. ValueError for a pose with neither:
+    joints are never chosen in a configuration nobody asked for. time_s and temp_c are per
+    reading (m, K) or None, as the model's extensions need them; prev_q (m, n) rad the joints
+    the arm comes from (NaN rows: not given; the backlash's approach).
     """
     desired = np.asarray(desired, dtype=float)
     mask = np.asarray(mask, dtype=bool)
     robot = model.layout.robot
-    lower, upper = robot.lower, robot.upper
     m, n = desired.shape[0], robot.n_joints
     q = np.full((m, n), np.nan) if q0 is None else np.array(q0, dtype=float)
     guess = np.all(np.isfinite(q), axis=1)
+    lower = np.repeat(robot.lower[None], m, axis=0)
+    upper = np.repeat(robot.upper[None], m, axis=0)
     if not guess.all():
-        q[~guess] = _search(model, desired[~guess], mask[~guess], lower, upper, max_iter)
-    return solve(model, desired, mask, q, lower, upper, time_s, temp_c, max_iter)
+        given = np.zeros(m, dtype=bool) if cf is None else np.all(np.isfinite(cf), axis=1)
+        lost = ~guess & ~given
+        if lost.any():
+            raise ValueError(
+                f"pose {int(np.flatnonzero(lost)[0]) + 1} has neither starting joints nor a "
+                "configuration (cf1, cf4, cf6, cfx)"
+            )
+        want = np.asarray(cf, dtype=float)[~guess].astype(int)
+        found, lo, hi = _in_configuration(model, desired[~guess], mask[~guess], want, max_iter)
+        q[~guess], lower[~guess], upper[~guess] = found, lo, hi
+    none = ~np.all(np.isfinite(q), axis=1)
+    start = np.where(none[:, None], 0.5 * (lower + upper), q)
+    res = solve(model, desired, mask, start, lower, upper, time_s, temp_c, max_iter, prev_q)
+    res.q[none] = np.nan
+    res.error_mm[none] = np.inf
+    res.converged[none] = False
+    return res
 
 
-def _search(model: Model, desired, mask, lower, upper, max_iter) -> np.ndarray:
-    """Per pose, the best solution of the geometric model from each of the fixed starts."""
+def _seeds(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Starting joints (m, S, 6) within each pose's configuration's ranges: joints 1, 4, 5 and 6
+    mid-range, joints 2 and 3 on a grid (the wrist centre's sides are what the grid tries)."""
+    mid = 0.5 * (lo + hi)
+    grid = np.linspace(0.15, 0.85, SEED_GRID)
+    s2 = lo[:, None, 1] + grid[None] * (hi - lo)[:, None, 1]
+    s3 = lo[:, None, 2] + grid[None] * (hi - lo)[:, None, 2]
+    m = len(lo)
+    out = np.repeat(mid[:, None], SEED_GRID * SEED_GRID, axis=1)
+    out[:, :, 1] = np.repeat(s2, SEED_GRID, axis=1)
+    out[:, :, 2] = np.tile(s3, (1, SEED_GRID))
+    return out.reshape(m, SEED_GRID * SEED_GRID, -1)
+
+
+def _in_configuration(model: Model, desired, mask, cf, max_iter):
+    """Per pose, the geometric model's best joints in configuration cf (m, 4) (NaN where none
+    reaches the target there), and the joint ranges the configuration allows (m, n) rad."""
+    robot = model.nominal
+    if not configuration.supports(robot):
+        raise ValueError(
+            f"a configuration (cf1, cf4, cf6, cfx) describes a six-axis arm; {robot.name} has "
+            f"{robot.n_joints} joints: give starting joints"
+        )
+    lo, hi = configuration.bounds(robot, cf)
     geo = Model(model.layout, model.x, [], model.nominal)
-    s = starts(lower, upper)
-    m, S = len(desired), len(s)
-    q0 = np.repeat(s[None], m, axis=0).reshape(m * S, -1)
+    s = _seeds(lo, hi)
+    m, S, n = s.shape
     res = solve(
         geo,
         np.repeat(desired, S, axis=0),
         np.repeat(mask, S, axis=0),
-        q0,
-        lower,
-        upper,
+        s.reshape(m * S, n),
+        np.repeat(lo, S, axis=0),
+        np.repeat(hi, S, axis=0),
         max_iter=max_iter,
     )
-    err = res.error_mm.reshape(m, S)
-    best = np.argmin(err, axis=1)  # the first start among equals: reproducible
-    return res.q.reshape(m, S, -1)[np.arange(m), best]
+    got = configuration.confdata(robot, res.q).reshape(m, S, 4)
+    err = np.where(np.all(got == cf[:, None], axis=2), res.error_mm.reshape(m, S), np.inf)
+    best = np.argmin(err, axis=1)  # the first seed among equals: reproducible
+    out = res.q.reshape(m, S, n)[np.arange(m), best]
+    out[~np.isfinite(err[np.arange(m), best])] = np.nan
+    return out, lo, hi

@@ -426,8 +426,12 @@ def diagnose(
     screen_outliers=True,
     pose_ids=None,
     tracker_spec: dict | None = None,
+    prev_q=None,
 ) -> Diagnosis:
     """Baseline geometric calibration, candidate effects, selection and the extended model.
+
+    prev_q (m, n) rad, NaN rows where not given: the joints the arm came from before each pose,
+    which decide the backlash's approach directions over the visit order.
 
     tracker_spec: the cell's tracker block (mpe_um, mpe_um_per_m), the noise floor when the data
     cannot measure it (one SMR, no repeated pose); without it the default specification's.
@@ -444,7 +448,7 @@ def diagnose(
     meas = meas if screening is None else screening.apply(meas)
     clock["screening"] = time.perf_counter() - t0
     prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
-    inputs = Inputs(q, time_s, temp_c)
+    inputs = Inputs(q, time_s, temp_c, prev_q=prev_q)
     noise = tracker_noise(q, meas, inputs, tracker_spec)
     # the geometric calibration decides what is identified (and refuses too few poses) before
     # any selection, so the held parameters agree with the ls-sum model the report judges

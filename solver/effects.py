@@ -31,14 +31,18 @@ class Inputs:
     temp_c: np.ndarray | None = None  # (m, K)
     # (m, n) sign of each joint's last move before the pose, from the whole campaign's order
     motion: np.ndarray | None = None
+    # (m, n) rad the joints the arm came from (NaN rows: not given); they decide the motion
+    prev_q: np.ndarray | None = None
 
     def __post_init__(self):
         if self.motion is None:
-            self.motion = last_motion(self.q, self.time_s)
+            self.motion = last_motion(self.q, self.time_s, self.prev_q)
 
     def subset(self, idx) -> Inputs:
         pick = lambda a: None if a is None else a[idx]  # noqa: E731
-        return Inputs(self.q[idx], pick(self.time_s), pick(self.temp_c), pick(self.motion))
+        return Inputs(
+            self.q[idx], pick(self.time_s), pick(self.temp_c), pick(self.motion), pick(self.prev_q)
+        )
 
 
 @dataclass

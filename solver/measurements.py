@@ -20,6 +20,8 @@ class Measurements:
     xyz: np.ndarray  # (m, K, 3) mm
     time_s: np.ndarray | None = None  # (m, K) s, NaN where missing
     temp_c: np.ndarray | None = None  # (m, K) degC, NaN where missing
+    # (m, n) rad the joints the arm came from before each pose, NaN rows where not given
+    prev_q: np.ndarray | None = None
 
     @property
     def mask(self) -> np.ndarray:
@@ -46,6 +48,7 @@ class Measurements:
             self.xyz[idx],
             pick(self.time_s),
             pick(self.temp_c),
+            pick(self.prev_q),
         )
 
     def select_targets(self, names) -> Measurements:
@@ -59,4 +62,5 @@ class Measurements:
             self.xyz[:, cols],
             pick(self.time_s),
             pick(self.temp_c),
+            self.prev_q,
         )

@@ -1,4 +1,5 @@
-"""The direction of each joint's last motion before a pose, from the order the poses were visited."""
+"""The direction of each joint's last motion before a pose: from the joints the arm came from
+where the data gives them (prev_q), else from the order the poses were visited."""
 
 from __future__ import annotations
 
@@ -20,11 +21,16 @@ def visit_order(time_s: np.ndarray | None, m: int) -> np.ndarray:
     return np.argsort(np.nanmin(t, axis=1), kind="stable")
 
 
-def last_motion(q: np.ndarray, time_s: np.ndarray | None = None) -> np.ndarray:
+def last_motion(
+    q: np.ndarray, time_s: np.ndarray | None = None, prev_q: np.ndarray | None = None
+) -> np.ndarray:
     """Per pose and joint (m, n): +1 or -1, the sign of the joint's last move before the pose.
 
-    A joint that did not move keeps the direction of its previous move; before its first move
-    (the first pose visited) the direction is unknown, 0.
+    prev_q (m, n) rad, NaN rows where not given, are the joints the arm came from: where given,
+    they decide (a file split or reordered keeps its approach directions). Elsewhere, and for a
+    joint that did not move from prev_q, the visit order does: a joint that did not move keeps
+    the direction of its previous move; before its first move (the first pose visited) the
+    direction is unknown, 0.
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
     m = q.shape[0]
@@ -35,4 +41,8 @@ def last_motion(q: np.ndarray, time_s: np.ndarray | None = None) -> np.ndarray:
         seq[i] = np.where(step[i - 1] != 0, step[i - 1], seq[i - 1])
     out = np.empty_like(seq)
     out[order] = seq
+    if prev_q is not None:
+        step = np.sign(q - np.asarray(prev_q, dtype=float))  # NaN where not given
+        given = np.isfinite(step) & (step != 0)
+        out = np.where(given, step, out)
     return out

@@ -4,7 +4,8 @@ verification run of it on the cell."""
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+import json
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.responses import FileResponse
@@ -151,7 +152,20 @@ NOT_DEPLOYABLE: Responses = {
         "content": PROBLEM,
     }
 }
-CSV_ANSWER: Responses = {200: {"content": {"text/csv": {"schema": {"type": "string"}}}}}
+# the compensation's warnings (orientation from the starting joints, jumps): a JSON list of lines
+WARNINGS_HEADER = "X-Robocal-Warnings"
+CSV_ANSWER: Responses = {
+    200: {
+        "content": {"text/csv": {"schema": {"type": "string"}}},
+        "headers": {
+            WARNINGS_HEADER: {
+                "description": "the compensation's warnings, a JSON list of one-line strings "
+                "(absent without any)",
+                "schema": {"type": "string"},
+            }
+        },
+    }
+}
 EXPORT_ANSWER: Responses = {
     200: {"content": {m: {"schema": {"type": "string"}} for m in model_files.MEDIA.values()}}
 }
@@ -197,7 +211,7 @@ async def compensate(
     A model its validation marks not deployable is refused (409 with the reasons) unless
     force=true."""
     data = await request.body()
-    text = await run_in_threadpool(
+    out = await run_in_threadpool(
         _with_model,
         jobs,
         job_id,
@@ -208,14 +222,13 @@ async def compensate(
         _tcp(tcp),
         max_error_mm,
     )
-    return Response(
-        text,
-        media_type="text/csv",
-        headers={"Content-Disposition": f'attachment; filename="job-{job_id}.joints.csv"'},
-    )
+    headers = {"Content-Disposition": f'attachment; filename="job-{job_id}.joints.csv"'}
+    if out.warnings:  # JSON with ASCII escapes: a header carries no other text safely
+        headers[WARNINGS_HEADER] = json.dumps([f"{filename}: {w}" for w in out.warnings])
+    return Response(out.csv, media_type="text/csv", headers=headers)
 
 
-def _with_model(jobs, job_id, force, target, *args) -> str:
+def _with_model(jobs, job_id, force, target, *args) -> Any:
     """target(model path, *args) in a worker, once a worker slot is free; 409 if the model is
     not deployable, unless forced."""
     path = jobs.model_path(job_id)

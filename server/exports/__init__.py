@@ -5,10 +5,14 @@ from __future__ import annotations
 
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from robocal.server.formats.errors import InputError
 from robocal.server.formats.files import atomic_write_text
 from robocal.server.formats.model_json import ModelFile, file_digest, read_model
+
+if TYPE_CHECKING:
+    import numpy as np
 
 FORMATS = ("rapid", "params", "urdf")
 SUFFIXES = {".mod": "rapid", ".csv": "params", ".urdf": "urdf"}
@@ -96,11 +100,13 @@ def _rapid(model: ModelFile, model_path, joints_path, targets_path, out) -> tupl
             f"{model.robot.name} has {model.robot.n_joints} joints; a RAPID jointtarget "
             "holds 6 robot axes",
         )
+    error_mm: np.ndarray | None
     if targets_path is not None:
         from robocal.server.compensation import compensate_file
 
         source = targets_path
-        pose_ids, q_deg, error_mm = compensate_file(model_path, targets_path)
+        c = compensate_file(model_path, targets_path)
+        pose_ids, q_deg, error_mm = c.pose_ids, c.q_deg, c.error_mm
     else:
         from robocal.server.formats.joints_csv import read_joints
 

@@ -182,6 +182,8 @@ def read_campaign_columns(
     joints = [f"q{i}" for i in range(1, robot.n_joints + 1)]
     if not t.ok or not all(t.has(c) for c in ["pose", *joints, "target", *measured]):
         return None
+    if any(t.has(f"prev_{c}") for c in joints):  # the row reader checks and reads them
+        return None
     present = [c for c in extras if t.has(c)]
     cols = t.numbers([*joints, *measured, *present], blank_ok=present)
     labels = t.labels(["pose", "target"])
@@ -230,6 +232,8 @@ def read_poses_columns(text: str, robot: Robot, extras, bounds, limit_tol: float
     joints = [f"q{i}" for i in range(1, robot.n_joints + 1)]
     if not t.ok or not all(t.has(c) for c in ["pose", *joints]):
         return None
+    if any(t.has(f"prev_{c}") for c in joints):  # the row reader checks and reads them
+        return None
     present = [c for c in extras if t.has(c)]
     cols = t.numbers([*joints, *present], blank_ok=present)
     labels = t.labels(["pose"])
@@ -248,4 +252,4 @@ def read_poses_columns(text: str, robot: Robot, extras, bounds, limit_tol: float
         values[c] = cols[c][first]
         if not _within(values[c], *bounds[c][0]):
             return None
-    return pose_ids, np.deg2rad(q[first]), values.get("time_s"), values.get("temp_c")
+    return pose_ids, np.deg2rad(q[first]), values.get("time_s"), values.get("temp_c"), None

@@ -12,6 +12,7 @@ from robocal.solver.robot import Robot
 from .campaign_columns import read_campaign_columns, read_poses_columns
 from .cell_json import TARGET_NAME
 from .csv_table import Row, Table
+from .errors import InputError
 from .files import atomic_write_text, read_text
 from .limits import COORD_MAX_MM, SMRS_MAX, TEMP_RANGE_C, TIME_MAX_S
 
@@ -46,6 +47,74 @@ def joint_deg(t: Table, row: Row, i: int, name: str, robot: Robot) -> float:
             f"[{lo:.6g}, {hi:.6g}] deg of joint {i + 1} of {robot.name}",
         )
     return value
+
+
+def prev_columns(robot: Robot) -> list[str]:
+    """The columns `prev_q1` ... `prev_qN`: the joints the arm came from before a pose."""
+    return [f"prev_{c}" for c in joint_columns(robot)]
+
+
+def prev_header(t: Table, robot: Robot) -> list[str]:
+    """The prev_q columns present: all of them or none."""
+    cols = prev_columns(robot)
+    have = t.optional(cols)
+    if have and len(have) != len(cols):
+        missing = next(c for c in cols if c not in have)
+        raise InputError(
+            t.path,
+            t.header_line,
+            None,
+            f"missing column '{missing}': the joints the arm came from give every joint, "
+            f"prev_q1 to prev_q{len(cols)}",
+        )
+    return have
+
+
+class PrevJoints:
+    """Each pose's prev_q (degrees, or None), the same on every row of the pose."""
+
+    def __init__(self, table: Table, robot: Robot, have: list[str]):
+        self.table, self.robot, self.have = table, robot, have
+        self.by_pose: dict[int, tuple[Row, list[float] | None]] = {}
+
+    def add(self, row: Row, k: int, pid: str) -> None:
+        if not self.have:
+            return
+        t = self.table
+        given = [c for c in self.have if t.raw(row, c)]
+        if given and len(given) != len(self.have):
+            blank = next(c for c in self.have if not t.raw(row, c))
+            raise t.error(row, blank, "empty field: a row gives all of prev_q1 ... or none")
+        v = (
+            [joint_deg(t, row, i, c, self.robot) for i, c in enumerate(self.have)]
+            if given
+            else None
+        )
+        if k not in self.by_pose:
+            self.by_pose[k] = (row, v)
+            return
+        first, w = self.by_pose[k]
+        if (v is None) != (w is None) or (
+            v is not None
+            and w is not None
+            and max(abs(a - b) for a, b in zip(v, w)) > SAME_POSE_TOL_DEG
+        ):
+            raise t.error(
+                row,
+                self.have[0],
+                f"the joints the arm came from differ from line {first.line}, an earlier row of "
+                f"pose {pid!r}",
+            )
+
+    def rad(self, m: int) -> np.ndarray | None:
+        """(m, n) rad, NaN rows where a pose gives none; None without the columns."""
+        if not self.have:
+            return None
+        out = np.full((m, len(self.have)), np.nan)
+        for k, (_, v) in self.by_pose.items():
+            if v is not None:
+                out[k] = np.deg2rad(v)
+        return out
 
 
 class _Poses:
@@ -101,6 +170,7 @@ def read_campaign_rows(path, robot: Robot, text: str | None = None) -> Measureme
     t = Table.read(path) if text is None else Table(path, text)
     t.require(["pose", *joint_columns(robot), "target", *MEASURED])
     extras = t.optional(list(EXTRAS))
+    prev = PrevJoints(t, robot, prev_header(t, robot))
     t.require_rows()
     poses = _Poses(t, robot)
     seen: dict[tuple[str, str], Row] = {}
@@ -108,6 +178,7 @@ def read_campaign_rows(path, robot: Robot, text: str | None = None) -> Measureme
     readings = []  # (pose index, target, xyz, extras)
     for row in t.rows:
         k, _ = poses.add(row)
+        prev.add(row, k, poses.ids[k])
         target = t.text(row, "target")
         if not TARGET_NAME.fullmatch(target):
             raise t.error(
@@ -145,15 +216,23 @@ def read_campaign_rows(path, robot: Robot, text: str | None = None) -> Measureme
         for c, v in zip(extras, more):
             extra[c][k, col[target]] = v
     return Measurements(
-        list(poses.ids), poses.q_rad(), names, xyz, extra.get("time_s"), extra.get("temp_c")
+        list(poses.ids),
+        poses.q_rad(),
+        names,
+        xyz,
+        extra.get("time_s"),
+        extra.get("temp_c"),
+        prev.rad(m),
     )
 
 
 def read_poses(path, robot: Robot):
-    """Read `poses.csv` (or a `meas.csv`, measured columns ignored) -> (ids, q rad, time_s, temp_c).
+    """Read `poses.csv` (or a `meas.csv`, measured columns ignored) -> (ids, q rad, time_s,
+    temp_c, prev_q rad).
 
     time_s and temp_c are (m,) arrays, or None when the column is absent; for a `meas.csv`
-    they come from the first row of each pose. Column-wise first, as read_campaign.
+    they come from the first row of each pose. prev_q is (m, n), NaN rows where a pose gives
+    none, or None without the columns. Column-wise first, as read_campaign.
     """
     text = read_text(path)
     fast = read_poses_columns(text, robot, EXTRAS, BOUNDS, LIMIT_TOL_DEG, SAME_POSE_TOL_DEG)
@@ -166,11 +245,13 @@ def read_poses_rows(path, robot: Robot, text: str | None = None):
     t.require(["pose", *joint_columns(robot)])
     extras = t.optional(list(EXTRAS))
     per_target = bool(t.optional(["target"]))
+    prev = PrevJoints(t, robot, prev_header(t, robot))
     t.require_rows()
     poses = _Poses(t, robot)
     values: dict[str, list[float]] = {c: [] for c in extras}
     for row in t.rows:
         k, new = poses.add(row)
+        prev.add(row, k, poses.ids[k])
         if not new and not per_target:
             first = poses.first[k]
             raise t.error(row, "pose", f"pose {poses.ids[k]!r} is already on line {first.line}")
@@ -178,7 +259,8 @@ def read_poses_rows(path, robot: Robot, text: str | None = None):
             for c in extras:
                 values[c].append(t.number(row, c, np.nan, *BOUNDS[c]))
     arrays = {c: np.array(v, dtype=float) for c, v in values.items()}
-    return list(poses.ids), poses.q_rad(), arrays.get("time_s"), arrays.get("temp_c")
+    ids = list(poses.ids)
+    return ids, poses.q_rad(), arrays.get("time_s"), arrays.get("temp_c"), prev.rad(len(ids))
 
 
 def _csv_text(header: list[str], rows) -> str:
@@ -207,12 +289,14 @@ def write_campaign(path, meas: Measurements) -> None:
     extras = [
         (c, a) for c, a in (("time_s", meas.time_s), ("temp_c", meas.temp_c)) if a is not None
     ]
+    prev = None if meas.prev_q is None else np.rad2deg(np.asarray(meas.prev_q, dtype=float))
     header = [
         "pose",
         *[f"q{i}" for i in range(1, q.shape[1] + 1)],
         "target",
         *MEASURED,
         *[c for c, _ in extras],
+        *([f"prev_q{i}" for i in range(1, q.shape[1] + 1)] if prev is not None else []),
     ]
     q_deg = np.rad2deg(q)
     mask = meas.mask
@@ -228,6 +312,7 @@ def write_campaign(path, meas: Measurements) -> None:
                         name,
                         *[f"{v:.6f}" for v in meas.xyz[i, k]],
                         *[_fmt(a[i, k], ".6f") for _, a in extras],
+                        *([_fmt(v, ".9f") for v in prev[i]] if prev is not None else []),
                     ]
                 )
     atomic_write_text(path, _csv_text(header, rows))

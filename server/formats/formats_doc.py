@@ -10,12 +10,21 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+from robocal.solver.configuration import CF_COLUMNS
+
 from .campaign_csv import BOUNDS, EXTRAS, MEASURED
 from .json_schema import MODELS, committed
 from .targets_csv import ANGLE_BOUNDS, ORIENTATION
 
 PAGE = Path(__file__).resolve().parents[2] / "docs" / "formats.md"
 JOINTS = "q1..qN"  # one column per joint, in degrees, within the robot's joint limits
+PREV = "prev_q1..prev_qN"  # the joints the arm came from before the pose
+PREV_NOTE = (
+    f"{PREV} (all or none on a row, the same on every row of a pose) are the joints the arm came "
+    "from before the pose: where given, they set the direction of each joint's last motion "
+    "(backlash) in place of the visit order (time_s, else the file order), so a file split or "
+    "reordered keeps it."
+)
 
 
 @dataclass(frozen=True)
@@ -36,20 +45,20 @@ CSV_FILES = (
         "meas.csv",
         "a measurement campaign: one row per (pose, SMR) reading",
         ("pose", JOINTS, "target", *MEASURED),
-        EXTRAS,
+        (*EXTRAS, PREV),
         "calibrate, evaluate, compare, diagnose, predict (as poses)",
         "simulate; the API's measurements.csv",
         "Rows of one pose repeat its joints exactly; a (pose, target) pair appears once; "
-        "an SMR not measured at a pose has no row.",
+        "an SMR not measured at a pose has no row. " + PREV_NOTE,
     ),
     CsvFile(
         "poses.csv",
         "poses to predict SMR positions for",
         ("pose", JOINTS),
-        (*EXTRAS, "target"),
+        (*EXTRAS, "target", PREV),
         "predict",
         "-",
-        "A meas.csv is accepted: its measured columns are ignored.",
+        "A meas.csv is accepted: its measured columns are ignored. " + PREV_NOTE,
     ),
     CsvFile(
         "pred.csv",
@@ -63,11 +72,14 @@ CSV_FILES = (
         "targets.csv",
         "where the SMRs (or, with --tcp, the tool point) must go",
         ("pose", "target", *MEASURED),
-        (JOINTS, *EXTRAS, *ORIENTATION),
+        (JOINTS, *CF_COLUMNS, *EXTRAS, PREV, *ORIENTATION),
         "compensate, export --targets",
         "-",
-        f"{JOINTS} (all or none) start the search; {', '.join(ORIENTATION)} (all three, "
-        "degrees, Rz Ry Rx) give the tool's orientation with --tcp.",
+        f"Every pose gives {JOINTS} (all or none: the starting joints, which keep their "
+        f"configuration) or {', '.join(CF_COLUMNS)} (all or none: ABB's confdata, see "
+        "[configuration.md](configuration.md)); a pose with neither is refused. "
+        f"{', '.join(ORIENTATION)} (all three, degrees, Rz Ry Rx) give the tool's orientation "
+        "with --tcp. " + PREV_NOTE,
     ),
     CsvFile(
         "joints.csv",
@@ -88,7 +100,7 @@ JSON_FILES = {
 
 def column_unit(column: str) -> str:
     """A column's unit and range, from the bounds the readers enforce."""
-    if column == JOINTS:
+    if column in (JOINTS, PREV):
         return "deg, within the joint limits"
     if column in ORIENTATION:
         (lo, hi), unit = ANGLE_BOUNDS
@@ -96,6 +108,10 @@ def column_unit(column: str) -> str:
     if column in BOUNDS:
         (lo, hi), why = BOUNDS[column]
         return f"{why.split(' (')[0]}, {lo:g} to {hi:g}"
+    if column in CF_COLUMNS[:-1]:
+        return "integer: the quadrant of joint " + column[2:] + ", within its limits"
+    if column == CF_COLUMNS[-1]:
+        return "integer: the arm configuration, 0 to 7"
     if column == "predicted_error_mm":
         return "mm"
     if column == "pose":

@@ -5,9 +5,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from robocal.solver import configuration
 from robocal.solver.robot import Robot
 
-from .campaign_csv import BOUNDS, EXTRAS, MEASURED, joint_columns, joint_deg
+from .campaign_csv import (
+    BOUNDS,
+    EXTRAS,
+    MEASURED,
+    PrevJoints,
+    joint_columns,
+    joint_deg,
+    prev_header,
+)
 from .csv_table import Row, Table
 from .errors import InputError
 
@@ -28,6 +37,10 @@ class Targets:
     lines: list[int]
     # with orientation=True: per pose the tool's rx, ry, rz in the cell frame (m, 3) deg, NaN if none
     orientation: np.ndarray | None = None
+    # per pose ABB's confdata cf1, cf4, cf6, cfx (m, 4), NaN where a pose gives none
+    cf: np.ndarray | None = None
+    # per pose the joints the arm comes from (m, n) rad, NaN where a pose gives none
+    prev_q: np.ndarray | None = None
 
 
 ORIENTATION = ("rx", "ry", "rz")
@@ -55,6 +68,8 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
             None,
             f"missing column '{missing}': a tool orientation is rx, ry, rz",
         )
+    cfs = _cf_columns(t, robot)
+    prev = PrevJoints(t, robot, prev_header(t, robot))
     t.require_rows()
     names = tuple(names)
     turn: dict[int, tuple[Row, list[float]]] = {}
@@ -63,6 +78,7 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
     ids: list[str] = []
     first: list[Row] = []
     guesses: list[list[float] | None] = []
+    confs: list[list[int] | None] = []
     seen: dict[tuple[int, str], Row] = {}
     readings = []
     for row in t.rows:
@@ -74,6 +90,14 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
             ids.append(pid)
             first.append(row)
             guesses.append(q)
+            confs.append(_confdata(t, row, cfs, robot))
+        elif not _same(confs[k], _confdata(t, row, cfs, robot)):
+            raise t.error(
+                row,
+                cfs[0],
+                f"the configuration differs from line {first[k].line}, an earlier row of "
+                f"pose {pid!r}",
+            )
         elif not _same(guesses[k], q):
             name = have[0] if have else "pose"
             raise t.error(
@@ -82,6 +106,7 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
                 f"the starting guess differs from line {first[k].line}, an earlier row of "
                 f"pose {pid!r}",
             )
+        prev.add(row, k, pid)
         target = t.text(row, "target")
         if target not in col:
             raise t.error(
@@ -135,7 +160,54 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
         extra.get("temp_c"),
         [r.line for r in first],
         _orientations(turn, m) if orientation else None,
+        np.array([[np.nan] * 4 if c is None else c for c in confs], dtype=float).reshape(m, 4),
+        prev.rad(m),
     )
+
+
+def _cf_columns(t: Table, robot: Robot) -> list[str]:
+    """The confdata columns present: all four or none, and only for a six-axis arm."""
+    have = t.optional(list(configuration.CF_COLUMNS))
+    if not have:
+        return []
+    if len(have) != len(configuration.CF_COLUMNS):
+        missing = next(c for c in configuration.CF_COLUMNS if c not in have)
+        raise InputError(
+            t.path,
+            t.header_line,
+            None,
+            f"missing column '{missing}': a configuration gives cf1, cf4, cf6 and cfx",
+        )
+    if not configuration.supports(robot):
+        raise InputError(
+            t.path,
+            t.header_line,
+            None,
+            f"column '{have[0]}': cf1, cf4, cf6, cfx describe a six-axis arm's configuration; "
+            f"{robot.name} has {robot.n_joints} joints: give starting joints q1 to "
+            f"q{robot.n_joints} instead",
+        )
+    return have
+
+
+def _confdata(t: Table, row: Row, cfs, robot: Robot) -> list[int] | None:
+    """The row's confdata, or None when its cf fields are all blank; refused unless each is an
+    integer its joint's limits allow (cfx 0 to 7)."""
+    if not cfs or not any(t.raw(row, c) for c in cfs):
+        return None
+    out = []
+    for c, name in enumerate(configuration.CF_COLUMNS):
+        if c < len(configuration.QUADRANT_JOINTS):
+            j = configuration.QUADRANT_JOINTS[c]
+            lo, hi = configuration.quadrant_range(robot.lower[j], robot.upper[j])
+            what = f"a quadrant of joint {j + 1} within its limits ({lo} to {hi})"
+        else:
+            lo, hi, what = 0, configuration.CFX_MAX, "an arm configuration number, 0 to 7"
+        v = t.number(row, name)
+        if v != round(v) or not lo <= v <= hi:
+            raise t.error(row, name, f"{t.raw(row, name)} is not {what}")
+        out.append(int(v))
+    return out
 
 
 def _orientations(turn, m: int) -> np.ndarray:

@@ -11,4 +11,6 @@ def test_bench_reports_throughput_next_to_the_reference():
         assert x["targets_per_second"] > 0 and x["reference"]["targets"] == 3
         assert x["worst_predicted_error_mm"] < 0.01
         assert x["reference"]["worst_predicted_error_mm"] < 0.01
-    assert r["without_starting_guess"]["worst_predicted_error_mm"] < 0.01
+    cf = r["from_configuration"]
+    assert cf["worst_predicted_error_mm"] < 0.01 and cf["configuration_kept"] == cf["targets"]
+    assert cf["max_joint_change_deg"] < 1.0

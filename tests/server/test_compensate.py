@@ -14,6 +14,7 @@ from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import make_effects
 from robocal.server.exports.rapid import read_module
 from robocal.server.formats.cell_json import default_cell
+from robocal.solver.configuration import CF_COLUMNS, confdata
 from robocal.solver.kinematics import Layout, flange_frames
 from robocal.solver.rigid import kabsch
 
@@ -41,9 +42,10 @@ def cell(tmp_path_factory):
     return d, vc
 
 
-def write_targets(
-    path, rows, header=("pose", "target", "x", "y", "z", *[f"q{i}" for i in range(1, 7)])
-):
+JOINTS_HEADER = ("pose", "target", "x", "y", "z", *[f"q{i}" for i in range(1, 7)])
+
+
+def write_targets(path, rows, header=JOINTS_HEADER):
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(header)
@@ -61,24 +63,28 @@ def test_compensated_joints_reach_the_targets_on_the_true_arm(cell, tmp_path):
     q_want = vc.sample_poses(30, np.random.default_rng(99))
     desired = vc.true_points(q_want)
     program = np.round(np.degrees(q_want), 1)  # the robot program's joints: a starting guess
+    cf = confdata(default_cell().robot, q_want)  # the configurations the program was taught in
     rows = []
     for i in range(30):
         if i < 20:  # three SMRs and a guess
             for k, name in enumerate(vc.target_names):
-                rows.append([f"P{i}", name, *desired[i, k], *program[i]])
-        else:  # one SMR, no guess: the joints are left blank
+                rows.append([f"P{i}", name, *desired[i, k], *program[i], *[""] * 4])
+        else:  # one SMR, no guess: the joints are left blank, the configuration given
             k = i % 3
-            rows.append([f"P{i}", vc.target_names[k], *desired[i, k], *[""] * 6])
-    write_targets(tmp_path / "targets.csv", rows)
+            rows.append([f"P{i}", vc.target_names[k], *desired[i, k], *[""] * 6, *cf[i]])
+    write_targets(tmp_path / "targets.csv", rows, (*JOINTS_HEADER, *CF_COLUMNS))
     r = robocal("compensate", d / "model.json", "targets.csv", "--out", "joints.csv", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert "compensated 30 poses" in r.stdout
+    # one SMR leaves the orientation to the configuration's search: said, once
+    assert r.stderr.count("warning") == 1 and "10 poses (first 'P20')" in r.stderr, r.stderr
     assert open(tmp_path / "joints.csv").readline().strip() == (
         "pose,q1,q2,q3,q4,q5,q6,predicted_error_mm"
     )
     ids, q, err = read_joints(tmp_path / "joints.csv")
     assert ids == [f"P{i}" for i in range(30)]
     assert np.all((q >= vc.true_robot.lower) & (q <= vc.true_robot.upper))
+    assert (confdata(default_cell().robot, q) == cf).all()
     reached = vc.true_points(q)
     floor = vc.noise_floor_mm(q_want)
     three = reached[:20] - desired[:20]
@@ -254,18 +260,19 @@ def test_a_model_with_thermal_growth_needs_the_temperature(tmp_path):
     write_model(tmp_path / "model.json", model)
     q = vc.sample_poses(2, np.random.default_rng(0))
     p = vc.true_points(q)
-    rows = [[i, t, *p[i, k]] for i in range(2) for k, t in enumerate(vc.target_names)]
-    write_targets(tmp_path / "a.csv", rows, ("pose", "target", "x", "y", "z"))
+    g = np.degrees(q)
+    rows = [[i, t, *p[i, k], *g[i]] for i in range(2) for k, t in enumerate(vc.target_names)]
+    write_targets(tmp_path / "a.csv", rows)
     with pytest.raises(InputError, match=r"a.csv:1: the model's thermal_drift needs a temp_c"):
         compensate_file(tmp_path / "model.json", tmp_path / "a.csv")
     temps = [[*r, "" if r[0] == 1 else 21.5] for r in rows]
-    write_targets(tmp_path / "b.csv", temps, ("pose", "target", "x", "y", "z", "temp_c"))
+    write_targets(tmp_path / "b.csv", temps, (*JOINTS_HEADER, "temp_c"))
     with pytest.raises(InputError, match=r"b.csv:5: pose '1'"):
         compensate_file(tmp_path / "model.json", tmp_path / "b.csv")
     temps = [[*r, 21.5] for r in rows]
-    write_targets(tmp_path / "c.csv", temps, ("pose", "target", "x", "y", "z", "temp_c"))
-    ids, q_deg, err = compensate_file(tmp_path / "model.json", tmp_path / "c.csv")
-    assert ids == ["0", "1"] and err.max() < 0.01
+    write_targets(tmp_path / "c.csv", temps, (*JOINTS_HEADER, "temp_c"))
+    c = compensate_file(tmp_path / "model.json", tmp_path / "c.csv")
+    assert c.pose_ids == ["0", "1"] and c.error_mm.max() < 0.01
 
 
 def test_a_rapid_module_of_compensated_targets_reaches_them_on_the_true_arm(cell, tmp_path):
@@ -303,3 +310,84 @@ def test_a_rapid_module_of_compensated_targets_reaches_them_on_the_true_arm(cell
         "targets.csv", "--out", "X.mod", cwd=tmp_path,
     )  # fmt: skip
     assert r.returncode != 0 and not (tmp_path / "X.mod").exists()
+
+
+def test_a_pose_without_joints_or_configuration_is_refused_naming_it(cell, tmp_path):
+    _, vc = cell
+    rows = _good_rows(vc)
+    for r in rows[3:6]:  # pose 1, lines 5 to 7, without its joints
+        r[5:] = [""] * 6
+    err = refused(cell, tmp_path, rows)
+    assert err.startswith(
+        "robocal: error: targets.csv:5: pose '1' has neither starting joints (q1 ... qN) nor a "
+        "configuration (cf1, cf4, cf6, cfx)"
+    ), err
+    assert "\n" not in err
+
+
+def test_a_guess_two_degrees_off_stays_in_its_configuration(cell, tmp_path):
+    """The program's joints 2 degrees off on every joint: the joints found are the true ones to
+    within 3 degrees, on target to within twice the floor; the jumps between poses reported."""
+    d, vc = cell
+    rng = np.random.default_rng(12)
+    q_want = vc.sample_poses(15, rng)
+    desired = vc.true_points(q_want)
+    lo, hi = np.degrees(vc.true_robot.lower), np.degrees(vc.true_robot.upper)
+    guess = np.clip(np.degrees(q_want) + rng.choice([-2.0, 2.0], size=q_want.shape), lo, hi)
+    rows = [
+        [f"P{i}", name, *desired[i, k], *guess[i]]
+        for i in range(15)
+        for k, name in enumerate(vc.target_names)
+    ]
+    write_targets(tmp_path / "targets.csv", rows)
+    r = robocal(
+        "compensate", d / "model.json", "targets.csv", "--out", "joints.csv",
+        "--max-jump-deg", "60", cwd=tmp_path,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    _, q, err = read_joints(tmp_path / "joints.csv")
+    assert np.degrees(np.abs(q - q_want)).max() <= 3.0
+    floor = vc.noise_floor_mm(q_want)
+    assert err.max() <= 2 * floor
+    reached = vc.true_points(q) - desired
+    assert np.sqrt(np.mean(np.sum(reached**2, -1))) <= 2 * floor
+    big = int(np.sum(np.abs(np.diff(np.degrees(q), axis=0)).max(axis=1) > 60))
+    assert big > 0 and f"{big} jumps of more than 60 deg between consecutive poses" in r.stdout
+
+
+def test_a_guess_in_another_configuration_is_refused(cell, tmp_path):
+    """Joint 1's starting value 40 degrees off: the solve would turn it there, which no
+    correction needs; refused with the pose and the joint, nothing written."""
+    _, vc = cell
+    rows = _good_rows(vc)
+    for r in rows[3:6]:
+        r[5] = float(r[5]) + (40.0 if float(r[5]) < 0 else -40.0)
+    err = refused(cell, tmp_path, rows)
+    assert "targets.csv:5: pose '1' would leave its starting joints' configuration: joint 1 " in err
+
+
+def test_a_configuration_contradicting_the_joints_is_refused(cell, tmp_path):
+    _, vc = cell
+    rows = _good_rows(vc)
+    q = np.deg2rad([[float(v) for v in r[5:11]] for r in rows])
+    cf = confdata(default_cell().robot, q)
+    cf[4, 3] ^= 1  # pose 1's second row, joint 5's sign flipped
+    rows = [[*r, *c] for r, c in zip(rows, cf)]
+    err = refused(cell, tmp_path, rows, header=(*JOINTS_HEADER, *CF_COLUMNS))
+    assert "targets.csv:6:" in err and "configuration differs from line 5" in err, err
+    cf[4, 3] ^= 1
+    cf[3:6, 3] ^= 1
+    rows = [[*r[:11], *c] for r, c in zip(rows, cf)]
+    err = refused(cell, tmp_path, rows, header=(*JOINTS_HEADER, *CF_COLUMNS))
+    assert "targets.csv:5: pose '1' has starting joints in configuration" in err, err
+
+
+@pytest.mark.parametrize(
+    "value,why",
+    [("8", "is not an arm configuration number"), ("1.5", "is not an arm"), ("x", "not a number")],
+)
+def test_bad_configuration_values_are_refused(cell, tmp_path, value, why):
+    _, vc = cell
+    rows = [[*r[:5], *[""] * 6, 0, 0, 0, value] for r in _good_rows(vc)]
+    err = refused(cell, tmp_path, rows, header=(*JOINTS_HEADER, *CF_COLUMNS))
+    assert err.startswith("robocal: error: targets.csv:2:15: column 'cfx'") and why in err, err

@@ -253,7 +253,7 @@ def test_read_poses_csv(tmp_path):
         "a,0,0,0,0,0,0,0,20.5\n"
         "b,10,20,30,40,50,60,12.5,20.6\n"
     )
-    ids, q, time_s, temp_c = read_poses(put(tmp_path, "poses.csv", text), IRB2600)
+    ids, q, time_s, temp_c, _ = read_poses(put(tmp_path, "poses.csv", text), IRB2600)
     assert ids == ["a", "b"]
     np.testing.assert_allclose(q[1], np.deg2rad([10, 20, 30, 40, 50, 60]))
     np.testing.assert_array_equal(time_s, [0, 12.5])
@@ -267,7 +267,7 @@ def test_read_poses_accepts_meas_csv(tmp_path):
         "1,0,0,0,0,0,0,B,not measured,,,0.5\n"
         "2,10,20,30,40,50,60,B,1,2,3,1.0\n"
     )
-    ids, q, time_s, temp_c = read_poses(put(tmp_path, "meas.csv", text), IRB2600)
+    ids, q, time_s, temp_c, _ = read_poses(put(tmp_path, "meas.csv", text), IRB2600)
     assert ids == ["1", "2"]
     assert q.shape == (2, 6)
     np.testing.assert_array_equal(time_s, [0.0, 1.0])  # first row of each pose

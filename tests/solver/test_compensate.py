@@ -13,8 +13,10 @@ from robocal.server.compensation import solver_model
 from robocal.server.formats.cell_json import Cell, default_cell
 from robocal.solver.calibrate import calibrate
 from robocal.solver.compensate import Model, compensate
+from robocal.solver.configuration import confdata
+from robocal.solver.robot import IRB2600
 
-from tests.robots import PUMA_LIKE
+from tests.robots import PUMA_LIKE, UR5
 
 GRAVITY_JOINTS = (2, 3)  # joints carrying a large gravity torque on both arms
 
@@ -68,19 +70,61 @@ def test_compensated_joints_put_the_true_arm_on_target(robot, seed):
     assert miss(nominal.q) > max(0.5, 20 * miss(calibrated.q))
 
 
-def test_one_smr_a_pose_without_a_guess_and_the_models_own_prediction():
-    """One SMR a pose and no starting guess: the search finds joints the model puts there, and
-    its reported miss is the model file's own prediction's (workflow.model_predict)."""
+def test_one_smr_a_pose_in_a_configuration_and_the_models_own_prediction():
+    """One SMR a pose and only its configuration: joints in that configuration that the model
+    puts there, and the reported miss is the model file's own prediction's
+    (workflow.model_predict)."""
     cell, vc, meas, model = simulated("irb2600", 21)
     q_want = vc.sample_poses(40, np.random.default_rng(5))
     desired = vc.true_points(q_want)
     mask = np.zeros(desired.shape[:2], dtype=bool)
     mask[np.arange(40), np.arange(40) % 3] = True
-    res = compensate(solver_model(model), desired, mask)
+    cf = confdata(cell.robot, q_want)
+    res = compensate(solver_model(model), desired, mask, cf=cf)
     assert res.converged.all() and res.error_mm.max() < 1e-6
+    assert (confdata(cell.robot, res.q) == cf).all()
     pred = workflow.model_predict(model, res.q)
     assert np.abs(pred[mask] - desired[mask]).max() < 1e-6
     assert np.all((res.q >= vc.true_robot.lower) & (res.q <= vc.true_robot.upper))
+
+
+@pytest.mark.parametrize("robot", [IRB2600, PUMA_LIKE, UR5])
+def test_a_configuration_alone_gives_back_the_joints_it_was_taken_from(robot):
+    """Joints drawn at random, their confdata computed, the SMRs they put on target asked for
+    with the confdata alone: the same joints (one solution a configuration), where the old
+    search from fixed starts turned joint 1 or the wrist half a turn away."""
+    vc = VirtualCell.random(robot, default_cell().targets, seed=3)
+    model = Model(*_true_layout(vc), [], robot)
+    q = vc.sample_poses(30, np.random.default_rng(1))
+    desired = vc.true_points(q)
+    res = compensate(model, desired, np.ones(desired.shape[:2], dtype=bool), cf=confdata(robot, q))
+    assert res.error_mm.max() < 1e-6
+    assert np.degrees(np.abs(res.q - q)).max() < 1e-3
+
+
+def test_neither_joints_nor_configuration_is_refused():
+    vc = VirtualCell.random(IRB2600, default_cell().targets, seed=3)
+    model = Model(*_true_layout(vc), [], IRB2600)
+    q = vc.sample_poses(3, np.random.default_rng(1))
+    desired = vc.true_points(q)
+    q0 = q.copy()
+    q0[1] = np.nan
+    with pytest.raises(ValueError, match="pose 2 has neither starting joints nor a configuration"):
+        compensate(model, desired, np.ones(desired.shape[:2], dtype=bool), q0)
+
+
+def test_a_configuration_the_arm_cannot_take_there_has_no_solution():
+    """Joint 1 asked in the quadrant opposite the target: no joints, an infinite miss."""
+    vc = VirtualCell.random(IRB2600, default_cell().targets, seed=3)
+    model = Model(*_true_layout(vc), [], IRB2600)
+    q = vc.sample_poses(4, np.random.default_rng(1))
+    desired = vc.true_points(q)
+    cf = confdata(IRB2600, q)
+    cf[2, 0] = cf[2, 0] + 2 if cf[2, 0] < 0 else cf[2, 0] - 2
+    cf[2, 3] &= 3  # wrist centre in front of axis 1: the target is behind it
+    res = compensate(model, desired, np.ones(desired.shape[:2], dtype=bool), cf=cf)
+    assert np.isnan(res.q[2]).all() and np.isinf(res.error_mm[2])
+    assert res.error_mm[[0, 1, 3]].max() < 1e-6
 
 
 def test_a_target_out_of_reach_keeps_its_miss():
@@ -155,3 +199,24 @@ def test_a_pose_beyond_a_joint_limit_stays_within_it_and_keeps_its_miss():
     assert np.all((res.q >= vc.true_robot.lower) & (res.q <= vc.true_robot.upper))
     assert res.error_mm[2] > 10.0
     assert res.error_mm[[0, 1, 3]].max() < 1e-6
+
+
+def test_prev_q_gives_a_shuffled_program_its_approach_directions():
+    """The same backlash model and targets, shuffled, with the joints each pose comes from: the
+    joints found are those of the program in order; shuffled without them, they are not."""
+    from robocal.solver.effects import Extension
+
+    cell = default_cell()
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=4)
+    ext = Extension("joint_backlash", joint=1, coef=np.array([-np.deg2rad(0.05)]))
+    model = Model(*_true_layout(vc), [ext], cell.robot)
+    q = vc.sample_poses(21, np.random.default_rng(2))
+    desired = vc.true_points(q)[1:]
+    prev, q = q[:-1], q[1:]
+    mask = np.ones(desired.shape[:2], dtype=bool)
+    ordered = compensate(model, desired, mask, q, prev_q=prev)
+    perm = np.random.default_rng(0).permutation(len(q))
+    shuffled = compensate(model, desired[perm], mask[perm], q[perm], prev_q=prev[perm])
+    assert np.degrees(np.abs(shuffled.q - ordered.q[perm])).max() < 1e-6
+    blind = compensate(model, desired[perm], mask[perm], q[perm])
+    assert np.degrees(np.abs(blind.q - ordered.q[perm])).max() > 0.05

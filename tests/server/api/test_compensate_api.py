@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import subprocess
 import sys
 
@@ -61,7 +62,7 @@ def test_compensate_and_export_a_done_model(live, model_job):
     url = f"/api/models/{job_id}/compensate"
     assert live.anonymous.post(url, content=body).status_code == 401
 
-    r = c.post(url, content=body, params={"filename": "cell-7.csv"})
+    r = r0 = c.post(url, content=body, params={"filename": "cell-7.csv"})
     assert r.status_code == 200, r.text
     assert r.headers["content-type"].startswith("text/csv")
     joints = list(csv.DictReader(io.StringIO(r.text)))
@@ -89,6 +90,26 @@ def test_compensate_and_export_a_done_model(live, model_job):
     assert r.status_code == 422 and "unreachable" in r.json()["detail"], r.text
     assert r.json()["line"] == 2
     assert c.post(url, content=body, params={"tcp": "1,2"}).status_code == 422
+    # three SMRs and the starting joints: a warning only for the jumps between the random poses
+    q = np.array([[float(j[f"q{i}"]) for i in range(1, 7)] for j in joints])
+    jumps = int(np.sum(np.abs(np.diff(q, axis=0)).max(axis=1) > 90))
+    said = json.loads(r0.headers.get("X-Robocal-Warnings", "[]"))
+    assert said == ([] if not jumps else [said[0]]), said
+    assert not jumps or said[0].startswith(f"cell-7.csv: {jumps} jumps of more than 90 deg")
+    # one SMR a pose: its orientation comes from the starting joints, said in a header
+    one = [lines[0], *[ln for ln in lines[1:] if ln.split(",")[1] == "A"]]
+    r = c.post(url, content="\n".join(one), params={"filename": "one.csv"})
+    assert r.status_code == 200, r.text
+    warned = json.loads(r.headers["X-Robocal-Warnings"])
+    assert len(warned) == 1 + bool(jumps) and warned[0].startswith("one.csv: 5 poses (first "), (
+        warned
+    )
+    assert "comes from the starting joints" in warned[0]
+    # no joints and no configuration: 422 naming the pose's line
+    bare = [",".join(ln.split(",")[:5]) for ln in lines]
+    r = c.post(url, content="\n".join(bare))
+    assert r.status_code == 422 and r.json()["line"] == 2, r.text
+    assert "has neither starting joints" in r.json()["detail"]
 
     # exports: the parameter table and the URDF need no body; RAPID compensates the upload
     r = c.post(f"/api/models/{job_id}/export", params={"format": "params"})
