@@ -52,7 +52,19 @@ def load_campaign(path, cell: Cell) -> Measurements:
         require_inputs(meas.q, meas.xyz)
     except ValueError as e:
         raise DataError(f"{path}: {e}") from None
+    refuse_wrong_units(path, cell, meas)
     return meas
+
+
+def refuse_wrong_units(path, cell: Cell, meas: Measurements) -> None:
+    """DataError naming the file and the likely units when the readings' spread is not the one
+    the cell's nominal arm gives at the measured joints (solver.plausibility)."""
+    from robocal.solver.plausibility import check_units
+
+    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    why = check_units(cell.robot, targets, meas.q, meas.xyz).reason()
+    if why:
+        raise DataError(f"{path}: {why}")
 
 
 DB_SUFFIXES = (".db", ".sqlite", ".sqlite3")
@@ -103,6 +115,7 @@ def load_data(path, cell_path=None, campaign_id=None, note=None) -> tuple[Cell, 
         raise DataError(
             f"{path}: campaign {campaign_id} ({info.name}) has no reading (all missing)"
         )
+    refuse_wrong_units(f"{path}: campaign {campaign_id}", cell, meas)
     return cell, meas
 
 
@@ -248,7 +261,38 @@ def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit
         noise_floor_mm=floor,
         noise_floor_source=source,
     )
-    return validation_block(v, list(used.pose_ids), source)
+    v.reasons += implausible(cell, used, cal.robot)
+    block = validation_block(v, list(used.pose_ids), source)
+    block["nominal_rms_mm"] = nominal_rms(cell, used)
+    return block
+
+
+def implausible(cell: Cell, meas: Measurements, robot) -> list[str]:
+    """The verdict's reasons against a model physics rules out (solver.plausibility): readings
+    in other units than the cell's nominal arm implies, or an identified geometry changed from
+    the nominal beyond what an arm of its size can have."""
+    from robocal.solver.plausibility import check_units, implausible_changes
+
+    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    units = check_units(cell.robot, targets, meas.q, meas.xyz).reason()
+    changes = implausible_changes(cell.robot, robot).reason()
+    return [why for why in (units, changes) if why]
+
+
+def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
+    """The nominal model's RMS error (mm a reading) on the readings, its base and SMRs
+    registered on them: what the calibration is to improve on."""
+    from robocal.solver.calibrate import calibrate
+
+    from .validation import json_number
+
+    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    nom = calibrate(
+        cell.robot, targets, meas.target_names, meas.q, meas.xyz, "nominal", base_guess=cell.base
+    )
+    r = np.linalg.norm(predict(nom.layout, nom.x, meas.q) - meas.xyz, axis=-1)
+    r = r[np.isfinite(r)]
+    return json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
 
 
 def model_predict(model: ModelFile, q, time_s=None, temp_c=None) -> np.ndarray:
@@ -443,8 +487,11 @@ def validate_diagnosis(
         noise_floor_mm=floor,
         noise_floor_source=source,
     )
+    v.reasons += implausible(cell, meas, model.robot)
     method = f"{FOLDS}-fold cross-validation of the diagnosis"
-    return validation_block(v, list(meas.pose_ids), source, method)
+    block = validation_block(v, list(meas.pose_ids), source, method)
+    block["nominal_rms_mm"] = nominal_rms(cell, meas)
+    return block
 
 
 def write_diagnosis(
