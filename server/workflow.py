@@ -57,14 +57,22 @@ def load_campaign(path, cell: Cell) -> Measurements:
 
 
 def refuse_wrong_units(path, cell: Cell, meas: Measurements) -> None:
-    """DataError naming the file and the likely units when the readings' spread is not the one
-    the cell's nominal arm gives at the measured joints (solver.plausibility)."""
-    from robocal.solver.plausibility import check_units
-
-    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
-    why = check_units(cell.robot, targets, meas.q, meas.xyz).reason()
+    """DataError naming the file and the likely units (see units_refusal)."""
+    why = units_refusal(cell, meas)
     if why:
         raise DataError(f"{path}: {why}")
+
+
+def units_refusal(cell: Cell, meas: Measurements) -> str | None:
+    """Why the readings are not in mm and degrees: their spread is not the one the cell's
+    nominal arm gives at the measured joints (solver.plausibility); None if they may be, or if
+    the cell does not name their SMRs (refused elsewhere)."""
+    from robocal.solver.plausibility import check_units
+
+    if any(t not in cell.targets for t in meas.target_names):
+        return None
+    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    return check_units(cell.robot, targets, meas.q, meas.xyz).reason()
 
 
 DB_SUFFIXES = (".db", ".sqlite", ".sqlite3")
@@ -271,10 +279,9 @@ def implausible(cell: Cell, meas: Measurements, robot) -> list[str]:
     """The verdict's reasons against a model physics rules out (solver.plausibility): readings
     in other units than the cell's nominal arm implies, or an identified geometry changed from
     the nominal beyond what an arm of its size can have."""
-    from robocal.solver.plausibility import check_units, implausible_changes
+    from robocal.solver.plausibility import implausible_changes
 
-    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
-    units = check_units(cell.robot, targets, meas.q, meas.xyz).reason()
+    units = units_refusal(cell, meas)
     changes = implausible_changes(cell.robot, robot).reason()
     return [why for why in (units, changes) if why]
 
