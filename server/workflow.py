@@ -39,8 +39,9 @@ def load_cell(path) -> Cell:
     return default_cell() if path is None else read_cell(path)
 
 
-def load_campaign(path, cell: Cell) -> Measurements:
-    """A campaign whose targets the cell describes."""
+def load_campaign(path, cell: Cell, cell_path=None) -> Measurements:
+    """A campaign whose targets the cell (read from cell_path, None for the built-in) describes,
+    in the units it implies."""
     meas = read_campaign(path, cell.robot)
     unknown = [t for t in meas.target_names if t not in cell.targets]
     if unknown:
@@ -52,6 +53,7 @@ def load_campaign(path, cell: Cell) -> Measurements:
         require_inputs(meas.q, meas.xyz)
     except ValueError as e:
         raise DataError(f"{path}: {e}") from None
+    refuse_radian_angles(cell_path, cell, meas)  # before the units: it changes the arm's spread
     refuse_wrong_units(path, cell, meas)
     return meas
 
@@ -61,6 +63,20 @@ def refuse_wrong_units(path, cell: Cell, meas: Measurements) -> None:
     why = units_refusal(cell, meas)
     if why:
         raise DataError(f"{path}: {why}")
+
+
+def refuse_radian_angles(cell_path, cell: Cell, meas: Measurements) -> None:
+    """DataError naming the cell.json whose robot's angles the readings say are radians
+    (solver.plausibility.check_cell_angles); a built-in robot's are never."""
+    from robocal.solver.plausibility import check_cell_angles
+
+    if cell_path is None:
+        return
+    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    check = check_cell_angles(cell.robot, targets, meas.q, meas.xyz)
+    why = check.reason() if check is not None else None
+    if why:
+        raise DataError(f"{cell_path}: {why}")
 
 
 def units_refusal(cell: Cell, meas: Measurements) -> str | None:
@@ -89,7 +105,7 @@ def load_data(path, cell_path=None, campaign_id=None, note=None) -> tuple[Cell, 
     note(text) is told when a database campaign is not done (its measured poses are used)."""
     if not is_database(path):
         cell = load_cell(cell_path)
-        return cell, load_campaign(path, cell)
+        return cell, load_campaign(path, cell, cell_path)
     from . import store
     from .formats.cell_json import parse_cell
 
@@ -123,6 +139,7 @@ def load_data(path, cell_path=None, campaign_id=None, note=None) -> tuple[Cell, 
         raise DataError(
             f"{path}: campaign {campaign_id} ({info.name}) has no reading (all missing)"
         )
+    refuse_radian_angles(cell_path or f"{path}: campaign {campaign_id}'s cell", cell, meas)
     refuse_wrong_units(f"{path}: campaign {campaign_id}", cell, meas)
     return cell, meas
 

@@ -17,7 +17,8 @@ from itertools import product
 import numpy as np
 
 from .kinematics import Layout, predict
-from .robot import Robot
+from .rigid import kabsch
+from .robot import Joint, Robot
 
 # What a length in the readings may really have been, and its size in mm.
 LENGTH_UNITS = {"mm": 1.0, "centimetres": 10.0, "inches": 25.4, "metres": 1000.0}
@@ -125,6 +126,64 @@ def check_units(robot: Robot, targets: np.ndarray, q: np.ndarray, xyz: np.ndarra
     if best is None:  # no unit explains it: the geometry or the cell, not a unit mistake
         return check
     return UnitCheck(s_m, s_p, ratio, bound, best[0], best[1], robot.n_joints)
+
+
+@dataclass(frozen=True)
+class CellAngles:
+    """The nominal arm's error on the readings (base registered) with its angles as given in
+    degrees, and read as radians."""
+
+    degrees_rms_mm: float
+    radians_rms_mm: float
+    bound_mm: float
+
+    def reason(self) -> str | None:
+        """One sentence when the angles as radians explain the readings and as degrees do not."""
+        if not (
+            self.degrees_rms_mm > self.bound_mm >= self.radians_rms_mm
+            and self.radians_rms_mm * RATIO_BAND < self.degrees_rms_mm
+        ):
+            return None
+        return (
+            f"the nominal arm errs {_mm(self.degrees_rms_mm)} RMS on the readings (base "
+            f"registered), {_mm(self.radians_rms_mm)} with its theta, alpha and beta read as "
+            "radians: give the robot's angles in degrees"
+        )
+
+
+def check_cell_angles(
+    robot: Robot, targets: np.ndarray, q: np.ndarray, xyz: np.ndarray
+) -> CellAngles | None:
+    """Whether the robot's angles (theta, alpha, beta), given in degrees, were meant as radians
+    (the arm as radians registers onto the readings, as degrees does not); None when they
+    cannot be radians: some lies beyond +-pi as given, or all are zero (either reading is the
+    same arm). An arm's twists are mostly +-90 degrees, so real cells are seldom even tried."""
+    angles = np.array([[j.theta, j.alpha, j.beta] for j in robot.joints])  # rad, from degrees
+    if not np.any(angles) or np.any(np.abs(np.rad2deg(angles)) > np.pi + 1e-9):
+        return None
+    as_radians = Robot(
+        robot.name,
+        robot.convention,
+        tuple(
+            Joint(j.a, j.d, np.rad2deg(j.theta), np.rad2deg(j.alpha), j.limits, np.rad2deg(j.beta))
+            for j in robot.joints
+        ),
+    )
+    bound = max(NOMINAL_ERROR_MIN_MM, NOMINAL_ERROR_FRACTION * robot.reach_mm)
+    return CellAngles(
+        registered_rms(robot, targets, q, xyz), registered_rms(as_radians, targets, q, xyz), bound
+    )
+
+
+def registered_rms(robot: Robot, targets: np.ndarray, q: np.ndarray, xyz: np.ndarray) -> float:
+    """RMS distance (mm a reading) of the readings from the robot's nominal SMR positions at the
+    joints, after the closed-form rigid fit of its base."""
+    mask = np.all(np.isfinite(xyz), axis=-1)
+    lay = Layout(robot, np.eye(4), tuple(str(k) for k in range(len(targets))))
+    p = predict(lay, lay.initial(targets), q)[mask]
+    T = kabsch(p, xyz[mask])
+    r = p @ T[:3, :3].T + T[:3, 3] - xyz[mask]
+    return float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
 
 
 @dataclass(frozen=True)

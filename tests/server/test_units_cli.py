@@ -11,6 +11,7 @@ import pytest
 from robocal.server.cli import main
 from robocal.solver.robot import IRB2600
 
+TARGETS = {"A": [60.0, 0.0, 35.0], "B": [-30.0, 52.0, 35.0], "C": [-30.0, -52.0, 35.0]}
 UNITS = {
     "metres.csv": ("xyz", lambda v: v / 1000.0, "x, y, z look like metres; give them in mm"),
     "inches.csv": ("xyz", lambda v: v / 25.4, "x, y, z look like inches; give them in mm"),
@@ -91,10 +92,7 @@ def test_wrong_nominal_geometry_not_deployable(folder, capsys):
         }
         for i, j in enumerate(IRB2600.joints)
     ]
-    cell = {
-        "robot": {"name": "irb2600", "convention": "dh", "joints": joints},
-        "targets": {"A": [60.0, 0.0, 35.0], "B": [-30.0, 52.0, 35.0], "C": [-30.0, -52.0, 35.0]},
-    }
+    cell = {"robot": {"name": "irb2600", "convention": "dh", "joints": joints}, "targets": TARGETS}
     (folder / "long.json").write_text(json.dumps(cell))
     out = folder / "long_model.json"
     args = ["calibrate", str(folder / "meas.csv"), "--cell", str(folder / "long.json")]
@@ -108,3 +106,18 @@ def test_wrong_nominal_geometry_not_deployable(folder, capsys):
         f"{reach:,.0f} mm reach)"
     ), why
     assert "NOT DEPLOYABLE" in capsys.readouterr().out
+
+
+def test_cell_angles_in_radians_refused_naming_the_cell(folder, capsys):
+    joints = [
+        {"a": j.a, "d": j.d, "theta": j.theta, "alpha": j.alpha, "limits": [-400, 400]}
+        for j in IRB2600.joints  # radians, as a user converting from a datasheet might
+    ]
+    cell = {"robot": {"name": "irb2600", "convention": "dh", "joints": joints}, "targets": TARGETS}
+    (folder / "radians_cell.json").write_text(json.dumps(cell))
+    capsys.readouterr()
+    args = ["calibrate", str(folder / "meas.csv"), "--cell", str(folder / "radians_cell.json")]
+    assert main([*args, "--out", str(folder / "rc.json")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"robocal: error: {folder / 'radians_cell.json'}: the nominal arm errs ")
+    assert err.endswith("read as radians: give the robot's angles in degrees") and "\n" not in err

@@ -7,8 +7,13 @@ from robocal.drivers.cell import VirtualCell
 from robocal.server import workflow
 from robocal.server.formats.campaign_csv import read_campaign
 from robocal.solver.measurements import Measurements
-from robocal.solver.plausibility import RATIO_BAND, check_units, implausible_changes
-from robocal.solver.robot import IRB2600, KUKA_LIKE
+from robocal.solver.plausibility import (
+    RATIO_BAND,
+    check_cell_angles,
+    check_units,
+    implausible_changes,
+)
+from robocal.solver.robot import IRB2600, KUKA_LIKE, Joint, Robot
 
 from tests.real import REAL
 from tests.robots import IIWA_LIKE, PUMA_LIKE, TARGETS, UR5
@@ -37,6 +42,24 @@ def test_wrong_units_named_right_ones_pass(robot):
     assert c.reason().endswith(f"q1..q{robot.n_joints} look like radians; give them in degrees")
     c = check_units(robot, targets, np.deg2rad(meas.q), meas.xyz / 1000.0)
     assert c.likely == ("metres", "radians"), c
+
+
+@pytest.mark.parametrize("robot", ROBOTS, ids=lambda r: r.name)
+def test_cell_angles_in_radians_named(robot):
+    """A cell.json whose theta and alpha were written in radians (read as degrees)."""
+    meas, targets = campaign(robot)
+    assert check_cell_angles(robot, targets, meas.q, meas.xyz) is None  # twists of 90 deg
+    as_written = Robot(
+        robot.name,
+        robot.convention,
+        tuple(
+            Joint(j.a, j.d, np.deg2rad(j.theta), np.deg2rad(j.alpha), j.limits)
+            for j in robot.joints
+        ),
+    )
+    check = check_cell_angles(as_written, targets, meas.q, meas.xyz)
+    print(f"{robot.name}: {check.degrees_rms_mm:.1f} mm as degrees, {check.radians_rms_mm:.2f}")
+    assert check.reason().endswith("read as radians: give the robot's angles in degrees")
 
 
 @pytest.mark.parametrize("sd_deg", [0.1, 1.0, 5.0])
@@ -69,6 +92,7 @@ def test_real_campaigns_pass_the_unit_check(name, file):
     c = check_units(cell.robot, targets, meas.q, meas.xyz)
     print(f"{name}/{file}: spread ratio {c.ratio:.4f} (band 1/{RATIO_BAND:g}..{RATIO_BAND:g})")
     assert c.plausible and 1 / RATIO_BAND < c.ratio < RATIO_BAND
+    assert check_cell_angles(cell.robot, targets, meas.q, meas.xyz) is None
     assert check_units(cell.robot, targets, meas.q, meas.xyz / 1000.0).likely[0] == "metres"
 
 
