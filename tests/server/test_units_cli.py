@@ -7,8 +7,13 @@ import csv
 import json
 import math
 
+import numpy as np
 import pytest
+from robocal.drivers.cell import VirtualCell
+from robocal.server import workflow
 from robocal.server.cli import main
+from robocal.server.formats.cell_json import default_cell
+from robocal.solver.measurements import Measurements
 from robocal.solver.robot import IRB2600
 
 TARGETS = {"A": [60.0, 0.0, 35.0], "B": [-30.0, 52.0, 35.0], "C": [-30.0, -52.0, 35.0]}
@@ -121,3 +126,18 @@ def test_cell_angles_in_radians_refused_naming_the_cell(folder, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"robocal: error: {folder / 'radians_cell.json'}: the nominal arm errs ")
     assert err.endswith("read as radians: give the robot's angles in degrees") and "\n" not in err
+
+
+def test_a_verdict_on_readings_in_metres_names_them():
+    """Where no file is read (a campaign measured by the service), the verdict says it: the
+    readings' units and the links shrunk a thousandfold."""
+    cell = default_cell()
+    meas = VirtualCell.random(cell.robot, cell.targets, seed=7).campaign(30, seed=7)
+    metres = Measurements(meas.pose_ids, meas.q, meas.target_names, meas.xyz / 1000.0)
+    v = workflow.model_file(workflow.run_method(cell, metres, "ls-sum"), cell, metres)
+    v = v.meta["validation"]
+    assert not v["deployable"]
+    assert any(r.endswith("x, y, z look like metres; give them in mm") for r in v["reasons"])
+    (change,) = [r for r in v["reasons"] if "changed by" in r]
+    assert "a2 by -899" in change or change.startswith("a2 changed by -899"), change
+    assert np.isfinite(v["nominal_rms_mm"]) and v["nominal_rms_mm"] > 1000.0
