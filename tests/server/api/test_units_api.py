@@ -4,7 +4,6 @@ stored (issue 21, point 5)."""
 import csv
 import io
 
-import pytest
 from robocal.drivers.cell import VirtualCell
 from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.cell_json import default_cell
@@ -12,7 +11,6 @@ from robocal.server.formats.cell_json import default_cell
 from .test_compensate_api import PROBLEM
 
 
-@pytest.mark.sqlite_only
 def test_an_upload_in_metres_is_refused_naming_the_units(live, tmp_path):
     cell = default_cell()
     meas = VirtualCell.random(cell.robot, cell.targets, seed=3).campaign(30, seed=3)
