@@ -39,8 +39,9 @@ def load_cell(path) -> Cell:
     return default_cell() if path is None else read_cell(path)
 
 
-def load_campaign(path, cell: Cell) -> Measurements:
-    """A campaign whose targets the cell describes."""
+def load_campaign(path, cell: Cell, cell_path=None) -> Measurements:
+    """A campaign whose targets the cell (read from cell_path, None for the built-in) describes,
+    in the units it implies."""
     meas = read_campaign(path, cell.robot)
     unknown = [t for t in meas.target_names if t not in cell.targets]
     if unknown:
@@ -52,7 +53,42 @@ def load_campaign(path, cell: Cell) -> Measurements:
         require_inputs(meas.q, meas.xyz)
     except ValueError as e:
         raise DataError(f"{path}: {e}") from None
+    refuse_radian_angles(cell_path, cell, meas)  # before the units: it changes the arm's spread
+    refuse_wrong_units(path, cell, meas)
     return meas
+
+
+def refuse_wrong_units(path, cell: Cell, meas: Measurements) -> None:
+    """DataError naming the file and the likely units (see units_refusal)."""
+    why = units_refusal(cell, meas)
+    if why:
+        raise DataError(f"{path}: {why}")
+
+
+def refuse_radian_angles(cell_path, cell: Cell, meas: Measurements) -> None:
+    """DataError naming the cell.json whose robot's angles the readings say are radians
+    (solver.plausibility.check_cell_angles); a built-in robot's are never."""
+    from robocal.solver.plausibility import check_cell_angles
+
+    if cell_path is None:
+        return
+    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    check = check_cell_angles(cell.robot, targets, meas.q, meas.xyz)
+    why = check.reason() if check is not None else None
+    if why:
+        raise DataError(f"{cell_path}: {why}")
+
+
+def units_refusal(cell: Cell, meas: Measurements) -> str | None:
+    """Why the readings are not in mm and degrees: their spread is not the one the cell's
+    nominal arm gives at the measured joints (solver.plausibility); None if they may be, or if
+    the cell does not name their SMRs (refused elsewhere)."""
+    from robocal.solver.plausibility import check_units
+
+    if any(t not in cell.targets for t in meas.target_names):
+        return None
+    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    return check_units(cell.robot, targets, meas.q, meas.xyz).reason()
 
 
 DB_SUFFIXES = (".db", ".sqlite", ".sqlite3")
@@ -69,7 +105,7 @@ def load_data(path, cell_path=None, campaign_id=None, note=None) -> tuple[Cell, 
     note(text) is told when a database campaign is not done (its measured poses are used)."""
     if not is_database(path):
         cell = load_cell(cell_path)
-        return cell, load_campaign(path, cell)
+        return cell, load_campaign(path, cell, cell_path)
     from . import store
     from .formats.cell_json import parse_cell
 
@@ -103,6 +139,8 @@ def load_data(path, cell_path=None, campaign_id=None, note=None) -> tuple[Cell, 
         raise DataError(
             f"{path}: campaign {campaign_id} ({info.name}) has no reading (all missing)"
         )
+    refuse_radian_angles(cell_path or f"{path}: campaign {campaign_id}'s cell", cell, meas)
+    refuse_wrong_units(f"{path}: campaign {campaign_id}", cell, meas)
     return cell, meas
 
 
@@ -252,7 +290,37 @@ def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit
         noise_floor_source=source,
         tolerance_mm=cell.tolerance_mm,
     )
-    return validation_block(v, list(used.pose_ids), source)
+    v.reasons += implausible(cell, used, cal.robot)
+    block = validation_block(v, list(used.pose_ids), source)
+    block["nominal_rms_mm"] = nominal_rms(cell, used)
+    return block
+
+
+def implausible(cell: Cell, meas: Measurements, robot) -> list[str]:
+    """The verdict's reasons against a model physics rules out (solver.plausibility): readings
+    in other units than the cell's nominal arm implies, or an identified geometry changed from
+    the nominal beyond what an arm of its size can have."""
+    from robocal.solver.plausibility import implausible_changes
+
+    units = units_refusal(cell, meas)
+    changes = implausible_changes(cell.robot, robot).reason()
+    return [why for why in (units, changes) if why]
+
+
+def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
+    """The nominal model's RMS error (mm a reading) on the readings, its base and SMRs
+    registered on them: what the calibration is to improve on."""
+    from robocal.solver.calibrate import calibrate
+
+    from .validation import json_number
+
+    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    nom = calibrate(
+        cell.robot, targets, meas.target_names, meas.q, meas.xyz, "nominal", base_guess=cell.base
+    )
+    r = np.linalg.norm(predict(nom.layout, nom.x, meas.q) - meas.xyz, axis=-1)
+    r = r[np.isfinite(r)]
+    return json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
 
 
 def model_predict(model: ModelFile, q, time_s=None, temp_c=None, prev_q=None) -> np.ndarray:
@@ -456,8 +524,11 @@ def validate_diagnosis(
         tolerance_mm=cell.tolerance_mm,
         max_floor_ratio=guard.MAX_FLOOR_RATIO,
     )
+    v.reasons += implausible(cell, meas, model.robot)
     method = f"{FOLDS}-fold cross-validation of the diagnosis"
-    return validation_block(v, list(meas.pose_ids), source, method)
+    block = validation_block(v, list(meas.pose_ids), source, method)
+    block["nominal_rms_mm"] = nominal_rms(cell, meas)
+    return block
 
 
 def write_diagnosis(

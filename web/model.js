@@ -118,6 +118,7 @@ function renderValidation(v) {
           + ` ${fmt(h.nominal_rms_mm)} mm) · leave-one-pose-out RMS ${fmt(v.holdout_rms_mm)} mm`
         : "")
         + ` · fit RMS ${fmt(v.fit_rms_mm)} mm`
+        + (v.nominal_rms_mm != null ? ` (nominal model ${fmt(v.nominal_rms_mm)} mm)` : "")
         + (v.noise_floor_mm ? ` · noise floor ${fmt(v.noise_floor_mm)} mm` : "")
         + (v.noise_floor_mm && v.noise_floor_source ? ` (from the ${v.noise_floor_source})` : "")
         + (v.holdout && !h ? ` (held out: ${v.holdout})` : "") }));

@@ -79,6 +79,9 @@ class Validation(BaseModel):
     holdout_rms_mm: float | None = Field(description="leave-one-pose-out RMS per reading")
     holdout_max_mm: float | None
     fit_rms_mm: float | None
+    nominal_rms_mm: float | None = Field(
+        None, description="the nominal model's RMS on the fitted readings, base and SMRs registered"
+    )
     holdout: str
     condition_number: float | None
     equations: int

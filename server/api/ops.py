@@ -99,7 +99,12 @@ def import_campaign(
 ) -> int:
     """Store an uploaded meas.csv, read already (uploads.read_measurements), as a done campaign;
     InputError naming `filename`."""
+    from robocal.server.workflow import units_refusal
+
     filename = Path(filename).name or "meas.csv"  # only a label: never a path on this machine
+    why = units_refusal(cell, measurements)
+    if why:  # before anything is stored
+        raise InputError(filename, None, None, why)
     try:
         return store.import_csv(
             db, path=filename, cell_json=cell_to_json(cell), name=name, measurements=measurements

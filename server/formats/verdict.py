@@ -17,6 +17,7 @@ class Verdict:
     holdout_rms_mm: float | None = None
     holdout_max_mm: float | None = None
     fit_rms_mm: float | None = None
+    nominal_rms_mm: float | None = None  # the nominal arm's error on the same readings
     tolerance_mm: float | None = None
     noise_floor_mm: float | None = None
     noise_floor_source: str | None = None
@@ -45,6 +46,7 @@ class Verdict:
             holdout_rms_mm=number("holdout_rms_mm"),
             holdout_max_mm=number("holdout_max_mm"),
             fit_rms_mm=number("fit_rms_mm"),
+            nominal_rms_mm=number("nominal_rms_mm"),
             tolerance_mm=number("tolerance_mm"),
             noise_floor_mm=number("noise_floor_mm"),
             noise_floor_source=block.get("noise_floor_source"),

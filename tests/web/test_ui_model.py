@@ -116,11 +116,13 @@ def test_healthy_model_parameters_as_the_api_gives_them(served, page):
     assert "unfit" not in (page.get_attribute("#x-params", "class") or "")
     v = p["validation"]
     assert page.text_content("#m-headline").startswith(
-        f"Held-out RMS {fmt(v['holdout_rms_mm'])} mm · fit RMS {fmt(v['fit_rms_mm'])} mm"
+        f"Held-out RMS {fmt(v['holdout_rms_mm'])} mm · fit RMS {fmt(v['fit_rms_mm'])} mm "
+        f"(nominal model {fmt(v['nominal_rms_mm'])} mm)"  # what the calibration improved on
     )
     # the floor with its source; the accuracy to expect, never a bare "fit to deploy"
     assert f"(from the {v['noise_floor_source']})" in page.text_content("#m-headline")
     assert page.text_content("#m-fit-ok") == f"Deployable: {v['summary']}."
+    assert v["nominal_rms_mm"] > 10 * v["fit_rms_mm"]
 
     # One row per joint, each kind's change ± its standard error, as the API gives them.
     ident = p["identified"]

@@ -1,0 +1,252 @@
+"""Physical plausibility of a campaign and of a calibration: unit mistakes, impossible changes.
+
+Units: the spread of the readings (RMS distance from their centroid) is compared with the spread
+the cell's nominal arm predicts at the measured joints. Both are invariant to the unknown base
+frame, and the centred RMS is a norm, so the two spreads differ by at most the nominal model's
+own registration error (triangle inequality), whatever the arm and however close the poses.
+A unit mistake scales the readings by 1/1000 (metres), 1/25.4 (inches) or 1/10 (centimetres),
+and joints read in radians put every pose within a few degrees of zero: the spread ratio is off
+by a factor of ten or more, and the right units bring it back to about one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from itertools import product
+
+import numpy as np
+
+from .kinematics import Layout, predict
+from .rigid import kabsch
+from .robot import Joint, Robot
+
+# What a length in the readings may really have been, and its size in mm.
+LENGTH_UNITS = {"mm": 1.0, "centimetres": 10.0, "inches": 25.4, "metres": 1000.0}
+# A nominal model registered on its arm's data errs by a few mm (real arms: 0.5-5 mm RMS, SMR
+# positions "a few mm off" included); allow 1% of the reach, at least 10 mm. The spreads of
+# readings in the right units cannot differ by more than that (module docstring).
+NOMINAL_ERROR_FRACTION = 0.01
+NOMINAL_ERROR_MIN_MM = 10.0
+# Spread ratios within this factor of one are never a unit mistake. Measured: 0.89-1.04 on the
+# real campaigns, 0.987-1.007 simulated (8 arms, 10-200 poses, poses within 0.1 deg of one
+# another included); mistakes give 1/10 (centimetres) or less, and joints in radians 4.1 (nine
+# poses of a 1.3 m arm) to 50 on campaigns over the joint ranges. Joints in radians that move
+# only a few degrees are not seen: such poses look alike in either unit.
+RATIO_BAND = 2.5
+# Another reading of the units explains the data when its spread ratio is within this of one.
+EXPLAINED_BAND = 1.5
+# Joint values in radians, read as degrees, lie within the joint limits in radians.
+LIMIT_SLACK_RAD = 1e-6
+
+# Largest change from nominal an arm's geometry can have, past which the nominal geometry or
+# the data's units are wrong. Lengths: 0.5% of the reach (13 mm on a 2.7 m arm, 5 mm on a 1 m
+# arm); machining tolerances are tenths of a mm (real calibrations: at most 0.64 mm on the
+# real UR5, IRB 120 and QKM campaigns, against limits of 5-6.4 mm), while a unit mistake moves
+# links by hundreds of mm. Twists (alpha, and Hayati's beta): 2 degrees, a machined angle whose
+# tolerance is hundredths (the real campaigns: at most 0.69 deg, the UR5's alpha3). Joint zero
+# offsets (theta): 5 degrees, since they come from the mastering of each joint, not the
+# machining, and are degrees off on real arms (2.02 deg, the real IRB 120's theta4); past 5 deg
+# the nominal offset is another convention (a -90 deg the cell lacks, a sign).
+LENGTH_CHANGE_FRACTION = 0.005
+TWIST_CHANGE_DEG = 2.0
+OFFSET_CHANGE_DEG = 5.0
+
+
+@dataclass(frozen=True)
+class UnitCheck:
+    """How the spread of the readings compares with the nominal arm's at the measured joints."""
+
+    measured_spread_mm: float  # RMS distance of the readings from their centroid, as given
+    predicted_spread_mm: float  # the same of the nominal arm's SMR positions, joints as given
+    ratio: float  # measured / predicted (about 1 in the right units)
+    bound_mm: float  # the most the two spreads may differ in the right units
+    likely: tuple[str, str] | None = None  # (length unit, joint unit) that explain the data
+    likely_ratio: float = float("nan")  # the spread ratio in those units
+    n_joints: int = 0
+
+    @property
+    def plausible(self) -> bool:
+        return self.likely is None
+
+    def reason(self) -> str | None:
+        """One sentence naming the likely units, None when the data's units are plausible."""
+        if self.likely is None:
+            return None
+        length, joints = self.likely
+        told = (
+            f"the readings span {_mm(self.measured_spread_mm)} (RMS from their centroid) while "
+            f"the nominal arm at the measured joints spans {_mm(self.predicted_spread_mm)}"
+        )
+        wrong = []
+        if length != "mm":
+            wrong.append(f"x, y, z look like {length}; give them in mm")
+        if joints != "degrees":
+            wrong.append(f"q1..q{self.n_joints} look like {joints}; give them in degrees")
+        return f"{told}: " + " and ".join(wrong)
+
+
+def spread(points: np.ndarray) -> float:
+    """RMS distance of points (N, 3) from their centroid."""
+    c = points - points.mean(axis=0)
+    return float(np.sqrt(np.mean(np.sum(c * c, axis=1))))
+
+
+def check_units(robot: Robot, targets: np.ndarray, q: np.ndarray, xyz: np.ndarray) -> UnitCheck:
+    """Whether readings xyz (m, K, 3, mm, NaN where missing) of SMRs at targets (K, 3, flange
+    frame) at joints q (m, n, rad as read from degrees) are in the units the nominal robot
+    implies (see the module's docstring)."""
+    mask = np.all(np.isfinite(xyz), axis=-1)
+    measured = xyz[mask]
+    bound = max(NOMINAL_ERROR_MIN_MM, NOMINAL_ERROR_FRACTION * robot.reach_mm)
+
+    def predicted(q_rad):
+        lay = Layout(robot, np.eye(4), tuple(str(k) for k in range(len(targets))))
+        return spread(predict(lay, lay.initial(targets), q_rad)[mask])
+
+    s_m = spread(measured) if len(measured) > 1 else 0.0
+    s_p = predicted(q) if len(measured) > 1 else 0.0
+    ratio = s_m / s_p if s_p > 0 else float("nan")
+    check = UnitCheck(s_m, s_p, ratio, bound)
+    if not (s_p > 0 and s_m > 0) or 1 / RATIO_BAND <= ratio <= RATIO_BAND:
+        return check
+    if abs(s_m - s_p) <= bound:  # the nominal arm's own error may explain the difference
+        return check
+    joints = {"degrees": q}
+    q_rad = np.rad2deg(q)  # the values read, taken as radians
+    if np.all((q_rad >= robot.lower - LIMIT_SLACK_RAD) & (q_rad <= robot.upper + LIMIT_SLACK_RAD)):
+        joints["radians"] = q_rad
+    best = None
+    for (length, f), (unit, q_h) in product(LENGTH_UNITS.items(), joints.items()):
+        if (length, unit) == ("mm", "degrees"):
+            continue
+        s_h = predicted(q_h) if unit != "degrees" else s_p
+        r = s_m * f / s_h if s_h > 0 else float("nan")
+        if 1 / EXPLAINED_BAND <= r <= EXPLAINED_BAND and (
+            best is None or abs(np.log(r)) < abs(np.log(best[1]))
+        ):
+            best = ((length, unit), r)
+    if best is None:  # no unit explains it: the geometry or the cell, not a unit mistake
+        return check
+    return UnitCheck(s_m, s_p, ratio, bound, best[0], best[1], robot.n_joints)
+
+
+@dataclass(frozen=True)
+class CellAngles:
+    """The nominal arm's error on the readings (base registered) with its angles as given in
+    degrees, and read as radians."""
+
+    degrees_rms_mm: float
+    radians_rms_mm: float
+    bound_mm: float
+
+    def reason(self) -> str | None:
+        """One sentence when the angles as radians explain the readings and as degrees do not."""
+        if not (
+            self.degrees_rms_mm > self.bound_mm >= self.radians_rms_mm
+            and self.radians_rms_mm * RATIO_BAND < self.degrees_rms_mm
+        ):
+            return None
+        return (
+            f"the nominal arm errs {_mm(self.degrees_rms_mm)} RMS on the readings (base "
+            f"registered), {_mm(self.radians_rms_mm)} with its theta, alpha and beta read as "
+            "radians: give the robot's angles in degrees"
+        )
+
+
+def check_cell_angles(
+    robot: Robot, targets: np.ndarray, q: np.ndarray, xyz: np.ndarray
+) -> CellAngles | None:
+    """Whether the robot's angles (theta, alpha, beta), given in degrees, were meant as radians
+    (the arm as radians registers onto the readings, as degrees does not); None when they
+    cannot be radians: some lies beyond +-pi as given, or all are zero (either reading is the
+    same arm). An arm's twists are mostly +-90 degrees, so real cells are seldom even tried."""
+    angles = np.array([[j.theta, j.alpha, j.beta] for j in robot.joints])  # rad, from degrees
+    if not np.any(angles) or np.any(np.abs(np.rad2deg(angles)) > np.pi + 1e-9):
+        return None
+    as_radians = Robot(
+        robot.name,
+        robot.convention,
+        tuple(
+            Joint(j.a, j.d, np.rad2deg(j.theta), np.rad2deg(j.alpha), j.limits, np.rad2deg(j.beta))
+            for j in robot.joints
+        ),
+    )
+    bound = max(NOMINAL_ERROR_MIN_MM, NOMINAL_ERROR_FRACTION * robot.reach_mm)
+    return CellAngles(
+        registered_rms(robot, targets, q, xyz), registered_rms(as_radians, targets, q, xyz), bound
+    )
+
+
+def registered_rms(robot: Robot, targets: np.ndarray, q: np.ndarray, xyz: np.ndarray) -> float:
+    """RMS distance (mm a reading) of the readings from the robot's nominal SMR positions at the
+    joints, after the closed-form rigid fit of its base."""
+    mask = np.all(np.isfinite(xyz), axis=-1)
+    lay = Layout(robot, np.eye(4), tuple(str(k) for k in range(len(targets))))
+    p = predict(lay, lay.initial(targets), q)[mask]
+    T = kabsch(p, xyz[mask])
+    r = p @ T[:3, :3].T + T[:3, 3] - xyz[mask]
+    return float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
+
+
+@dataclass(frozen=True)
+class ParameterChange:
+    """A geometric parameter changed from nominal by more than an arm of this size can have."""
+
+    name: str
+    change: float  # mm or degrees
+    limit: float  # mm or degrees
+    unit: str  # "mm" or "deg"
+
+
+@dataclass(frozen=True)
+class ChangeCheck:
+    """The implausible changes of a calibrated geometry from its nominal one, largest first."""
+
+    reach_mm: float
+    length_limit_mm: float
+    changes: list[ParameterChange] = field(default_factory=list)
+
+    def reason(self) -> str | None:
+        """One sentence naming the changes and the limits, None when every change is plausible."""
+        if not self.changes:
+            return None
+        first, *rest = self.changes
+        text = (
+            f"{first.name} changed by {_signed(first)} from nominal (more than "
+            f"{first.limit:.3g} {first.unit} for an arm of {self.reach_mm:,.0f} mm reach)"
+        )
+        shown = rest[:4]
+        text += "".join(f", {c.name} by {_signed(c)}" for c in shown)
+        if len(rest) > len(shown):
+            text += f" and {len(rest) - len(shown)} more"
+        return text + ": check the units of the data and the nominal geometry"
+
+
+def implausible_changes(nominal: Robot, identified: Robot) -> ChangeCheck:
+    """The geometric parameters of identified that moved from nominal beyond the limits (lengths
+    LENGTH_CHANGE_FRACTION of the nominal reach, joint offsets OFFSET_CHANGE_DEG, twists
+    TWIST_CHANGE_DEG); the base and the SMR
+    positions are not limited (the base is wherever the tracker saw it)."""
+    reach = nominal.reach_mm
+    length_limit = LENGTH_CHANGE_FRACTION * reach
+    delta = identified.param_vector() - nominal.param_vector()
+    out = []
+    for name, d in zip(nominal.param_names(), delta):
+        kind = name.rstrip("0123456789")
+        if kind in ("a", "d"):
+            if abs(d) > length_limit:
+                out.append(ParameterChange(name, float(d), length_limit, "mm"))
+        else:
+            limit = OFFSET_CHANGE_DEG if kind == "theta" else TWIST_CHANGE_DEG
+            if abs(np.rad2deg(d)) > limit:
+                out.append(ParameterChange(name, float(np.rad2deg(d)), limit, "deg"))
+    out.sort(key=lambda c: -abs(c.change) / c.limit)
+    return ChangeCheck(reach, length_limit, out)
+
+
+def _mm(v: float) -> str:
+    return f"{v:,.3g} mm" if v < 100 else f"{v:,.0f} mm"
+
+
+def _signed(c: ParameterChange) -> str:
+    return f"{c.change:+.1f} {c.unit}" if c.unit == "mm" else f"{c.change:+.2f} {c.unit}"
