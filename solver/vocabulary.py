@@ -189,8 +189,7 @@ class JointCompliance(Effect):
         return {
             "deflection_rms_deg": float(np.degrees(np.sqrt(np.mean(dq * dq)))),
             "deflection_range_deg": float(np.degrees(dq.max() - dq.min())),
-            "gravity_terms": int(len(ext.coef)),
-            "mass_model": "nominal" if ext.masses is not None else "fitted",
+            "gravity_terms": int(len(ext.coef)),  # 1: one stiffness on the nominal mass model
         }
 
     def evidence(self, ext, p, gain):

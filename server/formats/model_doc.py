@@ -201,4 +201,21 @@ class ModelDoc(Doc):
                     i,
                     "joint",
                 )
+            ext = e._extension
+            if ext.gravity is not None and ext.joint is not None:
+                # the gravity basis has four columns (mass, three moments) per link the joint moves
+                want = 4 * (n - ext.joint)
+                key, got = (
+                    ("masses", len(ext.masses))
+                    if ext.masses is not None
+                    else ("gravity_terms_total", len(ext.keep) if ext.keep is not None else 0)
+                )
+                if got != want:
+                    raise located(
+                        f"expected {want} values for joint {e.joint}'s {n - ext.joint} links, "
+                        f"got {got}",
+                        "extensions",
+                        i,
+                        key,
+                    )
         return self

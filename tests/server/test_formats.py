@@ -557,8 +557,9 @@ STORED_KEYS = {
 }
 
 
-def every_effect(seed):
-    """A model with one extension of every kind, as a diagnosis leaves them, and poses to predict."""
+def every_effect(seed, fitted_masses: bool | None = None):
+    """A model with one extension of every kind, as a diagnosis leaves them, and poses to predict
+    (its compliance with the masses fitted, on the nominal mass model, or either: None)."""
     from robocal.server.formats.model_json import ModelFile
     from robocal.solver.diagnosis_report import parameters
     from robocal.solver.effects import Inputs, prepare
@@ -577,6 +578,8 @@ def every_effect(seed):
     exts, params = [], []
     for kind in KINDS.values():
         options = kind.candidates(lay, x, inputs)
+        if fitted_masses is not None and kind.name == "joint_compliance":
+            options = [o for o in options if (o.masses is None) == fitted_masses]
         ext = options[rng.integers(len(options))]
         if kind.located_in_time:
             ext.at_s, ext.origin = float(np.median(time_s)), rng.normal(scale=500.0, size=3)
@@ -637,6 +640,13 @@ def test_every_effect_round_trips_through_model_json(tmp_path, seed):
             '"gravity_terms": [99, ',
             "gravity_terms: expected indices",
         ),
+        (
+            "joint_compliance",
+            '"gravity_terms_total": ',
+            '"gravity_terms_total": 1',
+            "gravity_terms_total: expected",
+        ),
+        ("joint_compliance", '"masses": [', '"masses": [1.0, ', "masses: expected"),
         ("joint_scale", '"coef": [', '"coef": [1.0, ', "expected 1 coefficients"),
         (
             "joint_scale",
@@ -649,7 +659,8 @@ def test_every_effect_round_trips_through_model_json(tmp_path, seed):
 def test_bad_extensions_in_a_model_file_are_refused(tmp_path, name, old, new, words):
     from robocal.server.formats.model_json import model_to_json, read_model
 
-    model, *_ = every_effect(0)
+    # a compliance on the nominal mass model stores `masses`, one with the masses fitted the rest
+    model, *_ = every_effect(0, fitted_masses="masses" not in old)
     obj = model_to_json(model)
     obj["extensions"] = [e for e in obj["extensions"] if e["name"] == name]
     text = json.dumps(obj, indent=2)

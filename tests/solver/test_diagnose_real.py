@@ -21,7 +21,7 @@ def test_real_campaign_names_joint_2_compliance(name):
     assert 0 < lo <= before - after <= hi
     assert first["significance"]["p_value"] < 0.005 and first["uncertainty"]
     # the one-stiffness model of the physics, not the masses fitted one by one
-    assert first["parameters"]["mass_model"] == "nominal"
+    assert first["parameters"]["gravity_terms"] == 1
     for alt in first["alternatives"]:  # named beside it when the data cannot tell them apart
         # a richer variant may score a little better on these poses: the data cannot tell
         assert alt["holdout_rmse_mm"] > after or alt["label"].endswith("masses fitted)")
