@@ -86,8 +86,8 @@ def gone(pid: int) -> bool:
     try:
         with open(f"/proc/{pid}/stat") as f:
             return f.read().rsplit(")", 1)[1].split()[0] == "Z"
-    except FileNotFoundError:
-        return True
+    except (FileNotFoundError, ProcessLookupError):  # reaped before the open, or between it
+        return True  # and the read (the read then fails with ESRCH)
 
 
 @pytest.fixture(scope="module")
