@@ -162,7 +162,7 @@ def test_campaign_on_real_devices_survives_a_lost_controller_resumes_and_calibra
     assert c.post(f"/api/campaigns/{cid}/start").status_code == 409  # failed: resume it
     assert c.post(f"/api/campaigns/{cid}/resume").status_code == 202
     done = finished(c, cid)
-    assert done["status"] == "done" and done["run"]["detail"] == "the run ended done", done
+    assert done["status"] == "done" and done["run"]["detail"] == "the run ended done", done["run"]
     assert done["run"]["summary"]["simulated"] is False
     assert done["run"]["summary"]["resumed_at"] == failed["poses_done"]
     readings = c.get(f"/api/campaigns/{cid}/measurements").json()
