@@ -113,18 +113,13 @@ def nominal_masses(layout: Layout, x, joint: int) -> np.ndarray:
     single stiffness multiplies (its scale is the fitted coefficient)."""
     lay = Layout(layout.robot, np.eye(4), layout.target_names)
     frames = joint_frames(lay, x, np.zeros((1, layout.robot.n_joints)))
-    origins = [o[0] for _, o in frames]
-    rods = []
-    for i, (R, o) in enumerate(frames):
-        half = (origins[i + 1] - o[0]) / 2.0 if i + 1 < len(frames) else np.zeros(3)
-        rods.append((np.linalg.norm(2.0 * half) / 1000.0, R[0].T @ half))  # kg per m, mm
-    wrist = WRIST_SHARE * sum(m for m, _ in rods)
-    w = []
-    for i, (m, r) in enumerate(rods[joint:], start=joint):
-        if i == len(rods) - 1:
-            m, r = m + wrist, r * m / (m + wrist) if m + wrist > 0 else r
-        w.extend([m, *(m * r)])
-    return np.asarray(w)
+    rods: list[tuple[float, np.ndarray]] = []
+    for (R, o), (_, o_next) in zip(frames[:-1], frames[1:]):
+        half = (o_next[0] - o[0]) / 2.0
+        rods.append((float(np.linalg.norm(2.0 * half)) / 1000.0, R[0].T @ half))  # kg per m, mm
+    # the wrist, a share of the arm's mass, lumped at the last joint's origin
+    rods.append((WRIST_SHARE * sum(m for m, _ in rods), np.zeros(3)))
+    return np.concatenate([[m, *(m * r)] for m, r in rods[joint:]])
 
 
 def gravity_in_base(layout: Layout, x) -> np.ndarray:
