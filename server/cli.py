@@ -472,6 +472,9 @@ def _print_diagnosis(report) -> None:
         f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)"
     )
     _print_unexplained(report.get("unexplained"))
+    doubt = (report.get("stability") or {}).get("doubt")
+    if doubt:
+        console.print(f"[yellow]{doubt}[/yellow]")
     if "validation" in report:  # the final model, judged as a calibration is
         from .formats.verdict import Verdict
 
@@ -751,6 +754,8 @@ def cmd_bench(args) -> None:
             clean_cases=args.clean,
             sizes=args.poses,
             workers=args.workers,
+            split_cases=args.split_cases,
+            real=() if args.quick else _real_campaigns(),
         )
     elif args.what == "outliers":
         from .bench_screen import run_screen_bench
@@ -783,11 +788,7 @@ def cmd_bench(args) -> None:
     elif args.what == "validation":
         from . import bench_validation
 
-        # the real campaigns beside a checkout (../shared/data/real), when they are there
-        real = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
-        result = bench_validation.run(
-            20, "minimax", sorted(p for p in real.glob("*") if p.is_dir())
-        )
+        result = bench_validation.run(20, "minimax", _real_campaigns())
     else:
         from .bench import run_solver_bench
 
@@ -795,6 +796,12 @@ def cmd_bench(args) -> None:
             sizes=args.sizes, reference=not args.no_reference, reference_max=args.reference_max
         )
     print(json.dumps(result, indent=2))
+
+
+def _real_campaigns() -> list[Path]:
+    """The real campaigns beside a checkout (../shared/data/real), when they are there."""
+    real = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+    return sorted(p for p in real.glob("*") if p.is_dir())
 
 
 def _data_arguments(p) -> None:
@@ -1226,6 +1233,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--cases", type=_positive_int, help="diagnose: effect cases of the suite (default 60)"
     )
     b.add_argument("--clean", type=_positive_int, help="diagnose: clean campaigns (default 200)")
+    b.add_argument(
+        "--split-cases",
+        type=_nonnegative_int,
+        help="diagnose: cases of the configuration-split suite (default 45, quick 5; 0 skips it)",
+    )
     b.add_argument(
         "--workers", type=_positive_int, default=2, help="diagnose: processes in the pool"
     )

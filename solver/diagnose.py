@@ -18,7 +18,7 @@ import numpy as np
 from . import vocabulary
 from .effects import Extension, Inputs, point_shift, prepare
 from .extended import extension_rows, fit_extended, predict_extended
-from .extrapolation import FoldCheck, RegionFold, joint_ranges, region_folds
+from .extrapolation import FoldCheck, RegionFold, configuration_folds, joint_ranges, region_folds
 from .finite import finite, require_inputs
 from .identify import Problem, register
 from .kinematics import Layout, predict_rows
@@ -28,6 +28,7 @@ from .noise import noise_floor as tracker_noise
 from .robot import Robot
 from .screen import screen_readings
 from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
+from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
 
 if TYPE_CHECKING:  # run_diagnosis imports fit_errors only when it needs it
     from .fit_errors import ExtendedErrors
@@ -274,7 +275,9 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
     than geometry on any region fold (solver/extrapolation.py), its last effect is refused."""
     q = diag.prob.q
     per_pose = max(1, int(diag.prob.mask.any(axis=0).sum()))  # SMRs a pose
-    folds = region_folds(diag.prob.layout, diag.x0, q, int(np.ceil(diag.free.sum() / per_pose)) + 1)
+    least = int(np.ceil(diag.free.sum() / per_pose)) + 1  # poses enough to fit on one side
+    folds = region_folds(diag.prob.layout, diag.x0, q, least)
+    folds += configuration_folds(diag.prob.layout.robot, q, least)
     if not folds:
         return steps, Extrapolation(folds, [], [])
     geo = [diag.region_rms([], f) for f in folds]
@@ -477,6 +480,9 @@ def diagnose(
         diag.warm = {}
         steps, final = kept, (diag.cross_validate([st[0] for st in kept]) if kept else base)
     clock["extrapolation"] = time.perf_counter() - t_region
+    t_resample = time.perf_counter()
+    stability = resampled(diag, cands, steps)
+    clock["resamples"] = time.perf_counter() - t_resample
     t2 = time.perf_counter()
     exts = [s[0] for s in steps]
     x, ee = diag.fit(exts)
@@ -500,6 +506,8 @@ def diagnose(
     head = {k: report.pop(k) for k in ("schema", "noise_floor_mm")}
     report = {**head, "noise_floor_source": noise.source, **report}
     report["extrapolation"] = extrapolation_report(region, prob.q)
+    if stability is not None:
+        report["stability"] = stability.to_report()
     report["seconds"] = {k: round(v, 3) for k, v in clock.items()}
     report["cross_validation"] = {
         "folds": len(diag.folds),
@@ -507,6 +515,24 @@ def diagnose(
         "candidates": len(cands),
     }
     return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors)
+
+
+def resampled(diag: Diagnoser, cands, steps) -> Stability | None:
+    """On a small campaign that names effects, the effects named on resamples of it
+    (solver/stability.py); None otherwise (naming nothing is the cautious answer already)."""
+    m = diag.prob.q.shape[0]
+    if m > RESAMPLE_MAX_POSES or not steps:
+        return None
+    named = []
+    subsets = leave_out(m)
+    for keep in subsets:
+        prob = Problem(diag.prob.layout, diag.prob.q[keep], diag.prob.meas[keep])
+        sub = Diagnoser(prob, diag.x0, diag.free, diag.inputs.subset(keep))
+        chosen, _, _ = select(sub, cands)
+        chosen, _ = extrapolating(sub, chosen)
+        named.append(tuple(effect_key(st[0]) for st in chosen))
+    final = tuple(effect_key(st[0]) for st in steps)
+    return Stability(min(map(len, subsets)), final, tuple(named))
 
 
 def extrapolation_report(region: Extrapolation, q) -> dict:
@@ -518,7 +544,8 @@ def extrapolation_report(region: Extrapolation, q) -> dict:
         return None if not np.isfinite(v) else float(v)
 
     return {
-        "method": "train on one side of a gravity-loaded joint's median, test on the other",
+        "method": "train on one side of a gravity-loaded joint's median, or in one arm "
+        "configuration (elbow, wrist, side of axis 1) where the data has both, test on the other",
         "max_ratio_to_geometric": MAX_RATIO,
         "folds": [
             {

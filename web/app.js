@@ -372,7 +372,7 @@ $("job-form").addEventListener("submit", async (ev) => {
       state.diag = d.id;
       $("diagnosis").hidden = false;
       $("d-effects").replaceChildren();
-      $("d-unexplained").hidden = $("d-outliers").hidden = true;
+      $("d-unexplained").hidden = $("d-outliers").hidden = $("d-doubt").hidden = true;
       $("d-figures").replaceChildren();
       $("d-links").replaceChildren();
       watchJob(d, followDiagnosis);
@@ -515,6 +515,9 @@ async function showDiagnosis(d) {
     });
     $("d-effects").replaceChildren(table);
   }
+  // a small campaign whose resamples name another cause: the cause is in doubt, said so
+  const doubt = report.stability?.doubt;
+  Object.assign($("d-doubt"), { hidden: !doubt, textContent: doubt ?? "" });
   showUnexplained(report.unexplained);
   showOutliers(report.outliers);
   // One figure per effect: its caption names the effect it shows.

@@ -61,10 +61,13 @@ class Unexplained(Open):
 
 
 class RegionFold(Open):
-    test: str = Field(description="the test poses' side of the split, e.g. `q2 >= 12.3 deg`")
+    test: str = Field(
+        description="the test poses' side of the split, e.g. `q2 >= 12.3 deg` or `wrist: q5 < 0`"
+    )
     test_poses: int
     beyond_training_deg: float = Field(
-        description="how far the test poses reach past the training poses' range of that joint"
+        description="how far the test poses reach past the training poses' range of that joint "
+        "(a configuration fold: of the joint reaching furthest)"
     )
     geometric_rmse_mm: float | None
     final_rmse_mm: float | None
@@ -89,6 +92,23 @@ class Extrapolation(Open):
     )
 
 
+class ResampledEffect(Open):
+    effect: str = Field(description="e.g. `joint_compliance(2)`, `joint_periodic(3, harmonic 2)`")
+    named_in: int = Field(description="how many resamples named it")
+    in_final: bool = Field(description="whether the final model has it")
+
+
+class Stability(Open):
+    resamples: int
+    poses_each: int
+    named_nothing: int = Field(description="resamples that named no effect (fewer poses)")
+    effects: list[ResampledEffect]
+    doubt: str | None = Field(
+        description="when resamples name another cause than the final model's, in a sentence; "
+        "null otherwise"
+    )
+
+
 class ReportDoc(Open):
     """A report.json: what the diagnosis found, most important effect first."""
 
@@ -108,8 +128,15 @@ class ReportDoc(Open):
     extrapolation: Extrapolation | None = Field(
         None,
         description="the final model tested off its training region: trained on one side of "
-        "each gravity-loaded joint's median, tested on the other; an effect that made any such "
+        "each gravity-loaded joint's median, or in one arm configuration (elbow, wrist, side of "
+        "axis 1) where the data has both, tested on the other; an effect that made any such "
         "fold worse than geometry is refused",
+    )
+    stability: Stability | None = Field(
+        None,
+        description="small campaigns (40 poses or fewer) that name an effect: the diagnosis "
+        "repeated on resamples leaving out every fifth pose, the effects each named, and the "
+        "doubt when they name another cause",
     )
     identified: dict | None = Field(
         None,

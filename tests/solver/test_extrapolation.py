@@ -5,9 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 from robocal.server import workflow
-from robocal.solver import vocabulary
+from robocal.solver import configuration, vocabulary
 from robocal.solver.calibrate import calibrate
-from robocal.solver.extrapolation import gravity_loaded, region_folds
+from robocal.solver.extrapolation import (
+    CONFIGURATIONS,
+    configuration_folds,
+    gravity_loaded,
+    region_folds,
+)
 from robocal.solver.kinematics import Layout, predict
 
 from tests.real import campaign_files
@@ -37,9 +42,12 @@ def test_every_30_pose_subset_of_the_real_irb120_holds_on_its_left_out_poses(cap
         extended = rms(predict_poses(cell, d, held.q), held.xyz)
         named = [e["name"] + f"({e.get('joint')})" for e in d.report["effects"]]
         refused = [r["label"] for r in d.report["extrapolation"]["refused"]]
+        resampled = d.report.get("stability") or {}
+        agree = ", ".join(f"{e['effect']} {e['named_in']}/5" for e in resampled.get("effects", []))
         lines.append(
             f"fold {k}: named {named or 'nothing'}, refused {refused or 'nothing'}; held out "
-            f"geometric {geometric:.4f} mm, diagnosed {extended:.4f} mm"
+            f"geometric {geometric:.4f} mm, diagnosed {extended:.4f} mm; resamples: "
+            f"{agree or 'none'}{' (in doubt)' if resampled.get('doubt') else ''}"
         )
         assert extended <= geometric * (1 + 1e-9), lines[-1]
     with capsys.disabled():
@@ -59,8 +67,38 @@ def test_region_folds_split_the_gravity_loaded_joints_both_ways():
     for f in folds:
         assert f.joint in loaded and len(f.test) >= 10
         qj = meas.q[f.test, f.joint]
-        assert np.all(qj >= f.at_rad) if f.above else np.all(qj < f.at_rad)
-        assert f.beyond_rad >= 0.0
+        assert np.all(qj >= f.at_rad) if f.above else np.all(qj <= f.at_rad)
+        train = np.delete(meas.q[:, f.joint], f.test)
+        assert np.all(train <= f.at_rad) if f.above else np.all(train >= f.at_rad)
+        assert f.beyond_rad >= 0.0 and len(f.test) == meas.n_poses // 2
+    # too few poses to fit on half: a smaller end is tested, the min_poses others trained on
+    small = region_folds(lay, x, meas.q[:18], min_poses=11)
+    assert small and all(len(f.test) == 7 for f in small)
+    assert region_folds(lay, x, meas.q[:15], min_poses=11) == []  # under 5 poses to test
+
+
+def test_configuration_folds_train_in_one_configuration_and_test_in_the_other():
+    """The real QKM campaign has poses in both elbow and both wrist configurations: each fold
+    tests one side and trains on the other; a campaign in one configuration has no such fold."""
+    cell, meas = workflow.load_data(*campaign_files("qkm_hl6"))
+    bits = configuration.cfx(cell.robot, meas.q)
+    folds = configuration_folds(cell.robot, meas.q, min_poses=10)
+    labels = [f.label() for f in folds]
+    assert {"wrist: q5 < 0", "wrist: q5 >= 0"} <= set(labels), labels
+    assert any(label.startswith("elbow: ") for label in labels), labels
+    bit_of = {name: bit for name, bit, *_ in CONFIGURATIONS}
+    for f in folds:
+        side = (bits & bit_of[f.label().split(":")[0]]) > 0
+        assert len(f.test) >= 10 and len(set(side[f.test])) == 1
+        train = np.setdiff1d(np.arange(meas.n_poses), f.test)
+        assert set(side[train]) == {not side[f.test][0]}  # every other pose trains
+    negative = (bits & configuration.JOINT5_NEGATIVE) > 0
+    one_wrist = meas.q[negative]
+    assert not [f for f in configuration_folds(cell.robot, one_wrist, 5) if "q5" in f.label()]
+    # a side with under a third of the poses is tested, never trained on alone
+    few = np.concatenate([meas.q[negative], meas.q[~negative][:8]])
+    wrist = [f.label() for f in configuration_folds(cell.robot, few, 5) if "q5" in f.label()]
+    assert wrist == ["wrist: q5 >= 0"], wrist
 
 
 def test_a_compliance_that_fits_one_regions_quirks_is_refused(monkeypatch):

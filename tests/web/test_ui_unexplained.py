@@ -17,6 +17,11 @@ from tests.solver.test_unexplained import campaign, draw
 from tests.web.conftest import shot
 
 SEED = 1  # draws the wrist coupling
+DOUBT = (
+    "the cause is in doubt: on 5 resamples of the campaign (29 poses each), "
+    "joint_compliance(2) named on 3 of 5; joint_periodic(2, harmonic 1) named on 2 of 5; "
+    "measure more poses before acting on these effects"
+)
 
 
 def extra_keys(report):
@@ -41,6 +46,16 @@ def extra_keys(report):
             ],
         }
     ] + report["effects"]
+    report["stability"] = {
+        "resamples": 5,
+        "poses_each": 29,
+        "named_nothing": 0,
+        "effects": [
+            {"effect": "joint_compliance(2)", "named_in": 3, "in_final": True},
+            {"effect": "joint_periodic(2, harmonic 1)", "named_in": 2, "in_final": False},
+        ],
+        "doubt": DOUBT,
+    }
     return report
 
 
@@ -85,8 +100,9 @@ def test_page_shows_the_unexplained_and_the_optional_keys(served, page, tmp_path
     assert page.evaluate("document.querySelector('#unexplained-table meter').value") > 0.5
     assert page.text_content("#u-per-pose").startswith("Per pose: ")
 
-    # The crafted keys: outliers by pose and target, and per effect its standard errors, gain
+    # The crafted keys: the resamples' doubt, outliers by pose and target, and per effect its standard errors, gain
     # interval and the candidates it could not be told apart from.
+    assert page.is_visible("#d-doubt") and page.text_content("#d-doubt") == DOUBT
     out = page.locator("#outliers-table tbody tr")
     assert out.count() == 2
     assert out.first.locator("td").all_text_contents() == ["17", "B", "1.4200"]

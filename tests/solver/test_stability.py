@@ -1,0 +1,39 @@
+"""Small campaigns: the effects named on resamples of the campaign, and the doubt said when they
+name another cause (issue 21, point 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+from robocal.solver.stability import RESAMPLES, Stability, key_label, leave_out
+
+C2 = ("joint_compliance", 1, None)
+P2 = ("joint_periodic", 1, 2)
+
+
+def test_each_resample_leaves_out_its_own_share_of_the_poses():
+    subsets = leave_out(36)
+    assert len(subsets) == RESAMPLES
+    left = [np.setdiff1d(np.arange(36), s) for s in subsets]
+    assert np.array_equal(np.sort(np.concatenate(left)), np.arange(36))  # each pose left out once
+    assert all(len(s) in (28, 29) for s in subsets)
+
+
+def test_resamples_that_name_the_same_cause_or_nothing_raise_no_doubt():
+    s = Stability(29, (C2,), ((C2,), (C2,), (), (), (P2,)))
+    assert s.count(C2) == 2 and s.count(P2) == 1 and s.doubt() is None
+    rep = s.to_report()
+    assert rep["effects"] == [
+        {"effect": "joint_compliance(2)", "named_in": 2, "in_final": True},
+        {"effect": "joint_periodic(2, harmonic 2)", "named_in": 1, "in_final": False},
+    ]
+    assert rep["doubt"] is None and rep["resamples"] == RESAMPLES and rep["named_nothing"] == 2
+
+
+def test_another_cause_named_on_two_resamples_puts_the_answer_in_doubt():
+    rival = Stability(29, (C2,), ((C2,), (C2,), (P2,), (P2,), ()))
+    doubt = rival.doubt()
+    assert doubt is not None and doubt.startswith("the cause is in doubt: on 5 resamples")
+    assert "joint_compliance(2) named on 2 of 5" in doubt
+    assert "joint_periodic(2, harmonic 2) named on 2 of 5" in doubt
+    assert [e["in_final"] for e in rival.to_report()["effects"]] == [True, False]
+    assert key_label(("thermal_drift", None, None)) == "thermal_drift"
