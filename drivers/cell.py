@@ -251,8 +251,10 @@ class VirtualCell:
         targets_per_pose: int | None = None,
         outlier_rate: float = 0.0,
         noise_scale: float = 1.0,
+        poses=None,
     ) -> Measurements:
-        """A measured campaign of n_poses random poses, timed and with the air temperature.
+        """A measured campaign of n_poses random poses (or these poses (n_poses, N) rad, in this
+        order), timed and with the air temperature.
 
         Beyond the tracker's noise (noise_scale x its spec) and beam breaks, a campaign may have
         the arm's own scatter (a joint error drawn afresh per pose, std arm_scatter_deg per joint,
@@ -261,7 +263,10 @@ class VirtualCell:
         """
         rng = np.random.default_rng(seed)
         extra = np.random.default_rng([EXTRAS_STREAM, seed])  # rng's draws stay as they were
-        q = self.sample_poses(n_poses, rng)
+        if poses is None:
+            q = self.sample_poses(n_poses, rng)
+        else:
+            q = np.array(poses, dtype=float).reshape(n_poses, self.true_robot.n_joints)
         K = len(self.target_names)
         moves = rng.uniform(MOVE_S - 2, MOVE_S + 2, n_poses)
         arrive = np.cumsum(moves) + PAUSE_S * np.arange(n_poses)

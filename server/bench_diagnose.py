@@ -15,12 +15,13 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
 
+from . import split_suite
 from .diagnose_suite import KINDS, draw_case, run_case, suite, summarize
 
 TARGET_S = {100: 10.0, 1000: 60.0}  # issue 10: seconds per campaign on 2 cores
 CLEAN_SEED0 = 100_000  # clean campaigns draw from seeds apart from the effect cases'
-FULL = {"effect_cases": 60, "clean_cases": 200}
-QUICK = {"effect_cases": 10, "clean_cases": 10}
+FULL = {"effect_cases": 60, "clean_cases": 200, "split_cases": 45}
+QUICK = {"effect_cases": 10, "clean_cases": 10, "split_cases": 5}
 TIMED_EFFECT = "joint_compliance:2=0.3"
 
 
@@ -30,6 +31,25 @@ def _case(seed_kind):
     r = run_case(draw_case(seed, kind))
     r["wall_seconds"] = time.perf_counter() - t0
     return r
+
+
+def _split_case(seed_kind):
+    seed, kind = seed_kind
+    t0 = time.perf_counter()
+    r = split_suite.run_split_case(split_suite.draw_split_case(seed, kind))
+    r["wall_seconds"] = time.perf_counter() - t0
+    return r
+
+
+def _split_line(r) -> str:
+    c = r["case"]
+    named = ", ".join(":".join(str(v) for v in n if v is not None) for n in r["named"]) or "nothing"
+    return (
+        f"split {c['kind']} seed {c['seed']} ({c['arm']}, {c['split']}, {c['train_poses']} "
+        f"poses): {', '.join(c['effects']) or 'clean'}; named {named}; test "
+        f"{r['diagnosed_test_mm']:.4f} mm vs geometric {r['geometric_test_mm']:.4f}, floor "
+        f"{r['floor_mm']:.4f} ({r['wall_seconds']:.1f} s)"
+    )
 
 
 def _line(r) -> str:
@@ -45,7 +65,7 @@ def _line(r) -> str:
     )
 
 
-def run_suite(pairs, workers: int = 2, log=None) -> list[dict]:
+def run_suite(pairs, workers: int = 2, log=None, case=_case, line=_line) -> list[dict]:
     """Run (seed, kind) cases, in a pool when workers > 1; results in the pairs' order."""
     results: list = [None] * len(pairs)  # filled in as the cases finish, in any order
     done = 0
@@ -55,14 +75,14 @@ def run_suite(pairs, workers: int = 2, log=None) -> list[dict]:
         done += 1
         results[i] = r
         if log:
-            log(f"[bench] {done}/{len(pairs)} {_line(r)}")
+            log(f"[bench] {done}/{len(pairs)} {line(r)}")
 
     if workers <= 1:
         for i, p in enumerate(pairs):
-            report(i, _case(p))
+            report(i, case(p))
         return results
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(_case, p): i for i, p in enumerate(pairs)}
+        futures = {pool.submit(case, p): i for i, p in enumerate(pairs)}
         for f in as_completed(futures):
             report(futures[f], f.result())
     return results
@@ -107,13 +127,20 @@ def run_diagnose_bench(
     sizes=(100, 1000),
     workers: int = 2,
     seed: int = 0,
+    split_cases: int | None = None,
+    real=(),
 ) -> dict:
-    """The suite's figures (detection per effect and size, false alarms, held-out/floor) and timing."""
+    """The suite's figures (detection per effect and size, false alarms, held-out/floor), the
+    configuration-split suite's and the real campaigns' (folders) split by configuration, and
+    timing."""
     counts = dict(QUICK if quick else FULL)
-    if effect_cases is not None:
-        counts["effect_cases"] = effect_cases
-    if clean_cases is not None:
-        counts["clean_cases"] = clean_cases
+    for key, value in (
+        ("effect_cases", effect_cases),
+        ("clean_cases", clean_cases),
+        ("split_cases", split_cases),
+    ):
+        if value is not None:
+            counts[key] = value
     effect_kinds = tuple(k for k in KINDS if k != "clean")
     pairs = suite(range(seed, seed + counts["effect_cases"]), effect_kinds)
     pairs += [(CLEAN_SEED0 + seed + i, "clean") for i in range(counts["clean_cases"])]
@@ -124,11 +151,20 @@ def run_diagnose_bench(
     t0 = time.perf_counter()
     results = run_suite(pairs, workers, log)
     suite_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    split_pairs = split_suite.split_suite(range(seed, seed + counts["split_cases"]))
+    split = run_suite(split_pairs, workers, log, _split_case, _split_line)
+    split_s = time.perf_counter() - t0
+    real_splits = []
+    for folder in real:
+        log(f"[bench] {folder.name}: fitted in one configuration, tested in the other")
+        real_splits += split_suite.real_splits(folder)
     timing = {}
     for poses in sizes:
         log(f"[bench] timing one diagnosis at {poses} poses")
         timing[str(poses)] = time_campaign(poses, seed)
     summary = summarize(results)
+    split_summary = split_suite.summarize_split(split)
     return {
         "benchmark": "diagnose",
         "quick": quick,
@@ -138,6 +174,12 @@ def run_diagnose_bench(
         **counts,
         "suite_seconds": suite_s,
         "summary": summary,
+        "configuration_split": {
+            "what": "diagnosed on poses in one elbow or wrist configuration, tested in the other",
+            "seconds": split_s,
+            "summary": split_summary,
+            "real": real_splits,
+        },
         "timing": timing,
         "met": {
             "detection_rate_min_0.9": _at_least(summary["detection"]["rate"], 0.9),
@@ -153,9 +195,26 @@ def run_diagnose_bench(
                 if not summary["out_of_vocabulary"]["cases"]
                 else summary["out_of_vocabulary"]["named_without_payoff"] == 0
             ),
+            "split_never_worse_than_geometry_1.02": (
+                None if not split else split_summary["hurt"] == 0
+            ),
+            "split_removed_at_least_0.8": (
+                None
+                if not split_summary["removed"]["of"]
+                else split_summary["removed"]["at_least_0.8"] == split_summary["removed"]["of"]
+            ),
+            "real_splits_never_worse_than_geometry_1.02": (
+                None
+                if not real_splits
+                else all(
+                    r["diagnosed_test_mm"] <= split_suite.MAX_RATIO * r["geometric_test_mm"]
+                    for r in real_splits
+                )
+            ),
             **{f"seconds_{k}_poses": v["met"] for k, v in timing.items()},
         },
         "cases": results,
+        "split_cases": split,
     }
 
 

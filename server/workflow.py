@@ -6,10 +6,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from robocal.solver.effects import Inputs, prepare
-from robocal.solver.extended import predict_extended
+from robocal.solver.effects import Inputs
+from robocal.solver.extended import predict_model
 from robocal.solver.finite import require_inputs
-from robocal.solver.kinematics import Layout, predict
+from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
 
 from .formats.campaign_csv import read_campaign
@@ -347,10 +347,7 @@ def model_predict(model: ModelFile, q, time_s=None, temp_c=None, prev_q=None) ->
         need = e.kind.needs(e)
         if need and getattr(inputs, need) is None:
             raise DataError(f"the model's {e.label()} needs a {need} column in the poses")
-    nominal = Layout(model.nominal or model.robot, np.eye(4), lay.target_names)
-    nx = nominal.initial(np.zeros((K, 3)))
-    bases = [prepare(e, nominal, nx, inputs) for e in model.extensions]
-    return predict_extended(lay, x, model.extensions, inputs, bases)
+    return predict_model(model.nominal or model.robot, lay, x, model.extensions, inputs)
 
 
 def paper_methods(target_names) -> list[str]:

@@ -27,6 +27,15 @@ def predict_extended(layout: Layout, x, exts, inputs: Inputs, bases=None) -> np.
     return p + moved
 
 
+def predict_model(nominal_robot, layout: Layout, x, exts, inputs: Inputs) -> np.ndarray:
+    """SMR centres (m, K, 3) of a fitted extended model on new poses, its extensions' bases taken
+    on the nominal arm as a model file is used (the fitted geometry moves only the prediction)."""
+    nominal = Layout(nominal_robot, np.eye(4), layout.target_names)
+    nx = nominal.initial(np.zeros((len(layout.target_names), 3)))
+    bases = [prepare(e, nominal, nx, inputs) for e in exts]
+    return predict_extended(layout, x, exts, inputs, bases)
+
+
 def extension_rows(layout, x, exts, bases, inputs, mask, idx):
     """Predicted readings (N, 3) and the transposed Jacobian over [x[idx], every coef] (P, N, 3)."""
     dq = joint_offsets(exts, bases, layout.robot.n_joints)

@@ -172,7 +172,7 @@ def test_bench_reports_the_suite_and_the_timing():
     """The bench JSON: detection per effect and size, false alarms, held-out/floor ratios, time."""
     from robocal.server.bench_diagnose import run_diagnose_bench
 
-    out = run_diagnose_bench(effect_cases=2, clean_cases=1, sizes=(30,), workers=1)
+    out = run_diagnose_bench(effect_cases=2, clean_cases=1, sizes=(30,), workers=1, split_cases=1)
     json.dumps(out)
     s = out["summary"]
     assert out["effect_cases"] == 2 and len(out["cases"]) == 3
@@ -182,6 +182,12 @@ def test_bench_reports_the_suite_and_the_timing():
     }
     assert s["false_alarms"]["clean_campaigns"] == 1
     assert s["holdout_over_floor"]["count"] + s["holdout_over_floor_outlier_cases"]["count"] == 3
+    split = out["configuration_split"]["summary"]
+    assert split["cases"] == 1 and split["clean_cases"] == 1 and len(out["split_cases"]) == 1
+    case = out["split_cases"][0]
+    assert case["case"]["split"] in ("elbow", "wrist") and case["floor_mm"] > 0
+    assert case["ratio"] == case["diagnosed_test_mm"] / case["geometric_test_mm"]
+    assert out["configuration_split"]["real"] == []  # no real campaigns asked for
     t = out["timing"]["30"]
     assert t["seconds"] > 0 and t["target_seconds"] is None and t["met"] is None
     assert set(out["met"]) >= {
@@ -189,4 +195,5 @@ def test_bench_reports_the_suite_and_the_timing():
         "false_alarm_rate_max_0.01",
         "holdout_over_floor_median_max_1.2",
         "seconds_30_poses",
+        "split_never_worse_than_geometry_1.02",
     }
