@@ -301,7 +301,7 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
     return kept, Extrapolation(folds, [FoldCheck(f, g, g) for f, g in zip(folds, geo)], refused)
 
 
-def select(diag: Diagnoser, cands, log=None):
+def select(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFECTS):
     """Forward selection; returns the accepted steps and the baseline's and final model's CV.
 
     Each round scores every remaining candidate by its linearised held-out gain against the
@@ -318,7 +318,7 @@ def select(diag: Diagnoser, cands, log=None):
     steps: list[tuple] = []
     remaining = list(cands)
     m = diag.prob.q.shape[0]
-    while remaining and len(steps) < MAX_EFFECTS:
+    while remaining and len(steps) < max_effects:
         trial, A, r, blocks, pose_of_row, scans = diag.linear_system(
             cv_now.fits["all"], current, remaining
         )
@@ -528,7 +528,7 @@ def resampled(diag: Diagnoser, cands, steps) -> Stability | None:
     for keep in subsets:
         prob = Problem(diag.prob.layout, diag.prob.q[keep], diag.prob.meas[keep])
         sub = Diagnoser(prob, diag.x0, diag.free, diag.inputs.subset(keep))
-        chosen, _, _ = select(sub, cands)
+        chosen, _, _ = select(sub, cands, max_effects=1)  # the top cause is what may differ
         chosen, _ = extrapolating(sub, chosen)
         named.append(tuple(effect_key(st[0]) for st in chosen))
     final = tuple(effect_key(st[0]) for st in steps)
@@ -544,8 +544,9 @@ def extrapolation_report(region: Extrapolation, q) -> dict:
         return None if not np.isfinite(v) else float(v)
 
     return {
-        "method": "train on one side of a gravity-loaded joint's median, or in one arm "
-        "configuration (elbow, wrist, side of axis 1) where the data has both, test on the other",
+        "method": "train on one side of a gravity-loaded joint's median (a smaller end on a "
+        "small campaign), or in one elbow or wrist configuration where the data has both, test "
+        "on the other",
         "max_ratio_to_geometric": MAX_RATIO,
         "folds": [
             {

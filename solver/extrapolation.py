@@ -3,7 +3,7 @@
 Random folds test a model on poses among its training poses; a user's later poses lie elsewhere:
 in another elbow or wrist configuration, another part of the joint space. Region folds split the
 campaign at the median of a gravity-loaded joint, and configuration folds by the arm's
-configuration (elbow, wrist, the side of axis 1) where the campaign has poses in both: train on
+configuration (elbow, wrist) where the campaign has poses in both: train on
 one side, test on the other, so an effect that only fitted the quirks of one region shows up as
 a worse test than geometry's there.
 """
@@ -37,7 +37,6 @@ CONFIGURATIONS = (
         "wrist centre in front of the lower arm",
     ),
     ("wrist", configuration.JOINT5_NEGATIVE, "q5 < 0", "q5 >= 0"),
-    ("axis 1", configuration.BEHIND_AXIS1, "wrist centre behind axis 1", "in front of axis 1"),
 )
 
 
@@ -111,7 +110,7 @@ def region_folds(layout: Layout, x, q: np.ndarray, min_poses: int) -> list[Regio
 
 
 def configuration_folds(robot, q: np.ndarray, min_poses: int) -> list[RegionFold]:
-    """Trained in one elbow (wrist, axis-1) configuration, tested in the other, for each
+    """Trained in one elbow (wrist) configuration, tested in the other, for each
     configuration bit the campaign's poses differ in: each side with at least min_poses poses,
     and trained only on a side with at least a third of the poses (fewer test how a fit on few
     poses extrapolates, not the effect: a true backlash fitted on a quarter of a campaign missed

@@ -128,8 +128,9 @@ class ReportDoc(Open):
     extrapolation: Extrapolation | None = Field(
         None,
         description="the final model tested off its training region: trained on one side of "
-        "each gravity-loaded joint's median, or in one arm configuration (elbow, wrist, side of "
-        "axis 1) where the data has both, tested on the other; an effect that made any such "
+        "each gravity-loaded joint's median (a smaller end on a small campaign), or in one elbow or "
+        "wrist configuration where the data has both, tested on the other; an effect that made "
+        "any such "
         "fold worse than geometry is refused",
     )
     stability: Stability | None = Field(
