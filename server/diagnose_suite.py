@@ -68,14 +68,7 @@ class Case:
 
     def cell(self) -> VirtualCell:
         """The virtual cell, with the hidden effects, exactly as `robocal simulate` builds it."""
-        vc = VirtualCell.random(
-            self.robot,
-            self.targets,
-            seed=self.cell_seed,
-            tracker=TrackerSpec(**Cell(self.robot, self.targets).tracker),
-        )
-        vc.effects.extend(make_effects(self.specs, vc, self.cell_seed))
-        return vc
+        return virtual_cell(self.robot, self.targets, self.cell_seed, self.specs)
 
     def simulate_args(self) -> list[str]:
         """`robocal simulate` arguments (without --cell, --out) for the same campaign."""
@@ -100,6 +93,15 @@ class Case:
             "multiples": [round(m, 2) for m in self.multiples],
             "skip": self.skip,
         }
+
+
+def virtual_cell(robot: Robot, targets: dict, cell_seed: int, specs) -> VirtualCell:
+    """The virtual cell of a case with its hidden effects, as `robocal simulate` builds it."""
+    vc = VirtualCell.random(
+        robot, targets, seed=cell_seed, tracker=TrackerSpec(**Cell(robot, targets).tracker)
+    )
+    vc.effects.extend(make_effects(specs, vc, cell_seed))
+    return vc
 
 
 def random_arm(rng, name: str) -> Robot:

@@ -15,9 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from robocal.drivers.cell import TrackerSpec, VirtualCell
-from robocal.drivers.effects import make_effects
-from robocal.server.formats.cell_json import Cell, default_cell
+from robocal.drivers.cell import VirtualCell
+from robocal.server.formats.cell_json import default_cell
 from robocal.solver import configuration
 from robocal.solver.robot import KUKA_LIKE, Robot
 
@@ -63,14 +62,7 @@ class SplitCase:
 
     def cell(self) -> VirtualCell:
         """The virtual cell with its hidden effects."""
-        vc = VirtualCell.random(
-            self.robot,
-            self.targets,
-            seed=self.cell_seed,
-            tracker=TrackerSpec(**Cell(self.robot, self.targets).tracker),
-        )
-        vc.effects.extend(make_effects(self.specs, vc, self.cell_seed))
-        return vc
+        return ds.virtual_cell(self.robot, self.targets, self.cell_seed, self.specs)
 
     def describe(self) -> dict:
         return {
