@@ -192,6 +192,7 @@ class Jobs:
         method: str = "minimax",
         kind: str = "calibration",
         holdout_campaign_id: int | None = None,
+        tolerance_mm: float | None = None,
     ) -> Job:
         """Check and queue a job; the job as queued. DuplicateJob (a Conflict) if the same
         calibration is queued or running."""
@@ -212,6 +213,7 @@ class Jobs:
                 campaign_id=campaign_id,
                 method=method,
                 holdout_campaign_id=holdout_campaign_id,
+                tolerance_mm=tolerance_mm,
             )
             self._queue.append(job.id)
         self._publish(job)

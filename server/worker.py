@@ -7,7 +7,7 @@ Only picklable things cross to a worker (a JobSetup and a job id); it opens the 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from . import store
@@ -112,10 +112,18 @@ def campaign_data(db: store.Database, campaign_id: int | None):
     return cell, meas
 
 
+def job_data(db: store.Database, job: store.JobInfo):
+    """A job's campaign_data, the tolerance asked for with the job over the cell's."""
+    cell, meas = campaign_data(db, job.campaign_id)
+    if job.tolerance_mm is not None:
+        cell = replace(cell, tolerance_mm=job.tolerance_mm)
+    return cell, meas
+
+
 def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.JobInfo) -> dict:
     from .recording import record_calibration  # rerun is heavy; load it with the first job
 
-    cell, meas = campaign_data(db, job.campaign_id)
+    cell, meas = job_data(db, job)
     hold = None if job.holdout_campaign_id is None else campaign_data(db, job.holdout_campaign_id)
     _update(db, report, job.id, progress=0.1)
     cal = run_method(cell, meas, job.method)
@@ -165,7 +173,7 @@ def _verdict(v: Verdict) -> dict:
 def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.JobInfo) -> dict:
     from .workflow import diagnose, write_diagnosis
 
-    cell, meas = campaign_data(db, job.campaign_id)
+    cell, meas = job_data(db, job)
     _update(db, report, job.id, progress=0.1)
     d, model = diagnose(cell, meas)
     _update(db, report, job.id, progress=0.8)

@@ -48,6 +48,7 @@ def public_job(job: Job) -> JobPublic:
         started_at=job.started_at,
         finished_at=job.finished_at,
         holdout_campaign_id=job.holdout_campaign_id,
+        tolerance_mm=job.tolerance_mm,
         **urls,
     )
 
@@ -81,6 +82,7 @@ def create_job(body: JobBody, jobs: JobsDep, request: Request) -> JobPublic | JS
                 method=body.method,
                 kind=body.kind,
                 holdout_campaign_id=body.holdout_campaign_id,
+                tolerance_mm=body.tolerance_mm,
             )
         )
     except DuplicateJob as e:

@@ -10,7 +10,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 from robocal.drivers.lifecycle import ACTIONS, STATES
 from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
-from robocal.server.formats.cell_doc import CellDoc
+from robocal.server.formats.cell_doc import CellDoc, Tolerance
 from robocal.server.formats.fields import Integer, Whole
 from robocal.server.formats.limits import COORD_MAX_MM, PRINTABLE
 from robocal.server.verification import CUBE_SIDE_MM, DIRECTIONS
@@ -179,6 +179,11 @@ class JobCreate(BaseModel):
         "not fitted on; the model's error on it is the validation figure, and its poses are the "
         "held-out ones of the recording",
     )
+    tolerance_mm: Tolerance | None = Field(
+        None,
+        description="the accuracy the application needs (mm), over the cell's `tolerance_mm`: "
+        "a model whose held-out error exceeds it is not deployable; null: the cell's",
+    )
 
     @field_validator("method")
     @classmethod
@@ -215,6 +220,9 @@ class JobPublic(BaseModel):
         None, description="a done calibration's: is its model deployable, and why not"
     )
     holdout_campaign_id: int | None = Field(None, description="a calibration's held-out campaign")
+    tolerance_mm: float | None = Field(
+        None, description="the tolerance asked for with the job (null: the cell's is used)"
+    )
     holdout: HoldoutSummary | None = Field(
         None, description="a done calibration's errors on its held-out campaign"
     )

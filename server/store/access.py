@@ -724,6 +724,7 @@ class JobInfo:
     finished_at: dt.datetime | None
     results: dict
     holdout_campaign_id: int | None = None  # a calibration's held-out campaign, if it has one
+    tolerance_mm: float | None = None  # the accuracy asked for, over the cell's; None: the cell's
 
 
 def create_job(
@@ -733,6 +734,7 @@ def create_job(
     campaign_id: int | None,
     method: str,
     holdout_campaign_id: int | None = None,
+    tolerance_mm: float | None = None,
 ) -> JobInfo:
     """Store a queued job on an existing campaign (none for a planning job); the job."""
     checks.one_of(kind, JOB_KINDS, "kind")
@@ -746,6 +748,7 @@ def create_job(
             kind=kind,
             campaign_id=campaign_id,
             holdout_campaign_id=holdout_campaign_id,
+            tolerance_mm=None if tolerance_mm is None else float(tolerance_mm),
             method=str(method),
             state="queued",
             progress=0.0,
@@ -838,6 +841,7 @@ def _job_info(j: Job) -> JobInfo:
         j.finished_at,
         dict(j.results or {}),
         j.holdout_campaign_id,
+        j.tolerance_mm,
     )
 
 

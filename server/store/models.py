@@ -209,6 +209,8 @@ class Job(Base):
     holdout_campaign_id: Mapped[int | None] = mapped_column(
         ID, ForeignKey("campaign.id", ondelete="SET NULL")
     )
+    # The accuracy the application needs (mm), which wins over the cell's; None: the cell's.
+    tolerance_mm: Mapped[float | None] = mapped_column(Float)
     state: Mapped[str] = mapped_column(String(16), default="queued")
     reason: Mapped[str | None] = mapped_column(Text)
     progress: Mapped[float] = mapped_column(Float, default=0.0)  # 0..1
