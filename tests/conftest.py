@@ -22,7 +22,8 @@ from tests.backends import BACKENDS, store_url_for
 
 TESTS = Path(__file__).resolve().parent
 SERVICE_DIRS = (TESTS / "server" / "api", TESTS / "web")
-SPAWNS = re.compile(r"\bsubprocess\.|\bPopen\(|\bos\.system\(")
+# cli_process.run: a `robocal` process forked from a server that has imported the program
+SPAWNS = re.compile(r"\bsubprocess\.|\bPopen\(|\bos\.system\(|\bcli_process\.run\(")
 
 
 def _source(obj) -> str:

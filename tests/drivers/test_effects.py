@@ -1,8 +1,6 @@
 """Physics effects of the virtual cell: each one's law, spec parsing, determinism, the CLI."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -12,6 +10,7 @@ from robocal.solver.calibrate import calibrate
 from robocal.solver.kinematics import Layout, predict
 from robocal.solver.robot import IRB2600, Robot
 
+from tests import cli_process
 from tests.robots import PUMA_LIKE, TARGETS
 
 
@@ -329,13 +328,7 @@ def test_defaults_are_clearly_visible_to_a_geometric_calibration(spec):
 
 
 def robocal(*args, cwd):
-    return subprocess.run(
-        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    return cli_process.run(*args, cwd=cwd, timeout=300)
 
 
 def test_simulate_with_an_effect_end_to_end(tmp_path):

@@ -9,15 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests import cli_process
+
 
 def robocal(*args, cwd):
-    return subprocess.run(
-        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    """`robocal ARGS` in its own process (forked from one that has imported the program)."""
+    return cli_process.run(*args, cwd=cwd, timeout=300)
 
 
 @pytest.fixture(scope="module")

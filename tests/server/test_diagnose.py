@@ -4,24 +4,17 @@ time_s, else file order). The numerics over many drawn effects are checked in pr
 tests/solver/test_diagnose_effects.py; here a few of the same draws go through the files."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 from robocal.server.formats.cell_json import cell_to_json
 
+from tests import cli_process
 from tests.solver.test_diagnose_effects import aim, cell_of, draw, draw_backlash, robot_for
 
 
 def robocal(*args, cwd):
-    r = subprocess.run(
-        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    r = cli_process.run(*args, cwd=cwd, timeout=600)
     assert r.returncode == 0, r.stderr
     return r
 

@@ -2,8 +2,6 @@
 
 import csv
 import re
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -21,6 +19,7 @@ from robocal.solver.effects import Extension
 from robocal.solver.kinematics import Layout, predict, rot, translation
 from robocal.solver.robot import IRB2600
 
+from tests import cli_process
 from tests.robots import KUKA_LIKE, PUMA_LIKE, TARGETS
 
 TOL_MM = 1e-6
@@ -307,13 +306,7 @@ def test_export_command_line(calibrated, tmp_path):
         ("--joints", "joints.csv", "--out", "Cal_Run.mod"),
     ]
     for args in runs:
-        r = subprocess.run(
-            [sys.executable, "-m", "robocal.server.cli", "export", str(calibrated["mdh"]), *args],
-            cwd=tmp_path,
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
+        r = cli_process.run("export", calibrated["mdh"], *args, cwd=tmp_path, timeout=120)
         assert r.returncode == 0 and r.stdout.startswith("wrote "), r.stderr
     assert read_module((tmp_path / "Cal_Run.mod").read_text()).moves == ["jt_P000", "jt_P001"]
     assert '<robot name="puma-like_calibrated">' in (tmp_path / "puma.urdf").read_text()

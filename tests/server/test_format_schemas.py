@@ -4,14 +4,13 @@ API validating cell uploads with the same model as the file reader."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import jsonschema_rs
 import pytest
 from robocal.server.formats import cell_to_json, default_cell
 from robocal.server.formats.json_schema import MODELS, committed, generated
 
+from tests import cli_process
 from tests.server.api.conftest import serve, settings_for
 
 SPEC_CELL = {
@@ -60,12 +59,7 @@ def test_committed_schema_is_the_models(name):
 
 @pytest.mark.parametrize("name", sorted(MODELS))
 def test_schema_command_prints_the_committed_file(name):
-    r = subprocess.run(
-        [sys.executable, "-m", "robocal.server.cli", "schema", name],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    r = cli_process.run("schema", name, cwd=".", timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout == committed(name).read_text()
     assert json.loads(r.stdout)["title"] == f"{name}.json"

@@ -2,8 +2,6 @@
 them by pose and target and record them; --keep-outliers uses every reading."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -13,17 +11,13 @@ from robocal.server.bench_screen import displace
 from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.cell_json import default_cell
 
+from tests import cli_process
+
 SEED = 21
 
 
 def robocal(*args, cwd, ok=True):
-    r = subprocess.run(
-        [sys.executable, "-m", "robocal.server.cli", *map(str, args)],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    r = cli_process.run(*args, cwd=cwd, timeout=600)
     assert (r.returncode == 0) == ok, r.stderr
     return r
 

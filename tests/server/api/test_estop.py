@@ -84,7 +84,7 @@ def test_estop_answers_ahead_of_60_heavy_reads(tmp_path, devices):
 def _estop_under_reads(url, token, devices):
     c = httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=30)
     # The heavy reads: Table 3 (every method of the paper) of a calibrated simulated campaign.
-    sim = c.post("/api/campaigns", json={"name": "data", "poses": 40, "seed": 4}).json()["id"]
+    sim = c.post("/api/campaigns", json={"name": "data", "poses": 20, "seed": 4}).json()["id"]
     c.post(f"/api/campaigns/{sim}/start")
     wait_for(
         lambda: c.get(f"/api/campaigns/{sim}").json(), lambda j: j["status"] == "done", timeout=120
