@@ -263,4 +263,5 @@ def validation_lines(v: Verdict) -> list[str]:
         out += [f"  - {r}" for r in v.reasons]
         if v.summary:
             out.append(f"  ({v.summary})")
+    out += [f"[yellow]warning[/yellow]: {w}" for w in v.warnings]
     return out

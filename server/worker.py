@@ -159,6 +159,7 @@ def _verdict(v: Verdict) -> dict:
         "validation": {
             "deployable": v.deployable,
             "reasons": list(v.reasons),
+            "warnings": list(v.warnings),
             "summary": v.summary,
             "holdout_rms_mm": v.holdout_rms_mm,
             "holdout_max_mm": v.holdout_max_mm,

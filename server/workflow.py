@@ -293,6 +293,7 @@ def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit
     v.reasons += implausible(cell, used, cal.robot)
     block = validation_block(v, list(used.pose_ids), source)
     block["nominal_rms_mm"] = nominal_rms(cell, used)
+    block["warnings"] = layout_warnings(cell, used, cal.targets)
     return block
 
 
@@ -305,6 +306,18 @@ def implausible(cell: Cell, meas: Measurements, robot) -> list[str]:
     units = units_refusal(cell, meas)
     changes = implausible_changes(cell.robot, robot).reason()
     return [why for why in (units, changes) if why]
+
+
+def layout_warnings(cell: Cell, meas: Measurements, targets) -> list[str]:
+    """The verdict's warnings: SMRs (targets (K, 3), the readings' order) identified far from
+    where the cell puts them. The fit holds (the SMR positions are free), so the model stays
+    deployable, but the cell's layout or its flange frame is not what the user thinks."""
+    from robocal.solver.plausibility import check_layout
+
+    names = meas.target_names
+    nominal = np.array([cell.targets[t] for t in names], dtype=float)
+    why = check_layout(names, nominal, np.asarray(targets, dtype=float)).reason()
+    return [why] if why else []
 
 
 def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
@@ -525,6 +538,7 @@ def validate_diagnosis(
     method = f"{FOLDS}-fold cross-validation of the diagnosis"
     block = validation_block(v, list(meas.pose_ids), source, method)
     block["nominal_rms_mm"] = nominal_rms(cell, meas)
+    block["warnings"] = layout_warnings(cell, meas, [model.targets[t] for t in meas.target_names])
     return block
 
 

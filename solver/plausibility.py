@@ -50,6 +50,14 @@ LIMIT_SLACK_RAD = 1e-6
 LENGTH_CHANGE_FRACTION = 0.005
 TWIST_CHANGE_DEG = 2.0
 OFFSET_CHANGE_DEG = 5.0
+# Farthest an SMR may be identified from its position in the cell. A nest drawing is a few mm
+# off (the real campaigns: 0.6 mm on the IRB 120, 2.7 mm on the UR5's on-axis SMR); an inch is
+# a wrong position, a wrong name or another flange frame (the real QKM cell's layout is the
+# identified one turned 180 deg about the flange axis: 226 mm).
+TARGET_MOVE_MM = 25.0
+# The identified layout is the cell's moved rigidly when a rigid transform matches them within
+# this (mm RMS): the whole layout was placed in another frame, not one SMR mistyped.
+RIGID_MATCH_MM = 5.0
 
 
 @dataclass(frozen=True)
@@ -242,6 +250,62 @@ def implausible_changes(nominal: Robot, identified: Robot) -> ChangeCheck:
                 out.append(ParameterChange(name, float(np.rad2deg(d)), limit, "deg"))
     out.sort(key=lambda c: -abs(c.change) / c.limit)
     return ChangeCheck(reach, length_limit, out)
+
+
+@dataclass(frozen=True)
+class LayoutCheck:
+    """How far the identified SMRs are from their cell positions (flange frame, mm)."""
+
+    moved: list[tuple[str, float]]  # SMRs past TARGET_MOVE_MM, with their distance
+    # the rotation that best takes the cell's layout to the found one, degrees
+    turn_deg: float = float("nan")
+    turn_axis: np.ndarray | None = None  # its axis (unit, flange frame)
+    shift_mm: float = float("nan")  # the translation of that rigid transform
+    rigid_rms_mm: float = float("nan")  # how well it matches (nan: fewer than 3 SMRs, or a line)
+
+    def reason(self) -> str | None:
+        """One sentence naming the SMRs and what the move looks like; None when all are close."""
+        if not self.moved:
+            return None
+        names = ", ".join(n for n, _ in self.moved)
+        far = max(d for _, d in self.moved)
+        text = (
+            f"SMR {names} identified up to {_mm(far)} from the cell's positions (more than "
+            f"{TARGET_MOVE_MM:g} mm, past a fixture drawing's error)"
+        )
+        if self.rigid_rms_mm <= RIGID_MATCH_MM and self.turn_axis is not None:
+            axis = self.turn_axis * np.sign(self.turn_axis[2] or 1.0)
+            tilt = np.rad2deg(np.arccos(np.clip(axis[2], -1.0, 1.0)))
+            about = "the flange axis (z)" if tilt <= 10.0 else f"an axis {tilt:.0f} deg off z"
+            text += (
+                f": the found layout is the cell's turned {self.turn_deg:.0f} deg about {about}"
+                f" and shifted {_mm(self.shift_mm)} (within {self.rigid_rms_mm:.2g} mm RMS), so "
+                "the cell's SMR positions and the model's flange frame differ by that motion; "
+                "check them before a tool is defined in the cell's flange frame"
+            )
+        else:
+            text += ": check the cell's SMR positions and names"
+        return text
+
+
+def check_layout(names, nominal: np.ndarray, identified: np.ndarray) -> LayoutCheck:
+    """The SMRs identified farther than TARGET_MOVE_MM from nominal (K, 3), and the rigid
+    motion of the whole layout that explains them, when there are three SMRs or more."""
+    from scipy.spatial.transform import Rotation
+
+    nominal, identified = np.asarray(nominal, float), np.asarray(identified, float)
+    dist = np.linalg.norm(identified - nominal, axis=1)
+    moved = [(str(n), float(d)) for n, d in zip(names, dist) if d > TARGET_MOVE_MM]
+    spread = np.linalg.svd(nominal - nominal.mean(axis=0), compute_uv=False)
+    if not moved or len(names) < 3 or spread[1] < 1.0:  # a line or a point fixes no rotation
+        return LayoutCheck(moved)
+    T = kabsch(nominal, identified)
+    rms = float(np.sqrt(np.mean(np.sum((nominal @ T[:3, :3].T + T[:3, 3] - identified) ** 2, 1))))
+    rotvec = Rotation.from_matrix(T[:3, :3]).as_rotvec()
+    angle = float(np.linalg.norm(rotvec))
+    axis = rotvec / angle if angle > 1e-9 else None
+    shift = float(np.linalg.norm(T[:3, 3]))
+    return LayoutCheck(moved, float(np.rad2deg(angle)), axis, shift, rms)
 
 
 def _mm(v: float) -> str:

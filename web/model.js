@@ -146,6 +146,11 @@ function renderValidation(v) {
     parts.push(Object.assign(document.createElement("p"), { id: "m-expected", className: "muted",
       textContent: `${v.summary[0].toUpperCase()}${v.summary.slice(1)}.` }));
   }
+  if ((v.warnings || []).length) {  // deployable or not: what deserves a look before use
+    const list = Object.assign(document.createElement("ul"), { id: "m-warnings" });
+    v.warnings.forEach((w) => { list.appendChild(document.createElement("li")).textContent = w; });
+    parts.push(list);
+  }
   box.replaceChildren(...parts);
 }
 

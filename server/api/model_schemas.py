@@ -74,6 +74,9 @@ class Validation(BaseModel):
 
     deployable: bool
     reasons: list[str] = Field(description="each limit the fit breaks, with its figures")
+    warnings: list[str] = Field(
+        [], description="what deserves a look but leaves the model deployable"
+    )
     summary: str | None = Field(None, description="the accuracy to expect on new poses")
     tolerance_mm: float | None = Field(None, description="the accuracy the application needs")
     holdout_rms_mm: float | None = Field(description="leave-one-pose-out RMS per reading")
@@ -110,6 +113,9 @@ class ValidationSummary(BaseModel):
 
     deployable: bool
     reasons: list[str]
+    warnings: list[str] = Field(
+        [], description="what deserves a look but leaves the model deployable"
+    )
     summary: str | None = Field(None, description="the accuracy to expect on new poses")
     holdout_rms_mm: float | None
     holdout_max_mm: float | None = None

@@ -136,6 +136,9 @@ class ValidationDoc(_Open):
         description="false, or missing: compensate and export refuse the model unless forced",
     )
     reasons: list[Text] = Field([], description="why not deployable, one sentence each")
+    warnings: list[Text] = Field(
+        [], description="what deserves a look but leaves the model deployable, one sentence each"
+    )
     holdout_rms_mm: Statistic | None = Field(None, description="the held-out RMS, mm")
     holdout_max_mm: Statistic | None = Field(None, description="the held-out maximum, mm")
     tolerance_mm: Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)] | None = Field(

@@ -24,6 +24,7 @@ class Verdict:
     condition_number: float | None = None
     holdout: str | None = None  # how the held-out figures were had
     summary: str | None = None  # the expected accuracy in one sentence, without the reasons
+    warnings: tuple[str, ...] = ()  # what deserves a look without making it undeployable
 
     @classmethod
     def of(cls, block: dict | None) -> Verdict:
@@ -53,6 +54,7 @@ class Verdict:
             condition_number=number("condition_number"),
             holdout=block.get("holdout"),
             summary=block.get("summary"),
+            warnings=tuple(w for w in block.get("warnings") or () if isinstance(w, str)),
         )
 
     def refusal(self) -> str | None:

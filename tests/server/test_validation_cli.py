@@ -83,6 +83,12 @@ def test_the_real_campaigns_are_deployable(name):
     v = workflow.model_file(cal, cell, meas).meta["validation"]
     assert v["deployable"] is True, v["reasons"]
     assert v["holdout_rms_mm"] > v["fit_rms_mm"] > v["noise_floor_mm"]
+    if name == "qkm_hl6":  # its cell's SMR layout is the found one turned half a turn
+        (warning,) = v["warnings"]
+        assert "SMR A, B, C identified up to 226 mm" in warning, warning
+        assert "turned 180 deg about the flange axis (z)" in warning, warning
+    else:  # the IRB 120's SMRs are found within a millimetre of its cell's
+        assert v["warnings"] == []
 
 
 def test_diagnose_reports_the_final_models_parameter_table_and_verdict(tmp_path):

@@ -1,6 +1,8 @@
 """Physical plausibility: readings in the wrong units and geometry changes no arm can have are
 told apart from real campaigns, of any arm size, however close their poses (issue 21, point 5)."""
 
+import re
+
 import numpy as np
 import pytest
 from robocal.drivers.cell import VirtualCell
@@ -9,7 +11,9 @@ from robocal.server.formats.campaign_csv import read_campaign
 from robocal.solver.measurements import Measurements
 from robocal.solver.plausibility import (
     RATIO_BAND,
+    TARGET_MOVE_MM,
     check_cell_angles,
+    check_layout,
     check_units,
     implausible_changes,
 )
@@ -124,3 +128,36 @@ def test_limits_scale_with_the_arm():
     small = implausible_changes(UR5, changed(UR5, a2=8.0)).changes
     large = implausible_changes(IRB2600, changed(IRB2600, a2=8.0)).changes
     assert [c.name for c in small] == ["a2"] and large == []
+
+
+def test_smrs_found_far_from_the_cell_are_named_with_the_motion_that_explains_them():
+    """A layout placed in another flange frame (turned about the flange axis, or tilted) is told
+    as that motion; one mistyped SMR as a position to check; a drawing's few mm is nothing."""
+    from scipy.spatial.transform import Rotation
+
+    names = ("A", "B", "C", "D")
+    nominal = np.array([[60.0, 0, 35], [-30, 52, 35], [-30, -52, 35], [0, 0, 80]])
+    rng = np.random.default_rng(3)
+    drawn = nominal + rng.normal(scale=1.0, size=nominal.shape)  # a drawing's error
+    assert check_layout(names, nominal, drawn).reason() is None
+
+    for angle, axis, about, moved in (
+        (180.0, [0, 0, 1], "the flange axis (z)", "A, B, C"),
+        (90.0, [0, 0, -1], "the flange axis (z)", "A, B, C"),
+        (30.0, [1, 0, 0], "an axis ", "B, C, D"),
+    ):
+        R = Rotation.from_rotvec(np.deg2rad(angle) * np.array(axis, float)).as_matrix()
+        found = drawn @ R.T + [0.5, 0, 0]
+        why = check_layout(names, nominal, found).reason()
+        turned = re.search(r"turned (\d+) deg about ", why)
+        assert turned and abs(int(turned[1]) - angle) <= 2, why
+        assert why[turned.end() :].startswith(about), why
+        assert why.startswith(f"SMR {moved} identified up to"), why
+
+    typo = drawn.copy()
+    typo[1, 0] += 40.0  # one SMR's x mistyped
+    why = check_layout(names, nominal, typo).reason()
+    assert why.startswith("SMR B identified up to 3") and "check the cell's SMR positions" in why
+    assert "turned" not in why
+    one = check_layout(("A",), nominal[:1], nominal[:1] + [0, 0, 2 * TARGET_MOVE_MM])
+    assert one.reason().startswith("SMR A identified up to 50") and "turned" not in one.reason()

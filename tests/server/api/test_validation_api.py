@@ -54,8 +54,10 @@ def test_a_healthy_campaign_is_deployable_with_its_parameter_table(live):
     job = calibrate(c, cid)
     j = c.get(f"/api/jobs/{job}").json()
     assert j["validation"]["deployable"] is True and j["validation"]["reasons"] == [], j
+    assert j["validation"]["warnings"] == [], j  # its SMRs are where the cell says
     p = c.get(f"/api/models/{job}/parameters").json()
     v, ident = p["validation"], p["identified"]
+    assert v["warnings"] == [], v
     assert v["holdout_rms_mm"] >= v["fit_rms_mm"] > 0 and v["condition_number"] < 1000
     rows = {r["parameter"]: r for r in ident["rows"]}
     for joint in range(1, 7):
