@@ -44,13 +44,12 @@ class JointsText:
     warnings: list[str]
 
 
-def compensated_csv(model_path, data: bytes, filename: str, tcp, max_error_mm, report=None):
-    """joints.csv (text) for an uploaded targets.csv and its warnings; InputError names the
-    upload's line."""
-    from .compensation import Limits, compensate_file, jumps_line
+def compensated_csv(model_path, data: bytes, filename: str, tcp, limits, report=None):
+    """joints.csv (text) for an uploaded targets.csv and its warnings, by the compensation's
+    limits (server.compensation.Limits); InputError names the upload's line."""
+    from .compensation import compensate_file, jumps_line
     from .formats.joints_csv import write_joints
 
-    limits = Limits(max_error_mm=max_error_mm)
     with tempfile.TemporaryDirectory(prefix="robocal-compensate-") as tmp:
         folder = Path(tmp)
         targets = _upload(folder, filename, data)

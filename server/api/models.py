@@ -10,7 +10,7 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.responses import FileResponse
 from robocal.server import charts, model_files, store, verification
-from robocal.server.compensation import MAX_ERROR_MM, parse_tcp
+from robocal.server.compensation import MAX_ERROR_MM, MAX_JUMP_DEG, MAX_MOVE_DEG, Limits, parse_tcp
 from robocal.server.formats.cell_json import parse_cell
 from robocal.server.formats.model_json import read_model
 from robocal.server.identified import parameters_of
@@ -203,14 +203,29 @@ async def compensate(
     jobs: JobsDep,
     tcp: Tcp = None,
     max_error_mm: Annotated[float, Query(gt=0, le=1000)] = MAX_ERROR_MM,
+    max_move_deg: Annotated[
+        float,
+        Query(
+            ge=0,
+            le=3600,
+            description="refuse a pose whose joints move further than this from its starting "
+            "joints: another configuration",
+        ),
+    ] = MAX_MOVE_DEG,
+    max_jump_deg: Annotated[
+        float,
+        Query(ge=0, le=3600, description="warn of consecutive poses whose joints turn more"),
+    ] = MAX_JUMP_DEG,
     filename: Filename = "targets.csv",
     force: Force = False,
 ) -> Response:
     """The joint commands (joints.csv) that put the SMRs (or the tool) where the uploaded
-    targets.csv wants them, by this job's model; an unreachable pose is 422 with its line.
-    A model its validation marks not deployable is refused (409 with the reasons) unless
-    force=true."""
+    targets.csv wants them, by this job's model; an unreachable pose, or one whose joints would
+    leave its starting configuration, is 422 with its line; jumps between consecutive poses are
+    warnings. A model its validation marks not deployable is refused (409 with the reasons)
+    unless force=true."""
     data = await request.body()
+    limits = Limits(max_error_mm, max_move_deg, max_jump_deg)
     out = await run_in_threadpool(
         _with_model,
         jobs,
@@ -220,7 +235,7 @@ async def compensate(
         data,
         filename,
         _tcp(tcp),
-        max_error_mm,
+        limits,
     )
     headers = {"Content-Disposition": f'attachment; filename="job-{job_id}.joints.csv"'}
     if out.warnings:  # JSON with ASCII escapes: a header carries no other text safely

@@ -96,6 +96,18 @@ def test_compensate_and_export_a_done_model(live, model_job):
     said = json.loads(r0.headers.get("X-Robocal-Warnings", "[]"))
     assert said == ([] if not jumps else [said[0]]), said
     assert not jumps or said[0].startswith(f"cell-7.csv: {jumps} jumps of more than 90 deg")
+    # the limits are the caller's: a correction larger than max_move_deg leaves the starting
+    # configuration (422 naming the pose), and jumps are judged by max_jump_deg
+    r = c.post(url, content=body, params={"max_move_deg": 0.00001})
+    assert r.status_code == 422 and r.json()["line"] == 2, r.text
+    assert "would leave its starting joints' configuration" in r.json()["detail"], r.text
+    r = c.post(url, content=body, params={"max_jump_deg": 0, "filename": "cell-7.csv"})
+    assert r.status_code == 200 and r.text == r0.text, r.text
+    said = json.loads(r.headers["X-Robocal-Warnings"])
+    assert said[-1].startswith("cell-7.csv: 4 jumps of more than 0 deg"), said
+    for bad in ({"max_move_deg": -1}, {"max_jump_deg": "x"}, {"max_jump_deg": 4000}):
+        r = c.post(url, content=body, params=bad)
+        assert r.status_code == 422 and next(iter(bad)) in r.text, (bad, r.text)
     # one SMR a pose: its orientation comes from the starting joints, said in a header
     one = [lines[0], *[ln for ln in lines[1:] if ln.split(",")[1] == "A"]]
     r = c.post(url, content="\n".join(one), params={"filename": "one.csv"})
