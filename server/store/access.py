@@ -496,8 +496,18 @@ def campaign_measurements(
         time_s[i, k] = np.nan if r.time_s is None else r.time_s
         temp_c[i, k] = np.nan if r.temp_c is None else r.temp_c
     some = lambda a: a if np.isfinite(a).any() else None  # noqa: E731
+    prev = np.full(q.shape, np.nan)
+    for i, p in enumerate(poses):
+        if p.prev_deg is not None:
+            prev[i] = p.prev_deg
     return Measurements(
-        [p.label for p in poses], np.deg2rad(q), names, xyz, some(time_s), some(temp_c)
+        [p.label for p in poses],
+        np.deg2rad(q),
+        names,
+        xyz,
+        some(time_s),
+        some(temp_c),
+        some(np.deg2rad(prev)),
     )
 
 
@@ -538,6 +548,7 @@ def import_csv(
     # the whole file is checked before the database is touched
     meas = read_campaign(path, robot) if measurements is None else measurements
     q = np.rad2deg(meas.q)
+    prev = None if meas.prev_q is None else np.rad2deg(meas.prev_q)
     mask = meas.mask
     settings = {"source": "csv", "file": os.path.basename(os.fspath(path))}
     with db.session(write=True) as s:
@@ -574,6 +585,7 @@ def import_csv(
                             campaign_id=cid,
                             pose_index=i,
                             reached_deg=q[i].tolist(),
+                            prev_deg=_given(prev, i),
                             state="measured" if mask[i].all() else "missing-target",
                             detail="imported",
                         )
@@ -590,6 +602,13 @@ def import_csv(
             s.execute(delete(Campaign).where(Campaign.id == cid))
         raise
     return cid
+
+
+def _given(prev: np.ndarray | None, i: int) -> list | None:
+    """Pose i's prev_q row (deg) as stored, None where the file gives none."""
+    if prev is None or not np.isfinite(prev[i]).all():
+        return None
+    return prev[i].tolist()
 
 
 def export_lines(db: Database, *, campaign_id: int, chunk: int = 5000):
@@ -882,6 +901,7 @@ def _poses_query(campaign_id: int):
             PoseOutcome.state,
             PoseOutcome.reached_deg,
             PoseOutcome.detail,
+            PoseOutcome.prev_deg,
         )
         .outerjoin(PoseOutcome, on)
         .where(PlannedPose.campaign_id == campaign_id)

@@ -184,6 +184,8 @@ class PoseOutcome(Base):
     pose_index: Mapped[int] = mapped_column(Integer)
     state: Mapped[str] = mapped_column(String(16))
     reached_deg: Mapped[list | None] = mapped_column(JSON)  # None when the arm never got there
+    # The joints the arm came from (deg; an imported file's prev_q): None, the visit order says
+    prev_deg: Mapped[list | None] = mapped_column(JSON)
     detail: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[dt.datetime] = mapped_column(UTCDateTime(), default=utcnow)
 

@@ -116,6 +116,35 @@ def test_round_trip_export_import(tmp_path, db, cell_json, simulated):
     assert (tmp_path / "again.csv").read_text() == (tmp_path / "meas.csv").read_text()
 
 
+def test_an_imported_files_prev_q_is_kept(tmp_path, db, cell_json, simulated):
+    """A file split or reordered gives prev_q (the joints the arm came from) on some poses: the
+    store keeps them, the campaign's readings give them back and export them again."""
+    keep = simulated.mask.any(axis=1)
+    meas = simulated.subset(keep)
+    rng = np.random.default_rng(5)
+    prev = meas.q + np.deg2rad(rng.uniform(-20, 20, meas.q.shape))
+    prev[::3] = np.nan  # poses without: the visit order says
+    meas.prev_q = prev
+    write_campaign(tmp_path / "meas.csv", meas)
+    cid = import_csv(db, path=tmp_path / "meas.csv", cell_json=cell_json, name="split")
+    back = campaign_measurements(db, campaign_id=cid, robot=IRB2600)
+    assert back.prev_q is not None and np.isnan(back.prev_q[::3]).all()
+    given = np.isfinite(prev[:, 0])
+    np.testing.assert_allclose(back.prev_q[given], prev[given], atol=1e-10)
+    export_csv(db, campaign_id=cid, path=tmp_path / "again.csv")
+    assert (tmp_path / "again.csv").read_text() == (tmp_path / "meas.csv").read_text()
+    plain = import_csv(db, path=_without_prev(tmp_path), cell_json=cell_json, name="plain")
+    assert campaign_measurements(db, campaign_id=plain).prev_q is None
+
+
+def _without_prev(tmp_path):
+    """The same campaign's file with no prev_q columns."""
+    meas = read_campaign(tmp_path / "meas.csv", IRB2600)
+    meas.prev_q = None
+    write_campaign(tmp_path / "plain.csv", meas)
+    return tmp_path / "plain.csv"
+
+
 def test_import_records_absent_targets_as_missing(tmp_path, db, cell_json, simulated):
     write_campaign(tmp_path / "meas.csv", simulated)
     cid = import_csv(db, path=tmp_path / "meas.csv", cell_json=cell_json, name="sim")
