@@ -604,6 +604,13 @@ def import_csv(
     return cid
 
 
+def _prev_fields(prev_deg, n: int) -> list[str]:
+    """A row's n prev_q fields as meas.csv writes them (blank where the pose gives none)."""
+    if not n:
+        return []
+    return [f"{v:.9f}" for v in prev_deg] if prev_deg is not None else [""] * n
+
+
 def _given(prev: np.ndarray | None, i: int) -> list | None:
     """Pose i's prev_q row (deg) as stored, None where the file gives none."""
     if prev is None or not np.isfinite(prev[i]).all():
@@ -626,9 +633,21 @@ def export_lines(db: Database, *, campaign_id: int, chunk: int = 5000):
             if s.scalar(select(func.count()).where(ok, col.is_not(None)))
         ]
         n_joints = parse_cell(campaign.cell_json).robot.n_joints
+        given = PoseOutcome.campaign_id == campaign_id, PoseOutcome.prev_deg.is_not(None)
+        has_prev = bool(s.scalar(select(func.count()).where(*given)))
+    prev_cols = [f"prev_q{i}" for i in range(1, n_joints + 1)] if has_prev else []
     yield (
         ",".join(
-            ["pose", *[f"q{i}" for i in range(1, n_joints + 1)], "target", "x", "y", "z", *extras]
+            [
+                "pose",
+                *[f"q{i}" for i in range(1, n_joints + 1)],
+                "target",
+                "x",
+                "y",
+                "z",
+                *extras,
+                *prev_cols,
+            ]
         )
         + "\n"
     )
@@ -653,6 +672,7 @@ def export_lines(db: Database, *, campaign_id: int, chunk: int = 5000):
                     PlannedPose.label,
                     PlannedPose.joints_deg,
                     PoseOutcome.reached_deg,
+                    PoseOutcome.prev_deg,
                 )
                 .join(PlannedPose, on)
                 .outerjoin(PoseOutcome, done)
@@ -679,6 +699,7 @@ def export_lines(db: Database, *, campaign_id: int, chunk: int = 5000):
                     r.target,
                     *[f"{v:.6f}" for v in (r.x, r.y, r.z)],
                     *["" if more[c] is None else f"{more[c]:.6f}" for c in extras],
+                    *_prev_fields(r.prev_deg, n_joints if has_prev else 0),
                 ]
             )
         yield buf.getvalue()

@@ -185,7 +185,7 @@ class PoseOutcome(Base):
     state: Mapped[str] = mapped_column(String(16))
     reached_deg: Mapped[list | None] = mapped_column(JSON)  # None when the arm never got there
     # The joints the arm came from (deg; an imported file's prev_q): None, the visit order says
-    prev_deg: Mapped[list | None] = mapped_column(JSON)
+    prev_deg: Mapped[list | None] = mapped_column(JSON(none_as_null=True))  # None: SQL NULL
     detail: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[dt.datetime] = mapped_column(UTCDateTime(), default=utcnow)
 

@@ -11,6 +11,7 @@ from robocal.server.store import (
     campaign_measurements,
     create_campaign,
     export_csv,
+    export_lines,
     get_campaign,
     import_csv,
     planned_poses,
@@ -133,8 +134,11 @@ def test_an_imported_files_prev_q_is_kept(tmp_path, db, cell_json, simulated):
     np.testing.assert_allclose(back.prev_q[given], prev[given], atol=1e-10)
     export_csv(db, campaign_id=cid, path=tmp_path / "again.csv")
     assert (tmp_path / "again.csv").read_text() == (tmp_path / "meas.csv").read_text()
+    streamed = "".join(export_lines(db, campaign_id=cid, chunk=7))  # the service's export
+    assert streamed == (tmp_path / "meas.csv").read_text()
     plain = import_csv(db, path=_without_prev(tmp_path), cell_json=cell_json, name="plain")
     assert campaign_measurements(db, campaign_id=plain).prev_q is None
+    assert "prev_q1" not in next(export_lines(db, campaign_id=plain))
 
 
 def _without_prev(tmp_path):
