@@ -1,6 +1,7 @@
 """The shown model in real headless Chromium: its validation (a 5-pose campaign's model is not fit
 to deploy, with the reasons, and its exports are refused unless "export anyway" is ticked), its
-identified parameters as the API gives them, and how to open its recording."""
+identified parameters as the API gives them, how to open its recording, and the verdict's
+warnings (the real QKM cell's SMR layout)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import re
 
 import httpx
 
+from tests.real import REAL
 from tests.server.api.conftest import wait_for
 from tests.web.conftest import shot
 
@@ -180,3 +182,26 @@ def test_healthy_model_parameters_as_the_api_gives_them(served, page):
     assert boxes and all(b["right"] <= 390 for b in boxes), boxes
     assert any(b["scroll"] > b["client"] for b in boxes), boxes  # the joints table scrolls
     shot(page, "model_390")
+
+
+def test_warnings_are_listed_under_the_verdict(served, page):
+    """The real QKM campaign: its cell's SMR layout is the found one turned half a turn about
+    the flange axis; the page lists the verdict's warning, and the model stays deployable."""
+    real = REAL / "qkm_hl6"
+    with httpx.Client(
+        base_url=served.url, timeout=120, headers={"Authorization": f"Bearer {served.token}"}
+    ) as c:
+        r = c.post("/api/cells", content=(real / "cell.json").read_bytes())
+        assert r.status_code == 201, r.text
+        r = c.post(
+            "/api/measurements/import",
+            content=(real / "train.csv").read_bytes(),
+            params={"filename": "train.csv", "cell_id": r.json()["id"]},
+        )
+        assert r.status_code == 201, r.text
+    job = calibrate_on_page(served, page, r.json()["id"])
+    v = job["validation"]
+    assert v["deployable"] is True and len(v["warnings"]) == 1, v
+    assert page.is_visible("#m-fit-ok") and page.is_visible("#m-warnings")
+    shown = page.locator("#m-warnings li").all_text_contents()
+    assert shown == v["warnings"] and "turned 180 deg about the flange axis (z)" in shown[0]
