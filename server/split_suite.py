@@ -12,7 +12,9 @@ model's and the floor (tracker noise and the arm's scatter on the test poses).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from robocal.drivers.cell import VirtualCell
@@ -138,8 +140,6 @@ def _rms(err) -> float:
 
 def run_split_case(case: SplitCase) -> dict:
     """Simulate both campaigns, diagnose the training one in process and score on the test one."""
-    import time
-
     from robocal.solver.calibrate import calibrate
     from robocal.solver.diagnose import diagnose
     from robocal.solver.effects import Inputs
@@ -258,8 +258,6 @@ def real_splits(folder, min_poses: int = 15) -> list[dict]:
     """A real campaign (folder with train.csv and cell.json) fitted in one configuration and
     tested in the other, both ways, for every configuration with min_poses poses on each side;
     a campaign in one configuration only is split at joint 2's median instead."""
-    from pathlib import Path
-
     from robocal.solver.calibrate import calibrate
     from robocal.solver.extrapolation import configuration_folds, region_folds
     from robocal.solver.kinematics import Layout, predict

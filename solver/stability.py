@@ -3,9 +3,8 @@
 On 30-40 poses a few poses can decide which of two look-alike effects wins (a joint's compliance
 or its second harmonic). The diagnosis's top effect is sought again on RESAMPLES subsets of the
 campaign, each leaving out every RESAMPLES-th pose from another start. A resample naming nothing
-says only that
-fewer poses name less (the selection's threshold is the same); one naming another cause
-contradicts the answer: when an effect the final model lacks is named on more than
+says only that fewer poses name less (the selection's threshold is the same); one naming another
+cause contradicts the answer: when an effect the final model lacks is named on more than
 RESAMPLES - AGREE resamples, the answer is in doubt and the report says so. A campaign that
 names nothing is not resampled: no effect is already the cautious answer.
 """

@@ -9,3 +9,17 @@ CAMPAIGNS = ("irb120_wu", "qkm_hl6")
 def campaign_files(name: str) -> tuple[Path, Path]:
     """(train.csv, cell.json) of one real campaign."""
     return REAL / name / "train.csv", REAL / name / "cell.json"
+
+
+def import_real(client, name: str) -> int:
+    """A real campaign's cell and train.csv uploaded through the API (an httpx client with the
+    token); the imported campaign's id."""
+    r = client.post("/api/cells", content=(REAL / name / "cell.json").read_bytes())
+    assert r.status_code == 201, r.text
+    r = client.post(
+        "/api/measurements/import",
+        content=(REAL / name / "train.csv").read_bytes(),
+        params={"filename": "train.csv", "cell_id": r.json()["id"]},
+    )
+    assert r.status_code == 201, r.text
+    return r.json()["id"]

@@ -11,7 +11,7 @@ import re
 
 import httpx
 
-from tests.real import REAL
+from tests.real import import_real
 from tests.server.api.conftest import wait_for
 from tests.web.conftest import shot
 
@@ -187,19 +187,11 @@ def test_healthy_model_parameters_as_the_api_gives_them(served, page):
 def test_warnings_are_listed_under_the_verdict(served, page):
     """The real QKM campaign: its cell's SMR layout is the found one turned half a turn about
     the flange axis; the page lists the verdict's warning, and the model stays deployable."""
-    real = REAL / "qkm_hl6"
     with httpx.Client(
         base_url=served.url, timeout=120, headers={"Authorization": f"Bearer {served.token}"}
     ) as c:
-        r = c.post("/api/cells", content=(real / "cell.json").read_bytes())
-        assert r.status_code == 201, r.text
-        r = c.post(
-            "/api/measurements/import",
-            content=(real / "train.csv").read_bytes(),
-            params={"filename": "train.csv", "cell_id": r.json()["id"]},
-        )
-        assert r.status_code == 201, r.text
-    job = calibrate_on_page(served, page, r.json()["id"])
+        cid = import_real(c, "qkm_hl6")
+    job = calibrate_on_page(served, page, cid)
     v = job["validation"]
     assert v["deployable"] is True and len(v["warnings"]) == 1, v
     assert page.is_visible("#m-fit-ok") and page.is_visible("#m-warnings")

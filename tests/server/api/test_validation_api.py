@@ -6,15 +6,14 @@ refused with the reason."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 from robocal.server.formats.verdict import NO_VERDICT
 
+from tests.real import import_real
 from tests.server.api.test_verify_api import calibrate, run_campaign
 
 PROBLEM = "application/problem+json"
-REAL = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "real" / "qkm_hl6"
 
 
 @pytest.mark.sqlite_only  # the store's part (campaigns, jobs) runs on both backends elsewhere
@@ -97,15 +96,7 @@ def test_a_healthy_campaign_is_deployable_with_its_parameter_table(live):
 def test_evaluating_on_another_cell_is_refused_with_the_reason(live):
     c = live.client
     job = calibrate(c, run_campaign(c, name="own", poses=30, seed=3, pause_s=0))
-    r = c.post("/api/cells", content=(REAL / "cell.json").read_bytes())
-    assert r.status_code == 201, r.text
-    r = c.post(
-        "/api/measurements/import",
-        content=(REAL / "train.csv").read_bytes(),
-        params={"filename": "train.csv", "cell_id": r.json()["id"]},
-    )
-    assert r.status_code == 201, r.text
-    other = r.json()["id"]
+    other = import_real(c, "qkm_hl6")
     url = f"/api/models/{job}/evaluate"
     r = c.get(url, params={"campaign_id": other})
     assert r.status_code == 422 and r.headers["content-type"] == PROBLEM, r.text
