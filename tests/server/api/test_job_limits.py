@@ -198,7 +198,12 @@ def test_a_duplicate_calibration_is_refused_while_queued_or_running(one_worker, 
     assert r.headers["content-type"] == "application/problem+json"
     assert r.json()["job_id"] == first["id"] and f"job {first['id']}" in r.json()["detail"]
     other = queue(one_worker, cid, method="ls-sum")  # another method is accepted
-    for job in (blocker, first, other):
+    # another tolerance is another verdict: accepted; the same one again is refused
+    tight = c.post("/api/jobs", json={"campaign_id": cid, "method": "minimax", "tolerance_mm": 0.1})
+    assert tight.status_code == 202, tight.text
+    again = c.post("/api/jobs", json={"campaign_id": cid, "method": "minimax", "tolerance_mm": 0.1})
+    assert again.status_code == 409 and again.json()["job_id"] == tight.json()["id"], again.text
+    for job in (blocker, first, other, tight.json()):
         c.post(f"/api/jobs/{job['id']}/cancel")
     # Once the first has ended, the same calibration may be asked for again.
     assert c.post("/api/jobs", json={"campaign_id": cid, "method": "minimax"}).status_code == 202
