@@ -282,6 +282,20 @@ def cmd_compensate(args) -> None:
         print(s["jumps"])
 
 
+def cmd_check(args) -> int:
+    from . import store
+    from .check import EXIT_RECALIBRATE, run_check
+    from .formats.model_json import write_json_atomic
+    from .tables import console
+
+    with store.open_database(args.db) as db:
+        res = run_check(args.model, args.check, db)
+    if args.out:
+        write_json_atomic(args.out, res.to_json())
+    console.print(f"{res.verdict} (check {res.history} of this model): {res.reason}")
+    return EXIT_RECALIBRATE if res.verdict == "recalibrate" else 0
+
+
 def cmd_evaluate(args) -> None:
     from . import tables, workflow
     from .formats.model_json import write_json_atomic
@@ -785,6 +799,10 @@ def cmd_bench(args) -> None:
         from .bench_recording import run_recording_bench
 
         result = run_recording_bench()
+    elif args.what == "check":
+        from .bench_check import run_check_bench
+
+        result = run_check_bench(clean=args.clean or 70)
     elif args.what == "validation":
         from . import bench_validation
 
@@ -1039,6 +1057,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     e.set_defaults(func=cmd_evaluate)
 
+    ck = sub.add_parser(
+        "check",
+        help="quick check of a deployed model: ok, watch or recalibrate (exit 3), over its history",
+    )
+    ck.add_argument("model", help="model.json (robocal calibrate or diagnose)")
+    ck.add_argument("check", help="check.csv: a meas.csv of the few poses measured every check")
+    ck.add_argument(
+        "--db", default="robocal.db", help="database of the checks' history (file or URL)"
+    )
+    ck.add_argument("--out", help="write check.json here")
+    ck.set_defaults(func=cmd_check)
+
     co = sub.add_parser("compare", help="every method side by side (the paper's Table 3)")
     _data_arguments(co)
     co.add_argument("--json", help="also write the figures as JSON")
@@ -1207,9 +1237,10 @@ def build_parser() -> argparse.ArgumentParser:
             "verify",
             "recording",
             "validation",
+            "check",
         ),
         help="what to time (validation: the deployment guard's flags on healthy, small and "
-        "real campaigns)",
+        "real campaigns; check: quick checks' false alarms and delays to a change)",
     )
     b.add_argument(
         "--repeats",
@@ -1232,7 +1263,11 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument(
         "--cases", type=_positive_int, help="diagnose: effect cases of the suite (default 60)"
     )
-    b.add_argument("--clean", type=_positive_int, help="diagnose: clean campaigns (default 200)")
+    b.add_argument(
+        "--clean",
+        type=_positive_int,
+        help="diagnose: clean campaigns (default 200); check: clean checks an arm (default 70)",
+    )
     b.add_argument(
         "--split-cases",
         type=_nonnegative_int,
@@ -1266,7 +1301,7 @@ def main(argv=None) -> int:
     if args.command == "demo" and args.effect is None:
         args.effect = ["joint_compliance:2"]
     try:
-        args.func(args)
+        code = args.func(args)
     except KeyboardInterrupt:  # before or after any motion
         print("robocal: interrupted", file=sys.stderr)
         return 130
@@ -1298,7 +1333,7 @@ def main(argv=None) -> int:
             print(f"robocal: error: {e}", file=sys.stderr)
             return 1
         raise
-    return 0
+    return code if isinstance(code, int) else 0
 
 
 def _is_settings_error(e: Exception) -> bool:

@@ -221,3 +221,30 @@ class Job(Base):
     finished_at: Mapped[dt.datetime | None] = mapped_column(UTCDateTime())
     # Paths of what the job wrote: model, recording, report, figures (a list).
     results: Mapped[dict] = mapped_column(JSON, default=dict)
+
+
+CHECK_VERDICTS = ("ok", "watch", "recalibrate")
+
+
+class ModelCheck(Base):
+    """A quick check of a deployed model (`robocal check`): its figures, verdict and each
+    reading's error, so later checks of the same model are judged against the history."""
+
+    __tablename__ = "model_check"
+    __table_args__ = (CheckConstraint(one_of("verdict", CHECK_VERDICTS), name="verdict"),)
+
+    id: Mapped[int] = mapped_column(ID, primary_key=True)
+    model_sha256: Mapped[str] = mapped_column(String(64), index=True)
+    checked_at: Mapped[dt.datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    source: Mapped[str] = mapped_column(Text)  # the check file's name
+    poses: Mapped[int] = mapped_column(Integer)
+    rms_mm: Mapped[float] = mapped_column(Float)
+    max_mm: Mapped[float] = mapped_column(Float)
+    expected_rms_mm: Mapped[float] = mapped_column(Float)
+    # the change from the model's first checks: its normal score and the CUSUM after it
+    change_z: Mapped[float] = mapped_column(Float)
+    cusum: Mapped[float] = mapped_column(Float)
+    verdict: Mapped[str] = mapped_column(String(16))
+    reason: Mapped[str] = mapped_column(Text)
+    # per reading [pose, target, dx, dy, dz]: measured minus the model, mm
+    errors: Mapped[list] = mapped_column(JSON)

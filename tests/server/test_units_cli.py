@@ -59,6 +59,7 @@ COMMANDS = {
     "diagnose": lambda d, f: ["diagnose", f, "--out", str(d / "r.json")],
     "compare": lambda d, f: ["compare", f],
     "evaluate": lambda d, f: ["evaluate", str(d / "model.json"), f],
+    "check": lambda d, f: ["check", str(d / "model.json"), f, "--db", str(d / "checks.db")],
 }
 
 

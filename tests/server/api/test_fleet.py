@@ -59,14 +59,22 @@ def test_two_stations_share_one_database(tmp_path):
         with ThreadPoolExecutor(2) as pool:
             north, south = pool.map(next, servers)
         try:
-            assert execute(url, "SELECT version_num FROM alembic_version") == [("0008",)]
+            assert execute(url, "SELECT version_num FROM alembic_version") == [("0009",)]
             tables = execute(
                 url,
                 "SELECT table_name FROM information_schema.tables "
                 "WHERE table_schema = 'public' ORDER BY table_name",
             )
             assert [t for (t,) in tables] == sorted(
-                ["alembic_version", "campaign", "job", "planned_pose", "pose_outcome", "reading"]
+                [
+                    "alembic_version",
+                    "campaign",
+                    "job",
+                    "model_check",
+                    "planned_pose",
+                    "pose_outcome",
+                    "reading",
+                ]
             )
 
             # Round 1: each station runs a campaign, both at once.

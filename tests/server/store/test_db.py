@@ -20,7 +20,15 @@ from sqlalchemy import inspect, text
 from tests.server.store.conftest import POSES_DEG
 
 ROOT = Path(__file__).resolve().parents[3]
-TABLES = {"alembic_version", "campaign", "planned_pose", "reading", "pose_outcome", "job"}
+TABLES = {
+    "alembic_version",
+    "campaign",
+    "planned_pose",
+    "reading",
+    "pose_outcome",
+    "job",
+    "model_check",
+}
 
 
 @pytest.mark.sqlite_only
@@ -49,7 +57,7 @@ def test_migrations_create_the_schema(tmp_path):
     uniques = {tuple(u["column_names"]) for u in insp.get_unique_constraints("reading")}
     assert ("campaign_id", "pose_index", "target") in uniques
     with db.engine.connect() as c:
-        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0008"
+        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0009"
         # The migration and the models describe the same schema.
         assert (
             compare_metadata(
@@ -155,7 +163,7 @@ def test_alembic_command_line_with_database_url(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     con = sqlite3.connect(path)
-    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0008",)
+    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0009",)
     assert con.execute("PRAGMA journal_mode").fetchone() == ("wal",)
     con.close()
 
@@ -211,7 +219,7 @@ def test_opening_a_new_store_from_many_places_at_once(store_url):
             return c.execute(text("SELECT version_num FROM alembic_version")).all()
 
     with ThreadPoolExecutor(4) as pool:
-        assert list(pool.map(version, range(4))) == [[("0008",)]] * 4
+        assert list(pool.map(version, range(4))) == [[("0009",)]] * 4
     for p in procs:
         _, err = p.communicate(timeout=120)
         assert p.returncode == 0, err

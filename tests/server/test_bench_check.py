@@ -1,0 +1,26 @@
+"""`robocal bench check` prints its figures as JSON: on three arms, 210 clean checks and nine
+histories of each kind of change (tracker bump, joint zero slip, payload, warming), the false
+`recalibrate` rate, the delay to it and the cause named."""
+
+from __future__ import annotations
+
+import json
+
+from tests.server.test_cli import robocal
+
+
+def test_checks_rarely_false_alarm_and_find_each_change_within_two(tmp_path):
+    r = robocal("bench", "check", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    s = doc["summary"]
+    print(json.dumps({k: v for k, v in s.items() if k != "changes"}))
+    assert s["clean_checks"] >= 200 and s["false_recalibrate_rate"] <= 0.01, s
+    for kind, c in s["changes"].items():
+        print(kind, {k: v for k, v in c.items() if k != "named"}, c["named"])
+        assert c["histories"] >= 9 and c["median_delay_checks"] <= 2, (kind, c)
+        if c["named_right"] is not None:  # the kinds a check can name
+            assert c["named_right"] >= 0.8 * c["histories"], (kind, c)
+    assert {a["arm"] for a in doc["arms"]} == {"irb2600", "kuka-like", "random"}
+    d = doc["durations"]
+    assert d["check_campaign_simulated_s"] < d["calibration_campaign_simulated_s"]
