@@ -11,12 +11,12 @@ import sqlite3
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.server import store
 from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.store.model_checks import model_checks
-
 from tests.server.test_cli import robocal
 
 SEED = 7

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.server import workflow
 from robocal.server.cli import main

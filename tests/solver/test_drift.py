@@ -5,6 +5,7 @@ only when one cause alone explains it."""
 from __future__ import annotations
 
 import numpy as np
+
 from robocal.solver import drift
 
 POSES = 6

@@ -12,11 +12,11 @@ import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
+from sqlalchemy import inspect, text
+
 from robocal.server.store import open_database, record_reading
 from robocal.server.store.db import alembic_config, database_url
 from robocal.server.store.models import Base
-from sqlalchemy import inspect, text
-
 from tests.server.store.conftest import POSES_DEG
 
 ROOT = Path(__file__).resolve().parents[3]
