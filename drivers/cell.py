@@ -6,6 +6,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Protocol
 
 import numpy as np
+
 from robocal.solver.kinematics import Layout, flange_frames, rot, translation
 from robocal.solver.measurements import Measurements
 from robocal.solver.robot import Robot

@@ -6,6 +6,7 @@ import difflib
 import math
 
 import numpy as np
+
 from robocal.solver import chain
 from robocal.solver.kinematics import joint_ops, translation
 from robocal.solver.robot import Robot

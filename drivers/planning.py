@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from robocal.solver import observability as obs
 from robocal.solver.identifiability import structural
 from robocal.solver.kinematics import Layout, flange_frames, predict, predict_rows

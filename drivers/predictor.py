@@ -11,6 +11,7 @@ those already measured there: the flange's pose error is common to all its SMRs.
 from __future__ import annotations
 
 import numpy as np
+
 from robocal.solver.calibrate import calibrate
 from robocal.solver.identifiability import NotIdentifiable
 from robocal.solver.identify import register

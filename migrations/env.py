@@ -6,6 +6,7 @@ import os
 from logging.config import fileConfig
 
 from alembic import context
+
 from robocal.server.store.db import make_engine
 from robocal.server.store.models import Base
 

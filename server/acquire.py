@@ -18,6 +18,7 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
 from robocal.drivers.campaign import CampaignEngine, Settings
 from robocal.drivers.clock import RealClock, VirtualClock
 from robocal.drivers.lifecycle import MOVING, StateError, next_state

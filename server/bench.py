@@ -10,12 +10,13 @@ from functools import partial
 
 import numpy as np
 import scipy
+from scipy.optimize import least_squares, minimize
+
 from robocal.solver.calibrate import calibrate
 from robocal.solver.identifiability import structural
 from robocal.solver.identify import least_squares_fit, register
 from robocal.solver.kinematics import predict
 from robocal.solver.minimax import default_epsilon, measured_distances
-from scipy.optimize import least_squares, minimize
 
 SEED = 0
 GOALS = {"ls_sum_100_poses_ms_max": 20, "minimax_100_poses_ms_max": 100, "speedup_min": 20}

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 from robocal.drivers.cell import VirtualCell
 
 ARMS = ("irb2600", "kuka-like", "random")

@@ -24,6 +24,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     import httpx  # a development dependency, as for the rest of the service bench
+
     from robocal.drivers.abb.sim import SimulatedController
 
 BODY_BYTES = 30_000_000

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+
 from robocal.solver import metrics
 from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements

@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+
 from robocal.solver import drift
 from robocal.solver.kinematics import joint_frames, predict
 

@@ -6,6 +6,7 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
+
 from robocal.solver import configuration
 from robocal.solver.compensate import Compensation, Model, compensate
 from robocal.solver.kinematics import Layout, rot

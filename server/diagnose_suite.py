@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import EFFECTS, make_effects
 from robocal.server.formats.cell_json import Cell, default_cell

@@ -6,6 +6,7 @@ and the strongest correlations."""
 from __future__ import annotations
 
 import numpy as np
+
 from robocal.solver.kinematics import BASE_NAMES, rot, translation
 from robocal.solver.uncertainty import ParameterErrors, propagate
 from robocal.solver.validation import strongest_correlations

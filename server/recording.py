@@ -13,6 +13,7 @@ import numpy as np
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 
 import rerun as rr  # noqa: E402
+
 from robocal.solver.calibrate import Calibration  # noqa: E402
 from robocal.solver.kinematics import flange_frames, joint_frames  # noqa: E402
 from robocal.solver.measurements import Measurements  # noqa: E402

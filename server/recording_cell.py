@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import rerun as rr
+
 from robocal.solver.calibrate import Calibration
 from robocal.solver.kinematics import Layout, flange_frames, joint_frames, predict
 from robocal.solver.measurements import Measurements

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
 from robocal.drivers.cell import VirtualCell
 from robocal.server.formats.cell_json import default_cell
 from robocal.solver import configuration

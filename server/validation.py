@@ -5,6 +5,7 @@ whether data it is evaluated on is of its cell."""
 from __future__ import annotations
 
 import numpy as np
+
 from robocal.solver import validation as guard
 from robocal.solver.effects import Inputs
 from robocal.solver.measurements import Measurements

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
 from robocal.solver.compensate import compensate
 from robocal.solver.iso9283 import (
     CUBE_PAIRS,

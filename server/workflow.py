@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+
 from robocal.solver.effects import Inputs
 from robocal.solver.extended import predict_model
 from robocal.solver.finite import require_inputs

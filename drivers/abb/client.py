@@ -11,6 +11,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
+
 from robocal.solver.robot import BUILTIN
 
 from . import protocol as p

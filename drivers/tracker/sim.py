@@ -7,6 +7,7 @@ import threading
 from collections.abc import Callable
 
 import numpy as np
+
 from robocal.drivers.cell import MIN_RANGE_MM
 from robocal.solver.kinematics import Layout, flange_frames
 

@@ -8,6 +8,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import HTMLResponse, JSONResponse
+
 from robocal.server import store, verification
 from robocal.server.acquire import AcquireOptions
 from robocal.server.campaign_planning import check_plan_size, plans_long

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from fastapi import APIRouter, Request
-from robocal.server.formats.cell_json import Cell, cell_to_json
 from starlette.concurrency import run_in_threadpool
+
+from robocal.server.formats.cell_json import Cell, cell_to_json
 
 from . import ops
 from .deps import Authorized, SettingsDep

@@ -6,6 +6,7 @@ numerics choke on costs a 504 and a killed process, never a hung request."""
 from __future__ import annotations
 
 from fastapi import APIRouter, Response
+
 from robocal.server import charts, store
 from robocal.server.formats.cell_json import parse_cell
 from robocal.solver.finite import require_inputs

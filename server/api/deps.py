@@ -6,6 +6,7 @@ from typing import Annotated, Literal
 
 from fastapi import Depends, Path, Query, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+
 from robocal.server.acquisitions import Acquisitions
 from robocal.server.events import Events
 from robocal.server.job_queue import Jobs

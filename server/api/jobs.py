@@ -8,6 +8,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, JSONResponse
+
 from robocal.server.job_queue import DuplicateJob, Job
 
 from . import problems

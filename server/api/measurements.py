@@ -6,8 +6,9 @@ from typing import Annotated
 
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import StreamingResponse
-from robocal.server import store, uploads
 from starlette.concurrency import iterate_in_threadpool, run_in_threadpool
+
+from robocal.server import store, uploads
 
 from . import ops
 from .campaigns import public_campaign

@@ -9,6 +9,8 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.responses import FileResponse
+from starlette.concurrency import run_in_threadpool
+
 from robocal.server import charts, model_files, store, verification
 from robocal.server.compensation import MAX_ERROR_MM, MAX_JUMP_DEG, MAX_MOVE_DEG, Limits, parse_tcp
 from robocal.server.formats.cell_json import parse_cell
@@ -16,7 +18,6 @@ from robocal.server.formats.model_json import read_model
 from robocal.server.identified import parameters_of
 from robocal.server.validation import absurd_errors, cell_mismatch, file_refusal
 from robocal.solver.finite import require_inputs
-from starlette.concurrency import run_in_threadpool
 
 from . import ops
 from .bodies import json_body, read_json

@@ -10,12 +10,13 @@ from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
 from robocal.drivers.lifecycle import StateError
 from robocal.server.acquisitions import ControllerUnreachable
 from robocal.server.formats.errors import InputError
 from robocal.server.store import Conflict, DatabaseGone, NotFound, StoreError, StoreUnavailable
 from robocal.server.store.errors import RETRY_AFTER_S, unavailable
-from starlette.exceptions import HTTPException as StarletteHTTPException
 
 MEDIA_TYPE = "application/problem+json"
 

@@ -7,6 +7,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from fastapi import HTTPException
+
 from robocal.server.job_queue import Busy, CallTimedOut, Jobs
 from robocal.server.processes import WorkerDied
 

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from robocal.solver.kinematics import Op, joint_ops, rot, translation
 from robocal.solver.robot import Robot
 

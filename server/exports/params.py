@@ -8,6 +8,7 @@ import io
 from dataclasses import dataclass
 
 import numpy as np
+
 from robocal.server.formats.csv_table import Table
 from robocal.server.formats.errors import InputError
 from robocal.server.formats.model_json import ModelFile

@@ -6,6 +6,7 @@ import re
 import xml.etree.ElementTree as ET
 
 import numpy as np
+
 from robocal.server.formats.model_json import ModelFile
 
 from .frames import rpy_from_matrix, segments

@@ -10,6 +10,7 @@ import io
 import re
 
 import numpy as np
+
 from robocal.solver.measurements import Measurements
 from robocal.solver.robot import Robot
 

@@ -6,6 +6,7 @@ import csv
 import io
 
 import numpy as np
+
 from robocal.solver.measurements import Measurements
 from robocal.solver.robot import Robot
 

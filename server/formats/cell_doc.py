@@ -17,6 +17,7 @@ from pydantic import (
     field_validator,
     model_validator,
 )
+
 from robocal.solver.robot import BUILTIN, Joint, Robot, detect_parallel
 
 from .fields import (

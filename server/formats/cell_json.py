@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
 from robocal.solver.robot import BUILTIN, IRB2600, Robot
 
 from .cell_doc import TARGET_NAME, CellDoc, RobotDoc  # noqa: F401 (TARGET_NAME: for readers)

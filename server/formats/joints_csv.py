@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from robocal.solver.robot import Robot
 
 from .campaign_csv import _csv_text, joint_deg

@@ -14,6 +14,7 @@ from pydantic import (
     field_validator,
     model_validator,
 )
+
 from robocal.solver.effects import Extension
 from robocal.solver.vocabulary import KINDS
 

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from robocal.solver.effects import Extension
 from robocal.solver.kinematics import Layout
 from robocal.solver.robot import Robot

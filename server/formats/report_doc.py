@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pydantic import ConfigDict, Field
+
 from robocal.solver.vocabulary import KINDS
 
 from .fields import Doc

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from robocal.solver import configuration
 from robocal.solver.robot import Robot
 

@@ -11,13 +11,14 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from sqlalchemy import CursorResult, Result, and_, delete, exists, func, insert, or_, select, update
+from sqlalchemy.orm import Session
+
 from robocal.drivers import lifecycle
 from robocal.server.formats.campaign_csv import read_campaign, write_campaign
 from robocal.server.formats.cell_json import parse_cell
 from robocal.solver.measurements import Measurements
 from robocal.solver.robot import Robot
-from sqlalchemy import CursorResult, Result, and_, delete, exists, func, insert, or_, select, update
-from sqlalchemy.orm import Session
 
 from . import checks
 from .db import Database

@@ -6,6 +6,7 @@ import json
 import math
 
 import numpy as np
+
 from robocal.server.formats.campaign_csv import LIMIT_TOL_DEG
 from robocal.server.formats.cell_json import TARGET_NAME, Cell, parse_cell
 from robocal.solver.robot import Robot

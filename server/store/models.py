@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import datetime as dt
 
-from robocal.drivers.lifecycle import STATES
 from sqlalchemy import (
     JSON,
     BigInteger,
@@ -30,6 +29,8 @@ from sqlalchemy import (
     UniqueConstraint,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+from robocal.drivers.lifecycle import STATES
 
 # A campaign's status is the engine's life-cycle state (drivers/lifecycle.py), all of them.
 STATUSES = STATES

@@ -5,6 +5,7 @@ from __future__ import annotations
 from contextlib import contextmanager
 
 import numpy as np
+
 from robocal.drivers.abb.client import ControllerClient
 from robocal.drivers.campaign import CampaignEngine, Settings
 from robocal.drivers.clock import VirtualClock
@@ -13,7 +14,6 @@ from robocal.drivers.predictor import SmrPredictor
 from robocal.drivers.simulated_cell import SimulatedCell
 from robocal.drivers.tracker.client import TrackerClient
 from robocal.solver.robot import IRB2600
-
 from tests.robots import TARGETS
 
 

@@ -6,6 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+
 from robocal.drivers.campaign import CampaignEngine, Settings, StateError
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.clock import VirtualClock
@@ -13,7 +14,6 @@ from robocal.drivers.plan import Measure
 from robocal.drivers.predictor import SmrPredictor
 from robocal.drivers.world import SimulatedWorld
 from robocal.solver.robot import IRB2600
-
 from tests.robots import TARGETS
 
 

@@ -3,6 +3,7 @@ the tracker's samples, pointing during the move's end, the base from the first p
 
 import numpy as np
 import pytest
+
 from robocal.drivers import predictor as predictor_module
 from robocal.drivers.campaign import Settings
 from robocal.drivers.cell import VirtualCell
@@ -18,7 +19,6 @@ from robocal.drivers.planning import (
 from robocal.drivers.predictor import SmrPredictor
 from robocal.drivers.simulated_cell import surveyed_base
 from robocal.solver.robot import IRB2600
-
 from tests.drivers.campaign_rig import simulated_engine
 from tests.robots import TARGETS
 

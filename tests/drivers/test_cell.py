@@ -4,6 +4,8 @@ import json
 
 import numpy as np
 import pytest
+from scipy.optimize import least_squares
+
 from robocal.drivers.cell import GeometricErrors, TrackerSpec, VirtualCell
 from robocal.solver.kinematics import (
     Layout,
@@ -13,8 +15,6 @@ from robocal.solver.kinematics import (
     translation,
 )
 from robocal.solver.robot import IRB2600
-from scipy.optimize import least_squares
-
 from tests.robots import KUKA_LIKE, PUMA_LIKE, TARGETS
 
 

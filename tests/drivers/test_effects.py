@@ -4,12 +4,12 @@ import json
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import EFFECTS, make_effect, make_effects
 from robocal.solver.calibrate import calibrate
 from robocal.solver.kinematics import Layout, predict
 from robocal.solver.robot import IRB2600, Robot
-
 from tests import cli_process
 from tests.robots import PUMA_LIKE, TARGETS
 

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+
 from robocal.drivers import campaign as campaign_module
 from robocal.drivers.campaign import CampaignEngine, EngineBusy, Settings, StateError
 from robocal.drivers.clock import VirtualClock

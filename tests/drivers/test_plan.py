@@ -4,6 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from robocal.drivers.plan import Aim, Checkpoint, Measure, Move, Save, Settle, campaign_plan
 
 POSES = np.array([[0, 10, 20, 0, 30, 0], [5, 15, 25, 0, 35, 0], [10, 20, 30, 0, 40, 0]], float)

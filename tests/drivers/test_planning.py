@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import PosesTooConstrained, VirtualCell
 from robocal.drivers.clock import VirtualClock
 from robocal.drivers.planning import (
@@ -17,7 +18,6 @@ from robocal.solver.calibrate import calibrate
 from robocal.solver.kinematics import Layout, flange_frames, predict, rot, translation
 from robocal.solver.observability import observability_indices, select_poses, unit_columns
 from robocal.solver.robot import IRB2600
-
 from tests.robots import TARGETS
 
 T = np.array(list(TARGETS.values()))

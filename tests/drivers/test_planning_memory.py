@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+
 from robocal.drivers.planning import candidate_jacobians, plan_poses
 from robocal.server.bench_scale import peak_mb, plan_at, smr_ring
 from robocal.solver import identifiability as ident

@@ -8,6 +8,8 @@ import time
 
 import numpy as np
 import pytest
+from sqlalchemy.exc import DBAPIError
+
 from robocal.drivers.abb.client import ControllerClient
 from robocal.drivers.abb.sim import SimulatedController, serve_controller
 from robocal.drivers.campaign import CampaignEngine, Settings
@@ -18,8 +20,6 @@ from robocal.drivers.tracker.client import TrackerClient
 from robocal.drivers.tracker.sim import SimulatedTracker, serve_tracker
 from robocal.drivers.world import SimulatedWorld
 from robocal.solver.robot import IRB2600
-from sqlalchemy.exc import DBAPIError
-
 from tests.backends import execute
 from tests.robots import TARGETS
 

@@ -4,6 +4,7 @@ import json
 import math
 
 import pytest
+
 from robocal.server.bench import GOALS, run_solver_bench
 
 

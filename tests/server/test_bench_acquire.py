@@ -1,6 +1,7 @@
 """`robocal bench acquire`: each procedure beside its physical bound."""
 
 import numpy as np
+
 from robocal.drivers.planning import total_move_time
 from robocal.server.bench_acquire import physical_bound, run_acquire_bench
 

@@ -12,6 +12,7 @@ from contextlib import contextmanager
 
 import numpy as np
 import pytest
+
 from robocal.server import store
 from robocal.server.formats import csv_table, limits
 from robocal.server.formats.campaign_csv import read_campaign, write_campaign

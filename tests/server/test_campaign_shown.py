@@ -8,6 +8,7 @@ import threading
 from types import SimpleNamespace
 
 import pytest
+
 from robocal.server import acquisitions as acquisitions_module
 from robocal.server import store
 from robocal.server.acquire import AcquireOptions

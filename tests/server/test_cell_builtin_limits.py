@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+
 from robocal.server.formats import InputError, cell_to_json, default_cell, read_cell
 from robocal.server.formats.cell_json import robot_to_json
 from robocal.solver.robot import IRB2600

@@ -7,10 +7,10 @@ import json
 
 import numpy as np
 import pytest
+
 from robocal.server.formats.cell_json import cell_to_json, default_cell, parse_cell
 from robocal.server.formats.errors import InputError
 from robocal.solver.robot import IRB2600
-
 from tests.real import REAL
 
 from .test_cli import robocal

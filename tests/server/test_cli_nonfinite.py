@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import pytest
+
 from robocal.server.cli import main as robocal
 
 LIMIT_S = 120  # a hang would be a regression: the test fails instead of waiting

@@ -9,7 +9,6 @@ from pathlib import Path
 
 from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.cell_json import cell_to_json
-
 from tests.solver.test_unexplained import campaign, draw
 
 ROOT = Path(__file__).resolve().parents[2]

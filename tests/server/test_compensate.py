@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import make_effects
 from robocal.server.exports.rapid import read_module
@@ -17,7 +18,6 @@ from robocal.server.formats.cell_json import default_cell
 from robocal.solver.configuration import CF_COLUMNS, confdata
 from robocal.solver.kinematics import Layout, flange_frames
 from robocal.solver.rigid import kabsch
-
 from tests.server.test_cli import robocal
 
 SEED, EFFECT = 6, "joint_compliance:2=1.0"

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hypothesis import given
+
 from robocal.server.formats import InputError
 from robocal.server.formats.campaign_columns import read_campaign_columns, read_poses_columns
 from robocal.server.formats.campaign_csv import (
@@ -163,7 +164,6 @@ def test_every_csv_of_the_repository_and_the_real_campaigns():
 @pytest.mark.parametrize("beam_breaks", [0.0, 0.2])
 def test_a_simulated_campaign_round_trips_column_wise(folder, beam_breaks):
     from robocal.drivers.cell import VirtualCell
-
     from tests.robots import TARGETS
 
     cell = VirtualCell.random(IRB2600, TARGETS, seed=4)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+
 from robocal.server.exports.params import read_params
 from robocal.server.formats import InputError, read_campaign, read_poses
 from robocal.server.formats.csv_table import Table

@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 import pytest
-from robocal.server.formats.cell_json import cell_to_json
 
+from robocal.server.formats.cell_json import cell_to_json
 from tests import cli_process
 from tests.solver.test_diagnose_effects import aim, cell_of, draw, draw_backlash, robot_for
 

@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+
 from robocal.server.diagnose_suite import (
     KINDS,
     PROBE_FIT,
@@ -22,7 +23,6 @@ from robocal.server.diagnose_suite import (
     summarize,
 )
 from robocal.server.formats.cell_json import Cell, cell_to_json
-
 from tests.server.test_diagnose import robocal
 
 SEEDS = range(40)  # the ten kinds in turn, four seeds each

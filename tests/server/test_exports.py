@@ -6,6 +6,7 @@ import re
 import numpy as np
 import pytest
 from pytransform3d.urdf import UrdfTransformManager
+
 from robocal.drivers.cell import VirtualCell
 from robocal.server import workflow
 from robocal.server.cli import main
@@ -18,7 +19,6 @@ from robocal.server.formats.model_json import ModelFile, read_model, write_model
 from robocal.solver.effects import Extension
 from robocal.solver.kinematics import Layout, predict, rot, translation
 from robocal.solver.robot import IRB2600
-
 from tests import cli_process
 from tests.robots import KUKA_LIKE, PUMA_LIKE, TARGETS
 

@@ -7,9 +7,9 @@ import json
 
 import jsonschema_rs
 import pytest
+
 from robocal.server.formats import cell_to_json, default_cell
 from robocal.server.formats.json_schema import MODELS, committed, generated
-
 from tests import cli_process
 from tests.server.api.conftest import serve, settings_for
 
@@ -67,7 +67,6 @@ def test_schema_command_prints_the_committed_file(name):
 
 def test_schemas_accept_the_spec_examples_and_what_the_program_writes(tmp_path):
     from robocal.server.formats.model_json import model_to_json
-
     from tests.server.test_formats import INLINE_MDH, every_effect
 
     cell = validator("cell")

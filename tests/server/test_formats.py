@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 import pytest
+
 from robocal.server.formats import (
     Cell,
     InputError,

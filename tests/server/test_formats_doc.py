@@ -1,6 +1,7 @@
 """docs/formats.md is the generated page, and its CSV columns are what the readers demand."""
 
 import pytest
+
 from robocal.server.formats import formats_doc
 from robocal.server.formats.campaign_csv import read_campaign, read_poses, write_predictions
 from robocal.server.formats.cell_json import default_cell

@@ -4,8 +4,8 @@ joint's offset instead of refusing, and the noise floor comes from the tracker's
 import json
 
 import pytest
-from robocal.server.formats.cell_json import robot_to_json
 
+from robocal.server.formats.cell_json import robot_to_json
 from tests.robots import IIWA_LIKE, PUMA_LIKE, UR5
 from tests.server.test_cli import robocal
 

@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import make_effects
 from robocal.server import workflow
@@ -16,7 +17,6 @@ from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.errors import InputError
 from robocal.server.formats.model_json import write_model
 from robocal.solver.effects import Inputs
-
 from tests.server.test_cli import robocal
 
 SEED, POSES, BACKLASH = 4, 80, "joint_backlash:2=0.05"

@@ -272,7 +272,6 @@ def test_a_diagnosis_recording_shows_the_final_model_after_and_the_geometric_bes
     """The demo's recording of a diagnosis: "after" is the final, extended model (its errors as
     `evaluate` gives them), the geometric calibration beside it under its own entities."""
     from robocal.server import workflow
-
     from tests.server.test_validation_model import campaign as effect_campaign
 
     cell, meas = effect_campaign(50, 21, ("joint_compliance:2",))

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from robocal.server.formats.errors import InputError
 from robocal.server.formats.targets_csv import read_targets
 from robocal.solver.robot import IRB2600
-
 from tests.robots import IIWA_LIKE
 
 HEAD = "pose,target,x,y,z"

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.server import workflow
 from robocal.server.cli import main

@@ -9,8 +9,8 @@ import json
 from pathlib import Path
 
 import pytest
-from robocal.server import workflow
 
+from robocal.server import workflow
 from tests.server.test_cli import robocal
 
 REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import make_effects
 from robocal.server import workflow

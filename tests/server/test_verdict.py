@@ -9,9 +9,9 @@ import json
 
 import numpy as np
 import pytest
+
 from robocal.server.formats.verdict import NO_VERDICT, Verdict
 from robocal.solver import validation as guard
-
 from tests.server.test_cli import robocal
 
 CELL = {

@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+
 from robocal.server import store, workflow
 from robocal.server.acquire import AcquireOptions, acquire
 from robocal.server.formats.cell_json import default_cell

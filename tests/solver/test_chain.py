@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from robocal.drivers.effects import link_frames
 from robocal.solver.kinematics import (
     Layout,

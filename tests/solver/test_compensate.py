@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import make_effects
 from robocal.server import workflow
@@ -15,7 +16,6 @@ from robocal.solver.calibrate import calibrate
 from robocal.solver.compensate import Model, compensate
 from robocal.solver.configuration import confdata
 from robocal.solver.robot import IRB2600
-
 from tests.robots import PUMA_LIKE, UR5
 
 GRAVITY_JOINTS = (2, 3)  # joints carrying a large gravity torque on both arms

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import make_effects
 from robocal.server.formats.cell_json import Cell, default_cell
@@ -16,7 +17,6 @@ from robocal.solver.diagnose import diagnose
 from robocal.solver.effects import Inputs, prepare
 from robocal.solver.extended import predict_extended
 from robocal.solver.kinematics import Layout, predict
-
 from tests.robots import KUKA_LIKE
 
 EFFECTS = ("joint_compliance", "joint_periodic", "joint_scale", "thermal_drift", "base_shift")

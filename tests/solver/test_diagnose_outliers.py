@@ -3,11 +3,11 @@ left out of the fits, and the floor and the named effect stay right (the command
 and files are checked in tests/server/test_outliers.py on the same campaign)."""
 
 import numpy as np
+
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import make_effects
 from robocal.server.bench_screen import displace
 from robocal.server.formats.cell_json import default_cell
-
 from tests.solver.test_diagnose_effects import diagnosed
 
 SEED = 21

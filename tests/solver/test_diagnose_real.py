@@ -2,8 +2,8 @@
 per-dataset setting (tests/server/test_diagnose_real.py runs them through the command line)."""
 
 import pytest
-from robocal.server import workflow
 
+from robocal.server import workflow
 from tests.real import CAMPAIGNS, campaign_files
 from tests.solver.test_diagnose_effects import diagnosed
 

@@ -4,6 +4,7 @@ six ways, region folds, and an extension that fits one region's quirks refused."
 from __future__ import annotations
 
 import numpy as np
+
 from robocal.server import workflow
 from robocal.solver import configuration, vocabulary
 from robocal.solver.calibrate import calibrate
@@ -14,7 +15,6 @@ from robocal.solver.extrapolation import (
     region_folds,
 )
 from robocal.solver.kinematics import Layout, predict
-
 from tests.real import campaign_files
 from tests.solver.test_diagnose_effects import diagnosed, predict_poses
 

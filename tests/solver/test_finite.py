@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 import robocal.solver.finite
 from robocal.drivers.cell import VirtualCell
 from robocal.server.processes import call
@@ -14,7 +15,6 @@ from robocal.solver.diagnose import diagnose
 from robocal.solver.finite import NonFinite
 from robocal.solver.rigid import kabsch
 from robocal.solver.robot import IRB2600
-
 from tests.robots import TARGETS
 
 NAMES = ("A", "B", "C")

@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.solver.calibrate import METHODS, calibrate
 from robocal.solver.identify import register
 from robocal.solver.kinematics import Layout, predict, predict_rows, predict_with_jacobian
 from robocal.solver.robot import IRB2600
-
 from tests.robots import TARGETS
 
 NAMES = ("A", "B", "C")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from robocal.solver.iso9283 import (
     cube_points,
     distance_figures,

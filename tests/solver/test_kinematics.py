@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from robocal.solver.kinematics import Layout, flange_frames, predict, predict_with_jacobian
 from robocal.solver.robot import IRB2600, robot_from_degrees
 

@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.solver.calibrate import calibrate
 from robocal.solver.identifiability import NotIdentifiable
 from robocal.solver.kinematics import predict
 from robocal.solver.robot import IRB2600
-
 from tests.robots import KUKA_LIKE, PUMA_LIKE, TARGETS
 
 NAMES = ("A", "B", "C")

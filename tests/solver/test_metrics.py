@@ -7,8 +7,9 @@ import warnings
 
 import numpy as np
 import pytest
-from robocal.solver import metrics as mt
 from scipy.spatial.transform import Rotation
+
+from robocal.solver import metrics as mt
 
 NAMES = ("A", "B", "C")
 # Right triangle whose spanned frame is the identity: x along A->B, z = +z.

@@ -5,10 +5,10 @@ import functools
 
 import numpy as np
 import pytest
+
 from robocal.solver import calibrate as calibrate_module
 from robocal.solver import minimax as minimax_module
 from robocal.solver.robot import IRB2600
-
 from tests.robots import KUKA_LIKE, PUMA_LIKE
 from tests.solver.test_methods import campaign, fit
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from robocal.solver.effects import Inputs
 from robocal.solver.noise import from_repeats, from_spec, noise_floor
 

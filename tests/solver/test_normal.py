@@ -2,14 +2,14 @@
 
 import numpy as np
 import pytest
+from scipy.optimize import least_squares
+
 from robocal.solver.identifiability import structural
 from robocal.solver.identify import SumOfSquares, register, start_fit
 from robocal.solver.kinematics import Layout, predict, predict_rows
 from robocal.solver.lm import levenberg_marquardt
 from robocal.solver.normal import PointNormal
 from robocal.solver.robot import IRB2600
-from scipy.optimize import least_squares
-
 from tests.robots import KUKA_LIKE, PUMA_LIKE
 
 SMRS = [[60, 0, 35], [-30, 52, 35], [-30, -52, 35], [0, 0, 80]]

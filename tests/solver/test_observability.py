@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from robocal.solver.observability import observability_indices, select_poses, unit_columns
 
 

@@ -4,11 +4,11 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.solver.calibrate import calibrate
 from robocal.solver.kinematics import predict
 from robocal.solver.robot import IRB2600
-
 from tests.robots import IIWA_LIKE, KUKA_LIKE, PUMA_LIKE, UR5
 
 ROBOTS = {

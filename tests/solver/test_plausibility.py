@@ -5,6 +5,7 @@ import re
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.server import workflow
 from robocal.server.formats.campaign_csv import read_campaign
@@ -18,7 +19,6 @@ from robocal.solver.plausibility import (
     implausible_changes,
 )
 from robocal.solver.robot import IRB2600, KUKA_LIKE, Joint, Robot
-
 from tests.real import REAL
 from tests.robots import IIWA_LIKE, PUMA_LIKE, TARGETS, UR5
 

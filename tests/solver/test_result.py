@@ -2,13 +2,13 @@
 
 import numpy as np
 import pytest
+from scipy.optimize import OptimizeResult
+
 from robocal.drivers.cell import VirtualCell
 from robocal.solver import minimax as minimax_module
 from robocal.solver import qp
 from robocal.solver.calibrate import METHODS, Calibration, calibrate
 from robocal.solver.robot import IRB2600
-from scipy.optimize import OptimizeResult
-
 from tests.robots import TARGETS
 
 NAMES = ("A", "B", "C")

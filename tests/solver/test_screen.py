@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.server import workflow
 from robocal.server.bench_screen import displace
@@ -10,7 +11,6 @@ from robocal.solver.diagnose import noise_floor
 from robocal.solver.effects import Inputs
 from robocal.solver.kinematics import predict
 from robocal.solver.screen import screen_readings
-
 from tests.real import CAMPAIGNS, campaign_files
 
 CELL = default_cell()

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import make_effects
 from robocal.server.formats.cell_json import default_cell
@@ -10,7 +11,6 @@ from robocal.solver.diagnose import Diagnoser, candidates, diagnose
 from robocal.solver.effects import Inputs
 from robocal.solver.identify import register
 from robocal.solver.selection import linear_scores, rmse_gain_interval
-
 from tests.robots import KUKA_LIKE, TARGETS
 
 

@@ -4,6 +4,7 @@ name another cause (issue 21, point 3)."""
 from __future__ import annotations
 
 import numpy as np
+
 from robocal.solver.stability import RESAMPLES, Stability, key_label, leave_out
 
 C2 = ("joint_compliance", 1, None)

@@ -3,6 +3,7 @@
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import make_effects
 from robocal.solver import identifiability as ident
@@ -21,7 +22,6 @@ from robocal.solver.fit_errors import calibration_errors, effect_uncertainty, ex
 from robocal.solver.identify import register
 from robocal.solver.robot import IRB2600
 from robocal.solver.uncertainty import Rows, clustered, propagate
-
 from tests.robots import KUKA_LIKE, TARGETS
 
 DRAWS = 40

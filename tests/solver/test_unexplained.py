@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.server.formats.cell_json import default_cell
 from robocal.solver import identifiability as ident
@@ -14,7 +15,6 @@ from robocal.solver.effects import Inputs
 from robocal.solver.identify import register
 from robocal.solver.motion import last_motion
 from robocal.solver.unexplained import STRONG, Fields, covariates, unexplained
-
 from tests.solver.test_diagnose_effects import diagnosed
 
 
@@ -206,7 +206,6 @@ def test_no_block_once_the_hidden_effect_is_named(seed):
     """An effect of the vocabulary, drawn as tests/server/test_diagnose.py draws it: the diagnosis
     names it, the final model reaches the floor, and nothing is left to say."""
     from robocal.drivers.effects import make_effects
-
     from tests.server.test_diagnose import aim
     from tests.server.test_diagnose import draw as draw_vocabulary
 

@@ -1,6 +1,7 @@
 """The diagnosis vocabulary: each effect's class, and backlash's basis from the visit order."""
 
 import numpy as np
+
 from robocal.solver.diagnose import candidates
 from robocal.solver.diagnosis_report import evidence, parameters
 from robocal.solver.effects import Extension, Inputs, joint_basis
@@ -8,7 +9,6 @@ from robocal.solver.kinematics import Layout
 from robocal.solver.motion import last_motion
 from robocal.solver.robot import IRB2600
 from robocal.solver.vocabulary import KINDS
-
 from tests.robots import TARGETS
 
 NAMES = tuple(TARGETS)

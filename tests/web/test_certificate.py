@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 
 import pytest
+
 from robocal.server.certificate import write_certificate
 
 from ..server.test_verification import calibrated_and_verified

@@ -9,8 +9,8 @@ import re
 import time
 
 import httpx
-from robocal.server.exports.rapid import read_module
 
+from robocal.server.exports.rapid import read_module
 from tests.server.api.conftest import wait_for
 from tests.web.conftest import shot as _shot
 

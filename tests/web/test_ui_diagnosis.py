@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from robocal.server.formats.cell_json import default_cell
 
+from robocal.server.formats.cell_json import default_cell
 from tests.server.test_diagnose import aim
 from tests.server.test_diagnose import draw as draw_effect
 from tests.web.conftest import shot

@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 
 from robocal.server.formats.campaign_csv import write_campaign
-
 from tests.solver.test_unexplained import campaign, draw
 from tests.web.conftest import shot
 

@@ -1,6 +1,7 @@
 """Fixtures: a virtual cell's world on a VirtualClock, the simulated controller, its TCP server."""
 
 import pytest
+
 from robocal.drivers.abb.sim import SimulatedController, serve_controller
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.clock import VirtualClock

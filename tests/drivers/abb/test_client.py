@@ -5,6 +5,7 @@ import time
 
 import numpy as np
 import pytest
+
 from robocal.drivers.abb import protocol as p
 from robocal.drivers.abb.client import (
     BusyError,

@@ -3,6 +3,7 @@ connect, and every MOVEJ is checked against the tighter of the two before it is 
 
 import numpy as np
 import pytest
+
 from robocal.drivers.abb import protocol as p
 from robocal.drivers.abb.client import ControllerClient, ControllerError, LimitError
 from robocal.drivers.abb.sim import SimulatedController, serve_controller

@@ -3,6 +3,7 @@
 import math
 
 import pytest
+
 from robocal.drivers.abb import protocol as p
 
 GOOD_REQUESTS = [

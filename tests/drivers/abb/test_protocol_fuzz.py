@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from hypothesis import given
 from hypothesis import strategies as st
+
 from robocal.drivers.abb import protocol as p
 from robocal.drivers.abb.sim import SimulatedController
 from robocal.drivers.cell import VirtualCell

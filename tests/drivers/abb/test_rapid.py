@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from robocal.drivers.abb import protocol as p
 from robocal.drivers.world import ACCEL_S, DEFAULT_SPEEDS_DEG_S
 from robocal.solver.robot import IRB2600

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from robocal.drivers.abb import protocol as p
 from robocal.drivers.world import ACCEL_S
 from robocal.solver.robot import IRB2600

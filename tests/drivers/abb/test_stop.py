@@ -7,6 +7,7 @@ import threading
 import time
 
 import pytest
+
 import robocal.drivers.abb.client as client_module
 from robocal.drivers.abb.client import ControllerClient, ControllerError, StopLatched
 from robocal.solver.robot import IRB2600

@@ -3,6 +3,7 @@
 import time
 
 import pytest
+
 from robocal.drivers.abb.client import ControllerClient, ControllerTimeout
 from robocal.drivers.abb.transport import LineTransport, TransportClosed
 from robocal.solver.robot import IRB2600

@@ -4,6 +4,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.clock import VirtualClock
 from robocal.drivers.tracker.sim import SimulatedTracker

@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 import pytest
+
 from robocal.drivers.tracker import ErrorCode, TrackerClient, TrackerError, TrackerTimeout
 from robocal.drivers.tracker.sim import SimulatedTracker, serve_tracker
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from robocal.drivers.tracker.protocol import (
     Ident,
     Measurement,

@@ -4,6 +4,7 @@ import threading
 
 import numpy as np
 import pytest
+
 from robocal.drivers.tracker.protocol import ErrorCode, TrackerError, search_time_s
 from robocal.drivers.tracker.sim import POINT_S, SimulatedTracker
 from robocal.solver.kinematics import translation

@@ -5,6 +5,7 @@ import threading
 import time
 
 import pytest
+
 from robocal.drivers.tracker.transport import MAX_LINE, LineSocket, LineTimeout
 
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import httpx
 import pytest
 import uvicorn
+
 from robocal.server.app import create_app
 from robocal.server.security import ensure_token
 from robocal.server.settings import Settings

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
+
 from robocal.server.api.bodies import (
     CELL_BODY_BYTES,
     CELLS,

@@ -11,8 +11,8 @@ import sys
 
 import numpy as np
 import pytest
-from robocal.server.exports.rapid import read_module
 
+from robocal.server.exports.rapid import read_module
 from tests.server.api.conftest import wait_for
 
 PROBLEM = "application/problem+json"

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import httpx
 import pytest
-from robocal.server import store
 from sqlalchemy import Engine, event
 
+from robocal.server import store
 from tests.backends import execute
 from tests.server.api.conftest import free_port, serve, settings_for, wait_for
 from tests.server.api.test_real_devices import RUN, cell_json, devices, finished  # noqa: F401

@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 
 import httpx
-from robocal.drivers.lifecycle import allowed
 
+from robocal.drivers.lifecycle import allowed
 from tests.server.api.conftest import free_port, serve, settings_for, wait_for
 from tests.server.api.test_real_devices import cell_json, devices  # noqa: F401 - a fixture
 from tests.server.api.test_sigterm import Wire, start_service

@@ -8,6 +8,7 @@ from __future__ import annotations
 import signal
 
 import pytest
+
 from robocal.server.api.bodies import JSON_BODY_BYTES
 from robocal.server.bench_stop_bodies import (
     BODY_BYTES,

@@ -4,8 +4,8 @@ with the state and the allowed actions; every one it allows does not; JSON carri
 from __future__ import annotations
 
 import pytest
-from robocal.drivers.lifecycle import ACTIONS, MOVING, STATES, allowed, next_state
 
+from robocal.drivers.lifecycle import ACTIONS, MOVING, STATES, allowed, next_state
 from tests.backends import execute
 from tests.server.api.conftest import wait_for
 

@@ -9,9 +9,9 @@ import threading
 import time
 
 import httpx
+
 from robocal.server import store
 from robocal.server.formats import cell_to_json, default_cell
-
 from tests.backends import execute
 from tests.server.api.conftest import serve, settings_for, wait_for
 

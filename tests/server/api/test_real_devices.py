@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import httpx
 import pytest
+
 from robocal.drivers.abb.sim import SimulatedController, serve_controller
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.clock import RealClock
@@ -17,7 +18,6 @@ from robocal.drivers.lifecycle import MOVING
 from robocal.drivers.tracker.sim import SimulatedTracker, serve_tracker
 from robocal.drivers.world import SimulatedWorld
 from robocal.server.formats import cell_to_json, default_cell
-
 from tests.server.api.conftest import free_port, wait_for
 
 PROBLEM = "application/problem+json"

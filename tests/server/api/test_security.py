@@ -3,6 +3,7 @@
 import hashlib
 
 import pytest
+
 from robocal.server.app import MUTATING, _api_routes, create_app
 from robocal.server.security import ensure_token, reads_open, reset_token
 from robocal.server.settings import Settings
@@ -92,6 +93,7 @@ def test_open_reads_only_on_a_loopback_host(tmp_path):
 
 def test_an_unguarded_read_route_is_refused_at_build_time(monkeypatch):
     from fastapi import APIRouter
+
     from robocal.server import app as app_module
 
     leak = APIRouter()
@@ -147,8 +149,9 @@ def test_settings_listen_on_loopback_by_default(monkeypatch):
 
 
 def test_an_unguarded_mutating_route_is_refused_at_build(tmp_path, monkeypatch):
-    import robocal.server.app as app_module
     from fastapi import APIRouter
+
+    import robocal.server.app as app_module
 
     extra = APIRouter()
     extra.delete("/oops")(lambda: None)

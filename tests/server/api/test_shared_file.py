@@ -13,8 +13,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-from robocal.drivers.lifecycle import MOVING
 
+from robocal.drivers.lifecycle import MOVING
 from tests.backends import replace_sqlite_file
 from tests.server.api.conftest import free_port, wait_for
 from tests.server.api.test_real_devices import cell_json, devices, finished  # noqa: F401 - a fixture

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from robocal.server.formats import cell_to_json, default_cell
 from robocal.server.store import create_campaign, open_database, set_status
 

@@ -6,6 +6,9 @@ import datetime as dt
 
 import numpy as np
 import pytest
+from sqlalchemy import text
+from sqlalchemy.exc import IntegrityError
+
 from robocal.server.formats import InputError
 from robocal.server.store import (
     Conflict,
@@ -26,8 +29,6 @@ from robocal.server.store import (
     set_status,
     take_lease,
 )
-from sqlalchemy import text
-from sqlalchemy.exc import IntegrityError
 
 from .conftest import POSES_DEG
 

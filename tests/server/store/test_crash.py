@@ -10,6 +10,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from sqlalchemy import text
+
 from robocal.server.store import (
     campaign_measurements,
     create_campaign,
@@ -17,7 +19,6 @@ from robocal.server.store import (
     next_unmeasured_pose,
     open_database,
 )
-from sqlalchemy import text
 
 from .crash_writer import TARGETS, beam_broken, fake_reading
 

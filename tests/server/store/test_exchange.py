@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from sqlalchemy import text
+
 from robocal.drivers.cell import VirtualCell
 from robocal.server.formats import InputError, read_campaign, write_campaign
 from robocal.server.store import (
@@ -22,8 +24,6 @@ from robocal.server.store import (
     set_status,
 )
 from robocal.solver.robot import IRB2600
-from sqlalchemy import text
-
 from tests.robots import TARGETS
 
 TABLES = ("campaign", "planned_pose", "reading", "pose_outcome")

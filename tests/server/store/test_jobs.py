@@ -1,6 +1,7 @@
 """Jobs in the store: created queued, moved along their states, failed when cut off."""
 
 import pytest
+
 from robocal.server.store import (
     Conflict,
     NotFound,
@@ -11,7 +12,6 @@ from robocal.server.store import (
     list_jobs,
     update_job,
 )
-
 from tests.server.store.conftest import POSES_DEG
 
 

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from robocal.server.store import (
     DatabaseGone,
     StoreError,
@@ -19,7 +20,6 @@ from robocal.server.store import (
     open_database,
     set_status,
 )
-
 from tests.backends import replace_sqlite_file
 
 from .conftest import POSES_DEG

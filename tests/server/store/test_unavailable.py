@@ -5,10 +5,11 @@ import sqlite3
 
 import psycopg.errors as pg
 import pytest
-from robocal.server import store
-from robocal.server.store.errors import unavailable
 from sqlalchemy import event
 from sqlalchemy.exc import IntegrityError, OperationalError
+
+from robocal.server import store
+from robocal.server.store.errors import unavailable
 
 CELL = {
     "robot": "irb2600",
