@@ -760,7 +760,7 @@ def cmd_schema(args) -> None:
 
 def cmd_bench(args) -> None:
     if args.what == "diagnose":
-        from .bench_diagnose import run_diagnose_bench
+        from .bench.diagnose import run_diagnose_bench
 
         result = run_diagnose_bench(
             quick=args.quick,
@@ -772,43 +772,43 @@ def cmd_bench(args) -> None:
             real=() if args.quick else _real_campaigns(),
         )
     elif args.what == "outliers":
-        from .bench_screen import run_screen_bench
+        from .bench.screen import run_screen_bench
 
         result = run_screen_bench()
     elif args.what == "service":
-        from .bench_service import run_service_bench
+        from .bench.service import run_service_bench
 
         result = run_service_bench()
     elif args.what == "startup":
-        from .bench_startup import run_startup_bench
+        from .bench.startup import run_startup_bench
 
         result = run_startup_bench(repeats=args.repeats)
     elif args.what == "compensate":
-        from .bench_compensate import run_compensate_bench
+        from .bench.compensate import run_compensate_bench
 
         result = run_compensate_bench()
     elif args.what == "verify":
-        from .bench_verify import run_verify_bench
+        from .bench.verify import run_verify_bench
 
         result = run_verify_bench()
     elif args.what == "acquire":
-        from .bench_acquire import run_acquire_bench
+        from .bench.acquire import run_acquire_bench
 
         result = run_acquire_bench()
     elif args.what == "recording":
-        from .bench_recording import run_recording_bench
+        from .bench.recording import run_recording_bench
 
         result = run_recording_bench()
     elif args.what == "check":
-        from .bench_check import run_check_bench
+        from .bench.check import run_check_bench
 
         result = run_check_bench(clean=args.clean or 70)
     elif args.what == "validation":
-        from . import bench_validation
+        from .bench import validation as bench_validation
 
         result = bench_validation.run(20, "minimax", _real_campaigns())
     else:
-        from .bench import run_solver_bench
+        from .bench.solver import run_solver_bench
 
         result = run_solver_bench(
             sizes=args.sizes, reference=not args.no_reference, reference_max=args.reference_max

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from robocal.drivers.planning import candidate_jacobians, plan_poses
-from robocal.server.bench_scale import peak_mb, plan_at, smr_ring
+from robocal.server.bench.scale import peak_mb, plan_at, smr_ring
 from robocal.solver import identifiability as ident
 from robocal.solver import observability as obs
 from robocal.solver.kinematics import Layout, predict_rows

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from robocal.server.bench import GOALS, run_solver_bench
+from robocal.server.bench.solver import GOALS, run_solver_bench
 
 
 @pytest.fixture(scope="module")

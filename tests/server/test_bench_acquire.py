@@ -3,7 +3,7 @@
 import numpy as np
 
 from robocal.drivers.planning import total_move_time
-from robocal.server.bench_acquire import physical_bound, run_acquire_bench
+from robocal.server.bench.acquire import physical_bound, run_acquire_bench
 
 
 def test_the_bound_is_the_best_order_of_the_motion_plus_the_samples():

@@ -1,6 +1,6 @@
 """`robocal bench compensate` times the batched solve next to scipy's one target at a time."""
 
-from robocal.server.bench_compensate import run_compensate_bench
+from robocal.server.bench.compensate import run_compensate_bench
 
 
 def test_bench_reports_throughput_next_to_the_reference():

@@ -1,6 +1,6 @@
 """`robocal bench service`'s deleted-database figure, measured once."""
 
-from robocal.server.bench_service import deleted_database
+from robocal.server.bench.service import deleted_database
 
 
 def test_a_deleted_database_is_detected_within_a_pose():

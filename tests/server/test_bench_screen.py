@@ -1,6 +1,6 @@
 """`robocal bench outliers` counts false flags and outliers found over drawn campaigns."""
 
-from robocal.server.bench_screen import run_screen_bench
+from robocal.server.bench.screen import run_screen_bench
 
 
 def test_bench_counts_flags_and_finds():

@@ -3,7 +3,7 @@ request bodies in flight."""
 
 import json
 
-from robocal.server.bench_service import STOP_BOUND_MS, stop_latency
+from robocal.server.bench.service import STOP_BOUND_MS, stop_latency
 
 
 def test_stop_latency_against_a_stalled_controller():
@@ -17,7 +17,7 @@ def test_stop_latency_against_a_stalled_controller():
 
 
 def test_estop_with_bodies_reports_idle_and_loaded_stops_of_one_run():
-    from robocal.server.bench_stop_bodies import HOLD_BYTES, estop_with_bodies
+    from robocal.server.bench.stop_bodies import HOLD_BYTES, estop_with_bodies
 
     result = estop_with_bodies(rounds=1, sigterms=1, body_bytes=2 * HOLD_BYTES)
     print(

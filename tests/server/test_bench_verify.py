@@ -1,6 +1,6 @@
 """`robocal bench verify` runs the ISO 9283 verification after a calibration and reports both."""
 
-from robocal.server.bench_verify import run_verify_bench
+from robocal.server.bench.verify import run_verify_bench
 
 
 def test_bench_reports_the_run_next_to_the_calibration_campaign():

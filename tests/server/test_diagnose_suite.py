@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from robocal.server.diagnose_suite import (
+from robocal.server.bench.diagnose_suite import (
     KINDS,
     PROBE_FIT,
     PROBE_POSES,
@@ -113,7 +113,7 @@ def test_out_of_vocabulary_named_only_when_it_pays_off(results, summary):
 
 def test_payoff_compares_the_named_model_with_geometry_on_other_poses():
     """A real effect named pays off on a separate campaign of the same cell, against geometry."""
-    from robocal.server.diagnose_suite import _diagnoser, payoff
+    from robocal.server.bench.diagnose_suite import _diagnoser, payoff
     from robocal.solver.diagnose import diagnose
 
     case = draw_case(2, "joint_periodic")
@@ -161,7 +161,7 @@ def test_through_the_command_line(tmp_path, results, seed):
 
 def test_false_alarms_over_200_clean_campaigns():
     """At most 1% of clean campaigns (sizes, noise, scatter, defects all drawn) name any effect."""
-    from robocal.server.bench_diagnose import run_suite
+    from robocal.server.bench.diagnose import run_suite
 
     runs = run_suite([(seed, "clean") for seed in range(1000, 1200)], workers=2)
     alarms = [r["case"]["seed"] for r in runs if r["false_alarm"]]
@@ -170,7 +170,7 @@ def test_false_alarms_over_200_clean_campaigns():
 
 def test_bench_reports_the_suite_and_the_timing():
     """The bench JSON: detection per effect and size, false alarms, held-out/floor ratios, time."""
-    from robocal.server.bench_diagnose import run_diagnose_bench
+    from robocal.server.bench.diagnose import run_diagnose_bench
 
     out = run_diagnose_bench(effect_cases=2, clean_cases=1, sizes=(30,), workers=1, split_cases=1)
     json.dumps(out)

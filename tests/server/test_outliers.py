@@ -8,7 +8,7 @@ import pytest
 
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import make_effects
-from robocal.server.bench_screen import displace
+from robocal.server.bench.screen import displace
 from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.cell_json import default_cell
 from tests import cli_process

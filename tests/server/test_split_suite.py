@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocal.server import split_suite as ss
+from robocal.server.bench import split_suite as ss
 from robocal.solver import configuration
 
 

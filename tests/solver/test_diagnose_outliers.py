@@ -6,7 +6,7 @@ import numpy as np
 
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import make_effects
-from robocal.server.bench_screen import displace
+from robocal.server.bench.screen import displace
 from robocal.server.formats.cell_json import default_cell
 from tests.solver.test_diagnose_effects import diagnosed
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocal.server.bench_scale import peak_mb, smr_ring
+from robocal.server.bench.scale import peak_mb, smr_ring
 from robocal.solver import identifiability as ident
 from robocal.solver.identify import pose_residuals
 from robocal.solver.kinematics import Layout, predict_with_jacobian

@@ -5,7 +5,7 @@ import pytest
 
 from robocal.drivers.cell import VirtualCell
 from robocal.server import workflow
-from robocal.server.bench_screen import displace
+from robocal.server.bench.screen import displace
 from robocal.server.formats.cell_json import default_cell
 from robocal.solver.diagnose import noise_floor
 from robocal.solver.effects import Inputs

@@ -10,7 +10,7 @@ import signal
 import pytest
 
 from robocal.server.api.bodies import JSON_BODY_BYTES
-from robocal.server.bench_stop_bodies import (
+from robocal.server.bench.stop_bodies import (
     BODY_BYTES,
     CHUNK,
     HOLD_BYTES,

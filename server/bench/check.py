@@ -35,8 +35,8 @@ def arm_cell(arm: str, seed: int) -> VirtualCell:
     """The virtual cell of an arm, drawn from seed."""
     from robocal.solver.robot import KUKA_LIKE
 
+    from ..formats.cell_json import default_cell
     from . import diagnose_suite as ds
-    from .formats.cell_json import default_cell
 
     rng = np.random.default_rng([0xC4EC, seed])
     irb = default_cell()
@@ -83,9 +83,9 @@ def _heavier(effect, kg: float):
 
 def _calibrated(vc: VirtualCell, seed: int, d: Path):
     """model.json of a minimax calibration on TRAIN_POSES poses; the campaign's simulated s."""
-    from . import workflow
-    from .formats.cell_json import Cell
-    from .formats.model_json import write_model
+    from .. import workflow
+    from ..formats.cell_json import Cell
+    from ..formats.model_json import write_model
 
     cell = Cell(vc.nominal_robot, dict(zip(vc.target_names, vc.nominal_targets)))
     meas = vc.campaign(TRAIN_POSES, seed, arm_scatter_deg=SCATTER_DEG)
@@ -96,8 +96,8 @@ def _calibrated(vc: VirtualCell, seed: int, d: Path):
 
 def _check(vc: VirtualCell, poses, seed: int, d: Path, db) -> tuple:
     """One check of the fixed poses: (result, simulated s, wall s of the judgement)."""
-    from .check import run_check
-    from .formats.campaign_csv import write_campaign
+    from ..check import run_check
+    from ..formats.campaign_csv import write_campaign
 
     meas = vc.campaign(len(poses), seed, poses=poses, arm_scatter_deg=SCATTER_DEG)
     path = d / f"check{seed}.csv"
@@ -114,7 +114,7 @@ def _duration(meas) -> float:
 
 def run_arm(arm: str, seed: int, clean: int, changes: int) -> dict:
     """One arm: `clean` clean checks, then per kind `changes` histories with a change."""
-    from . import store
+    from .. import store
 
     vc = arm_cell(arm, seed)
     rng = np.random.default_rng([0xC4EC, seed, 1])

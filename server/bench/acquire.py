@@ -37,9 +37,9 @@ def run_acquire_bench(seed: int = 0, holdout: int = 50, configs=None) -> dict:
     from robocal.drivers.cell import TrackerSpec, VirtualCell
     from robocal.drivers.tracker.sim import SAMPLE_RATE_HZ
 
-    from . import store, workflow
-    from .acquire import AcquireOptions, acquire
-    from .formats.cell_json import default_cell
+    from .. import store, workflow
+    from ..acquire import AcquireOptions, acquire
+    from ..formats.cell_json import default_cell
 
     configs = CONFIGS if configs is None else configs
     cell = default_cell()

@@ -94,7 +94,7 @@ def time_campaign(poses: int, seed: int = 0) -> dict:
     from robocal.drivers.effects import make_effects
     from robocal.solver.diagnose import diagnose
 
-    from .formats.cell_json import default_cell
+    from ..formats.cell_json import default_cell
 
     cell = default_cell()
     vc = VirtualCell.random(cell.robot, cell.targets, seed=seed)

@@ -52,7 +52,7 @@ def plan_at(smrs: int):
     from robocal.solver import identifiability
     from robocal.solver.robot import IRB2600
 
-    from .formats.cell_json import default_cell
+    from ..formats.cell_json import default_cell
 
     base = VirtualCell.random(IRB2600, default_cell().targets, seed=1).base
     targets = smr_ring(smrs)
@@ -83,7 +83,7 @@ def run_scale(cell, meas, repeats: int = 2) -> dict:
     read by robocal and by np.loadtxt."""
     from robocal.solver.calibrate import calibrate
 
-    from .formats.campaign_csv import joint_columns, read_campaign, write_campaign
+    from ..formats.campaign_csv import joint_columns, read_campaign, write_campaign
 
     targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
     out: dict = {"poses": meas.n_poses, "readings": meas.n_readings}

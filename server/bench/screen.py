@@ -64,7 +64,7 @@ def run_screen_bench(clean: int = 480, dirty: int = 240, rate: float = 0.03) -> 
     """Screen `clean` campaigns (any exclusion is false) and `dirty` ones with `rate` moved."""
     from robocal.solver.screen import screen_readings
 
-    from .formats.cell_json import default_cell
+    from ..formats.cell_json import default_cell
 
     cell = default_cell()
     out: dict = {"benchmark": "outliers", "robot": cell.robot.name}

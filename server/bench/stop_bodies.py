@@ -62,7 +62,7 @@ def simulated_devices() -> Iterator[Devices]:
     from robocal.drivers.tracker.sim import SimulatedTracker, serve_tracker
     from robocal.drivers.world import SimulatedWorld
 
-    from .formats import cell_to_json, default_cell
+    from ..formats import cell_to_json, default_cell
 
     nominal, clock = default_cell(), RealClock()
     cell = VirtualCell.random(nominal.robot, nominal.targets, seed=11)

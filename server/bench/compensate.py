@@ -15,9 +15,9 @@ def _setup():
     from robocal.drivers.cell import VirtualCell
     from robocal.drivers.effects import make_effects
 
-    from . import workflow
-    from .compensation import solver_model
-    from .formats.cell_json import default_cell
+    from .. import workflow
+    from ..compensation import solver_model
+    from ..formats.cell_json import default_cell
 
     cell = default_cell()
     vc = VirtualCell.random(cell.robot, cell.targets, seed=SEED)

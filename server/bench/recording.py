@@ -1,6 +1,6 @@
 """Recording benchmark: size and write time of a calibration's .rrd beside the calibration's time.
 
-Run: `uv run python -m robocal.server.bench_recording` (JSON on stdout).
+Run: `uv run python -m robocal.server.bench.recording` (JSON on stdout).
 """
 
 from __future__ import annotations
@@ -34,9 +34,9 @@ def run_recording_bench(sizes=SIZES, seed: int = 1) -> dict:
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     from robocal.drivers.cell import VirtualCell
 
-    from .formats.cell_json import default_cell
-    from .recording import record_calibration
-    from .workflow import run_method
+    from ..formats.cell_json import default_cell
+    from ..recording import record_calibration
+    from ..workflow import run_method
 
     cell = default_cell()
     targets = {k: list(v) for k, v in cell.targets.items()}

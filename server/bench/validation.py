@@ -2,7 +2,7 @@
 200 poses, with and without hidden effects) and the real campaigns must be deployable; small
 ones (5 poses) must not.
 
-    python -m robocal.server.bench_validation [--seeds 20] [--method minimax] [--real DIR...]
+    python -m robocal.server.bench.validation [--seeds 20] [--method minimax] [--real DIR...]
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def simulated(seed: int, poses: int, effects: list[str], method: str) -> dict:
     from robocal.drivers.cell import TrackerSpec, VirtualCell
     from robocal.drivers.effects import make_effects
 
-    from . import workflow
+    from .. import workflow
 
     cell = workflow.load_cell(None)
     vc = VirtualCell.random(
@@ -44,7 +44,7 @@ def simulated(seed: int, poses: int, effects: list[str], method: str) -> dict:
 
 def real(folder: Path, method: str) -> dict:
     """The verdict on a real campaign: its train.csv with its cell.json."""
-    from . import workflow
+    from .. import workflow
 
     cell, meas = workflow.load_data(folder / "train.csv", folder / "cell.json")
     return _verdict(cell, meas, method) | {"campaign": folder.name, "poses": meas.n_poses}
@@ -53,7 +53,7 @@ def real(folder: Path, method: str) -> dict:
 def _verdict(cell, meas, method) -> dict:
     from robocal.solver.identifiability import NotIdentifiable
 
-    from . import workflow
+    from .. import workflow
 
     t0 = time.perf_counter()
     try:
@@ -104,7 +104,7 @@ def run(seeds: int, method: str, real_dirs: list[Path]) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m robocal.server.bench_validation")
+    p = argparse.ArgumentParser(prog="python -m robocal.server.bench.validation")
     p.add_argument("--seeds", type=int, default=20, help="healthy simulated campaigns")
     p.add_argument(
         "--method", default="minimax", help="calibration method, or diagnose (its final model)"

@@ -381,7 +381,7 @@ def run_solver_bench(
 ) -> dict:
     """Time our solvers and scipy's finite-difference reference on virtual-cell campaigns of each
     size; then ls-sum, minimax and the meas.csv reader at scale_poses (time and peak memory)."""
-    from .formats.cell_json import default_cell
+    from ..formats.cell_json import default_cell
 
     cell = default_cell()
     names = tuple(cell.targets)
@@ -410,7 +410,7 @@ def run_solver_bench(
         results[str(m)] = entry
     scale = None
     if scale_poses:
-        from .bench_scale import run_scale
+        from .scale import run_scale
 
         _log(f"{scale_poses} poses: time and peak memory of ls-sum and minimax, meas.csv read")
         scale = run_scale(cell, _campaign(cell, int(scale_poses), seed))

@@ -263,7 +263,7 @@ def real_splits(folder, min_poses: int = 15) -> list[dict]:
     from robocal.solver.extrapolation import configuration_folds, region_folds
     from robocal.solver.kinematics import Layout, predict
 
-    from .workflow import diagnose, load_data, model_predict
+    from ..workflow import diagnose, load_data, model_predict
 
     folder = Path(folder)
     cell, meas = load_data(folder / "train.csv", folder / "cell.json")

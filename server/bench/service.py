@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_stop_bodies import estop_with_bodies
+from .stop_bodies import estop_with_bodies
 
 DEMO_TARGET_S = 60.0
 
@@ -23,7 +23,7 @@ def _serve(settings):
     """A real uvicorn on 127.0.0.1 in a thread; returns (server, thread, app)."""
     import uvicorn
 
-    from .app import create_app
+    from ..app import create_app
 
     app = create_app(settings)
     server = uvicorn.Server(
@@ -97,8 +97,8 @@ def latency_under_load(poses: int = 100, requests: int = 400) -> dict:
     only a diagnosis job runs (`during_job`, with the job pool's kind)."""
     import httpx
 
-    from .security import ensure_token
-    from .settings import Settings
+    from ..security import ensure_token
+    from ..settings import Settings
 
     with tempfile.TemporaryDirectory() as tmp:
         settings = Settings(
@@ -175,7 +175,7 @@ def stop_latency(stops: int = 100) -> dict:
     from robocal.drivers.clock import VirtualClock
     from robocal.drivers.world import SimulatedWorld
 
-    from .formats import default_cell
+    from ..formats import default_cell
 
     cell, clock = default_cell(), VirtualClock()
     targets = {k: v.tolist() for k, v in cell.targets.items()}
@@ -243,8 +243,8 @@ def deleted_database(repeats: int = 3) -> dict:
     simulated cell (virtual clock) each time."""
     import httpx
 
-    from .security import ensure_token
-    from .settings import Settings
+    from ..security import ensure_token
+    from ..settings import Settings
 
     runs = []
     for i in range(repeats):
