@@ -1,0 +1,7 @@
+"""`python -m robocal.server.cli`."""
+
+import sys
+
+from . import main
+
+sys.exit(main())

@@ -1,0 +1,161 @@
+"""`robocal acquire`: a campaign or a verification run on the cell."""
+
+from __future__ import annotations
+
+from .common import _nonnegative, _nonnegative_int, _positive, _positive_int, _rate, _whole
+
+_directions = _whole(1, 6, "a count of directions from 1 to 6")
+
+
+def _verify(args, cell) -> None:
+    """`acquire --verify model.json`: the ISO 9283 run before and after compensation."""
+    from .. import verification
+    from ..tables import console, verification_table
+
+    opts = verification.VerifyOptions(
+        cycles=args.cycles,
+        directions=args.directions,
+        points_path=args.points,
+        side_mm=args.side,
+        seed=args.seed,
+        name=args.name or "verify",
+        effects=tuple(args.effect),
+        pause_s=args.pause,
+    )
+    with console.status("verifying: nominal joints, then compensated ones..."):
+        report = verification.verify(args.db, cell, args.verify, opts)
+    verification.write(report, args.out)
+    console.print(verification_table(report))
+    written = [args.out]
+    if args.certificate:
+        from ..certificate import write_certificate
+
+        write_certificate(report, args.certificate)
+        written.append(args.certificate)
+    console.print(f"wrote {', '.join(written)}")
+
+
+def cmd_acquire(args) -> None:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from .. import workflow
+    from ..acquire import AcquireOptions, acquire
+    from ..tables import console
+
+    cell = workflow.load_cell(args.cell)
+    if args.verify:
+        return _verify(args, cell)
+    opts = AcquireOptions(
+        poses=args.poses,
+        seed=args.seed,
+        name=args.name,
+        settle=args.settle,
+        pause_s=args.pause,
+        order=args.order,
+        choose_from=args.choose_from,
+        beam_break_rate=args.beam_break_rate,
+        effects=tuple(args.effect),
+    )
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+    ) as progress:
+        summary = acquire(args.db, cell, opts, progress=progress, reset=args.reset)
+    if summary["resumed_at"] is not None:
+        console.print(
+            f"resumed campaign {summary['campaign']} ({summary['name']}) at pose "
+            f"{summary['resumed_at'] + 1}"
+        )
+    locked = summary["locked_without_search_after_10"]
+    console.print(
+        f"campaign {summary['campaign']} {summary['state']}: {summary['measured_poses']} poses "
+        f"measured now, {summary['readings']} readings, {summary['missing']} missing, "
+        f"{summary['beam_breaks']} beam breaks"
+        + (
+            f"; {'simulated ' if summary.get('simulated', True) else ''}campaign time "
+            f"{summary['campaign_s'] / 60:.1f} min"
+            if summary["campaign_s"] is not None
+            else ""
+        )
+        + (
+            f"; locked without search after pose 10: {100 * locked:.1f}%"
+            if locked is not None
+            else ""
+        )
+    )
+    console.print(
+        f"stored in {args.db}; calibrate with: robocal calibrate {args.db} "
+        f"--campaign {summary['campaign']}"
+    )
+
+
+def add(sub) -> None:
+    """The command's parser, on the command line's subparsers."""
+    aq = sub.add_parser(
+        "acquire",
+        help="run a campaign on the devices (simulated on loopback "
+        "sockets by default), storing every reading as it arrives",
+    )
+    aq.add_argument(
+        "--db", default="robocal.db", help="SQLite file (created if absent) or database URL"
+    )
+    aq.add_argument("--cell", help="cell.json (default: the built-in IRB 2600 cell)")
+    aq.add_argument(
+        "--poses", type=_positive_int, default=100, help="poses to measure (default 100)"
+    )
+    aq.add_argument(
+        "--seed", type=_nonnegative_int, default=0, help="random seed of the poses (and the cell)"
+    )
+    aq.add_argument("--name", help="campaign name; an unfinished campaign of that name is resumed")
+    aq.add_argument(
+        "--settle",
+        choices=("fixed", "adaptive"),
+        default="fixed",
+        help="fixed pause (the paper's 10 s) or end it once readings agree",
+    )
+    aq.add_argument(
+        "--pause", type=_nonnegative, default=10.0, help="pause at each pose, s (default 10)"
+    )
+    aq.add_argument("--order", action="store_true", help="order poses to shorten the motion")
+    aq.add_argument(
+        "--choose-from",
+        type=_nonnegative_int,
+        default=0,
+        metavar="N",
+        help="choose the poses out of N candidates by D-optimality",
+    )
+    aq.add_argument(
+        "--beam-break-rate",
+        type=_rate,
+        default=0.0,
+        help="simulated cell: fraction of readings lost to a broken beam (0 up to 1)",
+    )
+    aq.add_argument(
+        "--effect",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help="hidden effects of the simulated arm; see `simulate --help`",
+    )
+    aq.add_argument(
+        "--verify",
+        metavar="MODEL",
+        help="an ISO 9283 verification run of model.json: each test point visited from several "
+        "directions and cycles, with the nominal joints and the compensated ones",
+    )
+    aq.add_argument("--points", help="verify at these points (points.csv), not the ISO cube")
+    aq.add_argument("--cycles", type=_positive_int, default=3, help="verification cycles")
+    aq.add_argument("--directions", type=_directions, default=3, help="approach directions (1-6)")
+    aq.add_argument("--side", type=_positive, default=400.0, help="the ISO cube's side, mm")
+    aq.add_argument("--out", default="verification.json", help="the verification's figures")
+    aq.add_argument("--certificate", help="also write the accuracy certificate (HTML) here")
+    aq.add_argument(
+        "--reset",
+        action="store_true",
+        help="resume an e-stopped campaign (after the cell was checked)",
+    )
+    aq.set_defaults(func=cmd_acquire)

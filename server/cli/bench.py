@@ -1,0 +1,146 @@
+"""`robocal bench`: benchmarks printing JSON."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from .common import _nonnegative_int, _positive_int
+
+
+def _real_campaigns() -> list[Path]:
+    """The real campaigns beside a checkout (../shared/data/real), when they are there."""
+    real = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+    return sorted(p for p in real.glob("*") if p.is_dir())
+
+
+def cmd_bench(args) -> None:
+    if args.what == "diagnose":
+        from ..bench.diagnose import run_diagnose_bench
+
+        result = run_diagnose_bench(
+            quick=args.quick,
+            effect_cases=args.cases,
+            clean_cases=args.clean,
+            sizes=args.poses,
+            workers=args.workers,
+            split_cases=args.split_cases,
+            real=() if args.quick else _real_campaigns(),
+        )
+    elif args.what == "outliers":
+        from ..bench.screen import run_screen_bench
+
+        result = run_screen_bench()
+    elif args.what == "service":
+        from ..bench.service import run_service_bench
+
+        result = run_service_bench()
+    elif args.what == "startup":
+        from ..bench.startup import run_startup_bench
+
+        result = run_startup_bench(repeats=args.repeats)
+    elif args.what == "compensate":
+        from ..bench.compensate import run_compensate_bench
+
+        result = run_compensate_bench()
+    elif args.what == "verify":
+        from ..bench.verify import run_verify_bench
+
+        result = run_verify_bench()
+    elif args.what == "acquire":
+        from ..bench.acquire import run_acquire_bench
+
+        result = run_acquire_bench()
+    elif args.what == "recording":
+        from ..bench.recording import run_recording_bench
+
+        result = run_recording_bench()
+    elif args.what == "check":
+        from ..bench.check import run_check_bench
+
+        result = run_check_bench(clean=args.clean or 70)
+    elif args.what == "validation":
+        from ..bench import validation as bench_validation
+
+        result = bench_validation.run(20, "minimax", _real_campaigns())
+    else:
+        from ..bench.solver import run_solver_bench
+
+        result = run_solver_bench(
+            sizes=args.sizes, reference=not args.no_reference, reference_max=args.reference_max
+        )
+    print(json.dumps(result, indent=2))
+
+
+def add(sub) -> None:
+    """The command's parser, on the command line's subparsers."""
+    b = sub.add_parser("bench", help="benchmarks printing JSON")
+    b.add_argument(
+        "what",
+        choices=(
+            "solver",
+            "diagnose",
+            "acquire",
+            "service",
+            "outliers",
+            "startup",
+            "compensate",
+            "verify",
+            "recording",
+            "validation",
+            "check",
+        ),
+        help="what to time (validation: the deployment guard's flags on healthy, small and "
+        "real campaigns; check: quick checks' false alarms and delays to a change)",
+    )
+    b.add_argument(
+        "--repeats",
+        type=_positive_int,
+        default=7,
+        help="startup: runs of each command (median reported)",
+    )
+    b.add_argument(
+        "--poses",
+        type=_positive_int,
+        nargs="+",
+        default=[100, 1000],
+        help="diagnose: sizes of the campaigns timed one at a time",
+    )
+    b.add_argument(
+        "--quick",
+        action="store_true",
+        help="diagnose: a short run (10 effect cases, 10 clean campaigns)",
+    )
+    b.add_argument(
+        "--cases", type=_positive_int, help="diagnose: effect cases of the suite (default 60)"
+    )
+    b.add_argument(
+        "--clean",
+        type=_positive_int,
+        help="diagnose: clean campaigns (default 200); check: clean checks an arm (default 70)",
+    )
+    b.add_argument(
+        "--split-cases",
+        type=_nonnegative_int,
+        help="diagnose: cases of the configuration-split suite (default 45, quick 5; 0 skips it)",
+    )
+    b.add_argument(
+        "--workers", type=_positive_int, default=2, help="diagnose: processes in the pool"
+    )
+    b.add_argument(
+        "--sizes",
+        type=_positive_int,
+        nargs="+",
+        default=[100, 1000, 10000],
+        help="solver: pose counts timed (default 100 1000 10000)",
+    )
+    b.add_argument(
+        "--no-reference", action="store_true", help="skip the finite-difference scipy reference"
+    )
+    b.add_argument(
+        "--reference-max",
+        type=_positive_int,
+        default=10000,
+        help="largest pose count for which to run the reference",
+    )
+    b.set_defaults(func=cmd_bench)

@@ -1,0 +1,258 @@
+"""What the commands share: argument types and groups, data loading, printing."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def _note(text: str) -> None:
+    """A fact the user should know, on stderr, the results going on."""
+    print(f"robocal: note: {text}", file=sys.stderr)
+
+
+def _campaign_only_with_database(args) -> None:
+    """--campaign picks a campaign of a database; with a meas.csv it would be silently ignored."""
+    from .. import workflow
+
+    if args.campaign is not None and not workflow.is_database(args.meas):
+        raise workflow.DataError(
+            f"{args.meas}: --campaign picks a campaign of a database (.db), not of a CSV file"
+        )
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+
+
+def _nonnegative(text: str) -> float:
+    v = _number(text)
+    if not np.isfinite(v) or v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number >= 0")
+    return v
+
+
+def _positive(text: str) -> float:
+    v = _nonnegative(text)
+    if v == 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number > 0")
+    return v
+
+
+def _rate(text: str) -> float:
+    """A probability per reading: 1 would lose every reading."""
+    v = _nonnegative(text)
+    if v >= 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a rate from 0 up to (not including) 1")
+    return v
+
+
+def _whole(lo: int, hi: int | None, what: str):
+    """An argparse type: a whole number from lo to hi (None: no top), else `what` it must be."""
+
+    def check(text: str) -> int:
+        v = _integer(text)
+        if v < lo or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"{text!r} is not {what}")
+        return v
+
+    return check
+
+
+_nonnegative_int = _whole(0, None, "a whole number >= 0")
+
+
+_positive_int = _whole(1, None, "a positive integer")
+
+
+def _require_deployable(args) -> None:
+    """Refuse a model its validation marks not deployable, unless --force (then warn)."""
+    from ..validation import file_refusal
+
+    why = file_refusal(args.model)
+    if why and not args.force:
+        from ..workflow import DataError
+
+        raise DataError(f"{args.model}: {why}; --force to use it anyway")
+    if why:
+        print(f"robocal: warning: {args.model}: {why}", file=sys.stderr)
+
+
+def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=True):
+    """Run the diagnosis; write the report, its figures beside it and the extended model."""
+    from .. import workflow
+    from ..tables import console
+
+    with console.status("diagnosing: cross-validating candidate effects...") as status:
+        d, model = workflow.diagnose(
+            cell, meas, log=lambda msg: status.update(msg.strip()), screen=screen
+        )
+    report, figures = workflow.write_diagnosis(
+        d,
+        model,
+        Path(report_path),
+        {"file": Path(meas_path).name, "poses": meas.n_poses, "readings": meas.n_readings},
+        model_path,
+    )
+    return report, figures, d
+
+
+def _print_outliers(outliers, skipped=None) -> None:
+    """The readings screened out as gross errors, one line each (None: screening was off)."""
+    from ..tables import console
+
+    if outliers is None or skipped:
+        console.print(
+            "gross-outlier screening "
+            + (f"skipped ({skipped})" if skipped else "off")
+            + ": every reading used"
+        )
+        return
+    if not outliers:
+        console.print("no gross outlier among the readings")
+        return
+    console.print(
+        f"{len(outliers)} reading{'s' if len(outliers) > 1 else ''} excluded as gross "
+        "outliers (no plausible model fits them):"
+    )
+    for o in outliers:
+        console.print(
+            f"  pose {o['pose']} target {o['target']}: residual {o['residual_mm']:.3f} mm "
+            f"({o['evidence']})"
+        )
+
+
+def _print_screening(cal) -> None:
+    screening = cal.get("screening")
+    _print_outliers(cal.get("outliers"), screening.skipped if screening else None)
+
+
+def _print_diagnosis(report) -> None:
+    from .. import tables
+    from ..tables import console
+
+    _print_outliers(report.get("outliers"))
+    floor = report["noise_floor_mm"]
+    console.print(
+        f"baseline (geometric) held-out RMS {report['baseline']['holdout_rmse_mm']:.4f} mm, "
+        f"max {report['baseline']['holdout_max_mm']:.4f} mm; noise floor "
+        + (f"{floor:.4f} mm" if floor else "unknown")
+        + (
+            f" (from the {report['noise_floor_source']})"
+            if report.get("noise_floor_source")
+            else ""
+        )
+    )
+    if not report["effects"]:
+        console.print("no effect beyond geometry pays off on held-out poses")
+    for number, e in enumerate(report["effects"], start=1):  # as the figures are numbered
+        console.print(
+            f"[bold]effect {number}: {e['name']}[/bold]"
+            + (f" joint {e['joint']}" if "joint" in e else "")
+            + (f" harmonic {e['harmonic']}" if "harmonic" in e else "")
+            + (f" at {e['at_s']:.0f} s" if "at_s" in e else "")
+            + f": {e['evidence']}"
+        )
+        console.print("  " + tables.effect_parameters(e["parameters"], e.get("uncertainty")))
+        lo, hi = e["holdout_gain_interval_mm"]
+        console.print(
+            f"  held-out gain {e['holdout_rmse_before_mm'] - e['holdout_rmse_after_mm']:.4f} mm "
+            f"(95% interval over poses {lo:.4f} to {hi:.4f} mm)"
+        )
+        if e["alternatives"]:
+            console.print(
+                "  [yellow]the data cannot tell it from:[/yellow] "
+                + ", ".join(
+                    f"{a['label']} (held-out RMS {a['holdout_rmse_mm']:.4f} mm)"
+                    for a in e["alternatives"]
+                )
+            )
+    console.print(
+        f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
+        f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)"
+    )
+    _print_unexplained(report.get("unexplained"))
+    doubt = (report.get("stability") or {}).get("doubt")
+    if doubt:
+        console.print(f"[yellow]{doubt}[/yellow]")
+    if "validation" in report:  # the final model, judged as a calibration is
+        from ..formats.verdict import Verdict
+
+        for line in tables.validation_lines(Verdict.of(report["validation"])):
+            console.print(line)
+    if "identified" in report:
+        ident = report["identified"]
+        console.print("held fixed: " + tables.fixed_parameters(
+            {f["parameter"]: f["why"] for f in ident["fixed"]}))  # fmt: skip
+        console.print(tables.joints_table(ident))
+        console.print(tables.frames_table(ident))
+        console.print(tables.correlations(ident))
+
+
+def _print_unexplained(block) -> None:
+    """What the final model leaves, and the covariates it follows most (strength 0..1)."""
+    from ..tables import console
+
+    if not block:
+        return
+    console.print(f"[bold]{block['reading']}[/bold]")
+    for c in block["covariates"]:
+        console.print(f"  {c['strength']:.2f}  {c['name']}: {c['reading']}")
+    if "per_pose_share" in block:
+        console.print(f"  per pose: {block['per_pose_reading']}")
+
+
+def _data_arguments(p) -> None:
+    """A campaign to read: a meas.csv or a database (with its campaign id), and the cell."""
+    p.add_argument("meas", help="meas.csv, or a campaign database (.db file or URL)")
+    p.add_argument(
+        "--cell",
+        help="cell.json (default: a database campaign's own cell, else the built-in IRB 2600 one)",
+    )
+    p.add_argument(
+        "--campaign",
+        type=_positive_int,
+        help="campaign id when MEAS is a database (default: latest)",
+    )
+
+
+def _outlier_argument(p) -> None:
+    p.add_argument(
+        "--keep-outliers",
+        action="store_true",
+        help="use every reading: skip the screening for gross outliers (mis-locks, "
+        "bumped SMRs) that otherwise excludes them and lists them",
+    )
+
+
+def _tolerance_argument(p) -> None:
+    p.add_argument(
+        "--tolerance-mm",
+        type=_positive,
+        metavar="T",
+        help="the accuracy the application needs (mm): a model whose held-out error exceeds it "
+        "is not deployable (default the cell's tolerance_mm; none: the verdict states the "
+        "expected accuracy)",
+    )
+
+
+def _with_tolerance(cell, args):
+    """The cell with --tolerance-mm, which wins over its cell.json's tolerance_mm."""
+    if args.tolerance_mm is None:
+        return cell
+    from dataclasses import replace
+
+    return replace(cell, tolerance_mm=args.tolerance_mm)

@@ -1,0 +1,69 @@
+"""`robocal evaluate`: a model's accuracy on measured data."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+from .common import _campaign_only_with_database, _note, _positive_int
+
+
+def cmd_evaluate(args) -> None:
+    from .. import tables, workflow
+    from ..formats.model_json import write_json_atomic
+    from ..tables import console
+
+    model = workflow.read_model(args.model)
+    _campaign_only_with_database(args)
+    if workflow.is_database(args.meas):
+        # The model's own robot reads the joints: the campaign's cell may differ in its targets.
+        _, meas = workflow.load_data(args.meas, None, args.campaign, note=_note)
+    else:
+        from ..formats.cell_json import Cell
+
+        meas = workflow.load_campaign(args.meas, Cell(model.robot, model.targets, None, {}, None))
+    try:
+        res = workflow.evaluate(model, meas)
+    except workflow.DataError as e:
+        raise workflow.DataError(f"{args.meas}: {e}") from None
+    from ..validation import absurd_errors
+
+    why = absurd_errors(res, model.verdict)
+    if why and not args.force:
+        raise workflow.DataError(f"{args.meas}: {why}; --force to evaluate anyway")
+    if why:
+        print(f"robocal: warning: {args.meas}: {why}", file=sys.stderr)
+    if "nominal" in res:
+        console.print(
+            tables.accuracy(
+                res["nominal"], "Nominal model (base and SMRs fitted)", meas.target_names
+            )
+        )
+    console.print(tables.accuracy(res["model"], f"Model {args.model}", meas.target_names))
+    if "improvement_pct" in res:
+        console.print(
+            "improvement over nominal: "
+            + ", ".join(
+                f"{k} {v:.1f}%" for k, v in res["improvement_pct"].items() if np.isfinite(v)
+            )
+        )
+    if args.json:
+        write_json_atomic(args.json, res)
+
+
+def add(sub) -> None:
+    """The command's parser, on the command line's subparsers."""
+    e = sub.add_parser("evaluate", help="accuracy of a model on measured data")
+    e.add_argument("model", help="model.json (robocal calibrate)")
+    e.add_argument("meas", help="meas.csv, or a campaign database (.db file or URL)")
+    e.add_argument(
+        "--campaign",
+        type=_positive_int,
+        help="campaign id when MEAS is a database (default: latest)",
+    )
+    e.add_argument("--json", help="also write the figures as JSON")
+    e.add_argument(
+        "--force", action="store_true", help="evaluate data whose errors say another cell"
+    )
+    e.set_defaults(func=cmd_evaluate)

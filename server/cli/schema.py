@@ -1,0 +1,19 @@
+"""`robocal schema`: the JSON Schemas of the files."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+def cmd_schema(args) -> None:
+    # The committed file (tests keep it equal to the model's): no pydantic import to print it.
+    folder = Path(__file__).parent / "formats" / "schema"
+    sys.stdout.write((folder / f"{args.file}.schema.json").read_text(encoding="utf-8"))
+
+
+def add(sub) -> None:
+    """The command's parser, on the command line's subparsers."""
+    sc = sub.add_parser("schema", help="the JSON Schema of cell.json, model.json or report.json")
+    sc.add_argument("file", choices=("cell", "model", "report"), help="which file's schema")
+    sc.set_defaults(func=cmd_schema)
