@@ -1,23 +1,38 @@
 """The campaign store: SQLite or PostgreSQL through SQLAlchemy, schema by Alembic."""
 
-from .access import (
+from .campaigns import (
     CampaignInfo,
-    JobInfo,
-    LeaseHeld,
-    PoseInfo,
-    ReadingInfo,
-    campaign_measurements,
     create_campaign,
-    create_job,
-    discard_unfinished_pose,
+    get_campaign,
+    list_campaigns,
+    set_status,
+)
+from .db import Database, open_database
+from .errors import Conflict, DatabaseGone, NotFound, StoreError, StoreUnavailable
+from .exchange import (
+    campaign_measurements,
     export_csv,
     export_lines,
-    fail_unfinished_jobs,
-    get_campaign,
-    get_job,
     import_csv,
-    list_campaigns,
+)
+from .jobs import (
+    JobInfo,
+    create_job,
+    fail_unfinished_jobs,
+    get_job,
     list_jobs,
+    update_job,
+)
+from .leases import (
+    LeaseHeld,
+    release_lease,
+    renew_lease,
+    take_lease,
+)
+from .readings import (
+    PoseInfo,
+    ReadingInfo,
+    discard_unfinished_pose,
     next_unmeasured_pose,
     planned_poses,
     pose_readings,
@@ -25,14 +40,7 @@ from .access import (
     record_missing,
     record_pose_outcome,
     record_reading,
-    release_lease,
-    renew_lease,
-    set_status,
-    take_lease,
-    update_job,
 )
-from .db import Database, open_database
-from .errors import Conflict, DatabaseGone, NotFound, StoreError, StoreUnavailable
 
 __all__ = [
     "JobInfo",

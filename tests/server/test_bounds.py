@@ -19,8 +19,8 @@ from robocal.server.formats.campaign_csv import read_campaign, write_campaign
 from robocal.server.formats.cell_json import cell_to_json, default_cell, parse_cell
 from robocal.server.formats.errors import InputError
 from robocal.server.formats.model_json import read_model
-from robocal.server.store import access
 from robocal.server.store import db as store_db
+from robocal.server.store import exchange
 from robocal.solver.measurements import Measurements
 from robocal.solver.robot import IRB2600
 
@@ -251,7 +251,7 @@ def test_a_large_import_holds_the_write_lock_only_briefly_while_a_campaign_recor
     assert not errors and recorded[0] > 0
     # One transaction per IMPORT_CHUNK readings (and the campaign's first and last), each far
     # below the busy timeout a concurrent writer waits.
-    assert len(durations) >= 12_000 // access.IMPORT_CHUNK + 2
+    assert len(durations) >= 12_000 // exchange.IMPORT_CHUNK + 2
     assert longest < store_db.BUSY_TIMEOUT_MS / 1000
     info = store.get_campaign(db, campaign_id=cid)
     assert (info.status, info.n_poses, info.n_done) == ("done", 4000, 4000)
@@ -263,9 +263,9 @@ def test_a_large_import_holds_the_write_lock_only_briefly_while_a_campaign_recor
 def test_a_failed_import_leaves_nothing(tmp_path, monkeypatch):
     big_campaign(tmp_path / "big.csv", 50)
     db = store.open_database(tmp_path / "robocal.db")
-    monkeypatch.setattr(access, "IMPORT_CHUNK", 30)
+    monkeypatch.setattr(exchange, "IMPORT_CHUNK", 30)
     calls = [0]
-    real = access._add_plan
+    real = exchange._add_plan
 
     def failing(*a, **k):
         calls[0] += 1
@@ -273,7 +273,7 @@ def test_a_failed_import_leaves_nothing(tmp_path, monkeypatch):
             raise RuntimeError("disk full")
         return real(*a, **k)
 
-    monkeypatch.setattr(access, "_add_plan", failing)
+    monkeypatch.setattr(exchange, "_add_plan", failing)
     with pytest.raises(RuntimeError):
         store.import_csv(
             db, path=tmp_path / "big.csv", cell_json=cell_to_json(default_cell()), name="big"
