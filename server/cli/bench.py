@@ -10,7 +10,7 @@ from .common import _nonnegative_int, _positive_int
 
 def _real_campaigns() -> list[Path]:
     """The real campaigns beside a checkout (../shared/data/real), when they are there."""
-    real = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+    real = Path(__file__).resolve().parents[3] / "shared" / "data" / "real"
     return sorted(p for p in real.glob("*") if p.is_dir())
 
 

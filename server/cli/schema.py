@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
+
+from ..formats.json_schema import committed
 
 
 def cmd_schema(args) -> None:
     # The committed file (tests keep it equal to the model's): no pydantic import to print it.
-    folder = Path(__file__).parent / "formats" / "schema"
-    sys.stdout.write((folder / f"{args.file}.schema.json").read_text(encoding="utf-8"))
+    sys.stdout.write(committed(args.file).read_text(encoding="utf-8"))
 
 
 def add(sub) -> None:
