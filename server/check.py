@@ -24,8 +24,8 @@ from .workflow import DataError, _pose_column, load_campaign, model_predict
 
 EXIT_RECALIBRATE = 3
 STEEL_PPM_PER_K = 11.7  # the thermal expansion of an arm's steel and cast iron
-FD_STEP_RAD = 1e-6
-PAYLOAD_TORQUE_SHARE = 0.1  # a joint whose gravity torque is below this share carries no load  # central differences of the model's prediction in one joint
+FD_STEP_RAD = 1e-6  # central differences of the model's prediction in one joint
+PAYLOAD_TORQUE_SHARE = 0.1  # a joint whose gravity torque is below this share carries no load
 VERDICTS = ("ok", "watch", "recalibrate")
 
 
