@@ -15,6 +15,7 @@ import numpy as np
 
 from robocal.solver import drift
 from robocal.solver.kinematics import joint_frames, predict
+from robocal.solver.measurements import Measurements
 
 from . import store
 from .formats.cell_json import Cell
@@ -78,9 +79,7 @@ def expected_rms(model: ModelFile) -> float:
     raise DataError("the model states no held-out or fit error to check against: calibrate again")
 
 
-def _readings(model: ModelFile, check_path) -> _Readings:
-    cell = Cell(model.robot, model.targets, None, {}, None)
-    meas = load_campaign(check_path, cell)
+def _readings(model: ModelFile, meas: Measurements, check_path) -> _Readings:
     unknown = [t for t in meas.target_names if t not in model.targets]
     if unknown:
         raise DataError(f"{check_path}: target {unknown[0]!r} is not in the model")
@@ -290,17 +289,28 @@ def _subset(r: _Readings, keep: np.ndarray) -> _Readings:
 
 
 def run_check(model_path, check_path, db: store.Database) -> CheckResult:
-    """Check a model on a check campaign, append it to the model's history; the result."""
+    """Check a model on a check campaign (a meas.csv), append it to the model's history; the
+    result."""
     model = read_model(model_path)
-    sha = file_digest(model_path)
+    meas = load_campaign(check_path, Cell(model.robot, model.targets, None, {}, None))
+    return check_measured(
+        model, file_digest(model_path), meas, db, where=check_path, source=Path(check_path).name
+    )
+
+
+def check_measured(
+    model: ModelFile, sha: str, meas: Measurements, db: store.Database, *, where, source: str
+) -> CheckResult:
+    """Check a model (its file's sha256) on a check's readings (`where` they come from, for
+    messages; `source` stored with the check), append it to the model's history; the result."""
     expected = expected_rms(model)
-    r = _readings(model, check_path)
+    r = _readings(model, meas, where)
     out: dict = {}
 
     def judged(history: list[CheckRecord]) -> NewCheck:
         new, change, cause = judge(model, r, history, expected)
         out.update(change=change, cause=cause)
-        return NewCheck(**{**vars(new), "source": Path(check_path).name})
+        return NewCheck(**{**vars(new), "source": source})
 
     history = append_check(db, sha, judged)
     last, change = history[-1], out["change"]

@@ -24,9 +24,10 @@ def _verify(args, cell) -> None:
     )
     with console.status("verifying: nominal joints, then compensated ones..."):
         report = verification.verify(args.db, cell, args.verify, opts)
-    verification.write(report, args.out)
+    out = args.out or "verification.json"
+    verification.write(report, out)
     console.print(verification_table(report))
-    written = [args.out]
+    written = [out]
     if args.certificate:
         from ..certificate import write_certificate
 
@@ -35,18 +36,76 @@ def _verify(args, cell) -> None:
     console.print(f"wrote {', '.join(written)}")
 
 
-def cmd_acquire(args) -> None:
+def _check(args, cell) -> int:
+    """`acquire --check model.json`: the model's check poses measured, judged, stored."""
+    from ..check import EXIT_RECALIBRATE
+    from ..check_plan import DEFAULT_POSES
+    from ..check_run import CheckRunOptions, acquire_check
+    from ..formats.model_json import write_json_atomic
+    from ..tables import console
+
+    if args.check_poses and args.poses is not None:
+        raise ValueError("--poses plans that many check poses; --check-poses gives them: not both")
+    opts = CheckRunOptions(
+        poses_path=args.check_poses,
+        poses=args.poses or DEFAULT_POSES,
+        seed=args.seed,
+        pause_s=args.pause,
+        settle=args.settle,
+        beam_break_rate=args.beam_break_rate,
+        effects=tuple(args.effect),
+    )
+    with _progress(console) as progress:
+        run = acquire_check(args.db, cell, args.check, opts, progress=progress, reset=args.reset)
+    if run.summary is not None:
+        _print_summary(console, run.summary)
+    if run.result is None:
+        assert run.summary is not None  # a done campaign is always judged
+        console.print(
+            f"check campaign {run.campaign} {run.summary['state']}, not judged; run the same "
+            "command again to resume it (with --reset after an e-stop)"
+        )
+        return 1
+    res = run.result
+    if run.summary is None:
+        console.print(f"check campaign {run.campaign} was measured before: judged now")
+    out = args.out or "check.json"
+    write_json_atomic(out, res.to_json())
+    console.print(f"{res.verdict} (check {res.history} of this model): {res.reason}")
+    console.print(f"wrote {out}; the check's history is in {args.db}")
+    return EXIT_RECALIBRATE if res.verdict == "recalibrate" else 0
+
+
+def _progress(console):
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+    )
+
+
+def cmd_acquire(args) -> int | None:
     from .. import workflow
     from ..acquire import AcquireOptions, acquire
     from ..tables import console
 
     cell = workflow.load_cell(args.cell)
+    if args.verify and args.check:
+        raise ValueError("--verify and --check are two runs: one at a time")
     if args.verify:
-        return _verify(args, cell)
+        _verify(args, cell)
+        return None
+    if args.check:
+        return _check(args, cell)
+    if args.check_poses:
+        raise ValueError("--check-poses: the poses of a check, with --check model.json")
     opts = AcquireOptions(
-        poses=args.poses,
+        poses=args.poses if args.poses is not None else 100,
         seed=args.seed,
         name=args.name,
         settle=args.settle,
@@ -56,15 +115,17 @@ def cmd_acquire(args) -> None:
         beam_break_rate=args.beam_break_rate,
         effects=tuple(args.effect),
     )
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-    ) as progress:
+    with _progress(console) as progress:
         summary = acquire(args.db, cell, opts, progress=progress, reset=args.reset)
+    _print_summary(console, summary)
+    console.print(
+        f"stored in {args.db}; calibrate with: robocal calibrate {args.db} "
+        f"--campaign {summary['campaign']}"
+    )
+    return None
+
+
+def _print_summary(console, summary: dict) -> None:
     if summary["resumed_at"] is not None:
         console.print(
             f"resumed campaign {summary['campaign']} ({summary['name']}) at pose "
@@ -87,10 +148,6 @@ def cmd_acquire(args) -> None:
             else ""
         )
     )
-    console.print(
-        f"stored in {args.db}; calibrate with: robocal calibrate {args.db} "
-        f"--campaign {summary['campaign']}"
-    )
 
 
 def add(sub) -> None:
@@ -105,7 +162,9 @@ def add(sub) -> None:
     )
     aq.add_argument("--cell", help="cell.json (default: the built-in IRB 2600 cell)")
     aq.add_argument(
-        "--poses", type=_positive_int, default=100, help="poses to measure (default 100)"
+        "--poses",
+        type=_positive_int,
+        help="poses to measure (default 100; with --check: check poses to plan, default 6)",
     )
     aq.add_argument(
         "--seed", type=_nonnegative_int, default=0, help="random seed of the poses (and the cell)"
@@ -151,7 +210,21 @@ def add(sub) -> None:
     aq.add_argument("--cycles", type=_positive_int, default=3, help="verification cycles")
     aq.add_argument("--directions", type=_directions, default=3, help="approach directions (1-6)")
     aq.add_argument("--side", type=_positive, default=400.0, help="the ISO cube's side, mm")
-    aq.add_argument("--out", default="verification.json", help="the verification's figures")
+    aq.add_argument(
+        "--check",
+        metavar="MODEL",
+        help="a quick check of model.json: its check poses (--check-poses, else planned as "
+        "`check --plan` does) measured, judged and appended to the model's history in --db",
+    )
+    aq.add_argument(
+        "--check-poses",
+        metavar="FILE",
+        help="with --check: the poses to measure, a poses.csv (`robocal check --plan`)",
+    )
+    aq.add_argument(
+        "--out",
+        help="the verification's figures (default verification.json); with --check: check.json",
+    )
     aq.add_argument("--certificate", help="also write the accuracy certificate (HTML) here")
     aq.add_argument(
         "--reset",

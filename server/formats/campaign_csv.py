@@ -337,3 +337,12 @@ def write_predictions(path, pose_ids, target_names, xyz) -> None:
 
 
 __all__ = ["joint_columns", "read_campaign", "read_poses", "write_campaign", "write_predictions"]
+
+
+def write_poses(path, pose_ids, q_rad) -> None:
+    """Write `poses.csv`: `pose,q1..qN` (degrees), one row a pose, atomically."""
+    q = np.asarray(q_rad, dtype=float)
+    if q.ndim != 2 or len(pose_ids) != len(q) or not np.all(np.isfinite(q)):
+        raise ValueError("poses must be finite (m, N) joints, one id a pose")
+    rows = [[str(p), *[f"{v:.9f}" for v in np.rad2deg(row)]] for p, row in zip(pose_ids, q)]
+    atomic_write_text(path, _csv_text(["pose", *[f"q{i}" for i in range(1, q.shape[1] + 1)]], rows))

@@ -1,0 +1,137 @@
+"""`robocal acquire --check model.json`: a model's check poses measured on the cell, then judged.
+
+The poses (a `check --plan` file, else the model's plan) run as a campaign named after the model
+through `acquire`: the same engine, e-stop and lease as any campaign, every reading stored as it
+arrives. A check cut off (an e-stop, a fault, a killed process) is resumed by running it again
+(with --reset after an e-stop), keeping what it measured. Once it is done, its readings are judged
+(server/check.py) and appended to the model's history in the same database; a done check campaign
+not yet in the history (the process ended between the two) is judged on the next run instead of
+measuring again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import store
+from .acquire import PREDICTOR, AcquireOptions, _opened, acquire
+from .check import CheckResult, check_measured
+from .check_plan import DEFAULT_POSES, check_poses
+from .formats.cell_json import Cell, robot_to_json
+from .formats.errors import InputError
+from .formats.model_json import file_digest, read_model
+from .store.model_checks import model_checks
+
+RECORD = "check"  # the campaign settings' key of the model checked
+NOISE_STREAM = 23  # the simulated tracker's draws of a check: a stream of their own
+
+
+@dataclass
+class CheckRunOptions:
+    """Which poses (a poses.csv, else `poses` planned) and how to acquire them."""
+
+    poses_path: str | None = None
+    poses: int = DEFAULT_POSES
+    seed: int = 0  # the simulated arm: the calibration campaign's seed
+    pause_s: float = 10.0
+    settle: str = "fixed"
+    samples: int = 1000
+    effects: tuple = ()  # hidden physics of the simulated arm (a change to find)
+    beam_break_rate: float = 0.0
+
+
+@dataclass(frozen=True)
+class CheckRun:
+    """The check campaign's acquisition summary and, once it is done, the check's result."""
+
+    campaign: int
+    summary: dict | None  # None: nothing measured now (a done campaign judged)
+    result: CheckResult | None  # None: the campaign did not end done (e-stopped, paused)
+
+
+def campaign_name(sha: str) -> str:
+    """The check campaigns of a model share its name: an unfinished one is resumed."""
+    return f"check-{sha[:12]}"
+
+
+def acquire_check(
+    db_path,
+    cell: Cell,
+    model_path,
+    opts: CheckRunOptions,
+    *,
+    reset: bool = False,
+    progress=None,
+    log=None,
+    on_engine=None,
+    on_event=None,
+) -> CheckRun:
+    """Measure (or resume, or judge) the model's check on the cell; what was done."""
+    model = read_model(model_path)
+    if set(model.targets) != set(cell.targets):
+        raise InputError(
+            model_path,
+            None,
+            None,
+            f"the model's SMRs {sorted(model.targets)} are not the cell's {sorted(cell.targets)}",
+        )
+    sha = file_digest(model_path)
+    name = campaign_name(sha)
+    with _opened(db_path) as db:
+        ours = [c for c in store.list_campaigns(db) if c.name == name]
+        judged = {r.source for r in model_checks(db, sha)}
+        waiting = [c for c in ours if c.status == "done" and _source(c.id) not in judged]
+        if waiting:
+            cid = max(c.id for c in waiting)
+            return CheckRun(cid, None, _judge(db, model, sha, cid))
+    ids, q = check_poses(model, opts.poses_path, opts.poses)
+    geometry = {
+        "robot": robot_to_json(model.robot),
+        "base": np.asarray(model.base).tolist(),
+        "targets": {k: np.asarray(v).tolist() for k, v in model.targets.items()},
+    }
+    settings = {RECORD: {"model_sha256": sha, "model": str(model_path)}, PREDICTOR: geometry}
+    run = AcquireOptions(
+        poses=len(q),
+        seed=opts.seed,
+        name=name,
+        settle=opts.settle,
+        pause_s=opts.pause_s,
+        samples=opts.samples,
+        beam_break_rate=opts.beam_break_rate,
+        effects=tuple(opts.effects),
+        # each check reads the same simulated arm with noise of its own
+        noise_seed=[opts.seed, NOISE_STREAM, len(ours)] if cell.simulated else None,
+    )
+    summary = acquire(
+        db_path,
+        cell,
+        run,
+        progress,
+        log,
+        reset=reset,
+        on_engine=on_engine,
+        on_event=on_event,
+        poses_deg=np.rad2deg(q),
+        labels=ids,
+        settings=settings,
+    )
+    cid = summary["campaign"]
+    if summary["state"] != "done":
+        return CheckRun(cid, summary, None)
+    with _opened(db_path) as db:
+        return CheckRun(cid, summary, _judge(db, model, sha, cid))
+
+
+def _source(campaign_id: int) -> str:
+    return f"campaign {campaign_id}"
+
+
+def _judge(db, model, sha: str, campaign_id: int) -> CheckResult:
+    meas = store.campaign_measurements(
+        db, campaign_id=campaign_id, robot=model.robot, targets=sorted(model.targets)
+    )
+    where = f"check campaign {campaign_id}"
+    return check_measured(model, sha, meas, db, where=where, source=_source(campaign_id))

@@ -1,0 +1,104 @@
+"""`robocal acquire --check model.json` on the simulated cell: the model's check poses run through
+the campaign engine (lease, e-stop, resume) into the database, then judged and appended to the
+model's history; an e-stop mid-pose and a resume lose and duplicate nothing, and a check measured
+but not yet judged is judged on the next run rather than measured again."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from robocal.drivers.plan import Measure
+from robocal.server import check_run, store
+from robocal.server.acquire import AcquireOptions, acquire
+from robocal.server.formats.cell_json import default_cell
+from robocal.server.formats.model_json import file_digest
+from robocal.server.store.model_checks import model_checks
+from tests.server.test_acquire import counts
+from tests.server.test_cli import robocal
+
+SEED = 3
+PAUSE_S = 1.0
+CONTRACT = {"model_sha256", "poses", "rms_mm", "max_mm", "expected_rms_mm", "verdict", "reason"}
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    """A database holding a campaign of the simulated arm of SEED, and model.json from it."""
+    d = tmp_path_factory.mktemp("checkacq")
+    acquire(d / "cal.db", default_cell(), AcquireOptions(poses=60, seed=SEED, pause_s=PAUSE_S))
+    r = robocal("calibrate", "cal.db", "--out", "model.json", cwd=d)
+    assert r.returncode == 0, r.stderr
+    return d
+
+
+def test_estop_mid_pose_resume_and_judge_lose_nothing(calibrated, store_url):
+    model = calibrated / "model.json"
+    opts = check_run.CheckRunOptions(seed=SEED, pause_s=PAUSE_S)
+    cell = default_cell()
+
+    def stop_at_pose_3(engine):
+        target = engine.predictor.names[1]
+        engine.trace = lambda msg: msg == Measure(3, target) and engine.estop()
+
+    run = check_run.acquire_check(store_url, cell, model, opts, on_engine=stop_at_pose_3)
+    assert run.result is None and run.summary["state"] == "estopped"
+    ok_before, _, dup, outcomes = counts(store_url)
+    assert (outcomes, dup) == (3, 0) and ok_before == 3 * 3 + 1  # pose 3 cut after one SMR
+    with pytest.raises(store.Conflict, match="--reset"):
+        check_run.acquire_check(store_url, cell, model, opts)
+    run = check_run.acquire_check(store_url, cell, model, opts, reset=True)
+    assert run.summary["resumed_at"] == 3 and run.summary["state"] == "done"
+    ok, missing, dup, outcomes = counts(store_url)
+    assert (ok + missing, dup, outcomes) == (18, 0, 6) and ok >= ok_before
+    [info] = store.list_campaigns(store.open_database(store_url))
+    assert info.name == check_run.campaign_name(file_digest(model)) and info.status == "done"
+    res = run.result
+    assert res is not None and res.poses == 6 and res.history == 1 and res.verdict == "ok"
+    [rec] = model_checks(store.open_database(store_url), file_digest(model))
+    assert rec.source == f"campaign {info.id}" and len(rec.errors) == ok
+    # the next check: a campaign of its own, the same poses, judged against the first
+    again = check_run.acquire_check(store_url, cell, model, opts)
+    assert again.campaign != run.campaign and again.result.history == 2
+    assert again.result.verdict == "ok", again.result.reason
+    db = store.open_database(store_url)
+    first, second = (
+        [p.joints_deg for p in store.planned_poses(db, campaign_id=c)]
+        for c in (run.campaign, again.campaign)
+    )
+    assert first == second
+
+
+def test_a_check_measured_but_not_judged_is_judged_on_the_next_run(
+    calibrated, tmp_path, monkeypatch
+):
+    model = calibrated / "model.json"
+    db = tmp_path / "h.db"
+    opts = check_run.CheckRunOptions(seed=SEED, pause_s=PAUSE_S, poses=4)
+    real = check_run.check_measured
+
+    def ended(*a, **k):
+        raise KeyboardInterrupt  # the process ends between the acquisition and the judgement
+
+    monkeypatch.setattr(check_run, "check_measured", ended)
+    with pytest.raises(KeyboardInterrupt):
+        check_run.acquire_check(db, default_cell(), model, opts)
+    monkeypatch.setattr(check_run, "check_measured", real)
+    run = check_run.acquire_check(db, default_cell(), model, opts)
+    assert run.summary is None and run.result.history == 1 and run.result.poses == 4
+    assert len(store.list_campaigns(store.open_database(db))) == 1
+
+
+def test_acquire_check_on_the_command_line_with_planned_poses(calibrated, tmp_path):
+    (tmp_path / "model.json").write_bytes((calibrated / "model.json").read_bytes())
+    r = robocal("check", "--plan", 5, "model.json", "--out", "poses.csv", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    args = ["acquire", "--check", "model.json", "--db", "h.db", "--seed", SEED]
+    r = robocal(*args, "--check-poses", "poses.csv", "--pause", PAUSE_S, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "check.json").read_text())
+    assert CONTRACT <= set(doc) and doc["poses"] == 5 and doc["history"] == 1, doc
+    assert "ok (check 1 of this model)" in r.stdout
+    r = robocal(*args, "--check-poses", "poses.csv", "--poses", 3, cwd=tmp_path)
+    assert r.returncode == 1 and "not both" in r.stderr and "Traceback" not in r.stderr
