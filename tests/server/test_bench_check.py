@@ -24,3 +24,18 @@ def test_checks_rarely_false_alarm_and_find_each_change_within_two(tmp_path):
     assert {a["arm"] for a in doc["arms"]} == {"irb2600", "kuka-like", "random"}
     d = doc["durations"]
     assert d["check_campaign_simulated_s"] < d["calibration_campaign_simulated_s"]
+    cell = doc["on_the_cell"]
+    assert cell["check"]["campaign_simulated_s"] < cell["target_check_s"], cell
+
+
+def test_a_check_on_the_cell_takes_under_two_minutes_and_a_recalibration_far_more():
+    """On the simulated cell, through acquire: the 6 planned check poses at the paper's 10 s
+    pause, against the default 100-pose campaign (simulated time, not wall: no timed test)."""
+    from robocal.server.bench.check import on_the_cell
+
+    cell = on_the_cell()
+    print(json.dumps(cell))
+    check, full = cell["check"], cell["recalibration"]
+    assert check["poses"] == 6 and check["verdict"] == "ok", check
+    assert check["campaign_simulated_s"] < cell["target_check_s"]
+    assert check["campaign_simulated_s"] < full["campaign_simulated_s"] / 5
