@@ -1,9 +1,10 @@
 """`robocal check --plan N`: a model's check poses, chosen once and reused by every check.
 
 Candidates are random poses within the limits that the tracker sees (drivers.planning, on the
-model's arm and base), drawn from a fixed seed so that the same model plans the same poses; the N
-that make the check's change kinds most visible are chosen (solver.check_plan) and ordered for
-a short path from the arm's home.
+model's arm and base), drawn from a fixed seed so that the same model plans the same poses, and
+kept to those where the model is as good as its held-out error (not extrapolating); the N that
+make the check's change kinds most visible are chosen (solver.check_plan) and ordered for a
+short path from the arm's home.
 """
 
 from __future__ import annotations
@@ -22,6 +23,9 @@ DEFAULT_POSES = 6
 MIN_POSES = 2  # a check compares at least two poses with its baseline (drift.since_baseline)
 MAX_POSES = 100
 CANDIDATES = 1000
+# The candidates kept: those of leverage in the calibration design at most the median's, poses
+# where the model predicts at least as well as on a typical pose (solver.check_plan.interior).
+INTERIOR_SHARE = 0.5
 PLAN_SEED = 0x23C4  # fixed: a model's plan is the same every time it is made
 # The smallest zero slip a check is asked to see (a gear or encoder change, issue 23): a joint
 # whose slip of this size moves no candidate pose's SMR mean by the arm's repeatability (per
@@ -52,12 +56,21 @@ class CheckPlan:
 
 def plan_check(model: ModelFile, n: int = DEFAULT_POSES) -> CheckPlan:
     """The n check poses of the model (ValueError outside MIN_POSES..MAX_POSES)."""
-    from robocal.drivers.planning import order_poses, plan_poses, total_move_time
+    from robocal.drivers.planning import (
+        candidate_jacobians,
+        order_poses,
+        plan_poses,
+        total_move_time,
+    )
 
     if not MIN_POSES <= n <= MAX_POSES:
         raise ValueError(f"--plan: {n} poses; a check plans {MIN_POSES} to {MAX_POSES}")
     rng = np.random.default_rng(PLAN_SEED)
     cand = plan_poses(model.robot, model.base, model.targets, CANDIDATES, rng)
+    # the calibration's poses were drawn like these: keep those where the model is as good as
+    # its held-out error, which the check's level is judged against
+    ident = candidate_jacobians(model.robot, model.base, model.targets, cand)
+    cand = cand[cp.interior(ident, INTERIOR_SHARE)]
     lay, x = model.layout()
     design = cp.change_design(lay, x, cand, np.asarray(model.base)[:3, 3], VISIBLE_MM_PER_RAD)
     chosen = cp.choose(design, n)

@@ -77,6 +77,14 @@ def acquire_check(
             None,
             f"the model's SMRs {sorted(model.targets)} are not the cell's {sorted(cell.targets)}",
         )
+    if model.robot.n_joints != cell.robot.n_joints:
+        raise InputError(
+            model_path,
+            None,
+            None,
+            f"the model's arm has {model.robot.n_joints} joints, the cell's "
+            f"{cell.robot.n_joints}: not a model of this cell",
+        )
     sha = file_digest(model_path)
     name = campaign_name(sha)
     with _opened(db_path) as db:

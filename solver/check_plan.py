@@ -6,7 +6,9 @@ or a scale (the arm warmed). The check poses are chosen, out of candidates, to m
 J'J of those change parameters (D-optimality), J the pose means' motion under each change; a
 joint whose zero is itself a rigid motion (joint 1 turns every point about the base's axis) is
 left to the rigid motion, which absorbs it; one whose zero hardly moves the SMRs' mean at any pose
-(the last joint turns the SMRs about their own centre) is left out as invisible to a check.
+(the last joint turns the SMRs about their own centre) is left out as invisible to a check. The
+candidates are first kept to the interior of the calibration's design (interior()), where the
+model is as good as its held-out error says.
 """
 
 from __future__ import annotations
@@ -42,10 +44,14 @@ class ChangeDesign:
         return out
 
 
-def change_design(layout: Layout, x, q, origin, visible_mm_per_rad: float = 0.0) -> ChangeDesign:
+def change_design(
+    layout: Layout, x, q, origin, visible_mm_per_rad: float = 0.0, like: ChangeDesign | None = None
+) -> ChangeDesign:
     """The change design of poses q (m, N) rad on the model (layout, x); rotations and the scale
     about origin (3,) mm, the robot's base in the tracker frame. A joint whose zero moves no
-    pose's SMR mean by visible_mm_per_rad (its largest lever arm, mm) is left out."""
+    pose's SMR mean by visible_mm_per_rad (its largest lever arm, mm) is left out, and one the
+    rigid motion absorbs over these poses; given `like`, the joints it kept (a few poses' design
+    in the parameters of their candidates')."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     o = np.asarray(origin, dtype=float)
     c = predict(layout, x, q).mean(axis=1) - o  # (m, 3) each pose's SMR mean about the origin
@@ -63,9 +69,21 @@ def change_design(layout: Layout, x, q, origin, visible_mm_per_rad: float = 0.0)
         plus = predict(layout, x, q + step).mean(axis=1)
         minus = predict(layout, x, q - step).mean(axis=1)
         joints[:, :, j] = (plus - minus) / (2 * FD_STEP_RAD)
+    if like is None:
+        keep, absorbed, invisible = _kept_joints(rigid, joints, visible_mm_per_rad)
+    else:
+        keep = [j for j in range(n_j) if f"joint {j + 1}" in like.names]
+        absorbed, invisible = like.absorbed, like.invisible
+    J = np.concatenate([rigid, joints[:, :, keep], c[:, :, None]], axis=2)
+    names = (*RIGID_NAMES, *(f"joint {j + 1}" for j in keep), "scale")
+    return ChangeDesign(J, names, tuple(absorbed), tuple(invisible))
+
+
+def _kept_joints(rigid, joints, visible_mm_per_rad: float):
+    """The joints (0-based) a design keeps, and those (1-based) absorbed and invisible."""
     R = rigid.reshape(-1, 6)
     keep, absorbed, invisible = [], [], []
-    for j in range(n_j):
+    for j in range(joints.shape[2]):
         col = joints[:, :, j].ravel()
         coef, *_ = np.linalg.lstsq(R, col, rcond=None)
         size = np.linalg.norm(col)
@@ -75,9 +93,23 @@ def change_design(layout: Layout, x, q, origin, visible_mm_per_rad: float = 0.0)
             invisible.append(j + 1)
         else:
             keep.append(j)
-    J = np.concatenate([rigid, joints[:, :, keep], c[:, :, None]], axis=2)
-    names = (*RIGID_NAMES, *(f"joint {j + 1}" for j in keep), "scale")
-    return ChangeDesign(J, names, tuple(absorbed), tuple(invisible))
+    return keep, absorbed, invisible
+
+
+def interior(J_id, share: float = 0.5) -> np.ndarray:
+    """(m,) bool: the poses whose leverage in the calibration design J_id (per pose, as
+    observability takes it) is at most its `share` quantile over the poses.
+
+    A model fitted on poses drawn like these predicts a pose with an error that grows with the
+    pose's leverage (sigma^2 h for its parameters; its unmodelled effects extrapolate alike), and
+    its held-out error is their average: a check judged against that figure must not measure
+    only the poses where the model extrapolates, which D-optimality alone would pick.
+    """
+    J = obs.unit_columns(J_id)
+    J = J.dense() if isinstance(J, obs.PoseJacobians) else np.asarray(J, dtype=float)
+    M = np.einsum("nrp,nrq->pq", J, J)
+    h = np.einsum("nrp,pq,nrq->n", J, np.linalg.pinv(M), J)
+    return h <= np.quantile(h, share)
 
 
 def choose(design: ChangeDesign, n: int) -> np.ndarray:

@@ -1,8 +1,9 @@
 """`robocal bench check`: quick checks of calibrated simulated arms, clean and after a change.
 
 Each arm (the IRB 2600, a KUKA-like arm, a random 6R arm) is a virtual cell with a compliant
-joint 2 under a random mass model, calibrated (minimax) on 60 poses. Six fixed check poses are
-then measured again and again: a run of clean checks (the false alarms), and per kind of change
+joint 2 under a random mass model, calibrated (minimax) on 60 poses. Six fixed check poses
+(planned from the model as `check --plan` does, or random valid poses) are then measured again
+and again: a run of clean checks (the false alarms), and per kind of change
 five clean checks followed by checks after the change (the delay to `recalibrate` and the cause
 named): the tracker bumped 0.1 mm, a joint's zero slipping 5 mdeg (joint 2 or 3), 10 kg more
 payload, the arm 5 K warmer. On the simulated cell, through the devices and the store: a full
@@ -113,8 +114,9 @@ def _duration(meas) -> float:
     return float(np.nanmax(meas.time_s)) if meas.time_s is not None else float("nan")
 
 
-def run_arm(arm: str, seed: int, clean: int, changes: int) -> dict:
-    """One arm: `clean` clean checks, then per kind `changes` histories with a change."""
+def run_arm(arm: str, seed: int, clean: int, changes: int, poses: str = "planned") -> dict:
+    """One arm: `clean` clean checks, then per kind `changes` histories with a change; the check
+    poses planned from the model (`check --plan`) or random valid poses of the cell."""
     from .. import store
 
     vc = arm_cell(arm, seed)
@@ -123,21 +125,26 @@ def run_arm(arm: str, seed: int, clean: int, changes: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         out["calibration_campaign_s"] = _calibrated(vc, seed, d)
-        poses = vc.sample_poses(CHECK_POSES, rng)
+        q = vc.sample_poses(CHECK_POSES, rng)  # drawn either way: the same changes follow
+        if poses == "planned":
+            from ..check_plan import plan_check
+            from ..formats.model_json import read_model
+
+            q = plan_check(read_model(d / "model.json"), CHECK_POSES).q
         with store.open_database(d / "clean.db") as db:
             for k in range(clean):
-                res, sim_s, wall = _check(vc, poses, 1000 + k, d, db)
+                res, sim_s, wall = _check(vc, q, 1000 + k, d, db)
                 out["clean"].append(res.verdict)
         out["check_campaign_s"], out["check_wall_s"] = sim_s, wall
         for kind in KINDS:
             for c in range(changes):
                 with store.open_database(d / f"{kind}{c}.db") as db:
                     for k in range(BEFORE):
-                        _check(vc, poses, 2000 + 100 * c + k, d, db)
+                        _check(vc, q, 2000 + 100 * c + k, d, db)
                     after, cause = changed(vc, kind, rng)
                     delay, named = None, None
                     for k in range(AFTER):
-                        res, *_ = _check(after, poses, 3000 + 100 * c + k, d, db)
+                        res, *_ = _check(after, q, 3000 + 100 * c + k, d, db)
                         if res.verdict == "recalibrate":
                             delay, named = k + 1, res.cause
                             break
@@ -216,13 +223,17 @@ def on_the_cell(seed: int = 0) -> dict:
 CHECK_TARGET_S = 120.0  # issue 23: a quick check of 6 poses within 2 minutes on the cell
 
 
-def run_check_bench(seeds: int = 1, clean: int = 70, changes: int = 3) -> dict:
-    """Every arm on `seeds` seeds; the summary, the per-arm runs and the durations."""
+def run_check_bench(
+    seeds: int = 1, clean: int = 70, changes: int = 3, poses: str = "planned"
+) -> dict:
+    """Every arm on `seeds` seeds, its check poses `planned` or `random`; the summary, the
+    per-arm runs and the durations."""
     t0 = time.perf_counter()
     cell = on_the_cell()
-    arms = [run_arm(arm, s, clean, changes) for s in range(seeds) for arm in ARMS]
+    arms = [run_arm(arm, s, clean, changes, poses) for s in range(seeds) for arm in ARMS]
     wall = time.perf_counter() - t0
     return {
+        "check_poses": poses,
         "summary": summarize(arms),
         "on_the_cell": cell,
         "durations": {

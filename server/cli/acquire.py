@@ -46,6 +46,14 @@ def _check(args, cell) -> int:
 
     if args.check_poses and args.poses is not None:
         raise ValueError("--poses plans that many check poses; --check-poses gives them: not both")
+    planned = [o for o, v in (("--name", args.name), ("--order", args.order)) if v]
+    if args.choose_from:
+        planned.append("--choose-from")
+    if planned:
+        raise ValueError(
+            f"{', '.join(planned)}: a check's poses are planned by `check --plan` (ordered, "
+            "chosen) and its campaign named after the model; drop them with --check"
+        )
     opts = CheckRunOptions(
         poses_path=args.check_poses,
         poses=args.poses or DEFAULT_POSES,

@@ -58,7 +58,9 @@ def cmd_bench(args) -> None:
     elif args.what == "check":
         from ..bench.check import run_check_bench
 
-        result = run_check_bench(clean=args.clean or 70)
+        result = run_check_bench(
+            clean=args.clean or 70, poses="random" if args.random_check_poses else "planned"
+        )
     elif args.what == "validation":
         from ..bench import validation as bench_validation
 
@@ -118,6 +120,11 @@ def add(sub) -> None:
         "--clean",
         type=_positive_int,
         help="diagnose: clean campaigns (default 200); check: clean checks an arm (default 70)",
+    )
+    b.add_argument(
+        "--random-check-poses",
+        action="store_true",
+        help="check: random valid check poses rather than those `check --plan` picks",
     )
     b.add_argument(
         "--split-cases",

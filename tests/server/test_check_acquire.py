@@ -100,5 +100,60 @@ def test_acquire_check_on_the_command_line_with_planned_poses(calibrated, tmp_pa
     doc = json.loads((tmp_path / "check.json").read_text())
     assert CONTRACT <= set(doc) and doc["poses"] == 5 and doc["history"] == 1, doc
     assert "ok (check 1 of this model)" in r.stdout
-    r = robocal(*args, "--check-poses", "poses.csv", "--poses", 3, cwd=tmp_path)
-    assert r.returncode == 1 and "not both" in r.stderr and "Traceback" not in r.stderr
+    for extra, says in (
+        (("--check-poses", "poses.csv", "--poses", 3), "not both"),
+        (("--order",), "--order: a check's poses are planned"),
+        (("--verify", "model.json"), "one at a time"),
+    ):
+        r = robocal(*args, *extra, cwd=tmp_path)
+        assert r.returncode == 1 and says in r.stderr and "Traceback" not in r.stderr, r.stderr
+    r = robocal("acquire", "--check-poses", "poses.csv", "--db", "h.db", cwd=tmp_path)
+    assert r.returncode == 1 and "with --check" in r.stderr, r.stderr
+
+
+def test_ctrl_c_estops_a_check_on_the_command_line_and_reset_resumes_it(calibrated, tmp_path):
+    """Ctrl-C mid-check e-stops the arm (exit 130); the check waits for --reset, then resumes at
+    the next pose and is judged with every reading once."""
+    import signal
+    import subprocess
+    import time
+
+    from sqlalchemy.exc import DBAPIError
+
+    from tests.server.test_acquire import CMD
+
+    (tmp_path / "model.json").write_bytes((calibrated / "model.json").read_bytes())
+    db = tmp_path / "h.db"
+    n = 60  # enough poses that the interrupt lands mid-run
+    args = ["acquire", "--check", "model.json", "--db", "h.db", "--seed", SEED, "--poses", n]
+    proc = subprocess.Popen(
+        CMD + list(map(str, args)),
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+        try:
+            if counts(db)[3] >= 10:
+                break
+        except DBAPIError:  # not made yet
+            continue
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130 and "--reset" in err, err
+    ok_before, _, _, done_before = counts(db)
+    assert 10 <= done_before < n, "the interrupt must land mid-check"
+    [info] = store.list_campaigns(store.open_database(db))
+    assert info.status == "estopped"
+    r = robocal(*args, cwd=tmp_path)
+    assert r.returncode == 1 and "--reset" in r.stderr and "Traceback" not in r.stderr
+    r = robocal(*args, "--reset", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert f"at pose {done_before + 1}" in r.stdout, r.stdout
+    ok, missing, dup, outcomes = counts(db)
+    assert (ok + missing, dup, outcomes) == (3 * n, 0, n) and ok >= ok_before
+    doc = json.loads((tmp_path / "check.json").read_text())
+    assert doc["poses"] == n and doc["history"] == 1 and doc["verdict"] == "ok", doc
