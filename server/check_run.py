@@ -1,7 +1,7 @@
 """`robocal acquire --check model.json`: a model's check poses measured on the cell, then judged.
 
-The poses (a `check --plan` file, else the model's plan) run as a campaign named after the model
-through `acquire`: the same engine, e-stop and lease as any campaign, every reading stored as it
+The poses (a `check --plan` file, else those of the model's first check in this database, else the
+model's plan) run as a campaign named after the model through `acquire`: the same engine, e-stop and lease as any campaign, every reading stored as it
 arrives. A check cut off (an e-stop, a fault, a killed process) is resumed by running it again
 (with --reset after an e-stop), keeping what it measured. Once it is done, its readings are judged
 (server/check.py) and appended to the model's history in the same database; a done check campaign
@@ -30,10 +30,11 @@ NOISE_STREAM = 23  # the simulated tracker's draws of a check: a stream of their
 
 @dataclass
 class CheckRunOptions:
-    """Which poses (a poses.csv, else `poses` planned) and how to acquire them."""
+    """Which poses (a poses.csv, else `poses` planned, else those of the model's first check in
+    the database, else DEFAULT_POSES planned) and how to acquire them."""
 
     poses_path: str | None = None
-    poses: int = DEFAULT_POSES
+    poses: int | None = None
     seed: int = 0  # the simulated arm: the calibration campaign's seed
     pause_s: float = 10.0
     settle: str = "fixed"
@@ -91,10 +92,20 @@ def acquire_check(
         ours = [c for c in store.list_campaigns(db) if c.name == name]
         judged = {r.source for r in model_checks(db, sha)}
         waiting = [c for c in ours if c.status == "done" and _source(c.id) not in judged]
-        if waiting:
-            cid = max(c.id for c in waiting)
+        if waiting:  # the oldest first: the history keeps the order they were measured in
+            cid = min(c.id for c in waiting)
             return CheckRun(cid, None, _judge(db, model, sha, cid))
-    ids, q = check_poses(model, opts.poses_path, opts.poses)
+        earlier = [c for c in ours if c.n_poses > 0]
+        given = opts.poses_path is not None or opts.poses is not None
+        if earlier and not given:
+            # the poses of the model's first check here: a plan made again elsewhere (another
+            # numpy, another machine) could differ in a near tie, and the history would not match
+            planned = store.planned_poses(db, campaign_id=min(c.id for c in earlier))
+            ids = [p.label for p in planned]
+            q_deg = np.array([p.joints_deg for p in planned])
+    if given or not earlier:
+        ids, q = check_poses(model, opts.poses_path, opts.poses or DEFAULT_POSES)
+        q_deg = np.rad2deg(q)
     geometry = {
         "robot": robot_to_json(model.robot),
         "base": np.asarray(model.base).tolist(),
@@ -102,7 +113,7 @@ def acquire_check(
     }
     settings = {RECORD: {"model_sha256": sha, "model": str(model_path)}, PREDICTOR: geometry}
     run = AcquireOptions(
-        poses=len(q),
+        poses=len(q_deg),
         seed=opts.seed,
         name=name,
         settle=opts.settle,
@@ -122,7 +133,7 @@ def acquire_check(
         reset=reset,
         on_engine=on_engine,
         on_event=on_event,
-        poses_deg=np.rad2deg(q),
+        poses_deg=q_deg,
         labels=ids,
         settings=settings,
     )

@@ -39,7 +39,6 @@ def _verify(args, cell) -> None:
 def _check(args, cell) -> int:
     """`acquire --check model.json`: the model's check poses measured, judged, stored."""
     from ..check import EXIT_RECALIBRATE
-    from ..check_plan import DEFAULT_POSES
     from ..check_run import CheckRunOptions, acquire_check
     from ..formats.model_json import write_json_atomic
     from ..tables import console
@@ -56,7 +55,7 @@ def _check(args, cell) -> int:
         )
     opts = CheckRunOptions(
         poses_path=args.check_poses,
-        poses=args.poses or DEFAULT_POSES,
+        poses=args.poses,
         seed=args.seed,
         pause_s=args.pause,
         settle=args.settle,
@@ -221,8 +220,9 @@ def add(sub) -> None:
     aq.add_argument(
         "--check",
         metavar="MODEL",
-        help="a quick check of model.json: its check poses (--check-poses, else planned as "
-        "`check --plan` does) measured, judged and appended to the model's history in --db",
+        help="a quick check of model.json: its check poses (--check-poses; else those of its "
+        "first check in --db; else planned as `check --plan` does, --poses of them, default 6) "
+        "measured, judged and appended to the model's history in --db",
     )
     aq.add_argument(
         "--check-poses",

@@ -1,7 +1,8 @@
 """`robocal acquire --check model.json` on the simulated cell: the model's check poses run through
 the campaign engine (lease, e-stop, resume) into the database, then judged and appended to the
-model's history; an e-stop mid-pose and a resume lose and duplicate nothing, and a check measured
-but not yet judged is judged on the next run rather than measured again."""
+model's history; an e-stop mid-pose and a resume lose and duplicate nothing, a check measured
+but not yet judged is judged on the next run rather than measured again, and a model's later
+checks measure the poses of its first."""
 
 from __future__ import annotations
 
@@ -70,7 +71,7 @@ def test_estop_mid_pose_resume_and_judge_lose_nothing(calibrated, store_url):
     assert first == second
 
 
-def test_a_check_measured_but_not_judged_is_judged_on_the_next_run(
+def test_a_check_measured_but_not_judged_is_judged_next_and_later_ones_reuse_its_poses(
     calibrated, tmp_path, monkeypatch
 ):
     model = calibrated / "model.json"
@@ -88,6 +89,14 @@ def test_a_check_measured_but_not_judged_is_judged_on_the_next_run(
     run = check_run.acquire_check(db, default_cell(), model, opts)
     assert run.summary is None and run.result.history == 1 and run.result.poses == 4
     assert len(store.list_campaigns(store.open_database(db))) == 1
+
+    def planned(*a, **k):
+        raise AssertionError("the model's later checks measure its first check's poses")
+
+    monkeypatch.setattr(check_run, "check_poses", planned)
+    default = check_run.CheckRunOptions(seed=SEED, pause_s=PAUSE_S)
+    run = check_run.acquire_check(db, default_cell(), model, default)
+    assert run.summary["state"] == "done" and run.result.history == 2 and run.result.poses == 4
 
 
 def test_acquire_check_on_the_command_line_with_planned_poses(calibrated, tmp_path):
