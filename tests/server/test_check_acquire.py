@@ -16,6 +16,7 @@ from robocal.server.acquire import AcquireOptions, acquire
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.model_json import file_digest
 from robocal.server.store.model_checks import model_checks
+from tests.server.api.test_real_devices import devices  # noqa: F401 - a fixture
 from tests.server.test_acquire import counts
 from tests.server.test_cli import robocal
 
@@ -166,3 +167,21 @@ def test_ctrl_c_estops_a_check_on_the_command_line_and_reset_resumes_it(calibrat
     assert (ok + missing, dup, outcomes) == (3 * n, 0, n) and ok >= ok_before
     doc = json.loads((tmp_path / "check.json").read_text())
     assert doc["poses"] == n and doc["history"] == 1 and doc["verdict"] == "ok", doc
+
+
+def test_a_check_on_real_devices_over_their_addresses(tmp_path, devices):
+    """A cell whose tracker and controller are servers at addresses (the simulated ones on the
+    wall clock): the check runs through their clients and is judged like any other."""
+    from robocal.server.formats.campaign_csv import write_campaign
+    from robocal.server.formats.cell_json import parse_cell
+    from tests.server.api.test_real_devices import cell_json
+
+    write_campaign(tmp_path / "train.csv", devices.cell.campaign(60, 11))
+    r = robocal("calibrate", "train.csv", "--out", "model.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    cell = parse_cell(json.dumps(cell_json(devices)))
+    opts = check_run.CheckRunOptions(pause_s=0.05, samples=20)
+    run = check_run.acquire_check(tmp_path / "h.db", cell, tmp_path / "model.json", opts)
+    assert run.summary["state"] == "done" and run.summary["simulated"] is False
+    assert run.result.poses == 6 and run.result.verdict == "ok", run.result.reason
+    assert len([m for m in devices.controller.received if "MOVEJ" in m]) == 6
