@@ -209,8 +209,9 @@ def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
     """(tracker, controller) clients: of the simulated devices, else of the cell's real ones,
     each asked once so that a wrong address fails the run before the arm moves."""
     from robocal.drivers.abb.client import ControllerClient, ControllerError
+    from robocal.drivers.line_errors import ProtocolError
     from robocal.drivers.tracker.client import TrackerClient
-    from robocal.drivers.tracker.protocol import ProtocolError, TrackerError
+    from robocal.drivers.tracker.protocol import TrackerError
 
     if sim is not None:
         tracker = TrackerClient("127.0.0.1", sim.tracker_server.port)
