@@ -22,6 +22,13 @@ from .formats.model_json import (
     read_model,
     uncertainty_to_json,
 )
+from .validation import (
+    absurd_errors,
+    json_number,
+    noise_floor,
+    tracker_spec,
+    validation_block,
+)
 
 # The fit, the screening and the diagnosis pull in scipy (seconds on a busy machine): imported in
 # the functions that run them, so `robocal predict` starts with numpy alone.
@@ -189,8 +196,6 @@ def run_method(
     every reading, a Screening reuses one already made (compare screens once for all methods)."""
     from robocal.solver.calibrate import calibrate
 
-    from .validation import noise_floor
-
     screened = screen_campaign(cell, meas) if screening is True else screening or None
     use = without_outliers(meas, screened)
     targets = np.array([cell.targets[t] for t in meas.target_names])
@@ -277,8 +282,6 @@ def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit
     from robocal.solver import validation as guard
     from robocal.solver.fit_errors import point_errors
 
-    from .validation import noise_floor, validation_block
-
     floor, source = noise_floor(cell, used)
     v = guard.judge(
         fit_rms_mm=fit_rms,
@@ -325,8 +328,6 @@ def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
     """The nominal model's RMS error (mm a reading) on the readings, its base and SMRs
     registered on them: what the calibration is to improve on."""
     from robocal.solver.calibrate import calibrate
-
-    from .validation import json_number
 
     targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
     nom = calibrate(
@@ -421,6 +422,21 @@ def evaluate(model: ModelFile, meas: Measurements) -> dict:
     return out
 
 
+def held_out_errors(model: ModelFile, meas: Measurements) -> dict:
+    """A calibration's errors on readings it was not fitted on (mm; RMS and max per reading,
+    the nominal model's RMS registered on them), with a warning when they say the data is not
+    of the model's cell."""
+    result = evaluate(model, meas)
+    return {
+        "poses": int(np.any(meas.mask, axis=1).sum()),
+        "readings": int(meas.mask.sum()),
+        "rms_mm": json_number(result["model"]["rmse"]),
+        "max_mm": json_number(result["model"]["ap"]["max"]),
+        "nominal_rms_mm": json_number(result["nominal"]["rmse"]) if "nominal" in result else None,
+        "warning": absurd_errors(result, model.verdict),
+    }
+
+
 def _pose_column(a):
     """Per-pose value of a per-reading column (the first measured reading of each pose)."""
     if a is None:
@@ -432,8 +448,6 @@ def _pose_column(a):
 def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
     from robocal.solver.diagnose import diagnose as run_diagnosis
-
-    from .validation import tracker_spec
 
     targets = np.array([cell.targets[t] for t in meas.target_names])
     d = run_diagnosis(
@@ -515,8 +529,6 @@ def validate_diagnosis(
     names."""
     from robocal.solver import validation as guard
     from robocal.solver.diagnose import FOLDS
-
-    from .validation import validation_block
 
     pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
