@@ -19,6 +19,7 @@ import numpy as np
 
 from . import lifecycle
 from .engine_devices import Arm, Beam, Predictor, Sink
+from .engine_settings import Settings, Stats
 from .lifecycle import StateError
 from .plan import Aim, Checkpoint, Measure, Move, Save, Settle, campaign_plan
 from .tracker.protocol import NOMINAL_SAMPLE_RATE_HZ
@@ -30,50 +31,6 @@ WAKE_S = 0.5
 RESET_WAIT_S = 2.0
 # How long a run that ends waits for an e-stop's thread to finish telling its transition.
 TELL_WAIT_S = 5.0
-
-
-@dataclass
-class Settings:
-    """How to acquire: the paper's procedure by default (fixed 10 s pause at each pose)."""
-
-    pause_s: float = 10.0
-    settle: str = "fixed"  # or "adaptive": end the pause once the first SMR is seen still
-    # readings of a still SMR differ by noise alone: about 3 sqrt(2) times a tracker's per-axis
-    # repeatability at a few metres
-    settle_tol_mm: float = 0.03
-    # adaptive settling watches the first SMR in back-to-back looks of this many samples (50 ms
-    # at 1 kHz, a fraction of an arm's ringing period) and calls it still once this many
-    # successive looks, each with a spread the tracker calls OK, agree within settle_tol_mm
-    settle_look_samples: int = 50
-    settle_looks: int = 3
-    # the tracker's head slew (POINT): issued this long before a move's expected end, at the
-    # first SMR's predicted position, the beam is there as the arm arrives
-    point_lead_s: float = 0.05
-    samples: int = 1000
-    search_radius_mm: float = 10.0
-    wide_search_radius_mm: float = 50.0
-    retries: int = 2  # per target, after a beam break or a failed search
-
-    def __post_init__(self):
-        if self.settle not in ("fixed", "adaptive"):
-            raise ValueError(f"settle must be 'fixed' or 'adaptive', not {self.settle!r}")
-
-
-@dataclass
-class Stats:
-    """What happened: counts a person and the benchmark care about."""
-
-    poses: int = 0
-    readings: int = 0
-    missing: int = 0
-    skipped: int = 0
-    searched: int = 0
-    locked_first_try: int = 0
-    aimed: int = 0
-    beam_breaks: int = 0
-    aimed_after_10: int = 0
-    locked_after_10: int = 0
-    settle_s: list = field(default_factory=list)
 
 
 class EngineBusy(StateError):
