@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from robocal.solver.guard import strongest_correlations
 from robocal.solver.kinematics import BASE_NAMES, rot, translation
 from robocal.solver.uncertainty import ParameterErrors, propagate
-from robocal.solver.validation import strongest_correlations
 
 from .exports.params import Entry, base_entries, entries
 from .formats.model_json import ModelFile

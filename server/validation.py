@@ -1,12 +1,12 @@
 """The guard between a fit and its use: whether its data supports the model (model.json's
-`validation` block, solver.validation), whether it may be deployed (compensate, export), and
+`validation` block, solver.guard), whether it may be deployed (compensate, export), and
 whether data it is evaluated on is of its cell."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from robocal.solver import validation as guard
+from robocal.solver import guard
 from robocal.solver.effects import Inputs
 from robocal.solver.measurements import Measurements
 

@@ -279,7 +279,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
 
 def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit_rms) -> dict:
     """model.json's `validation` block of a calibration on the readings it used."""
-    from robocal.solver import validation as guard
+    from robocal.solver import guard
     from robocal.solver.fit_errors import point_errors
 
     floor, source = noise_floor(cell, used)
@@ -527,7 +527,7 @@ def validate_diagnosis(
     held-out figures against its fit, with the geometry's condition number; the report's noise
     floor, past MAX_FLOOR_RATIO times which the model lacks an effect the report's `unexplained`
     names."""
-    from robocal.solver import validation as guard
+    from robocal.solver import guard
     from robocal.solver.diagnose import FOLDS
 
     pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q)
