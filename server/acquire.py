@@ -476,7 +476,7 @@ def _predictor(cell: Cell, names, base, geometry: dict | None) -> SmrPredictor:
     """The SMR predictor: the cell's nominal arm from the base guess, refitted as readings come;
     or the geometry a campaign was stored with (a calibrated model's), kept as it is."""
     if geometry is None:
-        return SmrPredictor(cell.robot, np.array([cell.targets[t] for t in names]), names, base)
+        return SmrPredictor(cell.robot, cell.target_positions(names), names, base)
     return SmrPredictor(
         robot_from_json(geometry["robot"]),
         np.array([geometry["targets"][t] for t in names]),

@@ -80,7 +80,7 @@ def refuse_radian_angles(cell_path, cell: Cell, meas: Measurements) -> None:
 
     if cell_path is None:
         return
-    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    targets = cell.target_positions(meas.target_names)
     check = check_cell_angles(cell.robot, targets, meas.q, meas.xyz)
     why = check.reason() if check is not None else None
     if why:
@@ -95,7 +95,7 @@ def units_refusal(cell: Cell, meas: Measurements) -> str | None:
 
     if any(t not in cell.targets for t in meas.target_names):
         return None
-    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    targets = cell.target_positions(meas.target_names)
     return check_units(cell.robot, targets, meas.q, meas.xyz).reason()
 
 
@@ -156,7 +156,7 @@ def screen_campaign(cell: Cell, meas: Measurements) -> Screening:
     """The campaign's gross outliers (solver.screen), judged with the cell's nominal model."""
     from robocal.solver.screen import screen_readings
 
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    targets = cell.target_positions(meas.target_names)
     return screen_readings(
         cell.robot,
         targets,
@@ -198,7 +198,7 @@ def run_method(
 
     screened = screen_campaign(cell, meas) if screening is True else screening or None
     use = without_outliers(meas, screened)
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    targets = cell.target_positions(meas.target_names)
     cal = calibrate(
         cell.robot,
         targets,
@@ -319,7 +319,7 @@ def layout_warnings(cell: Cell, meas: Measurements, targets) -> list[str]:
     from robocal.solver.plausibility import check_layout
 
     names = meas.target_names
-    nominal = np.array([cell.targets[t] for t in names], dtype=float)
+    nominal = cell.target_positions(names)
     why = check_layout(names, nominal, np.asarray(targets, dtype=float)).reason()
     return [why] if why else []
 
@@ -329,7 +329,7 @@ def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
     registered on them: what the calibration is to improve on."""
     from robocal.solver.calibrate import calibrate
 
-    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    targets = cell.target_positions(meas.target_names)
     nom = calibrate(
         cell.robot, targets, meas.target_names, meas.q, meas.xyz, "nominal", base_guess=cell.base
     )
@@ -449,7 +449,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
     from robocal.solver.diagnose import diagnose as run_diagnosis
 
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    targets = cell.target_positions(meas.target_names)
     d = run_diagnosis(
         cell.robot,
         targets,
@@ -498,7 +498,7 @@ def _judge_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> Non
 
     from .identified import identified_block
 
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    targets = cell.target_positions(meas.target_names)
     geometric = calibrate(
         cell.robot,
         targets,
