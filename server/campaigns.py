@@ -46,7 +46,13 @@ def plan_given(db: store.Database, *, cell: Cell, opts: AcquireOptions, poses_de
 
 
 def import_campaign(
-    db: store.Database, *, measurements, filename: str, cell: Cell, name: str
+    db: store.Database,
+    *,
+    measurements,
+    filename: str,
+    cell: Cell,
+    name: str,
+    arm: str | None = None,
 ) -> int:
     """Store an uploaded meas.csv, read already (uploads.read_measurements), as a done campaign;
     InputError naming `filename`."""
@@ -58,7 +64,12 @@ def import_campaign(
         raise InputError(filename, None, None, why)
     try:
         return store.import_csv(
-            db, path=filename, cell_json=cell_to_json(cell), name=name, measurements=measurements
+            db,
+            path=filename,
+            cell_json=cell_to_json(cell),
+            name=name,
+            measurements=measurements,
+            arm=arm,
         )
     except InputError as e:
         raise InputError(filename, e.line, e.column, e.message) from None

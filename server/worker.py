@@ -14,6 +14,7 @@ from . import store
 from .formats.cell_json import parse_cell
 from .formats.model_json import model_to_json, to_plain, write_json_atomic
 from .formats.verdict import Verdict
+from .identified import arm_parameters
 from .processes import one_line
 from .workflow import held_out_errors, model_file, run_method
 
@@ -147,6 +148,8 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.J
     return {
         "model": str(path),
         "recording": str(rrd),
+        # the arm's parameters in the shared database, for the fleet view
+        "parameters": to_plain(arm_parameters(fitted)),
         **_verdict(fitted.verdict),
         **({"holdout": summary} if summary else {}),
     }

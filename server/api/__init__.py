@@ -1,6 +1,6 @@
 """The HTTP API: one router per resource, mounted under /api by server.app.create_app."""
 
-from . import campaigns, cells, charts, events, health, jobs, measurements, models
+from . import campaigns, cells, charts, events, fleet, health, jobs, measurements, models
 
 # Every route of these needs the token (reads too, unless reads are open on loopback).
 ROUTERS = (
@@ -12,6 +12,7 @@ ROUTERS = (
     models.router,
     events.router,
     charts.router,
+    fleet.router,
 )
 # Open to anyone: nothing in them says anything about the cell.
 OPEN_ROUTERS = (health.router,)

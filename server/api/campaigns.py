@@ -71,6 +71,7 @@ def public_campaign(
         actions=acquisitions.actions(info, status),
         simulated=info.simulated,
         notes=info.notes,
+        arm=info.arm,
         poses_total=info.n_poses,
         poses_done=info.n_done,
         run=None
