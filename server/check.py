@@ -27,6 +27,9 @@ STEEL_PPM_PER_K = 11.7  # the thermal expansion of an arm's steel and cast iron
 FD_STEP_RAD = 1e-6  # central differences of the model's prediction in one joint
 PAYLOAD_TORQUE_SHARE = 0.1  # a joint whose gravity torque is below this share carries no load
 VERDICTS = ("ok", "watch", "recalibrate")
+# The most poses a check uploaded to the service takes: it is judged in the service's own thread
+# (in the store's write transaction), and a quick check is a few fixed poses.
+MAX_POSES = 100
 
 
 @dataclass(frozen=True)
@@ -289,23 +292,38 @@ def _subset(r: _Readings, keep: np.ndarray) -> _Readings:
     )
 
 
-def run_check(model_path, check_path, db: store.Database) -> CheckResult:
-    """Check a model on a check campaign, append it to the model's history; the result."""
+@dataclass(frozen=True)
+class Prepared:
+    """A check read against its model, ready to be judged over the model's history."""
+
+    model: ModelFile
+    model_sha256: str
+    expected_rms_mm: float
+    readings: _Readings
+
+
+def prepare(model_path, check_path) -> Prepared:
+    """The model and the check's readings against it (DataError / InputError if they do not
+    fit): the heavy part, parsed where the caller likes (the service: a worker process)."""
     model = read_model(model_path)
-    sha = file_digest(model_path)
-    expected = expected_rms(model)
-    r = _readings(model, check_path)
+    return Prepared(
+        model, file_digest(model_path), expected_rms(model), _readings(model, check_path)
+    )
+
+
+def record(db: store.Database, p: Prepared, source: str) -> CheckResult:
+    """Judge a prepared check over its model's history and append it there; the result."""
     out: dict = {}
 
     def judged(history: list[CheckRecord]) -> NewCheck:
-        new, change, cause = judge(model, r, history, expected)
+        new, change, cause = judge(p.model, p.readings, history, p.expected_rms_mm)
         out.update(change=change, cause=cause)
-        return NewCheck(**{**vars(new), "source": Path(check_path).name})
+        return NewCheck(**{**vars(new), "source": source})
 
-    history = append_check(db, sha, judged)
+    history = append_check(db, p.model_sha256, judged)
     last, change = history[-1], out["change"]
     return CheckResult(
-        model_sha256=sha,
+        model_sha256=p.model_sha256,
         poses=last.poses,
         rms_mm=last.rms_mm,
         max_mm=last.max_mm,
@@ -319,3 +337,8 @@ def run_check(model_path, check_path, db: store.Database) -> CheckResult:
         cusum=last.cusum,
         cause=out["cause"],
     )
+
+
+def run_check(model_path, check_path, db: store.Database) -> CheckResult:
+    """Check a model on a check campaign, append it to the model's history; the result."""
+    return record(db, prepare(model_path, check_path), Path(check_path).name)
