@@ -18,9 +18,9 @@ COLOURS = {"ok": "#5e81ac", "watch": "#d08770", "recalibrate": "#bf616a"}
 
 def history_png(job_id: int, checks: list[CheckRecord], report=None) -> bytes:
     """RMS per check with the expected level and the limits; below, the accumulated change."""
-    fig = Figure(figsize=(8, 5.5), constrained_layout=True)
+    fig = Figure(figsize=(8, 5.5), layout="constrained")
     top, low = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
-    top.set_title(f"Job {job_id}'s model: quick checks ({len(checks)})")
+    fig.suptitle(f"Job {job_id}'s model: quick checks ({len(checks)})")
     if not checks:
         top.text(0.5, 0.5, "never checked", ha="center", va="center", transform=top.transAxes)
         return _png(fig)
@@ -47,7 +47,7 @@ def history_png(job_id: int, checks: list[CheckRecord], report=None) -> bytes:
     low.set_ylabel("accumulated change")
     low.set_ylim(bottom=0)
     low.xaxis.set_major_formatter(mdates.ConciseDateFormatter(low.xaxis.get_major_locator()))
-    top.legend(loc="upper left", fontsize=8, ncols=3)
+    fig.legend(loc="outside lower center", fontsize=8, ncols=6)  # off the points
     for ax in (top, low):
         ax.grid(alpha=0.3)
     return _png(fig)
