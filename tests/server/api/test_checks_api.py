@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from robocal.drivers.cell import VirtualCell
+from robocal.server.check import MAX_POSES
+from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.cell_json import default_cell
 from tests.server.api.conftest import wait_for
 from tests.server.test_check import SCATTER_DEG, bumped, measured
@@ -115,8 +117,11 @@ def test_bad_checks_are_refused_in_one_line_and_store_nothing(live, cell):
     assert p["detail"].startswith("cell-3.csv:3:") and "column 'x'" in p["detail"], p
     assert "\n" not in p["detail"] and "/tmp" not in p["detail"], p
 
+    d, vc, _ = cell
+    write_campaign(d / "many.csv", vc.campaign(MAX_POSES + 1, 2))
     cases = (
         (good.replace(",A,", ",Z,"), "target 'Z'"),  # an SMR the model does not have
+        ((d / "many.csv").read_text(), f"at most {MAX_POSES}"),  # a campaign, not a check
         ('{"robot": "irb2600"}', "check.csv"),  # not a CSV at all
         ("pose,target,x,y,z\n", "check.csv"),  # no joints, no readings
     )
