@@ -95,6 +95,17 @@ def test_checks_history_health_and_chart(live, cell):
     assert h["checked"] is True and h["verdict"] == "recalibrate" and h["history"] == 5, h
     assert h["reason"] == last["reason"] and h["checked_at"] == checks[-1]["checked_at"]
 
+    # `robocal check` on the served model.json and the service's database: the same history
+    d = cell[0]
+    (d / "served.model.json").write_bytes(c.get(f"/api/models/{job}").content)
+    (d / "cli-check.csv").write_text(check_csv(cell, 105, bumped))
+    r = robocal("check", "served.model.json", "cli-check.csv", "--db", live.settings.database,
+                cwd=d)  # fmt: skip
+    assert r.returncode == 3, r.stderr  # still recalibrate: the history remembers the bump
+    h = c.get(f"/api/models/{job}/health").json()
+    assert h["history"] == 6 and h["verdict"] == "recalibrate", h
+    assert c.get(url).json()["checks"][-1]["source"] == "cli-check.csv"
+
     png = c.get(f"/api/charts/models/{job}/checks.png")
     assert png.status_code == 200, png.text
     assert png.headers["content-type"] == "image/png" and png.content.startswith(b"\x89PNG")
