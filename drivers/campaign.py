@@ -1,25 +1,27 @@
 """The campaign engine: runs a plan's messages on the devices and alone owns the campaign's state.
 
 The plan (drivers/plan.py) says what to do: move, settle, aim, measure, save, checkpoint. The
-engine executes it on a controller and a tracker (duck-typed: the clients in drivers/abb and
-drivers/tracker, or anything with the same methods) on a clock, hands every reading to a sink as
+engine executes it on a controller and a tracker (drivers/engine_devices.py: the clients in
+drivers/abb and drivers/tracker, the simulated devices or a test's fakes) on a clock, hands every reading to a sink as
 soon as it arrives (the store commits it), and moves the campaign's state only through
-drivers/lifecycle.py. Pause, resume, abort, e-stop and reset are safe from any thread. It knows
-nothing of HTTP or SQL.
+drivers/lifecycle.py; each plan message goes to its handler through one table. Pause, resume,
+abort, e-stop and reset are safe from any thread. It knows nothing of HTTP or SQL.
 """
 
 from __future__ import annotations
 
 import threading
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import lifecycle
+from .engine_devices import Arm, Beam, Predictor, Sink
+from .engine_settings import Settings, Stats
 from .lifecycle import StateError
 from .plan import Aim, Checkpoint, Measure, Move, Save, Settle, campaign_plan
-from .predictor import SmrPredictor
 from .tracker.protocol import NOMINAL_SAMPLE_RATE_HZ
 
 # Real seconds between re-checks of a paused run's state: the condition's notify wakes it at
@@ -29,50 +31,6 @@ WAKE_S = 0.5
 RESET_WAIT_S = 2.0
 # How long a run that ends waits for an e-stop's thread to finish telling its transition.
 TELL_WAIT_S = 5.0
-
-
-@dataclass
-class Settings:
-    """How to acquire: the paper's procedure by default (fixed 10 s pause at each pose)."""
-
-    pause_s: float = 10.0
-    settle: str = "fixed"  # or "adaptive": end the pause once the first SMR is seen still
-    # readings of a still SMR differ by noise alone: about 3 sqrt(2) times a tracker's per-axis
-    # repeatability at a few metres
-    settle_tol_mm: float = 0.03
-    # adaptive settling watches the first SMR in back-to-back looks of this many samples (50 ms
-    # at 1 kHz, a fraction of an arm's ringing period) and calls it still once this many
-    # successive looks, each with a spread the tracker calls OK, agree within settle_tol_mm
-    settle_look_samples: int = 50
-    settle_looks: int = 3
-    # the tracker's head slew (POINT): issued this long before a move's expected end, at the
-    # first SMR's predicted position, the beam is there as the arm arrives
-    point_lead_s: float = 0.05
-    samples: int = 1000
-    search_radius_mm: float = 10.0
-    wide_search_radius_mm: float = 50.0
-    retries: int = 2  # per target, after a beam break or a failed search
-
-    def __post_init__(self):
-        if self.settle not in ("fixed", "adaptive"):
-            raise ValueError(f"settle must be 'fixed' or 'adaptive', not {self.settle!r}")
-
-
-@dataclass
-class Stats:
-    """What happened: counts a person and the benchmark care about."""
-
-    poses: int = 0
-    readings: int = 0
-    missing: int = 0
-    skipped: int = 0
-    searched: int = 0
-    locked_first_try: int = 0
-    aimed: int = 0
-    beam_breaks: int = 0
-    aimed_after_10: int = 0
-    locked_after_10: int = 0
-    settle_s: list = field(default_factory=list)
 
 
 class EngineBusy(StateError):
@@ -116,11 +74,11 @@ class CampaignEngine:
 
     def __init__(
         self,
-        controller,
-        tracker,
+        controller: Arm,
+        tracker: Beam,
         clock,
-        predictor: SmrPredictor,
-        sink,
+        predictor: Predictor,
+        sink: Sink,
         settings: Settings | None = None,
         log=None,
         *,
@@ -310,38 +268,16 @@ class CampaignEngine:
         plan = campaign_plan(poses_deg, names, start, stored)
         epoch = self._begin()
         try:
-            q_done = [] if history is None else list(history[0])
-            m_done = [] if history is None else list(history[1])
-            if q_done:
-                self.predictor.update(np.array(q_done), np.array(m_done))
-            work = None
+            run = _Run(epoch, names, start, stored)
+            if history is not None:
+                run.q_done, run.m_done = list(history[0]), list(history[1])
+            if run.q_done:
+                self.predictor.update(np.array(run.q_done), np.array(run.m_done))
             for msg in plan:
                 if self.trace is not None:
                     self.trace(msg)
-                if isinstance(msg, Checkpoint):
-                    if not self._checkpoint(epoch):
-                        break
-                    continue
-                if not self._may_go_on(epoch):
+                if not _HANDLERS[type(msg)](self, msg, run):
                     break
-                if isinstance(msg, Move):
-                    work = self._move(msg, stored if msg.pose == start else {}, epoch)
-                    if work is None:
-                        break
-                elif work is None:  # campaign_plan puts each pose's Move first
-                    raise AssertionError(f"{type(msg).__name__} before its pose's Move")
-                elif isinstance(msg, Settle):
-                    if not work.skipped:
-                        self._settle(work, names[0])
-                elif isinstance(msg, Aim):
-                    self._aim(msg, work, names)
-                elif isinstance(msg, Measure):
-                    self._measure(msg, work)
-                elif isinstance(msg, Save):
-                    q_rad, row = self._save(work, names)
-                    q_done.append(q_rad)
-                    m_done.append(row)
-                    self.predictor.update(np.array(q_done), np.array(m_done))
             else:
                 self._event("finish", epoch)
         except Exception as e:
@@ -375,6 +311,52 @@ class CampaignEngine:
             # (the store) must have the last state before the run's owner closes it
             self._tell(wait_s=TELL_WAIT_S)
         return self.stats
+
+    # -- the plan's messages, one handler each (_HANDLERS); False ends the run ----------------------
+    def _on_checkpoint(self, msg: Checkpoint, run: _Run) -> bool:
+        return self._checkpoint(run.epoch)
+
+    def _on_move(self, msg: Move, run: _Run) -> bool:
+        if not self._may_go_on(run.epoch):
+            return False
+        run.work = self._move(msg, run.stored if msg.pose == run.start else {}, run.epoch)
+        return run.work is not None
+
+    def _at_pose(self, msg, run: _Run) -> _Pose | None:
+        """The pose a message after its Move works on; None when the run must end first."""
+        if not self._may_go_on(run.epoch):
+            return None
+        if run.work is None:  # campaign_plan puts each pose's Move first
+            raise AssertionError(f"{type(msg).__name__} before its pose's Move")
+        return run.work
+
+    def _on_settle(self, msg: Settle, run: _Run) -> bool:
+        if (work := self._at_pose(msg, run)) is None:
+            return False
+        if not work.skipped:
+            self._settle(work, run.names[0])
+        return True
+
+    def _on_aim(self, msg: Aim, run: _Run) -> bool:
+        if (work := self._at_pose(msg, run)) is None:
+            return False
+        self._aim(msg, work, run.names)
+        return True
+
+    def _on_measure(self, msg: Measure, run: _Run) -> bool:
+        if (work := self._at_pose(msg, run)) is None:
+            return False
+        self._measure(msg, work)
+        return True
+
+    def _on_save(self, msg: Save, run: _Run) -> bool:
+        if (work := self._at_pose(msg, run)) is None:
+            return False
+        q_rad, row = self._save(work, run.names)
+        run.q_done.append(q_rad)
+        run.m_done.append(row)
+        self.predictor.update(np.array(run.q_done), np.array(run.m_done))
+        return True
 
     def _begin(self) -> int:
         """Start or resume; the e-stop count this run lives under."""
@@ -455,10 +437,10 @@ class CampaignEngine:
         """Aim at the first SMR's predicted position as the move ends, so the beam is there when
         the arm arrives. Only a POINT: nothing is measured until the controller reports the arm
         in position (the tracker cannot lock on a moving SMR, and any motion breaks a lock)."""
-        if getattr(self.predictor, "stage", "nominal") == "nominal":
+        if self.predictor.stage == "nominal":
             return  # a rough base puts the aim beyond the capture radius: the search comes later
-        last = getattr(self.controller, "last_move", None)
-        if not isinstance(duration, int | float) or getattr(last, "duration_s", 0.0) is None:
+        last = self.controller.last_move
+        if not isinstance(duration, int | float) or (last is not None and last.duration_s is None):
             return  # the MOVEJ reply was lost: the duration is only a bound, no time to aim at
         name = self.predictor.names[0]
         aim = self.predictor.predict(np.deg2rad(work.q_deg))[0]
@@ -522,7 +504,7 @@ class CampaignEngine:
         s = self.settings
         # no further than the prediction may be off: a target missed within that is out of sight
         # (facing away), and a calibrated model's reach is inside the narrow search
-        reach = min(s.wide_search_radius_mm, getattr(self.predictor, "reach_mm", np.inf))
+        reach = min(s.wide_search_radius_mm, self.predictor.reach_mm)
         last = reach <= s.search_radius_mm or attempt > 0
         if self.tracker.search(
             max(reach, s.search_radius_mm) if attempt > 0 else s.search_radius_mm
@@ -555,7 +537,7 @@ class CampaignEngine:
                 if code == "BEAM_BROKEN":
                     self.stats.beam_breaks += 1
                 continue
-            if getattr(reading, "status", "OK") not in ("OK", None):
+            if reading.status not in ("OK", None):
                 continue  # inaccurate: the target moved while measured; try again
             m = reading
             break
@@ -624,7 +606,7 @@ class CampaignEngine:
                 if watched not in work.unseen:
                     self.clock.sleep(look_s)  # a lost beam: give it time rather than spin
                 continue
-            if getattr(m, "status", "OK") not in ("OK", None):
+            if m.status not in ("OK", None):
                 still = []
                 continue
             still = [*still, np.asarray(m.mean_mm, dtype=float)][-s.settle_looks :]
@@ -668,3 +650,26 @@ def _spread(points) -> float:
 
 
 __all__ = ["CampaignEngine", "EngineBusy", "Settings", "StateError", "Stats"]
+
+
+@dataclass
+class _Run:
+    """One run()'s working state, shared by the message handlers."""
+
+    epoch: int  # the e-stop count the run lives under
+    names: tuple[str, ...]
+    start: int  # the first pose (a resumed run: the one cut off, with its stored readings)
+    stored: dict
+    q_done: list = field(default_factory=list)  # joints (rad) and readings of the poses done
+    m_done: list = field(default_factory=list)
+    work: _Pose | None = None  # the pose being measured
+
+
+_HANDLERS: dict[type, Callable[..., bool]] = {
+    Checkpoint: CampaignEngine._on_checkpoint,
+    Move: CampaignEngine._on_move,
+    Settle: CampaignEngine._on_settle,
+    Aim: CampaignEngine._on_aim,
+    Measure: CampaignEngine._on_measure,
+    Save: CampaignEngine._on_save,
+}

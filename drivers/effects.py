@@ -1,4 +1,9 @@
-"""Physics the geometric model lacks: one class per effect, made from a spec by `make_effect`."""
+"""Physics the geometric model lacks: one class per effect, made from a spec by `make_effect`.
+
+These are the simulator's hidden truth; the diagnosis's effects of the same names
+(solver/vocabulary.py) are what it can fit. They share no code on purpose: a judge that shares
+code with the thing it judges proves nothing.
+"""
 
 from __future__ import annotations
 

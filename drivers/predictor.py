@@ -16,9 +16,8 @@ from robocal.solver.calibrate import calibrate
 from robocal.solver.identifiability import NotIdentifiable
 from robocal.solver.identify import register
 from robocal.solver.kinematics import Layout, predict
+from robocal.solver.rigid import rigid_correction
 from robocal.solver.robot import Robot
-
-from .rigid import rigid_correction
 
 # Base and SMR positions together (15 parameters) fitted to fewer poses extrapolate badly to
 # the next; until then the base alone is fitted (a rigid motion, six)

@@ -209,8 +209,9 @@ def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
     """(tracker, controller) clients: of the simulated devices, else of the cell's real ones,
     each asked once so that a wrong address fails the run before the arm moves."""
     from robocal.drivers.abb.client import ControllerClient, ControllerError
+    from robocal.drivers.line_errors import ProtocolError
     from robocal.drivers.tracker.client import TrackerClient
-    from robocal.drivers.tracker.protocol import ProtocolError, TrackerError
+    from robocal.drivers.tracker.protocol import TrackerError
 
     if sim is not None:
         tracker = TrackerClient("127.0.0.1", sim.tracker_server.port)
@@ -475,7 +476,7 @@ def _predictor(cell: Cell, names, base, geometry: dict | None) -> SmrPredictor:
     """The SMR predictor: the cell's nominal arm from the base guess, refitted as readings come;
     or the geometry a campaign was stored with (a calibrated model's), kept as it is."""
     if geometry is None:
-        return SmrPredictor(cell.robot, np.array([cell.targets[t] for t in names]), names, base)
+        return SmrPredictor(cell.robot, cell.target_positions(names), names, base)
     return SmrPredictor(
         robot_from_json(geometry["robot"]),
         np.array([geometry["targets"][t] for t in names]),

@@ -28,6 +28,9 @@ STEEL_PPM_PER_K = 11.7  # the thermal expansion of an arm's steel and cast iron
 FD_STEP_RAD = 1e-6  # central differences of the model's prediction in one joint
 PAYLOAD_TORQUE_SHARE = 0.1  # a joint whose gravity torque is below this share carries no load
 VERDICTS = ("ok", "watch", "recalibrate")
+# The most poses a check uploaded to the service takes: it is judged in the service's own thread
+# (in the store's write transaction), and a quick check is a few fixed poses.
+MAX_POSES = 100
 
 
 @dataclass(frozen=True)
@@ -288,34 +291,44 @@ def _subset(r: _Readings, keep: np.ndarray) -> _Readings:
     )
 
 
-def run_check(model_path, check_path, db: store.Database) -> CheckResult:
-    """Check a model on a check campaign (a meas.csv), append it to the model's history; the
-    result."""
+@dataclass(frozen=True)
+class Prepared:
+    """A check read against its model, ready to be judged over the model's history."""
+
+    model: ModelFile
+    model_sha256: str
+    expected_rms_mm: float
+    readings: _Readings
+
+
+def prepare(model_path, check_path) -> Prepared:
+    """The model and the check's readings against it (DataError / InputError if they do not
+    fit): the heavy part, parsed where the caller likes (the service: a worker process)."""
     model = read_model(model_path)
-    meas = load_campaign(check_path, Cell(model.robot, model.targets, None, {}, None))
-    return check_measured(
-        model, file_digest(model_path), meas, db, where=check_path, source=Path(check_path).name
-    )
-
-
-def check_measured(
-    model: ModelFile, sha: str, meas: Measurements, db: store.Database, *, where, source: str
-) -> CheckResult:
-    """Check a model (its file's sha256) on a check's readings (`where` they come from, for
-    messages; `source` stored with the check), append it to the model's history; the result."""
     expected = expected_rms(model)
-    r = _readings(model, meas, where)
+    meas = load_campaign(check_path, Cell(model.robot, model.targets, None, {}, None))
+    return Prepared(model, file_digest(model_path), expected, _readings(model, meas, check_path))
+
+
+def prepare_measured(model: ModelFile, sha: str, meas: Measurements, where: str) -> Prepared:
+    """A model (its file's sha256) and a check's readings measured into the store (`where` they
+    are, for messages), ready to be judged: `acquire --check`."""
+    return Prepared(model, sha, expected_rms(model), _readings(model, meas, where))
+
+
+def record(db: store.Database, p: Prepared, source: str) -> CheckResult:
+    """Judge a prepared check over its model's history and append it there; the result."""
     out: dict = {}
 
     def judged(history: list[CheckRecord]) -> NewCheck:
-        new, change, cause = judge(model, r, history, expected)
+        new, change, cause = judge(p.model, p.readings, history, p.expected_rms_mm)
         out.update(change=change, cause=cause)
         return NewCheck(**{**vars(new), "source": source})
 
-    history = append_check(db, sha, judged)
+    history = append_check(db, p.model_sha256, judged)
     last, change = history[-1], out["change"]
     return CheckResult(
-        model_sha256=sha,
+        model_sha256=p.model_sha256,
         poses=last.poses,
         rms_mm=last.rms_mm,
         max_mm=last.max_mm,
@@ -329,3 +342,8 @@ def check_measured(
         cusum=last.cusum,
         cause=out["cause"],
     )
+
+
+def run_check(model_path, check_path, db: store.Database) -> CheckResult:
+    """Check a model on a check campaign, append it to the model's history; the result."""
+    return record(db, prepare(model_path, check_path), Path(check_path).name)

@@ -17,7 +17,7 @@ import numpy as np
 
 from . import store
 from .acquire import PREDICTOR, AcquireOptions, _opened, acquire
-from .check import CheckResult, check_measured
+from .check import CheckResult, prepare_measured, record
 from .check_plan import DEFAULT_POSES, check_poses
 from .formats.cell_json import Cell, robot_to_json
 from .formats.errors import InputError
@@ -152,5 +152,5 @@ def _judge(db, model, sha: str, campaign_id: int) -> CheckResult:
     meas = store.campaign_measurements(
         db, campaign_id=campaign_id, robot=model.robot, targets=sorted(model.targets)
     )
-    where = f"check campaign {campaign_id}"
-    return check_measured(model, sha, meas, db, where=where, source=_source(campaign_id))
+    prepared = prepare_measured(model, sha, meas, f"check campaign {campaign_id}")
+    return record(db, prepared, _source(campaign_id))

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from robocal.solver.guard import strongest_correlations
 from robocal.solver.kinematics import BASE_NAMES, rot, translation
 from robocal.solver.uncertainty import ParameterErrors, propagate
-from robocal.solver.validation import strongest_correlations
 
 from .exports.params import Entry, base_entries, entries
 from .formats.model_json import ModelFile
@@ -124,3 +124,13 @@ def parameters_of(model: ModelFile) -> dict:
     ]
     estimator = (model.meta.get("uncertainty") or {}).get("estimator", "none")
     return _block(model, rows, fixed, fit.get("condition_number"), estimator, [])
+
+
+def arm_parameters(model: ModelFile) -> list[dict]:
+    """The arm's own identified parameters (joints; not the cell's base or SMRs) with their
+    standard errors, as a calibration job keeps them for the fleet view."""
+    return [
+        {k: r[k] for k in ("parameter", "unit", "calibrated", "standard_error")}
+        for r in parameters_of(model)["rows"]
+        if r["group"] == "joint" and r["status"] == "identified" and r["standard_error"] is not None
+    ]

@@ -27,7 +27,7 @@ PRELOAD = [
     "robocal.server.worker",
     "robocal.server.charts",
     "robocal.server.recording",
-    "robocal.server.api.ops",
+    "robocal.server.campaigns",
 ]
 # Jobs are batch work: the API and a running acquisition (a robot and a tracker waiting on it)
 # get the CPU first.

@@ -10,6 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 if TYPE_CHECKING:
+    from .fleet import Fleet
     from .formats.verdict import Verdict
 
 # Wide enough for Table 3's eight columns when the output is a file or a pipe.
@@ -265,3 +266,35 @@ def validation_lines(v: Verdict) -> list[str]:
             out.append(f"  ({v.summary})")
     out += [f"[yellow]warning[/yellow]: {w}" for w in v.warnings]
     return out
+
+
+def fleet(f: Fleet) -> Table:
+    """The arms of one robot model: each arm's furthest parameter from the fleet (in units of
+    its spread and own uncertainty) and its largest jump since its previous calibration."""
+    limits = [p.limit for p in f.parameters if p.limit is not None]
+    t = Table(
+        title=f"Fleet of {f.robot_model}: {len(f.arms)} arms; flagged beyond |z| "
+        + (f"{min(limits):.1f}-{max(limits):.1f}" if limits else "- (too few arms)")
+        + f", jumps beyond {_f(f.jump_limit, 2)} (each {f.family_rate:.0%} false alarms a fleet)"
+    )
+    for col in ("arm", "calibrations", "job", "furthest", "z", "largest jump", "jump z", ""):
+        t.add_column(col, justify="left" if col in ("arm", "furthest", "largest jump") else "right")
+    for a in f.arms:
+        far = max(a.parameters, key=lambda p: abs(p.z or 0.0), default=None)
+        jumps = [p for p in a.parameters if p.jump_z is not None]
+        big = max(jumps, key=lambda p: abs(p.jump_z or 0.0), default=None)
+        verdict = ", ".join(
+            w for w, on in (("OFF THE FLEET", a.flagged), ("JUMPED", a.jumped)) if on
+        )
+        t.add_row(
+            a.arm,
+            str(a.calibrations),
+            str(a.job_id),
+            far.parameter if far else "-",
+            _f(far.z if far else None, 2),
+            f"{big.parameter} {big.jump:+.4g}" if big and big.jump is not None else "-",
+            _f(big.jump_z if big else None, 2),
+            verdict or "ok",
+            style="bold red" if verdict else None,
+        )
+    return t

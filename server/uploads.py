@@ -18,3 +18,26 @@ def read_measurements(data: bytes, filename: str, robot, report=None):
         path = _upload(Path(tmp), shown, data)
         with _named({str(path): shown}):
             return read_campaign(path, robot)
+
+
+def read_check(model_path, data: bytes, filename: str, report=None):
+    """An uploaded check.csv read against a stored model (check.Prepared); InputError and
+    DataError name the upload, never this machine's paths."""
+    from .check import MAX_POSES, prepare
+    from .workflow import DataError
+
+    shown = Path(filename).name or "check.csv"
+    with tempfile.TemporaryDirectory(prefix="robocal-check-") as tmp:
+        path = _upload(Path(tmp), shown, data)
+        try:
+            with _named({str(path): shown}):
+                p = prepare(model_path, path)
+        except DataError as e:
+            raise DataError(str(e).replace(str(path), shown)) from None
+    poses = len(p.readings.q)
+    if poses > MAX_POSES:
+        raise DataError(
+            f"{shown}: {poses} poses; a quick check measures a few fixed poses (at most "
+            f"{MAX_POSES}): calibrate with a campaign this large instead"
+        )
+    return p

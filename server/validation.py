@@ -1,12 +1,12 @@
 """The guard between a fit and its use: whether its data supports the model (model.json's
-`validation` block, solver.validation), whether it may be deployed (compensate, export), and
+`validation` block, solver.guard), whether it may be deployed (compensate, export), and
 whether data it is evaluated on is of its cell."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from robocal.solver import validation as guard
+from robocal.solver import guard
 from robocal.solver.effects import Inputs
 from robocal.solver.measurements import Measurements
 
@@ -130,20 +130,3 @@ def file_refusal(path) -> str | None:
     from .formats.model_json import read_model
 
     return read_model(path).verdict.refusal()
-
-
-def held_out_errors(model: ModelFile, meas: Measurements) -> dict:
-    """A calibration's errors on readings it was not fitted on (mm; RMS and max per reading,
-    the nominal model's RMS registered on them), with a warning when they say the data is not
-    of the model's cell."""
-    from .workflow import evaluate
-
-    result = evaluate(model, meas)
-    return {
-        "poses": int(np.any(meas.mask, axis=1).sum()),
-        "readings": int(meas.mask.sum()),
-        "rms_mm": json_number(result["model"]["rmse"]),
-        "max_mm": json_number(result["model"]["ap"]["max"]),
-        "nominal_rms_mm": json_number(result["nominal"]["rmse"]) if "nominal" in result else None,
-        "warning": absurd_errors(result, model.verdict),
-    }

@@ -14,9 +14,9 @@ from . import store
 from .formats.cell_json import parse_cell
 from .formats.model_json import model_to_json, to_plain, write_json_atomic
 from .formats.verdict import Verdict
+from .identified import arm_parameters
 from .processes import one_line
-from .validation import held_out_errors
-from .workflow import model_file, run_method
+from .workflow import held_out_errors, model_file, run_method
 
 Report = Callable[[dict], None]  # sends a job event to the service
 
@@ -65,9 +65,9 @@ PROGRESS_STEP = 0.02
 
 
 def run_planning(setup: JobSetup, job_id: int, cell, opts, report: Report) -> None:
-    """Plan a campaign (server.api.ops.plan_campaign) and store it `planned`: the job done with
+    """Plan a campaign (server.campaigns.plan_campaign) and store it `planned`: the job done with
     results {"campaign": id}, or failed with the reason (a name clash: the Conflict's text)."""
-    from .api.ops import plan_campaign
+    from .campaigns import plan_campaign
 
     db = _database(setup.database_url)
     _update(db, report, job_id, state="running")
@@ -148,6 +148,8 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.J
     return {
         "model": str(path),
         "recording": str(rrd),
+        # the arm's parameters in the shared database, for the fleet view
+        "parameters": to_plain(arm_parameters(fitted)),
         **_verdict(fitted.verdict),
         **({"holdout": summary} if summary else {}),
     }

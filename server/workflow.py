@@ -22,6 +22,13 @@ from .formats.model_json import (
     read_model,
     uncertainty_to_json,
 )
+from .validation import (
+    absurd_errors,
+    json_number,
+    noise_floor,
+    tracker_spec,
+    validation_block,
+)
 
 # The fit, the screening and the diagnosis pull in scipy (seconds on a busy machine): imported in
 # the functions that run them, so `robocal predict` starts with numpy alone.
@@ -73,7 +80,7 @@ def refuse_radian_angles(cell_path, cell: Cell, meas: Measurements) -> None:
 
     if cell_path is None:
         return
-    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    targets = cell.target_positions(meas.target_names)
     check = check_cell_angles(cell.robot, targets, meas.q, meas.xyz)
     why = check.reason() if check is not None else None
     if why:
@@ -88,7 +95,7 @@ def units_refusal(cell: Cell, meas: Measurements) -> str | None:
 
     if any(t not in cell.targets for t in meas.target_names):
         return None
-    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    targets = cell.target_positions(meas.target_names)
     return check_units(cell.robot, targets, meas.q, meas.xyz).reason()
 
 
@@ -149,7 +156,7 @@ def screen_campaign(cell: Cell, meas: Measurements) -> Screening:
     """The campaign's gross outliers (solver.screen), judged with the cell's nominal model."""
     from robocal.solver.screen import screen_readings
 
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    targets = cell.target_positions(meas.target_names)
     return screen_readings(
         cell.robot,
         targets,
@@ -189,11 +196,9 @@ def run_method(
     every reading, a Screening reuses one already made (compare screens once for all methods)."""
     from robocal.solver.calibrate import calibrate
 
-    from .validation import noise_floor
-
     screened = screen_campaign(cell, meas) if screening is True else screening or None
     use = without_outliers(meas, screened)
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    targets = cell.target_positions(meas.target_names)
     cal = calibrate(
         cell.robot,
         targets,
@@ -274,10 +279,8 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
 
 def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit_rms) -> dict:
     """model.json's `validation` block of a calibration on the readings it used."""
-    from robocal.solver import validation as guard
+    from robocal.solver import guard
     from robocal.solver.fit_errors import point_errors
-
-    from .validation import noise_floor, validation_block
 
     floor, source = noise_floor(cell, used)
     v = guard.judge(
@@ -316,7 +319,7 @@ def layout_warnings(cell: Cell, meas: Measurements, targets) -> list[str]:
     from robocal.solver.plausibility import check_layout
 
     names = meas.target_names
-    nominal = np.array([cell.targets[t] for t in names], dtype=float)
+    nominal = cell.target_positions(names)
     why = check_layout(names, nominal, np.asarray(targets, dtype=float)).reason()
     return [why] if why else []
 
@@ -326,9 +329,7 @@ def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
     registered on them: what the calibration is to improve on."""
     from robocal.solver.calibrate import calibrate
 
-    from .validation import json_number
-
-    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    targets = cell.target_positions(meas.target_names)
     nom = calibrate(
         cell.robot, targets, meas.target_names, meas.q, meas.xyz, "nominal", base_guess=cell.base
     )
@@ -421,6 +422,21 @@ def evaluate(model: ModelFile, meas: Measurements) -> dict:
     return out
 
 
+def held_out_errors(model: ModelFile, meas: Measurements) -> dict:
+    """A calibration's errors on readings it was not fitted on (mm; RMS and max per reading,
+    the nominal model's RMS registered on them), with a warning when they say the data is not
+    of the model's cell."""
+    result = evaluate(model, meas)
+    return {
+        "poses": int(np.any(meas.mask, axis=1).sum()),
+        "readings": int(meas.mask.sum()),
+        "rms_mm": json_number(result["model"]["rmse"]),
+        "max_mm": json_number(result["model"]["ap"]["max"]),
+        "nominal_rms_mm": json_number(result["nominal"]["rmse"]) if "nominal" in result else None,
+        "warning": absurd_errors(result, model.verdict),
+    }
+
+
 def _pose_column(a):
     """Per-pose value of a per-reading column (the first measured reading of each pose)."""
     if a is None:
@@ -433,9 +449,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
     from robocal.solver.diagnose import diagnose as run_diagnosis
 
-    from .validation import tracker_spec
-
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    targets = cell.target_positions(meas.target_names)
     d = run_diagnosis(
         cell.robot,
         targets,
@@ -484,7 +498,7 @@ def _judge_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> Non
 
     from .identified import identified_block
 
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    targets = cell.target_positions(meas.target_names)
     geometric = calibrate(
         cell.robot,
         targets,
@@ -513,10 +527,8 @@ def validate_diagnosis(
     held-out figures against its fit, with the geometry's condition number; the report's noise
     floor, past MAX_FLOOR_RATIO times which the model lacks an effect the report's `unexplained`
     names."""
-    from robocal.solver import validation as guard
+    from robocal.solver import guard
     from robocal.solver.diagnose import FOLDS
-
-    from .validation import validation_block
 
     pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)

@@ -94,6 +94,17 @@ def level(err: np.ndarray, pose: np.ndarray, expected_mm: float) -> Level:
     return Level(rms, mx, p, verdict)
 
 
+def level_limits(expected_mm: float, poses: int) -> tuple[float, float]:
+    """The 3-D RMS of a check's pose errors (mm) at which `level` says watch, and recalibrate,
+    for a check of this many poses against the model's expected error."""
+    nu = 3 * poses
+    watch, recal = (
+        expected_mm * float(np.sqrt(stats.chi2.isf(p, nu) / nu))
+        for p in (LEVEL_WATCH_P, LEVEL_RECALIBRATE_P)
+    )
+    return watch, recal
+
+
 def scatter_variance(history: np.ndarray, prior_mm: float) -> tuple[np.ndarray, float]:
     """Per pose, the per-coordinate variance of the scatter between checks, and the degrees of
     freedom it is known with.

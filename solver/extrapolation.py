@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import configuration
-from .effects import gravity_in_base
+from .gravity import gravity_in_base
 from .kinematics import Layout, joint_frames
 
 # A joint is gravity-loaded when its axis is on average this far from vertical (|cos| below).

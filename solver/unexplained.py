@@ -21,16 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from .effects import (
-    Extension,
-    Inputs,
-    gravity_basis,
-    gravity_in_base,
-    joint_basis,
-    point_basis,
-    point_shift,
-)
+from .effects import Extension, Inputs, joint_basis, point_basis, point_shift
 from .finite import finite
+from .gravity import gravity_basis, gravity_in_base
 from .kinematics import Layout, joint_frames, predict_rows
 
 ABOVE_FLOOR = 1.5  # held-out RMS over the noise floor above which the remainder is reported

@@ -1,4 +1,5 @@
-"""The diagnosis vocabulary: one class per effect, each registered once in KINDS.
+"""The diagnosis vocabulary: one class per effect, each registered once in KINDS, and the
+Extension that names one of them in a model (with the Inputs its basis reads).
 
 A kind says everything the program knows of one effect: how its extension acts (on one joint's
 angle, or on the SMR centres), its basis on the data and its parameter count, its label, its
@@ -10,19 +11,74 @@ drivers/effects.py).
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
-from .effects import (
-    Extension,
-    Inputs,
-    gravity_basis,
-    gravity_in_base,
-    nominal_masses,
-    select_independent,
-)
+from .gravity import gravity_basis, gravity_in_base, nominal_masses, select_independent
+from .motion import last_motion
 
 MDEG_PER_RAD = np.degrees(1.0) * 1000.0
 THERMAL_MIN_SPAN_C = 0.3  # below this air-temperature span, growth is sought against time instead
+
+
+@dataclass
+class Inputs:
+    """What extensions depend on, per pose and reading: joints, time, temperature, last motion."""
+
+    q: np.ndarray  # (m, n) rad
+    time_s: np.ndarray | None = None  # (m, K)
+    temp_c: np.ndarray | None = None  # (m, K)
+    # (m, n) sign of each joint's last move before the pose, from the whole campaign's order
+    motion: np.ndarray | None = None
+    # (m, n) rad the joints the arm came from (NaN rows: not given); they decide the motion
+    prev_q: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.motion is None:
+            self.motion = last_motion(self.q, self.time_s, self.prev_q)
+
+    def subset(self, idx) -> Inputs:
+        pick = lambda a: None if a is None else a[idx]  # noqa: E731
+        return Inputs(
+            self.q[idx], pick(self.time_s), pick(self.temp_c), pick(self.motion), pick(self.prev_q)
+        )
+
+
+@dataclass
+class Extension:
+    """One extension: its kind, where it acts, and its fitted coefficients."""
+
+    name: str
+    joint: int | None = None  # 0-based
+    harmonic: int | None = None
+    at_s: float | None = None
+    t_ref: float | None = None  # thermal: temperature (or time) of zero growth
+    variable: str | None = None  # thermal: "temp_c" or "time_s"
+    origin: np.ndarray | None = None  # base shift: centre of the rotation (the data's centroid)
+    coef: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # compliance: raw gravity-basis columns kept and the gravity direction in the base frame
+    keep: np.ndarray | None = None
+    gravity: np.ndarray | None = None
+    # compliance under the nominal mass model: fixed weights of the raw gravity basis (one
+    # stiffness fitted), instead of the kept columns' masses fitted one by one
+    masses: np.ndarray | None = None
+
+    @property
+    def kind(self):
+        """Its class in the vocabulary (solver.vocabulary), which knows everything else about it."""
+        return KINDS[self.name]
+
+    @property
+    def is_joint(self) -> bool:
+        return self.kind.is_joint
+
+    @property
+    def n_params(self) -> int:
+        return self.kind.n_params(self)
+
+    def label(self) -> str:
+        return self.kind.label(self)
 
 
 class Effect:

@@ -266,6 +266,7 @@ function tokenChanged() {
   loadCells();
   restartEvents();
   refreshHistory();
+  refreshFleet();
   restoreView();
 }
 
@@ -276,6 +277,7 @@ function boot() {
   loadCells();
   connectEvents();
   refreshHistory();
+  refreshFleet();
   restoreView();
 }
 

@@ -165,6 +165,7 @@ async function showModel(j) {
   $("m-force").checked = false;  // each model is exported anyway only on its own say-so
   renderValidation(j.validation && { ...j.validation, held_out: j.holdout });
   renderRecordingHint(j);
+  showChecks(j.id);  // web/checks.js: the latest check's verdict, the history and its chart
   $("m-parameters").hidden = true;
   $("m-parameters").replaceChildren();
   if (!j.parameters_url) return;

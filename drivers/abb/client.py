@@ -14,8 +14,9 @@ import numpy as np
 
 from robocal.solver.robot import BUILTIN
 
+from ..line_errors import TransportClosed
 from . import protocol as p
-from .transport import LineTransport, TransportClosed
+from .transport import LineTransport
 
 log = logging.getLogger(__name__)
 

@@ -6,6 +6,8 @@ import math
 import re
 from dataclasses import dataclass
 
+from ..line_errors import ProtocolError
+
 VERSION = 1
 MAX_LINE = 80  # a RAPID string holds at most 80 characters: the most a request may take
 MAX_REPLY = 200  # RAPID writes replies from rawbytes: room for a HELLO with its limit table
@@ -22,14 +24,6 @@ _ID = re.compile(r"#(\d{1,5})")
 _NUMBER = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?")
 _INT = re.compile(r"\d{1,9}")
 _NAME = re.compile(r"[A-Za-z0-9_.\-]{1,32}")
-
-
-class ProtocolError(ValueError):
-    """A line not following PROTOCOL.md; `request_id` is set when the id itself was readable."""
-
-    def __init__(self, message: str, request_id: int | None = None):
-        super().__init__(message)
-        self.request_id = request_id
 
 
 class WrongIdError(ProtocolError):

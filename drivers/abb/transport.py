@@ -7,14 +7,12 @@ import time
 
 import serial
 
+from ..line_errors import TransportClosed
+
 MAX_BUFFER = 1024  # a peer that never sends a newline must not grow our buffer forever
 # What a port raises once it is gone; closed by another thread (the client's reader may be
 # blocked in read() when the connection is closed), pyserial's socket can also raise these.
 _PORT_GONE = (serial.SerialException, OSError, AttributeError, TypeError, ValueError)
-
-
-class TransportClosed(ConnectionError):
-    """The port could not be opened, or the peer went away (socket closed or reset, port gone)."""
 
 
 class LineTransport:

@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 
+from ..line_errors import LineTimeout
 from .protocol import (
     IDEMPOTENT,
     MAX_ID,
@@ -24,7 +25,7 @@ from .protocol import (
     search_time_s,
     split_reply,
 )
-from .transport import LineSocket, LineTimeout
+from .transport import LineSocket
 
 log = logging.getLogger(__name__)
 BUSY_BACKOFF_S = 0.05
@@ -35,7 +36,7 @@ class TrackerTimeout(TimeoutError):
 
 
 class TrackerClient:
-    """A laser tracker over TCP; each call raises TrackerError, TrackerTimeout or ConnectionError.
+    """A laser tracker over TCP; each call raises TrackerError, TrackerTimeout or TransportClosed.
 
     Idempotent requests (ID, POINT, MEASURE, WEATHER, STATUS) are retried `retries` times on a
     fresh connection after a timeout, a dropped connection or BUSY; SEARCH is sent once.

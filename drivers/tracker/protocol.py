@@ -9,6 +9,8 @@ from enum import StrEnum
 
 import numpy as np
 
+from ..line_errors import ProtocolError
+
 MAX_ID = 999_999_999
 MAX_SAMPLES = 100_000
 MAX_SEARCH_RADIUS_MM = 200.0
@@ -43,14 +45,6 @@ class ErrorCode(StrEnum):
     INACCURATE = "INACCURATE"
     BAD_REQUEST = "BAD_REQUEST"
     BUSY = "BUSY"
-
-
-class ProtocolError(ValueError):
-    """A line that is not valid protocol; `req_id` is set when the id itself could be read."""
-
-    def __init__(self, message: str, req_id: int | None = None):
-        super().__init__(message)
-        self.req_id = req_id
 
 
 class TrackerError(Exception):

@@ -84,7 +84,7 @@ class SimulatedTracker:
         try:
             req = parse_request(line)
         except ProtocolError as e:
-            return encode_reply(e.req_id or 0, TrackerError(ErrorCode.BAD_REQUEST, str(e)))
+            return encode_reply(e.request_id or 0, TrackerError(ErrorCode.BAD_REQUEST, str(e)))
         if not self._busy.acquire(blocking=False):
             return encode_reply(req.id, TrackerError(ErrorCode.BUSY, "another request is running"))
         try:

@@ -6,11 +6,9 @@ import select
 import socket
 import time
 
+from ..line_errors import LineTimeout, TransportClosed
+
 MAX_LINE = 64 * 1024  # longer than any reply: what piles up without a newline is noise
-
-
-class LineTimeout(TimeoutError):
-    """No complete line arrived before the deadline."""
 
 
 class LineSocket:
@@ -22,7 +20,7 @@ class LineSocket:
 
     @classmethod
     def connect(cls, host: str, port: int, deadline: float) -> LineSocket:
-        """Connect by the monotonic deadline; LineTimeout or ConnectionError otherwise."""
+        """Connect by the monotonic deadline; LineTimeout or TransportClosed otherwise."""
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             raise LineTimeout(f"no time left to connect to {host}:{port}")
@@ -31,7 +29,7 @@ class LineSocket:
         except TimeoutError as e:
             raise LineTimeout(f"connecting to {host}:{port} timed out") from e
         except OSError as e:
-            raise ConnectionError(f"cannot connect to {host}:{port}: {e}") from e
+            raise TransportClosed(f"cannot connect to {host}:{port}: {e}") from e
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # one short line per request
         return cls(sock)
 
@@ -61,7 +59,7 @@ class LineSocket:
         except TimeoutError as e:
             raise LineTimeout("send timed out") from e
         except OSError as e:
-            raise ConnectionError(f"send failed: {e}") from e
+            raise TransportClosed(f"send failed: {e}") from e
 
     def read_line(self, deadline: float) -> str:
         """The next complete line, "\\n" included; bytes after it stay buffered for the next call.
@@ -83,9 +81,9 @@ class LineSocket:
             except TimeoutError:
                 continue
             except OSError as e:
-                raise ConnectionError(f"receive failed: {e}") from e
+                raise TransportClosed(f"receive failed: {e}") from e
             if not chunk:
-                raise ConnectionError("connection closed by the peer")
+                raise TransportClosed("connection closed by the peer")
             self._take(chunk)
 
     def _take(self, chunk: bytes) -> None:

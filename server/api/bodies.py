@@ -36,6 +36,7 @@ UPLOADS = frozenset(
         ("POST", "/api/measurements/import"),
         ("POST", "/api/models/{job_id}/compensate"),
         ("POST", "/api/models/{job_id}/export"),
+        ("POST", "/api/models/{job_id}/checks"),
     }
 )
 CELLS = frozenset({("POST", "/api/cells")})

@@ -13,7 +13,7 @@ from robocal.server import store, verification
 from robocal.server.acquire import AcquireOptions
 from robocal.server.campaign_planning import check_plan_size, plans_long
 
-from . import ops
+from .. import campaigns, cells
 from .bodies import json_body, read_json
 from .deps import (
     AcquisitionsDep,
@@ -71,6 +71,7 @@ def public_campaign(
         actions=acquisitions.actions(info, status),
         simulated=info.simulated,
         notes=info.notes,
+        arm=info.arm,
         poses_total=info.n_poses,
         poses_done=info.n_done,
         run=None
@@ -118,7 +119,7 @@ def create_campaign(
     if the cell has `devices`, else on the simulated ones. Random poses are planned at once
     (201, the campaign); a D-optimal choice or a long tour is queued as a planning job (202, the
     job); a D-optimal choice beyond the planning bounds is refused at once (422)."""
-    cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
+    cell = cells.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
     opts = AcquireOptions(**body.model_dump(exclude={"cell_id"}))
     check_plan_size(opts)
     if plans_long(opts):
@@ -128,7 +129,7 @@ def create_campaign(
             status_code=202,
             headers={"Location": f"/api/jobs/{job.id}"},
         )
-    cid = ops.plan_campaign(db, cell=cell, opts=opts)
+    cid = campaigns.plan_campaign(db, cell=cell, opts=opts)
     return public_campaign(store.get_campaign(db, campaign_id=cid), acquisitions, CampaignDetail)
 
 

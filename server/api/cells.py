@@ -7,7 +7,7 @@ from starlette.concurrency import run_in_threadpool
 
 from robocal.server.formats.cell_json import Cell, cell_to_json
 
-from . import ops
+from .. import cells
 from .deps import Authorized, SettingsDep
 from .schemas import CellPublic
 
@@ -28,13 +28,13 @@ JSON_BODY = {
 @router.get("")
 def list_cells(settings: SettingsDep) -> list[str]:
     """The cell ids: `default` (the simulated IRB 2600 cell) and uploads."""
-    return ops.list_cells(cells_dir=settings.cells_dir)
+    return cells.list_cells(cells_dir=settings.cells_dir)
 
 
 @router.get("/{cell_id}", response_model_exclude_none=True)
 def get_cell(cell_id: str, settings: SettingsDep) -> CellPublic:
     """One cell as cell.json, and whether it is simulated."""
-    return _public(cell_id, ops.load_cell(cells_dir=settings.cells_dir, cell_id=cell_id))
+    return _public(cell_id, cells.load_cell(cells_dir=settings.cells_dir, cell_id=cell_id))
 
 
 @router.post(
@@ -49,7 +49,9 @@ async def upload_cell(request: Request, settings: SettingsDep) -> CellPublic:
     and column) and keep it; a `devices` object makes it a real cell, whose campaigns drive the
     tracker and controller there."""
     text = (await request.body()).decode("utf-8", errors="replace")
-    cell_id, cell = await run_in_threadpool(ops.save_cell, cells_dir=settings.cells_dir, text=text)
+    cell_id, cell = await run_in_threadpool(
+        cells.save_cell, cells_dir=settings.cells_dir, text=text
+    )
     return _public(cell_id, cell)
 
 

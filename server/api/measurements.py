@@ -10,7 +10,7 @@ from starlette.concurrency import iterate_in_threadpool, run_in_threadpool
 
 from robocal.server import store, uploads
 
-from . import ops
+from .. import campaigns, cells
 from .campaigns import public_campaign
 from .deps import AcquisitionsDep, Authorized, CampaignId, DbDep, JobsDep, SettingsDep
 from .schemas import MAX_ID, PRINTABLE, CampaignPublic, ReadingPublic
@@ -117,15 +117,26 @@ async def import_readings(
     name: Annotated[str | None, Query(max_length=200, pattern=PRINTABLE)] = None,
     filename: Annotated[str, Query(max_length=255, pattern=PRINTABLE)] = "meas.csv",
     cell_id: Annotated[str, Query(max_length=64)] = "default",
+    arm: Annotated[
+        str | None,
+        Query(
+            min_length=1,
+            max_length=64,
+            pattern=PRINTABLE,
+            description="the physical arm measured (its serial number), for the fleet view",
+        ),
+    ] = None,
 ) -> CampaignPublic:
     """Store a meas.csv as a done campaign; a bad file is 422 with its line and nothing stored."""
     data = await request.body()
-    cell = ops.load_cell(cells_dir=settings.cells_dir, cell_id=cell_id)
-    cid = await run_in_threadpool(_import, jobs, db, data, filename, cell, name or filename)
+    cell = cells.load_cell(cells_dir=settings.cells_dir, cell_id=cell_id)
+    cid = await run_in_threadpool(_import, jobs, db, data, filename, cell, name or filename, arm)
     return public_campaign(store.get_campaign(db, campaign_id=cid), acquisitions)
 
 
-def _import(jobs, db, data: bytes, filename: str, cell, name: str) -> int:
+def _import(jobs, db, data: bytes, filename: str, cell, name: str, arm: str | None) -> int:
     """The file read in a worker process (no parse holds this one's GIL), stored from here."""
     meas = run_call(jobs, uploads.read_measurements, data, filename, cell.robot)
-    return ops.import_campaign(db, measurements=meas, filename=filename, cell=cell, name=name)
+    return campaigns.import_campaign(
+        db, measurements=meas, filename=filename, cell=cell, name=name, arm=arm
+    )

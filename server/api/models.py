@@ -19,7 +19,7 @@ from robocal.server.identified import parameters_of
 from robocal.server.validation import absurd_errors, cell_mismatch, file_refusal
 from robocal.solver.finite import require_inputs
 
-from . import ops
+from .. import campaigns
 from .bodies import json_body, read_json
 from .campaigns import public_campaign
 from .deps import AcquisitionsDep, Authorized, CampaignQuery, DbDep, JobId, JobsDep
@@ -345,7 +345,7 @@ def verify_model(
         q_deg, labels, settings = run_call(
             jobs, verification.prepare, cell, path, opts, f"job-{job_id}.model.json"
         )
-    cid = ops.plan_given(
+    cid = campaigns.plan_given(
         db,
         cell=cell,
         opts=verification.acquire_options(cell, opts, len(q_deg)),

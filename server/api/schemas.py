@@ -121,6 +121,7 @@ class CampaignPublic(BaseModel):
     actions: list[Action] = ACTIONS_FIELD
     simulated: bool
     notes: str
+    arm: str | None = Field(None, description="the physical arm measured (its serial), if named")
     poses_total: int
     poses_done: int
     run: RunPublic | None = None

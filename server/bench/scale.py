@@ -85,7 +85,7 @@ def run_scale(cell, meas, repeats: int = 2) -> dict:
 
     from ..formats.campaign_csv import joint_columns, read_campaign, write_campaign
 
-    targets = np.array([cell.targets[t] for t in meas.target_names], dtype=float)
+    targets = cell.target_positions(meas.target_names)
     out: dict = {"poses": meas.n_poses, "readings": meas.n_readings}
     for method in ("ls-sum", "minimax"):
 

@@ -79,7 +79,7 @@ def run_screen_bench(clean: int = 480, dirty: int = 240, rate: float = 0.03) -> 
             if share:
                 clean_xyz = xyz
                 xyz, moved = displace(xyz, seed, share)
-            targets = np.array([cell.targets[t] for t in meas.target_names])
+            targets = cell.target_positions(meas.target_names)
             s = screen_readings(
                 cell.robot, targets, meas.target_names, meas.q, xyz, meas.time_s, meas.temp_c
             )

@@ -385,7 +385,7 @@ def run_solver_bench(
 
     cell = default_cell()
     names = tuple(cell.targets)
-    targets = np.array([cell.targets[t] for t in names], dtype=float)
+    targets = cell.target_positions(names)
     results = {}
     for m in sizes:
         meas = _campaign(cell, int(m), seed)

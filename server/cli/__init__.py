@@ -16,6 +16,7 @@ from . import (
     diagnose,
     evaluate,
     export,
+    fleet,
     predict,
     schema,
     serve,
@@ -65,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     compensate.add(sub)
     evaluate.add(sub)
     check.add(sub)
+    fleet.add(sub)
     compare.add(sub)
     diagnose.add(sub)
     acquire.add(sub)

@@ -68,7 +68,7 @@ def cmd_calibrate(args) -> None:
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
     model = workflow.model_file(cal, cell, meas, data_path=args.meas)
     if hold is not None:  # the separate validation figure beside the leave-one-out one
-        from ..validation import held_out_errors
+        from ..workflow import held_out_errors
 
         model.meta.setdefault("validation", {})["held_out"] = {
             "file": Path(args.held_out).name,

@@ -49,6 +49,10 @@ class Cell:
     def simulated(self) -> bool:
         return self.devices is None
 
+    def target_positions(self, names) -> np.ndarray:
+        """(K, 3) the nominal positions (mm, flange frame) of the named SMRs, in that order."""
+        return np.array([self.targets[t] for t in names], dtype=float)
+
 
 def default_cell() -> Cell:
     """The spec's example cell: the built-in IRB 2600 with targets A, B, C."""

@@ -35,6 +35,7 @@ class CampaignInfo:
     n_done: int  # poses with an outcome
     lease_owner: str | None = None  # the process driving it (host:pid:random), if one claimed it
     lease_expires_at: dt.datetime | None = None
+    arm: str | None = None  # the physical arm measured (its serial), if named
 
 
 def create_campaign(
@@ -47,10 +48,12 @@ def create_campaign(
     labels: Sequence[str] | None = None,
     simulated: bool = False,
     notes: str = "",
+    arm: str | None = None,
 ) -> int:
     """Store a new `planned` campaign and its plan (n poses x N joints, deg) together; its id.
 
-    Labels (the `pose` column of an exported meas.csv) default to "1" ... "n".
+    Labels (the `pose` column of an exported meas.csv) default to "1" ... "n"; `arm` names the
+    physical arm (its serial number) for the fleet view.
     """
     cell, cell_text = checks.cell_text(cell_json)
     q = checks.plan_deg(poses_deg, cell.robot)
@@ -64,6 +67,7 @@ def create_campaign(
             simulated=simulated,
             notes=notes,
             status="planned",
+            arm=arm,
         )
         _add_plan(s, campaign.id, labels, q)
     return campaign.id
@@ -131,12 +135,16 @@ def _info(s: Session, c: Campaign) -> CampaignInfo:
         n_done,
         c.lease_owner,
         c.lease_expires_at,
+        c.arm,
     )
 
 
-def _add_campaign(s: Session, *, name, cell_text, settings, simulated, notes, status) -> Campaign:
+def _add_campaign(
+    s: Session, *, name, cell_text, settings, simulated, notes, status, arm=None
+) -> Campaign:
     if not isinstance(name, str) or not name.strip():
         raise ValueError("a campaign needs a name")
+    arm = checks.arm_name(arm)
     try:
         settings_text = json.dumps(dict(settings or {}), sort_keys=True, allow_nan=False)
     except (TypeError, ValueError) as e:
@@ -148,6 +156,7 @@ def _add_campaign(s: Session, *, name, cell_text, settings, simulated, notes, st
         simulated=bool(simulated),
         notes=str(notes),
         status=status,
+        arm=arm,
     )
     s.add(campaign)
     s.flush()  # assigns the id

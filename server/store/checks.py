@@ -124,3 +124,18 @@ def outcome_agrees(state: str, ok: int, missing: int, pose_index: int) -> None:
             f"pose {pose_index} cannot be {state}: it has {ok} reading(s) and "
             f"{missing} target(s) recorded missing"
         )
+
+
+ARM_MAX = 64  # characters of an arm's serial number
+
+
+def arm_name(arm) -> str | None:
+    """An arm's serial number, stripped: printable, 1 to ARM_MAX characters; None: unnamed."""
+    if arm is None:
+        return None
+    if not isinstance(arm, str) or not arm.strip():
+        raise ValueError("an arm's serial number must be a non-empty text")
+    arm = arm.strip()
+    if len(arm) > ARM_MAX or not arm.isprintable():
+        raise ValueError(f"arm {arm[:ARM_MAX]!r}: at most {ARM_MAX} printable characters")
+    return arm

@@ -115,8 +115,9 @@ def import_csv(
     robot: Robot | None = None,
     notes: str = "",
     measurements: Measurements | None = None,
+    arm: str | None = None,
 ) -> int:
-    """Store a `meas.csv` as a `done` campaign; its id. All or nothing: InputError on a bad file
+    """Store a `meas.csv` as a `done` campaign (of this physical arm, if named); its id. All or nothing: InputError on a bad file
     (or cell), and then nothing is written. `measurements`: the file at `path` read already (by
     a worker process), for this robot.
 
@@ -144,6 +145,7 @@ def import_csv(
             simulated=False,
             notes=IMPORTING,
             status="failed",
+            arm=arm,
         )
         cid = campaign.id
     step = max(1, IMPORT_CHUNK // len(meas.target_names))  # poses per transaction

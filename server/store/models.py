@@ -102,6 +102,8 @@ class Campaign(Base):
     settings_json: Mapped[str] = mapped_column(Text, default="{}")  # pause, settle, retries...
     simulated: Mapped[bool] = mapped_column(Boolean, default=False)
     notes: Mapped[str] = mapped_column(Text, default="")
+    # The physical arm measured (its serial number), which the fleet view follows; None: unnamed
+    arm: Mapped[str | None] = mapped_column(Text, index=True)
     # The process that drives the campaign (host:pid:random) and until when its claim holds;
     # the owner renews it while it runs, so a killed owner's claim lapses.
     lease_owner: Mapped[str | None] = mapped_column(Text)

@@ -24,6 +24,8 @@ class DeviceError(Exception):
 
 
 class Controller:
+    last_move = None  # no MOVEJ tickets: the engine aims ahead on the duration alone
+
     def __init__(self, world):
         self.world, self.commands, self.latched = world, [], False
 

@@ -65,6 +65,8 @@ class Cell:
 
 
 class Controller:
+    last_move = None
+
     def __init__(self, cell):
         self.cell = cell
 
@@ -130,6 +132,8 @@ class Tracker:
 
 class Predictor:
     names = NAMES
+    stage = "nominal"  # never aims ahead: each pose's SMRs are pointed at after the move
+    reach_mm = np.inf
 
     def __init__(self):
         self.history = None

@@ -14,7 +14,7 @@ from robocal.server import store
 from robocal.server.acquire import AcquireOptions
 from robocal.server.acquisitions import Acquisitions
 from robocal.server.api import campaigns as routes
-from robocal.server.api.ops import plan_campaign
+from robocal.server.campaigns import plan_campaign
 from robocal.server.formats import default_cell
 from robocal.server.job_queue import check_job
 

@@ -78,15 +78,15 @@ def test_a_check_measured_but_not_judged_is_judged_next_and_later_ones_reuse_its
     model = calibrated / "model.json"
     db = tmp_path / "h.db"
     opts = check_run.CheckRunOptions(seed=SEED, pause_s=PAUSE_S, poses=4)
-    real = check_run.check_measured
+    real = check_run.record
 
     def ended(*a, **k):
         raise KeyboardInterrupt  # the process ends between the acquisition and the judgement
 
-    monkeypatch.setattr(check_run, "check_measured", ended)
+    monkeypatch.setattr(check_run, "record", ended)
     with pytest.raises(KeyboardInterrupt):
         check_run.acquire_check(db, default_cell(), model, opts)
-    monkeypatch.setattr(check_run, "check_measured", real)
+    monkeypatch.setattr(check_run, "record", real)
     run = check_run.acquire_check(db, default_cell(), model, opts)
     assert run.summary is None and run.result.history == 1 and run.result.poses == 4
     assert len(store.list_campaigns(store.open_database(db))) == 1

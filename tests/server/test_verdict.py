@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from robocal.server.formats.verdict import NO_VERDICT, Verdict
-from robocal.solver import validation as guard
+from robocal.solver import guard
 from tests.server.test_cli import robocal
 
 CELL = {

@@ -41,7 +41,7 @@ def simulated(robot: str, seed: int):
 def nominal_model(cell: Cell, meas) -> Model:
     """What an uncalibrated cell knows: the nominal arm, registered to the tracker."""
     names = meas.target_names
-    targets = np.array([cell.targets[t] for t in names])
+    targets = cell.target_positions(names)
     nom = calibrate(cell.robot, targets, names, meas.q, meas.xyz, method="nominal")
     return Model(nom.layout, nom.x, [], cell.robot)
 

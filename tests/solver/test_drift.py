@@ -91,3 +91,16 @@ def test_level_judges_pose_means_against_the_expected_error():
     far = fine + 0.1
     lvl = drift.level(far, pose, 0.02)
     assert lvl.verdict == "recalibrate" and lvl.rms_mm > 0.15 and lvl.max_mm >= lvl.rms_mm
+
+
+def test_level_limits_are_where_the_level_changes_its_verdict():
+    # one reading a pose: its error is the pose's mean, so the RMS is the one the limits bound
+    rng = np.random.default_rng(3)
+    pose = np.arange(POSES)
+    direction = rng.normal(size=(POSES, 3))
+    direction /= np.sqrt(np.mean(np.sum(direction**2, axis=1)))  # RMS 1 mm
+    watch, recalibrate = drift.level_limits(0.02, POSES)
+    assert 0.02 < watch < recalibrate
+    for limit, below, above in ((watch, "ok", "watch"), (recalibrate, "watch", "recalibrate")):
+        assert drift.level(direction * limit * 0.999, pose, 0.02).verdict == below
+        assert drift.level(direction * limit * 1.001, pose, 0.02).verdict == above

@@ -9,16 +9,10 @@ from robocal.drivers.effects import make_effects
 from robocal.solver import identifiability as ident
 from robocal.solver.calibrate import calibrate
 from robocal.solver.diagnosis_report import parameters
-from robocal.solver.effects import (
-    Extension,
-    Inputs,
-    gravity_basis,
-    gravity_in_base,
-    joint_basis,
-    select_independent,
-)
+from robocal.solver.effects import Extension, Inputs, joint_basis
 from robocal.solver.extended import fit_extended
 from robocal.solver.fit_errors import calibration_errors, effect_uncertainty, extended_errors
+from robocal.solver.gravity import gravity_basis, gravity_in_base, select_independent
 from robocal.solver.identify import register
 from robocal.solver.robot import IRB2600
 from robocal.solver.uncertainty import Rows, clustered, propagate

@@ -80,7 +80,7 @@ def campaign(seed, effect=None, poses=100, one_smr=False):
 
 def geometric_remainder(cell, meas):
     """The geometric model's held-out residual and what unexplained() needs beside it."""
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    targets = cell.target_positions(meas.target_names)
     prob, x0 = register(cell.robot, targets, meas.target_names, meas.q, meas.xyz, cell.base)
     st = ident.structural(prob.layout, x0, np.ones(prob.layout.n_params, dtype=bool))
     inputs = Inputs(meas.q, meas.time_s, meas.temp_c)

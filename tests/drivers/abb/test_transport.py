@@ -5,7 +5,8 @@ import time
 import pytest
 
 from robocal.drivers.abb.client import ControllerClient, ControllerTimeout
-from robocal.drivers.abb.transport import LineTransport, TransportClosed
+from robocal.drivers.abb.transport import LineTransport
+from robocal.drivers.line_errors import TransportClosed
 from robocal.solver.robot import IRB2600
 
 

@@ -150,7 +150,7 @@ def test_good_requests(line, expected):
 def test_bad_requests_are_refused(line, req_id, message):
     with pytest.raises(ProtocolError, match=message) as info:
         parse_request(line)
-    assert info.value.req_id == req_id
+    assert info.value.request_id == req_id
 
 
 @pytest.mark.parametrize(

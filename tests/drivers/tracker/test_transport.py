@@ -6,7 +6,8 @@ import time
 
 import pytest
 
-from robocal.drivers.tracker.transport import MAX_LINE, LineSocket, LineTimeout
+from robocal.drivers.line_errors import LineTimeout
+from robocal.drivers.tracker.transport import MAX_LINE, LineSocket
 
 
 @pytest.fixture

@@ -33,6 +33,7 @@ FILES = {
     ("POST", "/api/measurements/import"),
     ("POST", "/api/models/{job_id}/compensate"),
     ("POST", "/api/models/{job_id}/export"),
+    ("POST", "/api/models/{job_id}/checks"),
 }
 FILE_CHECKS_EXCLUDED = [checks.positive_data_acceptance]
 # Examples per operation and generation mode: bounded so the whole run stays near a minute.

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocal.solver import validation as guard
+from robocal.solver import guard
 from robocal.solver.uncertainty import Rows
 
 

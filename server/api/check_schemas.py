@@ -1,0 +1,81 @@
+"""The bodies of a model's quick checks: one check's result, the history, the line's health."""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Literal
+
+from pydantic import BaseModel, Field
+
+Verdict = Literal["ok", "watch", "recalibrate"]
+VERDICT = (
+    "ok; watch (a change that may be scatter: check again soon); recalibrate (the model no "
+    "longer describes the arm, judged over the history)"
+)
+
+
+class CheckPublic(BaseModel):
+    """One check as `robocal check` writes check.json (FORMATS section 8), and its job."""
+
+    job_id: int
+    model_sha256: str
+    poses: int = Field(description="poses of the check with at least one reading")
+    rms_mm: float = Field(description="3-D RMS of the readings' error against the model")
+    max_mm: float
+    expected_rms_mm: float = Field(description="the model's held-out error (noise floor at least)")
+    verdict: Verdict = Field(description=VERDICT)
+    reason: str = Field(description="one sentence a person can check; the cause where known")
+    history: int = Field(description="checks of this model, this one included")
+    change_mm: float | None = Field(
+        description="RMS change from the model's first checks (null: nothing to compare with)"
+    )
+    scatter_mm: float | None = Field(description="the scatter between checks it was judged by")
+    change_score: float = Field(description="normal score of the change")
+    cusum: float = Field(description="the change scores accumulated over the history")
+    cause: str | None = Field(
+        description="rigid, joint N, scale, payload or unknown, when recalibrate; else null"
+    )
+
+
+class CheckEntry(BaseModel):
+    """One stored check of the history, with the limits its figures were judged by."""
+
+    id: int
+    checked_at: dt.datetime
+    source: str = Field(description="the uploaded file's name")
+    poses: int
+    rms_mm: float
+    max_mm: float
+    expected_rms_mm: float
+    watch_rms_mm: float = Field(description="the RMS at which the level alone says watch")
+    recalibrate_rms_mm: float = Field(
+        description="the RMS at which the level alone says recalibrate"
+    )
+    change_score: float
+    cusum: float
+    verdict: Verdict
+    reason: str
+
+
+class CheckHistory(BaseModel):
+    """A model's checks, oldest first, and the accumulated change's limits."""
+
+    job_id: int
+    model_sha256: str
+    cusum_watch: float = Field(description="the accumulated change at which it says watch")
+    cusum_recalibrate: float = Field(description="... and recalibrate")
+    checks: list[CheckEntry]
+
+
+class ModelHealth(BaseModel):
+    """Whether the deployed model still holds, by its latest check: the production line's view."""
+
+    job_id: int
+    model_sha256: str
+    checked: bool = Field(description="false: the model was never checked")
+    verdict: Verdict | None = Field(description=f"{VERDICT}; null when never checked")
+    reason: str
+    checked_at: dt.datetime | None
+    history: int = Field(description="checks of this model")
+    rms_mm: float | None
+    expected_rms_mm: float | None

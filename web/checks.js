@@ -1,0 +1,87 @@
+// robocal page, the shown model's quick checks (spec section 8): the latest check's verdict on the
+// model (GET /api/models/{id}/health), the history as a table and a chart (GET .../checks,
+// GET /api/charts/models/{id}/checks.png), and a check.csv posted (POST .../checks). Uses
+// app.js's globals ($, api, fmt, state, say, makeTable, showImage, clearImage) and history.js's
+// when(); model.js calls showChecks(job id) as it shows a model.
+"use strict";
+
+// figures in mm (the caption says so); each check's reason on a line of its own below it
+const CHECK_COLUMNS = ["#", "when", "file", "poses", "RMS", "max", "expected", "watch at",
+  "recalibrate at", "change score", "accumulated", "verdict"];
+
+/** The latest check's verdict on the model, or that it was never checked. */
+function renderHealth(h) {
+  const box = $("m-health");
+  box.hidden = false;
+  box.className = h.verdict ? `k-${h.verdict}` : "k-never";
+  if (!h.checked) {
+    box.textContent = "Never checked since calibrated: post a check.csv under \"Quick checks\".";
+    return;
+  }
+  const badge = Object.assign(document.createElement("span"), { className: "k-badge",
+    textContent: h.verdict });
+  box.replaceChildren(badge, ` latest check (${h.history} of this model, ${when(h.checked_at)}): `
+    + h.reason);
+}
+
+/** The model's checks as a table, newest first: a line of figures and verdict, then its reason. */
+function renderChecks(hist) {
+  const checks = [...hist.checks].reverse();
+  if (!checks.length) {
+    $("k-history").replaceChildren(Object.assign(document.createElement("p"),
+      { className: "muted", textContent: "no check of this model yet" }));
+    return;
+  }
+  const n = hist.checks.length;
+  const table = makeTable("k-table", CHECK_COLUMNS, checks.map((c, i) => [String(n - i),
+    when(c.checked_at), c.source, String(c.poses), fmt(c.rms_mm), fmt(c.max_mm),
+    fmt(c.expected_rms_mm), fmt(c.watch_rms_mm), fmt(c.recalibrate_rms_mm),
+    c.change_score.toFixed(2), c.cusum.toFixed(2), c.verdict]));
+  [...table.tBodies[0].rows].forEach((tr, i) => {
+    tr.className = "k-check";
+    tr.cells[11].className = `k-${checks[i].verdict}`;
+    const why = document.createElement("tr");
+    why.className = "k-reason";
+    Object.assign(why.insertCell(), { colSpan: CHECK_COLUMNS.length,
+      textContent: checks[i].reason });
+    tr.after(why);
+  });
+  const caption = table.createCaption();
+  caption.textContent = "RMS, max, expected and the level's limits in mm; accumulated change: "
+    + `watch above ${hist.cusum_watch.toFixed(1)}, recalibrate above `
+    + `${hist.cusum_recalibrate.toFixed(1)}`;
+  $("k-history").replaceChildren(table);
+}
+
+/** The shown model's checks: verdict, history table and chart. */
+async function showChecks(jobId) {
+  $("m-health").hidden = true;
+  $("k-history").replaceChildren();
+  $("k-charts").hidden = true;
+  clearImage($("k-chart"));
+  $("k-health-url").textContent = `GET /api/models/${jobId}/health`;
+  try {
+    const [h, hist] = await Promise.all([api("GET", `/models/${jobId}/health`),
+      api("GET", `/models/${jobId}/checks`)]);
+    if (state.job !== jobId) return;  // another model was shown meanwhile
+    renderHealth(h);
+    renderChecks(hist);
+    $("k-charts").hidden = !hist.checks.length;
+    // the fragment (never sent) tells this history's chart from an earlier one still on its way
+    const n = hist.checks.length;
+    if (n) showImage($("k-chart"), `/api/charts/models/${jobId}/checks.png#${n}`);
+  } catch (e) { say(e.message); }
+}
+
+$("k-post").addEventListener("click", async () => {
+  const file = $("k-file").files[0];
+  if (!file) { say("choose a check.csv file first"); return; }
+  const job = state.job;
+  $("k-state").textContent = "checking...";
+  try {
+    const c = await api("POST", `/models/${job}/checks?filename=${encodeURIComponent(file.name)}`,
+      await file.text(), true, "text/csv");
+    $("k-state").textContent = `check ${c.history}: ${c.verdict}`;
+    if (state.job === job) await showChecks(job);
+  } catch (e) { $("k-state").textContent = ""; say(e.message); }
+});

@@ -1,0 +1,164 @@
+// The diagnosis on the page: its job followed, its report shown (effects, their parameters and
+// figures, what is left unexplained, the outliers). Uses app.js's globals ($, api, say, state).
+
+/** The diagnosis job's state as its events (live.js) tell it; its report once done. */
+async function followDiagnosis(d) {
+  if (d.id !== state.diag) return;
+  $("d-state").textContent = `diagnosis job ${d.id}: ${d.state}`
+    + (d.state === "running" ? ` (${Math.round(d.progress * 100)} %)` : "")
+    + (d.reason ? `: ${d.reason}` : "");
+  try {
+    if (d.state === "done") await showDiagnosis(d);
+  } catch (e) { say(e.message); }
+}
+
+const UNITS = [["_ppm_per_c", "ppm/°C"], ["_ppm_per_hour", "ppm/h"], ["_deg", "deg"],
+               ["_ppm", "ppm"], ["_mm", "mm"], ["_s", "s"]];
+
+/** An effect's parameters as text, each ± its standard error where `errors` gives one, units
+ * taken from the key suffixes of the report; each value after `sign` ("± " for standard errors). */
+function formatParameters(params, errors = null, sign = "") {
+  const pm = (v, se) => fmt(v) + (typeof se === "number" ? ` ± ${fmt(se)}` : "");
+  return Object.entries(params || {}).map(([key, v]) => {
+    const [suffix, unit] = UNITS.find(([sfx]) => key.endsWith(sfx)) || ["", ""];
+    const label = (suffix ? key.slice(0, -suffix.length) : key).replaceAll("_", " ");
+    const se = (errors || {})[key];
+    const value = Array.isArray(v) ? `(${v.map((x, i) => pm(x, Array.isArray(se) ? se[i] : null)).join(", ")})`
+      : typeof v === "number" ? (Number.isInteger(v) ? String(v) : pm(v, se)) : String(v);
+    return `${label} ${sign}${value}${unit ? ` ${unit}` : ""}`;
+  }).join("; ");
+}
+
+/** Optional per-effect keys of the report: [key, column heading, text of its value]. */
+const EFFECT_EXTRAS = [
+  ["uncertainty", "standard error", (v) => formatParameters(v, null, "± ")],
+  ["holdout_gain_interval_mm", "held-out gain interval / mm",
+   (v) => `${fmt(v[0])} to ${fmt(v[1])}`],
+  ["alternatives", "could not be told apart from",
+   (v) => (v.length ? v.map((a) => `${a.label || effectLabel(a)} (held-out RMS `
+     + `${fmt(a.holdout_rmse_mm ?? a.holdout_rmse_after_mm)} mm)`).join("; ") : "none")],
+];
+
+/** A small table: headings, then rows of cell texts. */
+function makeTable(id, headings, rows) {
+  const table = document.createElement("table");
+  table.id = id;
+  const head = table.createTHead().insertRow();
+  headings.forEach((h) => { head.appendChild(document.createElement("th")).textContent = h; });
+  const body = table.createTBody();
+  rows.forEach((row) => {
+    const tr = body.insertRow();
+    row.forEach((v) => { tr.insertCell().textContent = v; });
+  });
+  return table;
+}
+
+/** What the final model leaves unexplained: how much, and the covariates it follows most. */
+function showUnexplained(u) {
+  const box = $("d-unexplained");
+  box.hidden = !u;
+  if (!u) return box.replaceChildren();
+  const title = Object.assign(document.createElement("h3"), { textContent: "Unexplained" });
+  const summary = Object.assign(document.createElement("p"), { id: "u-summary", textContent: u.reading });
+  const table = makeTable("unexplained-table", ["covariate", "strength", "through", "reading"],
+    u.covariates.map((c) => [c.name, fmt(c.strength), c.channel ?? "-", c.reading]));
+  [...table.tBodies[0].rows].forEach((tr, i) => {
+    const bar = document.createElement("meter");  // strength 0..1 at a glance
+    Object.assign(bar, { min: 0, max: 1, value: u.covariates[i].strength });
+    tr.cells[1].prepend(bar, " ");
+    tr.cells[3].className = "evidence";
+  });
+  const parts = [title, summary, table];
+  if (u.per_pose_reading) {
+    parts.push(Object.assign(document.createElement("p"), {
+      id: "u-per-pose", className: u.per_pose_dominates ? "warn" : "muted",
+      textContent: `Per pose: ${u.per_pose_reading}` }));
+  }
+  box.replaceChildren(...parts);
+}
+
+/** Readings excluded as gross errors, by pose and target. */
+function showOutliers(list) {
+  const box = $("d-outliers");
+  box.hidden = !list || !list.length;
+  if (box.hidden) return box.replaceChildren();
+  box.replaceChildren(
+    Object.assign(document.createElement("h3"),
+      { textContent: `Readings excluded as gross errors (${list.length})` }),
+    makeTable("outliers-table", ["pose", "target", "residual / mm"],
+      list.map((o) => [String(o.pose), o.target, fmt(o.residual_mm)])));
+}
+
+/** The name a person reads for an effect of the report: type, joint, harmonic, time. */
+function effectLabel(e) {
+  return e.name + (e.joint !== undefined && e.joint !== null ? `, joint ${e.joint}` : "")
+    + (e.harmonic ? `, harmonic ${e.harmonic}` : "")
+    + (e.at_s !== undefined && e.at_s !== null ? ` at ${e.at_s.toFixed(0)} s` : "");
+}
+
+/** Whether this figure file shows this effect: the report names each effect's figure. */
+function figureOf(e, file) {
+  return e.figure === file;
+}
+
+async function showDiagnosis(d) {
+  const [report, figures] = await Promise.all([api("GET", d.report_url.slice(4)),
+                                               api("GET", d.figures_url.slice(4))]);
+  if (d.id !== state.diag) return;
+  const b = report.baseline, f = report.final;
+  $("d-state").textContent = `geometric model: held-out RMS ${fmt(b.holdout_rmse_mm)} mm; `
+    + `${f.model}: ${fmt(f.holdout_rmse_mm)} mm (noise floor `
+    + `${report.noise_floor_mm ? `${fmt(report.noise_floor_mm)} mm` : "unknown"}`
+    + `${report.noise_floor_source ? `, from the ${report.noise_floor_source}` : ""})`;
+  if (!report.effects.length) {
+    $("d-effects").innerHTML = '<p id="d-none">No effect beyond geometry pays off on held-out poses.</p>';
+  } else {
+    const table = document.createElement("table");
+    table.id = "effects-table";
+    const head = table.createTHead().insertRow();
+    ["effect", "joint", "evidence", "parameters", "held-out RMS before / mm", "after / mm"]
+      .forEach((h) => { head.appendChild(document.createElement("th")).textContent = h; });
+    const body = table.createTBody();
+    // Optional columns (FORMATS.md section 5), shown only when some effect carries them.
+    const extra = EFFECT_EXTRAS.filter(([key]) => report.effects.some((e) => e[key] !== undefined));
+    extra.forEach(([, h]) => { head.appendChild(document.createElement("th")).textContent = h; });
+    report.effects.forEach((e, i) => {
+      const tr = body.insertRow();
+      const name = `Effect ${i + 1}: ${e.name}` + (e.harmonic ? ` (harmonic ${e.harmonic})` : "")
+        + (e.at_s !== undefined && e.at_s !== null ? ` at ${e.at_s.toFixed(0)} s` : "");
+      [name, e.joint ?? "-", e.evidence, formatParameters(e.parameters, e.uncertainty),
+       fmt(e.holdout_rmse_before_mm), fmt(e.holdout_rmse_after_mm),
+       ...extra.map(([key, , show]) => (e[key] === undefined ? "-" : show(e[key])))]
+        .forEach((v) => { tr.insertCell().textContent = v; });
+      tr.cells[2].className = "evidence";
+      tr.cells[3].className = "parameters";
+      extra.forEach(([key], k) => { tr.cells[6 + k].className = `extra ${key}`; });
+    });
+    $("d-effects").replaceChildren(table);
+  }
+  // a small campaign whose resamples name another cause: the cause is in doubt, said so
+  const doubt = report.stability?.doubt;
+  Object.assign($("d-doubt"), { hidden: !doubt, textContent: doubt ?? "" });
+  showUnexplained(report.unexplained);
+  showOutliers(report.outliers);
+  // One figure per effect: its caption names the effect it shows.
+  $("d-figures").replaceChildren(...figures.map((fig) => {
+    const i = report.effects.findIndex((e) => figureOf(e, fig.name));
+    const e = report.effects[i];
+    const el = document.createElement("figure");
+    const img = el.appendChild(document.createElement("img"));
+    showImage(img, fig.url);
+    img.alt = e ? `residuals against ${effectLabel(e)}, before and after` : fig.name;
+    el.appendChild(document.createElement("figcaption")).textContent = e
+      ? `Effect ${i + 1}: ${effectLabel(e)}. Residuals before and after, with what the effect `
+        + `predicts (${fig.name})` : fig.name;
+    return el;
+  }));
+  const reportLink = Object.assign(document.createElement("a"),
+    { href: d.report_url, textContent: "Download report.json" });
+  reportLink.setAttribute("download", `job-${d.id}.report.json`);
+  const modelLink = Object.assign(document.createElement("a"),
+    { href: d.model_url, textContent: "Download extended model.json" });
+  modelLink.setAttribute("download", `job-${d.id}.model.json`);
+  $("d-links").replaceChildren(reportLink, " · ", modelLink);
+}
