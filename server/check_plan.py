@@ -9,7 +9,7 @@ short path from the arm's home.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -67,16 +67,15 @@ def plan_check(model: ModelFile, n: int = DEFAULT_POSES) -> CheckPlan:
         raise ValueError(f"--plan: {n} poses; a check plans {MIN_POSES} to {MAX_POSES}")
     rng = np.random.default_rng(PLAN_SEED)
     cand = plan_poses(model.robot, model.base, model.targets, CANDIDATES, rng)
-    # the calibration's poses were drawn like these: keep those where the model is as good as
-    # its held-out error, which the check's level is judged against
-    ident = candidate_jacobians(model.robot, model.base, model.targets, cand)
-    cand = cand[cp.interior(ident, INTERIOR_SHARE)]
     lay, x = model.layout()
     design = cp.change_design(lay, x, cand, np.asarray(model.base)[:3, 3], VISIBLE_MM_PER_RAD)
-    chosen = cp.choose(design, n)
+    # the calibration's poses were drawn like these: choose among those where the model is as
+    # good as its held-out error, which the check's level is judged against
+    ident = candidate_jacobians(model.robot, model.base, model.targets, cand)
+    inside = np.flatnonzero(cp.interior(ident, INTERIOR_SHARE))
+    chosen = inside[cp.choose(replace(design, J=design.J[inside]), n)]
     home = np.zeros(model.robot.n_joints)
-    order = order_poses(cand[chosen], start=home)
-    idx = chosen[order]
+    idx = chosen[order_poses(cand[chosen], start=home)]
     unit = design.J / np.linalg.norm(design.J, axis=(0, 1))  # mm and rad comparable
     return CheckPlan(
         [f"check{i + 1}" for i in range(n)],
