@@ -95,17 +95,7 @@ def acquire_check(
         if waiting:  # the oldest first: the history keeps the order they were measured in
             cid = min(c.id for c in waiting)
             return CheckRun(cid, None, _judge(db, model, sha, cid))
-        earlier = [c for c in ours if c.n_poses > 0]
-        given = opts.poses_path is not None or opts.poses is not None
-        if earlier and not given:
-            # the poses of the model's first check here: a plan made again elsewhere (another
-            # numpy, another machine) could differ in a near tie, and the history would not match
-            planned = store.planned_poses(db, campaign_id=min(c.id for c in earlier))
-            ids = [p.label for p in planned]
-            q_deg = np.array([p.joints_deg for p in planned])
-    if given or not earlier:
-        ids, q = check_poses(model, opts.poses_path, opts.poses or DEFAULT_POSES)
-        q_deg = np.rad2deg(q)
+        ids, q_deg = _poses(db, ours, model, opts)
     geometry = {
         "robot": robot_to_json(model.robot),
         "base": np.asarray(model.base).tolist(),
@@ -142,6 +132,19 @@ def acquire_check(
         return CheckRun(cid, summary, None)
     with _opened(db_path) as db:
         return CheckRun(cid, summary, _judge(db, model, sha, cid))
+
+
+def _poses(db, ours, model, opts: CheckRunOptions) -> tuple[list[str], np.ndarray]:
+    """The check's (pose labels, joints deg): those given (a file, a count to plan), else those
+    of the model's first check campaign `ours` in the database, else the model's plan."""
+    earlier = [c for c in ours if c.n_poses > 0]
+    if earlier and opts.poses_path is None and opts.poses is None:
+        # a plan made again elsewhere (another numpy, another machine) could differ in a near
+        # tie, and the history would no longer match its poses
+        planned = store.planned_poses(db, campaign_id=min(c.id for c in earlier))
+        return [p.label for p in planned], np.array([p.joints_deg for p in planned])
+    ids, q = check_poses(model, opts.poses_path, opts.poses or DEFAULT_POSES)
+    return ids, np.rad2deg(q)
 
 
 def _source(campaign_id: int) -> str:
