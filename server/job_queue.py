@@ -198,7 +198,14 @@ class Jobs:
         )
         self._supervisor.start()
         # The fork server imports the solver once (seconds): now, not in the first request.
-        threading.Thread(target=warm_up, name="robocal-fork-server", daemon=True).start()
+        self.warm = threading.Event()  # set once it has (or failed to)
+        threading.Thread(target=self._warm_up, name="robocal-fork-server", daemon=True).start()
+
+    def _warm_up(self) -> None:
+        try:
+            warm_up()
+        finally:
+            self.warm.set()
 
     # --- the API's verbs ------------------------------------------------------------------------
 

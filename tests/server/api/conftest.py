@@ -75,6 +75,10 @@ def serve(settings: Settings):
     while not server.started:
         assert thread.is_alive() and time.monotonic() < deadline, "server did not start"
         time.sleep(0.02)
+    # The first upload or job would wait for the fork server to import the solver: tens of
+    # seconds on a loaded machine, past a request's timeout. A user's first request may wait;
+    # a test's waits here instead, for as long as the machine needs.
+    assert server.config.app.state.jobs.warm.wait(600), "the fork server did not start"
     url = f"http://{settings.host}:{settings.port}"
     with (
         httpx.Client(
