@@ -141,24 +141,30 @@ class Acquisitions:
         _state)."""
         return _state(self._live_state(info.id), info)
 
-    def shown(self, campaign_id: int) -> tuple[store.CampaignInfo, str]:
-        """The stored campaign and its life-cycle state, the engine's read before the store: the
-        counts then hold every pose the state implies (read after, a run ending between the two
-        reads would show done with its last pose missing)."""
+    def shown(self, campaign_id: int) -> tuple[store.CampaignInfo, str, Run | None]:
+        """The stored campaign, its life-cycle state and this service's run of it, read in that
+        order backwards: the run first (a run shown ended has its last state stored, so the state
+        read after is that one; read after the state, a run that ended during a slow read of the
+        store would show ended beside the state it resumed from), then the engine's state, then
+        the store (its counts then hold every pose the state implies)."""
+        run = self.get(campaign_id)
         live = self._live_state(campaign_id)
         info = self._as_shown(store.get_campaign(self.db, campaign_id=campaign_id))
-        return info, _state(live, info)
+        return info, _state(live, info), run
 
-    def shown_all(self, status: str | None = None) -> list[tuple[store.CampaignInfo, str]]:
-        """Every stored campaign (or those shown with this status) and its state, as shown()."""
+    def shown_all(
+        self, status: str | None = None
+    ) -> list[tuple[store.CampaignInfo, str, Run | None]]:
+        """Every stored campaign (or those shown with this status), its state and run, read in
+        the order shown() reads them."""
         with self._lock:
-            current = self._current
+            current, runs = self._current, dict(self._runs)
         live = None if current is None else self._live_state(current)
         every = (
-            (info, _state(live if info.id == current else None, info))
+            (info, _state(live if info.id == current else None, info), runs.get(info.id))
             for info in map(self._as_shown, store.list_campaigns(self.db))
         )
-        return [(info, shown) for info, shown in every if status is None or shown == status]
+        return [(i, shown, run) for i, shown, run in every if status is None or shown == status]
 
     def _live_state(self, campaign_id: int) -> str | None:
         engine = self._engine_of(campaign_id)

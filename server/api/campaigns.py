@@ -11,6 +11,7 @@ from fastapi.responses import HTMLResponse, JSONResponse
 
 from robocal.server import store, verification
 from robocal.server.acquire import AcquireOptions
+from robocal.server.acquisitions import Run
 from robocal.server.campaign_planning import check_plan_size, plans_long
 
 from .. import campaigns, cells
@@ -55,11 +56,15 @@ CONFLICT: Responses = {
 
 
 def public_campaign(
-    info: store.CampaignInfo, acquisitions, cls=CampaignPublic, status: str | None = None
+    info: store.CampaignInfo,
+    acquisitions,
+    cls=CampaignPublic,
+    status: str | None = None,
+    run: Run | None = None,
 ):
-    """The campaign as the API shows it: its life-cycle state (`status` if read already, see
-    Acquisitions.shown) and the actions it allows."""
-    run = acquisitions.get(info.id)
+    """The campaign as the API shows it: its life-cycle state (`status` and `run` if read
+    already, see Acquisitions.shown) and the actions it allows."""
+    run = run or acquisitions.get(info.id)
     status = status or acquisitions.status_of(info)
     extra = {"settings": info.settings} if cls is CampaignDetail else {}
     return cls(
@@ -139,8 +144,8 @@ def list_campaigns(
 ) -> list[CampaignPublic]:
     """Every campaign, oldest first (or those with this status, as shown)."""
     return [
-        public_campaign(info, acquisitions, status=shown)
-        for info, shown in acquisitions.shown_all(status)
+        public_campaign(info, acquisitions, status=shown, run=run)
+        for info, shown, run in acquisitions.shown_all(status)
     ]
 
 
@@ -148,8 +153,8 @@ def list_campaigns(
 def get_campaign(campaign_id: CampaignId, acquisitions: AcquisitionsDep) -> CampaignDetail:
     """One campaign with its state, the actions it allows, and its poses done of total (read
     only: a campaign left moving by a process that is gone shows failed)."""
-    info, status = acquisitions.shown(campaign_id)
-    return public_campaign(info, acquisitions, CampaignDetail, status)
+    info, status, run = acquisitions.shown(campaign_id)
+    return public_campaign(info, acquisitions, CampaignDetail, status, run)
 
 
 VERIFICATION_PROBLEMS: Responses = {
