@@ -23,6 +23,7 @@ from .formats.cell_json import Cell, robot_to_json
 from .formats.errors import InputError
 from .formats.model_json import file_digest, read_model
 from .store.model_checks import model_checks
+from .validation import cell_mismatch
 
 RECORD = "check"  # the campaign settings' key of the model checked
 NOISE_STREAM = 23  # the simulated tracker's draws of a check: a stream of their own
@@ -71,21 +72,9 @@ def acquire_check(
 ) -> CheckRun:
     """Measure (or resume, or judge) the model's check on the cell; what was done."""
     model = read_model(model_path)
-    if set(model.targets) != set(cell.targets):
-        raise InputError(
-            model_path,
-            None,
-            None,
-            f"the model's SMRs {sorted(model.targets)} are not the cell's {sorted(cell.targets)}",
-        )
-    if model.robot.n_joints != cell.robot.n_joints:
-        raise InputError(
-            model_path,
-            None,
-            None,
-            f"the model's arm has {model.robot.n_joints} joints, the cell's "
-            f"{cell.robot.n_joints}: not a model of this cell",
-        )
+    why = cell_mismatch(model, cell)
+    if why:
+        raise InputError(model_path, None, None, f"{why}: not a model of this cell")
     sha = file_digest(model_path)
     name = campaign_name(sha)
     with _opened(db_path) as db:

@@ -33,6 +33,7 @@ from .compensation import MAX_ERROR_MM, solver_model
 from .formats.cell_json import Cell, parse_cell, robot_to_json
 from .formats.errors import InputError
 from .formats.model_json import ModelFile, read_model
+from .validation import cell_mismatch
 
 APPROACH_MM = 50.0  # each approach pose stands this far from its point
 # approach directions, in the order they are taken: from above, then along the cell's axes
@@ -280,13 +281,9 @@ def prepare(
     model's geometry, from which the tracker is aimed (clustered poses teach a predictor little)."""
     check_options(opts)
     model = read_model(model_path)
-    if set(model.targets) != set(cell.targets):
-        raise InputError(
-            model_path,
-            None,
-            None,
-            f"the model's SMRs {sorted(model.targets)} are not the cell's {sorted(cell.targets)}",
-        )
+    why = cell_mismatch(model, cell)
+    if why:
+        raise InputError(model_path, None, None, f"{why}: not a model of this cell")
     plan, joints = make_plan(model, opts)
     meta = model.meta or {}
     record = {
