@@ -147,4 +147,3 @@ def test_check_run_estop_reset_resume_judged_and_again(live, store_url, monkeypa
     assert [e["source"] for e in hist] == [f"campaign {cid}", f"campaign {again}"], hist
     assert hist[1]["verdict"] == "ok", hist[1]
     assert c.get(f"/api/models/{job}/health").json()["history"] == 2
-
