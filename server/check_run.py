@@ -41,6 +41,7 @@ class CheckRunOptions:
     samples: int = 1000
     effects: tuple = ()  # hidden physics of the simulated arm (a change to find)
     beam_break_rate: float = 0.0
+    arm: str | None = None  # the physical arm checked (its serial number)
 
 
 @dataclass(frozen=True)
@@ -91,6 +92,7 @@ def acquire_check(
         effects=tuple(opts.effects),
         # each check reads the same simulated arm with noise of its own
         noise_seed=noise_seed(cell, opts.seed, len(ours)),
+        arm=opts.arm,
     )
     summary = acquire(
         db_path,
