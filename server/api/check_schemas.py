@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import datetime as dt
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from robocal.server.check_plan import DEFAULT_POSES, MAX_POSES, MIN_POSES
+from robocal.server.formats.fields import Whole
+
+from .schemas import Real
 
 Verdict = Literal["ok", "watch", "recalibrate"]
 VERDICT = (
@@ -88,23 +91,18 @@ class CheckRunCreate(BaseModel):
     first check, else planned), as `robocal acquire --check`."""
 
     model_config = ConfigDict(extra="forbid")
+    # the bounds before Whole: after it pydantic leaves them out of the JSON schema's numbers
     cell_id: str = Field("default", max_length=64, description="the cell it runs on")
-    poses: int | None = Field(
+    poses: Annotated[int, Field(ge=MIN_POSES, le=MAX_POSES), Whole] | None = Field(
         None,
-        ge=MIN_POSES,
-        le=MAX_POSES,
-        strict=True,
         description="poses to plan (null: those of the model's first check, else "
         f"{DEFAULT_POSES} planned); a model's later checks measure its first check's",
     )
-    seed: int | None = Field(
+    seed: Annotated[int, Field(ge=0, le=2**32 - 1), Whole] | None = Field(
         None,
-        ge=0,
-        le=2**32 - 1,
-        strict=True,
         description="the simulated cell's arm (null: that of the model's own campaign)",
     )
-    pause_s: float = Field(10.0, ge=0.0, le=600.0, strict=True)
+    pause_s: Real = Field(10.0, ge=0.0, le=600.0)
 
 
 class CheckRunPublic(BaseModel):
