@@ -11,7 +11,7 @@ from . import campaigns, check_run, store
 from .acquire import UNFINISHED, AcquireOptions
 from .check import CheckResult
 from .check_run import RECORD, CheckRunOptions
-from .formats.cell_json import Cell
+from .formats.cell_json import Cell, parse_cell
 from .formats.model_json import file_digest, read_model
 from .store.model_checks import model_checks
 
@@ -36,6 +36,10 @@ def start_check(
     poses: int | None = None,
     seed: int = 0,
     pause_s: float = 10.0,
+    effects: tuple = (),
+    samples: int = AcquireOptions.samples,
+    settle: str = AcquireOptions.settle,
+    arm: str | None = None,
 ) -> CheckStarted:
     """Run the model's check on the cell: an unfinished check campaign of the model resumed,
     else a new one of its check poses started; a done one not yet judged (the service stopped
@@ -63,6 +67,10 @@ def start_check(
         name=check_run.campaign_name(sha),
         pause_s=pause_s,
         noise_seed=check_run.noise_seed(cell, seed, len(ours)),
+        effects=tuple(effects),
+        samples=samples,
+        settle=settle,
+        arm=arm,
     )
     settings = check_run.stored_settings(model, sha, model_path, job_id=job_id)
     cid = campaigns.plan_given(
@@ -89,15 +97,33 @@ def judge_done(db: store.Database, campaign_id: int) -> str | None:
     return f"check {res.history} of the model: {res.verdict}: {res.reason}"
 
 
-def default_seed(db: store.Database, campaign_id: int | None) -> int:
-    """The simulated arm of the model's own campaign (its acquisition's seed), else 0."""
-    if campaign_id is None:
-        return 0
-    try:
-        info = store.get_campaign(db, campaign_id=campaign_id)
-    except store.NotFound:
-        return 0
-    return int((info.settings or {}).get("options", {}).get("seed", 0))
+@dataclass(frozen=True)
+class ModelSource:
+    """Where the model's own campaign was measured: its cell, how it was acquired (the simulated
+    arm: seed and effects; the tracker's samples and settling), and its arm."""
+
+    cell: Cell
+    acquired: bool  # False: its readings were imported (no simulated arm known)
+    seed: int
+    effects: tuple
+    samples: int
+    settle: str
+    arm: str | None
 
 
-__all__ = ["CheckStarted", "default_seed", "judge_done", "start_check"]
+def model_source(db: store.Database, campaign_id: int) -> ModelSource:
+    """The model's campaign as a check reads it again: the same cell, arm and way of reading."""
+    info = store.get_campaign(db, campaign_id=campaign_id)
+    was = (info.settings or {}).get("options") or {}
+    return ModelSource(
+        cell=parse_cell(info.cell_json, f"<campaign {info.id} cell>"),
+        acquired=bool(was),
+        seed=int(was.get("seed", 0)),
+        effects=tuple(was.get("effects", ())),
+        samples=int(was.get("samples", AcquireOptions.samples)),
+        settle=str(was.get("settle", AcquireOptions.settle)),
+        arm=info.arm,
+    )
+
+
+__all__ = ["CheckStarted", "ModelSource", "judge_done", "model_source", "start_check"]

@@ -117,8 +117,8 @@ $("k-run").addEventListener("click", async () => {
   button.disabled = true;  // one check at a time from here; the cell refuses a second anyway
   $("k-run-state").textContent = "starting...";
   try {
-    const r = await api("POST", `/models/${job}/checks/run`,
-      { cell_id: $("c-cell").value || "default" });
+    // on the cell the model's campaign was measured on, as the calibration read it
+    const r = await api("POST", `/models/${job}/checks/run`, {});
     if (r.started) await followCheck(r.campaign_id, job);
     if (state.job !== job) return;
     const h = await api("GET", `/models/${job}/health`);

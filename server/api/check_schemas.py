@@ -92,7 +92,11 @@ class CheckRunCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     # the bounds before Whole: after it pydantic leaves them out of the JSON schema's numbers
-    cell_id: str = Field("default", max_length=64, description="the cell it runs on")
+    cell_id: str | None = Field(
+        None,
+        max_length=64,
+        description="the cell it runs on (null: the one the model's campaign was measured on)",
+    )
     poses: Annotated[int, Field(ge=MIN_POSES, le=MAX_POSES), Whole] | None = Field(
         None,
         description="poses to plan (null: those of the model's first check, else "

@@ -10,7 +10,7 @@ from fastapi import APIRouter, Depends, Request, Response
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
-from robocal.server import cells, check, check_charts, check_service, uploads
+from robocal.server import cells, check, check_charts, check_service, store, uploads
 from robocal.server.formats.model_json import file_digest
 from robocal.server.store.model_checks import CheckRecord, model_checks
 from robocal.solver import drift
@@ -86,9 +86,10 @@ def _check(jobs, db, job_id: int, data: bytes, filename: str) -> CheckPublic:
 CheckRunBody = Annotated[CheckRunCreate, Depends(read_json(CheckRunCreate))]
 RUN_PROBLEMS: Responses = {
     409: {
-        "description": "the job has no model yet, the cell runs another campaign, or the "
+        "description": "the job has no model yet, the cell runs another campaign, the "
         "model's check campaign waits for its reset after an e-stop (POST "
-        "/api/campaigns/{id}/reset)",
+        "/api/campaigns/{id}/reset), or the model's readings were imported and no `seed` "
+        "says which simulated arm to check",
         "content": PROBLEM,
     },
     422: {
@@ -122,11 +123,19 @@ def run_check(
     `campaign_url`); once done, judged and appended to the model's history (GET .../checks,
     .../health). An unfinished check campaign of the model is resumed rather than planned again;
     one measured but not judged yet is judged now (201)."""
-    path = jobs.model_path(job_id)
-    cell = cells.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
-    seed = body.seed
-    if seed is None:
-        seed = check_service.default_seed(db, jobs.get(job_id).campaign_id)
+    path, campaign_id = jobs.model_path(job_id), jobs.get(job_id).campaign_id
+    if campaign_id is None:  # a planning job (model_path refused it already)
+        raise store.NotFound(f"job {job_id} has no model")
+    source = check_service.model_source(db, campaign_id)
+    same_cell = body.cell_id is None
+    cell = source.cell
+    if body.cell_id is not None:
+        cell = cells.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
+    if cell.simulated and body.seed is None and not (same_cell and source.acquired):
+        raise store.Conflict(
+            f"campaign {campaign_id}'s readings were imported: which simulated arm to check is "
+            "unknown; give `seed` (that of `robocal simulate --seed`)"
+        )
     out = check_service.start_check(
         db,
         acquisitions,
@@ -134,8 +143,13 @@ def run_check(
         model_path=path,
         job_id=job_id,
         poses=body.poses,
-        seed=seed,
+        seed=source.seed if body.seed is None else body.seed,
         pause_s=body.pause_s,
+        # the same simulated arm, read as the calibration read it
+        effects=source.effects if same_cell else (),
+        samples=source.samples,
+        settle=source.settle,
+        arm=source.arm,
     )
     doc = CheckRunPublic(
         job_id=job_id,

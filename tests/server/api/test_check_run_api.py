@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import threading
 
+import pytest
+
 from robocal.drivers.plan import Measure
 from robocal.server import acquisitions as acquisitions_module
 from tests.server.api.conftest import wait_for
+from tests.server.api.test_checks_api import calibrated, cell  # noqa: F401 - a fixture
 from tests.server.api.test_verify_api import calibrate, run_campaign
 from tests.server.test_acquire import counts
 
@@ -67,7 +70,7 @@ def ended(c, cid):
 
 def test_check_run_estop_reset_resume_judged_and_again(live, store_url, monkeypatch):
     c = live.client
-    job = calibrate(c, run_campaign(c, name="cal", poses=40, seed=SEED, pause_s=1))
+    job = calibrate(c, run_campaign(c, name="cal", poses=40, seed=SEED, pause_s=1, arm="SN-7"))
     url = f"/api/models/{job}/checks/run"
     body = {"pause_s": 1}
     assert live.anonymous.post(url, json=body).status_code == 401
@@ -93,6 +96,7 @@ def test_check_run_estop_reset_resume_judged_and_again(live, store_url, monkeypa
     assert r.headers["location"] == run["campaign_url"] == f"/api/campaigns/{cid}"
     info = campaign(c, cid)
     assert info["poses_total"] == 6 and info["settings"]["options"]["seed"] == SEED, info
+    assert info["arm"] == "SN-7", info  # the model's arm, checked
 
     assert hold.reached.wait(120), "the check never reached pose 3"
     r = c.post(url, json=body)  # the cell is busy with this very check
@@ -147,3 +151,17 @@ def test_check_run_estop_reset_resume_judged_and_again(live, store_url, monkeypa
     assert [e["source"] for e in hist] == [f"campaign {cid}", f"campaign {again}"], hist
     assert hist[1]["verdict"] == "ok", hist[1]
     assert c.get(f"/api/models/{job}/health").json()["history"] == 2
+
+
+@pytest.mark.sqlite_only  # a refusal before anything is stored
+def test_a_model_of_imported_simulated_readings_needs_the_seed(live, cell):  # noqa: F811
+    c = live.client
+    job = calibrated(live, cell[0])  # readings of `simulate --seed 11`, imported
+    url = f"/api/models/{job}/checks/run"
+    r = c.post(url, json={"pause_s": 0})
+    assert r.status_code == 409 and "give `seed`" in r.json()["detail"], r.text
+    assert all(not j["name"].startswith("check-") for j in c.get("/api/campaigns").json())
+    r = c.post(url, json={"pause_s": 0, "seed": 11})
+    assert r.status_code == 202, r.text
+    done = ended(c, r.json()["campaign_id"])
+    assert done["status"] == "done" and "check 1 of the model: " in done["run"]["detail"], done
