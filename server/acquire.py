@@ -29,6 +29,7 @@ from . import store
 from .formats.cell_json import Cell, cell_to_json, parse_cell, robot_from_json
 from .formats.model_json import to_plain
 from .lease import Lease, process_owner
+from .store.checks import arm_name
 
 # The campaign settings' key of a known geometry for the SMR predictor (robot, base, targets).
 PREDICTOR = "predictor"
@@ -59,6 +60,7 @@ class AcquireOptions:
     # the simulated tracker's own draws (noise, beam breaks; default: seed), so that two runs on
     # the same simulated arm can read it with independent noise
     noise_seed: int | list | None = None
+    arm: str | None = None  # the physical arm measured (its serial number), for the fleet view
 
 
 class StoreSink:
@@ -186,6 +188,7 @@ def plan_and_store(
         poses_deg=poses_deg.tolist(),
         labels=labels,
         simulated=cell.simulated,
+        arm=opts.arm,
         settings={
             **(settings or {}),
             "options": asdict(opts),
@@ -328,6 +331,7 @@ def acquire(
     check_drivable(cell)  # before the database is created
     owner = owner or process_owner()
     name = opts.name or f"campaign-seed{opts.seed}"
+    asked_arm = arm_name(opts.arm)  # ValueError before anything is stored
     stopper = _Stopper(log)
     with ExitStack() as stack:
         db = stack.enter_context(_opened(db_path))  # closed last, after the lease and devices
@@ -339,6 +343,11 @@ def acquire(
         if existing is not None:
             stack.enter_context(Lease(db, existing.id, owner, on_lost=stopper.estop, log=log))
             existing = store.get_campaign(db, campaign_id=existing.id)  # as of the lease
+            if asked_arm is not None and existing.arm != asked_arm:
+                raise store.Conflict(
+                    f"arm: campaign {existing.id} ({existing.name}) measures arm "
+                    f"{existing.arm!r}, not {asked_arm!r}; give another --name for this arm"
+                )
             state = ready_to_run(db, existing, reset=reset, log=log)
             info = existing
             cell = parse_cell(info.cell_json)

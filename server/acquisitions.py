@@ -12,6 +12,7 @@ from __future__ import annotations
 import datetime as dt
 import logging
 import threading
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, replace
@@ -69,10 +70,14 @@ class Acquisitions:
         events: Events | None = None,
         *,
         owner: str | None = None,
+        on_done: Callable[[int], str | None] | None = None,
     ):
         self.db = db
         self.events = events or Events()
         self.owner = owner or lease.process_owner()
+        # what follows a campaign's run ending done (a check judged), still on the worker so the
+        # cell takes no other campaign meanwhile; its note joins the run's detail
+        self.on_done = on_done
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="robocal-acquire")
         # E-stops run here: never queued behind requests in the server's thread pool.
         self.stops = ThreadPoolExecutor(4, thread_name_prefix="robocal-estop")
@@ -364,6 +369,17 @@ class Acquisitions:
                 # the run has begun: "start queued" no longer says anything; the state does
                 self._runs[self._current] = replace(self._runs[self._current], detail=None)
 
+    def _after_done(self, campaign_id: int, detail: str) -> str:
+        """The run's detail with on_done's note; its failure said there, never raised (the
+        campaign is done and its readings stored whatever follows)."""
+        assert self.on_done is not None
+        try:
+            note = self.on_done(campaign_id)
+        except Exception as e:  # noqa: BLE001 - a fault after the run: the campaign stays done
+            log.error("campaign %d: after its run: %s: %s", campaign_id, type(e).__name__, e)
+            return f"{detail}; then {type(e).__name__}: {e}"
+        return detail if note is None else f"{detail}; {note}"
+
     def _publish(self, campaign_id: int, state: str, was: str) -> None:
         self.events.publish(
             {"type": "campaign.state", "campaign_id": campaign_id, "state": state, "was": was}
@@ -382,7 +398,10 @@ class Acquisitions:
                 on_event=self.events.publish,
                 owner=self.owner,
             )
-            change = dict(detail=f"the run ended {summary['state']}", summary=to_plain(summary))
+            detail = f"the run ended {summary['state']}"
+            if summary["state"] == "done" and self.on_done is not None:
+                detail = self._after_done(cid, detail)
+            change = dict(detail=detail, summary=to_plain(summary))
         except _Cancelled:
             change = dict(detail="stopped before the arm moved")
         except Exception as e:  # a device fault (the engine reported failed), or a refusal

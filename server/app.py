@@ -13,7 +13,7 @@ from fastapi import Depends, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.routing import APIRoute
 
-from . import store
+from . import check_service, store
 from .acquisitions import Acquisitions
 from .api import OPEN_ROUTERS, ROUTERS, bodies, problems
 from .api.deps import TOKEN_CHECKS
@@ -58,7 +58,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             call_timeout_s=settings.call_timeout_s,
             call_workers=settings.call_workers,
         )
-        app.state.acquisitions = Acquisitions(db, events)
+        app.state.acquisitions = Acquisitions(
+            db, events, on_done=lambda cid: check_service.judge_done(db, cid)
+        )
         try:
             yield
         finally:

@@ -42,6 +42,7 @@ class CheckRunOptions:
     samples: int = 1000
     effects: tuple = ()  # hidden physics of the simulated arm (a change to find)
     beam_break_rate: float = 0.0
+    arm: str | None = None  # the physical arm checked (its serial number)
 
 
 @dataclass(frozen=True)
@@ -72,25 +73,15 @@ def acquire_check(
 ) -> CheckRun:
     """Measure (or resume, or judge) the model's check on the cell; what was done."""
     model = read_model(model_path)
-    why = cell_mismatch(model, cell)
-    if why:
-        raise InputError(model_path, None, None, f"{why}: not a model of this cell")
+    check_fits(model, cell, model_path)
     sha = file_digest(model_path)
     name = campaign_name(sha)
     with _opened(db_path) as db:
-        ours = [c for c in store.list_campaigns(db) if c.name == name]
-        judged = {r.source for r in model_checks(db, sha)}
-        waiting = [c for c in ours if c.status == "done" and _source(c.id) not in judged]
-        if waiting:  # the oldest first: the history keeps the order they were measured in
-            cid = min(c.id for c in waiting)
-            return CheckRun(cid, None, _judge(db, model, sha, cid))
-        ids, q_deg = _poses(db, ours, model, opts)
-    geometry = {
-        "robot": robot_to_json(model.robot),
-        "base": np.asarray(model.base).tolist(),
-        "targets": {k: np.asarray(v).tolist() for k, v in model.targets.items()},
-    }
-    settings = {RECORD: {"model_sha256": sha, "model": str(model_path)}, PREDICTOR: geometry}
+        ours, waiting = pending(db, sha)
+        if waiting is not None:
+            return CheckRun(waiting, None, judge(db, model, sha, waiting))
+        ids, q_deg = poses_of(db, ours, model, opts)
+    settings = stored_settings(model, sha, model_path)
     run = AcquireOptions(
         poses=len(q_deg),
         seed=opts.seed,
@@ -101,7 +92,8 @@ def acquire_check(
         beam_break_rate=opts.beam_break_rate,
         effects=tuple(opts.effects),
         # each check reads the same simulated arm with noise of its own
-        noise_seed=[opts.seed, NOISE_STREAM, len(ours)] if cell.simulated else None,
+        noise_seed=noise_seed(cell, opts.seed, len(ours)),
+        arm=opts.arm,
     )
     summary = acquire(
         db_path,
@@ -120,10 +112,47 @@ def acquire_check(
     if summary["state"] != "done":
         return CheckRun(cid, summary, None)
     with _opened(db_path) as db:
-        return CheckRun(cid, summary, _judge(db, model, sha, cid))
+        return CheckRun(cid, summary, judge(db, model, sha, cid))
 
 
-def _poses(db, ours, model, opts: CheckRunOptions) -> tuple[list[str], np.ndarray]:
+def check_fits(model, cell: Cell, model_path) -> None:
+    """InputError unless the model is one of the cell's arm (validation.cell_mismatch: its robot,
+    nominal geometry and SMRs)."""
+    why = cell_mismatch(model, cell)
+    if why:
+        raise InputError(model_path, None, None, f"{why}: not a model of this cell")
+
+
+def pending(db, sha: str):
+    """The model's check campaigns and the oldest done one not yet judged, if any (the history
+    keeps the order they were measured in)."""
+    ours = [c for c in store.list_campaigns(db) if c.name == campaign_name(sha)]
+    judged = {r.source for r in model_checks(db, sha)}
+    waiting = [c.id for c in ours if c.status == "done" and _source(c.id) not in judged]
+    return ours, min(waiting) if waiting else None
+
+
+def stored_settings(model, sha: str, model_path, **record) -> dict:
+    """The check campaign's own settings: the model checked (and `record`), and its geometry
+    for the SMR predictor."""
+    geometry = {
+        "robot": robot_to_json(model.robot),
+        "base": np.asarray(model.base).tolist(),
+        "targets": {k: np.asarray(v).tolist() for k, v in model.targets.items()},
+    }
+    return {
+        RECORD: {"model_sha256": sha, "model": str(model_path), **record},
+        PREDICTOR: geometry,
+    }
+
+
+def noise_seed(cell: Cell, seed: int, earlier: int):
+    """The simulated tracker's draws of a model's check after `earlier` ones: each check reads
+    the same simulated arm with noise of its own (None on real devices)."""
+    return [seed, NOISE_STREAM, earlier] if cell.simulated else None
+
+
+def poses_of(db, ours, model, opts: CheckRunOptions) -> tuple[list[str], np.ndarray]:
     """The check's (pose labels, joints deg): those given (a file, a count to plan), else those
     of the model's first check campaign `ours` in the database, else the model's plan."""
     earlier = [c for c in ours if c.n_poses > 0]
@@ -140,7 +169,8 @@ def _source(campaign_id: int) -> str:
     return f"campaign {campaign_id}"
 
 
-def _judge(db, model, sha: str, campaign_id: int) -> CheckResult:
+def judge(db, model, sha: str, campaign_id: int) -> CheckResult:
+    """The done check campaign's readings judged and appended to the model's history."""
     meas = store.campaign_measurements(
         db, campaign_id=campaign_id, robot=model.robot, targets=sorted(model.targets)
     )

@@ -61,6 +61,7 @@ class VerifyOptions:
     pause_s: float = 10.0
     samples: int = 1000  # tracker samples a reading, as the calibration campaign took them
     settle: str = "fixed"
+    arm: str | None = None  # the physical arm measured (its serial number)
 
 
 def read_points(path) -> tuple[list[str], np.ndarray]:
@@ -405,6 +406,7 @@ def acquire_options(cell: Cell, opts: VerifyOptions, poses: int) -> AcquireOptio
         settle=opts.settle,
         effects=tuple(opts.effects),
         noise_seed=[opts.seed, 9283] if cell.simulated else None,
+        arm=opts.arm,
     )
 
 

@@ -1,6 +1,7 @@
 // robocal page, the shown model's quick checks (spec section 8): the latest check's verdict on the
 // model (GET /api/models/{id}/health), the history as a table and a chart (GET .../checks,
-// GET /api/charts/models/{id}/checks.png), and a check.csv posted (POST .../checks). Uses
+// GET /api/charts/models/{id}/checks.png), a check.csv posted (POST .../checks), and a check run
+// on the cell, followed to its verdict (POST .../checks/run, then its campaign). Uses
 // app.js's globals ($, api, fmt, state, say, makeTable, showImage, clearImage) and history.js's
 // when(); model.js calls showChecks(job id) as it shows a model.
 "use strict";
@@ -84,4 +85,49 @@ $("k-post").addEventListener("click", async () => {
     $("k-state").textContent = `check ${c.history}: ${c.verdict}`;
     if (state.job === job) await showChecks(job);
   } catch (e) { $("k-state").textContent = ""; say(e.message); }
+});
+
+// How often a check run on the cell is asked for its progress (a simulated check takes seconds).
+const CHECK_POLL_MS = 500;
+
+/** One line of a check campaign's progress, or its end. */
+function checkRunLine(c) {
+  const poses = `${c.poses_done} of ${c.poses_total} poses`;
+  if (c.run && c.run.active) return `check campaign ${c.id}: ${c.status}, ${poses}`;
+  if (c.status === "done") return null;  // judged: the verdict is said instead
+  return `check campaign ${c.id} ${c.status} after ${poses}`
+    + (c.status === "estopped" ? ": reset it, then run the check again to resume it" : "");
+}
+
+/** Follow the check campaign until its run is over; its last state. */
+async function followCheck(cid, job) {
+  for (;;) {
+    const c = await api("GET", `/campaigns/${cid}`);
+    if (state.job !== job) return c;  // another model was shown meanwhile
+    const line = checkRunLine(c);
+    if (line) $("k-run-state").textContent = line;
+    if (!(c.run && c.run.active) && c.status !== "running") return c;
+    await new Promise((ok) => setTimeout(ok, CHECK_POLL_MS));
+  }
+}
+
+$("k-run").addEventListener("click", async () => {
+  const job = state.job;
+  const button = $("k-run");
+  button.disabled = true;  // one check at a time from here; the cell refuses a second anyway
+  $("k-run-state").textContent = "starting...";
+  try {
+    // on the cell the model's campaign was measured on, as the calibration read it
+    const r = await api("POST", `/models/${job}/checks/run`, {});
+    if (r.started) await followCheck(r.campaign_id, job);
+    if (state.job !== job) return;
+    const h = await api("GET", `/models/${job}/health`);
+    const c = await api("GET", `/campaigns/${r.campaign_id}`);
+    if (state.job !== job) return;
+    if (c.status === "done" && h.checked) {
+      $("k-run-state").textContent = `check ${h.history}: ${h.verdict}`;
+    }
+    await showChecks(job);
+  } catch (e) { $("k-run-state").textContent = ""; say(e.message); }
+  finally { button.disabled = false; }
 });

@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import datetime as dt
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
+
+from robocal.server.check_plan import DEFAULT_POSES, MAX_POSES, MIN_POSES
+from robocal.server.formats.fields import Whole
+
+from .schemas import Real
 
 Verdict = Literal["ok", "watch", "recalibrate"]
 VERDICT = (
@@ -79,3 +84,38 @@ class ModelHealth(BaseModel):
     history: int = Field(description="checks of this model")
     rms_mm: float | None
     expected_rms_mm: float | None
+
+
+class CheckRunCreate(BaseModel):
+    """A check of the model to run on the service's cell: its check poses (those of the model's
+    first check, else planned), as `robocal acquire --check`."""
+
+    model_config = ConfigDict(extra="forbid")
+    # the bounds before Whole: after it pydantic leaves them out of the JSON schema's numbers
+    cell_id: str | None = Field(
+        None,
+        max_length=64,
+        description="the cell it runs on (null: the one the model's campaign was measured on)",
+    )
+    poses: Annotated[int, Field(ge=MIN_POSES, le=MAX_POSES), Whole] | None = Field(
+        None,
+        description="poses to plan (null: those of the model's first check, else "
+        f"{DEFAULT_POSES} planned); a model's later checks measure its first check's",
+    )
+    seed: Annotated[int, Field(ge=0, le=2**32 - 1), Whole] | None = Field(
+        None,
+        description="the simulated cell's arm (null: that of the model's own campaign)",
+    )
+    pause_s: Real = Field(10.0, ge=0.0, le=600.0)
+
+
+class CheckRunPublic(BaseModel):
+    """A check started on the cell (follow its campaign; judged into the history once done), or
+    a check measured earlier and judged now."""
+
+    job_id: int
+    campaign_id: int
+    campaign_url: str = Field(description="GET it for the run's progress and, once done, verdict")
+    started: bool = Field(description="false: nothing run now, a done check campaign judged")
+    note: str
+    check: CheckPublic | None = Field(description="the judged check, when started is false")

@@ -4,17 +4,27 @@ and its chart, and the production line's single question, whether the model stil
 from __future__ import annotations
 
 from dataclasses import asdict
+from typing import Annotated
 
-from fastapi import APIRouter, Request, Response
+from fastapi import APIRouter, Depends, Request, Response
+from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
-from robocal.server import check, check_charts, uploads
+from robocal.server import cells, check, check_charts, check_service, store, uploads
 from robocal.server.formats.model_json import file_digest
 from robocal.server.store.model_checks import CheckRecord, model_checks
 from robocal.solver import drift
 
-from .check_schemas import CheckEntry, CheckHistory, CheckPublic, ModelHealth
-from .deps import Authorized, DbDep, JobId, JobsDep
+from .bodies import json_body, read_json
+from .check_schemas import (
+    CheckEntry,
+    CheckHistory,
+    CheckPublic,
+    CheckRunCreate,
+    CheckRunPublic,
+    ModelHealth,
+)
+from .deps import AcquisitionsDep, Authorized, DbDep, JobId, JobsDep, SettingsDep
 from .models import Filename
 from .problems import Responses
 from .worker_calls import CALL_PROBLEMS, PROBLEM, call_slot, run_call
@@ -73,6 +83,91 @@ def _check(jobs, db, job_id: int, data: bytes, filename: str) -> CheckPublic:
     return CheckPublic(job_id=job_id, **asdict(res))
 
 
+CheckRunBody = Annotated[CheckRunCreate, Depends(read_json(CheckRunCreate))]
+RUN_PROBLEMS: Responses = {
+    409: {
+        "description": "the job has no model yet, the cell runs another campaign, the "
+        "model's check campaign waits for its reset after an e-stop (POST "
+        "/api/campaigns/{id}/reset), or the model's readings were imported and no `seed` "
+        "says which simulated arm to check",
+        "content": PROBLEM,
+    },
+    422: {
+        "description": "a model not of the cell's arm (its SMRs, its joints)",
+        "content": PROBLEM,
+    },
+}
+
+
+@router.post(
+    "/{job_id}/checks/run",
+    status_code=202,
+    dependencies=[Authorized],
+    response_model=CheckRunPublic,
+    openapi_extra=json_body(CheckRunCreate),
+    responses={
+        201: {"model": CheckRunPublic, "description": "a check measured earlier judged now"},
+        **RUN_PROBLEMS,
+    },
+)
+def run_check(
+    job_id: JobId,
+    body: CheckRunBody,
+    jobs: JobsDep,
+    db: DbDep,
+    settings: SettingsDep,
+    acquisitions: AcquisitionsDep,
+) -> JSONResponse:
+    """Run a quick check of the job's model on the cell (as `robocal acquire --check`): its check
+    poses as a campaign on the acquisition worker, with its lease, e-stop and events (202; follow
+    `campaign_url`); once done, judged and appended to the model's history (GET .../checks,
+    .../health). An unfinished check campaign of the model is resumed rather than planned again;
+    one measured but not judged yet is judged now (201)."""
+    path, campaign_id = jobs.model_path(job_id), jobs.get(job_id).campaign_id
+    if campaign_id is None:  # a planning job (model_path refused it already)
+        raise store.NotFound(f"job {job_id} has no model")
+    source = check_service.model_source(db, campaign_id)
+    same_cell = body.cell_id is None
+    cell = source.cell
+    if body.cell_id is not None:
+        cell = cells.load_cell(cells_dir=settings.cells_dir, cell_id=body.cell_id)
+    if cell.simulated and body.seed is None and not (same_cell and source.acquired):
+        raise store.Conflict(
+            f"campaign {campaign_id}'s readings were imported: which simulated arm to check is "
+            "unknown; give `seed` (that of `robocal simulate --seed`)"
+        )
+    out = check_service.start_check(
+        db,
+        acquisitions,
+        cell=cell,
+        model_path=path,
+        job_id=job_id,
+        poses=body.poses,
+        seed=source.seed if body.seed is None else body.seed,
+        pause_s=body.pause_s,
+        # the same simulated arm, read as the calibration read it
+        effects=source.effects if same_cell else (),
+        samples=source.samples,
+        settle=source.settle,
+        arm=source.arm,
+    )
+    doc = CheckRunPublic(
+        job_id=job_id,
+        campaign_id=out.campaign_id,
+        campaign_url=f"/api/campaigns/{out.campaign_id}",
+        started=out.started,
+        note=out.note,
+        check=None if out.result is None else CheckPublic(job_id=job_id, **asdict(out.result)),
+    )
+    if out.started:
+        return JSONResponse(
+            doc.model_dump(mode="json"),
+            status_code=202,
+            headers={"Location": doc.campaign_url},
+        )
+    return JSONResponse(doc.model_dump(mode="json"), status_code=201)
+
+
 def _history(jobs, db, job_id: int) -> tuple[str, list[CheckRecord]]:
     """The model's digest (the history's key, as the command line's) and its checks."""
     sha = file_digest(jobs.model_path(job_id))
@@ -124,7 +219,8 @@ def model_health(job_id: JobId, jobs: JobsDep, db: DbDep) -> ModelHealth:
             model_sha256=sha,
             checked=False,
             verdict=None,
-            reason=f"never checked: POST a check.csv to /api/models/{job_id}/checks",
+            reason=f"never checked: POST a check.csv to /api/models/{job_id}/checks or run one "
+            f"with POST /api/models/{job_id}/checks/run",
             checked_at=None,
             history=0,
             rms_mm=None,

@@ -340,6 +340,7 @@ def verify_model(
         # the tracker reads the SMRs as it did for the calibration
         samples=was.get("samples", verification.VerifyOptions.samples),
         settle=was.get("settle", verification.VerifyOptions.settle),
+        arm=source.arm,  # the arm the model is of
     )
     with call_slot(jobs):
         q_deg, labels, settings = run_call(

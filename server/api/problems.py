@@ -85,6 +85,19 @@ def problem(request: Request, status: int, detail: str, headers=None, **extra) -
     )
 
 
+def _schema_detail(errors: list[dict]) -> str:
+    """One line naming the first field refused (without its `body` or `query` prefix) and why."""
+    said = "the request does not match the schema"
+    if not errors:
+        return said
+    loc = [str(part) for part in errors[0].get("loc", ())]
+    if len(loc) > 1 and loc[0] in ("body", "query", "path", "header"):
+        loc = loc[1:]
+    why = " ".join(str(errors[0].get("msg", "")).split())
+    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+    return f"{said}: {'.'.join(loc)}: {why}{more}"
+
+
 def install(app: FastAPI) -> None:
     """Register the handlers that turn every refusal into a problem-details body."""
 
@@ -95,7 +108,7 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def validation_error(request: Request, exc: RequestValidationError):
         errors = [{k: e[k] for k in ("loc", "msg", "type") if k in e} for e in exc.errors()]
-        return problem(request, 422, "the request does not match the schema", errors=errors)
+        return problem(request, 422, _schema_detail(errors), errors=errors)
 
     @app.exception_handler(InputError)
     async def input_error(request: Request, exc: InputError):

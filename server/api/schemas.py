@@ -14,6 +14,7 @@ from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
 from robocal.server.formats.cell_doc import CellDoc, Tolerance
 from robocal.server.formats.fields import Integer, Whole
 from robocal.server.formats.limits import COORD_MAX_MM, PRINTABLE
+from robocal.server.store.checks import ARM_MAX
 from robocal.server.verification import CUBE_SIDE_MM, DIRECTIONS
 
 from .model_schemas import HoldoutSummary, ValidationSummary
@@ -63,6 +64,13 @@ class CampaignCreate(BaseModel):
     )
     beam_break_rate: Real = Field(0.0, ge=0.0, lt=1.0, description="simulated cell only")
     samples: Integer = Field(1000, ge=1, le=100_000)
+    arm: str | None = Field(
+        None,
+        min_length=1,
+        max_length=ARM_MAX,
+        pattern=PRINTABLE,
+        description="the physical arm measured (its serial number), for the fleet view",
+    )
 
 
 Coordinate = Field(ge=-COORD_MAX_MM, le=COORD_MAX_MM)

@@ -2,9 +2,23 @@
 
 from __future__ import annotations
 
+import argparse
+
 from .common import _nonnegative, _nonnegative_int, _positive, _positive_int, _rate, _whole
 
 _directions = _whole(1, 6, "a count of directions from 1 to 6")
+
+
+def _arm(text: str) -> str:
+    """An arm's serial number: printable, 1 to 64 characters (the store's rule)."""
+    from ..store.checks import arm_name
+
+    try:
+        arm = arm_name(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    assert arm is not None
+    return arm
 
 
 def _verify(args, cell) -> None:
@@ -21,6 +35,7 @@ def _verify(args, cell) -> None:
         name=args.name or "verify",
         effects=tuple(args.effect),
         pause_s=args.pause,
+        arm=args.arm,
     )
     with console.status("verifying: nominal joints, then compensated ones..."):
         report = verification.verify(args.db, cell, args.verify, opts)
@@ -61,6 +76,7 @@ def _check(args, cell) -> int:
         settle=args.settle,
         beam_break_rate=args.beam_break_rate,
         effects=tuple(args.effect),
+        arm=args.arm,
     )
     with _progress(console) as progress:
         run = acquire_check(args.db, cell, args.check, opts, progress=progress, reset=args.reset)
@@ -121,6 +137,7 @@ def cmd_acquire(args) -> int | None:
         choose_from=args.choose_from,
         beam_break_rate=args.beam_break_rate,
         effects=tuple(args.effect),
+        arm=args.arm,
     )
     with _progress(console) as progress:
         summary = acquire(args.db, cell, opts, progress=progress, reset=args.reset)
@@ -177,6 +194,13 @@ def add(sub) -> None:
         "--seed", type=_nonnegative_int, default=0, help="random seed of the poses (and the cell)"
     )
     aq.add_argument("--name", help="campaign name; an unfinished campaign of that name is resumed")
+    aq.add_argument(
+        "--arm",
+        type=_arm,
+        metavar="SERIAL",
+        help="the physical arm measured (its serial number, up to 64 printable characters), "
+        "stored with the campaign for the fleet view",
+    )
     aq.add_argument(
         "--settle",
         choices=("fixed", "adaptive"),

@@ -58,3 +58,30 @@ def test_checks_verdict_history_and_chart_shown(served, page, cell, tmp_path):  
     assert page.is_visible("#k-chart")
     page.locator("#checks").scroll_into_view_if_needed()
     shot(page, "checks")
+
+
+def test_a_check_run_on_the_cell_from_the_page_joins_the_history(served, page):
+    """The model's "Run a check on the cell": its poses run on the simulated cell, followed on the
+    page, and the verdict said there and in the history."""
+    from tests.server.api.test_verify_api import calibrate, run_campaign
+
+    c = served.client
+    job = calibrate(c, run_campaign(c, name="cal", poses=40, seed=3, pause_s=0))
+    page.goto(served.url + "/")
+    page.fill("#token", served.token)
+    page.click("#token-form button[type=submit]")
+    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.evaluate("(job) => openJob(job)", job)
+    page.wait_for_selector("#m-health:not([hidden])")
+    assert "Never checked" in page.text_content("#m-health")
+    page.click("#k-run")
+    page.wait_for_function(
+        "document.getElementById('k-run-state').textContent.startsWith('check 1: ')"
+    )
+    assert page.text_content("#k-run-state") == "check 1: ok"
+    page.wait_for_function("document.querySelectorAll('#k-table tbody tr.k-check').length === 1")
+    [entry] = c.get(f"/api/models/{job}/checks").json()["checks"]
+    source = page.locator("#k-table tbody tr.k-check").nth(0).locator("td").nth(2).text_content()
+    assert source == entry["source"] and source.startswith("campaign "), source
+    assert page.locator("#m-health .k-badge").text_content() == "ok"
+    assert page.is_enabled("#k-run")

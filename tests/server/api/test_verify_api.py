@@ -37,7 +37,7 @@ def calibrate(c, cid, method="ls-sum") -> int:
 def test_verify_a_model_estop_reset_resume_and_read_the_certificate(live):
     c = live.client
     seed = 23
-    job = calibrate(c, run_campaign(c, name="cal", poses=60, seed=seed, pause_s=0))
+    job = calibrate(c, run_campaign(c, name="cal", poses=60, seed=seed, pause_s=0, arm="SN-23"))
     url = f"/api/models/{job}/verify"
     body = {"cycles": 2, "directions": 2, "pause_s": 0}
     assert live.anonymous.post(url, json=body).status_code == 401
@@ -48,6 +48,7 @@ def test_verify_a_model_estop_reset_resume_and_read_the_certificate(live):
     vid = v["id"]
     assert v["kind"] == "verification" and v["poses_total"] == 2 * 5 * 2 * 2 * 2, v
     assert v["settings"]["options"]["seed"] == seed  # the calibration's simulated arm
+    assert v["arm"] == "SN-23", v  # and its serial number
     # the arm runs one campaign at a time: a second verification is refused while this one runs
     r = c.post(url, json=body)
     assert r.status_code == 409 and r.headers["content-type"] == PROBLEM, r.text
