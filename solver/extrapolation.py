@@ -60,16 +60,59 @@ class RegionFold:
 
 
 @dataclass(frozen=True)
+class SpanParts:
+    """A test residual's sum of squares (mm^2) inside and outside the span of the test poses'
+    geometric Jacobian: what a geometric refit there could remove, and what none could."""
+
+    inside: float
+    outside: float
+
+
+@dataclass(frozen=True)
 class FoldCheck:
-    """One region fold: the geometric and the extended model's held-out RMS (mm) there."""
+    """One region fold: the geometric and the extended model's held-out RMS (mm) there; where
+    measured, their test residuals split by the test poses' geometric span, and the part inside it
+    of the extended model's move from geometry's prediction (sum of squares, mm^2)."""
 
     fold: RegionFold
     geometric_rms: float
     extended_rms: float
+    geometric_parts: SpanParts | None = None
+    extended_parts: SpanParts | None = None
+    shift_inside: float | None = None
 
     @property
     def worse(self) -> bool:
-        return self.extended_rms > MAX_RATIO * self.geometric_rms
+        return self.extended_rms > MAX_RATIO * self.geometric_rms and not self.geometry_to_blame
+
+    @property
+    def geometry_to_blame(self) -> bool:
+        """The extended model's excess lies in the geometric span: it is no worse than geometry
+        outside it (the effect's own part, which no geometric refit explains), and inside it moves
+        the prediction by less than geometry's own error there (its geometric parameters, fitted
+        beside the effect on one region, extrapolate no differently from geometry's than geometry
+        misses). A fold trained on half a campaign extrapolates geometry poorly whatever the model;
+        that alone refused a true backlash fitted on 20 poses that halved the other
+        configuration's error."""
+        g, e = self.geometric_parts, self.extended_parts
+        if g is None or e is None or self.shift_inside is None:
+            return False
+        return e.outside <= g.outside and self.shift_inside < g.inside
+
+
+def span_parts(Jt: np.ndarray, r: np.ndarray) -> SpanParts | None:
+    """r's sum of squares inside and outside the column span of J (Jt (P, N, 3), r (N, 3));
+    None when the span leaves no room outside it (as many independent columns as rows)."""
+    J = Jt.reshape(Jt.shape[0], -1).T
+    y = r.ravel()
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(y))):
+        return None
+    U, s, _ = np.linalg.svd(J, full_matrices=False)
+    rank = int(np.sum(s > s[0] * max(J.shape) * np.finfo(float).eps)) if s.size else 0
+    if rank >= J.shape[0]:
+        return None
+    inside = float(np.sum((U[:, :rank].T @ y) ** 2))
+    return SpanParts(inside, max(float(y @ y) - inside, 0.0))
 
 
 def gravity_loaded(layout: Layout, x, q: np.ndarray) -> list[int]:

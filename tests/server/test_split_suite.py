@@ -27,7 +27,7 @@ def test_training_and_test_poses_lie_in_the_two_configurations(seed):
 
 
 def test_the_summary_counts_cases_that_extrapolate_worse_than_geometry():
-    def result(kind, arm, ratio, removed):
+    def result(kind, arm, ratio, removed, removable=None):
         geo = 0.3
         return {
             "case": {"kind": kind, "arm": arm},
@@ -41,16 +41,26 @@ def test_the_summary_counts_cases_that_extrapolate_worse_than_geometry():
             "ratio": ratio,
             "test_over_floor": geo * ratio / 0.05,
             "removed": removed,
+            "removable": removable,
         }
 
     s = ss.summarize_split(
         [
-            result("joint_compliance", "irb2600", 0.3, 0.95),
-            result("joint_periodic", "kuka-like", 1.05, -0.1),
+            result("joint_compliance", "irb2600", 0.3, 0.95, 0.97),
+            result("joint_periodic", "kuka-like", 1.05, -0.1, 0.9),
+            result("joint_backlash", "kuka-like", 0.9, 0.3, 0.4),
             result("clean", "random", 1.0, None),
         ]
     )
     assert s["hurt"] == 1 and s["worst_ratio"] == 1.05
-    assert s["removed"] == {"median": pytest.approx(0.425), "at_least_0.8": 1, "of": 2}
+    assert s["removed"] == {
+        "median": pytest.approx(0.3),
+        "at_least_0.8": 1,
+        "of": 3,
+        # the backlash: even the effects known exactly would remove only 40%
+        "removable_below_0.8": 1,
+        "at_least_0.8_where_removable": 1,
+        "removable_of": 2,
+    }
     assert s["per_arm"]["kuka-like"]["hurt"] == 1 and s["per_arm"]["irb2600"]["hurt"] == 0
-    assert s["false_alarms"]["clean_campaigns"] == 1 and s["detection_rate"] == 0.5
+    assert s["false_alarms"]["clean_campaigns"] == 1 and s["detection_rate"] == pytest.approx(1 / 3)
