@@ -603,6 +603,8 @@ def extrapolation_report(region: Extrapolation, q) -> dict:
                 "beyond_training_deg": float(np.degrees(c.fold.beyond_rad)),
                 "geometric_rmse_mm": num(c.geometric_rms),
                 "final_rmse_mm": num(c.extended_rms),
+                "worse_only_in_geometric_span": c.extended_rms > MAX_RATIO * c.geometric_rms
+                and c.geometry_to_blame,
             }
             for c in region.checks
         ],

@@ -64,3 +64,34 @@ def test_the_summary_counts_cases_that_extrapolate_worse_than_geometry():
     }
     assert s["per_arm"]["kuka-like"]["hurt"] == 1 and s["per_arm"]["irb2600"]["hurt"] == 0
     assert s["false_alarms"]["clean_campaigns"] == 1 and s["detection_rate"] == pytest.approx(1 / 3)
+
+
+def test_a_backlash_fitted_on_40_poses_of_one_configuration_holds_in_the_other():
+    """A joint-6 backlash on the IRB 2600 with two SMRs, 40 training poses: a region fold trained
+    on 20 of them extrapolates geometry worse beside it (in the geometric span only), which alone
+    refused it; accepted, it removes at least 80% of geometry's excess in the other elbow
+    configuration, what the effect known exactly would remove."""
+    case = ss.draw_split_case(33, "joint_backlash")
+    assert case.arm == "irb2600" and case.n_train == 40 and len(case.targets) == 2
+    r = ss.run_split_case(case)
+    assert r["named"] == [["joint_backlash", 6, None]], r["named"]
+    assert r["ratio"] <= ss.MAX_RATIO and r["removed"] >= ss.REMOVED_MIN, r
+    assert r["geometric_without_effects_test_mm"] < r["geometric_test_mm"]
+    assert r["removable"] == pytest.approx(r["removed"], abs=0.05)
+    # the report says which fold was worse, and why it did not refuse the backlash
+    from robocal.solver.diagnose import diagnose
+
+    vc = case.cell()
+    q_train, _, _ = ss.split_poses(case, vc)
+    train = vc.campaign(case.n_train, case.cell_seed, poses=q_train, **case.options)
+    nominal = np.array([case.targets[t] for t in train.target_names])
+    d = diagnose(case.robot, nominal, train.target_names, train.q, train.xyz, train.time_s)
+    folds = d.report["extrapolation"]["folds"]
+    exempt = [f for f in folds if f["worse_only_in_geometric_span"]]
+    assert exempt and d.report["extrapolation"]["refused"] == [], folds
+    assert all(f["final_rmse_mm"] > ss.MAX_RATIO * f["geometric_rmse_mm"] for f in exempt)
+
+
+def test_a_clean_case_has_no_removable_share():
+    r = ss.run_split_case(ss.draw_split_case(5, "clean"))
+    assert r["named"] == [] and r["removable"] is None and r["ratio"] == pytest.approx(1.0)

@@ -4,15 +4,20 @@ six ways, region folds, and an extension that fits one region's quirks refused."
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from robocal.server import workflow
 from robocal.solver import configuration, vocabulary
 from robocal.solver.calibrate import calibrate
 from robocal.solver.extrapolation import (
     CONFIGURATIONS,
+    FoldCheck,
+    RegionFold,
+    SpanParts,
     configuration_folds,
     gravity_loaded,
     region_folds,
+    span_parts,
 )
 from robocal.solver.kinematics import Layout, predict
 from tests.real import campaign_files
@@ -117,3 +122,37 @@ def test_a_compliance_that_fits_one_regions_quirks_is_refused(monkeypatch):
     assert [x["label"] for x in refused] == ["joint_compliance(2, masses fitted)"], r["effects"]
     assert refused[0]["worse_on"] and r["effects"] == []
     assert r["final"]["model"] == "geometric"
+
+
+def test_span_parts_split_a_residual_by_the_geometric_jacobian():
+    rng = np.random.default_rng(3)
+    Jt = rng.normal(size=(4, 10, 3))  # 4 parameters, 10 readings
+    J = Jt.reshape(4, -1).T
+    inside = J @ rng.normal(size=4)
+    noise = rng.normal(size=30)
+    outside = noise - J @ np.linalg.lstsq(J, noise, rcond=None)[0]
+    parts = span_parts(Jt, (inside + outside).reshape(10, 3))
+    assert parts is not None
+    assert parts.inside == pytest.approx(inside @ inside)
+    assert parts.outside == pytest.approx(outside @ outside)
+    # as many independent columns as rows: nothing lies outside, nothing to judge by
+    assert span_parts(rng.normal(size=(6, 2, 3)), rng.normal(size=(2, 3))) is None
+    assert span_parts(Jt, np.full((10, 3), np.nan)) is None
+
+
+def check(extended_rms, g, e, shift):
+    fold = RegionFold(1, 0.0, True, np.arange(20), 0.5)
+    return FoldCheck(fold, 0.10, extended_rms, SpanParts(*g), e and SpanParts(*e), shift)
+
+
+def test_a_fold_worse_only_inside_the_geometric_span_blames_geometry():
+    """Worse than geometry on a fold by its in-span part (geometric parameters extrapolating from
+    one region) while better outside it: not the effect's fault. Worse outside the span, or moving
+    the in-span prediction by more than geometry misses there, or unmeasured: refused as before."""
+    # inside 0.18 -> 0.45 mm^2, outside 0.22 -> 0.03: a true effect fitted on half the poses
+    assert not check(0.11, (0.18, 0.22), (0.45, 0.03), 0.08).worse
+    assert check(0.11, (0.18, 0.22), (0.45, 0.03), 0.08).geometry_to_blame
+    assert check(0.11, (0.18, 0.22), (0.20, 0.30), 0.01).worse  # the effect's part is worse
+    assert check(0.11, (0.18, 0.22), (0.45, 0.03), 0.30).worse  # moved more than geometry misses
+    assert check(0.11, (0.18, 0.22), None, None).worse  # no span measured
+    assert not check(0.101, (0.18, 0.22), (0.9, 0.9), 0.9).worse  # within 1.02x: never refused
