@@ -102,14 +102,15 @@ class FoldCheck:
 
 def span_parts(Jt: np.ndarray, r: np.ndarray) -> SpanParts | None:
     """r's sum of squares inside and outside the column span of J (Jt (P, N, 3), r (N, 3));
-    None when the span leaves no room outside it (as many independent columns as rows)."""
+    None when the span leaves less room outside it than it takes (fewer rows than twice its
+    independent columns): a few dimensions outside it would judge the effect by chance."""
     J = Jt.reshape(Jt.shape[0], -1).T
     y = r.ravel()
     if not (np.all(np.isfinite(J)) and np.all(np.isfinite(y))):
         return None
     U, s, _ = np.linalg.svd(J, full_matrices=False)
     rank = int(np.sum(s > s[0] * max(J.shape) * np.finfo(float).eps)) if s.size else 0
-    if rank >= J.shape[0]:
+    if J.shape[0] - rank < rank:
         return None
     inside = float(np.sum((U[:, :rank].T @ y) ** 2))
     return SpanParts(inside, max(float(y @ y) - inside, 0.0))

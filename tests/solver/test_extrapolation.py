@@ -135,8 +135,11 @@ def test_span_parts_split_a_residual_by_the_geometric_jacobian():
     assert parts is not None
     assert parts.inside == pytest.approx(inside @ inside)
     assert parts.outside == pytest.approx(outside @ outside)
-    # as many independent columns as rows: nothing lies outside, nothing to judge by
+    # as many independent columns as rows: nothing lies outside, nothing to judge by; fewer
+    # dimensions outside the span than in it: too few to judge by either
     assert span_parts(rng.normal(size=(6, 2, 3)), rng.normal(size=(2, 3))) is None
+    assert span_parts(rng.normal(size=(4, 2, 3)), rng.normal(size=(2, 3))) is None
+    assert span_parts(rng.normal(size=(3, 2, 3)), rng.normal(size=(2, 3))) is not None
     assert span_parts(Jt, np.full((10, 3), np.nan)) is None
 
 
