@@ -87,17 +87,19 @@ class FoldCheck:
 
     @property
     def geometry_to_blame(self) -> bool:
-        """The extended model's excess lies in the geometric span: it is no worse than geometry
-        outside it (the effect's own part, which no geometric refit explains), and inside it moves
-        the prediction by less than geometry's own error there (its geometric parameters, fitted
-        beside the effect on one region, extrapolate no differently from geometry's than geometry
-        misses). A fold trained on half a campaign extrapolates geometry poorly whatever the model;
-        that alone refused a true backlash fitted on 20 poses that halved the other
-        configuration's error."""
+        """The extended model's excess lies in the geometric span: outside it (the effect's own
+        part, which no geometric refit explains) it is no worse than geometry, and its move of
+        the prediction inside it (its geometric parameters, fitted beside the effect on one
+        region, extrapolating otherwise) stays below geometry's own error there plus what the
+        effect gained outside: the effect's part and the change it made to geometry's part
+        together below geometry's whole error. A fold trained on half a campaign extrapolates
+        geometry poorly whatever the model; that alone refused true effects that removed most of
+        geometry's excess in the other configuration (a backlash fitted on 20 poses)."""
         g, e = self.geometric_parts, self.extended_parts
         if g is None or e is None or self.shift_inside is None:
             return False
-        return e.outside <= g.outside and self.shift_inside < g.inside
+        gain = g.outside - e.outside
+        return gain >= 0 and self.shift_inside < g.inside + gain
 
 
 def span_parts(Jt: np.ndarray, r: np.ndarray) -> SpanParts | None:

@@ -77,7 +77,8 @@ class RegionFold(Open):
         description="the final model is over max_ratio_to_geometric here, but only inside the "
         "span of the test poses' geometric Jacobian (geometric parameters fitted on one region, "
         "which a fit on the whole campaign refits): no worse than geometry outside it, and moving "
-        "the prediction there by less than geometry's own error; not refused for it",
+        "the prediction there by less than geometry's own error there plus what the effect "
+        "gained outside; not refused for it",
     )
 
 

@@ -156,6 +156,8 @@ def test_a_fold_worse_only_inside_the_geometric_span_blames_geometry():
     assert not check(0.11, (0.18, 0.22), (0.45, 0.03), 0.08).worse
     assert check(0.11, (0.18, 0.22), (0.45, 0.03), 0.08).geometry_to_blame
     assert check(0.11, (0.18, 0.22), (0.20, 0.30), 0.01).worse  # the effect's part is worse
-    assert check(0.11, (0.18, 0.22), (0.45, 0.03), 0.30).worse  # moved more than geometry misses
+    # moved inside more than geometry misses there, but less than that and the gain outside
+    assert not check(0.11, (0.18, 0.22), (0.45, 0.03), 0.30).worse
+    assert check(0.11, (0.18, 0.22), (0.45, 0.03), 0.40).worse  # more than both
     assert check(0.11, (0.18, 0.22), None, None).worse  # no span measured
     assert not check(0.101, (0.18, 0.22), (0.9, 0.9), 0.9).worse  # within 1.02x: never refused
