@@ -95,3 +95,15 @@ def test_a_backlash_fitted_on_40_poses_of_one_configuration_holds_in_the_other()
 def test_a_clean_case_has_no_removable_share():
     r = ss.run_split_case(ss.draw_split_case(5, "clean"))
     assert r["named"] == [] and r["removable"] is None and r["ratio"] == pytest.approx(1.0)
+
+
+def test_a_periodic_error_seen_by_one_smr_holds_in_the_other_wrist_configuration():
+    """A joint-4 periodic error on the KUKA-like arm with one SMR, 60 training poses: on a region
+    fold trained on 30 of them the extended model moves geometry's part by more than geometry
+    misses there, but less than that and what it gained outside; accepted, it removes at least
+    80% of geometry's excess on the other wrist configuration."""
+    case = ss.draw_split_case(112, "joint_periodic")
+    assert case.arm == "kuka-like" and len(case.targets) == 1
+    r = ss.run_split_case(case)
+    assert r["named"] == [["joint_periodic", 4, 1]], r["named"]
+    assert r["ratio"] <= ss.MAX_RATIO and r["removed"] >= ss.REMOVED_MIN, r
