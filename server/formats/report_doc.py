@@ -78,7 +78,8 @@ class RegionFold(Open):
         "span of the test poses' geometric Jacobian (geometric parameters fitted on one region, "
         "which a fit on the whole campaign refits): no worse than geometry outside it, and moving "
         "the prediction there by less than geometry's own error there plus what the effect "
-        "gained outside; not refused for it",
+        "gained outside, its relative gain outside outweighing its relative loss inside; not "
+        "refused for it",
     )
 
 
