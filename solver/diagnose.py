@@ -18,7 +18,14 @@ import numpy as np
 from . import vocabulary
 from .effects import Extension, Inputs, point_shift, prepare
 from .extended import extension_rows, fit_extended, predict_extended
-from .extrapolation import FoldCheck, RegionFold, configuration_folds, joint_ranges, region_folds
+from .extrapolation import (
+    FoldCheck,
+    RegionFold,
+    configuration_folds,
+    joint_ranges,
+    region_folds,
+    span_parts,
+)
 from .finite import finite, require_inputs
 from .identify import Problem, register
 from .kinematics import Layout, predict_rows
@@ -249,16 +256,57 @@ class Diagnoser:
         x, ee, _ = fit_extended(self.prob, self.inputs, self.x0, self.free, exts, poses)
         return x, ee
 
-    def region_rms(self, exts, fold: RegionFold) -> float:
-        """Held-out RMS (mm) on the fold's test poses of the model fitted on the others; NaN
-        when the training side cannot fit it."""
+    def region_residuals(self, exts, fold: RegionFold) -> tuple[np.ndarray, np.ndarray] | None:
+        """The model fitted on the fold's training poses: its parameters and its residuals
+        (test poses, K, 3) on the test poses; None when the training side cannot fit it."""
         train = np.setdiff1d(np.arange(self.prob.q.shape[0]), fold.test)
         try:
             x, ee = self.fit_plain(exts, train)
         except (np.linalg.LinAlgError, ValueError):
-            return float("nan")
-        r = self.residuals(x, ee, fold.test)
-        return float(np.sqrt(np.nanmean(np.sum(r * r, axis=-1))))
+            return None
+        return x, self.residuals(x, ee, fold.test)
+
+    def region_geometric(self, fold: RegionFold) -> GeometricFold:
+        """Geometry's check on the fold, with the span of its test poses' Jacobian at its fit."""
+        fitted = self.region_residuals([], fold)
+        if fitted is None:
+            return GeometricFold(FoldCheck(fold, float("nan"), float("nan")), None, None, None)
+        x, r = fitted
+        rms = float(np.sqrt(np.nanmean(np.sum(r * r, axis=-1))))
+        mask = self.prob.mask[fold.test] & np.all(np.isfinite(r), axis=-1)
+        _, Jt = predict_rows(
+            self.prob.layout, x, self.prob.q[fold.test], mask, np.flatnonzero(self.free)
+        )
+        parts = span_parts(Jt, r[mask])
+        return GeometricFold(FoldCheck(fold, rms, rms, parts, parts, 0.0), mask, Jt, r[mask])
+
+    def region_check(self, exts, geo: GeometricFold) -> FoldCheck:
+        """The fold's check of the model with these extensions beside geometry's."""
+        fold = geo.check.fold
+        fitted = self.region_residuals(exts, fold)
+        if fitted is None:
+            return FoldCheck(fold, geo.check.geometric_rms, float("nan"))
+        r = fitted[1]
+        rms = float(np.sqrt(np.nanmean(np.sum(r * r, axis=-1))))
+        parts = shift = None
+        if geo.Jt is not None and np.all(np.isfinite(r[geo.mask])):
+            parts = span_parts(geo.Jt, r[geo.mask])
+            moved = span_parts(geo.Jt, r[geo.mask] - geo.resid)
+            shift = None if moved is None else moved.inside
+        return FoldCheck(
+            fold, geo.check.geometric_rms, rms, geo.check.geometric_parts, parts, shift
+        )
+
+
+@dataclass
+class GeometricFold:
+    """Geometry on one region fold: its check, and its test readings' mask, Jacobian and
+    residuals (None: the training side could not fit it)."""
+
+    check: FoldCheck
+    mask: np.ndarray | None
+    Jt: np.ndarray | None
+    resid: np.ndarray | None = None  # (readings, 3) at the mask
 
 
 @dataclass
@@ -280,12 +328,12 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
     folds += configuration_folds(diag.prob.layout.robot, q, least)
     if not folds:
         return steps, Extrapolation(folds, [], [])
-    geo = [diag.region_rms([], f) for f in folds]
+    geo = [diag.region_geometric(f) for f in folds]
     kept = list(steps)
     refused: list[tuple[Extension, list[FoldCheck]]] = []
     while kept:
         exts = [s[0] for s in kept]
-        checks = [FoldCheck(f, g, diag.region_rms(exts, f)) for f, g in zip(folds, geo)]
+        checks = [diag.region_check(exts, g) for g in geo]
         bad = [c for c in checks if c.worse]
         if not bad:
             return kept, Extrapolation(folds, checks, refused)
@@ -298,7 +346,7 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
                 f"  {last[0].label()} refused: worse than geometry off the training region "
                 f"({', '.join(c.fold.label() for c in bad)})"
             )
-    return kept, Extrapolation(folds, [FoldCheck(f, g, g) for f, g in zip(folds, geo)], refused)
+    return kept, Extrapolation(folds, [g.check for g in geo], refused)
 
 
 def select(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFECTS):
@@ -555,6 +603,8 @@ def extrapolation_report(region: Extrapolation, q) -> dict:
                 "beyond_training_deg": float(np.degrees(c.fold.beyond_rad)),
                 "geometric_rmse_mm": num(c.geometric_rms),
                 "final_rmse_mm": num(c.extended_rms),
+                "worse_only_in_geometric_span": c.extended_rms > MAX_RATIO * c.geometric_rms
+                and c.geometry_to_blame,
             }
             for c in region.checks
         ],

@@ -203,6 +203,14 @@ def run_diagnose_bench(
                 if not split_summary["removed"]["of"]
                 else split_summary["removed"]["at_least_0.8"] == split_summary["removed"]["of"]
             ),
+            # the cases where the effects known exactly would remove 80% (the rest is geometry
+            # extrapolating from one configuration, beyond any effect model's reach)
+            "split_removed_at_least_0.8_where_removable": (
+                None
+                if not split_summary["removed"]["removable_of"]
+                else split_summary["removed"]["at_least_0.8_where_removable"]
+                == split_summary["removed"]["removable_of"]
+            ),
             "real_splits_never_worse_than_geometry_1.02": (
                 None
                 if not real_splits

@@ -72,6 +72,15 @@ class RegionFold(Open):
     )
     geometric_rmse_mm: float | None
     final_rmse_mm: float | None
+    worse_only_in_geometric_span: bool = Field(
+        False,
+        description="the final model is over max_ratio_to_geometric here, but only inside the "
+        "span of the test poses' geometric Jacobian (geometric parameters fitted on one region, "
+        "which a fit on the whole campaign refits): no worse than geometry outside it, and moving "
+        "the prediction there by less than geometry's own error there plus what the effect "
+        "gained outside, its relative gain outside outweighing its relative loss inside; not "
+        "refused for it",
+    )
 
 
 class Refused(Open):
