@@ -55,18 +55,6 @@ class Calibration(OptimizeResult):
         return self.layout.targets(self.x)
 
 
-STATUS = {
-    "converged": 0,
-    "predicted decrease below tolerance": 0,
-    "iteration limit reached": 1,
-}
-
-
-def status_of(message: str) -> int:
-    """The status code of a solver's stop message: 0 converged, 1 iteration limit, 2 other."""
-    return next((code for head, code in STATUS.items() if message.startswith(head)), 2)
-
-
 def parse_method(method: str, target_names) -> tuple[str, list[int]]:
     """Method name and the targets it fits: `ls-single:B` fits B only."""
     name, _, arg = method.partition(":")
@@ -181,7 +169,7 @@ def calibrate(
         own["start"] = fit.start
         if name == "ls-single":
             x = fit_targets(prob, x, [k for k in range(len(target_names)) if k not in rows])
-    iters, message = res.iterations, res.message
+    iters, message, status = res.iterations, res.message, res.status
     own["lm"] = {
         "iterations": res.iterations,
         "evaluations": res.nfev,
@@ -194,7 +182,7 @@ def calibrate(
         own["ls_sum_F"] = start_F.tolist()
         mm = minimax(prob, x, data.free, rows=rows, qp=qp, epsilon=epsilon)
         x = mm.x
-        iters, message = mm.iterations, mm.message
+        iters, message, status = mm.iterations, mm.message, mm.status
         own.update(
             history=mm.history,
             qp=qp,
@@ -221,14 +209,13 @@ def calibrate(
     else:  # least squares: ls-pose its own residuals, the others F summed over their targets
         cost = float(res.cost) if name == "ls-pose" else float(F[rows].sum())
     prob, x = prob.rebased(x)
-    status = status_of(message)
     return Calibration(
         method=method,
         layout=prob.layout,
         x=x,
         cost=cost,
         success=status == 0,
-        status=status,
+        status=int(status),
         message=message,
         nit=iters,
         fixed={**st.fixed, **data.held},

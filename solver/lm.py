@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .finite import finite
+from .stop import Stop
 
 # A step whose actual decrease is within this fraction of the predicted one keeps its Jacobian.
 REUSE_RHO = 0.9
@@ -41,6 +42,7 @@ class LMResult:
     message: str
     njev: int = 0
     r: np.ndarray | None = None  # the residuals at x, when the last evaluation there gave them
+    status: Stop = Stop.ITERATION_LIMIT
 
 
 @dataclass
@@ -118,6 +120,7 @@ def levenberg_marquardt(
     chords = 0  # steps taken on it since
     nfev = njev = 1
     lam, message, it, r = LAMBDA0, "iteration limit reached", 0, None
+    stop = Stop.ITERATION_LIMIT
 
     def holds() -> bool:
         return chords == 0 or (near(at[0], x) if near else near_by_cost(at[1], cost))
@@ -148,11 +151,11 @@ def levenberg_marquardt(
                 break
             lam *= 10.0
             if lam > 1e16:
-                return LMResult(x, cost, it, nfev, "no further decrease", njev, r)
+                return LMResult(x, cost, it, nfev, "no further decrease", njev, r, Stop.OTHER)
         if predicted <= ftol * cost or cn >= cost:
             # nothing left to gain on this Jacobian: a minimum if it holds here, else take a fresh one
             if predicted <= ftol * cost and holds():
-                return LMResult(x, cost, it, nfev, "converged", njev, r)
+                return LMResult(x, cost, it, nfev, "converged", njev, r, Stop.CONVERGED)
             ne, at, chords = normal(x), (x, cost), 0
             nfev, njev = nfev + 1, njev + 1
             continue
@@ -167,7 +170,7 @@ def levenberg_marquardt(
             continue
         chords += 1
         if (small_f or small_x) and holds():
-            message = "converged"
+            message, stop = "converged", Stop.CONVERGED
             break
         if abs(1.0 - rho) < 1.0 - REUSE_RHO:
             # the linear model was right: another step on this Jacobian, at the new residual
@@ -176,4 +179,4 @@ def levenberg_marquardt(
         else:
             ne, at, chords = normal(x), (x, cost), 0
             nfev, njev = nfev + 1, njev + 1
-    return LMResult(x, cost, it, nfev, message, njev, r)
+    return LMResult(x, cost, it, nfev, message, njev, r, stop)

@@ -12,6 +12,7 @@ from .identify import Problem
 from .kinematics import predict, predict_rows
 from .normal import PointNormal
 from .qp import SOLVERS
+from .stop import Stop
 
 
 @dataclass
@@ -28,6 +29,7 @@ class MinimaxResult:
     mu: np.ndarray
     converged: bool
     message: str
+    status: Stop
     constraints: np.ndarray = field(default_factory=lambda: np.zeros(0))
     qp_unconverged: int = 0  # SQP iterations whose QP subproblem missed its own optimality test
 
@@ -195,6 +197,7 @@ def minimax(
     lam, mu = np.full(K, 1.0 / K), np.zeros(len(c))
     history = [float(np.max(F))]
     qp_iters, qp_missed, converged, message = 0, 0, False, "iteration limit reached"
+    stop = Stop.ITERATION_LIMIT
     rho = 1.0
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 (the count is reported after the loop)
@@ -214,6 +217,7 @@ def minimax(
                 if converged
                 else "stopped on the decrease of a QP subproblem not solved to tolerance"
             )
+            stop = Stop.CONVERGED if converged else Stop.OTHER
             lam, mu = sol.lam, sol.mu
             break
         alpha = 1.0
@@ -223,7 +227,7 @@ def minimax(
                 break
             alpha *= 0.5
         if alpha < 1e-6:
-            message = "line search failed: no descent along the QP step"
+            message, stop = "line search failed: no descent along the QP step", Stop.OTHER
             break
         s = alpha * sol.dx
         z = z + s
@@ -254,6 +258,7 @@ def minimax(
         mu,
         converged,
         message,
+        stop,
         c,
         qp_missed,
     )
