@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .finite import finite
 
@@ -33,6 +32,9 @@ def rigid_correction(pred, meas, point_sigma_mm: float, rot_sigma_rad: float) ->
     millimetre nominal errors fix its rotation worse than a survey does; the prior keeps the
     rotation where the points cannot tell, while the translation follows the points.
     """
+    # here, not at the top: kabsch is on `robocal predict`'s path, which starts without scipy
+    from scipy.spatial.transform import Rotation
+
     pred, meas = np.asarray(pred, dtype=float), np.asarray(meas, dtype=float)
     c = pred.mean(axis=0)
     T = np.eye(4)
