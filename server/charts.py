@@ -114,18 +114,19 @@ def table3(cell_json: str, meas: Measurements, report=None) -> dict:
     cell = parse_cell(cell_json, "<campaign cell>")
     rows = compare(cell, meas, paper_methods(meas.target_names))
     accs = [acc for _, acc in rows.values()]
-    table = [(f"F_{n} / mm^2", [a["F"][n] for a in accs]) for n in meas.target_names]
+    table = [(f"F_{n} / mm^2", [a.F[n] for a in accs]) for n in meas.target_names]
     table += [
-        ("max F_i / mm^2", [max(a["F"].values()) for a in accs]),
-        ("RMSE(phi) / mm", [a["rmse_phi"] for a in accs]),
-        ("AP mean / mm", [a["ap"]["mean"] for a in accs]),
-        ("AP std / mm", [a["ap"]["std"] for a in accs]),
-        ("AP max / mm", [a["ap"]["max"] for a in accs]),
+        ("max F_i / mm^2", [max(a.F.values()) for a in accs]),
+        ("RMSE(phi) / mm", [a.rmse_phi for a in accs]),
+        ("AP mean / mm", [a.ap.mean for a in accs]),
+        ("AP std / mm", [a.ap.std for a in accs]),
+        ("AP max / mm", [a.ap.max for a in accs]),
     ]
-    if "ao_log" in accs[0]:
+    if accs[0].ao_log is not None:  # every method on the same data has one when the first has
+        nan = float("nan")
         table += [
-            ("AO' mean / deg", [a["ao_log"]["mean"] for a in accs]),
-            ("AO' max / deg", [a["ao_log"]["max"] for a in accs]),
+            ("AO' mean / deg", [a.ao_log.mean if a.ao_log else nan for a in accs]),
+            ("AO' max / deg", [a.ao_log.max if a.ao_log else nan for a in accs]),
         ]
     table.append(("time / ms", [cal.seconds * 1000 for cal, _ in rows.values()]))
     return {
@@ -138,7 +139,7 @@ def table3(cell_json: str, meas: Measurements, report=None) -> dict:
     }
 
 
-def evaluation(model_path, meas: Measurements, report=None) -> dict:
+def evaluation(model_path, meas: Measurements, report=None) -> metrics.Evaluation:
     """Accuracy of a model file on a campaign's readings, next to the nominal model."""
     return evaluate(read_model(model_path), meas)
 

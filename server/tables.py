@@ -10,6 +10,9 @@ from rich.console import Console
 from rich.table import Table
 
 if TYPE_CHECKING:
+    from robocal.solver.calibrate import Calibration
+    from robocal.solver.metrics import Accuracy, Stats
+
     from .fleet import Fleet
     from .formats.verdict import Verdict
 
@@ -23,50 +26,52 @@ def _f(v, digits=4) -> str:
     return f"{v:.{digits}g}" if abs(v) >= 10**digits or abs(v) < 1e-3 else f"{v:.{digits}f}"
 
 
-def table3(rows: dict, target_names) -> Table:
+def table3(rows: dict[str, tuple[Calibration, Accuracy]], target_names) -> Table:
     """The paper's Table 3 (sum of squared errors per SMR, RMSE(phi)) plus AP/AO statistics."""
     t = Table(title="Methods side by side on the calibration data (the paper's Table 3)")
     t.add_column("")
     for label in rows:
         t.add_column(label, justify="right")
     for name in target_names:
-        t.add_row(f"F_{name} / mm^2", *[_f(acc["F"][name]) for _, acc in rows.values()])
+        t.add_row(f"F_{name} / mm^2", *[_f(acc.F[name]) for _, acc in rows.values()])
     t.add_row(
-        "max F_i / mm^2", *[_f(max(acc["F"].values())) for _, acc in rows.values()], style="bold"
+        "max F_i / mm^2", *[_f(max(acc.F.values())) for _, acc in rows.values()], style="bold"
     )
-    t.add_row("RMSE(phi) / mm", *[_f(acc["rmse_phi"]) for _, acc in rows.values()])
-    t.add_row("AP mean / mm", *[_f(acc["ap"]["mean"]) for _, acc in rows.values()])
-    t.add_row("AP std / mm", *[_f(acc["ap"]["std"]) for _, acc in rows.values()])
-    t.add_row("AP max / mm", *[_f(acc["ap"]["max"]) for _, acc in rows.values()])
-    if "ao_log" in next(iter(rows.values()))[1]:
-        t.add_row("AO' mean / deg", *[_f(acc["ao_log"]["mean"]) for _, acc in rows.values()])
-        t.add_row("AO' max / deg", *[_f(acc["ao_log"]["max"]) for _, acc in rows.values()])
+    t.add_row("RMSE(phi) / mm", *[_f(acc.rmse_phi) for _, acc in rows.values()])
+    t.add_row("AP mean / mm", *[_f(acc.ap.mean) for _, acc in rows.values()])
+    t.add_row("AP std / mm", *[_f(acc.ap.std) for _, acc in rows.values()])
+    t.add_row("AP max / mm", *[_f(acc.ap.max) for _, acc in rows.values()])
+    accs = [acc for _, acc in rows.values()]
+    if accs[0].ao_log is not None:
+        # every method on the same data has an orientation when the first has one
+        t.add_row("AO' mean / deg", *[_f(a.ao_log.mean if a.ao_log else None) for a in accs])
+        t.add_row("AO' max / deg", *[_f(a.ao_log.max if a.ao_log else None) for a in accs])
         for c in "abc":
             t.add_row(
-                f"AO {c} mean / deg", *[_f(acc["ao_euler"][c]["mean"]) for _, acc in rows.values()]
+                f"AO {c} mean / deg",
+                *[_f(a.ao_euler[c].mean if a.ao_euler else None) for a in accs],
             )
     t.add_row("time / ms", *[f"{cal.seconds * 1000:.0f}" for cal, _ in rows.values()])
     return t
 
 
-def accuracy(acc: dict, title: str, target_names) -> Table:
+def _row(s: Stats) -> list[str]:
+    """A statistics row's cells: mean, std, max, rms."""
+    return [_f(s.mean), _f(s.std), _f(s.max), _f(s.rms)]
+
+
+def accuracy(acc: Accuracy, title: str, target_names) -> Table:
     """Positioning and orientation statistics of one model on one data set."""
     t = Table(title=title)
     for col in ("", "mean", "std", "max", "rms"):
         t.add_column(col, justify="right" if col else "left")
     for name in target_names:
-        s = acc["ap_per_target"][name]
-        t.add_row(f"AP {name} / mm", *[_f(s[k]) for k in ("mean", "std", "max", "rms")])
-    s = acc["ap"]
-    t.add_row("AP all / mm", *[_f(s[k]) for k in ("mean", "std", "max", "rms")], style="bold")
-    if "ao_log" in acc:
+        t.add_row(f"AP {name} / mm", *_row(acc.ap_per_target[name]))
+    t.add_row("AP all / mm", *_row(acc.ap), style="bold")
+    if acc.ao_euler is not None and acc.ao_log is not None:
         for c in "abc":
-            s = acc["ao_euler"][c]
-            t.add_row(f"AO {c} (Euler) / deg", *[_f(s[k]) for k in ("mean", "std", "max", "rms")])
-        s = acc["ao_log"]
-        t.add_row(
-            "AO' (log) / deg", *[_f(s[k]) for k in ("mean", "std", "max", "rms")], style="bold"
-        )
+            t.add_row(f"AO {c} (Euler) / deg", *_row(acc.ao_euler[c]))
+        t.add_row("AO' (log) / deg", *_row(acc.ao_log), style="bold")
     return t
 
 

@@ -4,6 +4,8 @@ whether data it is evaluated on is of its cell."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from robocal.solver import guard
@@ -13,6 +15,9 @@ from robocal.solver.measurements import Measurements
 from .formats.cell_json import Cell
 from .formats.model_json import ModelFile
 from .formats.verdict import Verdict
+
+if TYPE_CHECKING:
+    from robocal.solver.metrics import Evaluation
 
 HOLDOUT_METHOD = "leave-one-pose-out cross-validation, linearised at the fit"
 # Model errors (RMS, mm) on data past which the data cannot be of the model's cell.
@@ -107,13 +112,13 @@ def data_mismatch(nominal, targets: list[str], cell: Cell) -> str | None:
     return None
 
 
-def absurd_errors(result: dict, verdict: Verdict | None = None) -> str | None:
+def absurd_errors(result: Evaluation, verdict: Verdict | None = None) -> str | None:
     """Why an evaluation's errors say the data is of another cell (a moved tracker, another
     robot), or the model unfit: the model's RMS error past ABSURD_MM; None otherwise."""
-    rms = result["model"]["rmse"]
+    rms = result.model.rmse
     if np.isfinite(rms) and rms <= ABSURD_MM:
         return None
-    nominal = result.get("nominal", {}).get("rmse")
+    nominal = result.nominal.rmse if result.nominal is not None else None
     unfit = verdict is not None and not verdict.deployable
     return (
         f"the model's predictions are {rms:.1f} mm RMS from the readings (limit {ABSURD_MM:g} "

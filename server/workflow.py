@@ -34,6 +34,7 @@ from .validation import (
 # the functions that run them, so `robocal predict` starts with numpy alone.
 if TYPE_CHECKING:
     from robocal.solver.calibrate import Calibration
+    from robocal.solver.metrics import Accuracy, Evaluation
     from robocal.solver.screen import Screening
 
 PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
@@ -235,9 +236,9 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         data.update(file=Path(data_path).name, sha256=file_digest(data_path))
     fit = {
         "F_mm2": dict(zip(meas.target_names, np.round(cal.F, 9).tolist())),
-        "rmse_phi_mm": acc["rmse_phi"],
-        "rmse_mm": acc["rmse"],
-        "ap_max_mm": acc["ap"]["max"],
+        "rmse_phi_mm": acc.rmse_phi,
+        "rmse_mm": acc.rmse,
+        "ap_max_mm": acc.ap.max,
         "condition_number": cal.condition,
         "fixed_parameters": cal.fixed,
         "iterations": cal.nit,
@@ -273,7 +274,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         )
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable
-    model.meta["validation"] = validate(cal, cell, used, rows, errors, acc["rmse"])
+    model.meta["validation"] = validate(cal, cell, used, rows, errors, acc.rmse)
     return model
 
 
@@ -375,7 +376,7 @@ def paper_methods(target_names) -> list[str]:
 
 def compare(
     cell: Cell, meas: Measurements, methods=None, qp_solvers=("primal-dual", "exact"), screen=True
-):
+) -> dict[str, tuple[Calibration, Accuracy]]:
     """Every method on the same data, screened once for gross outliers (unless screen is False):
     calibrations and their accuracy on the readings they used."""
     from robocal.solver import metrics
@@ -393,7 +394,7 @@ def compare(
     return rows
 
 
-def evaluate(model: ModelFile, meas: Measurements) -> dict:
+def evaluate(model: ModelFile, meas: Measurements) -> Evaluation:
     """Accuracy of a model on measured data, next to the nominal model fitted to the same data."""
     from robocal.solver import metrics
     from robocal.solver.calibrate import calibrate
@@ -412,14 +413,12 @@ def evaluate(model: ModelFile, meas: Measurements) -> dict:
         model, meas.q, _pose_column(meas.time_s), _pose_column(meas.temp_c), meas.prev_q
     )
     after = metrics.accuracy(pred[:, order], meas.xyz, names)
-    out = {"model": after}
-    if model.nominal is not None:
-        targets = np.array([model.targets[t] for t in names])
-        nom = calibrate(model.nominal, targets, names, meas.q, meas.xyz, method="nominal")
-        before = metrics.accuracy(predict(nom.layout, nom.x, meas.q), meas.xyz, names)
-        out["nominal"] = before
-        out["improvement_pct"] = metrics.compare_accuracy(before, after)
-    return out
+    if model.nominal is None:
+        return metrics.Evaluation(after)
+    targets = np.array([model.targets[t] for t in names])
+    nom = calibrate(model.nominal, targets, names, meas.q, meas.xyz, method="nominal")
+    before = metrics.accuracy(predict(nom.layout, nom.x, meas.q), meas.xyz, names)
+    return metrics.Evaluation(after, before, metrics.compare_accuracy(before, after))
 
 
 def held_out_errors(model: ModelFile, meas: Measurements) -> dict:
@@ -430,9 +429,9 @@ def held_out_errors(model: ModelFile, meas: Measurements) -> dict:
     return {
         "poses": int(np.any(meas.mask, axis=1).sum()),
         "readings": int(meas.mask.sum()),
-        "rms_mm": json_number(result["model"]["rmse"]),
-        "max_mm": json_number(result["model"]["ap"]["max"]),
-        "nominal_rms_mm": json_number(result["nominal"]["rmse"]) if "nominal" in result else None,
+        "rms_mm": json_number(result.model.rmse),
+        "max_mm": json_number(result.model.ap.max),
+        "nominal_rms_mm": json_number(result.nominal.rmse) if result.nominal is not None else None,
         "warning": absurd_errors(result, model.verdict),
     }
 

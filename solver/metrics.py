@@ -13,6 +13,7 @@ the Euler deviations AO (eq. 4) do, so they are only comparable for the same fra
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -129,26 +130,36 @@ def orientation_errors_log(pred, meas) -> np.ndarray:
     return out
 
 
-def stats(values) -> dict:
+@dataclass(frozen=True)
+class Stats:
+    """mean, std (ddof=1, ISO 9283 style), max, rms and count n of a set of errors."""
+
+    mean: float
+    std: float
+    max: float
+    rms: float
+    n: int
+
+    def to_json(self) -> dict:
+        """The statistics as a JSON object (NaN where undefined, as Python's json writes it)."""
+        return {"mean": self.mean, "std": self.std, "max": self.max, "rms": self.rms, "n": self.n}
+
+
+def stats(values) -> Stats:
     """mean, std (ddof=1, ISO 9283 style), max, rms and count n of the finite values."""
     v = np.asarray(values, dtype=float).ravel()
     v = v[np.isfinite(v)]
     n = int(v.size)
     if n == 0:
-        return {
-            "mean": float("nan"),
-            "std": float("nan"),
-            "max": float("nan"),
-            "rms": float("nan"),
-            "n": 0,
-        }
-    return {
-        "mean": float(v.mean()),
-        "std": float(v.std(ddof=1)) if n > 1 else float("nan"),
-        "max": float(v.max()),
-        "rms": float(np.sqrt(np.mean(v**2))),
-        "n": n,
-    }
+        nan = float("nan")
+        return Stats(mean=nan, std=nan, max=nan, rms=nan, n=0)
+    return Stats(
+        mean=float(v.mean()),
+        std=float(v.std(ddof=1)) if n > 1 else float("nan"),
+        max=float(v.max()),
+        rms=float(np.sqrt(np.mean(v**2))),
+        n=n,
+    )
 
 
 def improvement_pct(before, after) -> float:
@@ -159,7 +170,40 @@ def improvement_pct(before, after) -> float:
     return 100.0 * (before - after) / before
 
 
-def accuracy(pred, meas, target_names) -> dict:
+@dataclass(frozen=True)
+class Accuracy:
+    """One prediction's accuracy against measurements: counts, AP per target and overall (mm),
+    F_i (mm^2), RMSE(phi) and RMSE (mm); AO per Euler angle and AO' (deg) when K >= 3."""
+
+    n_poses: int
+    n_readings: dict[str, int]  # readings per target
+    ap_per_target: dict[str, Stats]
+    ap: Stats
+    F: dict[str, float]
+    rmse_phi: float
+    rmse: float
+    ao_euler: dict[str, Stats] | None = None  # a, b, c; None with fewer than 3 targets
+    ao_log: Stats | None = None  # None with fewer than 3 targets
+
+    def to_json(self) -> dict:
+        """The figures as a JSON object, the orientation keys only when there is an orientation."""
+        out = {
+            "n_poses": self.n_poses,
+            "n_readings": dict(self.n_readings),
+            "ap_per_target": {n: s.to_json() for n, s in self.ap_per_target.items()},
+            "ap": self.ap.to_json(),
+            "F": dict(self.F),
+            "rmse_phi": self.rmse_phi,
+            "rmse": self.rmse,
+        }
+        if self.ao_euler is not None:
+            out["ao_euler"] = {k: s.to_json() for k, s in self.ao_euler.items()}
+        if self.ao_log is not None:
+            out["ao_log"] = self.ao_log.to_json()
+        return out
+
+
+def accuracy(pred, meas, target_names) -> Accuracy:
     """Position, orientation and sum-of-squares accuracy of one prediction against measurements."""
     pred, meas, mask = _check(pred, meas)
     names = tuple(target_names)
@@ -170,33 +214,73 @@ def accuracy(pred, meas, target_names) -> dict:
     F = sum_squares(pred, meas)
     counts = mask.sum(axis=0)
     n_total = int(counts.sum())
-    out = {
-        "n_poses": int(m),
-        "n_readings": {n: int(c) for n, c in zip(names, counts)},
-        "ap_per_target": {n: stats(ap[:, i]) for i, n in enumerate(names)},
-        "ap": stats(ap),
-        "F": {n: float(f) for n, f in zip(names, F)},
-        "rmse_phi": rmse_phi(F, counts),
-        "rmse": float(np.sqrt(F.sum() / n_total)) if n_total else float("nan"),
-    }
+    ao_euler = ao_log = None
     if K >= 3:
         ao = orientation_errors_euler(pred, meas)
-        out["ao_euler"] = {k: stats(ao[:, j]) for j, k in enumerate("abc")}
-        out["ao_log"] = stats(orientation_errors_log(pred, meas))
-    return out
+        ao_euler = {k: stats(ao[:, j]) for j, k in enumerate("abc")}
+        ao_log = stats(orientation_errors_log(pred, meas))
+    return Accuracy(
+        n_poses=int(m),
+        n_readings={n: int(c) for n, c in zip(names, counts)},
+        ap_per_target={n: stats(ap[:, i]) for i, n in enumerate(names)},
+        ap=stats(ap),
+        F={n: float(f) for n, f in zip(names, F)},
+        rmse_phi=rmse_phi(F, counts),
+        rmse=float(np.sqrt(F.sum() / n_total)) if n_total else float("nan"),
+        ao_euler=ao_euler,
+        ao_log=ao_log,
+    )
 
 
-def compare_accuracy(before: dict, after: dict) -> dict:
-    """Improvement in percent of mean AP, max AP, mean AO' and RMSE between two `accuracy` dicts."""
+@dataclass(frozen=True)
+class Improvement:
+    """Improvement in percent of mean AP, max AP, mean AO' and RMSE (NaN where undefined)."""
+
+    ap_mean: float
+    ap_max: float
+    ao_log_mean: float
+    rmse: float
+
+    def to_json(self) -> dict:
+        """The percentages as a JSON object."""
+        return {
+            "ap_mean": self.ap_mean,
+            "ap_max": self.ap_max,
+            "ao_log_mean": self.ao_log_mean,
+            "rmse": self.rmse,
+        }
+
+
+def compare_accuracy(before: Accuracy, after: Accuracy) -> Improvement:
+    """Improvement in percent of mean AP, max AP, mean AO' and RMSE between two accuracies."""
     nan = float("nan")
-    ao_b = before.get("ao_log", {}).get("mean", nan)
-    ao_a = after.get("ao_log", {}).get("mean", nan)
-    return {
-        "ap_mean": improvement_pct(before["ap"]["mean"], after["ap"]["mean"]),
-        "ap_max": improvement_pct(before["ap"]["max"], after["ap"]["max"]),
-        "ao_log_mean": improvement_pct(ao_b, ao_a),
-        "rmse": improvement_pct(before["rmse"], after["rmse"]),
-    }
+    ao_b = before.ao_log.mean if before.ao_log is not None else nan
+    ao_a = after.ao_log.mean if after.ao_log is not None else nan
+    return Improvement(
+        ap_mean=improvement_pct(before.ap.mean, after.ap.mean),
+        ap_max=improvement_pct(before.ap.max, after.ap.max),
+        ao_log_mean=improvement_pct(ao_b, ao_a),
+        rmse=improvement_pct(before.rmse, after.rmse),
+    )
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """A model's accuracy on data, beside the nominal model's registered on the same data and
+    the improvement over it (both None when the model has no nominal robot)."""
+
+    model: Accuracy
+    nominal: Accuracy | None = None
+    improvement_pct: Improvement | None = None
+
+    def to_json(self) -> dict:
+        """The evaluation as a JSON object: model, then nominal and improvement_pct if known."""
+        out = {"model": self.model.to_json()}
+        if self.nominal is not None:
+            out["nominal"] = self.nominal.to_json()
+        if self.improvement_pct is not None:
+            out["improvement_pct"] = self.improvement_pct.to_json()
+        return out
 
 
 def table3(results: dict, target_names) -> dict:

@@ -109,7 +109,8 @@ def evaluate_model(
         if not force:
             raise HTTPException(422, f"campaign {campaign_id}: {why}; force=true to go on")
         warnings.append(why)
-    return {**result, "warnings": warnings} if warnings else result
+    body = result.to_json()
+    return {**body, "warnings": warnings} if warnings else body
 
 
 def unmeasured(info: store.CampaignInfo) -> str:

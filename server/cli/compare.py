@@ -28,7 +28,7 @@ def cmd_compare(args) -> None:
                 f"iterations, {cal.sqp_seconds * 1000:.1f} ms, final max F_i "
                 f"{cal.F.max():.6f} mm^2"
             )
-    worst = {k: max(acc["F"].values()) for k, (_, acc) in rows.items()}
+    worst = {k: max(acc.F.values()) for k, (_, acc) in rows.items()}
     best = [k for k, v in worst.items() if v <= min(worst.values()) * (1 + 1e-9)]
     console.print(f"smallest max F_i: {', '.join(best)}")
     if args.json:
@@ -36,9 +36,9 @@ def cmd_compare(args) -> None:
             args.json,
             {
                 k: {
-                    "F": acc["F"],
-                    "rmse_phi": acc["rmse_phi"],
-                    "accuracy": acc,
+                    "F": acc.F,
+                    "rmse_phi": acc.rmse_phi,
+                    "accuracy": acc.to_json(),
                     "seconds": cal.seconds,
                 }
                 for k, (cal, acc) in rows.items()

@@ -72,12 +72,13 @@ def cmd_demo(args) -> None:
     ext = workflow.evaluate(extended, hold)
     console.print(
         tables.accuracy(
-            ext["model"], f"extended model on the {args.holdout} held-out poses", hold.target_names
+            ext.model, f"extended model on the {args.holdout} held-out poses", hold.target_names
         )
     )
+    nominal_rms = geo.nominal.rmse if geo.nominal is not None else float("nan")
     console.print(
-        f"held-out RMS: nominal {geo['nominal']['rmse']:.4f} mm, minimax "
-        f"{geo['model']['rmse']:.4f} mm, extended {ext['model']['rmse']:.4f} mm"
+        f"held-out RMS: nominal {nominal_rms:.4f} mm, minimax "
+        f"{geo.model.rmse:.4f} mm, extended {ext.model.rmse:.4f} mm"
     )
     console.print(
         f"files in {out}: robocal.db (the campaign), model.json (minimax), "

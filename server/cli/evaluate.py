@@ -34,22 +34,20 @@ def cmd_evaluate(args) -> None:
         raise workflow.DataError(f"{args.meas}: {why}; --force to evaluate anyway")
     if why:
         print(f"robocal: warning: {args.meas}: {why}", file=sys.stderr)
-    if "nominal" in res:
+    if res.nominal is not None:
         console.print(
-            tables.accuracy(
-                res["nominal"], "Nominal model (base and SMRs fitted)", meas.target_names
-            )
+            tables.accuracy(res.nominal, "Nominal model (base and SMRs fitted)", meas.target_names)
         )
-    console.print(tables.accuracy(res["model"], f"Model {args.model}", meas.target_names))
-    if "improvement_pct" in res:
+    console.print(tables.accuracy(res.model, f"Model {args.model}", meas.target_names))
+    if res.improvement_pct is not None:
         console.print(
             "improvement over nominal: "
             + ", ".join(
-                f"{k} {v:.1f}%" for k, v in res["improvement_pct"].items() if np.isfinite(v)
+                f"{k} {v:.1f}%" for k, v in res.improvement_pct.to_json().items() if np.isfinite(v)
             )
         )
     if args.json:
-        write_json_atomic(args.json, res)
+        write_json_atomic(args.json, res.to_json())
 
 
 def add(sub) -> None:

@@ -89,7 +89,7 @@ def test_split_files_predict_and_evaluate_as_the_whole_in_visit_order(campaign, 
     off = np.linalg.norm(got[False] - want, axis=-1).max(axis=1)
     assert np.mean(off > 0.1) > 0.2  # the approach guessed wrong at many poses: 0.1 mm and more
     rmse = {
-        name: workflow.evaluate(model, read_campaign(tmp_path / name, cell.robot))["model"]["rmse"]
+        name: workflow.evaluate(model, read_campaign(tmp_path / name, cell.robot)).model.rmse
         for name in ("half0p.csv", "half0.csv")
     }
     assert rmse["half0p.csv"] < 0.03 < 0.1 < rmse["half0.csv"], rmse

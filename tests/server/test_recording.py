@@ -297,7 +297,7 @@ def test_a_diagnosis_recording_shows_the_final_model_after_and_the_geometric_bes
         geo = np.array(_static(chunks, f"/world/poses/{kind}/error/geometric", "Arrows3D:vectors"))
         rms_after = np.sqrt(np.mean(np.sum((after / 100.0) ** 2, axis=-1)))
         rms_geo = np.sqrt(np.mean(np.sum((geo / 100.0) ** 2, axis=-1)))
-        assert rms_after == pytest.approx(workflow.evaluate(model, m)["model"]["rmse"], rel=1e-3)
+        assert rms_after == pytest.approx(workflow.evaluate(model, m).model.rmse, rel=1e-3)
         e = np.linalg.norm(m.xyz - predict(cal.layout, cal.x, m.q), axis=-1)
         assert rms_geo == pytest.approx(np.sqrt(np.nanmean(e * e)), rel=1e-3)
         assert rms_after < 0.7 * rms_geo, (kind, rms_after, rms_geo)

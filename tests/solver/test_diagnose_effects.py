@@ -197,7 +197,7 @@ def test_extended_model_predicts_with_time_and_temperature():
     assert [e.name for e in d.extensions] == ["thermal_drift"]
     pred = predict_poses(cell, d, meas.q, meas.time_s, meas.temp_c)
     acc = metrics.accuracy(pred, meas.xyz, meas.target_names)
-    assert acc["rmse"] <= 1.3 * truth["noise_floor_mm"]
+    assert acc.rmse <= 1.3 * truth["noise_floor_mm"]
 
 
 def rms(pred, xyz):

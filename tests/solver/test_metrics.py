@@ -223,18 +223,18 @@ def test_orientation_missing_reading_gives_nan_row():
 
 def test_stats_hand_ignores_nan():
     s = mt.stats(np.array([[1.0, np.nan], [2.0, 3.0]]))
-    assert s["n"] == 3
-    assert s["mean"] == pytest.approx(2.0)
-    assert s["std"] == pytest.approx(1.0)  # ddof = 1
-    assert s["max"] == pytest.approx(3.0)
-    assert s["rms"] == pytest.approx(math.sqrt(14 / 3))
+    assert s.n == 3
+    assert s.mean == pytest.approx(2.0)
+    assert s.std == pytest.approx(1.0)  # ddof = 1
+    assert s.max == pytest.approx(3.0)
+    assert s.rms == pytest.approx(math.sqrt(14 / 3))
 
 
 def test_stats_degenerate():
     s = mt.stats([np.nan])
-    assert s["n"] == 0 and all(math.isnan(s[k]) for k in ("mean", "std", "max", "rms"))
+    assert s.n == 0 and all(math.isnan(v) for v in (s.mean, s.std, s.max, s.rms))
     s1 = mt.stats([2.0])
-    assert s1["n"] == 1 and s1["mean"] == 2.0 and math.isnan(s1["std"])
+    assert s1.n == 1 and s1.mean == 2.0 and math.isnan(s1.std)
 
 
 def test_improvement_pct():
@@ -258,25 +258,26 @@ def _offset_case(d):
 def test_accuracy_hand():
     pred, meas = _offset_case(2.0)
     acc = mt.accuracy(pred, meas, NAMES)
-    assert acc["n_poses"] == 2
-    assert acc["n_readings"] == {"A": 2, "B": 1, "C": 2}
-    assert acc["F"] == pytest.approx({"A": 8.0, "B": 4.0, "C": 8.0})
-    assert acc["ap_per_target"]["B"]["n"] == 1
-    assert acc["ap"]["n"] == 5 and acc["ap"]["mean"] == pytest.approx(2.0)
-    assert acc["ap"]["std"] == pytest.approx(0.0)
+    assert acc.n_poses == 2
+    assert acc.n_readings == {"A": 2, "B": 1, "C": 2}
+    assert acc.F == pytest.approx({"A": 8.0, "B": 4.0, "C": 8.0})
+    assert acc.ap_per_target["B"].n == 1
+    assert acc.ap.n == 5 and acc.ap.mean == pytest.approx(2.0)
+    assert acc.ap.std == pytest.approx(0.0)
     # Missing readings are excluded from the RMS, not counted as zero error.
-    assert acc["rmse"] == pytest.approx(2.0)
-    assert acc["rmse_phi"] == pytest.approx(2.0)
+    assert acc.rmse == pytest.approx(2.0)
+    assert acc.rmse_phi == pytest.approx(2.0)
     # A pure translation has no orientation error; pose 1 lacks B so has no orientation.
-    assert acc["ao_log"]["n"] == 1 and acc["ao_log"]["max"] == pytest.approx(0.0, abs=1e-9)
-    assert set(acc["ao_euler"]) == {"a", "b", "c"}
-    assert acc["ao_euler"]["c"]["n"] == 1
+    assert acc.ao_log.n == 1 and acc.ao_log.max == pytest.approx(0.0, abs=1e-9)
+    assert set(acc.ao_euler) == {"a", "b", "c"}
+    assert acc.ao_euler["c"].n == 1
 
 
 def test_accuracy_two_targets_has_no_orientation():
     pred, meas = _offset_case(1.0)
     acc = mt.accuracy(pred[:, :2], meas[:, :2], ("A", "B"))
-    assert "ao_log" not in acc and "ao_euler" not in acc
+    assert acc.ao_log is None and acc.ao_euler is None
+    assert "ao_log" not in acc.to_json() and "ao_euler" not in acc.to_json()
     with pytest.raises(ValueError):
         mt.accuracy(pred, meas, ("A", "B"))
 
@@ -285,9 +286,9 @@ def test_accuracy_rotation_reported():
     pred = TRI[None]
     meas = moved(TRI, iso_R(0, 0, 2.0), 0.0)[None]
     acc = mt.accuracy(pred, meas, NAMES)
-    assert acc["ao_log"]["mean"] == pytest.approx(2.0)
-    assert acc["ao_euler"]["c"]["mean"] == pytest.approx(2.0)
-    assert acc["ao_euler"]["a"]["mean"] == pytest.approx(0.0, abs=1e-9)
+    assert acc.ao_log.mean == pytest.approx(2.0)
+    assert acc.ao_euler["c"].mean == pytest.approx(2.0)
+    assert acc.ao_euler["a"].mean == pytest.approx(0.0, abs=1e-9)
 
 
 def test_compare_accuracy():
@@ -295,12 +296,12 @@ def test_compare_accuracy():
     before = mt.accuracy(pred, moved(pred, iso_R(0, 0, 2.0), [4.0, 0, 0]), NAMES)
     after = mt.accuracy(pred, moved(pred, iso_R(0, 0, 0.5), [1.0, 0, 0]), NAMES)
     cmp = mt.compare_accuracy(before, after)
-    assert set(cmp) == {"ap_mean", "ap_max", "ao_log_mean", "rmse"}
-    assert cmp["ao_log_mean"] == pytest.approx(75.0)
-    for k in ("ap_mean", "ap_max", "rmse"):
-        assert 0.0 < cmp[k] < 100.0
+    assert set(cmp.to_json()) == {"ap_mean", "ap_max", "ao_log_mean", "rmse"}
+    assert cmp.ao_log_mean == pytest.approx(75.0)
+    for v in (cmp.ap_mean, cmp.ap_max, cmp.rmse):
+        assert 0.0 < v < 100.0
     same = mt.compare_accuracy(before, before)
-    assert all(v == pytest.approx(0.0) for v in same.values())
+    assert all(v == pytest.approx(0.0) for v in same.to_json().values())
 
 
 def test_table3_columns_and_values():
