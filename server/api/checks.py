@@ -15,7 +15,7 @@ from robocal.server.formats.model_json import file_digest
 from robocal.server.store.model_checks import CheckRecord, model_checks
 from robocal.solver import drift
 
-from .bodies import json_body, read_json
+from .bodies import csv_body, json_body, read_json
 from .check_schemas import (
     CheckEntry,
     CheckHistory,
@@ -31,21 +31,9 @@ from .worker_calls import CALL_PROBLEMS, PROBLEM, call_slot, run_call
 
 router = APIRouter(prefix="/models", tags=["checks"])
 charts_router = APIRouter(prefix="/charts", tags=["charts"])
-CHECK_BODY = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            "text/csv": {
-                "schema": {
-                    "type": "string",
-                    "minLength": 1,
-                    "description": "a check.csv: a meas.csv (spec sections 1 and 8) of the few "
-                    "poses measured every check",
-                }
-            }
-        },
-    }
-}
+CHECK_BODY = csv_body(
+    "a check.csv: a meas.csv (spec sections 1 and 8) of the few poses measured every check"
+)
 BAD_CHECK: Responses = {
     409: {"description": "the job is not done (it has no model yet)", "content": PROBLEM},
     422: {

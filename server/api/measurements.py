@@ -11,6 +11,7 @@ from starlette.concurrency import iterate_in_threadpool, run_in_threadpool
 from robocal.server import store, uploads
 
 from .. import campaigns, cells
+from .bodies import csv_body
 from .campaigns import public_campaign
 from .deps import AcquisitionsDep, Authorized, CampaignId, DbDep, JobsDep, SettingsDep
 from .schemas import MAX_ID, PRINTABLE, CampaignPublic, ReadingPublic
@@ -20,21 +21,7 @@ router = APIRouter(tags=["measurements"])
 # Readings per page of GET .../measurements: a page stays a few megabytes whatever the campaign.
 PAGE_MAX = 10_000
 TOTAL_HEADER = "X-Total-Count"
-CSV_BODY = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            # non-empty: spec section 1 requires the header row, so an empty file is refused
-            "text/csv": {
-                "schema": {
-                    "type": "string",
-                    "minLength": 1,
-                    "description": "a meas.csv (spec section 1): a header row, then readings",
-                }
-            }
-        },
-    }
-}
+CSV_BODY = csv_body("a meas.csv (spec section 1): a header row, then readings")
 
 
 @router.get(
