@@ -142,12 +142,15 @@ def add(sub) -> None:
         help="solver: pose counts timed (default 100 1000 10000)",
     )
     b.add_argument(
-        "--no-reference", action="store_true", help="skip the finite-difference scipy reference"
+        "--no-reference",
+        action="store_true",
+        help="solver: skip the peers (scipy with analytic derivatives; finite differences up to "
+        "1,000 poses)",
     )
     b.add_argument(
         "--reference-max",
         type=_positive_int,
         default=10000,
-        help="largest pose count for which to run the reference",
+        help="solver: largest pose count for which to run the peers",
     )
     b.set_defaults(func=cmd_bench)
