@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 import platform
 import sys
-import time
 from collections.abc import Callable
 from functools import partial
 from typing import Any
@@ -26,6 +25,8 @@ from robocal.solver.identifiability import structural
 from robocal.solver.identify import least_squares_fit, register
 from robocal.solver.kinematics import predict, predict_rows
 from robocal.solver.minimax import default_epsilon, measured_distances, minimax
+
+from .timing import interleaved, load, paired, spread
 
 SEED = 0
 # speedup_min: ours against the strongest fair peer (median of paired rounds), at every size
@@ -50,70 +51,6 @@ def _log(msg: str) -> None:
 def _rounds(m: int) -> int:
     """Interleaved rounds for m poses (fewer if the size's time budget runs out first)."""
     return 41 if m <= 100 else 15 if m <= 1000 else 7
-
-
-def _spread(seconds) -> dict:
-    """Median, quartiles and extremes of a list of times (s), and how many."""
-    t = np.asarray(seconds, dtype=float)
-    p25, p50, p75 = np.percentile(t, [25, 50, 75])
-    return {
-        "median_s": float(p50),
-        "p25_s": float(p25),
-        "p75_s": float(p75),
-        "min_s": float(t.min()),
-        "max_s": float(t.max()),
-        "runs": len(t),
-    }
-
-
-def _load() -> list[float]:
-    """The 1, 5 and 15 minute load averages now."""
-    return [round(v, 2) for v in os.getloadavg()]
-
-
-def interleaved(fns: dict, rounds: int, budget_s: float = 120.0, limits: dict | None = None):
-    """Run every callable once a round, for up to `rounds` rounds (at least 3 once budget_s is
-    spent), the order rotating each round so that none always follows the same one.
-
-    limits: name -> most rounds that callable takes part in (a slow secondary figure).
-    Returns ({name: [seconds per round]}, {name: its last result}). Taking turns makes every
-    side see the same machine: a slow spell on a shared host slows them all, not one.
-    """
-    limits = limits or {}
-    names = list(fns)
-    times: dict[str, list[float]] = {k: [] for k in names}
-    results: dict = {}
-    spent = 0.0
-    for r in range(rounds):
-        if r >= 3 and spent > budget_s:
-            break
-        for k in names[r % len(names) :] + names[: r % len(names)]:
-            if len(times[k]) >= limits.get(k, rounds):
-                continue
-            t0 = time.perf_counter()
-            results[k] = fns[k]()
-            dt = time.perf_counter() - t0
-            times[k].append(dt)
-            spent += 0.0 if k in limits else dt  # a capped figure does not cut the others short
-    return times, results
-
-
-def _paired(times: dict, num, den) -> dict:
-    """Per-round ratios sum(times[num]) / sum(times[den]) over the rounds all of them ran:
-    median, quartiles and extremes."""
-    n = min(len(times[k]) for k in (*num, *den))
-    ratio = np.array(
-        [sum(times[k][i] for k in num) / sum(times[k][i] for k in den) for i in range(n)]
-    )
-    p25, p50, p75 = np.percentile(ratio, [25, 50, 75])
-    return {
-        "median": float(p50),
-        "p25": float(p25),
-        "p75": float(p75),
-        "min": float(ratio.min()),
-        "max": float(ratio.max()),
-        "rounds": n,
-    }
 
 
 def _campaign(cell, m: int, seed: int):
@@ -350,15 +287,15 @@ def _size(cell, meas, names, targets, m: int, rounds: int, peers: bool, fd: bool
             fd_minimax_slsqp=partial(_peer_minimax, prob, x_ls, free, analytic=False),
         )
         limits = {"fd_ls_trf": FD_ROUNDS, "fd_minimax_slsqp": FD_ROUNDS}
-    load_before = _load()
+    load_before = load()
     times, res = interleaved(fns, rounds, limits=limits)
     entry: dict = {
         "poses": int(m),
         "readings": meas.n_readings,
         "free_parameters": int(free.sum()),
         "rounds": len(times["ours_ls_sum"]),
-        "load_average": {"before": load_before, "after": _load()},
-        "timings": {k: _spread(v) for k, v in times.items()},
+        "load_average": {"before": load_before, "after": load()},
+        "timings": {k: spread(v) for k, v in times.items()},
         "ours": {},
     }
     for key in OURS:
@@ -396,19 +333,19 @@ def _size(cell, meas, names, targets, m: int, rounds: int, peers: bool, fd: bool
         "ls_sum": {
             "peer": ls_peer,
             "ours": "ours_ls_solve",
-            "speedup": _paired(times, [ls_peer], ["ours_ls_solve"]),
+            "speedup": paired(times, [ls_peer], ["ours_ls_solve"]),
         },
         "minimax": {
             "peer": "peer_minimax_slsqp",
             "ours": "ours_minimax_sqp",
-            "speedup": _paired(times, ["peer_minimax_slsqp"], ["ours_minimax_sqp"]),
+            "speedup": paired(times, ["peer_minimax_slsqp"], ["ours_minimax_sqp"]),
         },
     }
     mm_chain = ["setup", ls_peer, "peer_minimax_slsqp"]
     entry["end_to_end"] = {
-        "ls_sum": _paired(times, ["setup", ls_peer], ["ours_ls_sum"]),
-        "minimax": _paired(times, mm_chain, ["ours_minimax"]),
-        "minimax_exact": _paired(times, mm_chain, ["ours_minimax_exact"]),
+        "ls_sum": paired(times, ["setup", ls_peer], ["ours_ls_sum"]),
+        "minimax": paired(times, mm_chain, ["ours_minimax"]),
+        "minimax_exact": paired(times, mm_chain, ["ours_minimax_exact"]),
     }
     entry["precision"] = _precision(prob, x_ls, free, entry)
     if fd:
@@ -416,8 +353,8 @@ def _size(cell, meas, names, targets, m: int, rounds: int, peers: bool, fd: bool
             "ls_trf": res["fd_ls_trf"][1],
             "minimax_slsqp": res["fd_minimax_slsqp"][1],
             "speedup_end_to_end": {
-                "ls_sum": _paired(times, ["setup", "fd_ls_trf"], ["ours_ls_sum"]),
-                "minimax": _paired(
+                "ls_sum": paired(times, ["setup", "fd_ls_trf"], ["ours_ls_sum"]),
+                "minimax": paired(
                     times, ["setup", "fd_ls_trf", "fd_minimax_slsqp"], ["ours_minimax"]
                 ),
             },
@@ -526,7 +463,7 @@ def run_solver_bench(
     cell = default_cell()
     names = tuple(cell.targets)
     targets = cell.target_positions(names)
-    load_start = _load()
+    load_start = load()
     results = {}
     for m in sizes:
         meas = _campaign(cell, int(m), seed)
@@ -544,7 +481,7 @@ def run_solver_bench(
     return {
         "benchmark": "solver",
         "machine": _machine(),
-        "load_average": {"start": load_start, "end": _load()},
+        "load_average": {"start": load_start, "end": load()},
         "cell": {
             "robot": cell.robot.name,
             "targets": {k: v.tolist() for k, v in zip(names, targets)},

@@ -5,7 +5,8 @@ import math
 
 import pytest
 
-from robocal.server.bench.solver import GOALS, interleaved, run_solver_bench
+from robocal.server.bench.solver import GOALS, run_solver_bench
+from robocal.server.bench.timing import interleaved
 
 
 @pytest.fixture(scope="module")
