@@ -155,6 +155,7 @@ class _Epigraph:
         self.z0 = x_ls[idx]
         self.K = prob.meas.shape[1]
         self.target = np.nonzero(prob.mask)[1]
+        self.onehot = (np.arange(self.K)[:, None] == self.target[None, :]).astype(float)
         self.ts = prob.layout.target_slice.start
         self.col = {int(j): n for n, j in enumerate(idx)}
         self.analytic = analytic
@@ -187,13 +188,14 @@ class _Epigraph:
 
     def jacobian(self, v) -> np.ndarray:
         """Of the constraints: -dF_i/dv / phi0 and 1 for w; -d(distance terms)/dv / phi0."""
-        z = self.z0 + v[:-1] * self.step
-        r = self.model.residuals(z)
-        J = self.model.jacobian(z)  # (3N, P)
-        rows = 2.0 * J * r[:, None]  # d(r^2)/dz per coordinate
-        dF = np.zeros((self.K, len(self.step)))
-        np.add.at(dF, np.repeat(self.target, 3), rows)
-        dc = self._distances(self.x(v))[1]
+        x = self.x(v)
+        prob, model = self.prob, self.model
+        model.jacobians += 1
+        p, Jt = predict_rows(prob.layout, x, prob.q, prob.mask, model.idx)  # one walk: both
+        r = p - model.meas  # (N, 3)
+        per_reading = 2.0 * np.einsum("pnc,nc->np", Jt, r)  # d(|r_n|^2)/dx, (N, P)
+        dF = self.onehot @ per_reading  # summed per SMR, (K, P)
+        dc = self._distances(x)[1]
         out = np.zeros((self.K + len(self.pairs), len(v)))
         out[: self.K, :-1] = -dF * self.step / self.phi0
         out[: self.K, -1] = 1.0
