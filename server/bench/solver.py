@@ -143,7 +143,7 @@ class _Epigraph:
     x = x_ls + z * sqrt(phi0) / |J column| on the free entries: every variable moves the SMRs
     alike and the objective starts at 1, so SLSQP's ftol is relative, as ours' tolerance."""
 
-    def __init__(self, prob, x_ls, free, analytic: bool):
+    def __init__(self, prob, x_ls, free):
         self.prob, self.model = prob, _Model(prob, x_ls, free)
         idx = self.model.idx
         scale = np.linalg.norm(self.model.jacobian(x_ls[idx]), axis=0)
@@ -158,7 +158,6 @@ class _Epigraph:
         self.onehot = (np.arange(self.K)[:, None] == self.target[None, :]).astype(float)
         self.ts = prob.layout.target_slice.start
         self.col = {int(j): n for n, j in enumerate(idx)}
-        self.analytic = analytic
 
     def x(self, v) -> np.ndarray:
         return self.model.x(self.z0 + v[:-1] * self.step)
@@ -205,7 +204,7 @@ class _Epigraph:
 
 def _peer_minimax(prob, x_ls, free, analytic=True, ftol=MINIMAX_TOL):
     """minimax by SLSQP on the epigraph form from the ls-sum solution x_ls: (x, figures)."""
-    ep = _Epigraph(prob, x_ls, free, analytic)
+    ep = _Epigraph(prob, x_ls, free)
     v0 = np.zeros(len(ep.step) + 1)
     v0[-1] = 1.0
     con = {"type": "ineq", "fun": ep.constraints}
