@@ -95,18 +95,20 @@ def _during_job(c, campaign_id: int, rounds: int = 3, idle: int = 100, cap: int 
     both see the same machine: a slow spell on a shared host shows on both sides, not on one.
     """
     url = f"/api/campaigns/{campaign_id}"
-    quiet: list[float] = []
-    busy: list[float] = []
+    spells: list[list[float]] = []
+    jobs: list[list[float]] = []
     walls, states = [], []
     load = [os.getloadavg()[0]]
     for _ in range(rounds):
-        quiet += [_timed_get(c, url) for _ in range(idle)]
+        spells.append([_timed_get(c, url) for _ in range(idle)])
         lat, wall, state = _job_samples(c, url, campaign_id, cap)
-        busy += lat
+        jobs.append(lat)
         walls.append(wall)
         states.append(state)
         load.append(os.getloadavg()[0])
-    quiet += [_timed_get(c, url) for _ in range(idle)]
+    spells.append([_timed_get(c, url) for _ in range(idle)])
+    quiet = [t for spell in spells for t in spell]
+    busy = [t for job in jobs for t in job]
     return {
         "rounds": rounds,
         "timing": f"{idle} idle reads, then reads during one diagnosis job, in turns "
@@ -116,6 +118,10 @@ def _during_job(c, campaign_id: int, rounds: int = 3, idle: int = 100, cap: int 
         "job_s": float(np.median(walls)),
         "job_s_min_max": [float(min(walls)), float(max(walls))],
         "job": states[-1] if len(set(states)) == 1 else ",".join(states),
+        "p50_ms_by_turn": {
+            "idle": [float(np.median(x)) * 1000 for x in spells],
+            "job": [float(np.median(x)) * 1000 for x in jobs],
+        },
         "load_average_1min": load,
     }
 

@@ -47,5 +47,6 @@ def test_idle_spells_surround_every_job():
     assert out["idle"]["requests"] == 15 and out["rounds"] == 2 and out["job"] == "done"
     assert out["requests"] == 120
     assert len(out["load_average_1min"]) == 3
+    assert len(out["p50_ms_by_turn"]["idle"]) == 3 and len(out["p50_ms_by_turn"]["job"]) == 2
     for key in ("p25_ms", "p50_ms", "p75_ms", "p99_ms"):
         assert out["idle"][key] >= 0 and out[key] >= 0
