@@ -174,7 +174,7 @@ async function showModel(j) {
     if (j.id !== state.job) return;  // another job was shown meanwhile
     if (p.validation) renderValidation(p.validation);
     renderParameters(p);
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 }
 
 // The exports (app.js postDownload) carry force=true only when "export anyway" is ticked: a model

@@ -13,7 +13,7 @@ import httpx
 
 from tests.real import import_real
 from tests.server.api.conftest import wait_for
-from tests.web.conftest import shot
+from tests.web.conftest import said, shot
 
 
 def fmt(v) -> str:
@@ -93,8 +93,9 @@ def test_five_poses_not_fit_to_deploy_and_exports_refused(served, page):
     # Unticked: the service refuses (409, its reasons), and nothing is saved.
     page.click("#x-params")
     page.wait_for_selector("#message:not([hidden])")
-    message = page.text_content("#message")
-    assert "409" in message and "not deployable: too few poses" in message, message
+    text, technical = said(page)
+    assert "not deployable: too few poses" in text, text
+    assert "409" in technical, technical
     assert page.text_content("#t-state") == ""
     # Ticked: force=true, and the parameter table comes back.
     page.check("#m-force")
