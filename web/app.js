@@ -135,12 +135,22 @@ async function api(method, path, body, raw = false, contentType = "application/j
 /** An <img> of an API picture: fetched with the token (an src URL cannot carry it). */
 async function showImage(img, url) {
   img.dataset.url = url;  // the picture this <img> is to show; an older answer is dropped
+  const figure = img.closest("figure");
+  // a chart being drawn says so (a grey box with words), never a broken-image icon
+  if (figure) { figure.classList.add("loading"); figure.setAttribute("aria-busy", "true"); }
   try {
     const blob = await (await request("GET", url.replace(/^\/api/, ""))).blob();
     if (img.dataset.url !== url) return;
     if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
     img.src = URL.createObjectURL(blob);
-  } catch (e) { say(e); }
+  } catch (e) {
+    if (img.dataset.url === url) say(e);
+  } finally {
+    if (figure && img.dataset.url === url) {
+      figure.classList.remove("loading");
+      figure.removeAttribute("aria-busy");
+    }
+  }
 }
 
 /** Empty an <img> of an API picture (another job's is not to be seen meanwhile). */
@@ -157,13 +167,21 @@ document.addEventListener("click", async (ev) => {
   if (!a) return;
   ev.preventDefault();
   try {
-    const blob = await (await request("GET", a.getAttribute("href").slice(4))).blob();
+    const r = await request("GET", a.getAttribute("href").slice(4));
+    const blob = await r.blob();
     const save = Object.assign(document.createElement("a"), {
-      href: URL.createObjectURL(blob), download: a.getAttribute("download") || "" });
+      href: URL.createObjectURL(blob), download: savedName(r, a.getAttribute("download") || "") });
     save.click();
     setTimeout(() => URL.revokeObjectURL(save.href), 10000);
   } catch (e) { say(e); }
 });
+
+/** The name the service gives a download (its Content-Disposition: robot, job and what it
+ * is), else `fallback`. */
+function savedName(r, fallback) {
+  const m = /filename="([^"]+)"/.exec(r.headers.get("content-disposition") || "");
+  return m ? m[1] : fallback;
+}
 
 function showTokenState() {
   $("token-state").textContent = sessionStorage.getItem(TOKEN_KEY)
@@ -262,6 +280,7 @@ $("campaign-form").addEventListener("submit", async (ev) => {
     const c = r.status === 202 ? await planned(await r.json()) : await r.json();
     plannedSmrs.set(c.id, cellSmrs.get(body.cell_id));
     useCampaign(c);
+    refreshCampaigns().catch(() => {});  // history.js: the new campaign listed at once
     say(`Campaign ${c.id} planned on cell ${body.cell_id}: press Start to run it.`, true);
   } catch (e) { say(e); }
 });
@@ -472,13 +491,7 @@ $("job-form").addEventListener("submit", async (ev) => {
     // Automatic extensions: a diagnosis job on the same campaign, alongside the calibration.
     if ($("j-auto").checked) {
       const d = await api("POST", "/jobs", { campaign_id: state.campaign, kind: "diagnosis" });
-      state.diag = d.id;
-      $("diagnosis").hidden = false;
-      $("d-effects").replaceChildren();
-      $("d-unexplained").hidden = $("d-outliers").hidden = $("d-doubt").hidden = true;
-      $("d-figures").replaceChildren();
-      $("d-links").replaceChildren();
-      watchJob(d, followDiagnosis);
+      useDiagnosis(d);  // diagnosis.js
     }
   } catch (e) { say(e); refreshCalibrate(); }
 });
@@ -526,11 +539,12 @@ async function postDownload(path, body, filename) {
   $("t-state").textContent = "computing...";
   try {
     const r = await request("POST", path, body, true, "text/csv");
+    const name = savedName(r, filename);
     const save = Object.assign(document.createElement("a"), {
-      href: URL.createObjectURL(await r.blob()), download: filename });
+      href: URL.createObjectURL(await r.blob()), download: name });
     save.click();
     setTimeout(() => URL.revokeObjectURL(save.href), 10000);
-    $("t-state").textContent = `saved ${filename}`;
+    $("t-state").textContent = `saved ${name}`;
   } catch (e) { $("t-state").textContent = ""; say(e); }
 }
 

@@ -1,6 +1,17 @@
 // The diagnosis on the page: its job followed, its report shown (effects, their parameters and
 // figures, what is left unexplained, the outliers). Uses app.js's globals ($, api, say, state).
 
+/** Make a diagnosis job the page's: its block emptied, then followed to its report. */
+function useDiagnosis(d) {
+  state.diag = d.id;
+  $("diagnosis").hidden = false;
+  $("d-effects").replaceChildren();
+  $("d-unexplained").hidden = $("d-outliers").hidden = $("d-doubt").hidden = true;
+  $("d-figures").replaceChildren();
+  $("d-links").replaceChildren();
+  watchJob(d, followDiagnosis);
+}
+
 /** The diagnosis job's state as its events (live.js) tell it; its report once done. */
 async function followDiagnosis(d) {
   if (d.id !== state.diag) return;

@@ -89,8 +89,9 @@ function renderJobs() {
     const j = rows[i];
     tr.dataset.job = j.id;
     tr.cells[5].className = "evidence";
-    // a calibration opens to its results (or its progress); a planning job to its campaign
-    if (j.kind === "calibration" && j.state !== "failed") tr.cells[0].replaceChildren(openButton("job", j.id));
+    // a calibration opens to its results (or its progress), a diagnosis to its report, a
+    // planning job to its campaign
+    if (j.kind !== "planning" && j.state !== "failed") tr.cells[0].replaceChildren(openButton("job", j.id));
     if (j.kind === "planning" && j.campaign_id !== null) {
       tr.cells[0].replaceChildren(openButton("campaign", j.campaign_id));
     }
@@ -146,8 +147,13 @@ async function openVerification(id, job) {
 async function openJob(id, scroll = false) {
   try {
     const j = await api("GET", `/jobs/${id}`);
-    if (j.kind === "diagnosis") { say(`job ${id} is a diagnosis: open its campaign's calibration`); return; }
     if (j.campaign_id !== state.campaign) await openCampaign(j.campaign_id, true);
+    if (j.kind === "diagnosis") {  // its report, beside whatever calibration the page shows
+      useDiagnosis(j);
+      renderJobs();
+      if (scroll) $("diagnosis").scrollIntoView({ block: "start" });
+      return;
+    }
     state.job = j.id;
     state.diag = null;
     $("diagnosis").hidden = true;
