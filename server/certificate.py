@@ -16,6 +16,8 @@ matplotlib.use("Agg")  # files only: the workstation may have no display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .formats.verdict import Verdict  # noqa: E402
+
 CSS = """
 body { font: 11pt/1.4 "DejaVu Sans", Arial, sans-serif; color: #111; max-width: 190mm;
        margin: 10mm auto; }
@@ -94,9 +96,13 @@ def _table(head, rows, cls="") -> str:
 
 
 def holdout_rms(report: dict):
-    """The model's held-out RMS (mm) as its diagnosis stated it, if it did."""
-    final = (report["model"].get("meta") or {}).get("diagnosis", {}).get("final", {})
-    return final.get("holdout_rmse_mm")
+    """The model's held-out RMS (mm) as its diagnosis stated it, else as its validation did
+    (a calibration's leave-one-pose-out figure); None if neither did."""
+    meta = report["model"].get("meta") or {}
+    final = (meta.get("diagnosis") or {}).get("final") or {}
+    if final.get("holdout_rmse_mm") is not None:
+        return final["holdout_rmse_mm"]
+    return Verdict.of(meta.get("validation")).holdout_rms_mm
 
 
 def render(report: dict) -> str:

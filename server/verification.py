@@ -291,8 +291,16 @@ def prepare(
         "model": {
             "path": model_name or str(model_path),
             "sha256": _sha256(model_path),
-            # what the certificate quotes of the model: its held-out RMS
-            "meta": {"diagnosis": {"final": meta.get("diagnosis", {}).get("final", {})}},
+            # what the certificate quotes of the model: its held-out RMS (a diagnosis's final
+            # model's, else the calibration's leave-one-pose-out one from its validation)
+            "meta": {
+                "diagnosis": {"final": meta.get("diagnosis", {}).get("final", {})},
+                "validation": {
+                    k: v
+                    for k, v in (meta.get("validation") or {}).items()
+                    if k in ("deployable", "holdout_rms_mm")
+                },
+            },
         },
         "smr": list(model.targets)[0],
         "cycles": opts.cycles,
