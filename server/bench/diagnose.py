@@ -13,8 +13,6 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
-import numpy as np
-
 from . import split_suite
 from .diagnose_suite import KINDS, draw_case, run_case, suite, summarize
 
@@ -93,6 +91,7 @@ def time_campaign(poses: int, seed: int = 0) -> dict:
     from robocal.drivers.cell import VirtualCell
     from robocal.drivers.effects import make_effects
     from robocal.solver.diagnose import diagnose
+    from robocal.solver.problem import Problem
 
     from ..formats.cell_json import default_cell
 
@@ -100,9 +99,9 @@ def time_campaign(poses: int, seed: int = 0) -> dict:
     vc = VirtualCell.random(cell.robot, cell.targets, seed=seed)
     vc.effects.extend(make_effects([TIMED_EFFECT], vc, seed))
     meas = vc.campaign(poses, seed=seed)
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    problem = Problem.of(cell.robot, cell.target_positions(meas.target_names), meas)
     t0, c0 = time.perf_counter(), time.process_time()
-    d = diagnose(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s, meas.temp_c)
+    d = diagnose(problem)
     wall = time.perf_counter() - t0
     target = TARGET_S.get(poses)
     return {

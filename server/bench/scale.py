@@ -82,17 +82,16 @@ def run_scale(cell, meas, repeats: int = 2) -> dict:
     """ls-sum and minimax on the campaign (time, peak memory, their ratios), and its meas.csv
     read by robocal and by np.loadtxt."""
     from robocal.solver.calibrate import calibrate
+    from robocal.solver.problem import Problem
 
     from ..formats.campaign_csv import joint_columns, read_campaign, write_campaign
 
-    targets = cell.target_positions(meas.target_names)
+    problem = Problem.of(cell.robot, cell.target_positions(meas.target_names), meas)
     out: dict = {"poses": meas.n_poses, "readings": meas.n_readings}
     for method in ("ls-sum", "minimax"):
 
         def fit(method=method):
-            return calibrate(
-                cell.robot, targets, meas.target_names, meas.q, meas.xyz, method=method
-            )
+            return calibrate(problem, method)
 
         seconds, cal = _timed(fit, repeats)
         out[method.replace("-", "_")] = {

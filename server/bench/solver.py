@@ -25,6 +25,7 @@ from robocal.solver.identifiability import structural
 from robocal.solver.identify import least_squares_fit, register
 from robocal.solver.kinematics import predict, predict_rows
 from robocal.solver.minimax import default_epsilon, measured_distances, minimax
+from robocal.solver.problem import Problem
 
 from .timing import interleaved, load, paired, spread
 
@@ -264,10 +265,11 @@ def _size(cell, meas, names, targets, m: int, rounds: int, peers: bool, fd: bool
     """Every side on one campaign of m poses, in interleaved rounds."""
     args = (cell.robot, targets, meas.target_names, meas.q, meas.xyz)
     prob, x0, free = _setup(*args)
+    problem = Problem(*args)
     fns: dict[str, Callable[[], Any]] = {
-        "ours_ls_sum": partial(calibrate, *args, method="ls-sum"),
-        "ours_minimax": partial(calibrate, *args, method="minimax"),
-        "ours_minimax_exact": partial(calibrate, *args, method="minimax", qp="exact"),
+        "ours_ls_sum": partial(calibrate, problem, "ls-sum"),
+        "ours_minimax": partial(calibrate, problem, "minimax"),
+        "ours_minimax_exact": partial(calibrate, problem, "minimax", qp="exact"),
     }
     x_ls, _ = least_squares_fit(prob, x0, free)
     if peers:
