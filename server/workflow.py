@@ -208,8 +208,7 @@ def run_method(
 def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None) -> ModelFile:
     """The self-contained model file of a calibration."""
     from robocal.solver import metrics
-    from robocal.solver.fit_errors import angles, calibration_rows
-    from robocal.solver.uncertainty import errors_from_rows
+    from robocal.solver.fit_errors import calibration_figures
 
     from .identified import identified_block
 
@@ -217,8 +216,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     used = without_outliers(meas, screening)
     pred = predict(cal.layout, cal.x, meas.q)
     acc = metrics.accuracy(pred, used.xyz, meas.target_names)
-    rows, column = calibration_rows(cal, meas.q, used.xyz)
-    errors = errors_from_rows(rows, cal.layout.names(), column, angles(cal.layout))
+    errors, holdout = calibration_figures(cal, meas.q, used.xyz)
     data = {"poses": meas.n_poses, "readings": meas.n_readings, "targets": list(meas.target_names)}
     if data_path is not None and "://" not in str(data_path):  # a server's database: no file
         data.update(file=Path(data_path).name, sha256=file_digest(data_path))
@@ -262,19 +260,19 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         )
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable
-    model.meta["validation"] = validate(cal, cell, used, rows, errors, acc.rmse)
+    model.meta["validation"] = validate(cal, cell, used, holdout, errors, acc.rmse)
     return model
 
 
-def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit_rms) -> dict:
-    """model.json's `validation` block of a calibration on the readings it used."""
+def validate(cal: Calibration, cell: Cell, used: Measurements, holdout, errors, fit_rms) -> dict:
+    """model.json's `validation` block of a calibration on the readings it used (holdout: its
+    leave-one-pose-out residuals, solver.guard.Holdout)."""
     from robocal.solver import guard
-    from robocal.solver.fit_errors import point_errors
 
     floor, source = noise_floor(cell, used)
     v = guard.judge(
         fit_rms_mm=fit_rms,
-        holdout=guard.leave_one_pose_out(rows, point_errors(cal, rows)),
+        holdout=holdout,
         condition_number=cal.condition,
         equations=3 * int(np.isfinite(used.xyz[..., 0]).sum()),
         free_parameters=int(np.count_nonzero(errors.column >= 0)),
