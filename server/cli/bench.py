@@ -61,6 +61,10 @@ def cmd_bench(args) -> None:
         result = run_check_bench(
             clean=args.clean or 70, poses="random" if args.random_check_poses else "planned"
         )
+    elif args.what == "scale":
+        from ..bench.scale import run_calibrate_scale
+
+        result = run_calibrate_scale(poses=args.scale_poses, repeats=args.repeats)
     elif args.what == "validation":
         from ..bench import validation as bench_validation
 
@@ -91,15 +95,16 @@ def add(sub) -> None:
             "recording",
             "validation",
             "check",
+            "scale",
         ),
         help="what to time (validation: the deployment guard's flags on healthy, small and "
-        "real campaigns; check: quick checks' false alarms and delays to a change)",
+        "real campaigns; check: quick checks' false alarms and delays to a change; scale: `robocal calibrate` of a large campaign as a process, next to np.loadtxt of its file)",
     )
     b.add_argument(
         "--repeats",
         type=_positive_int,
         default=7,
-        help="startup: runs of each command (median reported)",
+        help="startup, scale: runs of each command (median reported)",
     )
     b.add_argument(
         "--poses",
@@ -107,6 +112,12 @@ def add(sub) -> None:
         nargs="+",
         default=[100, 1000],
         help="diagnose: sizes of the campaigns timed one at a time",
+    )
+    b.add_argument(
+        "--scale-poses",
+        type=_positive_int,
+        default=50_000,
+        help="scale: poses of the campaign calibrated (default 50000)",
     )
     b.add_argument(
         "--quick",
