@@ -34,7 +34,9 @@ def point_rows(layout: Layout, x, q, meas, mask, cols, estimated, weight=None, s
     p, Jt = predict_rows(layout, x, q, mask, cols)
     J = Jt.reshape(len(cols), -1).T
     pose, k = np.nonzero(mask)
-    G = J * np.asarray(estimated, dtype=float)[None, :]
+    # least squares over every column (ls-sum, nominal): the weights are the Jacobian itself
+    plain = weight is None and bool(np.all(estimated))
+    G = J if plain else J * np.asarray(estimated, dtype=float)[None, :]
     if weight is not None:
         arm = np.asarray(cols) < layout.target_slice.start
         G[:, arm] *= np.repeat(np.asarray(weight, dtype=float)[k], 3)[:, None]

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .finite import finite
-from .uncertainty import Rows, pose_blocks
+from .uncertainty import Rows, hat_blocks, pose_blocks
 
 # A deployable model has at least this many equations (3 per reading) per free parameter.
 MIN_EQUATIONS_PER_PARAMETER = 3
@@ -98,23 +98,26 @@ def holdout_block(rows: Rows, Ai: np.ndarray) -> tuple[np.ndarray, list[int]]:
     on its own rows and Ai alone, so a fit's rows may be taken a block of poses at a time."""
     out = np.full(len(rows.r), np.nan)
     unsupported: list[int] = []
-    for n, idx in pose_blocks(rows.pose):
+    for _n, idx in pose_blocks(rows.pose):
         J, G, r = rows.J[idx], rows.G[idx], rows.r[idx]
-        P = J.shape[-1]
-        H = finite(
-            (J.reshape(-1, P) @ Ai).reshape(J.shape) @ G.transpose(0, 2, 1), "the held-out blocks"
-        )
-        M = np.eye(n) - H
-        # the smallest singular value of I - H is at least 1 - |H|_F: the SVD only where small
-        ok = np.sqrt(np.einsum("bij,bij->b", H, H)) < 0.5
-        if not ok.all():
-            ok[~ok] = np.linalg.svd(M[~ok], compute_uv=False)[:, -1] > UNSUPPORTED
-        e = np.full(r.shape, np.nan)
-        if ok.any():
-            e[ok] = np.linalg.solve(M[ok], r[ok][..., None])[..., 0]
-        out[idx] = e
+        out[idx], ok = held_out(hat_blocks(J, G, Ai), r)
         unsupported.extend(rows.pose[idx[~ok, 0]].tolist())
     return out, unsupported
+
+
+def held_out(H: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(I - H_p)^-1 r_p per pose (H (b, n, n), r (b, n)), NaN for the poses that cannot be held
+    out, and which can (b,)."""
+    H = finite(H, "the held-out blocks")
+    M = np.eye(H.shape[-1]) - H
+    # the smallest singular value of I - H is at least 1 - |H|_F: the SVD only where small
+    ok = np.sqrt(np.einsum("bij,bij->b", H, H)) < 0.5
+    if not ok.all():
+        ok[~ok] = np.linalg.svd(M[~ok], compute_uv=False)[:, -1] > UNSUPPORTED
+    e = np.full(r.shape, np.nan)
+    if ok.any():
+        e[ok] = np.linalg.solve(M[ok], r[ok][..., None])[..., 0]
+    return e, ok
 
 
 def strongest_correlations(cov: np.ndarray, k: int = 5) -> list[tuple[int, int, float]]:

@@ -13,12 +13,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .guard import Holdout, holdout_block, holdout_inverse
-from .uncertainty import Rows, StageSums, bread, cr2_meat, plain_from_sums, stage_sums
+from .guard import Holdout, held_out, holdout_inverse
+from .uncertainty import (
+    Rows,
+    StageSums,
+    bread,
+    cr2_block_meat,
+    hat_blocks,
+    plain_from_sums,
+    pose_blocks,
+    stage_sums,
+)
 
 # A block holds about this many Jacobian entries (8 bytes each): 4 MiB a matrix, a handful of
 # them alive at once, next to the fit's own ~100 MiB at 50,000 poses.
 BLOCK_ENTRIES = 1 << 19
+
+# Relative difference below which the covariance's inverse of the normal matrix and the held-out
+# residuals' pseudo-inverse are one matrix.
+SAME_INVERSE = 1e-10
 
 # Each call yields the fit's rows again, in blocks of whole poses, blocks in pose order.
 Blocks = Callable[[], Iterable[Rows]]
@@ -48,7 +61,8 @@ def post_fit(blocks: Blocks, point: Callable[[Rows], np.ndarray] | None = None) 
     for rows in blocks():  # pass one: the normal matrices
         if not len(rows.r):
             continue
-        GJ, GG = rows.G.T @ rows.J, rows.G.T @ rows.G
+        GJ = rows.G.T @ rows.J
+        GG = GJ if rows.G is rows.J else rows.G.T @ rows.G
         A, B = (GJ, GG) if A is None or B is None else (A + GJ, B + GG)
         for s, sums in stage_sums(rows, GG).items():
             if s in stages:
@@ -60,17 +74,24 @@ def post_fit(blocks: Blocks, point: Callable[[Rows], np.ndarray] | None = None) 
     Ai = bread(A)
     C = Ai @ B @ Ai.T
     Ah = holdout_inverse(A)
+    # the two inverses of a well-conditioned fit agree to rounding: one hat matrix serves both
+    same = bool(np.linalg.norm(Ai - Ah) <= SAME_INVERSE * np.linalg.norm(Ai))
     meat = np.zeros_like(A)
     held, stage, unsupported, poses = [], [], [], set()
     for rows in blocks():  # pass two: each pose's blocks
         if not len(rows.r):
             continue
-        meat += cr2_meat(rows, Ai, C)
-        e, bad = holdout_block(rows, Ah)
+        e = np.full(len(rows.r), np.nan)
+        for _n, idx in pose_blocks(rows.pose):
+            J, r = rows.J[idx], rows.r[idx]
+            G = J if rows.G is rows.J else rows.G[idx]
+            H = hat_blocks(J, G, Ai)
+            meat += cr2_block_meat(J, G, r, H, C)
+            e[idx], ok = held_out(H if same else hat_blocks(J, G, Ah), r)
+            unsupported += rows.pose[idx[~ok, 0]].tolist()
         keep = np.ones(len(e), dtype=bool) if point is None else np.asarray(point(rows), bool)
         held.append(e[keep])
         stage.append(rows.stage[keep])
-        unsupported += bad
         poses.update(np.unique(rows.pose).tolist())
     # the stacked rows' order: stage by stage, poses in order within each
     order = np.argsort(np.concatenate(stage), kind="stable")

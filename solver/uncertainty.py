@@ -137,15 +137,24 @@ def cr2_meat(rows: Rows, Ai: np.ndarray, C: np.ndarray) -> np.ndarray:
     # poses with as many rows (all readings present) are done at once
     for _n, idx in pose_blocks(rows.pose):
         J, G, r = rows.J[idx], rows.G[idx], rows.r[idx]
-        P = J.shape[-1]
-        # one large product each, then the small per-pose ones
-        JA = (J.reshape(-1, P) @ Ai).reshape(J.shape)
-        JC = (J.reshape(-1, P) @ C).reshape(J.shape)
-        H = JA @ G.transpose(0, 2, 1)
-        E = finite(H + H.transpose(0, 2, 1) - JC @ J.transpose(0, 2, 1), "the residual blocks")
-        score = (inverse_root_times(E, r)[:, None, :] @ G)[:, 0]
-        meat += score.T @ score
+        meat += cr2_block_meat(J, G, r, hat_blocks(J, G, Ai), C)
     return meat
+
+
+def hat_blocks(J: np.ndarray, G: np.ndarray, Ai: np.ndarray) -> np.ndarray:
+    """The hat matrix's diagonal blocks J_p Ai G_p' (b, n, n) of poses of n rows each (J, G:
+    (b, n, P)): one large product, then the small per-pose ones."""
+    P = J.shape[-1]
+    return (J.reshape(-1, P) @ Ai).reshape(J.shape) @ G.transpose(0, 2, 1)
+
+
+def cr2_block_meat(J, G, r, H, C) -> np.ndarray:
+    """cr2_meat of poses of n rows each (J, G (b, n, P), r (b, n)) given their hat blocks H."""
+    P = J.shape[-1]
+    JC = (J.reshape(-1, P) @ C).reshape(J.shape)
+    E = finite(H + H.transpose(0, 2, 1) - JC @ J.transpose(0, 2, 1), "the residual blocks")
+    score = (inverse_root_times(E, r)[:, None, :] @ G)[:, 0]
+    return score.T @ score
 
 
 # Poses whose residual-maker block is I - E with |E|_F up to this take the binomial series
