@@ -115,20 +115,19 @@ class _Columns:
         a plain decimal of at most MAX_DIGITS digits; None otherwise (a space, an exponent, a
         longer number...). All columns at once, in blocks of rows that stay in cache."""
         c = np.asarray(cols)
-        left = self.sep[1:, c - 1] + 1  # past the comma before; the first field, past the line
-        left[:, c == 0] = self.sep[:-1, -1:] + 1
-        length = self.sep[1:, c] - left
-        width = int(length.max())
-        if width > MAX_FIELD:
-            return None
-        out = np.empty(left.shape)
+        out = np.empty((self.n, len(cols)))
         step = max(1, _FIELDS // len(cols))
-        for lo in range(0, len(left), step):
-            at = slice(lo, lo + step)
-            v = _parse_decimals(self._window(left[at].ravel(), width), length[at].ravel())
+        for lo in range(0, self.n, step):
+            sep = self.sep[lo : lo + step + 1]  # the line before, then the chunk's
+            left = sep[1:, c - 1] + 1  # past the comma before; the first field, past the line
+            left[:, c == 0] = sep[:-1, -1:] + 1
+            length = sep[1:, c] - left
+            if length.max() > MAX_FIELD:
+                return None
+            v = _parse_decimals(self._window(left.ravel(), int(length.max())), length.ravel())
             if v is None:
                 return None
-            out[at] = v.reshape(-1, len(cols))
+            out[lo : lo + step] = v.reshape(-1, len(cols))
         return out
 
     def _bounds(self, j: int) -> tuple[np.ndarray, np.ndarray]:
@@ -206,15 +205,17 @@ _PAD = LABEL_CHARS_MAX + MAX_FIELD  # spaces after the text: no field's window r
 
 
 def _positions(raw: np.ndarray, chars: tuple[int, ...], chunk: int = 1 << 22) -> np.ndarray:
-    """Offsets of the bytes equal to any of chars, a chunk at a time (no file-sized masks)."""
+    """Offsets of the bytes equal to any of chars, a chunk at a time (no file-sized masks), as
+    32-bit integers when the text's size allows (a file is at most FILE_BYTES_MAX)."""
+    kind = np.int32 if len(raw) < 2**31 else np.intp
     out = []
     for lo in range(0, len(raw), chunk):
         part = raw[lo : lo + chunk]
         hit = part == chars[0]
         for c in chars[1:]:
             hit |= part == c
-        out.append(np.flatnonzero(hit) + lo)
-    return np.concatenate(out) if out else np.zeros(0, dtype=np.intp)
+        out.append((np.flatnonzero(hit) + lo).astype(kind))
+    return np.concatenate(out) if out else np.zeros(0, dtype=kind)
 
 
 _END = ord(",")  # written past each field's end: no field holds one
