@@ -215,7 +215,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     screening = cal.get("screening")
     used = without_outliers(meas, screening)
     pred = predict(cal.layout, cal.x, meas.q)
-    acc = metrics.accuracy(pred, used.xyz, meas.target_names)
+    acc = metrics.accuracy(pred, used.xyz, meas.target_names, orientation=False)  # positions
     errors, holdout = calibration_figures(cal, meas.q, used.xyz)
     data = {"poses": meas.n_poses, "readings": meas.n_readings, "targets": list(meas.target_names)}
     if data_path is not None and "://" not in str(data_path):  # a server's database: no file
