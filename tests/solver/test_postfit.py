@@ -18,6 +18,7 @@ from robocal.solver.fit_errors import (
 )
 from robocal.solver.kinematics import predict
 from robocal.solver.postfit import post_fit
+from robocal.solver.problem import Problem
 from robocal.solver.robot import IRB2600
 from robocal.solver.uncertainty import ABSORBED, inverse_root_times
 from tests.robots import TARGETS
@@ -39,7 +40,7 @@ def campaign(seed=5, poses=POSES, missing=True):
 
 def fit(method, seed=5):
     names, targets, q, xyz = campaign(seed)
-    return calibrate(IRB2600, targets, names, q, xyz, method=method), q, xyz
+    return calibrate(Problem(IRB2600, targets, names, q, xyz), method), q, xyz
 
 
 def inv_sqrt(M):
