@@ -29,7 +29,7 @@ class PositionUncertainty:
 
     parameters_mm: np.ndarray  # 3-D standard uncertainty from the parameters' covariance
     unexplained_mm: np.ndarray  # 3-D standard uncertainty of what the model leaves unexplained
-    instrument_mm: float  # 3-D RMS of a reading's own error (0: the position itself)
+    instrument_mm: np.ndarray  # 3-D RMS of a reading's own error (0: the position itself)
     combined_mm: np.ndarray  # u_c: the three in quadrature
     expanded_mm: np.ndarray  # U: the radius that holds the error with `coverage`
     joint_scatter_deg: float  # the unexplained part as a joint error of this RMS per joint
@@ -63,15 +63,24 @@ def spread_at(layout: Layout, x, q, cov: np.ndarray, column: np.ndarray) -> Spre
     )
 
 
-def joint_scatter_rad(train: Spread, holdout_rms_mm: float, noise_mm: float) -> float:
+def mean_traces(at: Spread) -> tuple[float, float]:
+    """The positions' mean parameter variance (mm^2) and mean lever (mm^2 per rad^2): what
+    joint_scatter_rad takes, summed over blocks of positions by the caller if need be."""
+    par = float(np.mean(np.trace(at.parameters, axis1=-2, axis2=-1)))
+    lever = float(np.mean(np.trace(at.joints, axis1=-2, axis2=-1)))
+    return par, lever
+
+
+def joint_scatter_rad(
+    parameters_mm2: float, lever_mm2: float, holdout_rms_mm: float, noise_mm: float
+) -> float:
     """The RMS joint error (rad, each joint alike) that accounts for the held-out error beyond
-    the tracker's noise and the parameters' own part on the training positions (0 when those
-    account for all of it): the arm's scatter and effects no parameter captures, which grow
-    with the lever arm, as a joint error's motion does."""
-    par = float(np.mean(np.trace(train.parameters, axis1=-2, axis2=-1)))
-    excess = holdout_rms_mm**2 - noise_mm**2 - par
-    lever = float(np.mean(np.trace(train.joints, axis1=-2, axis2=-1)))
-    return float(np.sqrt(max(0.0, excess) / lever)) if lever > 0 else 0.0
+    the tracker's noise and the parameters' own part on the training positions (their mean
+    traces, mean_traces); 0 when those account for all of it. It stands for the arm's scatter
+    and effects no parameter captures, which grow with the lever arm as a joint error's motion
+    does."""
+    excess = holdout_rms_mm**2 - noise_mm**2 - parameters_mm2
+    return float(np.sqrt(max(0.0, excess) / lever_mm2)) if lever_mm2 > 0 else 0.0
 
 
 def radius(cov: np.ndarray, coverage: float = COVERAGE) -> np.ndarray:
@@ -86,19 +95,23 @@ def radius(cov: np.ndarray, coverage: float = COVERAGE) -> np.ndarray:
 
 
 def position_uncertainty(
-    at: Spread, scatter_rad: float, instrument_mm: float = 0.0, coverage: float = COVERAGE
+    at: Spread, scatter_rad: float, instrument_mm=0.0, coverage: float = COVERAGE
 ) -> PositionUncertainty:
     """U at positions of this spread, the unexplained part a joint error of RMS scatter_rad and
-    a reading's own error (3-D RMS instrument_mm, isotropic) on top; instrument 0 for the
-    position itself."""
+    a reading's own error (3-D RMS instrument_mm, isotropic, per position or one for all) on
+    top; instrument 0 for the position itself."""
     unexplained = scatter_rad**2 * at.joints
-    total = at.parameters + unexplained + (instrument_mm**2 / 3.0) * np.eye(3)
+    instrument_mm = np.broadcast_to(
+        np.asarray(instrument_mm, dtype=float), at.parameters.shape[:-2]
+    )
+    iso = (instrument_mm**2 / 3.0)[..., None, None] * np.eye(3)
+    total = at.parameters + unexplained + iso
     u_par = np.sqrt(np.clip(np.trace(at.parameters, axis1=-2, axis2=-1), 0.0, None))
     u_unx = np.sqrt(np.clip(np.trace(unexplained, axis1=-2, axis2=-1), 0.0, None))
     return PositionUncertainty(
         parameters_mm=u_par,
         unexplained_mm=u_unx,
-        instrument_mm=float(instrument_mm),
+        instrument_mm=instrument_mm,
         combined_mm=np.sqrt(u_par**2 + u_unx**2 + instrument_mm**2),
         expanded_mm=radius(total, coverage),
         joint_scatter_deg=float(np.degrees(scatter_rad)),

@@ -15,6 +15,7 @@ from robocal.solver import position_uncertainty as pu
 from robocal.solver.calibrate import calibrate
 from robocal.solver.fit_errors import angles, calibration_rows, point_errors
 from robocal.solver.kinematics import predict
+from robocal.solver.problem import Problem
 from robocal.solver.robot import IRB2600
 from robocal.solver.uncertainty import errors_from_rows
 from tests.robots import PUMA_LIKE, UR5
@@ -36,12 +37,12 @@ def _case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray,
     train = vc.campaign(40, seed, arm_scatter_deg=scatter)
     names = train.target_names
     nominal = np.array([TARGETS[t] for t in names])
-    cal = calibrate(robot, nominal, names, train.q, train.xyz, method="ls-sum")
+    cal = calibrate(Problem.of(robot, nominal, train), "ls-sum")
     rows, column = calibration_rows(cal, train.q, train.xyz)
     errors = errors_from_rows(rows, cal.layout.names(), column, angles(cal.layout))
     holdout = guard.leave_one_pose_out(rows, point_errors(cal, rows)).rms()
     trained = pu.spread_at(cal.layout, cal.x, train.q, errors.cov, errors.column)
-    s = pu.joint_scatter_rad(trained, holdout, vc.last_campaign["noise_floor_mm"])
+    s = pu.joint_scatter_rad(*pu.mean_traces(trained), holdout, vc.last_campaign["noise_floor_mm"])
     rng = np.random.default_rng([7, seed])
     q = vc.sample_poses(TEST_POSES, rng)
     truth = vc.true_points(q, pose_dq=np.deg2rad(scatter) * rng.normal(size=q.shape))
