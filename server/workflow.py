@@ -211,6 +211,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     from robocal.solver.fit_errors import calibration_figures
 
     from .identified import identified_block
+    from .position_uncertainty import position_block
 
     screening = cal.get("screening")
     used = without_outliers(meas, screening)
@@ -261,6 +262,13 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable
     model.meta["validation"] = validate(cal, cell, used, holdout, errors, acc.rmse)
+    if cal.method != "nominal":
+        v = model.meta["validation"]
+        block = position_block(
+            cal.layout, cal.x, used.q, errors, v["holdout_rms_mm"], v["noise_floor_mm"]
+        )
+        if block is not None:
+            model.meta["uncertainty"]["position"] = block
     return model
 
 
