@@ -11,8 +11,9 @@ from robocal.solver.uncertainty import ParameterErrors
 
 from .formats.model_json import ModelFile
 
-# Positions whose Jacobians are held at once: memory stays flat in the campaign's size.
-BLOCK = 2048
+# The mean traces the joint scatter is fitted to are taken over at most this many of the fit's
+# poses, evenly spread (a mean: 4,096 poses give it to about a percent, at any campaign's size).
+MEAN_POSES = 4096
 METHOD = (
     "U holds the position's error with 95 % probability: the parameters' pose-clustered "
     "covariance propagated to the position, and what the model leaves unexplained as a joint "
@@ -26,12 +27,9 @@ def position_block(layout, x, q, errors: ParameterErrors, holdout_rms_mm, noise_
     its held-out error or noise floor is unknown."""
     if holdout_rms_mm is None or noise_mm is None or not np.isfinite(holdout_rms_mm):
         return None
-    par = lever = 0.0
-    for s in range(0, len(q), BLOCK):
-        chunk = q[s : s + BLOCK]
-        p, g = pu.mean_traces(pu.spread_at(layout, x, chunk, errors.cov, errors.column))
-        par, lever = par + p * len(chunk), lever + g * len(chunk)
-    scatter = pu.joint_scatter_rad(par / len(q), lever / len(q), holdout_rms_mm, noise_mm)
+    q = np.asarray(q)[np.unique(np.linspace(0, len(q) - 1, min(len(q), MEAN_POSES)).astype(int))]
+    par, lever = pu.mean_traces(pu.spread_at(layout, x, q, errors.cov, errors.column))
+    scatter = pu.joint_scatter_rad(par, lever, holdout_rms_mm, noise_mm)
     free = np.flatnonzero(errors.column >= 0)
     order = free[np.argsort(errors.column[free])]
     scale = np.where(errors.degrees[order], np.degrees(1.0), 1.0)

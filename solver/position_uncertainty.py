@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
 from .kinematics import Layout, predict_with_jacobian
 
@@ -58,7 +57,7 @@ def spread_at(layout: Layout, x, q, cov: np.ndarray, column: np.ndarray) -> Spre
     Jc = np.zeros(J.shape[:-1] + (cov.shape[0],))
     Jc[..., column[free]] = J[..., free]
     return Spread(
-        np.einsum("...ip,pq,...jq->...ij", Jc, cov, Jc),
+        np.einsum("...ip,...jp->...ij", Jc @ cov, Jc),
         np.einsum("...in,...jn->...ij", Jq, Jq),
     )
 
@@ -86,6 +85,8 @@ def joint_scatter_rad(
 def radius(cov: np.ndarray, coverage: float = COVERAGE) -> np.ndarray:
     """The radius holding a zero-mean Gaussian error of covariance cov (..., 3, 3) with this
     probability: |e|^2 = sum of lambda_i chi2_1, matched in mean and variance by c chi2_nu."""
+    from scipy.stats import chi2  # here: scipy.stats costs a calibration's start half a second
+
     lam = np.clip(np.linalg.eigvalsh(cov), 0.0, None)
     s1, s2 = lam.sum(-1), (lam**2).sum(-1)
     ok = s2 > 0
