@@ -29,6 +29,7 @@ th { background: #eee; } .id td { text-align: left; } .id td:first-child { width
 .verdict { font-size: 12pt; padding: 2mm 3mm; border: 2px solid #286; background: #efe; }
 figure { margin: 3mm 0; text-align: center; } img { max-width: 100%; }
 .note { font-size: 9pt; color: #444; }
+.overdue { color: #a3333d; }
 @page { size: A4; margin: 12mm; }
 @media print { body { margin: 0; } h2, table, figure { break-inside: avoid; } }
 """
@@ -117,8 +118,12 @@ def uncertainty_section(report: dict) -> tuple[str, str]:
                 "is within it.",
                 "fail": f"<b>FAIL</b> against the tolerance {tol:g} mm: an AP less its U is "
                 "beyond it.",
-                "not decided": f"<b>NOT DECIDED</b> against the tolerance {tol:g} mm: an AP is "
-                "within it only without its uncertainty.",
+                "not decided": f"<b>NOT DECIDED</b> against the tolerance {tol:g} mm: "
+                + (
+                    f"the tracker's calibration was due {escape(str(dec['tracker_overdue']))}."
+                    if dec.get("tracker_overdue")
+                    else "an AP is within it only without its uncertainty."
+                ),
             }[verdict]
     model = unc.get("model")
     rows = []
@@ -183,8 +188,24 @@ def render(report: dict) -> str:
     b, a = report["before"], report["after"]
     inst = report["instrument"]
     instrument = inst.get("kind", "laser tracker") + "".join(
-        f", {k} {v}" for k, v in inst.items() if k != "kind" and v is not None
+        f", {k} {v}"
+        for k, v in inst.items()
+        if k not in ("kind", "smr_ids", "certificate_id", "certificate_due", "serial")
+        and v is not None
     )
+    trace = [
+        ("Tracker serial", inst.get("serial") or "not given"),
+        (
+            "Tracker calibration",
+            f"certificate {inst.get('certificate_id') or 'not given'}, due "
+            f"{inst.get('certificate_due') or 'not given'}"
+            + (" - OVERDUE at this run" if report.get("tracker_overdue") else ""),
+        ),
+        (
+            "SMR ids",
+            ", ".join(f"{k} {v}" for k, v in (inst.get("smr_ids") or {}).items()) or "not given",
+        ),
+    ]
     rms = holdout_rms(report)
     ident = [
         ("Robot", report["robot"]),
@@ -192,6 +213,7 @@ def render(report: dict) -> str:
         ("Model SHA-256", report["model"]["sha256"]),
         ("Model held-out RMS", "-" if rms is None else f"{rms:.4f} mm"),
         ("Instrument", instrument),
+        *trace,
         ("Cell", "simulated" if report["simulated"] else "real devices"),
         ("Date (UTC)", report["date"]),
         ("Measured point", f"SMR {report['smr']}"),
@@ -230,10 +252,17 @@ def render(report: dict) -> str:
     ]
     gain = b["AP_max_mm"] / a["AP_max_mm"] if a["AP_max_mm"] > 0 else float("inf")
     decided, uncertainty = uncertainty_section(report)
+    late = report.get("tracker_overdue")
+    overdue_head = (
+        f' <span class="overdue" id="overdue">- tracker calibration overdue (due {escape(late)}):'
+        " not passing</span>"
+        if late
+        else ""
+    )
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>Accuracy certificate - {escape(report["robot"])}</title>
 <style>{CSS}</style></head><body>
-<h1>Accuracy certificate</h1>
+<h1>Accuracy certificate{overdue_head}</h1>
 <p class="note">Positioning accuracy and repeatability after calibration, measured per ISO 9283:1998
 (clause 7.2: AP, RP and vAP; 7.3: AD and RD), commanded once with the nominal joints
 and once with the model's compensated joints.</p>

@@ -401,6 +401,7 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
     ap_u = mpe_mm(cell, plan.points)
     for p, u in zip(runs["compensated"]["points"], ap_u):
         p["AP_U_mm"] = float(u)
+    late = overdue(cell, info.created_at)
     tolerance = cell.tolerance_mm
     if tolerance is None:
         tolerance = (record["model"].get("meta") or {}).get("validation", {}).get("tolerance_mm")
@@ -419,10 +420,11 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
         "before": runs["nominal"],
         "after": runs["compensated"],
         "simulated_s": seconds if cell.simulated else None,
+        "tracker_overdue": late,
         "uncertainty": {
             "model": record.get("uncertainty"),
             "ap_u": AP_U,
-            "decision": decision(ap, ap_u, tolerance),
+            "decision": decision(ap, ap_u, tolerance, tracker_overdue=late),
         },
     }
 
@@ -467,11 +469,24 @@ def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> di
     return verification_report(*readings(store.open_database(db_path), summary["campaign"]))
 
 
+# What the certificate says of the tracker's traceability, from the cell's tracker block.
+TRACEABILITY = ("serial", "certificate_id", "certificate_due", "smr_ids")
+
+
 def _instrument(cell: Cell, tracker) -> dict:
+    trace = {k: cell.tracker[k] for k in TRACEABILITY if cell.tracker.get(k) is not None}
     if cell.simulated:
-        return {"kind": "simulated laser tracker", **(tracker or {})}
+        return {"kind": "simulated laser tracker", **(tracker or {}), **trace}
     d = cell.devices
-    return {"kind": "laser tracker", "address": d.tracker_address() if d else None}
+    return {"kind": "laser tracker", "address": d.tracker_address() if d else None, **trace}
+
+
+def overdue(cell: Cell, when: dt.datetime) -> str | None:
+    """The tracker's calibration due date (YYYY-MM-DD) when the run was after it, else None."""
+    due = cell.tracker.get("certificate_due")
+    if due is None:
+        return None
+    return due if when.date() > dt.date.fromisoformat(str(due)) else None
 
 
 def write(report: dict, path) -> None:

@@ -47,20 +47,22 @@ def at_points(model: ModelFile, cell: Cell, q_deg, points_mm) -> dict | None:
     }
 
 
-def decision(ap_mm, u_mm, tolerance_mm: float | None) -> dict:
+def decision(ap_mm, u_mm, tolerance_mm: float | None, tracker_overdue: str | None = None) -> dict:
     """The verdict on the APs (mm) with their U against the tolerance: `pass`, `fail` or `not
-    decided` (and `no tolerance` without one), with the rule and the figures it used."""
+    decided` (and `no tolerance` without one), with the rule and the figures it used. A tracker
+    past its calibration's due date never passes: its U is not vouched for."""
     ap, u = np.asarray(ap_mm, dtype=float), np.asarray(u_mm, dtype=float)
     if tolerance_mm is None:
         verdict = "no tolerance"
     elif np.all(ap + u <= tolerance_mm):
-        verdict = "pass"
+        verdict = "not decided" if tracker_overdue else "pass"
     elif np.any(ap - u > tolerance_mm):
         verdict = "fail"
     else:
         verdict = "not decided"
     return {
         "verdict": verdict,
+        "tracker_overdue": tracker_overdue,
         "tolerance_mm": tolerance_mm,
         "rule": RULE,
         "worst_upper_mm": float(np.max(ap + u)),

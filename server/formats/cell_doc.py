@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import ipaddress
 import re
 from typing import Annotated, Literal
@@ -155,11 +156,25 @@ RobotField = Annotated[
 
 
 class TrackerDoc(Doc):
-    """The tracker's accuracy spec (maximum permissible error); other keys are kept as given."""
+    """The tracker's accuracy spec (maximum permissible error) and its traceability (serial,
+    its own calibration certificate and when that falls due, the SMRs' ids); other keys are
+    kept as given."""
 
     model_config = ConfigDict(extra="allow")
     mpe_um: NonNegative = 10.0
     mpe_um_per_m: NonNegative = 2.5
+    serial: Label | None = Field(None, description="the tracker's serial number")
+    certificate_id: Label | None = Field(
+        None, description="the id of the tracker's own calibration certificate"
+    )
+    certificate_due: dt.date | None = Field(
+        None,
+        description="when the tracker's calibration falls due (YYYY-MM-DD): a certificate "
+        "of a run after it says so and does not pass",
+    )
+    smr_ids: dict[str, Label] | None = Field(
+        None, description="each SMR's own id (serial or inventory number), by target name"
+    )
 
 
 class TrackerAddress(Doc):
@@ -251,6 +266,19 @@ class CellDoc(Doc):
         if isinstance(robot, str):
             builtin_robot(robot)
         return robot
+
+    @model_validator(mode="after")
+    def _smr_ids_of_targets(self):
+        for name in self.tracker.smr_ids or {}:
+            if name not in self.targets:
+                raise located(
+                    f"SMR {name!r} is not among the targets ({', '.join(self.targets)})",
+                    "tracker",
+                    "smr_ids",
+                    name,
+                    key=True,
+                )
+        return self
 
     @model_validator(mode="after")
     def _devices_need(self):

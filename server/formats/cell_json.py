@@ -82,7 +82,8 @@ def cell_from_doc(c: CellDoc) -> Cell:
         c.robot_model,
         {name: np.array(xyz, dtype=float) for name, xyz in c.targets.items()},
         None if c.base is None else np.array(c.base, dtype=float),
-        c.tracker.model_dump(),
+        # as JSON gives them (a due date a string): what the cell's JSON is written back from
+        c.tracker.model_dump(mode="json", exclude_none=True),
         c.payload_kg,
         devices,
         bool({"mpe_um", "mpe_um_per_m"} & c.tracker.model_fields_set),
