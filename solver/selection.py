@@ -39,7 +39,7 @@ from .finite import finite
 ALPHA = 0.003  # nominal family-wise false-alarm rate per round of selection
 RESAMPLES = 2000  # sign-flip resamples of the null (0.997 quantile from its 6 largest)
 RANK_TOL = 1e-9
-POSE_BLOCK = 512  # poses per block of row-wise work (even: the sign draws' stream stays whole)
+POSE_BLOCK = 512  # poses per block of row-wise work
 RESAMPLE_BLOCK = 64  # resamples per block (a multiple of 8: the signs are held as bits)
 
 
@@ -81,7 +81,8 @@ class SignFlips:
     of floats would grow with poses x resamples).
 
     Drawn POSE_BLOCK poses at a time from the one stream, pose by pose as one (m, resamples)
-    draw would take them, so the resamples are the same for any block size."""
+    draw takes them (the bit generator keeps a drawn word's unused half from one call to the
+    next), so the resamples are those of one draw whatever the block size."""
 
     def __init__(self, m: int, resamples: int, rng: np.random.Generator):
         self.m, self.n = m, resamples
@@ -340,14 +341,21 @@ def rmse_gain_interval(
     resamples: int = 2000,
     seed: int = 0,
 ):
-    """Bootstrap interval over poses of the held-out RMS gain (before minus after), mm."""
+    """Bootstrap interval over poses of the held-out RMS gain (before minus after), mm.
+
+    The resamples are drawn a block at a time (about a million pose indices), from the one stream
+    as one (resamples, m) draw would take them."""
     rng = np.random.default_rng(seed)
     m = len(n)
-    idx = rng.integers(0, m, size=(resamples, m))
-    nn = n[idx].sum(axis=1)
-    ok = nn > 0
-    g = np.sqrt(sq_before[idx].sum(axis=1)[ok] / nn[ok]) - np.sqrt(
-        sq_after[idx].sum(axis=1)[ok] / nn[ok]
-    )
-    lo, hi = np.quantile(g, [(1 - level) / 2, (1 + level) / 2])
+    block = max(1, 2**20 // max(m, 1))
+    g = []
+    for start in range(0, resamples, block):
+        idx = rng.integers(0, m, size=(min(block, resamples - start), m))
+        nn = n[idx].sum(axis=1)
+        ok = nn > 0
+        g.append(
+            np.sqrt(sq_before[idx].sum(axis=1)[ok] / nn[ok])
+            - np.sqrt(sq_after[idx].sum(axis=1)[ok] / nn[ok])
+        )
+    lo, hi = np.quantile(np.concatenate(g), [(1 - level) / 2, (1 + level) / 2])
     return float(lo), float(hi)
