@@ -61,6 +61,17 @@ def cmd_bench(args) -> None:
         result = run_check_bench(
             clean=args.clean or 70, poses="random" if args.random_check_poses else "planned"
         )
+    elif args.what == "scale":
+        from ..bench.scale import run_diagnose_scale, run_scale
+        from ..bench.solver import _campaign
+        from ..formats.cell_json import default_cell
+
+        cell = default_cell()
+        result = {
+            "benchmark": "scale",
+            "calibrate": run_scale(cell, _campaign(cell, 50_000, 0)),
+            "diagnose": run_diagnose_scale(),
+        }
     elif args.what == "validation":
         from ..bench import validation as bench_validation
 
@@ -91,9 +102,11 @@ def add(sub) -> None:
             "recording",
             "validation",
             "check",
+            "scale",
         ),
         help="what to time (validation: the deployment guard's flags on healthy, small and "
-        "real campaigns; check: quick checks' false alarms and delays to a change)",
+        "real campaigns; check: quick checks' false alarms and delays to a change; scale: calibrate "
+        "50,000 poses and diagnose 1,000 to 10,000, time and peak memory beside np.loadtxt)",
     )
     b.add_argument(
         "--repeats",
