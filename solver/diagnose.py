@@ -36,6 +36,7 @@ from .robot import Robot
 from .screen import screen_readings
 from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
 from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
+from .tall import tall_qr
 
 if TYPE_CHECKING:  # run_diagnosis imports fit_errors only when it needs it
     from .fit_errors import ExtendedErrors
@@ -186,7 +187,7 @@ class Diagnoser:
         r = predict_extended(self.prob.layout, x, ee, sub)[mask] - meas[mask]  # (N, 3)
         idx = np.flatnonzero(self.free)
         _, Jt = predict_rows(self.prob.layout, x, sub.q, mask, idx)  # (P, N, 3)
-        Q, _ = np.linalg.qr(finite(Jt.reshape(len(idx), -1).T, "an effect's Jacobian"))
+        Q, _ = tall_qr(finite(Jt.reshape(len(idx), -1).T, "an effect's Jacobian"))
         Q = Q.reshape(-1, 3, Q.shape[1])  # (N, 3, P)
         t = sub.time_s[mask]
         order = np.argsort(t, kind="stable")

@@ -146,7 +146,9 @@ def linear_scores(
 
     Every quantity of a fold's refit is a Gram matrix of the columns or a product X' R with the
     residual vectors R; with one sign per pose, X' R = sum over poses of (X_p' r_p) s_p, so the
-    thousands of null resamples cost a product of (columns x poses) by (poses x resamples).
+    thousands of null resamples cost a product of (columns x poses) by (poses x resamples),
+    taken RESAMPLE_BLOCK resamples at a time: memory grows with the poses alone, not with poses
+    x resamples (SignFlips holds the signs as bits).
     """
     rng = np.random.default_rng(seed)
     sizes = [A.shape[1]] + [B.shape[1] for B in blocks]
@@ -303,18 +305,19 @@ def _split_scan(A, Z, r, r0, starts, poses, order, XA, AA, rr_total, flips: Sign
             carry = None  # suffix sum over the visits from hi on
             for hi in range(m, first, -SPLIT_BLOCK):
                 lo = max(hi - SPLIT_BLOCK, first)
-                part = per(lo, hi)[::-1]
-                if carry is not None:  # summed on in the same order as one pass over all visits
-                    part = np.concatenate([carry[None], part])
-                sums = np.cumsum(part, axis=0)
-                carry = sums[-1]
-                sums = sums[::-1][: min(hi, end) - lo]  # at the splits lo, lo + 1, ...
+                sums = per(lo, hi)  # summed in place from the last visit back, as the carry
+                if carry is not None:  # was: the order of one pass over all visits
+                    sums[-1] += carry
+                for i in range(len(sums) - 2, -1, -1):  # a row at a time: cumsum down the
+                    sums[i] += sums[i + 1]  # first axis strides through memory, 3x slower
+                carry = sums[0]
+                sums = sums[: min(hi, end) - lo]  # at the splits lo, lo + 1, ...
                 at = slice(lo - first, lo - first + len(sums))
                 b = sums - (sZA[6 * at.start : 6 * at.stop] @ H[:, cols]).reshape(sums.shape)
                 q = np.sum(b * (G_inv[at] @ b), axis=1).max(axis=0)
                 best[cols] = np.maximum(best[cols], q)
 
-        scan(slice(0, 1), lambda lo, hi: Zr[lo:hi, :, None])
+        scan(slice(0, 1), lambda lo, hi: Zr[lo:hi, :, None].copy())
         for cols, S in flips.blocks():
             S = S[order]
             scan(
