@@ -305,10 +305,12 @@ def _split_scan(A, Z, r, r0, starts, poses, order, XA, AA, rr_total, flips: Sign
             carry = None  # suffix sum over the visits from hi on
             for hi in range(m, first, -SPLIT_BLOCK):
                 lo = max(hi - SPLIT_BLOCK, first)
-                sums = per(lo, hi)  # summed in place from the last visit back, as the carry
-                if carry is not None:  # was: the order of one pass over all visits
+                # suffix sums in place from the last visit back, carried on from the block after
+                # it: the additions of one pass over all visits, in the same order
+                sums = per(lo, hi)
+                if carry is not None:
                     sums[-1] += carry
-                for i in range(len(sums) - 2, -1, -1):  # a row at a time: cumsum down the
+                for i in range(len(sums) - 2, -1, -1):  # a row at a time: np.cumsum down the
                     sums[i] += sums[i + 1]  # first axis strides through memory, 3x slower
                 carry = sums[0]
                 sums = sums[: min(hi, end) - lo]  # at the splits lo, lo + 1, ...
