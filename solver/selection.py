@@ -153,7 +153,10 @@ def linear_scores(
     rng = np.random.default_rng(seed)
     sizes = [A.shape[1]] + [B.shape[1] for B in blocks]
     J = np.concatenate([A] + list(blocks), axis=1)
-    J /= np.maximum(np.linalg.norm(J, axis=0), 1e-300)  # spans unchanged; fair rank tests
+    # spans unchanged; fair rank tests (the norms taken per block: the same sums, without a
+    # squared copy of the whole Jacobian)
+    norms = np.concatenate([np.linalg.norm(X, axis=0) for X in [A] + list(blocks)])
+    J /= np.maximum(norms, 1e-300)
     cuts = np.cumsum([0] + sizes)
     a = slice(0, sizes[0])
     rows = A.shape[0]
