@@ -30,6 +30,7 @@ simulated campaigns it still runs slightly above its nominal rate (1.0% at alpha
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -91,11 +92,13 @@ class SignFlips:
             k = min(POSE_BLOCK, m - i)
             self.bits[i : i + k] = np.packbits(rng.integers(0, 2, size=(k, resamples)) > 0, axis=1)
 
-    def blocks(self):
-        """(columns, signs (m, columns) of +-1) over all resamples, RESAMPLE_BLOCK at a time."""
+    def blocks(self, poses: np.ndarray | None = None):
+        """(columns, signs (poses, columns) of +-1) over all resamples, RESAMPLE_BLOCK at a time;
+        poses default all."""
+        held = self.bits if poses is None else self.bits[poses]
         for c0 in range(0, self.n, RESAMPLE_BLOCK):
             c1 = min(c0 + RESAMPLE_BLOCK, self.n)
-            bits = np.unpackbits(self.bits[:, c0 // 8 : (c1 + 7) // 8], axis=1)[:, : c1 - c0]
+            bits = np.unpackbits(held[:, c0 // 8 : (c1 + 7) // 8], axis=1)[:, : c1 - c0]
             yield slice(c0, c1), bits * 2.0 - 1.0
 
 
@@ -304,31 +307,31 @@ def _split_scan(A, Z, r, r0, starts, poses, order, XA, AA, rr_total, flips: Sign
         sZA = sZA.reshape(-1, sZA.shape[2])  # (splits x 6, P): one product per block
         Zr, Z0 = Zr[order], Z0[order]
 
-        def scan(cols, per):  # per(lo, hi): (hi - lo, 6, columns) for the visits lo to hi
-            carry = None  # suffix sum over the visits from hi on
-            for hi in range(m, first, -SPLIT_BLOCK):
-                lo = max(hi - SPLIT_BLOCK, first)
-                # suffix sums in place from the last visit back, carried on from the block after
-                # it: the additions of one pass over all visits, in the same order
-                sums = per(lo, hi)
-                if carry is not None:
-                    sums[-1] += carry
+        # suffix sums in place from the last visit back, each block of splits carrying them on
+        # from the block after it: the additions of one pass over all visits, in the same order;
+        # the splits outermost, so a block's columns stay in cache for all the resamples
+        carry = np.zeros((Z.shape[1], 1 + flips.n))
+        for hi in range(m, first, -SPLIT_BLOCK):
+            lo = max(hi - SPLIT_BLOCK, first)
+            at = slice(lo - first, max(min(hi, end), lo) - first)  # splits lo, lo + 1, ...
+            ZA_at, G_at = sZA[6 * at.start : 6 * at.stop], G_inv[at]
+            observed = [(slice(0, 1), Zr[lo:hi, :, None].copy())]
+            signed = (
+                (slice(1 + c.start, 1 + c.stop), Z0[lo:hi, :, None] * S[:, None, :])
+                for c, S in flips.blocks(order[lo:hi])
+            )
+            for cols, sums in itertools.chain(observed, signed):
+                if hi < m:
+                    sums[-1] += carry[:, cols]
                 for i in range(len(sums) - 2, -1, -1):  # a row at a time: np.cumsum down the
                     sums[i] += sums[i + 1]  # first axis strides through memory, 3x slower
-                carry = sums[0]
-                sums = sums[: min(hi, end) - lo]  # at the splits lo, lo + 1, ...
-                at = slice(lo - first, lo - first + len(sums))
-                b = sums - (sZA[6 * at.start : 6 * at.stop] @ H[:, cols]).reshape(sums.shape)
-                q = np.sum(b * (G_inv[at] @ b), axis=1).max(axis=0)
+                carry[:, cols] = sums[0]
+                sums = sums[: at.stop - at.start]
+                if not len(sums):  # the last visits, after the last split
+                    continue
+                b = sums - (ZA_at @ H[:, cols]).reshape(sums.shape)
+                q = np.sum(b * (G_at @ b), axis=1).max(axis=0)
                 best[cols] = np.maximum(best[cols], q)
-
-        scan(slice(0, 1), lambda lo, hi: Zr[lo:hi, :, None].copy())
-        for cols, S in flips.blocks():
-            S = S[order]
-            scan(
-                slice(1 + cols.start, 1 + cols.stop),
-                lambda lo, hi: Z0[lo:hi, :, None] * S[lo:hi, None, :],  # noqa: B023
-            )
     return np.log(rss0 / np.maximum(rss0 - best, 1e-12 * rss0))
 
 

@@ -37,7 +37,7 @@ def test_split_scan_carries_its_sums_across_blocks(monkeypatch):
     in the same order), so blocks do not change which split wins."""
     args = problem(60)
     one = linear_scores(*args[:5], 60, resamples=40, scans=args[5])
-    monkeypatch.setattr(selection, "SPLIT_BLOCK", 7)
+    monkeypatch.setattr(selection, "SPLIT_BLOCK", 3)
     monkeypatch.setattr(selection, "RESAMPLE_BLOCK", 8)
     monkeypatch.setattr(selection, "POSE_BLOCK", 4)
     small = linear_scores(*args[:5], 60, resamples=40, scans=args[5])
