@@ -378,3 +378,17 @@ def random_tracker_placement(rng) -> np.ndarray:
     level = rot(2, tilt_dir) @ rot(0, tilt) @ rot(2, -tilt_dir)
     tracker_in_base = translation(r * np.cos(az), r * np.sin(az), h) @ rot(2, yaw) @ level
     return np.linalg.inv(tracker_in_base)
+
+
+def displace(xyz, seed, rate):
+    """Readings (m, K, 3) with a share `rate` of the present ones moved 0.3-2 mm (OUTLIER_MM) in random
+    directions (drawn from seed), and the mask (m, K) of those moved."""
+    rng = np.random.default_rng([7, seed])
+    have = np.argwhere(np.all(np.isfinite(xyz), axis=-1))
+    pick = have[rng.choice(len(have), max(1, int(round(rate * len(have)))), replace=False)]
+    out, moved = xyz.copy(), np.zeros(xyz.shape[:2], dtype=bool)
+    for p, k in pick:
+        v = rng.normal(size=3)
+        out[p, k] += rng.uniform(*OUTLIER_MM) * v / np.linalg.norm(v)
+        moved[p, k] = True
+    return out, moved

@@ -16,6 +16,7 @@ from robocal.solver.calibrate import calibrate
 from robocal.solver.identifiability import NotIdentifiable
 from robocal.solver.identify import register
 from robocal.solver.kinematics import Layout, predict
+from robocal.solver.problem import Problem
 from robocal.solver.rigid import rigid_correction
 from robocal.solver.robot import Robot
 
@@ -76,15 +77,9 @@ class SmrPredictor:
         self._fitted_at = m
         if m >= MIN_CALIBRATE_POSES and len(self.names) * m * 3 > 2 * self.layout.n_params:
             try:
-                cal = calibrate(
-                    self.robot,
-                    self.targets,
-                    self.names,
-                    q,
-                    meas,
-                    method="ls-sum",
-                    base_guess=self.layout.base(self.x),
-                )
+                base = self.layout.base(self.x)
+                problem = Problem(self.robot, self.targets, self.names, q, meas, base)
+                cal = calibrate(problem, "ls-sum")
                 self.layout, self.x, self.stage = cal.layout, cal.x, "calibrated"
                 return self.stage
             except (NotIdentifiable, np.linalg.LinAlgError):

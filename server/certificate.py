@@ -16,6 +16,8 @@ matplotlib.use("Agg")  # files only: the workstation may have no display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .formats.verdict import Verdict  # noqa: E402
+
 CSS = """
 body { font: 11pt/1.4 "DejaVu Sans", Arial, sans-serif; color: #111; max-width: 190mm;
        margin: 10mm auto; }
@@ -81,6 +83,79 @@ def figure_scatter(report: dict) -> str:
     return _png(fig)
 
 
+def figure_uncertainty_map(volume: dict) -> str:
+    """U over the working volume: the map's positions in three slices of height, coloured by U."""
+    xyz, u = np.asarray(volume["xyz_mm"]), np.asarray(volume["U_mm"])
+    edges = np.quantile(xyz[:, 2], [0, 1 / 3, 2 / 3, 1])
+    fig, axes = plt.subplots(1, 3, figsize=(9, 3.3), constrained_layout=True, sharey=True)
+    norm = plt.Normalize(float(u.min()), float(u.max()))
+    for i, ax in enumerate(axes):
+        band = (xyz[:, 2] >= edges[i]) & (xyz[:, 2] <= edges[i + 1])
+        sc = ax.scatter(xyz[band, 0], xyz[band, 1], c=u[band], s=9, cmap="viridis", norm=norm)
+        ax.set_title(f"z {edges[i]:.0f} to {edges[i + 1]:.0f} mm", fontsize=9)
+        ax.set_xlabel("x, mm")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("y, mm")
+    fig.colorbar(sc, ax=axes, label="U (95 %), mm", shrink=0.85)
+    return _png(fig)
+
+
+def uncertainty_section(report: dict) -> tuple[str, str]:
+    """The verdict's sentence on the tolerance, and the uncertainty section's HTML ("" without
+    the figures: a model written before them, or an extended model)."""
+    unc = report.get("uncertainty") or {}
+    dec = unc.get("decision")
+    said = ""
+    if dec:
+        tol, verdict = dec["tolerance_mm"], dec["verdict"]
+        if verdict == "no tolerance":
+            said = "No tolerance given (the cell's tolerance_mm or the model's): no pass or fail."
+        else:
+            said = {
+                "pass": f"<b>PASS</b> against the tolerance {tol:g} mm: every AP plus its U "
+                "is within it.",
+                "fail": f"<b>FAIL</b> against the tolerance {tol:g} mm: an AP less its U is "
+                "beyond it.",
+                "not decided": f"<b>NOT DECIDED</b> against the tolerance {tol:g} mm: an AP is "
+                "within it only without its uncertainty.",
+            }[verdict]
+    model = unc.get("model")
+    rows = []
+    for i, q in enumerate(report["after"]["points"]):
+        rows.append(
+            (
+                q["point"],
+                f"{q['AP_mm']:.4f} ± {q['AP_U_mm']:.4f}" if "AP_U_mm" in q else f"{q['AP_mm']:.4f}",
+                f"{model['model_U_mm'][i]:.4f}" if model else "-",
+                f"{model['reading_U_mm'][i]:.4f}" if model else "-",
+            )
+        )
+    html = "<h2>Uncertainty and decision</h2>" + _table(
+        ["point", "AP after ± U (mm)", "model U at the point (mm)", "a reading's U (mm)"], rows
+    )
+    if model and model.get("map"):
+        html += (
+            '<figure><img alt="U over the working volume" '
+            f'src="{figure_uncertainty_map(model["map"])}"></figure>'
+        )
+    notes = [unc.get("ap_u", "")]
+    if model:
+        notes.append(
+            f"Model U: the radius holding the arm's position error with "
+            f"{100 * model['coverage']:.0f} % probability (k about {np.median(model['k']):.1f}), "
+            "from the parameters' covariance and the error the model leaves unexplained (a joint "
+            f"scatter of {model['joint_scatter_deg']:.4f} deg RMS); a reading's U adds the "
+            "tracker's specification."
+        )
+    else:
+        notes.append("The model keeps no position uncertainty: its U is not stated.")
+    if dec:
+        notes.append("Decision rule: " + dec["rule"] + ".")
+    html += "".join(f'<p class="note">{escape(n)}</p>' for n in notes if n)
+    return said, html
+
+
 def _rows(rows) -> str:
     return "".join(
         "<tr>" + "".join(f"<td>{escape(str(c))}</td>" for c in r) + "</tr>" for r in rows
@@ -94,9 +169,13 @@ def _table(head, rows, cls="") -> str:
 
 
 def holdout_rms(report: dict):
-    """The model's held-out RMS (mm) as its diagnosis stated it, if it did."""
-    final = (report["model"].get("meta") or {}).get("diagnosis", {}).get("final", {})
-    return final.get("holdout_rmse_mm")
+    """The model's held-out RMS (mm) as its diagnosis stated it, else as its validation did
+    (a calibration's leave-one-pose-out figure); None if neither did."""
+    meta = report["model"].get("meta") or {}
+    final = (meta.get("diagnosis") or {}).get("final") or {}
+    if final.get("holdout_rmse_mm") is not None:
+        return final["holdout_rmse_mm"]
+    return Verdict.of(meta.get("validation")).holdout_rms_mm
 
 
 def render(report: dict) -> str:
@@ -150,6 +229,7 @@ def render(report: dict) -> str:
         for p, q in zip(b.get("distances", []), a.get("distances", []))
     ]
     gain = b["AP_max_mm"] / a["AP_max_mm"] if a["AP_max_mm"] > 0 else float("inf")
+    decided, uncertainty = uncertainty_section(report)
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>Accuracy certificate - {escape(report["robot"])}</title>
 <style>{CSS}</style></head><body>
@@ -160,12 +240,13 @@ and once with the model's compensated joints.</p>
 {_table([], ident, "id")}
 <p class="verdict" id="verdict">Worst-point accuracy AP: <b>{b["AP_max_mm"]:.4f} mm</b> with the
 nominal joints, <b>{a["AP_max_mm"]:.4f} mm</b> compensated ({gain:.0f}x better); worst
-repeatability RP {b["RP_max_mm"]:.4f} mm / {a["RP_max_mm"]:.4f} mm.</p>
+repeatability RP {b["RP_max_mm"]:.4f} mm / {a["RP_max_mm"]:.4f} mm. {decided}</p>
 <h2>Summary</h2>
 {_table(["figure", "before (nominal)", "after (compensated)"], summary)}
 <h2>Per test point (mm)</h2>
 {_table(["point", "x", "y", "z", "AP before", "AP after", "RP before", "RP after", "vAP before", "vAP after"], points)}
 {"<h2>Distance accuracy and repeatability (mm)</h2>" + _table(["pair", "AD before", "AD after", "RD before", "RD after"], distances) if distances else ""}
+{uncertainty}
 <h2>Plots</h2>
 <figure><img alt="AP and RP per point" src="{figure_ap_rp(report)}"></figure>
 <figure><img alt="attained less commanded positions" src="{figure_scatter(report)}"></figure>

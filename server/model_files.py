@@ -4,6 +4,8 @@ name the file the user sent)."""
 
 from __future__ import annotations
 
+import json
+import re
 import tempfile
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -12,9 +14,23 @@ from pathlib import Path
 from .formats.errors import InputError
 
 SUFFIX = {"rapid": ".mod", "params": ".csv", "urdf": ".urdf"}
+# What a download of each export is called after its robot and job (download_name).
+ENDING = {"rapid": "targets.mod", "params": "parameters.csv", "urdf": "model.urdf"}
 MEDIA = {"rapid": "text/plain", "params": "text/csv", "urdf": "application/xml"}
 # The uploaded file's name on disk: only its last part, and never empty.
 _SAFE = "".join(chr(c) for c in range(33, 127) if chr(c) not in '/\\:*?"<>|')
+
+
+def download_name(model_path, job_id: int, ending: str) -> str:
+    """The name a download of a job's model or export is saved under: the robot, the job and
+    what it is (irb2600-job-3-parameters.csv), so a folder of them reads without opening one."""
+    try:
+        robot = json.loads(Path(model_path).read_text()).get("robot")
+        name = robot.get("name") if isinstance(robot, dict) else robot
+    except (OSError, ValueError, AttributeError):
+        name = None
+    slug = re.sub(r"[^A-Za-z0-9_.-]+", "-", str(name or "robot")).strip("-.") or "robot"
+    return f"{slug}-job-{job_id}-{ending}"
 
 
 def _upload(folder: Path, filename: str, data: bytes) -> Path:

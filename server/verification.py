@@ -34,6 +34,7 @@ from .formats.cell_json import Cell, parse_cell, robot_to_json
 from .formats.errors import InputError
 from .formats.model_json import ModelFile, read_model
 from .validation import cell_mismatch
+from .verification_uncertainty import AP_U, at_points, decision, mpe_mm
 
 APPROACH_MM = 50.0  # each approach pose stands this far from its point
 # approach directions, in the order they are taken: from above, then along the cell's axes
@@ -291,10 +292,25 @@ def prepare(
         "model": {
             "path": model_name or str(model_path),
             "sha256": _sha256(model_path),
-            # what the certificate quotes of the model: its held-out RMS
-            "meta": {"diagnosis": {"final": meta.get("diagnosis", {}).get("final", {})}},
+            # what the certificate quotes of the model: its held-out RMS (a diagnosis's final
+            # model's, else the calibration's leave-one-pose-out one from its validation)
+            "meta": {
+                "diagnosis": {"final": meta.get("diagnosis", {}).get("final", {})},
+                "validation": {
+                    k: v
+                    for k, v in (meta.get("validation") or {}).items()
+                    if k in ("deployable", "holdout_rms_mm", "tolerance_mm")
+                },
+            },
         },
         "smr": list(model.targets)[0],
+        # U of the model at each test point, from the compensated joints that visit it
+        "uncertainty": at_points(
+            model,
+            cell,
+            [joints["compensated"][_first_visit(plan, j)] for j in range(len(plan.names))],
+            plan.points,
+        ),
         "cycles": opts.cycles,
         "directions": opts.directions,
         "approach_mm": APPROACH_MM,
@@ -312,6 +328,11 @@ def prepare(
     }
     settings = {RECORD: record, PREDICTOR: geometry}
     return np.vstack([joints[w] for w in RUNS]), pose_labels(plan), settings
+
+
+def _first_visit(plan: Plan, j: int) -> int:
+    """The plan's first measured visit of test point j."""
+    return int(np.flatnonzero(plan.visit & (plan.point == j))[0])
 
 
 def pose_labels(plan: Plan) -> list[str]:
@@ -376,6 +397,13 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
         t = times[part][np.isfinite(times[part])]
         seconds[what] = float(t.max() - t.min()) if len(t) else None
     cell = parse_cell(info.cell_json, f"<campaign {info.id} cell>")
+    ap = [p["AP_mm"] for p in runs["compensated"]["points"]]
+    ap_u = mpe_mm(cell, plan.points)
+    for p, u in zip(runs["compensated"]["points"], ap_u):
+        p["AP_U_mm"] = float(u)
+    tolerance = cell.tolerance_mm
+    if tolerance is None:
+        tolerance = (record["model"].get("meta") or {}).get("validation", {}).get("tolerance_mm")
     return {
         "robot": cell.robot.name if hasattr(cell.robot, "name") else str(cell.robot),
         "model": record["model"],
@@ -391,6 +419,11 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
         "before": runs["nominal"],
         "after": runs["compensated"],
         "simulated_s": seconds if cell.simulated else None,
+        "uncertainty": {
+            "model": record.get("uncertainty"),
+            "ap_u": AP_U,
+            "decision": decision(ap, ap_u, tolerance),
+        },
     }
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -12,6 +13,7 @@ from robocal.solver.extended import predict_model
 from robocal.solver.finite import require_inputs
 from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
+from robocal.solver.problem import Problem
 
 from .formats.campaign_csv import read_campaign
 from .formats.cell_json import Cell, default_cell, read_cell
@@ -42,6 +44,12 @@ PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
 
 class DataError(ValueError):
     """Inputs that are well-formed but do not fit together; the message names the file."""
+
+
+def cell_problem(cell: Cell, meas: Measurements) -> Problem:
+    """The solver's problem of a campaign in a cell: its arm, SMRs, base guess and tracker spec."""
+    targets = cell.target_positions(meas.target_names)
+    return Problem.of(cell.robot, targets, meas, cell.base, tracker_spec=tracker_spec(cell))
 
 
 def load_cell(path) -> Cell:
@@ -157,17 +165,7 @@ def screen_campaign(cell: Cell, meas: Measurements) -> Screening:
     """The campaign's gross outliers (solver.screen), judged with the cell's nominal model."""
     from robocal.solver.screen import screen_readings
 
-    targets = cell.target_positions(meas.target_names)
-    return screen_readings(
-        cell.robot,
-        targets,
-        meas.target_names,
-        meas.q,
-        meas.xyz,
-        meas.time_s,
-        meas.temp_c,
-        cell.base,
-    )
+    return screen_readings(cell_problem(cell, meas))
 
 
 def without_outliers(meas: Measurements, screening: Screening | None) -> Measurements:
@@ -199,18 +197,8 @@ def run_method(
 
     screened = screen_campaign(cell, meas) if screening is True else screening or None
     use = without_outliers(meas, screened)
-    targets = cell.target_positions(meas.target_names)
-    cal = calibrate(
-        cell.robot,
-        targets,
-        meas.target_names,
-        meas.q,
-        use.xyz,
-        method=method,
-        base_guess=cell.base,
-        qp=qp,
-        noise_floor_mm=noise_floor(cell, use)[0],
-    )
+    problem = replace(cell_problem(cell, use), noise_floor_mm=noise_floor(cell, use)[0])
+    cal = calibrate(problem, method, qp=qp)
     if screened is not None:
         cal.screening = screened
         cal.outliers = screened.report(meas.pose_ids, meas.target_names)
@@ -220,17 +208,16 @@ def run_method(
 def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None) -> ModelFile:
     """The self-contained model file of a calibration."""
     from robocal.solver import metrics
-    from robocal.solver.fit_errors import angles, calibration_rows
-    from robocal.solver.uncertainty import errors_from_rows
+    from robocal.solver.fit_errors import calibration_figures
 
     from .identified import identified_block
+    from .position_uncertainty import position_block
 
     screening = cal.get("screening")
     used = without_outliers(meas, screening)
     pred = predict(cal.layout, cal.x, meas.q)
-    acc = metrics.accuracy(pred, used.xyz, meas.target_names)
-    rows, column = calibration_rows(cal, meas.q, used.xyz)
-    errors = errors_from_rows(rows, cal.layout.names(), column, angles(cal.layout))
+    acc = metrics.accuracy(pred, used.xyz, meas.target_names, orientation=False)  # positions
+    errors, holdout = calibration_figures(cal, meas.q, used.xyz)
     data = {"poses": meas.n_poses, "readings": meas.n_readings, "targets": list(meas.target_names)}
     if data_path is not None and "://" not in str(data_path):  # a server's database: no file
         data.update(file=Path(data_path).name, sha256=file_digest(data_path))
@@ -274,19 +261,26 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         )
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable
-    model.meta["validation"] = validate(cal, cell, used, rows, errors, acc.rmse)
+    model.meta["validation"] = validate(cal, cell, used, holdout, errors, acc.rmse)
+    if cal.method != "nominal":
+        v = model.meta["validation"]
+        block = position_block(
+            cal.layout, cal.x, used.q, errors, v["holdout_rms_mm"], v["noise_floor_mm"]
+        )
+        if block is not None:
+            model.meta["uncertainty"]["position"] = block
     return model
 
 
-def validate(cal: Calibration, cell: Cell, used: Measurements, rows, errors, fit_rms) -> dict:
-    """model.json's `validation` block of a calibration on the readings it used."""
+def validate(cal: Calibration, cell: Cell, used: Measurements, holdout, errors, fit_rms) -> dict:
+    """model.json's `validation` block of a calibration on the readings it used (holdout: its
+    leave-one-pose-out residuals, solver.guard.Holdout)."""
     from robocal.solver import guard
-    from robocal.solver.fit_errors import point_errors
 
     floor, source = noise_floor(cell, used)
     v = guard.judge(
         fit_rms_mm=fit_rms,
-        holdout=guard.leave_one_pose_out(rows, point_errors(cal, rows)),
+        holdout=holdout,
         condition_number=cal.condition,
         equations=3 * int(np.isfinite(used.xyz[..., 0]).sum()),
         free_parameters=int(np.count_nonzero(errors.column >= 0)),
@@ -330,10 +324,7 @@ def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
     registered on them: what the calibration is to improve on."""
     from robocal.solver.calibrate import calibrate
 
-    targets = cell.target_positions(meas.target_names)
-    nom = calibrate(
-        cell.robot, targets, meas.target_names, meas.q, meas.xyz, "nominal", base_guess=cell.base
-    )
+    nom = calibrate(cell_problem(cell, meas), "nominal")
     r = np.linalg.norm(predict(nom.layout, nom.x, meas.q) - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
     return json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
@@ -416,7 +407,7 @@ def evaluate(model: ModelFile, meas: Measurements) -> Evaluation:
     if model.nominal is None:
         return metrics.Evaluation(after)
     targets = np.array([model.targets[t] for t in names])
-    nom = calibrate(model.nominal, targets, names, meas.q, meas.xyz, method="nominal")
+    nom = calibrate(Problem.of(model.nominal, targets, meas), "nominal")
     before = metrics.accuracy(predict(nom.layout, nom.x, meas.q), meas.xyz, names)
     return metrics.Evaluation(after, before, metrics.compare_accuracy(before, after))
 
@@ -448,22 +439,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
     from robocal.solver.diagnose import diagnose as run_diagnosis
 
-    targets = cell.target_positions(meas.target_names)
-    d = run_diagnosis(
-        cell.robot,
-        targets,
-        meas.target_names,
-        meas.q,
-        meas.xyz,
-        meas.time_s,
-        meas.temp_c,
-        base_guess=cell.base,
-        log=log,
-        screen_outliers=screen,
-        pose_ids=meas.pose_ids,
-        tracker_spec=tracker_spec(cell),
-        prev_q=meas.prev_q,
-    )
+    d = run_diagnosis(cell_problem(cell, meas), log=log, screen_outliers=screen)
     lay, x = d.layout, d.x
     robot = lay.robot.with_params(x[: lay.n_geo])
     model = ModelFile(
@@ -497,17 +473,8 @@ def _judge_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> Non
 
     from .identified import identified_block
 
-    targets = cell.target_positions(meas.target_names)
-    geometric = calibrate(
-        cell.robot,
-        targets,
-        meas.target_names,
-        meas.q,
-        meas.xyz,
-        "ls-sum",
-        base_guess=cell.base,
-        noise_floor_mm=d.report["noise_floor_mm"],
-    )
+    problem = replace(cell_problem(cell, meas), noise_floor_mm=d.report["noise_floor_mm"])
+    geometric = calibrate(problem, "ls-sum")
     model.meta["identified"] = identified_block(
         model,
         d.errors.parameters,

@@ -4,18 +4,31 @@ from __future__ import annotations
 
 import difflib
 import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import OptimizeResult
 
 from . import identifiability as ident
-from .finite import finite, require_inputs
-from .identify import fit_targets, pose_fit, pose_residuals, pose_weight, register, start_fit
+from . import identify
+from .finite import finite
+from .identify import (
+    SumOfSquares,
+    fit_targets,
+    pose_fit,
+    pose_residuals,
+    pose_weight,
+    register,
+    start_fit,
+)
 from .kinematics import Layout, predict_with_jacobian
-from .minimax import minimax
+from .lm import LMResult
+from .minimax import MinimaxResult, minimax
+from .problem import Problem
 from .robot import Robot
+from .stop import Stop
 
-METHODS = ("minimax", "ls-sum", "ls-single", "ls-pose", "nominal")
 # Fit residuals (RMS a reading) past this multiple of the noise floor set the level at which
 # the parameters are judged identified instead of the floor.
 RESIDUAL_OVER_FLOOR = 2.0
@@ -78,149 +91,218 @@ def parse_method(method: str, target_names) -> tuple[str, list[int]]:
     return name, list(range(len(target_names)))
 
 
-def calibrate(
-    robot: Robot,
-    targets,
-    target_names,
-    q,
-    meas,
-    method="minimax",
-    base_guess=None,
-    qp="primal-dual",
-    epsilon=None,
-    noise_floor_mm=None,
-) -> Calibration:
-    """Fit geometry, base frame and SMR positions to measurements with the chosen method.
+@dataclass
+class Stopped:
+    """Why a method without a solver of its own stopped."""
 
-    q: (m, n) joint readings in rad; meas: (m, K, 3) mm with NaN for missing readings;
-    noise_floor_mm: the tracker's noise (3-D RMS a reading), against which the parameters the
-    data moves too little are held (default: the default tracker spec's).
-    """
-    t0 = time.perf_counter()
-    name, rows = parse_method(method, list(target_names))
-    require_inputs(q, meas, targets, base_guess)
-    if name == "ls-pose" and len(target_names) < 3:
-        raise ValueError("ls-pose needs at least three targets")
-    if name == "nominal":
-        prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
-        F = prob.sum_squares(x0)
-        return Calibration(
-            method=method,
-            layout=prob.layout,
-            x=x0,
-            cost=float(F.sum()),
-            success=True,
-            status=0,
-            message="nominal model registered: nothing fitted",
-            nit=0,
-            fixed={},
-            condition=float("nan"),
-            F=F,
-            seconds=time.perf_counter() - t0,
-        )
-    # which parameters the model can identify does not depend on where the base is
-    lay = Layout(robot, np.eye(4), tuple(target_names))
-    x0 = lay.initial(targets)
+    status: Stop
+    message: str
+    iterations: int
+
+
+@dataclass
+class Fitted:
+    """What one method's own steps leave for the common ending."""
+
+    prob: identify.Problem  # the registered problem x is of
+    x: np.ndarray
+    F: np.ndarray  # (K,) mm^2 per target at x
+    cost: float  # the method's objective at x, mm^2
+    stop: LMResult | MinimaxResult | Stopped  # the last solver's status, message, iterations
+    fixed: dict  # parameter name -> why it is held
+    condition: float
+    own: dict = field(default_factory=dict)  # the method's own figures
+    rebase: bool = True  # the base folded into the layout's reference (nominal keeps its own)
+
+
+def _nominal(problem: Problem, rows: list[int], **_) -> Fitted:
+    """Condition 0: the nominal arm with its base and SMRs registered, nothing of it fitted."""
+    p = problem
+    prob, x0 = register(p.robot, p.targets, p.target_names, p.q, p.meas, p.base_guess)
+    F = prob.sum_squares(x0)
+    stop = Stopped(Stop.CONVERGED, "nominal model registered: nothing fitted", 0)
+    return Fitted(prob, x0, F, float(F.sum()), stop, {}, float("nan"), rebase=False)
+
+
+def _structural(problem: Problem, rows: list[int], weight=None):
+    """Which parameters the model can identify on the fitted targets (wherever the base is)."""
+    lay = Layout(problem.robot, np.eye(4), problem.target_names)
+    x0 = lay.initial(problem.targets)
     candidates = np.ones(lay.n_params, dtype=bool)
     ts = lay.target_slice.start
-    for k in range(len(target_names)):
+    for k in range(len(problem.target_names)):
         if k not in rows:
             candidates[ts + 3 * k : ts + 3 * k + 3] = False
-    weight = pose_weight(lay.targets(x0)) if name == "ls-pose" else None
-    st = ident.structural(lay, x0, candidates, rows=rows, pose_weight=weight)
-    own: dict = {"structural_condition": st.condition}  # the method's own figures
-    if name == "ls-pose":
-        prob, x0 = register(robot, targets, target_names, q, meas, base_guess, refine=False)
-        lay = prob.layout
-        full = np.all(prob.mask, axis=1)
-        p, J, _ = predict_with_jacobian(lay, x0, q[full])
-        Jd = pose_residuals(p, p, J, weight)[1].reshape(-1, lay.n_params)
-        data = ident.check_data(
-            ident.gram(Jd, st.free), st.free, lay, Jd.shape[0], int(full.sum()), noise_floor_mm
-        )
-        x, res = pose_fit(prob, x0, data.free, weight)
-        x = fit_targets(prob, x, range(len(target_names)))
-        own["pose_weight_mm_per_rad"] = weight
-    else:
-        fit, first = start_fit(robot, targets, target_names, q, meas, st.free, rows, base_guess)
-        prob = fit.prob
-        A, n_rows = first.A, 3 * int(fit.mask.sum())
-        data = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], noise_floor_mm)
-        if data.held:  # the start's normal equations were of the structurally free columns
-            fit, first = start_fit(
-                robot, targets, target_names, q, meas, data.free, rows, base_guess
-            )
-        x, res = fit.fit(first)
-        del first  # its twists, as large as a Jacobian, would sit beside minimax's own
-        # Residuals well above the tracker's noise (the arm's repeatability, unmodelled effects)
-        # pin the parameters less than the noise alone would: judged again at their level.
-        F = finite(prob.sum_squares(x)[rows], "the fit's residuals")
-        scatter = float(np.sqrt(F.sum() / max(1, fit.mask.sum())))
-        floor = noise_floor_mm or ident.DEFAULT_NOISE_FLOOR_MM
-        if scatter > RESIDUAL_OVER_FLOOR * floor:
-            again = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], scatter)
-            if set(again.held) - set(data.held):
-                data = again
-                fit, first = start_fit(
-                    robot, targets, target_names, q, meas, data.free, rows, base_guess
-                )
-                x, res = fit.fit(first)
-                del first
-        own["start"] = fit.start
-        if name == "ls-single":
-            x = fit_targets(prob, x, [k for k in range(len(target_names)) if k not in rows])
-    iters, message, status = res.iterations, res.message, res.status
-    own["lm"] = {
+    return lay, ident.structural(lay, x0, candidates, rows=rows, pose_weight=weight)
+
+
+def _lm_figures(res) -> dict:
+    """The least-squares stage's effort, as every fitting method reports it."""
+    return {
         "iterations": res.iterations,
         "evaluations": res.nfev,
         "jacobians": res.njev,
         "message": res.message,
     }
-    if name == "minimax":
-        # the fit's last residuals, when it kept them, are those of x over every target
-        start_F = fit.per_target(res.r) if res.r is not None else prob.sum_squares(x)
-        own["ls_sum_F"] = start_F.tolist()
-        mm = minimax(prob, x, data.free, rows=rows, qp=qp, epsilon=epsilon)
-        x = mm.x
-        iters, message, status = mm.iterations, mm.message, mm.status
-        own.update(
-            history=mm.history,
-            qp=qp,
-            qp_iterations=mm.qp_iterations,
-            qp_converged=mm.qp_unconverged == 0,
-            lam=mm.lam.tolist(),
-            mu=mm.mu.tolist(),
-            constraints=mm.constraints.tolist(),
-            sqp_seconds=mm.seconds,
-        )
-    # ls-sum's last residuals, when the fit kept them, are those of x over every target;
-    # minimax's F_i of its last step too when it fitted every target
-    if name == "ls-sum" and res.r is not None:
-        F = fit.per_target(res.r)
-    elif name == "minimax" and sorted(rows) == list(range(len(target_names))):
-        F = np.empty(len(target_names))
+
+
+def _ls_pose(problem: Problem, rows: list[int], **_) -> Fitted:
+    """Condition 6: least squares on the pose (position and orientation) each reading set gives."""
+    p = problem
+    if len(p.target_names) < 3:
+        raise ValueError("ls-pose needs at least three targets")
+    lay = Layout(p.robot, np.eye(4), p.target_names)
+    weight = pose_weight(lay.targets(lay.initial(p.targets)))
+    _, st = _structural(p, rows, weight)
+    prob, x0 = register(p.robot, p.targets, p.target_names, p.q, p.meas, p.base_guess, False)
+    lay = prob.layout
+    full = np.all(prob.mask, axis=1)
+    pred, J, _ = predict_with_jacobian(lay, x0, p.q[full])
+    Jd = pose_residuals(pred, pred, J, weight)[1].reshape(-1, lay.n_params)
+    data = ident.check_data(
+        ident.gram(Jd, st.free), st.free, lay, Jd.shape[0], int(full.sum()), p.noise_floor_mm
+    )
+    x, res = pose_fit(prob, x0, data.free, weight)
+    x = fit_targets(prob, x, range(len(p.target_names)))
+    own = {
+        "structural_condition": st.condition,
+        "pose_weight_mm_per_rad": weight,
+        "lm": _lm_figures(res),
+    }
+    F = prob.sum_squares(x)
+    fixed = {**st.fixed, **data.held}
+    return Fitted(prob, x, F, float(res.cost), res, fixed, data.condition, own)
+
+
+@dataclass
+class _LeastSquares:
+    """The point least-squares stage ls-sum, ls-single and minimax share."""
+
+    fit: SumOfSquares
+    x: np.ndarray
+    res: LMResult
+    data: ident.DataCheck
+    fixed: dict
+    own: dict
+
+
+def _least_squares(problem: Problem, rows: list[int]) -> _LeastSquares:
+    """ls-sum on the targets in rows, its held parameters judged at the fit's own scatter."""
+    p = problem
+
+    def start(free):
+        return start_fit(p.robot, p.targets, p.target_names, p.q, p.meas, free, rows, p.base_guess)
+
+    lay, st = _structural(p, rows)
+    fit, first = start(st.free)
+    prob = fit.prob
+    A, n_rows = first.A, 3 * int(fit.mask.sum())
+    data = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], p.noise_floor_mm)
+    if data.held:  # the start's normal equations were of the structurally free columns
+        fit, first = start(data.free)
+    x, res = fit.fit(first)
+    del first  # its twists, as large as a Jacobian, would sit beside minimax's own
+    # Residuals well above the tracker's noise (the arm's repeatability, unmodelled effects)
+    # pin the parameters less than the noise alone would: judged again at their level.
+    F = finite(prob.sum_squares(x)[rows], "the fit's residuals")
+    scatter = float(np.sqrt(F.sum() / max(1, fit.mask.sum())))
+    floor = p.noise_floor_mm or ident.DEFAULT_NOISE_FLOOR_MM
+    if scatter > RESIDUAL_OVER_FLOOR * floor:
+        again = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], scatter)
+        if set(again.held) - set(data.held):
+            data = again
+            fit, first = start(data.free)
+            x, res = fit.fit(first)
+            del first
+    own = {"structural_condition": st.condition, "start": fit.start, "lm": _lm_figures(res)}
+    return _LeastSquares(fit, x, res, data, {**st.fixed, **data.held}, own)
+
+
+def _ls_sum(problem: Problem, rows: list[int], **_) -> Fitted:
+    """Condition 4: least squares summed over every target."""
+    ls = _least_squares(problem, rows)
+    prob, x, res = ls.fit.prob, ls.x, ls.res
+    # the fit's last residuals, when it kept them, are those of x over every target
+    F = ls.fit.per_target(res.r) if res.r is not None else prob.sum_squares(x)
+    return Fitted(prob, x, F, float(F[rows].sum()), res, ls.fixed, ls.data.condition, ls.own)
+
+
+def _ls_single(problem: Problem, rows: list[int], **_) -> Fitted:
+    """Conditions 1-3: least squares on one target, the others' positions fitted after."""
+    ls = _least_squares(problem, rows)
+    prob, res = ls.fit.prob, ls.res
+    others = [k for k in range(len(problem.target_names)) if k not in rows]
+    x = fit_targets(prob, ls.x, others)
+    F = prob.sum_squares(x)
+    return Fitted(prob, x, F, float(F[rows].sum()), res, ls.fixed, ls.data.condition, ls.own)
+
+
+def _minimax(problem: Problem, rows: list[int], qp="primal-dual", epsilon=None) -> Fitted:
+    """Condition 5, the paper's: the worst target's sum of squares minimised from ls-sum's fit."""
+    ls = _least_squares(problem, rows)
+    fit, prob, res = ls.fit, ls.fit.prob, ls.res
+    # the fit's last residuals, when it kept them, are those of x over every target
+    start_F = fit.per_target(res.r) if res.r is not None else prob.sum_squares(ls.x)
+    mm = minimax(prob, ls.x, ls.data.free, rows=rows, qp=qp, epsilon=epsilon)
+    # its F_i of the last step are those of every target when it fitted every target
+    if sorted(rows) == list(range(len(problem.target_names))):
+        F = np.empty(len(problem.target_names))
         F[rows] = mm.F
     else:
-        F = prob.sum_squares(x)
-    if name == "minimax":
-        worst = rows[int(np.argmax(F[rows]))]
-        cost = float(F[worst])
-        own.update(worst_target=list(target_names)[worst], worst_F=cost)
-    else:  # least squares: ls-pose its own residuals, the others F summed over their targets
-        cost = float(res.cost) if name == "ls-pose" else float(F[rows].sum())
-    prob, x = prob.rebased(x)
+        F = prob.sum_squares(mm.x)
+    worst = rows[int(np.argmax(F[rows]))]
+    own = {
+        **ls.own,
+        "ls_sum_F": start_F.tolist(),
+        "history": mm.history,
+        "qp": qp,
+        "qp_iterations": mm.qp_iterations,
+        "qp_converged": mm.qp_unconverged == 0,
+        "lam": mm.lam.tolist(),
+        "mu": mm.mu.tolist(),
+        "constraints": mm.constraints.tolist(),
+        "sqp_seconds": mm.seconds,
+        "worst_target": problem.target_names[worst],
+        "worst_F": float(F[worst]),
+    }
+    return Fitted(prob, mm.x, F, float(F[worst]), mm, ls.fixed, ls.data.condition, own)
+
+
+# Each method's own steps; the method's parsing, the rebasing and the result are common.
+FITS: dict[str, Callable[..., Fitted]] = {
+    "minimax": _minimax,
+    "ls-sum": _ls_sum,
+    "ls-single": _ls_single,
+    "ls-pose": _ls_pose,
+    "nominal": _nominal,
+}
+METHODS = tuple(FITS)
+
+
+def calibrate(problem: Problem, method="minimax", *, qp="primal-dual", epsilon=None) -> Calibration:
+    """Fit geometry, base frame and SMR positions to the problem's readings with the method.
+
+    qp and epsilon are minimax's QP subsolver and stopping tolerance. The problem's
+    noise_floor_mm (the tracker's noise, 3-D RMS a reading) is what parameters the data moves
+    too little are held against (default: the default tracker spec's).
+    """
+    t0 = time.perf_counter()
+    name, rows = parse_method(method, list(problem.target_names))
+    out = FITS[name](problem, rows, qp=qp, epsilon=epsilon)
+    prob, x = out.prob.rebased(out.x) if out.rebase else (out.prob, out.x)
+    status, message, nit = out.stop.status, out.stop.message, out.stop.iterations
     return Calibration(
         method=method,
         layout=prob.layout,
         x=x,
-        cost=cost,
+        cost=out.cost,
         success=status == 0,
         status=int(status),
         message=message,
-        nit=iters,
-        fixed={**st.fixed, **data.held},
-        condition=data.condition,
-        F=F,
+        nit=nit,
+        fixed=out.fixed,
+        condition=out.condition,
+        F=out.F,
         seconds=time.perf_counter() - t0,
-        **own,
+        **out.own,
     )

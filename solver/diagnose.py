@@ -10,12 +10,12 @@ poses.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import vocabulary
+from . import identify, vocabulary
 from .effects import Extension, Inputs, point_shift, prepare
 from .extended import extension_rows, fit_extended, predict_extended
 from .extrapolation import (
@@ -26,13 +26,13 @@ from .extrapolation import (
     region_folds,
     span_parts,
 )
-from .finite import finite, require_inputs
-from .identify import Problem, register
+from .finite import finite
+from .identify import register
 from .kinematics import Layout, predict_rows
 from .motion import visit_order
 from .noise import from_distances as noise_floor  # noqa: F401 (the tests' measured floor)
 from .noise import noise_floor as tracker_noise
-from .robot import Robot
+from .problem import Problem
 from .screen import screen_readings
 from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
 from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
@@ -99,7 +99,7 @@ def candidates(layout, x, inputs: Inputs) -> list[Extension]:
 class Diagnoser:
     """Cross-validation of model variants on one campaign."""
 
-    def __init__(self, prob: Problem, x0, free, inputs: Inputs, k_folds=FOLDS):
+    def __init__(self, prob: identify.Problem, x0, free, inputs: Inputs, k_folds=FOLDS):
         self.prob, self.x0, self.free, self.inputs = prob, x0, free, inputs
         self.folds = folds(prob.q.shape[0], k_folds)
         self.centroid = np.nanmean(prob.meas.reshape(-1, 3), axis=0)
@@ -478,57 +478,29 @@ def simplest_variant(trial, ok, best: int, sc) -> int:
     return min(tied, key=lambda i: (trial[i].n_params, -sc.gain[i])) if tied else best
 
 
-def diagnose(
-    robot: Robot,
-    targets,
-    target_names,
-    q,
-    meas,
-    time_s=None,
-    temp_c=None,
-    base_guess=None,
-    log=None,
-    screen_outliers=True,
-    pose_ids=None,
-    tracker_spec: dict | None = None,
-    prev_q=None,
-) -> Diagnosis:
+def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     """Baseline geometric calibration, candidate effects, selection and the extended model.
 
-    prev_q (m, n) rad, NaN rows where not given: the joints the arm came from before each pose,
-    which decide the backlash's approach directions over the visit order.
-
-    tracker_spec: the cell's tracker block (mpe_um, mpe_um_per_m), the noise floor when the data
-    cannot measure it (one SMR, no repeated pose); without it the default specification's.
+    The problem's prev_q decides the backlash's approach directions over the visit order; its
+    tracker_spec is the noise floor when the data cannot measure it (one SMR, no repeated pose).
     """
     t0 = time.perf_counter()
-    require_inputs(q, meas, targets, base_guess)
     clock = {}
     # gross outliers (solver.screen) are missing from here on: fits, noise floor, figures
-    screening = (
-        screen_readings(robot, targets, target_names, q, meas, time_s, temp_c, base_guess)
-        if screen_outliers
-        else None
-    )
-    meas = meas if screening is None else screening.apply(meas)
+    screening = screen_readings(problem) if screen_outliers else None
+    if screening is not None:
+        problem = problem.with_meas(screening.apply(problem.meas))
     clock["screening"] = time.perf_counter() - t0
-    prob, x0 = register(robot, targets, target_names, q, meas, base_guess)
-    inputs = Inputs(q, time_s, temp_c, prev_q=prev_q)
-    noise = tracker_noise(q, meas, inputs, tracker_spec)
+    p = problem
+    q, meas, target_names, pose_ids = p.q, p.meas, p.target_names, p.pose_ids
+    prob, x0 = register(p.robot, p.targets, target_names, q, meas, p.base_guess)
+    inputs = p.inputs()
+    noise = tracker_noise(q, meas, inputs, p.tracker_spec)
     # the geometric calibration decides what is identified (and refuses too few poses) before
     # any selection, so the held parameters agree with the ls-sum model the report judges
     from .calibrate import calibrate
 
-    geo = calibrate(
-        robot,
-        targets,
-        target_names,
-        q,
-        meas,
-        "ls-sum",
-        base_guess=base_guess,
-        noise_floor_mm=noise.mm,
-    )
+    geo = calibrate(replace(problem, noise_floor_mm=noise.mm), "ls-sum")
     free = np.array([n not in geo.fixed for n in prob.layout.names()])
     clock["setup"] = time.perf_counter() - t0
     diag = Diagnoser(prob, x0, free, inputs)
@@ -588,7 +560,7 @@ def resampled(diag: Diagnoser, cands, steps) -> Stability | None:
     named = []
     subsets = leave_out(m)
     for keep in subsets:
-        prob = Problem(diag.prob.layout, diag.prob.q[keep], diag.prob.meas[keep])
+        prob = identify.Problem(diag.prob.layout, diag.prob.q[keep], diag.prob.meas[keep])
         sub = Diagnoser(prob, diag.x0, diag.free, diag.inputs.subset(keep))
         chosen, _, _ = select(sub, cands, max_effects=1)  # the top cause is what may differ
         chosen, _ = extrapolating(sub, chosen)

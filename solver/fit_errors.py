@@ -10,9 +10,11 @@ import numpy as np
 from .calibrate import Calibration, parse_method
 from .effects import Extension, Inputs, prepare
 from .extended import extension_rows as extended_rows
+from .guard import Holdout
 from .identify import Problem, pose_fit, pose_residuals
 from .kinematics import Layout, predict_rows
-from .uncertainty import ParameterErrors, Rows, errors_from_rows, propagate
+from .postfit import Blocks, poses_per_block, post_fit
+from .uncertainty import CLUSTERED, ParameterErrors, Rows, errors_from_rows, propagate
 
 
 def angles(layout: Layout) -> np.ndarray:
@@ -32,7 +34,9 @@ def point_rows(layout: Layout, x, q, meas, mask, cols, estimated, weight=None, s
     p, Jt = predict_rows(layout, x, q, mask, cols)
     J = Jt.reshape(len(cols), -1).T
     pose, k = np.nonzero(mask)
-    G = J * np.asarray(estimated, dtype=float)[None, :]
+    # least squares over every column (ls-sum, nominal): the weights are the Jacobian itself
+    plain = weight is None and bool(np.all(estimated))
+    G = J if plain else J * np.asarray(estimated, dtype=float)[None, :]
     if weight is not None:
         arm = np.asarray(cols) < layout.target_slice.start
         G[:, arm] *= np.repeat(np.asarray(weight, dtype=float)[k], 3)[:, None]
@@ -45,8 +49,25 @@ def _in(cols, which) -> np.ndarray:
 
 def calibration_errors(cal: Calibration, q, meas) -> ParameterErrors:
     """Standard errors of a calibration's identified parameters (every method of `calibrate`)."""
-    rows, column = calibration_rows(cal, q, meas)
-    return errors_from_rows(rows, cal.layout.names(), column, angles(cal.layout))
+    return calibration_figures(cal, q, meas)[0]
+
+
+def calibration_figures(cal: Calibration, q, meas) -> tuple[ParameterErrors, Holdout]:
+    """A calibration's standard errors and leave-one-pose-out residuals, its rows taken a block
+    of poses at a time (solver.postfit): memory bounded whatever the campaign's size."""
+    blocks, column = calibration_blocks(cal, q, meas)
+    post = post_fit(blocks, lambda rows: point_errors(cal, rows))
+    names = cal.layout.names()
+    errors = ParameterErrors(
+        tuple(names),
+        np.asarray(column, dtype=int),
+        post.clustered,
+        angles(cal.layout),
+        CLUSTERED,
+        post.poses,
+        post.plain,
+    )
+    return errors, post.holdout
 
 
 def point_errors(cal: Calibration, rows: Rows) -> np.ndarray:
@@ -57,7 +78,16 @@ def point_errors(cal: Calibration, rows: Rows) -> np.ndarray:
 
 
 def calibration_rows(cal: Calibration, q, meas) -> tuple[Rows, np.ndarray]:
-    """A calibration's residual rows and each parameter's column in them (-1 where held fixed).
+    """A calibration's residual rows, all at once, and each parameter's column in them (-1 where
+    held fixed); see calibration_blocks."""
+    blocks, column = calibration_blocks(cal, q, meas, len(q))
+    return Rows.stack(list(blocks())), column
+
+
+def calibration_blocks(cal: Calibration, q, meas, block=None) -> tuple[Blocks, np.ndarray]:
+    """A calibration's residual rows, `block` poses at a time (default: a block of
+    postfit.BLOCK_ENTRIES Jacobian entries), and each parameter's column in them (-1 where held
+    fixed).
 
     ls-sum and nominal are least squares over every reading; minimax's optimum is a least-squares
     stationary point weighted per SMR by its multipliers (the distance constraints are left
@@ -80,53 +110,86 @@ def calibration_rows(cal: Calibration, q, meas) -> tuple[Rows, np.ndarray]:
             dtype=int,
         )
     column = np.full(len(names), -1)
+    K = mask.shape[1]
     if name == "ls-pose":
-        parts, cols = _pose_stages(cal, q, meas, mask, free)
+        stages = _PoseStages(cal, q, meas, mask, free)
+        cols = stages.cols
         column[cols[len(free) :]] = np.arange(len(free), len(cols))  # the SMRs of the second stage
         column[free[free < ts]] = np.flatnonzero(free < ts)
+        rows_of, per_pose = stages.rows, 9 * K
     else:
         cols = np.r_[free, smr(others)].astype(int)
         weight = np.asarray(cal.lam) if name == "minimax" else None
-        sel = np.zeros(mask.shape[1], dtype=bool)
+        sel = np.zeros(K, dtype=bool)
         sel[rows] = True
-        parts = [point_rows(lay, x, q, meas, mask & sel, cols, _in(cols, free), weight)]
-        if others:
-            parts.append(
-                point_rows(lay, x, q, meas, mask & ~sel, cols, _in(cols, smr(others)), stage=1)
-            )
+
+        def rows_of(lo: int, hi: int) -> Rows:
+            qb, mb, at = q[lo:hi], meas[lo:hi], mask[lo:hi]
+            parts = [point_rows(lay, x, qb, mb, at & sel, cols, _in(cols, free), weight)]
+            if others:
+                parts.append(
+                    point_rows(lay, x, qb, mb, at & ~sel, cols, _in(cols, smr(others)), stage=1)
+                )
+            return _shifted(Rows.stack(parts), lo)
+
         column[cols] = np.arange(len(cols))
-    return Rows.stack(parts), column
+        per_pose = 3 * K
+    step = block or poses_per_block(per_pose, len(cols))
+    m = len(q)
+
+    def blocks():
+        for lo in range(0, m, step):
+            yield rows_of(lo, min(m, lo + step))
+
+    return blocks, column
 
 
-def _pose_stages(cal: Calibration, q, meas, mask, free):
+def _shifted(rows: Rows, lo: int) -> Rows:
+    """Rows of a block of poses starting at pose lo, their pose indices made the campaign's."""
+    rows.pose = rows.pose + lo
+    return rows
+
+
+class _PoseStages:
     """ls-pose's two stages: pose residuals over `free` (on poses with every SMR), then every SMR
     position from its readings with the arm held. The first stage's SMR entries are its own
     (refitted here, since the second stage replaced them in the calibration)."""
-    lay = cal.layout
-    weight = cal.pose_weight_mm_per_rad
-    prob = Problem(lay, q, meas)
-    x1, _ = pose_fit(prob, cal.x, np.isin(np.arange(lay.n_params), free), weight)
-    full = np.all(mask, axis=1)
-    m, K = int(full.sum()), mask.shape[1]
-    p, Jt = predict_rows(lay, x1, q[full], np.ones((m, K), dtype=bool), free)
-    J = Jt.reshape(len(free), m, K, 3).transpose(1, 2, 3, 0)
-    r, Jr = pose_residuals(p.reshape(m, K, 3), meas[full], J, weight)
-    tcols = np.arange(lay.target_slice.start, lay.target_slice.stop)
-    cols = np.r_[free, tcols]
-    n1 = len(free)
-    J1 = np.zeros((r.size, len(cols)))
-    J1[:, :n1] = Jr.reshape(-1, n1)
-    first = Rows(
-        J1, J1.copy(), r.ravel(), np.repeat(np.flatnonzero(full), 6), np.zeros(r.size, int)
-    )
-    # the second stage sees the arm's free entries and its own SMR columns, not stage one's SMRs
-    arm = np.r_[free[free < lay.target_slice.start], tcols]
-    second = point_rows(lay, cal.x, q, meas, mask, arm, _in(arm, tcols), stage=1)
-    J2 = np.zeros((len(second.r), len(cols)))
-    G2 = np.zeros_like(J2)
-    at = np.r_[np.flatnonzero(free < lay.target_slice.start), np.arange(n1, len(cols))]
-    J2[:, at], G2[:, at] = second.J, second.G
-    return [first, Rows(J2, G2, second.r, second.pose, second.stage)], cols
+
+    def __init__(self, cal: Calibration, q, meas, mask, free):
+        lay = cal.layout
+        self.cal, self.q, self.meas, self.mask, self.free = cal, q, meas, mask, free
+        self.weight = cal.pose_weight_mm_per_rad
+        prob = Problem(lay, q, meas)
+        self.x1, _ = pose_fit(prob, cal.x, np.isin(np.arange(lay.n_params), free), self.weight)
+        self.tcols = np.arange(lay.target_slice.start, lay.target_slice.stop)
+        self.cols = np.r_[free, self.tcols]
+
+    def rows(self, lo: int, hi: int) -> Rows:
+        """Both stages' rows of poses lo to hi."""
+        lay, free, cols = self.cal.layout, self.free, self.cols
+        q, meas, mask = self.q[lo:hi], self.meas[lo:hi], self.mask[lo:hi]
+        full = np.all(mask, axis=1)
+        m, K = int(full.sum()), mask.shape[1]
+        n1 = len(free)
+        parts = []
+        if m:
+            p, Jt = predict_rows(lay, self.x1, q[full], np.ones((m, K), dtype=bool), free)
+            J = Jt.reshape(n1, m, K, 3).transpose(1, 2, 3, 0)
+            r, Jr = pose_residuals(p.reshape(m, K, 3), meas[full], J, self.weight)
+            J1 = np.zeros((r.size, len(cols)))
+            J1[:, :n1] = Jr.reshape(-1, n1)
+            pose = np.repeat(np.flatnonzero(full), 6)
+            parts.append(Rows(J1, J1.copy(), r.ravel(), pose, np.zeros(r.size, int)))
+        # the second stage sees the arm's free entries and its own SMR columns, not stage one's
+        ts = lay.target_slice.start
+        arm = np.r_[free[free < ts], self.tcols]
+        second = point_rows(lay, self.cal.x, q, meas, mask, arm, _in(arm, self.tcols), stage=1)
+        J2 = np.zeros((len(second.r), len(cols)))
+        G2 = np.zeros_like(J2)
+        at = np.r_[np.flatnonzero(free < ts), np.arange(n1, len(cols))]
+        J2[:, at], G2[:, at] = second.J, second.G
+        parts.append(Rows(J2, G2, second.r, second.pose, second.stage))
+        return _shifted(Rows.stack(parts), lo)
 
 
 def coef_names(exts) -> list[str]:

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .finite import finite
-from .uncertainty import Rows, pose_blocks
+from .uncertainty import Rows, hat_blocks, pose_blocks
 
 # A deployable model has at least this many equations (3 per reading) per free parameter.
 MIN_EQUATIONS_PER_PARAMETER = 3
@@ -78,26 +78,46 @@ def leave_one_pose_out(rows: Rows, point: np.ndarray | None = None) -> Holdout:
     docstring). point (N,) bool: the rows that are point errors (predicted - measured, three
     consecutive rows a reading), default all; other rows (ls-pose's pose residuals) only move
     the parameters."""
-    A = finite(rows.G.T @ rows.J, "the normal matrix")
-    d = np.sqrt(np.abs(np.diag(A)))
-    d[d == 0] = 1.0
-    Ai = np.linalg.pinv(A / np.outer(d, d)) / np.outer(d, d)
-    out = np.full(len(rows.r), np.nan)
-    unsupported = []
-    for n, idx in pose_blocks(rows.pose):
-        J, G, r = rows.J[idx], rows.G[idx], rows.r[idx]
-        P = J.shape[-1]
-        H = np.einsum("bip,bjp->bij", (J.reshape(-1, P) @ Ai).reshape(J.shape), G)
-        M = np.eye(n) - H
-        s = np.linalg.svd(finite(M, "the held-out blocks"), compute_uv=False)
-        ok = s[:, -1] > UNSUPPORTED
-        e = np.full(r.shape, np.nan)
-        if ok.any():
-            e[ok] = np.linalg.solve(M[ok], r[ok][..., None])[..., 0]
-        out[idx] = e
-        unsupported.extend(rows.pose[idx[~ok, 0]].tolist())
+    out, unsupported = holdout_block(rows, holdout_inverse(rows.G.T @ rows.J))
     point = np.ones(len(out), dtype=bool) if point is None else np.asarray(point, dtype=bool)
     return Holdout(out[point].reshape(-1, 3), np.array(sorted(set(unsupported)), dtype=int))
+
+
+def holdout_inverse(A: np.ndarray) -> np.ndarray:
+    """(G'J)^-1 as the held-out residuals use it: a Jacobi-scaled pseudo-inverse, so a
+    rank-deficient fit still gives the poses that can be held out."""
+    A = finite(A, "the normal matrix")
+    d = np.sqrt(np.abs(np.diag(A)))
+    d[d == 0] = 1.0
+    return np.linalg.pinv(A / np.outer(d, d)) / np.outer(d, d)
+
+
+def holdout_block(rows: Rows, Ai: np.ndarray) -> tuple[np.ndarray, list[int]]:
+    """Held-out residuals (N,) of rows holding whole poses (NaN where a pose cannot be held
+    out) and those poses, given the whole fit's holdout_inverse Ai: each pose's figure depends
+    on its own rows and Ai alone, so a fit's rows may be taken a block of poses at a time."""
+    out = np.full(len(rows.r), np.nan)
+    unsupported: list[int] = []
+    for _n, idx in pose_blocks(rows.pose):
+        J, G, r = rows.J[idx], rows.G[idx], rows.r[idx]
+        out[idx], ok = held_out(hat_blocks(J, G, Ai), r)
+        unsupported.extend(rows.pose[idx[~ok, 0]].tolist())
+    return out, unsupported
+
+
+def held_out(H: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(I - H_p)^-1 r_p per pose (H (b, n, n), r (b, n)), NaN for the poses that cannot be held
+    out, and which can (b,)."""
+    H = finite(H, "the held-out blocks")
+    M = np.eye(H.shape[-1]) - H
+    # the smallest singular value of I - H is at least 1 - |H|_F: the SVD only where small
+    ok = np.sqrt(np.einsum("bij,bij->b", H, H)) < 0.5
+    if not ok.all():
+        ok[~ok] = np.linalg.svd(M[~ok], compute_uv=False)[:, -1] > UNSUPPORTED
+    e = np.full(r.shape, np.nan)
+    if ok.any():
+        e[ok] = np.linalg.solve(M[ok], r[ok][..., None])[..., 0]
+    return e, ok
 
 
 def strongest_correlations(cov: np.ndarray, k: int = 5) -> list[tuple[int, int, float]]:

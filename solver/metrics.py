@@ -203,8 +203,9 @@ class Accuracy:
         return out
 
 
-def accuracy(pred, meas, target_names) -> Accuracy:
-    """Position, orientation and sum-of-squares accuracy of one prediction against measurements."""
+def accuracy(pred, meas, target_names, orientation: bool = True) -> Accuracy:
+    """Position, orientation and sum-of-squares accuracy of one prediction against measurements
+    (orientation False: positions only, no AO or AO')."""
     pred, meas, mask = _check(pred, meas)
     names = tuple(target_names)
     m, K = mask.shape
@@ -215,7 +216,7 @@ def accuracy(pred, meas, target_names) -> Accuracy:
     counts = mask.sum(axis=0)
     n_total = int(counts.sum())
     ao_euler = ao_log = None
-    if K >= 3:
+    if K >= 3 and orientation:
         ao = orientation_errors_euler(pred, meas)
         ao_euler = {k: stats(ao[:, j]) for j, k in enumerate("abc")}
         ao_log = stats(orientation_errors_log(pred, meas))

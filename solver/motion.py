@@ -35,10 +35,11 @@ def last_motion(
     q = np.atleast_2d(np.asarray(q, dtype=float))
     m = q.shape[0]
     order = visit_order(time_s, m)
-    step = np.sign(np.diff(q[order], axis=0))  # (m - 1, n)
     seq = np.zeros_like(q)
-    for i in range(1, m):
-        seq[i] = np.where(step[i - 1] != 0, step[i - 1], seq[i - 1])
+    seq[1:] = np.sign(np.diff(q[order], axis=0))
+    # each joint's last nonzero step so far (row 0's zero before any): a forward fill
+    last = np.maximum.accumulate(np.where(seq != 0, np.arange(m)[:, None], 0), axis=0)
+    seq = np.take_along_axis(seq, last, axis=0)
     out = np.empty_like(seq)
     out[order] = seq
     if prev_q is not None:

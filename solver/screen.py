@@ -34,8 +34,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from .finite import finite, require_inputs
+from .finite import finite
 from .identifiability import NotIdentifiable
+from .problem import Problem
 
 ALPHA = 0.01  # chance of any false flag on a clean campaign, by the Gaussian reference
 MAX_ROUNDS = 6
@@ -314,16 +315,16 @@ def leverage(J: np.ndarray) -> np.ndarray:
     return np.sum(U * U, axis=1).reshape(-1, 3).mean(axis=1)
 
 
-def geometric_fit(robot, targets, target_names, q, base_guess=None):
+def geometric_fit(problem: Problem):
     """fit(meas) for screen(): an ls-sum calibration's predictions and its readings' leverage."""
     from .calibrate import calibrate
     from .identifiability import jacobian_rows
     from .kinematics import predict
 
+    q = problem.q
+
     def fit(meas):
-        cal = calibrate(
-            robot, targets, target_names, q, meas, method="ls-sum", base_guess=base_guess
-        )
+        cal = calibrate(problem.with_meas(meas), "ls-sum")
         mask = np.all(np.isfinite(meas), axis=-1)
         lev = np.zeros(mask.shape)
         lev[mask] = leverage(jacobian_rows(cal.layout, cal.x, q, mask))
@@ -332,11 +333,7 @@ def geometric_fit(robot, targets, target_names, q, base_guess=None):
     return fit
 
 
-def screen_readings(
-    robot, targets, target_names, q, meas, time_s=None, temp_c=None, base_guess=None, alpha=ALPHA
-) -> Screening:
+def screen_readings(problem: Problem, alpha=ALPHA) -> Screening:
     """Screen a campaign with the geometric (ls-sum) model: the one call the commands make."""
-    require_inputs(q, meas, targets, base_guess)
-    return screen(
-        geometric_fit(robot, targets, target_names, q, base_guess), q, meas, time_s, temp_c, alpha
-    )
+    p = problem
+    return screen(geometric_fit(p), p.q, p.meas, p.time_s, p.temp_c, alpha)

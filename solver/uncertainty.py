@@ -25,12 +25,12 @@ ABSORBED = 1e-9
 
 def pose_blocks(pose: np.ndarray):
     """The rows of each pose, grouped by their count: (n, (poses, n) row indices) pairs, so that
-    poses with as many rows are handled at once."""
+    poses with as many rows are handled at once (each pose's rows in their order)."""
     order = np.argsort(pose, kind="stable")
     starts = np.flatnonzero(np.r_[True, np.diff(pose[order]) != 0])
-    blocks = np.split(order, starts[1:])
-    for n in sorted({len(b) for b in blocks}):
-        yield n, np.array([b for b in blocks if len(b) == n])
+    counts = np.diff(np.r_[starts, len(order)])
+    for n in np.unique(counts).tolist():
+        yield n, order[starts[counts == n][:, None] + np.arange(n)]
 
 
 @dataclass
@@ -61,20 +61,59 @@ class Rows:
 
 def _bread(rows: Rows) -> np.ndarray:
     """(G'J)^-1, the map from the scores to the parameters."""
-    return np.linalg.inv(finite(rows.G.T @ rows.J, "the covariance's bread"))
+    return bread(rows.G.T @ rows.J)
+
+
+def bread(A: np.ndarray) -> np.ndarray:
+    """(G'J)^-1 from the normal matrix A = G'J."""
+    return np.linalg.inv(finite(A, "the covariance's bread"))
+
+
+@dataclass
+class StageSums:
+    """What the plain estimate needs of one stage's rows: r'r, their count, G'G and which
+    columns of G any row uses (a column's sum of squares is positive)."""
+
+    rr: float
+    count: int
+    GG: np.ndarray
+    used: np.ndarray  # (P,) bool
+
+    @staticmethod
+    def of(rows: Rows, on: np.ndarray) -> StageSums:
+        G, r = rows.G[on], rows.r[on]
+        GG = G.T @ G
+        return StageSums(float(r @ r), int(on.sum()), GG, np.diag(GG) > 0)
+
+    def add(self, other: StageSums) -> None:
+        self.rr += other.rr
+        self.count += other.count
+        self.GG += other.GG
+        self.used |= other.used
+
+
+def stage_sums(rows: Rows, GG: np.ndarray | None = None) -> dict[int, StageSums]:
+    """Each stage's StageSums over these rows (GG: their G'G, if known)."""
+    stages = np.unique(rows.stage)
+    if len(stages) == 1 and GG is not None:  # the usual case: no copy of G
+        sums = StageSums(float(rows.r @ rows.r), len(rows.r), GG.copy(), np.diag(GG) > 0)
+        return {int(stages[0]): sums}
+    return {int(s): StageSums.of(rows, rows.stage == s) for s in stages}
+
+
+def plain_from_sums(Ai: np.ndarray, stages: dict[int, StageSums]) -> np.ndarray:
+    """The plain covariance from the bread and the stages' sums (see plain)."""
+    meat = np.zeros_like(Ai)
+    for s in sorted(stages):
+        st = stages[s]
+        p = int(np.count_nonzero(st.used))
+        meat += st.rr / max(st.count - p, 1) * st.GG
+    return Ai @ meat @ Ai.T
 
 
 def plain(rows: Rows) -> np.ndarray:
     """Covariance with every residual row independent, of one variance per stage."""
-    Ai = _bread(rows)
-    meat = np.zeros_like(Ai)
-    for s in np.unique(rows.stage):
-        on = rows.stage == s
-        G = rows.G[on]
-        p = int(np.count_nonzero(np.any(G != 0, axis=0)))
-        s2 = float(rows.r[on] @ rows.r[on]) / max(int(on.sum()) - p, 1)
-        meat += s2 * (G.T @ G)
-    return Ai @ meat @ Ai.T
+    return plain_from_sums(_bread(rows), stage_sums(rows))
 
 
 def clustered(rows: Rows) -> np.ndarray:
@@ -87,22 +126,66 @@ def clustered(rows: Rows) -> np.ndarray:
     """
     Ai = _bread(rows)
     C = Ai @ (rows.G.T @ rows.G) @ Ai.T
+    return Ai @ cr2_meat(rows, Ai, C) @ Ai.T
+
+
+def cr2_meat(rows: Rows, Ai: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """The CR2 meat (sum of the poses' adjusted scores' outer products) of rows holding whole
+    poses, given the whole fit's bread Ai and C = Ai G'G Ai': the meat of a fit is the sum of
+    this over any split of its rows by pose."""
     meat = np.zeros_like(Ai)
     # poses with as many rows (all readings present) are done at once
-    for n, idx in pose_blocks(rows.pose):
+    for _n, idx in pose_blocks(rows.pose):
         J, G, r = rows.J[idx], rows.G[idx], rows.r[idx]
-        P = J.shape[-1]
-        # one large product each, then the small per-pose ones
-        JA = (J.reshape(-1, P) @ Ai).reshape(J.shape)
-        JC = (J.reshape(-1, P) @ C).reshape(J.shape)
-        H = np.einsum("bip,bjp->bij", JA, G)
-        M = np.eye(n) - H - H.transpose(0, 2, 1) + np.einsum("bip,bjp->bij", JC, J)
-        w, V = np.linalg.eigh(finite(0.5 * (M + M.transpose(0, 2, 1)), "the residual-maker blocks"))
+        meat += cr2_block_meat(J, G, r, hat_blocks(J, G, Ai), C)
+    return meat
+
+
+def hat_blocks(J: np.ndarray, G: np.ndarray, Ai: np.ndarray) -> np.ndarray:
+    """The hat matrix's diagonal blocks J_p Ai G_p' (b, n, n) of poses of n rows each (J, G:
+    (b, n, P)): one large product, then the small per-pose ones."""
+    P = J.shape[-1]
+    return (J.reshape(-1, P) @ Ai).reshape(J.shape) @ G.transpose(0, 2, 1)
+
+
+def cr2_block_meat(J, G, r, H, C) -> np.ndarray:
+    """cr2_meat of poses of n rows each (J, G (b, n, P), r (b, n)) given their hat blocks H."""
+    P = J.shape[-1]
+    JC = (J.reshape(-1, P) @ C).reshape(J.shape)
+    E = finite(H + H.transpose(0, 2, 1) - JC @ J.transpose(0, 2, 1), "the residual blocks")
+    score = (inverse_root_times(E, r)[:, None, :] @ G)[:, 0]
+    return score.T @ score
+
+
+# Poses whose residual-maker block is I - E with |E|_F up to this take the binomial series
+# (I - E)^-1/2 = sum_k binom(2k, k) (E / 4)^k, whose terms shrink as |E|^k: 27 terms at most
+# for a double's precision. Small leverage makes it the usual case (50,000 poses: |E| ~ 1e-3,
+# 6 terms), at the cost of matrix-vector products instead of an eigensolver per pose.
+SERIES_MAX = 0.25
+
+
+def inverse_root_times(E: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """(I - E)^-1/2 r for each symmetric block E (b, n, n) and vector r (b, n), eigenvalues of
+    I - E below ABSORBED taken as absorbed whole (their part of r dropped)."""
+    u = np.empty_like(r)
+    rho = np.sqrt(np.einsum("bij,bij->b", E, E))
+    near = rho <= SERIES_MAX
+    if near.any():
+        En, t = E[near], r[near]
+        top = float(rho[near].max())
+        terms = 0 if top == 0 else int(np.ceil(np.log(1e-17) / np.log(top)))
+        un = t.copy()
+        for k in range(1, terms + 1):
+            t = (En @ t[..., None])[..., 0] * ((2 * k - 1) / (2 * k))
+            un += t
+        u[near] = un
+    far = ~near
+    if far.any():
+        M = np.eye(E.shape[-1]) - E[far]
+        w, V = np.linalg.eigh(0.5 * (M + M.transpose(0, 2, 1)))
         inv_root = np.where(w > ABSORBED, 1.0 / np.sqrt(np.clip(w, ABSORBED, None)), 0.0)
-        u = np.einsum("bij,bj->bi", V, inv_root * np.einsum("bji,bj->bi", V, r))
-        score = np.einsum("bnp,bn->bp", G, u)
-        meat += score.T @ score
-    return Ai @ meat @ Ai.T
+        u[far] = np.einsum("bij,bj->bi", V, inv_root * np.einsum("bji,bj->bi", V, r[far]))
+    return u
 
 
 @dataclass

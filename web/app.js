@@ -14,15 +14,29 @@ const state = { campaign: null, status: null, job: null, diag: null, failureShow
                 verify: null };  // the verification run started from the results: {campaign, job}
 const READINGS_SHOWN = 6;  // the latest readings table keeps this many rows
 
-/** Show a message at the corner (an error unless ok). */
-function say(text, ok = false) {
+/** Show a message in the header's notice row: an error (until dismissed or replaced) unless ok
+ * (gone after a few seconds). `what` is text or an Error; an API refusal (ApiError) keeps the
+ * request and its status one click away, under "details", for an engineer (or `technical`). */
+function say(what, ok = false, technical = "") {
   const m = $("message");
-  m.textContent = text;
+  if (what instanceof ApiError) technical = what.technical;
+  m.setAttribute("role", ok ? "status" : "alert");
+  $("message-text").textContent = what instanceof Error ? what.message : what;
+  $("message-technical").textContent = technical;
+  $("message-details").hidden = !technical;
+  $("message-details").open = false;
   m.className = ok ? "ok" : "";
   m.hidden = false;
   clearTimeout(say.timer);
-  say.timer = setTimeout(() => { m.hidden = true; }, ok ? 3000 : 10000);
+  if (ok) say.timer = setTimeout(() => { m.hidden = true; }, 6000);
 }
+$("message-close").addEventListener("click", () => { $("message").hidden = true; });
+
+// The header's height, for the page's scroll padding (style.css): what the page scrolls to (a
+// focused field, a result shown) lands below the header and its notices, never under them.
+new ResizeObserver(([e]) => document.documentElement.style.setProperty(
+  "--header-h", `${Math.ceil(e.target.getBoundingClientRect().height)}px`,
+)).observe(document.querySelector("header"));
 
 /** Draw the eye to an element that just changed (a short highlight). */
 function flash(el) {
@@ -31,8 +45,58 @@ function flash(el) {
   el.classList.add("flash");
 }
 
-/** Call the API with the tab's token (reads need it too); the Response, or throw with the
- * problem-detail message. The token goes only in the Authorization header, never in a URL. */
+/** An API refusal in the operator's words (what happened, what to do); `technical` is the
+ * request, its status and the API's own words, for an engineer. */
+class ApiError extends Error {
+  constructor(message, technical, status) {
+    super(message);
+    this.technical = technical;
+    this.status = status;
+  }
+}
+
+// What the operator was doing, by request: the start of every refusal's message.
+const DOING = [
+  ["POST", /^\/cells$/, () => "The cell was not uploaded"],
+  ["POST", /^\/measurements\/import/, () => "The file was not imported"],
+  ["POST", /^\/campaigns$/, () => "The campaign was not planned"],
+  ["POST", /^\/campaigns\/(\d+)\/(\w+)$/, (m) => `Campaign ${m[1]} could not ${
+    { estop: "be stopped", reset: "be reset" }[m[2]] || m[2]}`],
+  ["POST", /^\/estop$/, () => "The emergency stop was not confirmed"],
+  ["POST", /^\/jobs$/, () => "The job was not started"],
+  ["POST", /^\/models\/\d+\/compensate/, () => "The targets were not compensated"],
+  ["POST", /^\/models\/\d+\/export/, () => "The export was not made"],
+  ["POST", /^\/models\/\d+\/verify/, () => "The verification run was not planned"],
+  ["POST", /^\/models\/\d+\/checks\/run/, () => "The check was not run"],
+  ["POST", /^\/models\/\d+\/checks/, () => "The check was not judged"],
+  ["GET", /^\/(\w+)/, () => "The page could not load what it shows"],
+];
+
+/** The refusal's message for people: what was being done, why not (the API's detail and the
+ * fields it names, as the form calls them), and what to do. */
+function refusal(method, path, status, data) {
+  const found = DOING.find(([m, re]) => m === method && re.test(path));
+  const doing = found ? found[2](path.match(found[1])) : "That did not work";
+  const fields = Array.isArray(data && data.errors) ? data.errors.map((e) => {
+    const at = (e.loc || []).filter((p) => !["body", "query", "path"].includes(p)).join(" ");
+    return at ? `${at}: ${e.msg}` : e.msg;
+  }).join("; ") : "";
+  const detail = String((data && data.detail) || "").trim();
+  const why = [detail, fields].filter(Boolean).join("; ");
+  const todo = {
+    401: "paste the service's API token in section 1 (robocal serve prints it at its first start)",
+    403: "paste the service's API token in section 1",
+    413: "the file is larger than the service takes; split it",
+    429: "the service is busy: try again in a moment",
+  }[status] || (status >= 500 ? "the service's log has the details; try again, and report it if it "
+    + "happens again" : "");
+  const reason = why || (status === 401 ? "the service refuses this tab's API token" : "");
+  return `${doing}${reason ? `: ${reason}` : ""}${todo ? `. What to do: ${todo}.` : ""}`;
+}
+
+/** Call the API with the tab's token (reads need it too); the Response, or throw an ApiError
+ * with the refusal in people's words. The token goes only in the Authorization header, never in
+ * a URL. */
 async function request(method, path, body, raw = false, contentType = "application/json") {
   const headers = { Accept: "application/json" };
   const token = sessionStorage.getItem(TOKEN_KEY);
@@ -40,19 +104,23 @@ async function request(method, path, body, raw = false, contentType = "applicati
   if (body !== undefined) headers["Content-Type"] = contentType;
   // raw: the body is already text, sent as is (a cell.json or meas.csv keeps its lines for the
   // errors).
-  const r = await fetch(`/api${path}`, {
-    method, headers, body: body === undefined ? undefined : raw ? body : JSON.stringify(body),
-  });
+  let r;
+  try {
+    r = await fetch(`/api${path}`, {
+      method, headers, body: body === undefined ? undefined : raw ? body : JSON.stringify(body),
+    });
+  } catch (e) {
+    throw new ApiError("The service does not answer. What to do: check that robocal serve is "
+      + "running on this computer, then try again.", `${method} /api${path}: ${e.message}`, 0);
+  }
   if (!r.ok) {
     const type = r.headers.get("content-type") || "";
     const data = type.includes("json") ? await r.json() : { detail: await r.text() };
-    // RFC 9457 problem details: the API's own words are the useful part.
-    // A request the schema refuses names its fields in `errors`: "body.cycles: ..." is the help.
-    const fields = Array.isArray(data && data.errors) ? data.errors.map(
-      (e) => `${(e.loc || []).join(".")}: ${e.msg}`).join("; ") : "";
-    const detail = ((data && data.detail) || r.statusText) + (fields ? ` (${fields})` : "");
-    const hint = r.status === 401 ? " (where the token comes from: section 1)" : "";
-    throw new Error(`${method} /api${path}: ${r.status} ${data.title || r.statusText}: ${detail}${hint}`);
+    // RFC 9457 problem details: the API's own words are the useful part; the request and the
+    // status go under "details".
+    const technical = `${method} /api${path}: ${r.status} ${data.title || r.statusText}`
+      + (data.errors ? `\n${JSON.stringify(data.errors)}` : "");
+    throw new ApiError(refusal(method, path, r.status, data), technical, r.status);
   }
   return r;
 }
@@ -67,12 +135,22 @@ async function api(method, path, body, raw = false, contentType = "application/j
 /** An <img> of an API picture: fetched with the token (an src URL cannot carry it). */
 async function showImage(img, url) {
   img.dataset.url = url;  // the picture this <img> is to show; an older answer is dropped
+  const figure = img.closest("figure");
+  // a chart being drawn says so (a grey box with words), never a broken-image icon
+  if (figure) { figure.classList.add("loading"); figure.setAttribute("aria-busy", "true"); }
   try {
     const blob = await (await request("GET", url.replace(/^\/api/, ""))).blob();
     if (img.dataset.url !== url) return;
     if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
     img.src = URL.createObjectURL(blob);
-  } catch (e) { say(e.message); }
+  } catch (e) {
+    if (img.dataset.url === url) say(e);
+  } finally {
+    if (figure && img.dataset.url === url) {
+      figure.classList.remove("loading");
+      figure.removeAttribute("aria-busy");
+    }
+  }
 }
 
 /** Empty an <img> of an API picture (another job's is not to be seen meanwhile). */
@@ -89,13 +167,21 @@ document.addEventListener("click", async (ev) => {
   if (!a) return;
   ev.preventDefault();
   try {
-    const blob = await (await request("GET", a.getAttribute("href").slice(4))).blob();
+    const r = await request("GET", a.getAttribute("href").slice(4));
+    const blob = await r.blob();
     const save = Object.assign(document.createElement("a"), {
-      href: URL.createObjectURL(blob), download: a.getAttribute("download") || "" });
+      href: URL.createObjectURL(blob), download: savedName(r, a.getAttribute("download") || "") });
     save.click();
     setTimeout(() => URL.revokeObjectURL(save.href), 10000);
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 });
+
+/** The name the service gives a download (its Content-Disposition: robot, job and what it
+ * is), else `fallback`. */
+function savedName(r, fallback) {
+  const m = /filename="([^"]+)"/.exec(r.headers.get("content-disposition") || "");
+  return m ? m[1] : fallback;
+}
 
 function showTokenState() {
   $("token-state").textContent = sessionStorage.getItem(TOKEN_KEY)
@@ -118,20 +204,24 @@ function cellLabel(c) {
     : `${c.id} (real: tracker ${d.tracker.host}:${d.tracker.port}, controller ${d.controller.url})`;
 }
 
-// SMRs per cell id, for the duration estimate (plan.js).
+// SMRs per cell id, and whether it is simulated, for the duration estimate (plan.js).
 const cellSmrs = new Map();
+const cellSimulated = new Map();
 
 /** Fill the cell picker from GET /api/cells, keeping (or setting) the selection. */
 async function loadCells(select) {
   try {
     const ids = await api("GET", "/cells");
     const cells = await Promise.all(ids.map((id) => api("GET", `/cells/${id}`)));
-    cells.forEach((c) => cellSmrs.set(c.id, Object.keys(c.cell.targets || {}).length));
+    cells.forEach((c) => {
+      cellSmrs.set(c.id, Object.keys(c.cell.targets || {}).length);
+      cellSimulated.set(c.id, !!c.simulated);
+    });
     const pick = select || $("c-cell").value || "default";
     $("c-cell").replaceChildren(...cells.map((c) => new Option(cellLabel(c), c.id)));
     $("c-cell").value = ids.includes(pick) ? pick : ids[0];
     showEstimate();
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 }
 
 $("cells-refresh").addEventListener("click", () => loadCells());
@@ -141,7 +231,7 @@ $("cell-upload-btn").addEventListener("click", async () => {
     const c = await api("POST", "/cells", $("cell-json").value, true);
     await loadCells(c.id);
     say(`cell ${c.id} uploaded`, true);
-  } catch (e) { say(e.message); }  // a 422 names the line and column of the problem
+  } catch (e) { say(e); }  // a 422 names the line and column of the problem
 });
 
 /** A campaign becomes the page's current one: progress, readings, calibration enabled if done.
@@ -178,7 +268,7 @@ $("m-import-btn").addEventListener("click", async () => {
     useCampaign(c);
     await refreshReadings(c.id);
     say(`${file.name} imported as campaign ${c.id} (${c.poses_done} poses)`, true);
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 });
 
 $("campaign-form").addEventListener("submit", async (ev) => {
@@ -190,8 +280,9 @@ $("campaign-form").addEventListener("submit", async (ev) => {
     const c = r.status === 202 ? await planned(await r.json()) : await r.json();
     plannedSmrs.set(c.id, cellSmrs.get(body.cell_id));
     useCampaign(c);
-    say(`campaign ${c.id} planned on cell ${body.cell_id}`, true);
-  } catch (e) { say(e.message); }
+    refreshCampaigns().catch(() => {});  // history.js: the new campaign listed at once
+    say(`Campaign ${c.id} planned on cell ${body.cell_id}: press Start to run it.`, true);
+  } catch (e) { say(e); }
 });
 
 /** Follow a planning job, from the event stream, until it is done (its campaign) or failed
@@ -216,24 +307,54 @@ document.querySelectorAll("button[data-action]").forEach((b) => b.addEventListen
   b.disabled = true;  // no double click while the request is out; the refresh re-enables
   try {
     const r = await api("POST", `/campaigns/${state.campaign}/${action}`);
-    say(`${action}: ${r.status || "ok"}${r.note ? ` (${r.note})` : ""}`, true);
-  } catch (e) { say(e.message); }
+    say(`Campaign ${state.campaign} ${DONE_WORDS[action] || action}`, true,
+      r.note ? `${action}: ${r.note}` : "");
+  } catch (e) { say(e); }
   refreshCampaign();  // the action may have changed the state either way
 }));
+
+// What each campaign action did and what comes next, in the operator's words.
+const DONE_WORDS = {
+  start: "started: the arm moves to its first pose.",
+  pause: "pauses after the pose in progress. Resume continues it.",
+  resume: "resumed: it goes on at its next pose not yet measured.",
+  abort: "aborted: it ends here; its readings are kept.",
+  reset: "reset after the stop: it is paused now. Check the cell, then press Resume to go on.",
+  estop: "stopped: the arm halts where it is. To go on: check the cell, press Reset, then Resume.",
+};
 
 // The header's emergency stop: whatever campaign runs, whichever page state this is.
 $("estop-all").addEventListener("click", async () => {
   try {
     const r = await api("POST", "/estop");
-    say(r.campaign_id === null || r.campaign_id === undefined ? "emergency stop: nothing runs"
-      : `emergency stop: campaign ${r.campaign_id} stopped${r.note ? ` (${r.note})` : ""}`,
-    true);
-  } catch (e) { say(e.message); }
+    if (r.campaign_id === null || r.campaign_id === undefined) {
+      say("Emergency stop: no campaign was running; nothing moved.", true);
+    } else {
+      say(`Emergency stop: campaign ${r.campaign_id} ${DONE_WORDS.estop}`, true,
+        r.note ? `estop: ${r.note}` : "");
+    }
+  } catch (e) { say(e); }
   if (state.campaign !== null) refreshCampaign();
 });
 
+// Poses done per campaign as last heard, from its pose events and its reads alike: the progress
+// bar and the history's row show this one count (a list read can lag the events), and a count
+// only grows (a resumed run goes on from where it stopped).
+const poseCounts = new Map();
+
+/** The campaign's pose count after hearing (done, total); the history's row shows it too. */
+function heardPoses(id, done, total) {
+  const was = poseCounts.get(id);
+  if (!was || done >= was.done) poseCounts.set(id, { done, total });
+  const now = poseCounts.get(id);
+  const cell = document.querySelector(`#h-campaigns-table tr[data-campaign="${id}"] td.poses`);
+  if (cell) cell.textContent = `${now.done} / ${now.total}`;
+  return now;
+}
+
 /** The progress bar and count (also from each pose's event, without asking the API). */
 function showPoseCount(done, total) {
+  ({ done, total } = heardPoses(state.campaign, done, total));
   $("p-bar").max = total || 1;
   $("p-bar").value = done;
   $("p-count").textContent = `${done} / ${total} poses`;
@@ -257,7 +378,8 @@ function showCampaign(c) {
   $("p-run").className = c.status === "failed" ? "error" : "muted";
   if (c.status === "failed" && state.failureShown !== `${c.id}:${detail}`) {
     state.failureShown = `${c.id}:${detail}`;
-    say(`campaign ${c.id} failed${detail ? `: ${detail}` : ""}`);
+    say(`Campaign ${c.id} stopped on a fault${detail ? `: ${detail}` : ""}. What to do: check `
+      + "the devices, then press Reset and Resume; the readings so far are kept.");
   }
   state.status = c.status;
   if (c.kind === "verification") showVerifyState(c);
@@ -303,7 +425,7 @@ async function refreshCampaign() {
     if (c.kind === "verification" && c.status === "done" && !state.runActive) {
       await showVerification(c.id);
     }
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 }
 
 // The readings total last seen: the next page asked for starts just before it, so one request
@@ -328,7 +450,7 @@ async function refreshReadings(id) {
     if (id !== state.campaign) return;
     readingsSeen.total = total;
     renderReadings(rows.slice(-READINGS_SHOWN), total);
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 }
 
 function renderReadings(rows, total) {
@@ -369,15 +491,9 @@ $("job-form").addEventListener("submit", async (ev) => {
     // Automatic extensions: a diagnosis job on the same campaign, alongside the calibration.
     if ($("j-auto").checked) {
       const d = await api("POST", "/jobs", { campaign_id: state.campaign, kind: "diagnosis" });
-      state.diag = d.id;
-      $("diagnosis").hidden = false;
-      $("d-effects").replaceChildren();
-      $("d-unexplained").hidden = $("d-outliers").hidden = $("d-doubt").hidden = true;
-      $("d-figures").replaceChildren();
-      $("d-links").replaceChildren();
-      watchJob(d, followDiagnosis);
+      useDiagnosis(d);  // diagnosis.js
     }
-  } catch (e) { say(e.message); refreshCalibrate(); }
+  } catch (e) { say(e); refreshCalibrate(); }
 });
 
 function showJob(j) {
@@ -423,12 +539,13 @@ async function postDownload(path, body, filename) {
   $("t-state").textContent = "computing...";
   try {
     const r = await request("POST", path, body, true, "text/csv");
+    const name = savedName(r, filename);
     const save = Object.assign(document.createElement("a"), {
-      href: URL.createObjectURL(await r.blob()), download: filename });
+      href: URL.createObjectURL(await r.blob()), download: name });
     save.click();
     setTimeout(() => URL.revokeObjectURL(save.href), 10000);
-    $("t-state").textContent = `saved ${filename}`;
-  } catch (e) { $("t-state").textContent = ""; say(e.message); }
+    $("t-state").textContent = `saved ${name}`;
+  } catch (e) { $("t-state").textContent = ""; say(e); }
 }
 
 async function targetsUpload(query) {
@@ -483,7 +600,7 @@ $("v-start").addEventListener("click", async () => {
     useCampaign(c, true);
     refreshCampaign();
     say(`verification campaign ${c.id} of job ${job}'s model started`, true);
-  } catch (e) { $("v-state").textContent = shown; say(e.message); }
+  } catch (e) { $("v-state").textContent = shown; say(e); }
   $("v-start").disabled = false;
 });
 
@@ -521,7 +638,7 @@ async function showVerification(id) {
     $("v-certificate").dataset.campaign = id;
     $("v-report").hidden = false;
     $("v-state").textContent = `verification campaign ${id}: done`;
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 }
 
 // The certificate is fetched with the token (a link cannot carry it) and shown in a new tab from
@@ -541,7 +658,7 @@ $("v-certificate").addEventListener("click", async () => {
         .click();
     }
     setTimeout(() => URL.revokeObjectURL(url), 60000);
-  } catch (e) { if (tab) tab.close(); say(e.message); }
+  } catch (e) { if (tab) tab.close(); say(e); }
 });
 
 function fmt(v) {

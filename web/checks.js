@@ -71,7 +71,7 @@ async function showChecks(jobId) {
     // the fragment (never sent) tells this history's chart from an earlier one still on its way
     const n = hist.checks.length;
     if (n) showImage($("k-chart"), `/api/charts/models/${jobId}/checks.png#${n}`);
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 }
 
 $("k-post").addEventListener("click", async () => {
@@ -84,7 +84,7 @@ $("k-post").addEventListener("click", async () => {
       await file.text(), true, "text/csv");
     $("k-state").textContent = `check ${c.history}: ${c.verdict}`;
     if (state.job === job) await showChecks(job);
-  } catch (e) { $("k-state").textContent = ""; say(e.message); }
+  } catch (e) { $("k-state").textContent = ""; say(e); }
 });
 
 // How often a check run on the cell is asked for its progress (a simulated check takes seconds).
@@ -128,6 +128,6 @@ $("k-run").addEventListener("click", async () => {
       $("k-run-state").textContent = `check ${h.history}: ${h.verdict}`;
     }
     await showChecks(job);
-  } catch (e) { $("k-run-state").textContent = ""; say(e.message); }
+  } catch (e) { $("k-run-state").textContent = ""; say(e); }
   finally { button.disabled = false; }
 });

@@ -1,6 +1,17 @@
 // The diagnosis on the page: its job followed, its report shown (effects, their parameters and
 // figures, what is left unexplained, the outliers). Uses app.js's globals ($, api, say, state).
 
+/** Make a diagnosis job the page's: its block emptied, then followed to its report. */
+function useDiagnosis(d) {
+  state.diag = d.id;
+  $("diagnosis").hidden = false;
+  $("d-effects").replaceChildren();
+  $("d-unexplained").hidden = $("d-outliers").hidden = $("d-doubt").hidden = true;
+  $("d-figures").replaceChildren();
+  $("d-links").replaceChildren();
+  watchJob(d, followDiagnosis);
+}
+
 /** The diagnosis job's state as its events (live.js) tell it; its report once done. */
 async function followDiagnosis(d) {
   if (d.id !== state.diag) return;
@@ -9,7 +20,7 @@ async function followDiagnosis(d) {
     + (d.reason ? `: ${d.reason}` : "");
   try {
     if (d.state === "done") await showDiagnosis(d);
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 }
 
 const UNITS = [["_ppm_per_c", "ppm/°C"], ["_ppm_per_hour", "ppm/h"], ["_deg", "deg"],
@@ -44,7 +55,12 @@ function makeTable(id, headings, rows) {
   const table = document.createElement("table");
   table.id = id;
   const head = table.createTHead().insertRow();
-  headings.forEach((h) => { head.appendChild(document.createElement("th")).textContent = h; });
+  // an empty heading (the open buttons' column, a row's name) still has words for screen readers
+  headings.forEach((h) => {
+    const th = head.appendChild(document.createElement("th"));
+    if (h) th.textContent = h;
+    else th.appendChild(Object.assign(document.createElement("span"), { className: "sr-only", textContent: "row" }));
+  });
   const body = table.createTBody();
   rows.forEach((row) => {
     const tr = body.insertRow();

@@ -19,7 +19,7 @@ async function refreshFleet() {
       return;
     }
     await showFleet(sel.value);
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 }
 
 async function showFleet(model) {
@@ -92,6 +92,6 @@ function plotParameter(name) {
   box.replaceChildren(svg);
 }
 
-$("fleet-model").addEventListener("change", (e) => showFleet(e.target.value).catch((x) => say(x.message)));
+$("fleet-model").addEventListener("change", (e) => showFleet(e.target.value).catch((x) => say(x)));
 $("fleet-parameter").addEventListener("change", (e) => plotParameter(e.target.value));
 $("fleet-refresh").addEventListener("click", refreshFleet);

@@ -42,18 +42,22 @@ async function refreshJobs() {
 }
 
 async function refreshHistory() {
-  try { await Promise.all([refreshCampaigns(), refreshJobs()]); } catch (e) { say(e.message); }
+  try { await Promise.all([refreshCampaigns(), refreshJobs()]); } catch (e) { say(e); }
 }
 
 function renderCampaigns() {
   const rows = past.campaigns.slice(-HISTORY_ROWS).reverse();
   if (!rows.length) { $("h-campaigns").innerHTML = '<p class="muted">no campaign yet</p>'; return; }
   const table = makeTable("h-campaigns-table", ["", "id", "name", "kind", "status", "poses", "created"],
-    rows.map((c) => ["", String(c.id), c.name, c.kind, c.status,
-                     `${c.poses_done} / ${c.poses_total}`, when(c.created_at)]));
+    rows.map((c) => {
+      const n = heardPoses(c.id, c.poses_done, c.poses_total);  // app.js: the bar's count too
+      return ["", String(c.id), c.name, c.kind, c.status, `${n.done} / ${n.total}`,
+              when(c.created_at)];
+    }));
   [...table.tBodies[0].rows].forEach((tr, i) => {
     const c = rows[i];
     tr.cells[0].replaceChildren(openButton("campaign", c.id));
+    tr.cells[5].className = "poses";
     tr.dataset.campaign = c.id;
     if (c.id === state.campaign) tr.className = "current";
   });
@@ -85,8 +89,9 @@ function renderJobs() {
     const j = rows[i];
     tr.dataset.job = j.id;
     tr.cells[5].className = "evidence";
-    // a calibration opens to its results (or its progress); a planning job to its campaign
-    if (j.kind === "calibration" && j.state !== "failed") tr.cells[0].replaceChildren(openButton("job", j.id));
+    // a calibration opens to its results (or its progress), a diagnosis to its report, a
+    // planning job to its campaign
+    if (j.kind !== "planning" && j.state !== "failed") tr.cells[0].replaceChildren(openButton("job", j.id));
     if (j.kind === "planning" && j.campaign_id !== null) {
       tr.cells[0].replaceChildren(openButton("campaign", j.campaign_id));
     }
@@ -119,7 +124,7 @@ async function openCampaign(id, keepResults = false) {
     await refreshCampaign();
     if (!keepResults) $("campaign").scrollIntoView({ block: "start" });
     return c;
-  } catch (e) { say(e.message); return null; }
+  } catch (e) { say(e); return null; }
 }
 
 /** A verification campaign with the results of the job whose model it ran: its status, and its
@@ -142,8 +147,13 @@ async function openVerification(id, job) {
 async function openJob(id, scroll = false) {
   try {
     const j = await api("GET", `/jobs/${id}`);
-    if (j.kind === "diagnosis") { say(`job ${id} is a diagnosis: open its campaign's calibration`); return; }
     if (j.campaign_id !== state.campaign) await openCampaign(j.campaign_id, true);
+    if (j.kind === "diagnosis") {  // its report, beside whatever calibration the page shows
+      useDiagnosis(j);
+      renderJobs();
+      if (scroll) $("diagnosis").scrollIntoView({ block: "start" });
+      return;
+    }
     state.job = j.id;
     state.diag = null;
     $("diagnosis").hidden = true;
@@ -156,7 +166,7 @@ async function openJob(id, scroll = false) {
       if (BUSY_JOB.has(j.state)) watchJob(j, followJob);
     }
     if (scroll) ($("results").hidden ? $("calibration") : $("results")).scrollIntoView({ block: "start" });
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 }
 
 /** The URL says which campaign and job the page shows (replaced, not a new history entry). */
@@ -228,7 +238,7 @@ $("compare-form").addEventListener("submit", async (ev) => {
     const evals = await Promise.all(
       ids.map((id) => api("GET", `/models/${id}/evaluate?campaign_id=${cid}`)));
     renderCompare(ids, cid, evals);
-  } catch (e) { $("compare").replaceChildren(); say(e.message); }
+  } catch (e) { $("compare").replaceChildren(); say(e); }
 });
 
 function renderCompare(ids, cid, evals) {

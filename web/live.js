@@ -121,6 +121,7 @@ function dispatch(type, text) {
 // campaign.pose (each pose done, with the counts), campaign.state (each state the engine enters)
 // and campaign.run (a run wound up, its summary stored): server/acquire.py, acquisitions.py.
 function onCampaignEvent(type, e) {
+  if (type === "campaign.pose") heardPoses(e.campaign_id, e.poses_done, e.poses_total);
   if (e.campaign_id === state.campaign) {
     if (type === "campaign.pose") {
       showPoseCount(e.poses_done, e.poses_total);

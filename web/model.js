@@ -12,8 +12,12 @@ const SMR_KINDS = ["x", "y", "z"];
 /** A value ± its standard error as the page writes numbers (fmt); "fixed" if held fixed. */
 function plusMinus(value, row) {
   if (row.status === "held fixed") return "fixed";
-  return row.standard_error === null || row.standard_error === undefined
-    ? fmt(value) : `${fmt(value)} ± ${fmt(row.standard_error)}`;
+  const se = row.standard_error;
+  if (se === null || se === undefined || !Number.isFinite(se)) return fmt(value);
+  // both to the standard error's second significant digit, as the command line prints them
+  // (server/tables.py plus_minus): 0.01234 ± 0.00089, never 1.234e-2 ± 8.887e-4
+  const places = se > 0 ? Math.min(8, Math.max(0, 1 - Math.floor(Math.log10(se)))) : 4;
+  return `${value.toFixed(places)} ± ${se.toFixed(places)}`;
 }
 
 /** A group's parameters as a table: one line per `key` (joint, SMR), one column per kind, each
@@ -174,7 +178,7 @@ async function showModel(j) {
     if (j.id !== state.job) return;  // another job was shown meanwhile
     if (p.validation) renderValidation(p.validation);
     renderParameters(p);
-  } catch (e) { say(e.message); }
+  } catch (e) { say(e); }
 }
 
 // The exports (app.js postDownload) carry force=true only when "export anyway" is ticked: a model

@@ -51,9 +51,11 @@ function duration(s) {
   return min < 120 ? `${min} min` : `${Math.floor(min / 60)} h ${min % 60} min`;
 }
 
-/** Typical and longest estimate as text: "about 6 min" or "about 4 min (at most 6 min)". */
-function estimateText([typical, most]) {
-  return `about ${duration(typical)}` + (most > typical * 1.05 ? ` (at most ${duration(most)})` : "");
+/** Typical and longest estimate as text: "about 6 min" or "about 4 min (at most 6 min)"; on a
+ * simulated cell, said to be a real cell's (the simulator runs in virtual time: seconds). */
+function estimateText([typical, most], simulated = false) {
+  return `about ${duration(typical)}` + (most > typical * 1.05 ? ` (at most ${duration(most)})` : "")
+    + (simulated ? " on a real cell; simulated here in seconds" : "");
 }
 
 /** The form's estimate, before anything is planned. */
@@ -64,7 +66,8 @@ function showEstimate() {
   const move = o.order ? EST.moveOrderedS : EST.moveS;
   const [typ, most] = poseSeconds(o, smrs);
   $("c-estimate").textContent = `Estimated duration: ${estimateText([
-    EST.searchS + o.poses * (move + typ), EST.searchS + o.poses * (move + most)])}: `
+    EST.searchS + o.poses * (move + typ), EST.searchS + o.poses * (move + most)],
+  cellSimulated.get(o.cell_id))}: `
     + `${o.poses} poses x (move ~${move} s + ${o.settle} settle `
     + `${o.settle === "adaptive" ? `~${Math.min(o.pause_s, EST.adaptiveSettleS)} s, at most ` : ""}`
     + `${o.pause_s} s + ${smrs} SMRs x (aim ~${EST.aimS} s + ${o.samples} samples at `
@@ -94,7 +97,7 @@ function plannedEstimate(c) {
   const [typ, most] = poseSeconds(o, smrsOf(c));
   const fixed = EST.searchS + moves;
   return { typical: fixed + c.poses_total * typ, most: fixed + c.poses_total * most,
-           moves, planned: typeof tour === "number" };
+           moves, planned: typeof tour === "number", simulated: !!c.simulated };
 }
 
 /** The estimate under the progress bar: the whole campaign, and what is left while it runs. */
@@ -102,7 +105,8 @@ function showPlannedEstimate(c) {
   const e = plannedEstimate(c);
   state.estimate = e;
   if (!e) { $("p-estimate").textContent = ""; return; }
-  $("p-estimate").textContent = `Estimated duration: ${estimateText([e.typical, e.most])}`
+  $("p-estimate").textContent = `Estimated duration: ${estimateText([e.typical, e.most],
+    c.simulated)}`
     + (e.planned ? ` (moves ${duration(e.moves)} on the planned tour)` : "");
   showTimeLeft(c.poses_done, c.poses_total, c.status);
 }
@@ -110,6 +114,8 @@ function showPlannedEstimate(c) {
 function showTimeLeft(done, total, status = state.status) {
   const e = state.estimate;
   const running = !FINAL.has(status) && done > 0 && done < total;
-  $("p-left").textContent = e && running
-    ? `; about ${duration(e.typical * (1 - done / total))} left` : "";
+  const left = e && running ? duration(e.typical * (1 - done / total)) : null;
+  // a simulated run's time left is a real cell's: the simulator itself is done in seconds
+  $("p-left").textContent = left === null ? ""
+    : `; about ${left} left${e.simulated ? " on a real cell" : ""}`;
 }

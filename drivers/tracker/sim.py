@@ -28,6 +28,8 @@ from .protocol import (
 
 POINT_S = 0.05  # head slew and lock
 INACCURATE_SPREAD = 3.0  # sample std above this many sigma: the target moved while measured
+# the flange rings after each move: amplitude (mm) * exp(-t / tau) * sin(2 pi hz t), t from arrival
+SETTLE_AMPLITUDE_MM, SETTLE_TAU_S, SETTLE_HZ = 0.05, 1.5, 3.0
 PRESSURE_HPA, HUMIDITY_PCT = 1013.25, 45.0
 WEATHER_NOISE = (0.02, 0.05, 0.2)  # degC, hPa, %
 LOCK_EPS_S = 1e-9
@@ -49,9 +51,9 @@ class SimulatedTracker:
         clock,
         capture_radius_mm: float = 3.0,
         beam_break_rate: float = 0.0,
-        settle_amplitude_mm: float = 0.05,
-        settle_tau_s: float = 1.5,
-        settle_hz: float = 3.0,
+        settle_amplitude_mm: float = SETTLE_AMPLITUDE_MM,
+        settle_tau_s: float = SETTLE_TAU_S,
+        settle_hz: float = SETTLE_HZ,
         sample_rate_hz: float = SAMPLE_RATE_HZ,
         seed: int = 0,
     ):

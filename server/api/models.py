@@ -37,9 +37,9 @@ VerifyBody = Annotated[VerifyCreate, Depends(read_json(VerifyCreate))]
 )
 def get_model(job_id: JobId, jobs: JobsDep) -> FileResponse:
     """The model.json of a done job (404 no job, 409 not done)."""
-    return FileResponse(
-        jobs.model_path(job_id), media_type="application/json", filename=f"job-{job_id}.model.json"
-    )
+    path = jobs.model_path(job_id)
+    name = model_files.download_name(path, job_id, "model.json")
+    return FileResponse(path, media_type="application/json", filename=name)
 
 
 @router.get(
@@ -239,7 +239,8 @@ async def compensate(
         _tcp(tcp),
         limits,
     )
-    headers = {"Content-Disposition": f'attachment; filename="job-{job_id}.joints.csv"'}
+    name = model_files.download_name(jobs.model_path(job_id), job_id, "joints.csv")
+    headers = {"Content-Disposition": f'attachment; filename="{name}"'}
     if out.warnings:  # JSON with ASCII escapes: a header carries no other text safely
         headers[WARNINGS_HEADER] = json.dumps([f"{filename}: {w}" for w in out.warnings])
     return Response(out.csv, media_type="text/csv", headers=headers)
@@ -286,7 +287,7 @@ async def export(
         data if format == "rapid" else None,
         filename,
     )
-    name = f"job-{job_id}{model_files.SUFFIX[format]}"
+    name = model_files.download_name(jobs.model_path(job_id), job_id, model_files.ENDING[format])
     return Response(
         text,
         media_type=model_files.MEDIA[format],

@@ -13,8 +13,6 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
-import numpy as np
-
 from . import split_suite
 from .diagnose_suite import KINDS, draw_case, run_case, suite, summarize
 
@@ -104,11 +102,12 @@ def timed_campaign(poses: int, seed: int = 0):
 def time_campaign(poses: int, seed: int = 0) -> dict:
     """Wall time of one diagnosis of a campaign of that size (the IRB 2600, one hidden effect)."""
     from robocal.solver.diagnose import diagnose
+    from robocal.solver.problem import Problem
 
     cell, meas = timed_campaign(poses, seed)
-    targets = np.array([cell.targets[t] for t in meas.target_names])
+    problem = Problem.of(cell.robot, cell.target_positions(meas.target_names), meas)
     t0, c0 = time.perf_counter(), time.process_time()
-    d = diagnose(cell.robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s, meas.temp_c)
+    d = diagnose(problem)
     wall = time.perf_counter() - t0
     target = TARGET_S.get(poses)
     return {

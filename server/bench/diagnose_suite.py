@@ -222,6 +222,7 @@ def aim_magnitudes(case: Case, templates, multiples) -> list[str]:
     """
     from robocal.solver.calibrate import calibrate
     from robocal.solver.kinematics import predict
+    from robocal.solver.problem import Problem
 
     probe = Case(
         case.seed,
@@ -252,9 +253,7 @@ def aim_magnitudes(case: Case, templates, multiples) -> list[str]:
     for template, effect, multiple in zip(templates, effects, multiples):
         vc.effects = [effect]
         meas = vc.campaign(PROBE_POSES, probe_seed, noise_scale=0.0)
-        fit = calibrate(
-            case.robot, nominal, names, meas.q[fit_on], meas.xyz[fit_on], method="ls-sum"
-        )
+        fit = calibrate(Problem.of(case.robot, nominal, meas.subset(fit_on)), "ls-sum")
         err = predict(fit.layout, fit.x, meas.q[held]) - meas.xyz[held]
         share = float(np.sqrt(np.nanmean(np.sum(err**2, axis=-1))))
         magnitude = effect.magnitude * floor * np.sqrt(multiple**2 - 1.0) / max(share, 1e-12)
@@ -327,6 +326,7 @@ def run_case(case: Case) -> dict:
     import time
 
     from robocal.solver.diagnose import diagnose
+    from robocal.solver.problem import Problem
 
     if case.skip:
         return {"case": case.describe(), "skipped": case.skip}
@@ -336,7 +336,7 @@ def run_case(case: Case) -> dict:
     truth = dict(vc.last_campaign)
     nominal = np.array([case.targets[t] for t in meas.target_names])
     t0 = time.perf_counter()
-    d = diagnose(case.robot, nominal, meas.target_names, meas.q, meas.xyz, meas.time_s, meas.temp_c)
+    d = diagnose(Problem.of(case.robot, nominal, meas))
     seconds = time.perf_counter() - t0
     return score(case, vc, meas, truth, d.report, d, seconds)
 

@@ -1,7 +1,11 @@
 """The solvers and the meas.csv reader at scale (50,000 poses by default): wall time and peak
 memory of ls-sum and minimax, and the file's reading time, each next to a reference measured in
 the same run (ls-sum for minimax; numpy's loadtxt of the same numbers for the reader); and
-planning's peak memory at 3 and 16 SMRs (linear in the SMRs since issue 20)."""
+planning's peak memory at 3 and 16 SMRs (linear in the SMRs since issue 20).
+
+`robocal bench scale` (run_calibrate_scale): the whole `robocal calibrate` of a large campaign,
+its wall time and peak memory as a process, next to a process that only np.loadtxt's the same
+file and one that only reads and fits it, in interleaved rounds (issue 24)."""
 
 from __future__ import annotations
 
@@ -82,17 +86,16 @@ def run_scale(cell, meas, repeats: int = 2) -> dict:
     """ls-sum and minimax on the campaign (time, peak memory, their ratios), and its meas.csv
     read by robocal and by np.loadtxt."""
     from robocal.solver.calibrate import calibrate
+    from robocal.solver.problem import Problem
 
     from ..formats.campaign_csv import joint_columns, read_campaign, write_campaign
 
-    targets = cell.target_positions(meas.target_names)
+    problem = Problem.of(cell.robot, cell.target_positions(meas.target_names), meas)
     out: dict = {"poses": meas.n_poses, "readings": meas.n_readings}
     for method in ("ls-sum", "minimax"):
 
         def fit(method=method):
-            return calibrate(
-                cell.robot, targets, meas.target_names, meas.q, meas.xyz, method=method
-            )
+            return calibrate(problem, method)
 
         seconds, cal = _timed(fit, repeats)
         out[method.replace("-", "_")] = {
@@ -129,6 +132,206 @@ def run_scale(cell, meas, repeats: int = 2) -> dict:
     return out
 
 
+# issue 24's targets: the whole command within these multiples of its references
+CALIBRATE_OVER_LOADTXT_MAX = 6.0  # wall time, against a process that only loadtxt's the file
+CALIBRATE_OVER_FIT_MEMORY_MAX = 1.5  # peak memory, against the fit's own
+
+
+def _numeric_columns(robot) -> list[int]:
+    """meas.csv's numeric columns as write_campaign orders them: q1..qn, then x, y, z."""
+    from ..formats.campaign_csv import joint_columns
+
+    n = len(joint_columns(robot))  # pose, q1..qn, target, x, y, z, ...
+    return [*range(1, n + 1), n + 2, n + 3, n + 4]
+
+
+# Started by a small launcher: on Linux a process's peak resident set counts the memory of the
+# process it was forked from (kept across exec), so the benchmark's own would mask the command's.
+_LAUNCH = """
+import os, sys, time
+t0 = time.perf_counter()
+pid = os.fork()
+if pid == 0:
+    os.execvp(sys.argv[2], sys.argv[2:])
+_, status, usage = os.wait4(pid, 0)
+wall = time.perf_counter() - t0
+with open(sys.argv[1], "w") as f:
+    f.write(f"{os.waitstatus_to_exitcode(status)} {wall} {usage.ru_maxrss}")
+"""
+
+
+def _process(argv, cwd) -> tuple[float, float]:
+    """Wall time (s) and peak resident memory (MiB) of one process, from its own rusage."""
+    import subprocess
+    import sys
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out, err = Path(tmp) / "usage", Path(tmp) / "stderr"
+        with open(err, "wb") as stderr:
+            subprocess.run(
+                [sys.executable, "-c", _LAUNCH, str(out), *map(str, argv)],
+                cwd=cwd,
+                stdout=subprocess.DEVNULL,
+                stderr=stderr,
+                check=False,
+            )
+        code, wall, maxrss = out.read_text().split()
+        if int(code) != 0:
+            why = err.read_text(errors="replace").strip()[-1000:]
+            raise RuntimeError(f"{' '.join(map(str, argv))} failed: {why}")
+    return float(wall), int(maxrss) / 1024  # Linux: KiB
+
+
+def _summary(values: list[float]) -> dict:
+    """Median and spread of repeated figures."""
+    import statistics
+
+    return {
+        "median": statistics.median(values),
+        "min": min(values),
+        "max": max(values),
+        "runs": [round(v, 4) for v in values],
+    }
+
+
+_FIT_ONLY = """
+import sys
+from robocal.server import workflow
+cell, meas = workflow.load_data(sys.argv[1])
+workflow.run_method(cell, meas, "ls-sum", screening=False)
+"""
+
+
+def _in_process(path: Path) -> dict:
+    """Peak memory (tracemalloc, MiB) of the fit alone and of the whole command's work in this
+    process (read, fit, model file with standard errors and validation), with the fit's and the
+    post-fit's share of the time."""
+    from .. import workflow
+
+    cell = workflow.load_cell(None)
+    meas = workflow.load_campaign(path, cell)
+    fit_peak = peak_mb(lambda: workflow.run_method(cell, meas, "ls-sum", screening=False))
+
+    def whole():
+        c, m = workflow.load_data(path)
+        cal = workflow.run_method(c, m, "ls-sum", screening=False)
+        workflow.model_file(cal, c, m, data_path=path)
+
+    whole_peak = peak_mb(whole)
+    read_peak = peak_mb(lambda: workflow.load_data(path))
+    t0 = time.perf_counter()
+    cal = workflow.run_method(cell, meas, "ls-sum", screening=False)
+    t1 = time.perf_counter()
+    workflow.model_file(cal, cell, meas, data_path=path)
+    t2 = time.perf_counter()
+    return {
+        "fit_peak_mb": fit_peak,
+        "read_peak_mb": read_peak,
+        "calibrate_peak_mb": whole_peak,
+        "calibrate_over_fit": whole_peak / fit_peak,
+        "fit_seconds": t1 - t0,
+        "model_file_seconds": t2 - t1,
+    }
+
+
+def run_calibrate_scale(poses: int = 50_000, repeats: int = 5, seed: int = 0) -> dict:
+    """`robocal calibrate --method ls-sum --keep-outliers` of a simulated campaign of `poses`
+    poses as a process, in rounds with a process that only np.loadtxt's the file's numeric
+    columns and one that only reads and fits it (the order rotating each round): medians,
+    spread and the load average; then in-process peak memory (tracemalloc) of the fit and of
+    the whole command, and np.loadtxt against robocal's reader in the same process."""
+    import os
+    import sys
+
+    from ..formats.campaign_csv import read_campaign, write_campaign
+    from ..formats.cell_json import default_cell
+    from .solver import _campaign, _machine
+    from .startup import robocal_argv
+
+    cell = default_cell()
+    meas = _campaign(cell, poses, seed)
+    cols = _numeric_columns(cell.robot)
+    load = [os.getloadavg()]
+    with tempfile.TemporaryDirectory(prefix="robocal-bench-scale-") as tmp:
+        work = Path(tmp)
+        path = work / "meas.csv"
+        write_campaign(path, meas)
+        loadtxt = f"import numpy as np; np.loadtxt({str(path)!r}, delimiter=',', skiprows=1, usecols={cols})"
+        commands = {
+            "calibrate": [
+                *robocal_argv(),
+                *("calibrate", path.name, "--method", "ls-sum", "--keep-outliers"),
+                *("--out", "model.json"),
+            ],
+            "loadtxt": [sys.executable, "-c", loadtxt],
+            "fit_only": [sys.executable, "-c", _FIT_ONLY, path.name],
+        }
+        wall: dict[str, list[float]] = {k: [] for k in commands}
+        rss: dict[str, list[float]] = {k: [] for k in commands}
+        names = list(commands)
+        for r in range(repeats):
+            for k in names[r % len(names) :] + names[: r % len(names)]:  # rotate who goes first
+                w, m = _process(commands[k], work)
+                wall[k].append(w)
+                rss[k].append(m)
+        load.append(os.getloadavg())
+        reader, ref = [], []
+        for _ in range(repeats + 2):
+            t0 = time.perf_counter()
+            read_campaign(path, cell.robot)
+            t1 = time.perf_counter()
+            np.loadtxt(path, delimiter=",", skiprows=1, usecols=cols)
+            t2 = time.perf_counter()
+            reader.append(t1 - t0)
+            ref.append(t2 - t1)
+        inside = _in_process(path)
+        size = path.stat().st_size
+    load.append(os.getloadavg())
+    med = {k: _summary(v)["median"] for k, v in wall.items()}
+    peak = {k: _summary(v)["median"] for k, v in rss.items()}
+    return {
+        "benchmark": "scale",
+        "machine": _machine(),
+        "poses": meas.n_poses,
+        "readings": meas.n_readings,
+        "file_bytes": size,
+        "repeats": repeats,
+        "timing": "fresh processes in rounds, the order rotating each round; wall time from "
+        "start to exit, peak memory the process's maximum resident set (getrusage); medians "
+        "with min, max and every run",
+        "load_average_1_5_15": {"start": load[0], "after_processes": load[1], "end": load[2]},
+        "process": {
+            k: {"wall_seconds": _summary(wall[k]), "peak_rss_mb": _summary(rss[k])}
+            for k in commands
+        },
+        "commands": {k: " ".join(map(str, v)) for k, v in commands.items()},
+        "in_process": {
+            **inside,
+            "read_campaign_seconds": _summary(reader),
+            "loadtxt_seconds": _summary(ref),
+            "reader_over_loadtxt": _summary(reader)["median"] / _summary(ref)["median"],
+        },
+        "targets": {
+            "calibrate_over_loadtxt_wall": {
+                "value": med["calibrate"] / med["loadtxt"],
+                "max": CALIBRATE_OVER_LOADTXT_MAX,
+            },
+            "calibrate_over_fit_peak_rss": {
+                "value": peak["calibrate"] / peak["fit_only"],
+                "max": CALIBRATE_OVER_FIT_MEMORY_MAX,
+            },
+            "calibrate_over_fit_peak_tracemalloc": {
+                "value": inside["calibrate_over_fit"],
+                "max": CALIBRATE_OVER_FIT_MEMORY_MAX,
+            },
+            "reader_over_loadtxt": {
+                "value": _summary(reader)["median"] / _summary(ref)["median"],
+                "max": 1.0,
+            },
+        },
+    }
+
+
 DIAGNOSE_POSES = (1_000, 3_000, 10_000)
 DIAGNOSE_TARGETS = {"seconds_ratio_10x_poses": 10.0, "peak_rss_mib": 1024.0}  # issue 24
 
@@ -150,24 +353,24 @@ def diagnose_at(poses: int, seed: int = 0) -> dict:
     """One diagnosis of the timed campaign of `poses` written to meas.csv and read back, in this
     process: wall and CPU time, the process's peak RSS, and np.loadtxt of the same file."""
     from robocal.solver.diagnose import diagnose
+    from robocal.solver.problem import Problem
 
-    from ..formats.campaign_csv import joint_columns, read_campaign, write_campaign
+    from ..formats.campaign_csv import read_campaign, write_campaign
     from .diagnose import timed_campaign
 
     cell, meas = timed_campaign(poses, seed)
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "meas.csv"
         write_campaign(path, meas)
-        n = len(joint_columns(cell.robot))
-        numeric = [*range(1, n + 1), n + 2, n + 3, n + 4]
+        numeric = _numeric_columns(cell.robot)
         ref, _ = _timed(
             lambda: np.loadtxt(path, delimiter=",", skiprows=1, usecols=numeric), repeats=3
         )
         read = read_campaign(path, cell.robot)
-    targets = cell.target_positions(read.target_names)
+    problem = Problem.of(cell.robot, cell.target_positions(read.target_names), read)
     before = peak_rss_mib()
     t0, c0 = time.perf_counter(), time.process_time()
-    diagnose(cell.robot, targets, read.target_names, read.q, read.xyz, read.time_s, read.temp_c)
+    diagnose(problem)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     return {
         "poses": poses,

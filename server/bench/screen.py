@@ -7,21 +7,7 @@ import time
 
 import numpy as np
 
-SMALLEST_MM, LARGEST_MM = 0.3, 2.0  # a mis-lock or a bumped SMR
-
-
-def displace(xyz, seed, rate):
-    """Readings (m, K, 3) with a share `rate` of the present ones moved 0.3-2 mm in random
-    directions (drawn from seed), and the mask (m, K) of those moved."""
-    rng = np.random.default_rng([7, seed])
-    have = np.argwhere(np.all(np.isfinite(xyz), axis=-1))
-    pick = have[rng.choice(len(have), max(1, int(round(rate * len(have)))), replace=False)]
-    out, moved = xyz.copy(), np.zeros(xyz.shape[:2], dtype=bool)
-    for p, k in pick:
-        v = rng.normal(size=3)
-        out[p, k] += rng.uniform(SMALLEST_MM, LARGEST_MM) * v / np.linalg.norm(v)
-        moved[p, k] = True
-    return out, moved
+from robocal.drivers.cell import displace
 
 
 def drawn_campaign(cell, seed):
@@ -62,6 +48,7 @@ def drawn_campaign(cell, seed):
 
 def run_screen_bench(clean: int = 480, dirty: int = 240, rate: float = 0.03) -> dict:
     """Screen `clean` campaigns (any exclusion is false) and `dirty` ones with `rate` moved."""
+    from robocal.solver.problem import Problem
     from robocal.solver.screen import screen_readings
 
     from ..formats.cell_json import default_cell
@@ -80,9 +67,7 @@ def run_screen_bench(clean: int = 480, dirty: int = 240, rate: float = 0.03) -> 
                 clean_xyz = xyz
                 xyz, moved = displace(xyz, seed, share)
             targets = cell.target_positions(meas.target_names)
-            s = screen_readings(
-                cell.robot, targets, meas.target_names, meas.q, xyz, meas.time_s, meas.temp_c
-            )
+            s = screen_readings(Problem.of(cell.robot, targets, meas).with_meas(xyz))
             wrong = int((s.excluded & ~moved).sum())
             flagged += wrong > 0
             false += wrong

@@ -4,6 +4,7 @@ emergency stop's latency against a stalled controller, and with large request bo
 from __future__ import annotations
 
 import logging
+import os
 import subprocess
 import sys
 import tempfile
@@ -64,16 +65,16 @@ def _stats(seconds) -> dict:
     ms = np.array(seconds) * 1000
     return {
         "requests": len(ms),
+        "p25_ms": float(np.percentile(ms, 25)),
         "p50_ms": float(np.percentile(ms, 50)),
+        "p75_ms": float(np.percentile(ms, 75)),
         "p99_ms": float(np.percentile(ms, 99)),
         "max_ms": float(ms.max()),
     }
 
 
-def _during_job(c, campaign_id: int, cap: int = 5000) -> dict:
-    """Latency of the live-state endpoint while only a diagnosis of `campaign_id` runs."""
-    url = f"/api/campaigns/{campaign_id}"
-    idle = [_timed_get(c, url) for _ in range(100)]
+def _job_samples(c, url: str, campaign_id: int, cap: int) -> tuple[list[float], float, str]:
+    """Latencies of GET url while one diagnosis of campaign_id runs: (seconds, job's wall, state)."""
     job = c.post("/api/jobs", json={"campaign_id": campaign_id, "kind": "diagnosis"}).json()
     _wait(c, f"/api/jobs/{job['id']}", lambda b: b["state"] != "queued")
     lat: list[float] = []
@@ -84,11 +85,44 @@ def _during_job(c, campaign_id: int, cap: int = 5000) -> dict:
         if len(lat) % 20 == 0 and c.get(f"/api/jobs/{job['id']}").json()["state"] != "running":
             break
     job = _wait(c, f"/api/jobs/{job['id']}", lambda b: b["state"] in ("done", "failed"))
+    return lat, time.perf_counter() - t0, job["state"]
+
+
+def _during_job(c, campaign_id: int, rounds: int = 3, idle: int = 100, cap: int = 5000) -> dict:
+    """Latency of the live-state endpoint while only a diagnosis of `campaign_id` runs, and idle.
+
+    The two are taken in turns (idle samples, a job, idle samples, a job, ... idle samples), so
+    both see the same machine: a slow spell on a shared host shows on both sides, not on one.
+    """
+    url = f"/api/campaigns/{campaign_id}"
+    spells: list[list[float]] = []
+    jobs: list[list[float]] = []
+    walls, states = [], []
+    load = [os.getloadavg()[0]]
+    for _ in range(rounds):
+        spells.append([_timed_get(c, url) for _ in range(idle)])
+        lat, wall, state = _job_samples(c, url, campaign_id, cap)
+        jobs.append(lat)
+        walls.append(wall)
+        states.append(state)
+        load.append(os.getloadavg()[0])
+    spells.append([_timed_get(c, url) for _ in range(idle)])
+    quiet = [t for spell in spells for t in spell]
+    busy = [t for job in jobs for t in job]
     return {
-        "idle": _stats(idle),
-        **_stats(lat),
-        "job_s": time.perf_counter() - t0,
-        "job": job["state"],
+        "rounds": rounds,
+        "timing": f"{idle} idle reads, then reads during one diagnosis job, in turns "
+        f"({rounds} jobs, {rounds + 1} idle spells)",
+        "idle": _stats(quiet),
+        **_stats(busy),
+        "job_s": float(np.median(walls)),
+        "job_s_min_max": [float(min(walls)), float(max(walls))],
+        "job": states[-1] if len(set(states)) == 1 else ",".join(states),
+        "p50_ms_by_turn": {
+            "idle": [float(np.median(x)) * 1000 for x in spells],
+            "job": [float(np.median(x)) * 1000 for x in jobs],
+        },
+        "load_average_1min": load,
     }
 
 

@@ -149,6 +149,7 @@ def run_split_case(case: SplitCase) -> dict:
     from robocal.solver.effects import Inputs
     from robocal.solver.extended import predict_model
     from robocal.solver.kinematics import predict
+    from robocal.solver.problem import Problem
 
     vc = case.cell()
     q_train, q_test, split = split_poses(case, vc)
@@ -158,12 +159,11 @@ def run_split_case(case: SplitCase) -> dict:
     floor = float(np.hypot(truth["noise_floor_mm"], truth.get("arm_scatter_rms_mm", 0.0)))
     names = train.target_names
     nominal = np.array([case.targets[t] for t in names])
-    geo = calibrate(case.robot, nominal, names, train.q, train.xyz, method="ls-sum")
+    problem = Problem.of(case.robot, nominal, train)
+    geo = calibrate(problem, "ls-sum")
     geometric = _rms(predict(geo.layout, geo.x, test.q) - test.xyz)
     t0 = time.perf_counter()
-    d = diagnose(
-        case.robot, nominal, names, train.q, train.xyz, train.time_s, train.temp_c, log=None
-    )
+    d = diagnose(problem)
     seconds = time.perf_counter() - t0
     inputs = Inputs(test.q, test.time_s, test.temp_c)
     diagnosed = _rms(predict_model(case.robot, d.layout, d.x, d.extensions, inputs) - test.xyz)
@@ -215,13 +215,14 @@ def _without_effects(case: SplitCase, q_train, q_test) -> float:
     (the same noise and scatter): what the true structure reaches, the effects known exactly."""
     from robocal.solver.calibrate import calibrate
     from robocal.solver.kinematics import predict
+    from robocal.solver.problem import Problem
 
     vc = case.cell()
     vc.effects = []
     train = vc.campaign(case.n_train, case.cell_seed, poses=q_train, **case.options)
     test = vc.campaign(TEST_POSES, case.cell_seed + 1, poses=q_test, **case.options)
     nominal = np.array([case.targets[t] for t in train.target_names])
-    geo = calibrate(case.robot, nominal, train.target_names, train.q, train.xyz, method="ls-sum")
+    geo = calibrate(Problem.of(case.robot, nominal, train), "ls-sum")
     return _rms(predict(geo.layout, geo.x, test.q) - test.xyz)
 
 
@@ -298,12 +299,12 @@ def real_splits(folder, min_poses: int = 15) -> list[dict]:
     from robocal.solver.extrapolation import configuration_folds, region_folds
     from robocal.solver.kinematics import Layout, predict
 
-    from ..workflow import diagnose, load_data, model_predict
+    from ..workflow import cell_problem, diagnose, load_data, model_predict
 
     folder = Path(folder)
     cell, meas = load_data(folder / "train.csv", folder / "cell.json")
     names = meas.target_names
-    nominal = np.array([cell.targets[t] for t in names])
+    nominal = cell.target_positions(names)
     folds = configuration_folds(cell.robot, meas.q, min_poses)
     if not folds:
         lay = Layout(cell.robot, np.eye(4), names)
@@ -314,7 +315,7 @@ def real_splits(folder, min_poses: int = 15) -> list[dict]:
     for fold in folds:
         train = np.setdiff1d(np.arange(meas.n_poses), fold.test)
         fit, held = meas.subset(train), meas.subset(fold.test)
-        geo = calibrate(cell.robot, nominal, names, fit.q, fit.xyz, "ls-sum", base_guess=cell.base)
+        geo = calibrate(cell_problem(cell, fit), "ls-sum")
         d, model = diagnose(cell, fit)
         diagnosed = model_predict(model, held.q, held.time_s, held.temp_c, held.prev_q)
         out.append(

@@ -62,16 +62,10 @@ def cmd_bench(args) -> None:
             clean=args.clean or 70, poses="random" if args.random_check_poses else "planned"
         )
     elif args.what == "scale":
-        from ..bench.scale import run_diagnose_scale, run_scale
-        from ..bench.solver import _campaign
-        from ..formats.cell_json import default_cell
+        from ..bench.scale import run_calibrate_scale, run_diagnose_scale
 
-        cell = default_cell()
-        result = {
-            "benchmark": "scale",
-            "calibrate": run_scale(cell, _campaign(cell, 50_000, 0)),
-            "diagnose": run_diagnose_scale(),
-        }
+        result = run_calibrate_scale(poses=args.scale_poses, repeats=args.repeats)
+        result["diagnose"] = run_diagnose_scale()
     elif args.what == "validation":
         from ..bench import validation as bench_validation
 
@@ -105,14 +99,14 @@ def add(sub) -> None:
             "scale",
         ),
         help="what to time (validation: the deployment guard's flags on healthy, small and "
-        "real campaigns; check: quick checks' false alarms and delays to a change; scale: calibrate "
-        "50,000 poses and diagnose 1,000 to 10,000, time and peak memory beside np.loadtxt)",
+        "real campaigns; check: quick checks' false alarms and delays to a change; scale: `robocal calibrate` of a large campaign as a process, next to np.loadtxt of its file, "
+        "then diagnose of 1,000 / 3,000 / 10,000 poses)",
     )
     b.add_argument(
         "--repeats",
         type=_positive_int,
         default=7,
-        help="startup: runs of each command (median reported)",
+        help="startup, scale: runs of each command (median reported)",
     )
     b.add_argument(
         "--poses",
@@ -120,6 +114,12 @@ def add(sub) -> None:
         nargs="+",
         default=[100, 1000],
         help="diagnose: sizes of the campaigns timed one at a time",
+    )
+    b.add_argument(
+        "--scale-poses",
+        type=_positive_int,
+        default=50_000,
+        help="scale: poses of the campaign calibrated (default 50000)",
     )
     b.add_argument(
         "--quick",
@@ -155,12 +155,15 @@ def add(sub) -> None:
         help="solver: pose counts timed (default 100 1000 10000)",
     )
     b.add_argument(
-        "--no-reference", action="store_true", help="skip the finite-difference scipy reference"
+        "--no-reference",
+        action="store_true",
+        help="solver: skip the peers (scipy with analytic derivatives; finite differences up to "
+        "1,000 poses)",
     )
     b.add_argument(
         "--reference-max",
         type=_positive_int,
         default=10000,
-        help="largest pose count for which to run the reference",
+        help="solver: largest pose count for which to run the peers",
     )
     b.set_defaults(func=cmd_bench)

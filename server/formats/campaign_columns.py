@@ -22,6 +22,7 @@ from .limits import LABEL_CHARS_MAX, NUMBER_MAX, SMRS_MAX
 # The characters a label may not hold (Unicode Cc, Zl and Zp, as limits.bad_text says); in the
 # whole file, any of them (a tab too) leaves the file to the row reader.
 _CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029]")
+_PRINTABLE = bytes([ord("\n"), *range(32, 127)])  # an ASCII text's bytes but control characters
 
 
 class _Columns:
@@ -34,48 +35,61 @@ class _Columns:
             text = text.replace("\r\n", "\n")  # a lone \r is a control character, below
         if '"' in text:
             return  # quoting: csv's rules
-        if text.startswith((" ", "\n")) or "\n\n" in text or "\n " in text:  # maybe blank lines
-            text = "\n".join(ln for ln in text.split("\n") if ln.strip())
         if not text.endswith("\n"):
             text += "\n"
+        # a blank line is a row without commas: only a file refused as it is may have one
+        if not self._parse(text) and (
+            text.startswith((" ", "\n")) or "\n\n" in text or "\n " in text
+        ):
+            self._parse("\n".join(ln for ln in text.split("\n") if ln.strip()) + "\n")
+
+    def _parse(self, text: str) -> bool:
+        """Take the text if it has no control character but line breaks and every row is as
+        wide as the header; whether it did."""
         raw = self._bytes(text)
         if raw is None:
-            return  # tabs and other control characters: the row reader names them
-        ends = np.flatnonzero(raw == ord("\n"))
+            return False  # tabs and other control characters: the row reader names them
         self.header = [h.strip().lower() for h in text[: text.index("\n")].split(",")]
-        self.n = len(ends) - 1
-        if len(set(self.header)) != len(self.header) or not 1 <= self.n <= csv_table.CSV_ROWS_MAX:
-            return
-        # every row exactly as wide as the header (numpy would take a longer row)
-        commas = np.flatnonzero(raw == ord(","))
-        if np.any(np.diff(np.searchsorted(commas, ends)) != len(self.header) - 1):
-            return
-        self.file = io.StringIO(text)
+        width = len(self.header)
+        # every comma and line end in order: a row exactly as wide as the header holds width - 1
+        # commas and then its end (numpy's reader would take a longer row)
+        sep = _positions(raw[:-_PAD], (ord(","), ord("\n")))
+        if len(set(self.header)) != width or len(sep) % width:
+            return False
+        sep = sep.reshape(-1, width)
+        self.n = len(sep) - 1
+        if not 1 <= self.n <= csv_table.CSV_ROWS_MAX:
+            return False
+        if np.any(raw[sep[:, :-1]] != ord(",")) or np.any(raw[sep[:, -1]] != ord("\n")):
+            return False
+        self.text = text
         self.ascii = text.isascii()
-        if self.ascii:  # where each field of each row begins and ends, for the labels
-            self.raw, self.ends = raw, ends
-            self.starts = np.concatenate([[0], ends[:-1] + 1])
-            self.commas = commas.reshape(len(ends), len(self.header) - 1)
+        self.raw, self.sep, self.ends, self.commas = raw, sep, sep[:, -1], sep[:, :-1]
+        self.starts = np.concatenate([[0], self.ends[:-1] + 1])
+        self.view = np.lib.stride_tricks.sliding_window_view(raw, _PAD)
         self.ok = True
+        return True
 
     @staticmethod
     def _bytes(text: str) -> np.ndarray | None:
-        """The text's bytes if it holds no control character but line breaks (no tab either)."""
+        """The text's bytes and _PAD spaces (so a fixed-width window fits past any field) if it
+        holds no control character but line breaks (no tab either)."""
         if text.isascii():
-            raw = np.frombuffer(text.encode("ascii"), dtype=np.uint8)
-            return None if np.any(((raw < 32) & (raw != ord("\n"))) | (raw == 127)) else raw
+            data = text.encode("ascii")
+            if data.translate(None, _PRINTABLE):  # what is left is control characters
+                return None
+            return np.frombuffer(data + b" " * _PAD, dtype=np.uint8)
         if _CONTROL.search(text.replace("\n", "")):
             return None
         # a multi-byte character holds no comma or line break byte: the counts stand
-        return np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
+        return np.frombuffer((text + " " * _PAD).encode("utf-8"), dtype=np.uint8)
 
     def has(self, name: str) -> bool:
         return name in self.header
 
     def _load(self, names: list[str], dtype):
-        self.file.seek(0)
         return np.loadtxt(
-            self.file,
+            io.StringIO(self.text),
             skiprows=1,
             delimiter=",",
             comments=None,
@@ -86,7 +100,48 @@ class _Columns:
 
     def numbers(self, names: list[str], blank_ok=()) -> dict[str, np.ndarray] | None:
         """Each column as floats (NaN for a blank in the blank_ok ones), or None if the row reader
-        would refuse a value (bounds are the caller's)."""
+        would refuse a value (bounds are the caller's). Plain decimals of an ASCII file straight
+        from its bytes; numpy's loadtxt if any field holds something else."""
+        v = self._decimals([self.header.index(n) for n in names]) if self.ascii else None
+        if v is None:
+            return self._numbers_loaded(names, blank_ok)
+        strict = [i for i, n in enumerate(names) if n not in blank_ok]
+        if np.isnan(v[:, strict]).any():
+            return None  # a blank: the row reader says where
+        return dict(zip(names, v.T, strict=True))
+
+    def _decimals(self, cols: list[int]) -> np.ndarray | None:
+        """Fields cols of every data row (rows, len(cols)) as floats (NaN where blank) if each is
+        a plain decimal of at most MAX_DIGITS digits; None otherwise (a space, an exponent, a
+        longer number...). All columns at once, in blocks of rows that stay in cache."""
+        c = np.asarray(cols)
+        out = np.empty((self.n, len(cols)))
+        step = max(1, _FIELDS // len(cols))
+        for lo in range(0, self.n, step):
+            sep = self.sep[lo : lo + step + 1]  # the line before, then the chunk's
+            left = sep[1:, c - 1] + 1  # past the comma before; the first field, past the line
+            left[:, c == 0] = sep[:-1, -1:] + 1
+            length = sep[1:, c] - left
+            if length.max() > MAX_FIELD:
+                return None
+            v = _parse_decimals(self._window(left.ravel(), int(length.max())), length.ravel())
+            if v is None:
+                return None
+            out[lo : lo + step] = v.reshape(-1, len(cols))
+        return out
+
+    def _bounds(self, j: int) -> tuple[np.ndarray, np.ndarray]:
+        """Where field j of each data row begins and ends (byte offsets)."""
+        left = self.starts[1:] if j == 0 else self.commas[1:, j - 1] + 1
+        right = self.ends[1:] if j == self.commas.shape[1] else self.commas[1:, j]
+        return left, right
+
+    def _window(self, left: np.ndarray, width: int) -> np.ndarray:
+        """(width, rows) bytes from each offset: a field and what follows it."""
+        return np.ascontiguousarray(self.view[left, : max(width, 1)].T)
+
+    def _numbers_loaded(self, names: list[str], blank_ok=()) -> dict[str, np.ndarray] | None:
+        """numbers() by numpy's loadtxt."""
         strict = [n for n in names if n not in blank_ok]
         loose = [n for n in names if n in blank_ok]
         try:
@@ -130,14 +185,75 @@ class _Columns:
     def _field_bytes(self, j: int) -> np.ndarray | None:
         """Field j of every data row, stripped of spaces, as fixed-width bytes (numpy 'S'); None
         for a field wider than a label may be (the row reader judges it)."""
-        left = self.starts[1:] if j == 0 else self.commas[1:, j - 1] + 1
-        right = self.ends[1:] if j == self.commas.shape[1] else self.commas[1:, j]
+        left, right = self._bounds(j)
         width = int(max(1, (right - left).max()))
         if width > LABEL_CHARS_MAX:
             return None
-        at = np.minimum(left[:, None] + np.arange(width), len(self.raw) - 1)
-        cells = np.where(at < right[:, None], self.raw[at], ord(" ")).astype(np.uint8)
+        cells = self._window(left, width).T.copy()
+        cells[np.arange(width) >= (right - left)[:, None]] = ord(" ")
         return np.strings.strip(cells.view(f"S{width}").ravel())
+
+
+# Digits a decimal may have for its value to be the exact quotient of two doubles (its digits as
+# an integer below 2^53, a power of ten below 10^22): the one rounding of that division is the
+# correctly rounded decimal, as float() gives (Clinger's fast path).
+MAX_DIGITS = 15
+MAX_FIELD = 24  # bytes: a sign, a point, 15 digits and leading zeros
+_POW10 = 10.0 ** np.arange(MAX_FIELD + 1)
+_FIELDS = 1 << 15  # fields parsed at once: a window of them stays in cache
+_PAD = LABEL_CHARS_MAX + MAX_FIELD  # spaces after the text: no field's window runs off its end
+
+
+def _positions(raw: np.ndarray, chars: tuple[int, ...], chunk: int = 1 << 22) -> np.ndarray:
+    """Offsets of the bytes equal to any of chars, a chunk at a time (no file-sized masks), as
+    32-bit integers when the text's size allows (a file is at most FILE_BYTES_MAX)."""
+    kind = np.int32 if len(raw) < 2**31 else np.intp
+    out = []
+    for lo in range(0, len(raw), chunk):
+        part = raw[lo : lo + chunk]
+        hit = part == chars[0]
+        for c in chars[1:]:
+            hit |= part == c
+        out.append((np.flatnonzero(hit) + lo).astype(kind))
+    return np.concatenate(out) if out else np.zeros(0, dtype=kind)
+
+
+_END = ord(",")  # written past each field's end: no field holds one
+
+
+def _parse_decimals(window: np.ndarray, length: np.ndarray) -> np.ndarray | None:
+    """Fields as floats, NaN where empty: window (width, rows) holds each field's bytes from its
+    start, length (rows,) its length. None unless each is [+-]digits[.digits] (or .digits) of at
+    most MAX_DIGITS digits: NUMBER's plain decimals, whose float() this equals to the bit.
+
+    Byte arithmetic over the whole window, then Horner's rule a position at a time over all
+    fields: a digit multiplies by ten and adds itself, any other byte leaves the number."""
+    window[np.arange(len(window))[:, None] >= length] = _END
+    d = window - np.uint8(ord("0"))  # wraps past 9 for anything but a digit
+    digit = d <= 9
+    point = window == ord(".")
+    other = ~(digit | point | (window == _END))
+    other[0] &= (window[0] != ord("-")) & (window[0] != ord("+"))
+    if other.any():
+        return None
+    given = length > 0
+    digits = digit.sum(axis=0)
+    if np.any(point.sum(axis=0) > 1) or np.any(given & (digits == 0)) or digits.max() > MAX_DIGITS:
+        return None
+    times = (1 + 9 * digit).astype(np.uint8)
+    d *= digit
+    acc = np.zeros(window.shape[1], dtype=np.int64)
+    frac = np.zeros(window.shape[1], dtype=np.int64)
+    seen = np.zeros(window.shape[1], dtype=bool)  # a point so far
+    for j in range(len(window)):
+        acc *= times[j]
+        acc += d[j]
+        seen |= point[j]
+        frac += digit[j] & seen
+    v = acc / _POW10[frac]
+    v = np.where(window[0] == ord("-"), -v, v)
+    v[~given] = np.nan
+    return v
 
 
 def _text(label) -> str:
@@ -166,13 +282,15 @@ def _poses(ids: np.ndarray, q_deg: np.ndarray, same_tol_deg: float):
     # a pose's rows are usually together: look the ids up once per run of equal ids
     starts = np.flatnonzero(np.concatenate([[True], ids[1:] != ids[:-1]]))
     index: dict = {}
-    run_pose = [index.setdefault(p, len(index)) for p in ids[starts].tolist()]
+    runs = ids[starts]
+    runs = runs.astype("U") if runs.dtype.kind == "S" else runs  # an ASCII file's: as text
+    run_pose = [index.setdefault(p, len(index)) for p in runs.tolist()]
     inv = np.repeat(np.array(run_pose, dtype=np.intp), np.diff(np.append(starts, len(ids))))
     first = np.full(len(index), len(ids), dtype=np.intp)
     np.minimum.at(first, inv, np.arange(len(ids)))
     if np.any(np.abs(q_deg - q_deg[first[inv]]) > same_tol_deg):
         return None
-    return [_text(p) for p in index], inv, first
+    return list(index), inv, first
 
 
 def read_campaign_columns(

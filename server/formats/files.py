@@ -14,7 +14,12 @@ def read_text(path) -> str:
     larger than FILE_BYTES_MAX."""
     try:
         with open(path, "rb") as f:
-            data = f.read(FILE_BYTES_MAX + 1)
+            # a regular file's size sizes the buffer (read(FILE_BYTES_MAX + 1) allocates all of
+            # it up front); a file without one (a pipe), or grown meanwhile, is read on
+            size = os.fstat(f.fileno()).st_size
+            data = f.read(min(size, FILE_BYTES_MAX) + 1) if size else b""
+            if not size or len(data) > size:
+                data += f.read(FILE_BYTES_MAX + 1 - len(data))
     except OSError as e:
         raise InputError(path, None, None, f"cannot read the file: {e.strerror or e}") from None
     if len(data) > FILE_BYTES_MAX:

@@ -9,6 +9,7 @@ from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import EFFECTS, make_effect, make_effects
 from robocal.solver.calibrate import calibrate
 from robocal.solver.kinematics import Layout, predict
+from robocal.solver.problem import Problem
 from robocal.solver.robot import IRB2600, Robot
 from tests import cli_process
 from tests.robots import PUMA_LIKE, TARGETS
@@ -322,7 +323,7 @@ def test_defaults_are_clearly_visible_to_a_geometric_calibration(spec):
     held = np.arange(150) % 3 == 0  # interleaved, so time-dependent effects reach both sets
     cal, hold = m.subset(~held), m.subset(held)
     nominal = np.array([TARGETS[n] for n in m.target_names])
-    c = calibrate(IRB2600, nominal, m.target_names, cal.q, cal.xyz, method="ls-sum")
+    c = calibrate(Problem.of(IRB2600, nominal, cal), "ls-sum")
     rms = np.sqrt(np.mean(np.sum((predict(c.layout, c.x, hold.q) - hold.xyz) ** 2, axis=-1)))
     assert 3.0 < rms / cell.noise_floor_mm(m.q) < 30.0
 

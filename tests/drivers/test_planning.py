@@ -17,6 +17,7 @@ from robocal.drivers.world import ACCEL_S, SimulatedWorld
 from robocal.solver.calibrate import calibrate
 from robocal.solver.kinematics import Layout, flange_frames, predict, rot, translation
 from robocal.solver.observability import observability_indices, select_poses, unit_columns
+from robocal.solver.problem import Problem
 from robocal.solver.robot import IRB2600
 from tests.robots import TARGETS
 
@@ -163,7 +164,7 @@ def held_out_rms(c, q, idx, held, draws):
     err = []
     for d in range(draws):
         meas = c.measure(q[idx], np.random.default_rng(100 + d))
-        cal = calibrate(IRB2600, T, tuple(TARGETS), q[idx], meas, method="ls-sum")
+        cal = calibrate(Problem(IRB2600, T, tuple(TARGETS), q[idx], meas), "ls-sum")
         err.append(np.mean(np.sum((predict(cal.layout, cal.x, held) - true) ** 2, axis=-1)))
     return float(np.sqrt(np.mean(err)))
 

@@ -1,19 +1,63 @@
-"""`robocal bench acquire`: each procedure beside its physical bound."""
+"""`robocal bench acquire`: each procedure beside a lower bound on its time."""
+
+from itertools import permutations
 
 import numpy as np
 
-from robocal.drivers.planning import total_move_time
+from robocal.drivers.campaign_bound import (
+    Ringing,
+    motion_lower_bound,
+    settling_lower_bound,
+    spanning_tree_weight,
+)
+from robocal.drivers.planning import order_poses, total_move_time
+from robocal.drivers.tracker.sim import INACCURATE_SPREAD
 from robocal.server.bench.acquire import physical_bound, run_acquire_bench
 
 
-def test_the_bound_is_the_best_order_of_the_motion_plus_the_samples():
+def test_the_spanning_tree_is_no_longer_than_any_visiting_order():
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-1.0, 1.0, size=(6, 6))
+    home = np.zeros(6)
+    bound = motion_lower_bound(q, home)
+    best = min(total_move_time(q, list(p), home) for p in permutations(range(6)))
+    assert 0 < bound <= best
+    assert bound <= total_move_time(q, order_poses(q, home), home)
+
+
+def test_spanning_tree_weight_of_a_small_graph():
+    # a path 0-1-2 of weights 1 and 2, with a heavy edge 0-2: the tree drops the heavy edge
+    D = np.array([[0.0, 1.0, 5.0], [1.0, 0.0, 2.0], [5.0, 2.0, 0.0]])
+    assert spanning_tree_weight(D) == 3.0
+    assert spanning_tree_weight(np.zeros((1, 1))) == 0.0
+
+
+def test_settling_bound_is_the_first_start_whose_window_passes():
+    ring, samples, rate = Ringing(), 1000, 1000.0
+    sigma = np.array([1e-3, 3e-3, 1.0])
+    s = settling_lower_bound(sigma, samples, rate, ring)
+    assert s.earliest_s[2] == 0.0  # a ring far below the noise needs no wait
+    assert s.earliest_s[0] > s.earliest_s[1] > 0.0  # the quieter the tracker, the longer
+    for t, sd in zip(s.earliest_s, sigma):
+        spread = ring.at(t + np.arange(samples) / rate).std(ddof=1)
+        assert spread <= np.sqrt(3.0) * INACCURATE_SPREAD * sd
+        if t > 0:  # a millisecond sooner the same reading fails
+            early = ring.at(t - 1e-3 + np.arange(samples) / rate).std(ddof=1)
+            assert early > np.sqrt(3.0) * INACCURATE_SPREAD * sd
+    assert np.all(s.mean_shift_mm >= 0)
+
+
+def test_the_bound_adds_motion_samples_and_settling():
     rng = np.random.default_rng(0)
     q = rng.uniform(-1.0, 1.0, size=(12, 6))
     home = np.zeros(6)
-    b = physical_bound(q, readings=36, samples=1000, sample_rate_hz=1000.0, start=home)
+    b = physical_bound(
+        q, readings=36, samples=1000, sample_rate_hz=1000.0, start=home, sigma_mm=np.full(12, 1e-3)
+    )
     assert b["measuring_s"] == 36.0
-    assert b["motion_s"] <= total_move_time(q, None, home)  # the best order, not the given one
-    assert b["bound_s"] == b["motion_s"] + b["measuring_s"]
+    assert b["motion_s"] == motion_lower_bound(q, home) <= b["tour_s"]
+    assert b["settling_s"] > 0
+    assert b["bound_s"] == b["motion_s"] + b["measuring_s"] + b["settling_s"]
 
 
 def test_every_procedure_takes_longer_than_its_bound_and_the_combined_one_least():
@@ -26,9 +70,12 @@ def test_every_procedure_takes_longer_than_its_bound_and_the_combined_one_least(
     )
     runs = out["configs"]
     for run in runs.values():
-        assert run["bound"]["measuring_s"] == run["readings"] * 1.0  # 1,000 samples at 1 kHz
+        bound = run["bound"]
+        assert bound["measuring_s"] == run["readings"] * 1.0  # 1,000 samples at 1 kHz
+        assert bound["motion_s"] <= bound["tour_s"] and bound["settling_s"] >= 0
+        assert run["poses_in_bound"] == run["poses"]
         assert run["ratio_to_bound"] >= 1.0  # no procedure beats the physics
-        assert run["ratio_to_bound"] == run["campaign_s"] / run["bound"]["bound_s"]
+        assert run["ratio_to_bound"] == run["campaign_s"] / bound["bound_s"]
     assert out["fastest"] == "combined"
     assert runs["combined"]["ratio_to_bound"] < 0.5 * runs["paper"]["ratio_to_bound"]
-    assert out["target"]["ratio_to_bound_max"] == 1.2
+    assert out["target"]["ratio_to_bound_max"] == 1.2 and "spanning tree" in out["bound_method"]

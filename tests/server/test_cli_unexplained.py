@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from robocal.server.formats.campaign_csv import write_campaign
-from robocal.server.formats.cell_json import cell_to_json
+from robocal.server.formats.cell_json import cell_to_json, default_cell
 from tests.solver.test_unexplained import campaign, draw
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -16,9 +16,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_diagnose_prints_the_unexplained_block(tmp_path):
     effect, name, channel = draw(1)
-    cell, _, meas = campaign(1, effect)
+    _, _, meas = campaign(1, effect)
     write_campaign(tmp_path / "meas.csv", meas)
-    (tmp_path / "cell.json").write_text(json.dumps(cell_to_json(cell)))
+    (tmp_path / "cell.json").write_text(json.dumps(cell_to_json(default_cell())))
     r = subprocess.run(
         [
             sys.executable,

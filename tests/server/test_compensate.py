@@ -391,3 +391,28 @@ def test_bad_configuration_values_are_refused(cell, tmp_path, value, why):
     rows = [[*r[:5], *[""] * 6, 0, 0, 0, value] for r in _good_rows(vc)]
     err = refused(cell, tmp_path, rows, header=(*JOINTS_HEADER, *CF_COLUMNS))
     assert err.startswith("robocal: error: targets.csv:2:15: column 'cfx'") and why in err, err
+
+
+def test_one_smr_a_pose_in_a_configuration_and_the_models_own_prediction():
+    """One SMR a pose and only its configuration: joints in that configuration that the model
+    puts there, and the reported miss is the model file's own prediction's
+    (workflow.model_predict). (From tests/solver/test_compensate.py: it reads the model file.)"""
+    from robocal.server import workflow
+    from robocal.server.compensation import solver_model
+    from robocal.solver.compensate import compensate
+    from tests.solver.test_compensate import campaign
+
+    _, vc, meas = campaign("irb2600", 21)
+    cell = default_cell()
+    _, model = workflow.diagnose(cell, meas, screen=False)
+    q_want = vc.sample_poses(40, np.random.default_rng(5))
+    desired = vc.true_points(q_want)
+    mask = np.zeros(desired.shape[:2], dtype=bool)
+    mask[np.arange(40), np.arange(40) % 3] = True
+    cf = confdata(cell.robot, q_want)
+    res = compensate(solver_model(model), desired, mask, cf=cf)
+    assert res.converged.all() and res.error_mm.max() < 1e-6
+    assert (confdata(cell.robot, res.q) == cf).all()
+    pred = workflow.model_predict(model, res.q)
+    assert np.abs(pred[mask] - desired[mask]).max() < 1e-6
+    assert np.all((res.q >= vc.true_robot.lower) & (res.q <= vc.true_robot.upper))

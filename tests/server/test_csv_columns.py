@@ -171,3 +171,18 @@ def test_a_simulated_campaign_round_trips_column_wise(folder, beam_breaks):
     path = folder / "sim.csv"
     write_campaign(path, meas)
     assert agree(path) == "accepted"
+
+
+def test_plain_decimals_from_bytes_equal_float_to_the_bit():
+    from robocal.server.formats.campaign_columns import _parse_decimals
+
+    tokens = ["0", "-0", "+7", "007.50", ".5", "5.", "-.25", "123456789012345", "0.1", "2.675"]
+    tokens += [f"{v:.9f}" for v in np.random.default_rng(0).uniform(-400, 400, 200)]
+    width = max(map(len, tokens))
+    window = np.array([list(t.ljust(width, ",").encode()) for t in tokens], dtype=np.uint8).T
+    got = _parse_decimals(window.copy(), np.array([len(t) for t in tokens]))
+    want = np.array([float(t) for t in tokens])
+    assert got is not None and got.tobytes() == want.tobytes()  # -0.0 too
+    for refused in ("1e3", "1.2.3", "-", ".", "1 2", "--1", "1234567890123456"):
+        w = np.array([list(refused.encode())], dtype=np.uint8).T
+        assert _parse_decimals(w.copy(), np.array([len(refused)])) is None, refused

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from robocal.server.formats.cell_json import cell_to_json
+from robocal.server.formats.cell_json import Cell, cell_to_json
 from tests import cli_process
 from tests.solver.test_diagnose_effects import aim, cell_of, draw, draw_backlash, robot_for
 
@@ -25,7 +25,8 @@ def workdir(tmp_path_factory):
     paths = {}
     for name in ("irb2600", "kuka-like"):
         paths[name] = d / f"{name}.json"
-        paths[name].write_text(json.dumps(cell_to_json(cell_of(name))))
+        sim = cell_of(name)
+        paths[name].write_text(json.dumps(cell_to_json(Cell(sim.robot, sim.targets))))
     return d, paths
 
 

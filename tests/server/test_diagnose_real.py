@@ -1,6 +1,6 @@
 """Both real campaigns through the command line: exit 0, the report and the model written, joint
 2's compliance named and printed with its held-out gain (the numerics are checked in process in
-tests/solver/test_diagnose_real.py)."""
+tests/server/test_diagnose_real_in_process.py)."""
 
 import json
 

@@ -23,6 +23,7 @@ from robocal.server.bench.diagnose_suite import (
     summarize,
 )
 from robocal.server.formats.cell_json import Cell, cell_to_json
+from robocal.solver.problem import Problem
 from tests.server.test_diagnose import robocal
 
 SEEDS = range(40)  # the ten kinds in turn, four seeds each
@@ -75,7 +76,7 @@ def test_aimed_magnitude_shows_the_drawn_multiple():
     names = meas.target_names
     nominal = np.array([case.targets[t] for t in names])
     fit = calibrate(
-        case.robot, nominal, names, meas.q[:PROBE_FIT], meas.xyz[:PROBE_FIT], method="ls-sum"
+        Problem(case.robot, nominal, names, meas.q[:PROBE_FIT], meas.xyz[:PROBE_FIT]), "ls-sum"
     )
     err = predict(fit.layout, fit.x, meas.q[PROBE_FIT:]) - meas.xyz[PROBE_FIT:]
     ratio = np.sqrt(np.nanmean(np.sum(err**2, axis=-1))) / floor
@@ -120,7 +121,7 @@ def test_payoff_compares_the_named_model_with_geometry_on_other_poses():
     vc = case.cell()
     meas = vc.campaign(case.n_poses, case.cell_seed, **case.options)
     nominal = np.array([case.targets[t] for t in meas.target_names])
-    d = diagnose(case.robot, nominal, meas.target_names, meas.q, meas.xyz, meas.time_s, meas.temp_c)
+    d = diagnose(Problem.of(case.robot, nominal, meas))
     assert d.extensions, "premise: the effect is named"
     p = payoff(case, vc, _diagnoser(case, meas, meas.xyz), d)
     assert p["pays_off"] and p["named_rmse_mm"] < 0.7 * p["geometric_rmse_mm"], p

@@ -6,9 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from robocal.drivers.cell import VirtualCell
+from robocal.drivers.cell import VirtualCell, displace
 from robocal.drivers.effects import make_effects
-from robocal.server.bench.screen import displace
 from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.cell_json import default_cell
 from tests import cli_process

@@ -8,6 +8,7 @@ import pytest
 
 from robocal.server.bench import split_suite as ss
 from robocal.solver import configuration
+from robocal.solver.problem import Problem
 
 
 @pytest.mark.parametrize("seed", [0, 5, 10])  # clean cases (no aiming): one per arm
@@ -85,7 +86,9 @@ def test_a_backlash_fitted_on_40_poses_of_one_configuration_holds_in_the_other()
     q_train, _, _ = ss.split_poses(case, vc)
     train = vc.campaign(case.n_train, case.cell_seed, poses=q_train, **case.options)
     nominal = np.array([case.targets[t] for t in train.target_names])
-    d = diagnose(case.robot, nominal, train.target_names, train.q, train.xyz, train.time_s)
+    d = diagnose(
+        Problem(case.robot, nominal, train.target_names, train.q, train.xyz, time_s=train.time_s)
+    )
     folds = d.report["extrapolation"]["folds"]
     exempt = [f for f in folds if f["worse_only_in_geometric_span"]]
     assert exempt and d.report["extrapolation"]["refused"] == [], folds

@@ -9,40 +9,42 @@ import pytest
 
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import make_effects
-from robocal.server import workflow
-from robocal.server.compensation import solver_model
-from robocal.server.formats.cell_json import Cell, default_cell
 from robocal.solver.calibrate import calibrate
 from robocal.solver.compensate import Model, compensate
 from robocal.solver.configuration import confdata
+from robocal.solver.diagnose import diagnose
 from robocal.solver.robot import IRB2600
 from tests.robots import PUMA_LIKE, UR5
+from tests.sim import SimCell, default_cell
 
 GRAVITY_JOINTS = (2, 3)  # joints carrying a large gravity torque on both arms
 
 
-def cell_of(robot: str) -> Cell:
+def cell_of(robot: str) -> SimCell:
     irb = default_cell()
-    return irb if robot == "irb2600" else Cell(PUMA_LIKE, irb.targets)
+    return irb if robot == "irb2600" else SimCell(PUMA_LIKE, irb.targets)
 
 
-def simulated(robot: str, seed: int):
-    """A virtual cell with hidden geometry and compliance on a joint drawn from the seed, and the
-    model a diagnosis of its campaign writes."""
+def campaign(robot: str, seed: int):
+    """A virtual cell with hidden geometry and compliance on a joint drawn from the seed, and a
+    campaign of it: (cell, virtual cell, measurements)."""
     cell = cell_of(robot)
     vc = VirtualCell.random(cell.robot, cell.targets, seed=seed)
     joint = GRAVITY_JOINTS[np.random.default_rng(seed).integers(len(GRAVITY_JOINTS))]
     vc.effects.extend(make_effects([f"joint_compliance:{joint}=1.0"], vc, seed))
-    meas = vc.campaign(100, seed=seed)
-    _, model = workflow.diagnose(cell, meas, screen=False)
-    return cell, vc, meas, model
+    return cell, vc, vc.campaign(100, seed=seed)
 
 
-def nominal_model(cell: Cell, meas) -> Model:
+def simulated(robot: str, seed: int):
+    """The campaign and the model a diagnosis of it (as `robocal diagnose` runs it) finds."""
+    cell, vc, meas = campaign(robot, seed)
+    d = diagnose(cell.problem(meas), screen_outliers=False)
+    return cell, vc, meas, Model(d.layout, d.x, d.extensions, cell.robot)
+
+
+def nominal_model(cell: SimCell, meas) -> Model:
     """What an uncalibrated cell knows: the nominal arm, registered to the tracker."""
-    names = meas.target_names
-    targets = cell.target_positions(names)
-    nom = calibrate(cell.robot, targets, names, meas.q, meas.xyz, method="nominal")
+    nom = calibrate(cell.problem(meas), "nominal")
     return Model(nom.layout, nom.x, [], cell.robot)
 
 
@@ -57,7 +59,7 @@ def test_compensated_joints_put_the_true_arm_on_target(robot, seed):
     floor = vc.noise_floor_mm(q_want)
 
     nominal = compensate(nominal_model(cell, meas), desired, mask, q_want)
-    calibrated = compensate(solver_model(model), desired, mask, nominal.q)
+    calibrated = compensate(model, desired, mask, nominal.q)
 
     def miss(q):
         return float(np.sqrt(np.mean(np.sum((vc.true_points(q) - desired) ** 2, axis=-1))))
@@ -68,24 +70,6 @@ def test_compensated_joints_put_the_true_arm_on_target(robot, seed):
     after = miss(calibrated.q)
     assert after <= 2 * floor, f"true arm misses by {after:.4f} mm RMS, noise floor {floor:.4f}"
     assert miss(nominal.q) > max(0.5, 20 * miss(calibrated.q))
-
-
-def test_one_smr_a_pose_in_a_configuration_and_the_models_own_prediction():
-    """One SMR a pose and only its configuration: joints in that configuration that the model
-    puts there, and the reported miss is the model file's own prediction's
-    (workflow.model_predict)."""
-    cell, vc, meas, model = simulated("irb2600", 21)
-    q_want = vc.sample_poses(40, np.random.default_rng(5))
-    desired = vc.true_points(q_want)
-    mask = np.zeros(desired.shape[:2], dtype=bool)
-    mask[np.arange(40), np.arange(40) % 3] = True
-    cf = confdata(cell.robot, q_want)
-    res = compensate(solver_model(model), desired, mask, cf=cf)
-    assert res.converged.all() and res.error_mm.max() < 1e-6
-    assert (confdata(cell.robot, res.q) == cf).all()
-    pred = workflow.model_predict(model, res.q)
-    assert np.abs(pred[mask] - desired[mask]).max() < 1e-6
-    assert np.all((res.q >= vc.true_robot.lower) & (res.q <= vc.true_robot.upper))
 
 
 @pytest.mark.parametrize("robot", [IRB2600, PUMA_LIKE, UR5])

@@ -10,23 +10,24 @@ import pytest
 
 from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import make_effects
-from robocal.server.formats.cell_json import Cell, default_cell
 from robocal.solver import metrics
 from robocal.solver.calibrate import calibrate
 from robocal.solver.diagnose import diagnose
 from robocal.solver.effects import Inputs, prepare
 from robocal.solver.extended import predict_extended
 from robocal.solver.kinematics import Layout, predict
+from robocal.solver.problem import Problem
 from tests.robots import KUKA_LIKE
+from tests.sim import SimCell, default_cell
 
 EFFECTS = ("joint_compliance", "joint_periodic", "joint_scale", "thermal_drift", "base_shift")
 GRAVITY_JOINTS = (2, 3, 5)  # joints that carry a gravity torque on a floor-mounted 6R arm
 POSES = 100
 
 
-def cell_of(robot: str) -> Cell:
+def cell_of(robot: str) -> SimCell:
     irb = default_cell()
-    return irb if robot == "irb2600" else Cell(KUKA_LIKE, irb.targets)
+    return irb if robot == "irb2600" else SimCell(KUKA_LIKE, irb.targets)
 
 
 def robot_for(seed: int) -> str:
@@ -40,7 +41,7 @@ def geometric_ratio(cell, spec, seed):
     meas = vc.campaign(150, seed=seed)
     names = meas.target_names
     targets = np.array([cell.targets[t] for t in names])
-    fit = calibrate(cell.robot, targets, names, meas.q[:100], meas.xyz[:100], method="ls-sum")
+    fit = calibrate(Problem(cell.robot, targets, names, meas.q[:100], meas.xyz[:100]), "ls-sum")
     hold = slice(100, 150)
     err = predict(fit.layout, fit.x, meas.q[hold]) - meas.xyz[hold]
     return np.sqrt(np.nanmean(np.sum(err**2, axis=-1))) / vc.noise_floor_mm(meas.q[hold])
@@ -98,7 +99,10 @@ def simulated(cell, seed, specs, poses=POSES):
     """The campaign `robocal simulate --cell C --poses N --seed S --effect ...` makes, and its
     truth (with the noise floor), without the file."""
     vc = VirtualCell.random(
-        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(**cell.tracker)
+        cell.robot,
+        cell.targets,
+        seed=seed,
+        tracker=TrackerSpec(),  # the cell's default spec
     )
     vc.effects.extend(make_effects(specs, vc, seed))
     meas = vc.campaign(poses, seed=seed)
@@ -109,18 +113,7 @@ def simulated(cell, seed, specs, poses=POSES):
 
 def diagnosed(cell, meas):
     """The diagnosis `robocal diagnose` runs on a campaign."""
-    targets = np.array([cell.targets[t] for t in meas.target_names])
-    return diagnose(
-        cell.robot,
-        targets,
-        meas.target_names,
-        meas.q,
-        meas.xyz,
-        meas.time_s,
-        meas.temp_c,
-        base_guess=cell.base,
-        pose_ids=meas.pose_ids,
-    )
+    return diagnose(cell.problem(meas))
 
 
 def figure_of(d, effect):

@@ -4,10 +4,9 @@ and files are checked in tests/server/test_outliers.py on the same campaign)."""
 
 import numpy as np
 
-from robocal.drivers.cell import VirtualCell
+from robocal.drivers.cell import VirtualCell, displace
 from robocal.drivers.effects import make_effects
-from robocal.server.bench.screen import displace
-from robocal.server.formats.cell_json import default_cell
+from tests.sim import default_cell
 from tests.solver.test_diagnose_effects import diagnosed
 
 SEED = 21

@@ -9,13 +9,14 @@ import pytest
 
 import robocal.solver.finite
 from robocal.drivers.cell import VirtualCell
-from robocal.server.processes import call
 from robocal.solver.calibrate import calibrate
 from robocal.solver.diagnose import diagnose
 from robocal.solver.finite import NonFinite
+from robocal.solver.problem import Problem
 from robocal.solver.rigid import kabsch
 from robocal.solver.robot import IRB2600
 from tests.robots import TARGETS
+from tests.sim import in_child
 
 NAMES = ("A", "B", "C")
 METHODS = ["nominal", "ls-sum", "ls-single:A", "ls-pose", "minimax"]
@@ -39,13 +40,13 @@ def huge(value=1e308):
 def test_every_method_refuses_a_coordinate_beyond_any_instrument(method):
     targets, q, xyz = huge()
     with pytest.raises(NonFinite, match=r"measured SMR positions: a coordinate of 1e\+308 mm"):
-        calibrate(IRB2600, targets, NAMES, q, xyz, method=method)
+        calibrate(Problem(IRB2600, targets, NAMES, q, xyz), method)
 
 
 def test_diagnose_refuses_it_too():
     targets, q, xyz = huge()
     with pytest.raises(NonFinite, match="beyond"):
-        diagnose(IRB2600, targets, NAMES, q, xyz)
+        diagnose(Problem(IRB2600, targets, NAMES, q, xyz))
 
 
 def test_inf_and_nan_are_named_but_a_missing_reading_is_not():
@@ -53,13 +54,13 @@ def test_inf_and_nan_are_named_but_a_missing_reading_is_not():
     xyz, q = meas.xyz.copy(), meas.q.copy()
     xyz[1, 2, 1] = np.inf
     with pytest.raises(NonFinite, match="non-finite values in the measured SMR positions"):
-        calibrate(IRB2600, targets, NAMES, meas.q, xyz, method="ls-sum")
+        calibrate(Problem(IRB2600, targets, NAMES, meas.q, xyz), "ls-sum")
     q[3, 2] = np.nan
     with pytest.raises(NonFinite, match="non-finite values in the joint angles"):
-        calibrate(IRB2600, targets, NAMES, q, meas.xyz, method="ls-sum")
+        calibrate(Problem(IRB2600, targets, NAMES, q, meas.xyz), "ls-sum")
     xyz = meas.xyz.copy()
     xyz[1, 2] = np.nan  # a beam break: the fit goes on without it
-    assert calibrate(IRB2600, targets, NAMES, meas.q, xyz, method="ls-sum").x.size
+    assert calibrate(Problem(IRB2600, targets, NAMES, meas.q, xyz), "ls-sum").x.size
 
 
 def test_the_registration_refuses_an_overflowing_cross_covariance():
@@ -73,15 +74,15 @@ def test_the_registration_refuses_an_overflowing_cross_covariance():
         kabsch(src, dst)
 
 
-def _without_entry_bound(what: str, value: float, report=None) -> str:
+def _without_entry_bound(what: str, value: float) -> str:
     """In a child: the fit with the entry bound lifted; the error it ended with, or "ok"."""
     robocal.solver.finite.MAX_MM = np.inf
     targets, q, xyz = huge(value)
     try:
         if what == "diagnose":
-            diagnose(IRB2600, targets, NAMES, q, xyz, screen_outliers=False)
+            diagnose(Problem(IRB2600, targets, NAMES, q, xyz), screen_outliers=False)
         else:
-            calibrate(IRB2600, targets, NAMES, q, xyz, method=what)
+            calibrate(Problem(IRB2600, targets, NAMES, q, xyz), what)
     except NonFinite as e:
         return str(e)
     return "ok"
@@ -91,7 +92,7 @@ def _without_entry_bound(what: str, value: float, report=None) -> str:
 def test_without_the_entry_bound_the_intermediate_checks_still_refuse(what):
     # 1e308 overflows in the registration; 1e200 gets further (its squares overflow) and is
     # fitted or refused by the checks in front of the QP, the pose fit or the normal equations.
-    message = call(_without_entry_bound, (what, 1e308), CHILD_LIMIT_S)
+    message = in_child(_without_entry_bound, (what, 1e308), CHILD_LIMIT_S)
     assert message.startswith("non-finite values in "), message
-    message = call(_without_entry_bound, (what, 1e200), CHILD_LIMIT_S)
+    message = in_child(_without_entry_bound, (what, 1e200), CHILD_LIMIT_S)
     assert message == "ok" or message.startswith("non-finite values in "), message

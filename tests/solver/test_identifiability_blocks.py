@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocal.server.bench.scale import peak_mb, smr_ring
 from robocal.solver import identifiability as ident
 from robocal.solver.identify import pose_residuals
 from robocal.solver.kinematics import Layout, predict_with_jacobian
 from robocal.solver.robot import IRB2600, KUKA_LIKE, robot_from_degrees
+from tests.sim import peak_mb, smr_ring
 
 SEVEN = robot_from_degrees(
     "seven",

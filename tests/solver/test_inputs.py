@@ -7,6 +7,7 @@ from robocal.drivers.cell import VirtualCell
 from robocal.solver.calibrate import METHODS, calibrate
 from robocal.solver.identify import register
 from robocal.solver.kinematics import Layout, predict, predict_rows, predict_with_jacobian
+from robocal.solver.problem import Problem
 from robocal.solver.robot import IRB2600
 from tests.robots import TARGETS
 
@@ -36,7 +37,7 @@ def inputs():
 def test_calibrate_runs_on_read_only_inputs_and_leaves_them_unchanged(inputs, method):
     targets, q, xyz, _ = inputs
     copies = [a.copy() for a in (targets, q, xyz)]
-    cal = calibrate(IRB2600, targets, NAMES, q, xyz, method=method)
+    cal = calibrate(Problem(IRB2600, targets, NAMES, q, xyz), method)
     assert np.all(np.isfinite(cal.x))
     for a, c in zip((targets, q, xyz), copies, strict=True):
         np.testing.assert_array_equal(a, c)

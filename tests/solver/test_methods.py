@@ -7,6 +7,7 @@ from robocal.drivers.cell import VirtualCell
 from robocal.solver.calibrate import calibrate
 from robocal.solver.identifiability import NotIdentifiable
 from robocal.solver.kinematics import predict
+from robocal.solver.problem import Problem
 from robocal.solver.robot import IRB2600
 from tests.robots import KUKA_LIKE, PUMA_LIKE, TARGETS
 
@@ -23,7 +24,7 @@ def campaign(robot, seed, n_cal=100, n_hold=50):
 
 def fit(robot, meas, method, **kw):
     targets = np.array([TARGETS[t] for t in NAMES])
-    return calibrate(robot, targets, NAMES, meas.q, meas.xyz, method=method, **kw)
+    return calibrate(Problem(robot, targets, NAMES, meas.q, meas.xyz), method, **kw)
 
 
 def noise_floor(cell, meas, rows=slice(None)):
@@ -100,7 +101,7 @@ def test_too_similar_poses_hold_what_they_cannot_separate_by_name():
     q[:, 0] += np.linspace(-0.5, 0.5, 30)  # only joint 1 moves
     xyz = cell.measure(q, np.random.default_rng(0))
     targets = np.array([TARGETS[t] for t in NAMES])
-    c = calibrate(IRB2600, targets, NAMES, q, xyz, method="ls-sum")
+    c = calibrate(Problem(IRB2600, targets, NAMES, q, xyz), "ls-sum")
     for p in ("theta2", "a2", "theta3", "d4", "theta5"):
         assert "only together with" in c.fixed[p]
     assert np.isfinite(c.condition) and c.condition < 1e4

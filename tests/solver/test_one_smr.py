@@ -8,6 +8,7 @@ import pytest
 from robocal.drivers.cell import VirtualCell
 from robocal.solver.calibrate import calibrate
 from robocal.solver.kinematics import predict
+from robocal.solver.problem import Problem
 from robocal.solver.robot import IRB2600
 from tests.robots import IIWA_LIKE, KUKA_LIKE, PUMA_LIKE, UR5
 
@@ -40,7 +41,7 @@ def test_one_smr_on_the_axis_calibrates_holding_the_last_joints_offset(name, exa
     cell, cal, hold = one_smr(robot, 11 + list(ROBOTS).index(name), exactly)
     floor = np.sqrt(np.nanmean(np.sum((hold.xyz - cell.true_points(hold.q)) ** 2, axis=-1)))
     for method in METHODS:
-        c = calibrate(robot, np.array([ON_AXIS["A"]]), ("A",), cal.q, cal.xyz, method=method)
+        c = calibrate(Problem(robot, np.array([ON_AXIS["A"]]), ("A",), cal.q, cal.xyz), method)
         assert f"theta{n}" in c.fixed and f"d{n}" in c.fixed, (method, c.fixed)
         if exactly:
             assert "no effect on the measured SMRs" in c.fixed[f"theta{n}"]
@@ -53,7 +54,7 @@ def test_one_smr_on_the_axis_calibrates_holding_the_last_joints_offset(name, exa
 def test_ls_pose_needs_three_smrs_whatever_their_layout():
     cell, cal, _ = one_smr(IRB2600, 3, True)
     with pytest.raises(ValueError, match="three targets"):
-        calibrate(IRB2600, np.array([ON_AXIS["A"]]), ("A",), cal.q, cal.xyz, method="ls-pose")
+        calibrate(Problem(IRB2600, np.array([ON_AXIS["A"]]), ("A",), cal.q, cal.xyz), "ls-pose")
 
 
 def test_diagnose_refuses_too_few_poses_before_any_selection():
@@ -64,5 +65,7 @@ def test_diagnose_refuses_too_few_poses_before_any_selection():
     _, cal, _ = one_smr(IRB2600, 3, True, n_cal=6, n_hold=0)
     said = []
     with pytest.raises(NotIdentifiable, match="poses"):
-        diagnose(IRB2600, np.array([ON_AXIS["A"]]), ("A",), cal.q, cal.xyz, log=said.append)
+        diagnose(
+            Problem(IRB2600, np.array([ON_AXIS["A"]]), ("A",), cal.q, cal.xyz), log=said.append
+        )
     assert said == []

@@ -8,6 +8,7 @@ from robocal.drivers.cell import VirtualCell
 from robocal.solver import minimax as minimax_module
 from robocal.solver import qp
 from robocal.solver.calibrate import METHODS, Calibration, calibrate
+from robocal.solver.problem import Problem
 from robocal.solver.robot import IRB2600
 from tests.robots import TARGETS
 
@@ -24,7 +25,7 @@ def data():
 
 def _fit(data, method, **kw):
     targets, q, xyz = data
-    return calibrate(IRB2600, targets, NAMES, q, xyz, method=method, **kw)
+    return calibrate(Problem(IRB2600, targets, NAMES, q, xyz), method, **kw)
 
 
 @pytest.mark.parametrize("method", [*(m for m in METHODS if m != "ls-single"), "ls-single:B"])

@@ -5,13 +5,14 @@ import pytest
 
 from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import make_effects
-from robocal.server.formats.cell_json import default_cell
 from robocal.solver import identifiability as ident
 from robocal.solver.diagnose import Diagnoser, candidates, diagnose
 from robocal.solver.effects import Inputs
 from robocal.solver.identify import register
+from robocal.solver.problem import Problem
 from robocal.solver.selection import linear_scores, rmse_gain_interval
 from tests.robots import KUKA_LIKE, TARGETS
+from tests.sim import default_cell
 
 
 def campaign(robot, seed, poses, specs=(), noise=1.0):
@@ -22,7 +23,7 @@ def campaign(robot, seed, poses, specs=(), noise=1.0):
 
 def run(robot, meas):
     targets = np.array([TARGETS[t] for t in meas.target_names])
-    return diagnose(robot, targets, meas.target_names, meas.q, meas.xyz, meas.time_s, meas.temp_c)
+    return diagnose(Problem.of(robot, targets, meas))
 
 
 def named(d):

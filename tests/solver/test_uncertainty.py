@@ -14,6 +14,7 @@ from robocal.solver.extended import fit_extended
 from robocal.solver.fit_errors import calibration_errors, effect_uncertainty, extended_errors
 from robocal.solver.gravity import gravity_basis, gravity_in_base, select_independent
 from robocal.solver.identify import register
+from robocal.solver.problem import Problem
 from robocal.solver.robot import IRB2600
 from robocal.solver.uncertainty import Rows, clustered, propagate
 from tests.robots import KUKA_LIKE, TARGETS
@@ -49,7 +50,7 @@ def monte_carlo(method, robot=IRB2600, seed=3, poses=40, scatter_deg=0.0, draws=
         xyz = vc.measure(q, rng)
         # the arm's error at each pose moves all its SMRs alike: added to the joint readings
         q_read = q + np.deg2rad(scatter_deg) * rng.normal(size=q.shape)
-        cal = calibrate(robot, targets, vc.target_names, q_read, xyz, method=method)
+        cal = calibrate(Problem(robot, targets, vc.target_names, q_read, xyz), method)
         err = calibration_errors(cal, q_read, xyz)
         B0 = cal.base if B0 is None else B0
         v = cal.x.copy()
@@ -185,7 +186,7 @@ def test_held_parameters_have_no_standard_error_and_angles_are_in_degrees():
     vc = VirtualCell.random(IRB2600, TARGETS, seed=1)
     meas = vc.campaign(40, seed=1)
     targets = np.array([TARGETS[k] for k in vc.target_names])
-    cal = calibrate(IRB2600, targets, vc.target_names, meas.q, meas.xyz, method="ls-sum")
+    cal = calibrate(Problem(IRB2600, targets, vc.target_names, meas.q, meas.xyz), "ls-sum")
     err = calibration_errors(cal, meas.q, meas.xyz)
     se = err.standard_errors()
     assert [n for n, v in se.items() if v is None] == list(cal.fixed)

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from robocal.drivers.cell import VirtualCell
-from robocal.server.formats.cell_json import default_cell
 from robocal.solver import identifiability as ident
 from robocal.solver.diagnose import Diagnoser, noise_floor
 from robocal.solver.effects import Inputs
 from robocal.solver.identify import register
 from robocal.solver.motion import last_motion
 from robocal.solver.unexplained import STRONG, Fields, covariates, unexplained
+from tests.sim import default_cell
 from tests.solver.test_diagnose_effects import diagnosed
 
 
@@ -206,8 +206,8 @@ def test_no_block_once_the_hidden_effect_is_named(seed):
     """An effect of the vocabulary, drawn as tests/server/test_diagnose.py draws it: the diagnosis
     names it, the final model reaches the floor, and nothing is left to say."""
     from robocal.drivers.effects import make_effects
-    from tests.server.test_diagnose import aim
-    from tests.server.test_diagnose import draw as draw_vocabulary
+    from tests.solver.test_diagnose_effects import aim
+    from tests.solver.test_diagnose_effects import draw as draw_vocabulary
 
     spec, name, _, _, target = draw_vocabulary(seed)
     cell = default_cell()

@@ -1,6 +1,7 @@
 """A real uvicorn serving the API, the page and the charts, on 127.0.0.1 with its own data; and
 Debian's headless Chromium driven by Playwright."""
 
+import re
 from pathlib import Path
 
 import pytest
@@ -47,3 +48,20 @@ def shot(page, name: str) -> Path:
     path = ARTIFACTS / f"{name}.png"
     page.screenshot(path=str(path), full_page=True)
     return path
+
+
+# What a notice for people must not say: HTTP verbs, API paths, status codes and phrases (the
+# request and its status are under "details", for an engineer).
+HTTP_WORDS = re.compile(
+    r"\b(GET|POST|PUT|PATCH|DELETE)\b|/api/|\b(400|401|403|404|409|413|422|429|500|502|503)\b"
+    r"|Unprocessable|Unauthorized|Forbidden|Internal Server Error"
+)
+
+
+def said(page) -> tuple[str, str]:
+    """The message row's words and its details (the request and status); the words checked free
+    of HTTP."""
+    text = page.text_content("#message-text") or ""
+    technical = page.text_content("#message-technical") or ""
+    assert not HTTP_WORDS.search(text), f"the message speaks HTTP: {text!r}"
+    return text, technical

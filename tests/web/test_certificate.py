@@ -42,7 +42,7 @@ def test_certificate_shows_the_run_and_its_figures(page, certificate):
     verdict = page.inner_text("#verdict")
     assert re.search(r"\(\d+x better\)", verdict), verdict
     for p in report["after"]["points"]:
-        assert page.get_by_role("cell", name=p["point"], exact=True).is_visible()
+        assert page.get_by_role("cell", name=p["point"], exact=True).first.is_visible()
     # the plots are inline and decode: each image has a natural width
     widths = page.eval_on_selector_all("img", "imgs => imgs.map(i => i.naturalWidth)")
     assert len(widths) == 2 and min(widths) > 300
@@ -52,3 +52,29 @@ def test_certificate_shows_the_run_and_its_figures(page, certificate):
     pdf = page.pdf(format="A4", print_background=True)
     assert pdf.startswith(b"%PDF")
     (ARTIFACTS / "certificate.pdf").write_bytes(pdf)
+
+
+@pytest.fixture(scope="module")
+def calibrated_certificate(tmp_path_factory):
+    """(certificate.html, report) of a geometric calibration verified against a tolerance."""
+    from ..server.test_verification_uncertainty import calibrated_and_verified as calibrated
+
+    d = tmp_path_factory.mktemp("certificate-uncertainty")
+    report, _ = calibrated(d, tolerance_mm=0.5)
+    return write_certificate(report, d / "certificate.html"), report
+
+
+def test_certificate_states_the_uncertainty_and_the_decision(page, calibrated_certificate):
+    path, report = calibrated_certificate
+    page.goto(path.as_uri())
+    verdict = page.inner_text("#verdict")
+    assert "PASS against the tolerance 0.5 mm" in verdict, verdict
+    body = page.inner_text("body")
+    assert "Uncertainty and decision" in body and "ISO 14253-1" in body
+    for p, u in zip(report["after"]["points"], report["uncertainty"]["model"]["model_U_mm"]):
+        assert f"{p['AP_mm']:.4f} ± {p['AP_U_mm']:.4f}" in body
+        assert f"{u:.4f}" in body
+    widths = page.eval_on_selector_all("img", "imgs => imgs.map(i => i.naturalWidth)")
+    assert len(widths) == 3 and min(widths) > 300  # AP/RP, scatter, and the U map
+    assert page.is_visible("img[alt='U over the working volume']")
+    shot(page, "certificate-uncertainty")

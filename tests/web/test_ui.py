@@ -12,6 +12,7 @@ import httpx
 
 from robocal.server.exports.rapid import read_module
 from tests.server.api.conftest import wait_for
+from tests.web.conftest import said
 from tests.web.conftest import shot as _shot
 
 
@@ -184,7 +185,9 @@ def test_token_missing_shows_the_refusal(served, page):
     page.goto(served.url + "/")
     page.click("#create")
     page.wait_for_selector("#message:not([hidden])")
-    assert "401" in page.text_content("#message")
+    text, technical = said(page)
+    assert "API token" in text and "section 1" in text, text
+    assert "401" in technical, technical
 
 
 def test_cell_picker_upload_and_refusal(served, page):
@@ -196,8 +199,9 @@ def test_cell_picker_upload_and_refusal(served, page):
     page.fill("#cell-json", '{"schema": 1,\n "robot": ')  # broken JSON: a 422 with its line
     page.click("#cell-upload-btn")
     page.wait_for_selector("#message:not([hidden])")
-    message = page.text_content("#message")
-    assert "422" in message and "POST /api/cells" in message, message
+    text, technical = said(page)
+    assert text.startswith("The cell was not uploaded: "), text
+    assert "422" in technical and "POST /api/cells" in technical, technical
     # The default cell, sent back, is a valid upload: it becomes an id in the picker, selected.
     cell = _get(served, f"{served.url}/api/cells/default").json()["cell"]
     page.fill("#cell-json", json.dumps(cell, indent=2))

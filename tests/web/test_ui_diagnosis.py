@@ -21,7 +21,7 @@ import pytest
 from robocal.server.formats.cell_json import default_cell
 from tests.server.test_diagnose import aim
 from tests.server.test_diagnose import draw as draw_effect
-from tests.web.conftest import shot
+from tests.web.conftest import said, shot
 
 ROOT = Path(__file__).resolve().parents[2]
 POSES = 100
@@ -99,8 +99,9 @@ def test_hidden_effect_is_named_with_its_evidence_and_figure(served, page, tmp_p
     )
     page.click("#m-import-btn")
     page.wait_for_selector("#message:not([hidden])")
-    message = page.text_content("#message")
-    assert "422" in message and "bad.csv:3" in message, message
+    text, technical = said(page)
+    assert text.startswith("The file was not imported: ") and "bad.csv:3" in text, text
+    assert "422" in technical, technical
     assert page.is_hidden("#progress")
     page.set_input_files("#m-file", str(csv))
     page.click("#m-import-btn")

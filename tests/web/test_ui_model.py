@@ -11,9 +11,10 @@ import re
 
 import httpx
 
+from robocal.server.tables import plus_minus
 from tests.real import import_real
 from tests.server.api.conftest import wait_for
-from tests.web.conftest import shot
+from tests.web.conftest import said, shot
 
 
 def fmt(v) -> str:
@@ -93,8 +94,9 @@ def test_five_poses_not_fit_to_deploy_and_exports_refused(served, page):
     # Unticked: the service refuses (409, its reasons), and nothing is saved.
     page.click("#x-params")
     page.wait_for_selector("#message:not([hidden])")
-    message = page.text_content("#message")
-    assert "409" in message and "not deployable: too few poses" in message, message
+    text, technical = said(page)
+    assert "not deployable: too few poses" in text, text
+    assert "409" in technical, technical
     assert page.text_content("#t-state") == ""
     # Ticked: force=true, and the parameter table comes back.
     page.check("#m-force")
@@ -102,7 +104,12 @@ def test_five_poses_not_fit_to_deploy_and_exports_refused(served, page):
         page.click("#x-params")
     rows = list(csv.DictReader(io.StringIO(open(got.value.path()).read())))
     assert {r["parameter"] for r in rows} >= {"a1", "theta2", "base_x"}
-    assert page.text_content("#t-state") == f"saved job-{job['id']}.csv"
+    # saved under the robot's name, the job and what it is
+    saved = page.text_content("#t-state")
+    assert re.fullmatch(rf"saved [\w.-]+-job-{job['id']}-parameters\.csv", saved), saved
+    assert got.value.suggested_filename == saved.removeprefix("saved "), (
+        got.value.suggested_filename
+    )
     charts_loaded(page)
     shot(page, "model_unfit")
 
@@ -148,7 +155,8 @@ def test_healthy_model_parameters_as_the_api_gives_them(served, page):
             elif r["status"] == "held fixed":
                 want.append("fixed")
             else:
-                want.append(f"{fmt(r['change'])} ± {fmt(r['standard_error'])}")
+                # as the command line prints it (server/tables.py)
+                want.append(plus_minus(r["change"], r["standard_error"]))
         assert cells == want, (n, cells, want)
     # beta only where the convention has it (joint 2's parallel axes)
     assert "-" in lines.nth(0).locator("td").all_text_contents()

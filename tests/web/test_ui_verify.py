@@ -9,7 +9,7 @@ import re
 import httpx
 
 from tests.server.api.conftest import wait_for
-from tests.web.conftest import shot
+from tests.web.conftest import said, shot
 
 # Every change the page makes to the progress block, with the campaign and state it then shows
 # and whether its e-stop button is enabled: a run shorter than a poll is still seen whole.
@@ -65,9 +65,11 @@ def test_verify_from_the_results_and_open_the_certificate(served, page):
     page.fill("#v-cycles", "0")
     page.click("#v-start")
     # an earlier note ("start: planned ...") may still be shown: wait for this answer's
-    page.wait_for_function("document.getElementById('message').textContent.includes('422')")
-    message = page.text_content("#message")
-    assert "422" in message and "cycles" in message, message
+    page.wait_for_function(
+        "document.getElementById('message-technical').textContent.includes('422')"
+    )
+    text, technical = said(page)
+    assert text.startswith("The verification run was not planned: ") and "cycles" in text, text
     assert page.text_content("#p-id") == str(cal)
     page.fill("#v-cycles", "2")
     page.fill("#v-directions", "2")
@@ -79,9 +81,11 @@ def test_verify_from_the_results_and_open_the_certificate(served, page):
         busy = c.post("/api/campaigns", json={"poses": 2000, "name": "busy"}).json()["id"]
         assert c.post(f"/api/campaigns/{busy}/start").status_code == 202
         page.click("#v-start")
-        page.wait_for_function("document.getElementById('message').textContent.includes('409')")
-        message = page.text_content("#message")
-        assert f"campaign {busy} is running; one at a time" in message, message
+        page.wait_for_function(
+            "document.getElementById('message-technical').textContent.includes('409')"
+        )
+        text, _ = said(page)
+        assert f"campaign {busy} is running; one at a time" in text, text
         assert page.text_content("#p-id") == str(cal)
         assert c.post(f"/api/campaigns/{busy}/abort").status_code in (200, 202)
         wait_for(

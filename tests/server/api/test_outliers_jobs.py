@@ -3,8 +3,7 @@ them by pose and target."""
 
 import numpy as np
 
-from robocal.drivers.cell import VirtualCell
-from robocal.server.bench.screen import displace
+from robocal.drivers.cell import VirtualCell, displace
 from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.cell_json import default_cell
 from tests.server.api.conftest import wait_for

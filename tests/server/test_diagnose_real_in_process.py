@@ -1,18 +1,19 @@
 """Both real campaigns, in process: joint 2's compliance named with its held-out gain, no
-per-dataset setting (tests/server/test_diagnose_real.py runs them through the command line)."""
+per-dataset setting (tests/server/test_diagnose_real.py runs them through the command line;
+moved from tests/solver, since the campaign files are read as the commands read them)."""
 
 import pytest
 
 from robocal.server import workflow
+from robocal.solver.diagnose import diagnose
 from tests.real import CAMPAIGNS, campaign_files
-from tests.solver.test_diagnose_effects import diagnosed
 
 
 @pytest.mark.parametrize("name", CAMPAIGNS)
 def test_real_campaign_names_joint_2_compliance(name):
     meas_path, cell_path = campaign_files(name)
     cell, meas = workflow.load_data(meas_path, cell_path)
-    r = diagnosed(cell, meas).report
+    r = diagnose(workflow.cell_problem(cell, meas)).report
     first = r["effects"][0]
     assert (first["name"], first["joint"]) == ("joint_compliance", 2), r["effects"]
     before, after = first["holdout_rmse_before_mm"], first["holdout_rmse_after_mm"]

@@ -1,0 +1,74 @@
+"""A calibration's position uncertainty: kept in model.json (the identified parameters'
+covariance in mm and degrees, and the joint scatter that stands for what the model leaves
+unexplained), and read back as U at any joints (solver/position_uncertainty.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from robocal.solver import position_uncertainty as pu
+from robocal.solver.uncertainty import ParameterErrors
+
+from .formats.model_json import ModelFile
+
+# Positions whose Jacobians are held at once: memory stays flat in the campaign's size.
+BLOCK = 2048
+METHOD = (
+    "U holds the position's error with 95 % probability: the parameters' pose-clustered "
+    "covariance propagated to the position, and what the model leaves unexplained as a joint "
+    "error of `joint_scatter_deg` RMS (fitted to the held-out error beyond the tracker's noise); "
+    "a reading adds the tracker's own error"
+)
+
+
+def position_block(layout, x, q, errors: ParameterErrors, holdout_rms_mm, noise_mm) -> dict | None:
+    """model.json's `uncertainty.position` block of a fit at joints q (its poses), None when
+    its held-out error or noise floor is unknown."""
+    if holdout_rms_mm is None or noise_mm is None or not np.isfinite(holdout_rms_mm):
+        return None
+    par = lever = 0.0
+    for s in range(0, len(q), BLOCK):
+        chunk = q[s : s + BLOCK]
+        p, g = pu.mean_traces(pu.spread_at(layout, x, chunk, errors.cov, errors.column))
+        par, lever = par + p * len(chunk), lever + g * len(chunk)
+    scatter = pu.joint_scatter_rad(par / len(q), lever / len(q), holdout_rms_mm, noise_mm)
+    free = np.flatnonzero(errors.column >= 0)
+    order = free[np.argsort(errors.column[free])]
+    scale = np.where(errors.degrees[order], np.degrees(1.0), 1.0)
+    return {
+        "coverage": pu.COVERAGE,
+        "joint_scatter_deg": float(np.degrees(scatter)),
+        "parameters": [errors.names[i] for i in order],
+        "covariance": (errors.cov * np.outer(scale, scale)).tolist(),
+        "method": METHOD,
+    }
+
+
+def model_uncertainty(model: ModelFile, q_rad, instrument_mm=0.0) -> pu.PositionUncertainty | None:
+    """U of the model's SMR positions (m, K) at joints q (m, n) rad, a reading's own error
+    (3-D RMS, mm) on top; None for a model without a position block (written before it, or an
+    extended model whose coefficients' covariance it does not keep)."""
+    block = ((model.meta or {}).get("uncertainty") or {}).get("position")
+    if not block or model.extensions:
+        return None
+    lay, x = model.layout()
+    names = list(lay.names())
+    where = {n: i for i, n in enumerate(block["parameters"])}
+    column = np.array([where.get(n, -1) for n in names])
+    if len(where) != int(np.count_nonzero(column >= 0)):
+        return None  # another model's parameters: nothing to say
+    degrees = np.zeros(len(where), dtype=bool)
+    angle = np.asarray(_angles(lay))
+    for n, i in where.items():
+        degrees[i] = angle[names.index(n)]
+    scale = np.where(degrees, np.radians(1.0), 1.0)
+    cov = np.asarray(block["covariance"], dtype=float) * np.outer(scale, scale)
+    at = pu.spread_at(lay, x, np.atleast_2d(q_rad), cov, column)
+    scatter = np.radians(float(block["joint_scatter_deg"]))
+    return pu.position_uncertainty(at, scatter, instrument_mm, float(block["coverage"]))
+
+
+def _angles(layout):
+    from robocal.solver.fit_errors import angles
+
+    return angles(layout)

@@ -1,0 +1,100 @@
+"""A fit's standard errors and leave-one-pose-out residuals in two passes over its residual rows,
+a block of whole poses at a time: the normal matrices first, then each pose's small blocks.
+
+Every figure is a sum over poses (the meats) or a function of one pose's rows and the whole fit's
+normal matrix (the held-out residuals, the hat matrix's diagonal blocks), so the blocks give the
+same figures as the whole Jacobian at once, whose 50,000 poses would take 450,000 rows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .guard import Holdout, held_out, holdout_inverse
+from .uncertainty import (
+    Rows,
+    StageSums,
+    bread,
+    cr2_block_meat,
+    hat_blocks,
+    plain_from_sums,
+    pose_blocks,
+    stage_sums,
+)
+
+# A block holds about this many Jacobian entries (8 bytes each): 4 MiB a matrix, a handful of
+# them alive at once, next to the fit's own ~100 MiB at 50,000 poses.
+BLOCK_ENTRIES = 1 << 19
+
+# Relative difference below which the covariance's inverse of the normal matrix and the held-out
+# residuals' pseudo-inverse are one matrix.
+SAME_INVERSE = 1e-10
+
+# Each call yields the fit's rows again, in blocks of whole poses, blocks in pose order.
+Blocks = Callable[[], Iterable[Rows]]
+
+
+def poses_per_block(rows_per_pose: int, params: int) -> int:
+    """Poses a block of BLOCK_ENTRIES Jacobian entries holds."""
+    return max(1, BLOCK_ENTRIES // max(1, rows_per_pose * params))
+
+
+@dataclass
+class PostFit:
+    """A fit's covariances (CR2 clustered and plain) and held-out residuals."""
+
+    clustered: np.ndarray
+    plain: np.ndarray
+    holdout: Holdout
+    poses: int
+
+
+def post_fit(blocks: Blocks, point: Callable[[Rows], np.ndarray] | None = None) -> PostFit:
+    """The figures of uncertainty.clustered, uncertainty.plain and guard.leave_one_pose_out of
+    the stacked blocks, holding one block at a time. point(rows): which rows of a block are point
+    errors (default all)."""
+    A = B = None
+    stages: dict[int, StageSums] = {}
+    for rows in blocks():  # pass one: the normal matrices
+        if not len(rows.r):
+            continue
+        GJ = rows.G.T @ rows.J
+        GG = GJ if rows.G is rows.J else rows.G.T @ rows.G
+        A, B = (GJ, GG) if A is None or B is None else (A + GJ, B + GG)
+        for s, sums in stage_sums(rows, GG).items():
+            if s in stages:
+                stages[s].add(sums)
+            else:
+                stages[s] = sums
+    if A is None or B is None:
+        raise ValueError("no residual rows")
+    Ai = bread(A)
+    C = Ai @ B @ Ai.T
+    Ah = holdout_inverse(A)
+    # the two inverses of a well-conditioned fit agree to rounding: one hat matrix serves both
+    same = bool(np.linalg.norm(Ai - Ah) <= SAME_INVERSE * np.linalg.norm(Ai))
+    meat = np.zeros_like(A)
+    held, stage, unsupported, poses = [], [], [], set()
+    for rows in blocks():  # pass two: each pose's blocks
+        if not len(rows.r):
+            continue
+        e = np.full(len(rows.r), np.nan)
+        for _n, idx in pose_blocks(rows.pose):
+            J, r = rows.J[idx], rows.r[idx]
+            G = J if rows.G is rows.J else rows.G[idx]
+            H = hat_blocks(J, G, Ai)
+            meat += cr2_block_meat(J, G, r, H, C)
+            e[idx], ok = held_out(H if same else hat_blocks(J, G, Ah), r)
+            unsupported += rows.pose[idx[~ok, 0]].tolist()
+        keep = np.ones(len(e), dtype=bool) if point is None else np.asarray(point(rows), bool)
+        held.append(e[keep])
+        stage.append(rows.stage[keep])
+        poses.update(np.unique(rows.pose).tolist())
+    # the stacked rows' order: stage by stage, poses in order within each
+    order = np.argsort(np.concatenate(stage), kind="stable")
+    residuals = np.concatenate(held)[order].reshape(-1, 3)
+    holdout = Holdout(residuals, np.array(sorted(set(unsupported)), dtype=int))
+    return PostFit(Ai @ meat @ Ai.T, plain_from_sums(Ai, stages), holdout, len(poses))
