@@ -36,6 +36,7 @@ from .problem import Problem
 from .screen import screen_readings
 from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
 from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
+from .tall import tall_qr
 
 if TYPE_CHECKING:  # run_diagnosis imports fit_errors only when it needs it
     from .fit_errors import ExtendedErrors
@@ -46,6 +47,7 @@ T_SIMPLER = (
 )
 MAX_EFFECTS = 4
 FOLDS = 5
+GAP_BLOCK = 4096  # gaps between readings whose base-shift gains are solved at once
 
 
 @dataclass
@@ -185,7 +187,7 @@ class Diagnoser:
         r = predict_extended(self.prob.layout, x, ee, sub)[mask] - meas[mask]  # (N, 3)
         idx = np.flatnonzero(self.free)
         _, Jt = predict_rows(self.prob.layout, x, sub.q, mask, idx)  # (P, N, 3)
-        Q, _ = np.linalg.qr(finite(Jt.reshape(len(idx), -1).T, "an effect's Jacobian"))
+        Q, _ = tall_qr(finite(Jt.reshape(len(idx), -1).T, "an effect's Jacobian"))
         Q = Q.reshape(-1, 3, Q.shape[1])  # (N, 3, P)
         t = sub.time_s[mask]
         order = np.argsort(t, kind="stable")
@@ -203,25 +205,15 @@ class Diagnoser:
         Zr = suffix(np.einsum("nci,nc->ni", Z, r))
         Qr = np.einsum("ncp,nc->p", Q, r)
         lo = EDGE_POSES * meas.shape[1]
-        best, best_at = -1.0, float(np.median(t))
-        for n in range(max(lo, 1), len(t) - lo):
-            if t[n] == t[n - 1]:
-                continue
-            G = ZZ[n] - QZ[n].T @ QZ[n]
-            b = Zr[n] - QZ[n].T @ Qr
-            try:
-                gain = float(
-                    b
-                    @ np.linalg.solve(
-                        finite(G + 1e-12 * np.trace(G) * np.eye(6), "a time shift's normal matrix"),
-                        finite(b, "a time shift's gradient"),
-                    )
-                )
-            except np.linalg.LinAlgError:
-                continue
-            if gain > best:
-                best, best_at = gain, 0.5 * float(t[n - 1] + t[n])
-        return best_at
+        gaps = np.arange(max(lo, 1), len(t) - lo)
+        gaps = gaps[t[gaps] != t[gaps - 1]]
+        blocks = np.array_split(gaps, 1 + len(gaps) // GAP_BLOCK)
+        gain = np.concatenate([[]] + [shift_gains(ZZ[n], QZ[n], Zr[n], Qr) for n in blocks])
+        gain = np.nan_to_num(gain, nan=-np.inf)  # as the comparison in time order skipped them
+        if not len(gain) or not gain.max() > -1.0:
+            return float(np.median(t))
+        n = gaps[int(np.argmax(gain))]  # the first of equal gains, as a scan in time order keeps
+        return 0.5 * float(t[n - 1] + t[n])
 
     def linear_system(self, fit, current, cands):
         """The current model's Jacobian and residual on all readings, and each candidate's columns.
@@ -296,6 +288,28 @@ class Diagnoser:
         return FoldCheck(
             fold, geo.check.geometric_rms, rms, geo.check.geometric_parts, parts, shift
         )
+
+
+def shift_gains(ZZ, QZ, Zr, Qr) -> np.ndarray:
+    """Per gap, the gain b' G^-1 b of a base shift after it (Diagnoser.scan_shift), for a block of
+    gaps at once; a gap whose normal matrix is singular gains nothing (-inf)."""
+    QZt = np.swapaxes(QZ, 1, 2)
+    G = ZZ - QZt @ QZ
+    b = Zr - QZt @ Qr
+    G = G + 1e-12 * np.trace(G, axis1=1, axis2=2)[:, None, None] * np.eye(6)
+    finite(G, "a time shift's normal matrix")
+    finite(b, "a time shift's gradient")
+    solvable = np.ones(len(G), bool)
+    try:
+        x = np.linalg.solve(G, b[..., None])[..., 0]
+    except np.linalg.LinAlgError:  # a singular gap in the block: the others one by one
+        x = np.zeros_like(b)
+        for i in range(len(G)):
+            try:
+                x[i] = np.linalg.solve(G[i], b[i])
+            except np.linalg.LinAlgError:
+                solvable[i] = False
+    return np.where(solvable, np.sum(b * x, axis=1), -np.inf)
 
 
 @dataclass

@@ -17,6 +17,7 @@ import numpy as np
 from . import configuration
 from .gravity import gravity_in_base
 from .kinematics import Layout, joint_frames
+from .tall import tall_svd
 
 # A joint is gravity-loaded when its axis is on average this far from vertical (|cos| below).
 HORIZONTAL_AXIS = 0.7
@@ -115,7 +116,7 @@ def span_parts(Jt: np.ndarray, r: np.ndarray) -> SpanParts | None:
     y = r.ravel()
     if not (np.all(np.isfinite(J)) and np.all(np.isfinite(y))):
         return None
-    U, s, _ = np.linalg.svd(J, full_matrices=False)
+    U, s = tall_svd(J)
     rank = int(np.sum(s > s[0] * max(J.shape) * np.finfo(float).eps)) if s.size else 0
     if J.shape[0] - rank < rank:
         return None

@@ -30,6 +30,7 @@ simulated campaigns it still runs slightly above its nominal rate (1.0% at alpha
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +40,8 @@ from .finite import finite
 ALPHA = 0.003  # nominal family-wise false-alarm rate per round of selection
 RESAMPLES = 2000  # sign-flip resamples of the null (0.997 quantile from its 6 largest)
 RANK_TOL = 1e-9
+POSE_BLOCK = 512  # poses per block of row-wise work
+RESAMPLE_BLOCK = 64  # resamples per block (a multiple of 8: the signs are held as bits)
 
 
 def _pinv_sym(G: np.ndarray) -> np.ndarray:
@@ -48,6 +51,55 @@ def _pinv_sym(G: np.ndarray) -> np.ndarray:
     w, V = np.linalg.eigh(finite(G, "the information matrix"))
     keep = w > RANK_TOL * max(w[-1], 1e-300)
     return (V[:, keep] / w[keep]) @ V[:, keep].T
+
+
+def _pinv_stack(G: np.ndarray) -> np.ndarray:
+    """_pinv_sym of each matrix of a stack (n, k, k)."""
+    w, V = np.linalg.eigh(finite(G, "the information matrix"))
+    keep = w > RANK_TOL * np.maximum(w[:, -1:], 1e-300)
+    inv = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
+    return (V * inv[:, None, :]) @ np.swapaxes(V, 1, 2)
+
+
+def _pose_sums(rows_of, starts: np.ndarray, poses: np.ndarray, m: int, n_rows: int) -> np.ndarray:
+    """Per pose, the sum over its rows of rows_of(row slice), built POSE_BLOCK poses at a time.
+
+    Rows are grouped by pose; a row-wise product (a Jacobian times a residual, an outer product of
+    columns) is then never made for all rows at once."""
+    out = None
+    for i in range(0, len(starts), POSE_BLOCK):
+        j = min(i + POSE_BLOCK, len(starts))
+        lo, hi = starts[i], starts[j] if j < len(starts) else n_rows
+        part = np.add.reduceat(rows_of(slice(lo, hi)), starts[i:j] - lo, axis=0)
+        if out is None:
+            out = np.zeros((m, *part.shape[1:]))
+        out[poses[i:j]] = part
+    return np.zeros((m,)) if out is None else out
+
+
+class SignFlips:
+    """The null's random signs, one per pose and resample, held as bits (an (m, resamples) array
+    of floats would grow with poses x resamples).
+
+    Drawn POSE_BLOCK poses at a time from the one stream, pose by pose as one (m, resamples)
+    draw takes them (the bit generator keeps a drawn word's unused half from one call to the
+    next), so the resamples are those of one draw whatever the block size."""
+
+    def __init__(self, m: int, resamples: int, rng: np.random.Generator):
+        self.m, self.n = m, resamples
+        self.bits = np.zeros((m, (resamples + 7) // 8), np.uint8)
+        for i in range(0, m if resamples else 0, POSE_BLOCK):
+            k = min(POSE_BLOCK, m - i)
+            self.bits[i : i + k] = np.packbits(rng.integers(0, 2, size=(k, resamples)) > 0, axis=1)
+
+    def blocks(self, poses: np.ndarray | None = None):
+        """(columns, signs (poses, columns) of +-1) over all resamples, RESAMPLE_BLOCK at a time;
+        poses default all."""
+        held = self.bits if poses is None else self.bits[poses]
+        for c0 in range(0, self.n, RESAMPLE_BLOCK):
+            c1 = min(c0 + RESAMPLE_BLOCK, self.n)
+            bits = np.unpackbits(held[:, c0 // 8 : (c1 + 7) // 8], axis=1)[:, : c1 - c0]
+            yield slice(c0, c1), bits * 2.0 - 1.0
 
 
 @dataclass
@@ -97,12 +149,17 @@ def linear_scores(
 
     Every quantity of a fold's refit is a Gram matrix of the columns or a product X' R with the
     residual vectors R; with one sign per pose, X' R = sum over poses of (X_p' r_p) s_p, so the
-    thousands of null resamples cost a product of (columns x poses) by (poses x resamples).
+    thousands of null resamples cost a product of (columns x poses) by (poses x resamples),
+    taken RESAMPLE_BLOCK resamples at a time: memory grows with the poses alone, not with poses
+    x resamples (SignFlips holds the signs as bits).
     """
     rng = np.random.default_rng(seed)
     sizes = [A.shape[1]] + [B.shape[1] for B in blocks]
     J = np.concatenate([A] + list(blocks), axis=1)
-    J = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)  # spans unchanged; fair rank tests
+    # spans unchanged; fair rank tests (the norms taken per block: the same sums, without a
+    # squared copy of the whole Jacobian)
+    norms = np.concatenate([np.linalg.norm(X, axis=0) for X in [A] + list(blocks)])
+    J /= np.maximum(norms, 1e-300)
     cuts = np.cumsum([0] + sizes)
     a = slice(0, sizes[0])
     rows = A.shape[0]
@@ -111,23 +168,30 @@ def linear_scores(
     r0 = r if null_residual is None else null_residual
 
     def per_pose(v):  # per pose X_p' v_p and v_p' v_p
-        G = np.zeros((m, J.shape[1]))
-        G[poses] = np.add.reduceat(J * v[:, None], starts, axis=0)
+        G = _pose_sums(lambda s: J[s] * v[s, None], starts, poses, m, rows)
         vv = np.zeros(m)
         vv[poses] = np.add.reduceat(v * v, starts)
         return G, vv
 
     (Gp, rr), (G0, rr0) = per_pose(r), per_pose(r0)
     # the statistics are ratios of sums of squares: a residual's overall scale does not matter
-    signs = rng.choice([-1.0, 1.0], size=(m, resamples))
-
-    def products(idx):  # X' R over the poses idx: the observed residual, then every resample
-        return np.concatenate([Gp[idx].sum(axis=0)[:, None], G0[idx].T @ signs[idx]], axis=1)
+    flips = SignFlips(m, resamples, rng)
 
     def squares(idx):
         return np.r_[rr[idx].sum(), np.full(resamples, rr0[idx].sum())]
 
-    X_all = products(np.arange(m))  # (P_all, 1+B)
+    # X' R over all poses and over each fold's test poses: the observed residual, then every
+    # resample, the resamples' signs taken a block at a time
+    X_all = np.empty((J.shape[1], 1 + resamples))
+    X_fold = [np.empty_like(X_all) for _ in folds]
+    X_all[:, 0] = Gp.sum(axis=0)
+    for X, test_poses in zip(X_fold, folds):
+        X[:, 0] = Gp[test_poses].sum(axis=0)
+    for cols, S in flips.blocks():
+        cols = slice(1 + cols.start, 1 + cols.stop)
+        X_all[:, cols] = G0.T @ S
+        for X, test_poses in zip(X_fold, folds):
+            X[:, cols] = G0[test_poses].T @ S[test_poses]
     JJ_all = J.T @ J
     C = len(blocks)
     gain = np.zeros((C, 1 + resamples))
@@ -135,12 +199,11 @@ def linear_scores(
     pose_gain = np.zeros((C, m))
     pose_sse = np.zeros(m)
     sse = np.zeros(1 + resamples)
-    for test_poses in folds:
+    for X_S, test_poses in zip(X_fold, folds):
         test_rows = np.isin(pose_of_row, test_poses)
         Js = J[test_rows]
         JJ_S = Js.T @ Js
         JJ_T = JJ_all - JJ_S
-        X_S = products(test_poses)
         X_T = X_all - X_S
         AA_inv = _pinv_sym(JJ_T[a, a])
         coefA = AA_inv @ X_T[a]  # the current model refitted on the training poses
@@ -191,7 +254,7 @@ def linear_scores(
             X_all[a],
             JJ_all[a, a],
             squares(np.arange(m)),
-            signs,
+            flips,
         )
     null = lr[:, 1:]
     if resamples == 0:
@@ -214,38 +277,61 @@ def linear_scores(
 
 
 EDGE_POSES = 5  # a split leaves at least this many poses on either side
+SPLIT_BLOCK = 512  # visits per block of the split scan (a block's arrays stay in cache)
 
 
-def _split_scan(A, Z, r, r0, starts, poses, order, XA, AA, rr_total, signs):
+def _split_scan(A, Z, r, r0, starts, poses, order, XA, AA, rr_total, flips: SignFlips):
     """Per residual column, the best in-sample log error ratio of a rigid shift after any split.
 
     For the split before the n-th pose visited, the shift's columns are Z on the later poses; their
-    Gram sums are suffix sums in visit order, so all splits cost one pass.
+    Gram sums are suffix sums in visit order, so all splits cost one pass. That pass goes through
+    the resamples RESAMPLE_BLOCK at a time and through the splits SPLIT_BLOCK at a time from the
+    last, each block's suffix sums carried on from the one after it: the per-pose products of the
+    shift's columns with the signed residuals are never held for all poses and resamples at once.
     """
-    m = signs.shape[0]
+    m, rows = flips.m, len(r)
     Z = Z / np.maximum(np.linalg.norm(Z, axis=0), 1e-300)
-    Zr = np.zeros((m, Z.shape[1]))
-    Z0 = np.zeros((m, Z.shape[1]))
-    ZA = np.zeros((m, Z.shape[1], A.shape[1]))
-    ZZ = np.zeros((m, Z.shape[1], Z.shape[1]))
-    Zr[poses] = np.add.reduceat(Z * r[:, None], starts, axis=0)
-    Z0[poses] = np.add.reduceat(Z * r0[:, None], starts, axis=0)
-    ZA[poses] = np.add.reduceat(Z[:, :, None] * A[:, None, :], starts, axis=0)
-    ZZ[poses] = np.add.reduceat(Z[:, :, None] * Z[:, None, :], starts, axis=0)
+    Zr = _pose_sums(lambda s: Z[s] * r[s, None], starts, poses, m, rows)
+    Z0 = _pose_sums(lambda s: Z[s] * r0[s, None], starts, poses, m, rows)
+    ZA = _pose_sums(lambda s: Z[s][:, :, None] * A[s][:, None, :], starts, poses, m, rows)
+    ZZ = _pose_sums(lambda s: Z[s][:, :, None] * Z[s][:, None, :], starts, poses, m, rows)
     AA_inv = _pinv_sym(AA)
     H = AA_inv @ XA
     rss0 = rr_total - np.sum(XA * H, axis=0)
-    per = np.concatenate(
-        [Zr[order][:, :, None], Z0[order][:, :, None] * signs[order][:, None, :]], axis=2
-    )
-    sZr = np.cumsum(per[::-1], axis=0)[::-1]
-    sZA = np.cumsum(ZA[order][::-1], axis=0)[::-1]
-    sZZ = np.cumsum(ZZ[order][::-1], axis=0)[::-1]
-    best = np.zeros(signs.shape[1] + 1)
-    for n in range(EDGE_POSES, m - EDGE_POSES + 1):
-        b = sZr[n] - sZA[n] @ H
-        G = sZZ[n] - sZA[n] @ AA_inv @ sZA[n].T
-        best = np.maximum(best, np.sum(b * (_pinv_sym(G) @ b), axis=0))
+    best = np.zeros(flips.n + 1)
+    first, end = EDGE_POSES, m - EDGE_POSES + 1  # the splits n: first <= n < end
+    if end > first:
+        suffix = lambda v: np.cumsum(v[::-1], axis=0)[::-1][first:end]  # noqa: E731
+        sZA = suffix(ZA[order])
+        G_inv = _pinv_stack(suffix(ZZ[order]) - sZA @ AA_inv @ np.swapaxes(sZA, 1, 2))
+        sZA = sZA.reshape(-1, sZA.shape[2])  # (splits x 6, P): one product per block
+        Zr, Z0 = Zr[order], Z0[order]
+
+        # suffix sums in place from the last visit back, each block of splits carrying them on
+        # from the block after it: the additions of one pass over all visits, in the same order;
+        # the splits outermost, so a block's columns stay in cache for all the resamples
+        carry = np.zeros((Z.shape[1], 1 + flips.n))
+        for hi in range(m, first, -SPLIT_BLOCK):
+            lo = max(hi - SPLIT_BLOCK, first)
+            at = slice(lo - first, max(min(hi, end), lo) - first)  # splits lo, lo + 1, ...
+            ZA_at, G_at = sZA[6 * at.start : 6 * at.stop], G_inv[at]
+            observed = [(slice(0, 1), Zr[lo:hi, :, None].copy())]
+            signed = (
+                (slice(1 + c.start, 1 + c.stop), Z0[lo:hi, :, None] * S[:, None, :])
+                for c, S in flips.blocks(order[lo:hi])
+            )
+            for cols, sums in itertools.chain(observed, signed):
+                if hi < m:
+                    sums[-1] += carry[:, cols]
+                for i in range(len(sums) - 2, -1, -1):  # a row at a time: np.cumsum down the
+                    sums[i] += sums[i + 1]  # first axis strides through memory, 3x slower
+                carry[:, cols] = sums[0]
+                sums = sums[: at.stop - at.start]
+                if not len(sums):  # the last visits, after the last split
+                    continue
+                b = sums - (ZA_at @ H[:, cols]).reshape(sums.shape)
+                q = np.sum(b * (G_at @ b), axis=1).max(axis=0)
+                best[cols] = np.maximum(best[cols], q)
     return np.log(rss0 / np.maximum(rss0 - best, 1e-12 * rss0))
 
 
@@ -266,14 +352,21 @@ def rmse_gain_interval(
     resamples: int = 2000,
     seed: int = 0,
 ):
-    """Bootstrap interval over poses of the held-out RMS gain (before minus after), mm."""
+    """Bootstrap interval over poses of the held-out RMS gain (before minus after), mm.
+
+    The resamples are drawn a block at a time (about a million pose indices), from the one stream
+    as one (resamples, m) draw would take them."""
     rng = np.random.default_rng(seed)
     m = len(n)
-    idx = rng.integers(0, m, size=(resamples, m))
-    nn = n[idx].sum(axis=1)
-    ok = nn > 0
-    g = np.sqrt(sq_before[idx].sum(axis=1)[ok] / nn[ok]) - np.sqrt(
-        sq_after[idx].sum(axis=1)[ok] / nn[ok]
-    )
-    lo, hi = np.quantile(g, [(1 - level) / 2, (1 + level) / 2])
+    block = max(1, 2**20 // max(m, 1))
+    g = []
+    for start in range(0, resamples, block):
+        idx = rng.integers(0, m, size=(min(block, resamples - start), m))
+        nn = n[idx].sum(axis=1)
+        ok = nn > 0
+        g.append(
+            np.sqrt(sq_before[idx].sum(axis=1)[ok] / nn[ok])
+            - np.sqrt(sq_after[idx].sum(axis=1)[ok] / nn[ok])
+        )
+    lo, hi = np.quantile(np.concatenate(g), [(1 - level) / 2, (1 + level) / 2])
     return float(lo), float(hi)

@@ -86,19 +86,25 @@ def run_suite(pairs, workers: int = 2, log=None, case=_case, line=_line) -> list
     return results
 
 
-def time_campaign(poses: int, seed: int = 0) -> dict:
-    """Wall time of one diagnosis of a campaign of that size (the IRB 2600, one hidden effect)."""
+def timed_campaign(poses: int, seed: int = 0):
+    """The default cell and the campaign diagnoses are timed on (the IRB 2600, one hidden effect)."""
     from robocal.drivers.cell import VirtualCell
     from robocal.drivers.effects import make_effects
-    from robocal.solver.diagnose import diagnose
-    from robocal.solver.problem import Problem
 
     from ..formats.cell_json import default_cell
 
     cell = default_cell()
     vc = VirtualCell.random(cell.robot, cell.targets, seed=seed)
     vc.effects.extend(make_effects([TIMED_EFFECT], vc, seed))
-    meas = vc.campaign(poses, seed=seed)
+    return cell, vc.campaign(poses, seed=seed)
+
+
+def time_campaign(poses: int, seed: int = 0) -> dict:
+    """Wall time of one diagnosis of a campaign of that size (the IRB 2600, one hidden effect)."""
+    from robocal.solver.diagnose import diagnose
+    from robocal.solver.problem import Problem
+
+    cell, meas = timed_campaign(poses, seed)
     problem = Problem.of(cell.robot, cell.target_positions(meas.target_names), meas)
     t0, c0 = time.perf_counter(), time.process_time()
     d = diagnose(problem)

@@ -330,3 +330,81 @@ def run_calibrate_scale(poses: int = 50_000, repeats: int = 5, seed: int = 0) ->
             },
         },
     }
+
+
+DIAGNOSE_POSES = (1_000, 3_000, 10_000)
+DIAGNOSE_TARGETS = {"seconds_ratio_10x_poses": 10.0, "peak_rss_mib": 1024.0}  # issue 24
+
+
+def peak_rss_mib() -> float:
+    """This process's peak resident memory, MiB: Linux's VmHWM, which starts afresh at exec
+    (ru_maxrss keeps the peak of the process that forked it)."""
+    import resource
+
+    status = Path("/proc/self/status")
+    if status.exists():
+        for line in status.read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def diagnose_at(poses: int, seed: int = 0) -> dict:
+    """One diagnosis of the timed campaign of `poses` written to meas.csv and read back, in this
+    process: wall and CPU time, the process's peak RSS, and np.loadtxt of the same file."""
+    from robocal.solver.diagnose import diagnose
+    from robocal.solver.problem import Problem
+
+    from ..formats.campaign_csv import read_campaign, write_campaign
+    from .diagnose import timed_campaign
+
+    cell, meas = timed_campaign(poses, seed)
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "meas.csv"
+        write_campaign(path, meas)
+        numeric = _numeric_columns(cell.robot)
+        ref, _ = _timed(
+            lambda: np.loadtxt(path, delimiter=",", skiprows=1, usecols=numeric), repeats=3
+        )
+        read = read_campaign(path, cell.robot)
+    problem = Problem.of(cell.robot, cell.target_positions(read.target_names), read)
+    before = peak_rss_mib()
+    t0, c0 = time.perf_counter(), time.process_time()
+    diagnose(problem)
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {
+        "poses": poses,
+        "seconds": seconds,
+        "cpu_seconds": cpu,
+        "ms_per_pose": 1e3 * seconds / poses,
+        "peak_rss_mib": peak_rss_mib(),
+        "rss_before_diagnosis_mib": before,
+        "loadtxt_seconds": ref,
+        "over_loadtxt": seconds / ref,
+    }
+
+
+def run_diagnose_scale(sizes=DIAGNOSE_POSES, seed: int = 0) -> dict:
+    """diagnose_at each size, each in a fresh process (its peak RSS is that diagnosis's), and
+    the largest size's time and memory against the smallest's."""
+    import multiprocessing
+
+    out: dict = {"reference": "np.loadtxt of the numeric columns of the same meas.csv"}
+    for poses in sizes:
+        with multiprocessing.get_context("spawn").Pool(1) as pool:
+            out[str(poses)] = pool.apply(diagnose_at, (poses, seed))
+    lo, hi = out[str(min(sizes))], out[str(max(sizes))]
+    ratio = max(sizes) / min(sizes)
+    out["largest_over_smallest"] = {
+        "poses": ratio,
+        "seconds": hi["seconds"] / lo["seconds"],
+        "cpu_seconds": hi["cpu_seconds"] / lo["cpu_seconds"],
+        "peak_rss_mib": hi["peak_rss_mib"] / lo["peak_rss_mib"],
+    }
+    out["targets"] = DIAGNOSE_TARGETS
+    out["met"] = {
+        "seconds_linear": hi["seconds"] / lo["seconds"]
+        <= DIAGNOSE_TARGETS["seconds_ratio_10x_poses"] * ratio / 10,
+        "peak_rss_under_1_gib": hi["peak_rss_mib"] < DIAGNOSE_TARGETS["peak_rss_mib"],
+    }
+    return out

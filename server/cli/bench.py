@@ -62,9 +62,10 @@ def cmd_bench(args) -> None:
             clean=args.clean or 70, poses="random" if args.random_check_poses else "planned"
         )
     elif args.what == "scale":
-        from ..bench.scale import run_calibrate_scale
+        from ..bench.scale import run_calibrate_scale, run_diagnose_scale
 
         result = run_calibrate_scale(poses=args.scale_poses, repeats=args.repeats)
+        result["diagnose"] = run_diagnose_scale()
     elif args.what == "validation":
         from ..bench import validation as bench_validation
 
@@ -98,7 +99,8 @@ def add(sub) -> None:
             "scale",
         ),
         help="what to time (validation: the deployment guard's flags on healthy, small and "
-        "real campaigns; check: quick checks' false alarms and delays to a change; scale: `robocal calibrate` of a large campaign as a process, next to np.loadtxt of its file)",
+        "real campaigns; check: quick checks' false alarms and delays to a change; scale: `robocal calibrate` of a large campaign as a process, next to np.loadtxt of its file, "
+        "then diagnose of 1,000 / 3,000 / 10,000 poses)",
     )
     b.add_argument(
         "--repeats",
