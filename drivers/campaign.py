@@ -31,6 +31,8 @@ WAKE_S = 0.5
 RESET_WAIT_S = 2.0
 # How long a run that ends waits for an e-stop's thread to finish telling its transition.
 TELL_WAIT_S = 5.0
+# Past a move's announced end (s): the controller rounds the duration to the millisecond.
+ARRIVAL_MARGIN_S = 1e-3
 
 
 class EngineBusy(StateError):
@@ -427,24 +429,33 @@ class CampaignEngine:
             self.log(f"pose {i}: skipped, {e}")
             work.skipped = True
             return work
-        self._point_ahead(work, t0, duration)
+        self._arrive(work, t0, duration)
         self.controller.wait_in_position(self.clock)
         work.q_rad = np.deg2rad(np.asarray(self.controller.joints(), dtype=float))
         work.predicted = self.predictor.predict(work.q_rad)
         return work
 
-    def _point_ahead(self, work: _Pose, t0: float, duration) -> None:
-        """Aim at the first SMR's predicted position as the move ends, so the beam is there when
-        the arm arrives. Only a POINT: nothing is measured until the controller reports the arm
-        in position (the tracker cannot lock on a moving SMR, and any motion breaks a lock)."""
-        if self.predictor.stage == "nominal":
-            return  # a rough base puts the aim beyond the capture radius: the search comes later
+    def _arrive(self, work: _Pose, t0: float, duration) -> None:
+        """Wait out the move the controller announced, pointing the beam ahead on the way: the
+        first STATUS after it finds the arm in position (polls would end up to a poll late)."""
         last = self.controller.last_move
         if not isinstance(duration, int | float) or (last is not None and last.duration_s is None):
-            return  # the MOVEJ reply was lost: the duration is only a bound, no time to aim at
+            return  # the MOVEJ reply was lost: the duration is only a bound, the polls tell
+        # the announced duration is rounded to the protocol's last digit: a tick past it the
+        # move has surely ended, so the POINT locks and the first STATUS says INPOS
+        end = t0 + float(duration) + ARRIVAL_MARGIN_S
+        if self.predictor.stage != "nominal":
+            self._point_ahead(work, end - self.settings.point_lead_s)
+        self.clock.sleep(end - self.clock.now())
+
+    def _point_ahead(self, work: _Pose, at: float) -> None:
+        """Aim at the first SMR's predicted position as the move ends, so the beam is there when
+        the arm arrives. Only a POINT: nothing is measured until the controller reports the arm
+        in position (the tracker cannot lock on a moving SMR, and any motion breaks a lock).
+        The nominal model is not used: a rough base puts the aim beyond the capture radius."""
         name = self.predictor.names[0]
         aim = self.predictor.predict(np.deg2rad(work.q_deg))[0]
-        self.clock.sleep(t0 + float(duration) - self.settings.point_lead_s - self.clock.now())
+        self.clock.sleep(at - self.clock.now())
         try:
             if self.tracker.point(aim):
                 work.locked_on, work.lock_searched = name, False

@@ -98,8 +98,19 @@ def test_the_beam_is_aimed_during_the_move_but_nothing_is_measured_before_arriva
     ahead = [e for e in log if e[0] == "POINT" and e[1]]
     # once the predictor has readings, the first SMR's POINT goes out while the arm moves
     assert len(ahead) == 20 - 1
-    # and locks as the arm arrives where the prediction is within the capture radius
-    assert sum(locked for *_, locked in ahead) >= 5
+    # and locks as the arm arrives where the prediction is within the capture radius (the
+    # POINT ends a millisecond past the move's announced end, never just before it)
+    assert sum(locked for *_, locked in ahead) >= 12
+
+
+def test_the_first_status_after_an_announced_move_finds_the_arm_in_position():
+    with simulated_engine(seed=4, n=20) as (engine, poses, sim):
+        stats = engine.run(poses)
+        statuses = [line for line in sim.controller_device.received if " STATUS" in line]
+        moves = sim.controller_device.moves
+    assert stats.readings == 20 * 3
+    # the engine waits out the duration the MOVEJ reply announced: no poll finds it MOVING
+    assert len(moves) == 20 and len(statuses) == len(moves)
 
 
 def test_a_controller_that_underestimates_its_move_still_gets_no_reading_while_moving():
