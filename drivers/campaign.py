@@ -64,6 +64,10 @@ class _Pose:
     lock_searched: bool = False
     # targets the widest search worth making missed while the arm stood here: out of sight
     unseen: set = field(default_factory=set)
+    # adaptive settling on the tracker's stream: when the pose's settle began, until its first
+    # reading tells how long the ringing held the samples back
+    settle_from: float | None = None
+    settle_seen: bool = False
 
 
 class CampaignEngine:
@@ -102,6 +106,7 @@ class CampaignEngine:
         self._active = False  # a run() is executing
         self._stopping = 0  # e-stops between their transition and the controller's answer
         self._halted_on_fault = False  # the engine latched the controller itself after a fault
+        self._stream_ok = True  # until the tracker refuses STABLE: then settle on looks
         self._pending: deque = deque()  # transitions not yet told to on_state
         self._telling = threading.RLock()  # one teller at a time: on_state hears them in order
 
@@ -540,7 +545,7 @@ class CampaignEngine:
             if not locked:
                 continue
             try:
-                reading = self.tracker.measure(s.samples)
+                reading = self._reading(work, name)
             except Exception as e:  # noqa: BLE001
                 code = _code(e)
                 if code is None:
@@ -573,6 +578,33 @@ class CampaignEngine:
         )
         self.stats.readings += 1
 
+    def _reading(self, work: _Pose, name: str):
+        """One reading of the locked SMR: with adaptive settling, the first samples of the
+        tracker's stream it calls still (the ringing judged on the samples themselves, within
+        the pause); else MEASURE at once."""
+        s = self.settings
+        if work.settle_from is None or not self._streams():
+            return self.tracker.measure(s.samples)
+        stable = self.tracker.measure_stable  # type: ignore[attr-defined]
+        try:
+            reading = stable(s.samples, max(0.0, s.pause_s - (self.clock.now() - work.settle_from)))
+        except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
+            if _code(e) != "BAD_REQUEST":
+                raise
+            # a tracker without the stream: settle on looks, as before, then measure
+            self._stream_ok = False
+            self.log(f"tracker has no STABLE ({e}): settling on looks")
+            work.settle_from = None
+            self._settle_looks(work, name)
+            return self.tracker.measure(s.samples)
+        if not work.settle_seen:
+            # from the settle's start to the first window's first sample (all the pause if none
+            # was still)
+            waited = self.clock.now() - s.samples / NOMINAL_SAMPLE_RATE_HZ - work.settle_from
+            self.stats.settle_s.append(max(0.0, waited))
+            work.settle_seen = True
+        return reading
+
     def _save(self, work: _Pose, names):
         """The pose's outcome to the sink; its joints (rad) and readings for the predictor."""
         i = work.index
@@ -593,6 +625,22 @@ class CampaignEngine:
             self.clock.sleep(s.pause_s)
             self.stats.settle_s.append(s.pause_s)
             return
+        if self._streams():
+            # the first reading waits on the tracker's own stream for samples it calls still
+            work.settle_from = self.clock.now()
+            return
+        self._settle_looks(work, name)
+
+    def _streams(self) -> bool:
+        """Adaptive settling on the tracker's sample stream (STABLE), where the tracker has it."""
+        return (
+            self.settings.settle == "adaptive"
+            and self._stream_ok
+            and (hasattr(self.tracker, "measure_stable"))
+        )
+
+    def _settle_looks(self, work: _Pose, name: str) -> None:
+        s = self.settings
         # adaptive: watch the first SMR in back-to-back looks at the tracker's own rate until
         # settle_looks successive ones are still (spread OK) and agree within tolerance; looks
         # spanning part of a ringing period see it as disagreeing means or as spread

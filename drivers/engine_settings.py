@@ -11,7 +11,9 @@ class Settings:
     """How to acquire: the paper's procedure by default (fixed 10 s pause at each pose)."""
 
     pause_s: float = 10.0
-    settle: str = "fixed"  # or "adaptive": end the pause once the first SMR is seen still
+    # or "adaptive": every reading is the first still window of the tracker's sample stream
+    # (STABLE), or, on a tracker without it, ends the pause once looks see the first SMR still
+    settle: str = "fixed"
     # readings of a still SMR differ by noise alone: about 3 sqrt(2) times a tracker's per-axis
     # repeatability at a few metres
     settle_tol_mm: float = 0.03
