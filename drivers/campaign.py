@@ -283,7 +283,10 @@ class CampaignEngine:
             for msg in plan:
                 if self.trace is not None:
                     self.trace(msg)
-                if not _HANDLERS[type(msg)](self, msg, run):
+                t0 = self.clock.now()
+                go_on = _HANDLERS[type(msg)](self, msg, run)
+                self._account(msg, self.clock.now() - t0)
+                if not go_on:
                     break
             else:
                 self._event("finish", epoch)
@@ -318,6 +321,11 @@ class CampaignEngine:
             # (the store) must have the last state before the run's owner closes it
             self._tell(wait_s=TELL_WAIT_S)
         return self.stats
+
+    def _account(self, msg, seconds: float) -> None:
+        phases = self.stats.phase_s
+        name = _PHASES.get(type(msg), "other")
+        setattr(phases, name, getattr(phases, name) + seconds)
 
     # -- the plan's messages, one handler each (_HANDLERS); False ends the run ----------------------
     def _on_checkpoint(self, msg: Checkpoint, run: _Run) -> bool:
@@ -723,6 +731,9 @@ class _Run:
     m_done: list = field(default_factory=list)
     work: _Pose | None = None  # the pose being measured
 
+
+# the PhaseSeconds field each message's time goes to (else "other")
+_PHASES: dict[type, str] = {Move: "move", Settle: "settle", Aim: "aim", Measure: "measure"}
 
 _HANDLERS: dict[type, Callable[..., bool]] = {
     Checkpoint: CampaignEngine._on_checkpoint,

@@ -36,6 +36,17 @@ class Settings:
 
 
 @dataclass
+class PhaseSeconds:
+    """Campaign clock seconds spent in each kind of plan message (where a campaign's time goes)."""
+
+    move: float = 0.0  # the move, the beam pointed ahead, the arm reported in position
+    settle: float = 0.0  # a fixed pause, or looks (adaptive on a tracker without a stream)
+    aim: float = 0.0  # POINTs and searches at the arrived pose
+    measure: float = 0.0  # readings with their retries (the stream's wait for a still window)
+    other: float = 0.0  # checkpoints (a pause's wait) and saves
+
+
+@dataclass
 class Stats:
     """What happened: counts a person and the benchmark care about."""
 
@@ -50,3 +61,4 @@ class Stats:
     aimed_after_10: int = 0
     locked_after_10: int = 0
     settle_s: list = field(default_factory=list)
+    phase_s: PhaseSeconds = field(default_factory=PhaseSeconds)
