@@ -33,6 +33,9 @@ RESET_WAIT_S = 2.0
 TELL_WAIT_S = 5.0
 # Past a move's announced end (s): the controller rounds the duration to the millisecond.
 ARRIVAL_MARGIN_S = 1e-3
+# An aim this close (mm, per axis) to one the beam just missed at misses too: the joints read
+# back after the move differ from the commanded ones by their rounding only
+SAME_AIM_MM = 0.01
 
 
 class EngineBusy(StateError):
@@ -67,6 +70,9 @@ class _Pose:
     # adaptive settling on the tracker's stream: when the pose's settle began, until its first
     # reading tells how long the ringing held the samples back
     settle_from: float | None = None
+    # where the beam was pointed ahead without locking as the arm arrived: pointing there
+    # again cannot lock (the SMR is outside the capture radius), a search around it may
+    missed_ahead: np.ndarray | None = None
     settle_seen: bool = False
 
 
@@ -472,6 +478,8 @@ class CampaignEngine:
         try:
             if self.tracker.point(aim):
                 work.locked_on, work.lock_searched = name, False
+            elif self.clock.now() >= at + self.settings.point_lead_s:
+                work.missed_ahead = aim  # the POINT ended after the move's announced end
         except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
             if _code(e) is None:
                 raise
@@ -493,7 +501,25 @@ class CampaignEngine:
             work.aims[msg.target] = (aim, False)
             return
         work.locked_on = None
+        missed, work.missed_ahead = work.missed_ahead, None
+        if missed is not None and float(np.max(np.abs(aim - missed))) <= SAME_AIM_MM:
+            # the beam missed right here as the arm arrived: search around it at once
+            self.stats.searched += 1
+            work.aims[msg.target] = (aim, self._search_here(work, msg.target))
+            return
         work.aims[msg.target] = (aim, self._lock_on(work, msg.target, aim, 0))
+
+    def _search_here(self, work: _Pose, name: str) -> bool:
+        """Search around where the beam points now; True once locked."""
+        try:
+            return self._search(work, name, 0)
+        except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
+            code = _code(e)
+            if code is None:
+                raise
+            if code == "BEAM_BROKEN":
+                self.stats.beam_breaks += 1
+            return False
 
     def _count_lock(self, i: int, searched: bool) -> None:
         if searched:

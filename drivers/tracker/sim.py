@@ -180,17 +180,28 @@ class SimulatedTracker:
             )
         sigma = float(self.world.cell.tracker.sigma_mm(distance))
         total = n + int(round(float(wait_s) * self.sample_rate_hz))
-        t = self.world.since_arrival() + np.arange(total) / self.sample_rate_hz
+        t0 = self.world.since_arrival()
         amplitude, tau, hz = self.settle
-        ring = amplitude * np.exp(-t / tau) * np.sin(2 * np.pi * hz * t)
-        # offsets from the SMR's centre: the windows' sums stay exact in float
-        d = ring[:, None] * self.settle_direction + self._rng.normal(scale=sigma, size=(total, 3))
-        c1 = np.vstack([np.zeros(3), np.cumsum(d, axis=0)])
-        c2 = np.vstack([np.zeros(3), np.cumsum(d * d, axis=0)])
-        s1, s2 = c1[n:] - c1[:-n], c2[n:] - c2[:-n]  # per window start
-        var = (s2 - s1 * s1 / n) / max(n - 1, 1)
-        ok = np.all(var <= (INACCURATE_SPREAD * sigma) ** 2, axis=1)
-        k = int(np.argmax(ok)) if ok.any() else len(ok) - 1
+        limit = (INACCURATE_SPREAD * sigma) ** 2
+        # the stream in blocks of n samples, drawn only as far as the first still window needs
+        # (the noise drawn depends on the physics, not on how long the caller would wait)
+        d = np.empty((0, 3))
+        k = -1
+        while k < 0 and len(d) < total:
+            t = t0 + np.arange(len(d), min(len(d) + n, total)) / self.sample_rate_hz
+            ring = amplitude * np.exp(-t / tau) * np.sin(2 * np.pi * hz * t)
+            # offsets from the SMR's centre: the windows' sums stay exact in float
+            block = ring[:, None] * self.settle_direction
+            d = np.vstack([d, block + self._rng.normal(scale=sigma, size=block.shape)])
+            if len(d) < n:
+                continue
+            c1 = np.vstack([np.zeros(3), np.cumsum(d, axis=0)])
+            c2 = np.vstack([np.zeros(3), np.cumsum(d * d, axis=0)])
+            s1, s2 = c1[n:] - c1[:-n], c2[n:] - c2[:-n]  # per window start
+            ok = np.all((s2 - s1 * s1 / n) / max(n - 1, 1) <= limit, axis=1)
+            k = int(np.argmax(ok)) if ok.any() else -1
+        if k < 0:
+            k = len(d) - n
         window = d[k : k + n]
         shared = self._rng.normal(scale=sigma * np.sqrt(1.0 - 1.0 / n), size=3)
         std = window.std(axis=0, ddof=1) if n > 1 else np.zeros(3)

@@ -270,3 +270,27 @@ def test_adaptive_settling_without_the_tracker_stream_settles_on_looks():
     # asked once; then looks of settle_look_samples and plain readings, as before the stream
     assert commands.count("STABLE") == 1 and commands.count("MEASURE") > 6 * 3
     assert len(stats.settle_s) == 6
+
+
+def test_a_point_ahead_that_missed_is_followed_by_a_search_not_the_same_point():
+    with simulated_engine(seed=2, n=12) as (engine, poses, sim):
+        lines, handle = [], sim.tracker_device.handle
+
+        def logged(line):
+            reply = handle(line)
+            lines.append((line.split()[1:], reply.split()[2:]))
+            return reply
+
+        sim.tracker_device.handle = logged
+        stats = engine.run(poses)
+    assert stats.readings == 12 * 3
+    missed = [i for i, (req, rep) in enumerate(lines) if req[0] == "POINT" and rep == ["UNLOCKED"]]
+    assert missed  # the early predictions miss the capture radius
+
+    def same_point(a, b):  # the aim again, up to the joints' read-back rounding
+        return a[0] == b[0] == "POINT" and np.allclose(
+            np.array(a[1:], float), np.array(b[1:], float), atol=0.01
+        )
+
+    # never the same POINT again right after it missed: it cannot lock there either
+    assert not any(i + 1 < len(lines) and same_point(lines[i][0], lines[i + 1][0]) for i in missed)
