@@ -31,6 +31,11 @@ WAKE_S = 0.5
 RESET_WAIT_S = 2.0
 # How long a run that ends waits for an e-stop's thread to finish telling its transition.
 TELL_WAIT_S = 5.0
+# Past a move's announced end (s): the controller rounds the duration to the millisecond.
+ARRIVAL_MARGIN_S = 1e-3
+# An aim this close (mm, per axis) to one the beam just missed at misses too: the joints read
+# back after the move differ from the commanded ones by their rounding only
+SAME_AIM_MM = 0.01
 
 
 class EngineBusy(StateError):
@@ -62,6 +67,13 @@ class _Pose:
     lock_searched: bool = False
     # targets the widest search worth making missed while the arm stood here: out of sight
     unseen: set = field(default_factory=set)
+    # adaptive settling on the tracker's stream: when the pose's settle began, until its first
+    # reading tells how long the ringing held the samples back
+    settle_from: float | None = None
+    # where the beam was pointed ahead without locking as the arm arrived: pointing there
+    # again cannot lock (the SMR is outside the capture radius), a search around it may
+    missed_ahead: np.ndarray | None = None
+    settle_seen: bool = False
 
 
 class CampaignEngine:
@@ -100,6 +112,7 @@ class CampaignEngine:
         self._active = False  # a run() is executing
         self._stopping = 0  # e-stops between their transition and the controller's answer
         self._halted_on_fault = False  # the engine latched the controller itself after a fault
+        self._stream_ok = True  # until the tracker refuses STABLE: then settle on looks
         self._pending: deque = deque()  # transitions not yet told to on_state
         self._telling = threading.RLock()  # one teller at a time: on_state hears them in order
 
@@ -276,7 +289,10 @@ class CampaignEngine:
             for msg in plan:
                 if self.trace is not None:
                     self.trace(msg)
-                if not _HANDLERS[type(msg)](self, msg, run):
+                t0 = self.clock.now()
+                go_on = _HANDLERS[type(msg)](self, msg, run)
+                self._account(msg, self.clock.now() - t0)
+                if not go_on:
                     break
             else:
                 self._event("finish", epoch)
@@ -311,6 +327,11 @@ class CampaignEngine:
             # (the store) must have the last state before the run's owner closes it
             self._tell(wait_s=TELL_WAIT_S)
         return self.stats
+
+    def _account(self, msg, seconds: float) -> None:
+        phases = self.stats.phase_s
+        name = _PHASES.get(type(msg), "other")
+        setattr(phases, name, getattr(phases, name) + seconds)
 
     # -- the plan's messages, one handler each (_HANDLERS); False ends the run ----------------------
     def _on_checkpoint(self, msg: Checkpoint, run: _Run) -> bool:
@@ -427,27 +448,38 @@ class CampaignEngine:
             self.log(f"pose {i}: skipped, {e}")
             work.skipped = True
             return work
-        self._point_ahead(work, t0, duration)
+        self._arrive(work, t0, duration)
         self.controller.wait_in_position(self.clock)
         work.q_rad = np.deg2rad(np.asarray(self.controller.joints(), dtype=float))
         work.predicted = self.predictor.predict(work.q_rad)
         return work
 
-    def _point_ahead(self, work: _Pose, t0: float, duration) -> None:
-        """Aim at the first SMR's predicted position as the move ends, so the beam is there when
-        the arm arrives. Only a POINT: nothing is measured until the controller reports the arm
-        in position (the tracker cannot lock on a moving SMR, and any motion breaks a lock)."""
-        if self.predictor.stage == "nominal":
-            return  # a rough base puts the aim beyond the capture radius: the search comes later
+    def _arrive(self, work: _Pose, t0: float, duration) -> None:
+        """Wait out the move the controller announced, pointing the beam ahead on the way: the
+        first STATUS after it finds the arm in position (polls would end up to a poll late)."""
         last = self.controller.last_move
         if not isinstance(duration, int | float) or (last is not None and last.duration_s is None):
-            return  # the MOVEJ reply was lost: the duration is only a bound, no time to aim at
+            return  # the MOVEJ reply was lost: the duration is only a bound, the polls tell
+        # the announced duration is rounded to the protocol's last digit: a tick past it the
+        # move has surely ended, so the POINT locks and the first STATUS says INPOS
+        end = t0 + float(duration) + ARRIVAL_MARGIN_S
+        if self.predictor.stage != "nominal":
+            self._point_ahead(work, end - self.settings.point_lead_s)
+        self.clock.sleep(end - self.clock.now())
+
+    def _point_ahead(self, work: _Pose, at: float) -> None:
+        """Aim at the first SMR's predicted position as the move ends, so the beam is there when
+        the arm arrives. Only a POINT: nothing is measured until the controller reports the arm
+        in position (the tracker cannot lock on a moving SMR, and any motion breaks a lock).
+        The nominal model is not used: a rough base puts the aim beyond the capture radius."""
         name = self.predictor.names[0]
         aim = self.predictor.predict(np.deg2rad(work.q_deg))[0]
-        self.clock.sleep(t0 + float(duration) - self.settings.point_lead_s - self.clock.now())
+        self.clock.sleep(at - self.clock.now())
         try:
             if self.tracker.point(aim):
                 work.locked_on, work.lock_searched = name, False
+            elif self.clock.now() >= at + self.settings.point_lead_s:
+                work.missed_ahead = aim  # the POINT ended after the move's announced end
         except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
             if _code(e) is None:
                 raise
@@ -469,7 +501,25 @@ class CampaignEngine:
             work.aims[msg.target] = (aim, False)
             return
         work.locked_on = None
+        missed, work.missed_ahead = work.missed_ahead, None
+        if missed is not None and float(np.max(np.abs(aim - missed))) <= SAME_AIM_MM:
+            # the beam missed right here as the arm arrived: search around it at once
+            self.stats.searched += 1
+            work.aims[msg.target] = (aim, self._search_here(work, msg.target))
+            return
         work.aims[msg.target] = (aim, self._lock_on(work, msg.target, aim, 0))
+
+    def _search_here(self, work: _Pose, name: str) -> bool:
+        """Search around where the beam points now; True once locked."""
+        try:
+            return self._search(work, name, 0)
+        except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
+            code = _code(e)
+            if code is None:
+                raise
+            if code == "BEAM_BROKEN":
+                self.stats.beam_breaks += 1
+            return False
 
     def _count_lock(self, i: int, searched: bool) -> None:
         if searched:
@@ -529,7 +579,7 @@ class CampaignEngine:
             if not locked:
                 continue
             try:
-                reading = self.tracker.measure(s.samples)
+                reading = self._reading(work, name)
             except Exception as e:  # noqa: BLE001
                 code = _code(e)
                 if code is None:
@@ -562,6 +612,33 @@ class CampaignEngine:
         )
         self.stats.readings += 1
 
+    def _reading(self, work: _Pose, name: str):
+        """One reading of the locked SMR: with adaptive settling, the first samples of the
+        tracker's stream it calls still (the ringing judged on the samples themselves, within
+        the pause); else MEASURE at once."""
+        s = self.settings
+        if work.settle_from is None or not self._streams():
+            return self.tracker.measure(s.samples)
+        stable = self.tracker.measure_stable  # type: ignore[attr-defined]
+        try:
+            reading = stable(s.samples, max(0.0, s.pause_s - (self.clock.now() - work.settle_from)))
+        except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
+            if _code(e) != "BAD_REQUEST":
+                raise
+            # a tracker without the stream: settle on looks, as before, then measure
+            self._stream_ok = False
+            self.log(f"tracker has no STABLE ({e}): settling on looks")
+            work.settle_from = None
+            self._settle_looks(work, name)
+            return self.tracker.measure(s.samples)
+        if not work.settle_seen:
+            # from the settle's start to the first window's first sample (all the pause if none
+            # was still)
+            waited = self.clock.now() - s.samples / NOMINAL_SAMPLE_RATE_HZ - work.settle_from
+            self.stats.settle_s.append(max(0.0, waited))
+            work.settle_seen = True
+        return reading
+
     def _save(self, work: _Pose, names):
         """The pose's outcome to the sink; its joints (rad) and readings for the predictor."""
         i = work.index
@@ -582,6 +659,22 @@ class CampaignEngine:
             self.clock.sleep(s.pause_s)
             self.stats.settle_s.append(s.pause_s)
             return
+        if self._streams():
+            # the first reading waits on the tracker's own stream for samples it calls still
+            work.settle_from = self.clock.now()
+            return
+        self._settle_looks(work, name)
+
+    def _streams(self) -> bool:
+        """Adaptive settling on the tracker's sample stream (STABLE), where the tracker has it."""
+        return (
+            self.settings.settle == "adaptive"
+            and self._stream_ok
+            and (hasattr(self.tracker, "measure_stable"))
+        )
+
+    def _settle_looks(self, work: _Pose, name: str) -> None:
+        s = self.settings
         # adaptive: watch the first SMR in back-to-back looks at the tracker's own rate until
         # settle_looks successive ones are still (spread OK) and agree within tolerance; looks
         # spanning part of a ringing period see it as disagreeing means or as spread
@@ -664,6 +757,9 @@ class _Run:
     m_done: list = field(default_factory=list)
     work: _Pose | None = None  # the pose being measured
 
+
+# the PhaseSeconds field each message's time goes to (else "other")
+_PHASES: dict[type, str] = {Move: "move", Settle: "settle", Aim: "aim", Measure: "measure"}
 
 _HANDLERS: dict[type, Callable[..., bool]] = {
     Checkpoint: CampaignEngine._on_checkpoint,

@@ -42,7 +42,9 @@ class Arm(Protocol):
 
 
 class Beam(Protocol):
-    """The laser tracker: point the beam, search around it, measure, read the weather."""
+    """The laser tracker: point the beam, search around it, measure, read the weather. A tracker
+    with a stable-probing mode also has measure_stable(samples, wait_s) (TrackerClient: STABLE);
+    the engine looks for it, so fakes without it keep settling on looks."""
 
     def point(self, xyz) -> bool: ...
 

@@ -11,7 +11,9 @@ class Settings:
     """How to acquire: the paper's procedure by default (fixed 10 s pause at each pose)."""
 
     pause_s: float = 10.0
-    settle: str = "fixed"  # or "adaptive": end the pause once the first SMR is seen still
+    # or "adaptive": every reading is the first still window of the tracker's sample stream
+    # (STABLE), or, on a tracker without it, ends the pause once looks see the first SMR still
+    settle: str = "fixed"
     # readings of a still SMR differ by noise alone: about 3 sqrt(2) times a tracker's per-axis
     # repeatability at a few metres
     settle_tol_mm: float = 0.03
@@ -34,6 +36,17 @@ class Settings:
 
 
 @dataclass
+class PhaseSeconds:
+    """Campaign clock seconds spent in each kind of plan message (where a campaign's time goes)."""
+
+    move: float = 0.0  # the move, the beam pointed ahead, the arm reported in position
+    settle: float = 0.0  # a fixed pause, or looks (adaptive on a tracker without a stream)
+    aim: float = 0.0  # POINTs and searches at the arrived pose
+    measure: float = 0.0  # readings with their retries (the stream's wait for a still window)
+    other: float = 0.0  # checkpoints (a pause's wait) and saves
+
+
+@dataclass
 class Stats:
     """What happened: counts a person and the benchmark care about."""
 
@@ -48,3 +61,4 @@ class Stats:
     aimed_after_10: int = 0
     locked_after_10: int = 0
     settle_s: list = field(default_factory=list)
+    phase_s: PhaseSeconds = field(default_factory=PhaseSeconds)

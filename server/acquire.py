@@ -465,6 +465,8 @@ def acquire(
         "campaign_end_s": clock.now(),
         "predictor": predictor.stage,
         "skipped_poses": stats.skipped,
+        # campaign clock seconds per kind of plan message (this run's)
+        "phase_s": asdict(stats.phase_s),
         "simulated": cell.simulated,
     }
 

@@ -87,6 +87,11 @@ class TrackerClient:
         budget = timeout_s or self.timeout_s + n / NOMINAL_SAMPLE_RATE_HZ
         return self.request("MEASURE", int(n), timeout_s=budget)
 
+    def measure_stable(self, n: int, wait_s: float, timeout_s: float | None = None) -> Measurement:
+        """The first n samples, streamed from now, that the tracker calls still (STABLE)."""
+        budget = timeout_s or self.timeout_s + wait_s + n / NOMINAL_SAMPLE_RATE_HZ
+        return self.request("STABLE", int(n), float(wait_s), timeout_s=budget)
+
     def weather(self) -> Weather:
         return self.request("WEATHER")
 

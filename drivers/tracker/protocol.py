@@ -23,11 +23,13 @@ COMMANDS: dict[str, tuple[type, ...]] = {
     "POINT": (float, float, float),
     "SEARCH": (float,),
     "MEASURE": (int,),
+    "STABLE": (int, float),
     "WEATHER": (),
     "STATUS": (),
 }
 # Repeating these changes nothing a second time (MEASURE only costs time); SEARCH may relock.
-IDEMPOTENT = frozenset({"ID", "POINT", "MEASURE", "WEATHER", "STATUS"})
+IDEMPOTENT = frozenset({"ID", "POINT", "MEASURE", "STABLE", "WEATHER", "STATUS"})
+MAX_STABLE_WAIT_S = 60.0
 MEASURE_OK, MEASURE_INACCURATE = "OK", "INACCURATE"
 
 _ID = re.compile(r"#(\d{1,9})")
@@ -195,6 +197,12 @@ def parse_request(line: str) -> Request:
         raise ProtocolError(f"SEARCH radius must be in (0, {MAX_SEARCH_RADIUS_MM}] mm", req_id)
     if command == "MEASURE" and not 1 <= args[0] <= MAX_SAMPLES:
         raise ProtocolError(f"MEASURE samples must be 1..{MAX_SAMPLES}", req_id)
+    if command == "STABLE" and not (
+        1 <= args[0] <= MAX_SAMPLES and 0 <= args[1] <= MAX_STABLE_WAIT_S
+    ):
+        raise ProtocolError(
+            f"STABLE samples must be 1..{MAX_SAMPLES} and wait 0..{MAX_STABLE_WAIT_S:g} s", req_id
+        )
     return Request(req_id, command, args)
 
 
@@ -250,7 +258,15 @@ def decode_reply(command: str, reply: ReplyLine):
         if not f or not _CODE.fullmatch(f[0]):
             raise ProtocolError("ERR reply without an upper-case error code", rid)
         raise TrackerError(f[0], " ".join(f[1:]))
-    expected = {"ID": 3, "POINT": 1, "SEARCH": 1, "MEASURE": 8, "WEATHER": 3, "STATUS": 4}
+    expected = {
+        "ID": 3,
+        "POINT": 1,
+        "SEARCH": 1,
+        "MEASURE": 8,
+        "STABLE": 8,
+        "WEATHER": 3,
+        "STATUS": 4,
+    }
     if command not in expected:
         raise ValueError(f"unknown command {command!r}")
     if len(f) != expected[command]:
@@ -259,11 +275,11 @@ def decode_reply(command: str, reply: ReplyLine):
         return Ident(*f)
     if command in ("POINT", "SEARCH"):
         return _locked(f[0], rid)
-    if command == "MEASURE":
+    if command in ("MEASURE", "STABLE"):
         mean, std = _vec(f[0:3], "mean", rid), _vec(f[3:6], "std", rid)
         samples = parse_int(f[6], "samples", rid)
         if np.any(std < 0) or samples < 1 or f[7] not in (MEASURE_OK, MEASURE_INACCURATE):
-            raise ProtocolError(f"MEASURE reply out of range: {' '.join(f)}", rid)
+            raise ProtocolError(f"{command} reply out of range: {' '.join(f)}", rid)
         return Measurement(mean, std, samples, f[7])
     if command == "WEATHER":
         t, p, h = (parse_float(x, "weather", rid) for x in f)

@@ -95,6 +95,7 @@ class SimulatedTracker:
                 "POINT": lambda *xyz: self.point(xyz),
                 "SEARCH": self.search,
                 "MEASURE": self.measure,
+                "STABLE": self.stable,
                 "WEATHER": self.weather,
                 "STATUS": self.status,
             }
@@ -159,6 +160,55 @@ class SimulatedTracker:
         self.aim_mm = p.copy()
         status = MEASURE_INACCURATE if np.any(std > INACCURATE_SPREAD * sigma) else MEASURE_OK
         return Measurement(samples.mean(axis=0), std, n, status)
+
+    def stable(self, n: int, wait_s: float) -> Measurement:
+        """The first n consecutive samples, streamed from now, whose spread the tracker calls OK
+        (the MEASURE check, judged sample by sample); after wait_s without one, the last window,
+        INACCURATE. Takes the wait plus n / sample_rate_hz seconds."""
+        if not self._still_locked():
+            raise TrackerError(ErrorCode.BEAM_BROKEN, "not locked on a target: POINT or SEARCH")
+        if self._rng.random() < self.beam_break_rate:
+            self.target = None
+            self.clock.sleep(n / self.sample_rate_hz)
+            raise TrackerError(ErrorCode.BEAM_BROKEN, "beam interrupted during the measurement")
+        p = self.world.smr_positions()[self.target]
+        distance = float(np.linalg.norm(p))
+        if distance < MIN_RANGE_MM:
+            raise TrackerError(
+                ErrorCode.INACCURATE,
+                f"target at {distance:.0f} mm, inside the {MIN_RANGE_MM:.0f} mm minimum range",
+            )
+        sigma = float(self.world.cell.tracker.sigma_mm(distance))
+        total = n + int(round(float(wait_s) * self.sample_rate_hz))
+        t0 = self.world.since_arrival()
+        amplitude, tau, hz = self.settle
+        limit = (INACCURATE_SPREAD * sigma) ** 2
+        # the stream in blocks of n samples, drawn only as far as the first still window needs
+        # (the noise drawn depends on the physics, not on how long the caller would wait)
+        d = np.empty((0, 3))
+        k = -1
+        while k < 0 and len(d) < total:
+            t = t0 + np.arange(len(d), min(len(d) + n, total)) / self.sample_rate_hz
+            ring = amplitude * np.exp(-t / tau) * np.sin(2 * np.pi * hz * t)
+            # offsets from the SMR's centre: the windows' sums stay exact in float
+            block = ring[:, None] * self.settle_direction
+            d = np.vstack([d, block + self._rng.normal(scale=sigma, size=block.shape)])
+            if len(d) < n:
+                continue
+            c1 = np.vstack([np.zeros(3), np.cumsum(d, axis=0)])
+            c2 = np.vstack([np.zeros(3), np.cumsum(d * d, axis=0)])
+            s1, s2 = c1[n:] - c1[:-n], c2[n:] - c2[:-n]  # per window start
+            ok = np.all((s2 - s1 * s1 / n) / max(n - 1, 1) <= limit, axis=1)
+            k = int(np.argmax(ok)) if ok.any() else -1
+        if k < 0:
+            k = len(d) - n
+        window = d[k : k + n]
+        shared = self._rng.normal(scale=sigma * np.sqrt(1.0 - 1.0 / n), size=3)
+        std = window.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
+        self.clock.sleep((k + n) / self.sample_rate_hz)
+        self.aim_mm = p.copy()
+        status = MEASURE_INACCURATE if np.any(std > INACCURATE_SPREAD * sigma) else MEASURE_OK
+        return Measurement(p + shared + window.mean(axis=0), std, n, status)
 
     def weather(self) -> Weather:
         noise = self._rng.normal(scale=WEATHER_NOISE)

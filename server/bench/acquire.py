@@ -112,6 +112,16 @@ def run_acquire_bench(seed: int = 0, holdout: int = 50, configs=None) -> dict:
                 "searched": summary["searched"],
                 "heldout_rmse_mm": float(np.sqrt(np.mean(np.sum(err**2, axis=-1)))),
                 "locked_without_search_after_10": summary["locked_without_search_after_10"],
+                # where the campaign's time went, beside the bound's terms
+                "phase_s": summary["phase_s"],
+                "over_bound_s": {
+                    "motion": summary["phase_s"]["move"] - bound["motion_s"],
+                    "of_which_tour_over_spanning_tree": bound["tour_s"] - bound["motion_s"],
+                    "measure_beyond_sampling": summary["phase_s"]["measure"] - bound["measuring_s"],
+                    "aim": summary["phase_s"]["aim"],
+                    "settle": summary["phase_s"]["settle"],
+                    "other": summary["phase_s"]["other"],
+                },
             }
             print(
                 f"[bench] {label}: {summary['campaign_s']:.1f} s, bound "

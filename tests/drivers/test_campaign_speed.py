@@ -84,7 +84,12 @@ def _device_log(sim):
         log.append(("MEASURE", world.moving(), world.since_arrival(), n))
         return measure(n)
 
-    dev.point, dev.measure = logged_point, logged_measure
+    def logged_stable(n, wait_s):  # a reading off the stream: sampled from now on, as MEASURE
+        log.append(("MEASURE", world.moving(), world.since_arrival(), n))
+        return stable(n, wait_s)
+
+    stable = dev.stable
+    dev.point, dev.measure, dev.stable = logged_point, logged_measure, logged_stable
     return log
 
 
@@ -98,8 +103,19 @@ def test_the_beam_is_aimed_during_the_move_but_nothing_is_measured_before_arriva
     ahead = [e for e in log if e[0] == "POINT" and e[1]]
     # once the predictor has readings, the first SMR's POINT goes out while the arm moves
     assert len(ahead) == 20 - 1
-    # and locks as the arm arrives where the prediction is within the capture radius
-    assert sum(locked for *_, locked in ahead) >= 5
+    # and locks as the arm arrives where the prediction is within the capture radius (the
+    # POINT ends a millisecond past the move's announced end, never just before it)
+    assert sum(locked for *_, locked in ahead) >= 12
+
+
+def test_the_first_status_after_an_announced_move_finds_the_arm_in_position():
+    with simulated_engine(seed=4, n=20) as (engine, poses, sim):
+        stats = engine.run(poses)
+        statuses = [line for line in sim.controller_device.received if " STATUS" in line]
+        moves = sim.controller_device.moves
+    assert stats.readings == 20 * 3
+    # the engine waits out the duration the MOVEJ reply announced: no poll finds it MOVING
+    assert len(moves) == 20 and len(statuses) == len(moves)
 
 
 def test_a_controller_that_underestimates_its_move_still_gets_no_reading_while_moving():
@@ -208,3 +224,73 @@ def test_a_target_out_of_sight_costs_one_narrow_search_once_the_model_is_calibra
     assert stats.missing == 1 and stats.readings == 20 * 3 - 1
     # before: a narrow search, then two wide ones of 8 s each
     assert [r for on, r in searches if on] == [engine.settings.search_radius_mm]
+
+
+def _commands(sim):
+    """Wrap the simulated tracker's line handler: the command of each request, in order."""
+    seen, handle = [], sim.tracker_device.handle
+
+    def logged(line):
+        seen.append(line.split()[1])
+        return handle(line)
+
+    sim.tracker_device.handle = logged
+    return seen
+
+
+def test_adaptive_settling_reads_the_first_still_window_of_the_tracker_stream():
+    with simulated_engine(seed=3, n=8) as (engine, poses, sim):
+        sim.tracker_device.settle = (0.5, TAU_S, HZ)  # rings for seconds after each move
+        commands = _commands(sim)
+        arrived = _settled_at(engine, sim)
+        stats = engine.run(poses)
+        points = sim.cell.true_points(np.deg2rad(poses))
+        sigma = sim.cell.tracker.sigma_mm(np.linalg.norm(points, axis=-1))
+    assert stats.readings == 8 * 3
+    # no looks and no reading refused: every reading is the stream's first still window
+    assert "MEASURE" not in commands and commands.count("STABLE") == 8 * 3
+    # the wait is the ringing's: with sigma ~0.01 mm the window's spread passes 3 sigma only
+    # once the 0.5 mm envelope is down to a few hundredths, tau ln(0.5 / 0.05) ~ 3.5 s
+    seen = np.array(arrived) + np.array(stats.settle_s)
+    assert sigma.max() < 0.02 and np.all(seen > 2.5) and np.all(seen < 5.0), seen
+
+
+def test_adaptive_settling_without_the_tracker_stream_settles_on_looks():
+    from robocal.drivers.tracker.protocol import ErrorCode, TrackerError
+
+    with simulated_engine(seed=3, n=6) as (engine, poses, sim):
+
+        def refused(n, wait_s):
+            raise TrackerError(ErrorCode.BAD_REQUEST, "unknown command 'STABLE'")
+
+        sim.tracker_device.stable = refused
+        commands = _commands(sim)
+        stats = engine.run(poses)
+    assert stats.readings == 6 * 3 and stats.missing == 0
+    # asked once; then looks of settle_look_samples and plain readings, as before the stream
+    assert commands.count("STABLE") == 1 and commands.count("MEASURE") > 6 * 3
+    assert len(stats.settle_s) == 6
+
+
+def test_a_point_ahead_that_missed_is_followed_by_a_search_not_the_same_point():
+    with simulated_engine(seed=2, n=12) as (engine, poses, sim):
+        lines, handle = [], sim.tracker_device.handle
+
+        def logged(line):
+            reply = handle(line)
+            lines.append((line.split()[1:], reply.split()[2:]))
+            return reply
+
+        sim.tracker_device.handle = logged
+        stats = engine.run(poses)
+    assert stats.readings == 12 * 3
+    missed = [i for i, (req, rep) in enumerate(lines) if req[0] == "POINT" and rep == ["UNLOCKED"]]
+    assert missed  # the early predictions miss the capture radius
+
+    def same_point(a, b):  # the aim again, up to the joints' read-back rounding
+        return a[0] == b[0] == "POINT" and np.allclose(
+            np.array(a[1:], float), np.array(b[1:], float), atol=0.01
+        )
+
+    # never the same POINT again right after it missed: it cannot lock there either
+    assert not any(i + 1 < len(lines) and same_point(lines[i][0], lines[i + 1][0]) for i in missed)

@@ -3,6 +3,7 @@
 from itertools import permutations
 
 import numpy as np
+import pytest
 
 from robocal.drivers.campaign_bound import (
     Ringing,
@@ -76,6 +77,13 @@ def test_every_procedure_takes_longer_than_its_bound_and_the_combined_one_least(
         assert run["poses_in_bound"] == run["poses"]
         assert run["ratio_to_bound"] >= 1.0  # no procedure beats the physics
         assert run["ratio_to_bound"] == run["campaign_s"] / bound["bound_s"]
+        # the campaign's time, split by plan message, adds up to it (one virtual clock)
+        assert sum(run["phase_s"].values()) == pytest.approx(run["campaign_s"], abs=1e-9)
+        assert run["phase_s"]["move"] >= bound["tour_s"] - 1e-9
+        assert run["phase_s"]["measure"] >= bound["measuring_s"]
+    # the paper pauses 10 s at each pose; adaptive settling waits inside the stream's readings
+    assert runs["paper"]["phase_s"]["settle"] == pytest.approx(10.0 * 14)
+    assert runs["combined"]["phase_s"]["settle"] == 0.0
     assert out["fastest"] == "combined"
     assert runs["combined"]["ratio_to_bound"] < 0.5 * runs["paper"]["ratio_to_bound"]
     assert out["target"]["ratio_to_bound_max"] == 1.2 and "spanning tree" in out["bound_method"]

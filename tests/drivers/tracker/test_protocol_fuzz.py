@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from robocal.drivers.tracker.protocol import (
     COMMANDS,
     MAX_ID,
+    MAX_STABLE_WAIT_S,
     Ident,
     Measurement,
     ProtocolError,
@@ -34,8 +35,10 @@ TOKEN = st.text(st.characters(min_codepoint=33, max_codepoint=126), min_size=1, 
 @st.composite
 def requests(draw) -> str:
     command = draw(st.sampled_from(sorted(COMMANDS)))
+    # STABLE's float is its wait, bounded tighter than a coordinate or a search radius
+    high = MAX_STABLE_WAIT_S if command == "STABLE" else 200.0
     args = [
-        draw(st.integers(1, 100_000) if kind is int else st.floats(0.1, 200.0))
+        draw(st.integers(1, 100_000) if kind is int else st.floats(0.1, high))
         for kind in COMMANDS[command]
     ]
     return encode_request(draw(IDS), command, *args)
@@ -102,6 +105,7 @@ REQUESTS = [
     "#7 POINT 1.000000 -2.500000 3000.000000\n",
     "#7 SEARCH 20.000000\n",
     "#7 MEASURE 500\n",
+    "#7 STABLE 1000 10\n",
     "#7 WEATHER\n",
     "#7 STATUS\n",
 ]
