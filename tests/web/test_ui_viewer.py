@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 
+import httpx
 import numpy as np
 import pytest
 
@@ -80,3 +81,17 @@ def test_viewer_shows_the_recording_from_the_service_alone(served, gl_page):
     page.wait_for_function(f"{FRAME}.body.dataset.pose === '5'")
     assert "pose 5" in page.text_content("#c3-state")
     assert not elsewhere, f"the page asked other hosts: {elsewhere}"
+
+
+def test_viewer_code_is_served_without_the_token_and_only_its_files(served):
+    """The viewer's code is public like the page; a name it does not ship is a 404, a recording
+    still needs the token."""
+    with httpx.Client(base_url=served.url, timeout=120) as anonymous:
+        js = anonymous.get("/viewer/re_viewer.js")
+        assert js.status_code == 200 and js.headers["content-type"].startswith("text/javascript")
+        assert "WebHandle" in js.text
+        wasm = anonymous.head("/viewer/re_viewer_bg.wasm")
+        assert wasm.status_code == 200 and wasm.headers["content-type"] == "application/wasm"
+        assert anonymous.get("/viewer/../token.sha256").status_code == 404
+        assert anonymous.get("/viewer/index.html").status_code == 404
+        assert anonymous.get("/api/jobs/1/recording").status_code == 401
