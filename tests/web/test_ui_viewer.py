@@ -80,6 +80,8 @@ def test_viewer_shows_the_recording_from_the_service_alone(served, gl_page):
     page.click("#c3-go")
     page.wait_for_function(f"{FRAME}.body.dataset.pose === '5'")
     assert "pose 5" in page.text_content("#c3-state")
+    page.wait_for_timeout(1000)  # a frame or two to draw it: for the picture only, not asserted
+    frame.screenshot(path=str(ARTIFACTS / "viewer-pose-5.png"))
     assert not elsewhere, f"the page asked other hosts: {elsewhere}"
 
 
