@@ -23,6 +23,7 @@ from .events import Events
 from .job_queue import Jobs
 from .security import ensure_token, require_reader
 from .settings import Settings
+from .viewer import mount_viewer
 from .web import mount_web
 
 API_PREFIX = "/api"
@@ -95,6 +96,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.include_router(router, prefix=API_PREFIX)
     check_authorized(app)
     mount_docs(app)
+    mount_viewer(app, settings.viewer_dir)
     mount_web(app)  # last: a mount at / hides any route added after it
     return app
 

@@ -28,7 +28,8 @@ def calibration_blueprint(
     has_solver: bool,
     figures: tuple[tuple[str, str], ...] | list[tuple[str, str]] = (),
 ) -> rrb.Blueprint:
-    """The cell with every pose left, charts right; the time panel on the solver's timeline.
+    """The cell with every pose left, one pose beside it, charts right; the time panel on the
+    solver's timeline.
 
     eye: on the whole cell; arm_eye: on the arm at the pose its frames are drawn at.
     figures: (entity, title) of each diagnosis figure, one tab each.
@@ -72,7 +73,9 @@ def calibration_blueprint(
         row_shares=[1, 2, 2],
     )
     return rrb.Blueprint(
-        rrb.Horizontal(rrb.Tabs(cell, one_pose, frames), charts, column_shares=[3, 2]),
+        # one pose beside the whole cell, not in a tab behind it: choosing a pose (the page's
+        # "Show this pose", or the time panel) shows its arm and arrows at once
+        rrb.Horizontal(rrb.Tabs(cell, frames), one_pose, charts, column_shares=[3, 2, 2]),
         rrb.TimePanel(timeline="iteration" if has_solver else "pose", state="collapsed"),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),

@@ -52,6 +52,11 @@ class Settings(BaseSettings):
         return self.data_dir / "recordings"
 
     @property
+    def viewer_dir(self) -> Path:
+        """Rerun's web viewer, copied from the installed rerun-sdk on first use (server/viewer.py)."""
+        return self.data_dir / "viewer"
+
+    @property
     def cells_dir(self) -> Path:
         return self.data_dir / "cells"
 

@@ -532,6 +532,7 @@ function showResults(j) {
   api("GET", `${charts.slice(4)}/table3`).then((t) => { if (state.job === j.id) renderTable3(t); })
     .catch((e) => { if (state.job === j.id) $("table3").textContent = e.message; });
   showModel(j);  // web/model.js: validation, identified parameters, recording hint
+  showCell3d(j);  // web/cell3d.js: the recording in the 3-D viewer
 }
 
 /** Save a POST answer (a compensation or an export of the shown job's model) as a file. */
