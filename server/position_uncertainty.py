@@ -37,7 +37,10 @@ def position_block(layout, x, q, errors: ParameterErrors, holdout_rms_mm, noise_
         "coverage": pu.COVERAGE,
         "joint_scatter_deg": float(np.degrees(scatter)),
         "parameters": [errors.names[i] for i in order],
-        "covariance": (errors.cov * np.outer(scale, scale)).tolist(),
+        # the named parameters' block (a fit's covariance may have columns of its own besides)
+        "covariance": (
+            errors.cov[np.ix_(errors.column[order], errors.column[order])] * np.outer(scale, scale)
+        ).tolist(),
         "method": METHOD,
     }
 
