@@ -9,7 +9,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, JSONResponse
 
-from robocal.server.job_queue import DuplicateJob, Job
+from robocal.server.service.job_queue import DuplicateJob, Job
 
 from . import problems
 from .bodies import json_body, read_json

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from robocal.solver import configuration, vocabulary
 from robocal.solver.calibrate import calibrate
 from robocal.solver.diagnose import diagnose
