@@ -59,3 +59,17 @@ def test_the_check_sees_an_upward_import(tmp_path, monkeypatch):
 def test_the_hall_holds_rooms_not_modules():
     modules = sorted(p.name for p in (ROOT / "server").glob("*.py"))
     assert len(modules) <= HALL_MODULES_MAX, modules
+
+
+LINES_MAX = 700
+
+
+def test_no_source_file_outgrows_a_reader():
+    """No non-test source file over 700 lines (the engine's sighting has a module of its own)."""
+    long = {
+        str(p.relative_to(ROOT)): n
+        for folder in ("server", "solver", "drivers", "migrations", "web")
+        for p in (ROOT / folder).rglob("*.py")
+        if (n := len(p.read_text().splitlines())) > LINES_MAX
+    }
+    assert long == {}
