@@ -61,6 +61,9 @@ class AcquireOptions:
     # the same simulated arm can read it with independent noise
     noise_seed: int | list | None = None
     arm: str | None = None  # the physical arm measured (its serial number), for the fleet view
+    # an adaptive campaign (server/adaptive_acquire.py): at most `poses` poses, chosen among
+    # `choose_from` candidates (default 400), until the predicted held-out RMS reaches this (mm)
+    target_accuracy_mm: float | None = None
 
 
 class StoreSink:
@@ -243,6 +246,11 @@ def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
 def _plan(cell: Cell, base, opts: AcquireOptions, progress=None):
     from robocal.drivers.planning import plan_campaign
 
+    if opts.target_accuracy_mm:
+        from .adaptive_acquire import plan_seed
+
+        return plan_seed(cell, base, opts)
+
     targets = np.array(list(cell.targets.values()))
     rng = np.random.default_rng(opts.seed)
     n_cand = max(opts.choose_from, opts.poses)
@@ -420,14 +428,17 @@ def acquire(
             sink = engine.sink = _Events(sink, on_event, engine, cid, len(poses_deg), start)
         if on_engine:
             on_engine(engine)
+        begin = start if start is not None else len(poses_deg)
+        adaptive = _adaptive(db, cid, cell, base, opts, names, clock, known, sink, on_event)
         t0 = clock.now()
         try:
             stats = _run(
                 engine,
                 poses_deg,
-                start=start if start is not None else len(poses_deg),
+                start=begin,
                 history=history,
                 partial=partial,
+                plan=None if adaptive is None else adaptive.plan(begin, partial),
             )
         except KeyboardInterrupt:
             writer.close()
@@ -451,7 +462,7 @@ def acquire(
         "campaign": cid,
         "name": name,
         "resumed_at": start if existing else None,
-        "poses": int(len(poses_deg)),
+        "poses": int(len(poses_deg) if adaptive is None else len(adaptive.planned)),
         "state": engine.state,
         "measured_poses": stats.poses,
         "readings": stats.readings,
@@ -468,7 +479,35 @@ def acquire(
         # campaign clock seconds per kind of plan message (this run's)
         "phase_s": asdict(stats.phase_s),
         "simulated": cell.simulated,
+        "adaptive": None if adaptive is None else adaptive.summary(),
     }
+
+
+def _adaptive(db, cid, cell, base, opts, names, clock, known, sink, on_event):
+    """An adaptive campaign's batches (None for a planned one), its steps told to the progress
+    line and the run's events."""
+    if not opts.target_accuracy_mm:
+        return None
+    from .adaptive_acquire import STEPS, AdaptiveRun, step_line
+
+    def on_step(step, total):
+        for s in _chain(sink):
+            if isinstance(s, _Progress):
+                line = step_line(step, float(opts.target_accuracy_mm))
+                s.progress.update(s.task, total=total, description=line)
+            if isinstance(s, _Events):
+                s.total = int(total)
+        if on_event:
+            on_event({"type": "campaign.adaptive", "campaign_id": cid, **step.to_json()})
+
+    return AdaptiveRun(db, cid, cell, base, opts, names, clock, on_step, known.get(STEPS, ()))
+
+
+def _chain(sink):
+    """The sink and those it wraps."""
+    while sink is not None:
+        yield sink
+        sink = getattr(sink, "sink", None)
 
 
 @contextmanager
