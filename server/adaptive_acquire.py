@@ -105,6 +105,8 @@ class AdaptiveRun:
         meas = store.campaign_measurements(self.db, campaign_id=self.cid, targets=self.names)
         step, chosen = self.planner.step(meas, self.clock.now())
         self.last = step
+        if self.steps and self.steps[-1]["poses"] == step.poses:
+            self.steps.pop()  # a resumed run refits the poses its last step had: that step again
         self.steps.append(step.to_json())
         store.update_settings(self.db, campaign_id=self.cid, **{STEPS: self.steps})
         total = len(self.planned) + (0 if chosen is None else len(chosen))

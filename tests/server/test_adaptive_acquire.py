@@ -64,3 +64,32 @@ def test_chosen_poses_come_from_the_candidates_without_repeats(tmp_path):
 def test_a_bad_target_is_refused_before_anything_is_stored(tmp_path):
     with pytest.raises(ValueError, match="target_accuracy_mm"):
         _run(tmp_path, target_accuracy_mm=-1.0)
+
+
+def test_an_interrupted_adaptive_campaign_resumes_with_its_plan_and_steps(tmp_path):
+    from robocal.server.acquire import Interrupted
+
+    heard = []
+
+    def on_event(e):
+        if e["type"] == "campaign.adaptive":
+            heard.append(e["poses"])
+            if len(heard) == 2:
+                raise KeyboardInterrupt  # Ctrl-C as the second step is told
+
+    opts = AcquireOptions(seed=3, order=True, settle="adaptive", poses=80, target_accuracy_mm=0.045)
+    with pytest.raises(Interrupted):
+        acquire(tmp_path / "a.db", default_cell(), opts, on_event=on_event)
+    with store.open_database(tmp_path / "a.db") as db:
+        info = store.get_campaign(db, campaign_id=1)
+    assert info.status == "estopped"
+    assert [s["poses"] for s in info.settings["adaptive_steps"]] == heard
+    summary = acquire(tmp_path / "a.db", default_cell(), opts, reset=True)
+    a = summary["adaptive"]
+    assert summary["campaign"] == 1 and summary["state"] == "done" and a["stopped"] == "target"
+    poses = [s["poses"] for s in a["steps"]]
+    assert poses[:2] == heard and poses == sorted(set(poses))
+    with store.open_database(tmp_path / "a.db") as db:
+        planned = store.planned_poses(db, campaign_id=1)
+        meas = store.campaign_measurements(db, campaign_id=1)
+    assert len(planned) == len(meas.q) == poses[-1]
