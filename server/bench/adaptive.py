@@ -55,9 +55,12 @@ def _heldout(db, cell, campaign: int, q_hold, meas_hold) -> float:
     return float(np.sqrt(np.nanmean(np.sum(err**2, axis=-1))))
 
 
-def run_arm(arm: str, seed: int, factors=FACTORS) -> dict:
-    """One arm and seed: the fixed campaign, and per target the adaptive and the random one."""
+def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
+    """One arm and seed: the fixed campaign, and per target the adaptive and the random one;
+    effects: hidden physics of the simulated arm (`simulate --effect` specs), which no fit of
+    the geometry captures."""
     from robocal.drivers.cell import TrackerSpec, VirtualCell
+    from robocal.drivers.effects import make_effects
 
     from .. import store
     from ..acquire import AcquireOptions, acquire
@@ -70,12 +73,15 @@ def run_arm(arm: str, seed: int, factors=FACTORS) -> dict:
         seed=seed,
         tracker=TrackerSpec(**cell.tracker),
     )
+    # the arm the simulated devices move (drivers/simulated_cell.py builds it so)
+    truth.effects.extend(make_effects(list(effects), truth, seed))
     rng = np.random.default_rng([seed, 0x401D])
     q_hold = truth.sample_poses(HOLDOUT, rng)
     meas_hold = truth.measure(q_hold, rng)
     floor = truth.noise_floor_mm(q_hold)
-    common: dict[str, Any] = dict(seed=seed, order=True, settle="adaptive")
+    common: dict[str, Any] = dict(seed=seed, order=True, settle="adaptive", effects=tuple(effects))
     out: dict = {"arm": arm, "seed": seed, "smrs": len(names), "floor_mm": floor, "targets": {}}
+    out["effects"] = list(effects)
     with tempfile.TemporaryDirectory() as tmp, store.open_database(Path(tmp) / "b.db") as db:
 
         def run(name: str, **kw) -> dict:
@@ -168,10 +174,11 @@ def summarize(runs: list[dict], factors=FACTORS) -> dict:
     return out
 
 
-def run_adaptive_suite(seeds: int = 20, arms=ARMS, factors=FACTORS) -> dict:
+def run_adaptive_suite(seeds: int = 20, arms=ARMS, factors=FACTORS, effects=()) -> dict:
     """Every arm x seed; the runs and their summary per target."""
-    runs = [run_arm(arm, s, factors) for s in range(seeds) for arm in arms]
+    runs = [run_arm(arm, s, factors, effects) for s in range(seeds) for arm in arms]
     return {
+        "effects": list(effects),
         "arms": list(arms),
         "seeds": seeds,
         "fixed_poses": FIXED_POSES,

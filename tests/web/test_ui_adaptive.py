@@ -5,19 +5,16 @@ from __future__ import annotations
 
 import re
 
-from tests.web.conftest import shot
+from tests.web.conftest import shot, sign_in
+
+FORM = {"#c-name": "adaptive", "#c-poses": "40", "#c-target": "0.05", "#c-pause": "0"}
 
 
 def test_the_predicted_accuracy_is_shown_live_and_the_stop_said(served, page):
-    page.goto(served.url + "/")
-    page.fill("#token", served.token)
-    page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
-    page.fill("#c-name", "adaptive")
-    page.fill("#c-poses", "40")
-    page.fill("#c-target", "0.05")
+    sign_in(page, served)
+    for field, value in FORM.items():
+        page.fill(field, value)
     page.select_option("#c-settle", "adaptive")
-    page.fill("#c-pause", "0")
     page.click("#create")
     page.wait_for_selector("#progress:not([hidden])")
     assert page.text_content("#p-adaptive") == (
