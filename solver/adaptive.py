@@ -47,8 +47,8 @@ class Prediction:
     rms_mm: float  # predicted held-out RMS at new poses over the working volume
     floor_mm: float  # what rms_mm tends to with endless poses: noise_mm x kappa
     parameters_mm: float  # the parameters' part: sqrt(mean prediction variance) x kappa
-    noise_mm: float  # the tracker's noise, 3-D RMS a reading
-    error_mm: float  # a reading's error: the noise, or what the fit's residuals show if more
+    noise_mm: float  # the tracker's noise over the volume, 3-D RMS a reading
+    error_mm: float  # a new reading's error: that noise, and what the fit's residuals show beyond
     holdout_mm: float  # the data's own leave-one-pose-out RMS
     expected_holdout_mm: float  # what the noise alone would give it
     kappa: float  # max(1, holdout / expected): the scale the data's check puts on the prediction
@@ -124,31 +124,37 @@ def predict(
     noise_mm: float,
     holdout_mm: float,
     fit_rms_mm: float = 0.0,
-    clustered_mm2: float = 0.0,
+    volume_noise_mm: float | None = None,
 ) -> Prediction:
     """The held-out RMS a fit on J_train (poses' rows (m, r, P)) will have over the volume of
-    W, given the tracker's noise (3-D RMS a reading), the fit's RMS and its held-out RMS.
+    W, given the tracker's noise at the training readings and over the volume (3-D RMS a
+    reading; the volume's default the training's), the fit's RMS and its held-out RMS.
 
-    A reading's error is the tracker's noise, or what the fit's residuals show if more (the
-    arm's own scatter, an effect no parameter has): their unbiased estimate, RMS x sqrt(rows /
-    (rows - P)). The parameters' part is the larger of s^2 tr(W C) and clustered_mm2, tr(W V)
-    of the fit's pose-clustered covariance V: errors shared by a pose's readings (the arm's
-    scatter) leave the parameters more uncertain than independent noise would."""
+    A training reading's error is the tracker's noise, or what the fit's residuals show if more
+    (their unbiased estimate, RMS x sqrt(rows / (rows - P))); the excess (the arm's own scatter,
+    an effect no parameter has) is added to the volume's noise, since the poses chosen for what
+    they teach lie farther from the tracker than most, and a tracker's noise grows with range.
+    Errors shared by a pose's readings (the arm's scatter) leave the parameters more uncertain
+    than independent noise would: the held-out check, which holds out whole poses, sees that.
+    (The pose-clustered covariance, tried in its place, needs more poses than parameters: at a
+    seed set's 16 poses it over-predicted by a third.)"""
     rows = 3 * train_readings
     dof = rows - J_train.shape[-1]
     s2 = noise_mm**2 / 3.0
     if dof > 0 and np.isfinite(fit_rms_mm):
         s2 = max(s2, fit_rms_mm**2 * rows / dof / 3.0)
-    error_mm = float(np.sqrt(3.0 * s2))
+    unexplained2 = max(0.0, 3.0 * s2 - noise_mm**2)
+    vol = noise_mm if volume_noise_mm is None else volume_noise_mm
+    error_mm = float(np.sqrt(vol**2 + unexplained2))
     C = normal_inverse(J_train)
-    par2 = max(s2 * float(np.trace(W @ C)), float(clustered_mm2))
+    par2 = s2 * float(np.trace(W @ C))
     expected = np.sqrt(s2 * expected_holdout(J_train, C, train_readings))
     kappa = max(1.0, holdout_mm / expected) if np.isfinite(holdout_mm) and expected > 0 else 1.0
     return Prediction(
         rms_mm=float(kappa * np.sqrt(error_mm**2 + par2)),
         floor_mm=float(kappa * error_mm),
         parameters_mm=float(kappa * np.sqrt(par2)),
-        noise_mm=float(noise_mm),
+        noise_mm=float(vol),
         error_mm=error_mm,
         holdout_mm=float(holdout_mm),
         expected_holdout_mm=float(expected),

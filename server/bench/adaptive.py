@@ -114,6 +114,7 @@ def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
                 "steps": [
                     (s["poses"], round(s["predicted_mm"], 5)) for s in a["adaptive"]["steps"]
                 ],
+                "last_step": a["adaptive"]["steps"][-1],
             }
             print(
                 f"[bench] {arm} seed {seed} x{f:g}: {a['poses']} poses, {a['campaign_s'] / 60:.1f} "

@@ -93,3 +93,17 @@ def test_an_interrupted_adaptive_campaign_resumes_with_its_plan_and_steps(tmp_pa
         planned = store.planned_poses(db, campaign_id=1)
         meas = store.campaign_measurements(db, campaign_id=1)
     assert len(planned) == len(meas.q) == poses[-1]
+
+
+def test_the_command_prints_each_step_and_why_it_stopped(tmp_path):
+    from tests import cli_process
+
+    args = ["acquire", "--db", "c.db", "--target-accuracy-mm", 0.05, "--settle", "adaptive"]
+    r = cli_process.run(*args, "--pause", 0, "--order", cwd=tmp_path, timeout=300)
+    assert r.returncode == 0, r.stderr
+    steps = [line for line in r.stdout.splitlines() if line.startswith("predicted held-out RMS")]
+    assert len(steps) == 1 and steps[0].count(":") >= 2, r.stdout
+    assert "stopped (target): predicted held-out RMS" in r.stdout
+    bad = cli_process.run(*args[:3], "--target-accuracy-mm", "-1", cwd=tmp_path, timeout=60)
+    assert bad.returncode == 2 and "--target-accuracy-mm" in bad.stderr
+    assert "Traceback" not in bad.stderr
