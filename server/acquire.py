@@ -429,7 +429,11 @@ def acquire(
         if on_engine:
             on_engine(engine)
         begin = start if start is not None else len(poses_deg)
-        adaptive = _adaptive(db, cid, cell, base, opts, names, clock, known, sink, on_event)
+        adaptive = None
+        if opts.target_accuracy_mm:
+            from .adaptive_acquire import adaptive_run
+
+            adaptive = adaptive_run(db, cid, cell, base, opts, clock, known, sink, on_event)
         t0 = clock.now()
         try:
             stats = _run(
@@ -481,33 +485,6 @@ def acquire(
         "simulated": cell.simulated,
         "adaptive": None if adaptive is None else adaptive.summary(),
     }
-
-
-def _adaptive(db, cid, cell, base, opts, names, clock, known, sink, on_event):
-    """An adaptive campaign's batches (None for a planned one), its steps told to the progress
-    line and the run's events."""
-    if not opts.target_accuracy_mm:
-        return None
-    from .adaptive_acquire import STEPS, AdaptiveRun, step_line
-
-    def on_step(step, total):
-        for s in _chain(sink):
-            if isinstance(s, _Progress):
-                line = step_line(step, float(opts.target_accuracy_mm))
-                s.progress.update(s.task, total=total, description=line)
-            if isinstance(s, _Events):
-                s.total = int(total)
-        if on_event:
-            on_event({"type": "campaign.adaptive", "campaign_id": cid, **step.to_json()})
-
-    return AdaptiveRun(db, cid, cell, base, opts, names, clock, on_step, known.get(STEPS, ()))
-
-
-def _chain(sink):
-    """The sink and those it wraps."""
-    while sink is not None:
-        yield sink
-        sink = getattr(sink, "sink", None)
 
 
 @contextmanager

@@ -137,3 +137,24 @@ def step_line(step: Step, target_mm: float) -> str:
         f"measuring: predicted {step.predicted_mm:.4f} mm at {step.poses} poses "
         f"(target {target_mm:.4f} mm)"
     )
+
+
+def adaptive_run(db, cid, cell: Cell, base, opts, clock, known: dict, sink, on_event=None):
+    """The adaptive campaign `cid`'s batches, each step told to the progress line (a sink with a
+    progress bar, acquire's _Progress: its total and words), the pose events' sink (its total)
+    and on_event; `known`: the campaign's stored settings (the steps so far)."""
+    target = float(opts.target_accuracy_mm)
+
+    def on_step(step: Step, total: int) -> None:
+        s = sink
+        while s is not None:  # the sinks acquire wrapped round one another
+            if hasattr(s, "progress") and hasattr(s, "task"):
+                s.progress.update(s.task, total=total, description=step_line(step, target))
+            if hasattr(s, "total"):
+                s.total = int(total)
+            s = getattr(s, "sink", None)
+        if on_event:
+            on_event({"type": "campaign.adaptive", "campaign_id": cid, **step.to_json()})
+
+    names = tuple(sorted(cell.targets))
+    return AdaptiveRun(db, cid, cell, base, opts, names, clock, on_step, known.get(STEPS, ()))
