@@ -107,3 +107,13 @@ def test_the_command_prints_each_step_and_why_it_stopped(tmp_path):
     bad = cli_process.run(*args[:3], "--target-accuracy-mm", "-1", cwd=tmp_path, timeout=60)
     assert bad.returncode == 2 and "--target-accuracy-mm" in bad.stderr
     assert "Traceback" not in bad.stderr
+
+
+def test_a_target_below_what_the_model_can_reach_stops_at_the_floor_and_says_so(tmp_path):
+    # a hidden effect no geometric fit captures: its floor is some 3x the tracker's noise
+    summary, _ = _run(tmp_path, target_accuracy_mm=0.02, effects=("joint_periodic:2=0.004",))
+    a = summary["adaptive"]
+    assert a["stopped"] == "floor" and summary["poses"] < 80, a["message"]
+    last = a["steps"][-1]
+    assert last["floor_mm"] > 0.02 and last["parameters_mm"] ** 2 < 0.1 * last["predicted_mm"] ** 2
+    assert "is above the target 0.0200 mm and reached" in a["message"]
