@@ -287,7 +287,7 @@ def prepare(
     if why:
         raise InputError(model_path, None, None, f"{why}: not a model of this cell")
     plan, joints = make_plan(model, opts)
-    meta = model.meta or {}
+    quoted = {"deployable", "holdout_rms_mm", "tolerance_mm"}
     record = {
         "model": {
             "path": model_name or str(model_path),
@@ -295,12 +295,12 @@ def prepare(
             # what the certificate quotes of the model: its held-out RMS (a diagnosis's final
             # model's, else the calibration's leave-one-pose-out one from its validation)
             "meta": {
-                "diagnosis": {"final": meta.get("diagnosis", {}).get("final", {})},
-                "validation": {
-                    k: v
-                    for k, v in (meta.get("validation") or {}).items()
-                    if k in ("deployable", "holdout_rms_mm", "tolerance_mm")
-                },
+                "diagnosis": {"final": model.diagnosis.final.to_json() if model.diagnosis else {}},
+                "validation": (
+                    model.validation.model_dump(include=quoted, exclude_unset=True)
+                    if model.validation
+                    else {}
+                ),
             },
         },
         "smr": list(model.targets)[0],

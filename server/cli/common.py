@@ -5,8 +5,12 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..formats.blocks import Unexplained
 
 
 def _note(text: str) -> None:
@@ -184,35 +188,36 @@ def _print_diagnosis(report) -> None:
         f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
         f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)"
     )
-    _print_unexplained(report.get("unexplained"))
-    doubt = (report.get("stability") or {}).get("doubt")
-    if doubt:
-        console.print(f"[yellow]{doubt}[/yellow]")
-    if "validation" in report:  # the final model, judged as a calibration is
-        from ..formats.verdict import Verdict
+    from ..formats.blocks import Validation
+    from ..formats.report_doc import ReportDoc
 
-        for line in tables.validation_lines(Verdict.of(report["validation"])):
+    doc = ReportDoc.model_validate(report)
+    _print_unexplained(doc.unexplained)
+    if doc.stability is not None and doc.stability.doubt:
+        console.print(f"[yellow]{doc.stability.doubt}[/yellow]")
+    if doc.validation is not None:  # the final model, judged as a calibration is
+        for line in tables.validation_lines(Validation.of(doc.validation)):
             console.print(line)
-    if "identified" in report:
-        ident = report["identified"]
+    if doc.identified is not None:
+        ident = doc.identified
         console.print("held fixed: " + tables.fixed_parameters(
-            {f["parameter"]: f["why"] for f in ident["fixed"]}))  # fmt: skip
+            {f.parameter: f.why for f in ident.fixed}))  # fmt: skip
         console.print(tables.joints_table(ident))
         console.print(tables.frames_table(ident))
         console.print(tables.correlations(ident))
 
 
-def _print_unexplained(block) -> None:
+def _print_unexplained(block: Unexplained | None) -> None:
     """What the final model leaves, and the covariates it follows most (strength 0..1)."""
     from ..tables import console
 
-    if not block:
+    if block is None:
         return
-    console.print(f"[bold]{block['reading']}[/bold]")
-    for c in block["covariates"]:
-        console.print(f"  {c['strength']:.2f}  {c['name']}: {c['reading']}")
-    if "per_pose_share" in block:
-        console.print(f"  per pose: {block['per_pose_reading']}")
+    console.print(f"[bold]{block.reading}[/bold]")
+    for c in block.covariates:
+        console.print(f"  {c.strength:.2f}  {c.name}: {c.reading}")
+    if block.per_pose_share is not None:
+        console.print(f"  per pose: {block.per_pose_reading}")
 
 
 def _data_arguments(p) -> None:

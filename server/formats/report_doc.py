@@ -6,6 +6,7 @@ from pydantic import ConfigDict, Field
 
 from robocal.solver.vocabulary import KINDS
 
+from .blocks import Identified, Score, Unexplained, Validation
 from .fields import Doc
 
 
@@ -13,12 +14,6 @@ class Open(Doc):
     """A report object: what a writer adds beyond the spec's keys is kept."""
 
     model_config = ConfigDict(extra="allow")
-
-
-class Fit(Open):
-    model: str = Field(description="geometric, then each effect: geometric+joint_compliance(2)")
-    holdout_rmse_mm: float
-    holdout_max_mm: float
 
 
 class Alternative(Open):
@@ -47,18 +42,6 @@ class Outlier(Open):
     pose: str | int
     target: str
     residual_mm: float
-
-
-class Covariate(Open):
-    name: str
-    strength: float
-    reading: str
-
-
-class Unexplained(Open):
-    holdout_rmse_mm: float
-    share_of_baseline_mse: float
-    covariates: list[Covariate]
 
 
 class RegionFold(Open):
@@ -130,9 +113,9 @@ class ReportDoc(Open):
         description="where the floor comes from: SMR-to-SMR distances or repeated readings in "
         "the data, else the cell's tracker specification (or the default one, said so)",
     )
-    baseline: Fit
+    baseline: Score
     effects: list[Effect] = Field(description="effects judged real, most important first")
-    final: Fit
+    final: Score
     outliers: list[Outlier] | None = Field(None, description="readings excluded as gross errors")
     unexplained: Unexplained | None = None
     extrapolation: Extrapolation | None = Field(
@@ -149,13 +132,13 @@ class ReportDoc(Open):
         "repeated on resamples leaving out every fifth pose, the effects each named, and the "
         "doubt when they name another cause",
     )
-    identified: dict | None = Field(
+    identified: Identified | None = Field(
         None,
         description="the final model's identified parameters, as model.json's `identified` "
         "(per parameter: change from nominal and standard error; held-fixed parameters and "
         "why; condition number; strongest correlations)",
     )
-    validation: dict | None = Field(
+    validation: Validation | None = Field(
         None,
         description="whether the data supports the final model, as model.json's `validation` "
         "(`deployable`, `reasons`, the cross-validated held-out RMS beside the fit RMS)",
