@@ -15,7 +15,7 @@ from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
 from robocal.solver.problem import Problem
 
-from .formats.blocks import Diagnosis, Fit, HeldOut, Score, Validation
+from .formats.blocks import Diagnosis, Fit, HeldOut, Validation
 from .formats.campaign_csv import read_campaign
 from .formats.cell_json import Cell, default_cell, read_cell
 from .formats.model_json import (
@@ -25,6 +25,7 @@ from .formats.model_json import (
     read_model,
     uncertainty_to_json,
 )
+from .formats.report_doc import ReportDoc
 from .validation import (
     absurd_errors,
     json_number,
@@ -457,28 +458,35 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
         parameters=d.parameters,
         meta={"method": "ls-sum+extensions"},
     )
-    # the solver's report, typed where the server reads it
+    # the solver's report as report.json has it, typed once: what the model keeps of it
+    report = ReportDoc.model_validate(d.report)
     model.diagnosis = Diagnosis(
-        final=Score.model_validate(d.report["final"]),
-        noise_floor_mm=d.report["noise_floor_mm"],
-        noise_floor_source=d.report["noise_floor_source"],
-        **({"outliers": d.report["outliers"]} if "outliers" in d.report else {}),
+        final=report.final,
+        noise_floor_mm=report.noise_floor_mm,
+        noise_floor_source=report.noise_floor_source,
+        **(
+            {"outliers": [o.to_json() for o in report.outliers]}
+            if report.outliers is not None
+            else {}
+        ),
     )
     if d.errors is not None:
         model.uncertainty = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
-        _judge_diagnosis(d, cell, meas, model)
+        _judge_diagnosis(d, report, cell, meas, model)
     return d, model
 
 
-def _judge_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> None:
+def _judge_diagnosis(
+    d, report: ReportDoc, cell: Cell, meas: Measurements, model: ModelFile
+) -> None:
     """The `identified` and `validation` blocks of a diagnosis's final model, as a calibration's:
     the held-fixed parameters and the condition number of the geometry as ls-sum finds them."""
     from robocal.solver.calibrate import calibrate
 
     from .identified import identified_block
 
-    problem = replace(cell_problem(cell, meas), noise_floor_mm=d.report["noise_floor_mm"])
+    problem = replace(cell_problem(cell, meas), noise_floor_mm=report.noise_floor_mm)
     geometric = calibrate(problem, "ls-sum")
     model.identified = identified_block(
         model,
@@ -488,11 +496,11 @@ def _judge_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> Non
         nominal_targets={t: cell.targets[t] for t in meas.target_names},
         nominal_base=cell.base,
     )
-    model.validation = validate_diagnosis(d, cell, meas, model, geometric.condition)
+    model.validation = validate_diagnosis(d, report, cell, meas, model, geometric.condition)
 
 
 def validate_diagnosis(
-    d, cell: Cell, meas: Measurements, model: ModelFile, condition: float
+    d, report: ReportDoc, cell: Cell, meas: Measurements, model: ModelFile, condition: float
 ) -> Validation:
     """model.json's `validation` block of a diagnosis's final model: its own cross-validated
     held-out figures against its fit, with the geometry's condition number; the report's noise
@@ -504,11 +512,12 @@ def validate_diagnosis(
     pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
-    floor, source = d.report["noise_floor_mm"], d.report["noise_floor_source"]
-    final = d.report["final"]
+    # the solver's report always says where its floor comes from; a report read from a file may not
+    floor, source = report.noise_floor_mm, report.noise_floor_source or "unstated"
+    final = report.final
     v = guard.judge(
         fit_rms_mm=float(np.sqrt(np.mean(r * r))),
-        holdout=guard.CrossValidated(final["holdout_rmse_mm"], final["holdout_max_mm"]),
+        holdout=guard.CrossValidated(final.holdout_rmse_mm, final.holdout_max_mm),
         condition_number=condition,
         equations=3 * int(meas.mask.sum()),
         free_parameters=int(np.count_nonzero(d.errors.parameters.column >= 0)),

@@ -144,54 +144,50 @@ def _print_screening(cal) -> None:
     _print_outliers(cal.get("outliers"), screening.skipped if screening else None)
 
 
-def _print_diagnosis(report) -> None:
+def _print_diagnosis(report: dict) -> None:
+    """The report as report.json has it (formats.report_doc), effect by effect."""
     from .. import tables
+    from ..formats.blocks import Validation
+    from ..formats.report_doc import ReportDoc
     from ..tables import console
 
-    _print_outliers(report.get("outliers"))
-    floor = report["noise_floor_mm"]
+    doc = ReportDoc.model_validate(report)
+    _print_outliers(None if doc.outliers is None else [o.to_json() for o in doc.outliers])
+    floor, base, final = doc.noise_floor_mm, doc.baseline, doc.final
     console.print(
-        f"baseline (geometric) held-out RMS {report['baseline']['holdout_rmse_mm']:.4f} mm, "
-        f"max {report['baseline']['holdout_max_mm']:.4f} mm; noise floor "
+        f"baseline (geometric) held-out RMS {base.holdout_rmse_mm:.4f} mm, "
+        f"max {base.holdout_max_mm:.4f} mm; noise floor "
         + (f"{floor:.4f} mm" if floor else "unknown")
-        + (
-            f" (from the {report['noise_floor_source']})"
-            if report.get("noise_floor_source")
-            else ""
-        )
+        + (f" (from the {doc.noise_floor_source})" if doc.noise_floor_source else "")
     )
-    if not report["effects"]:
+    if not doc.effects:
         console.print("no effect beyond geometry pays off on held-out poses")
-    for number, e in enumerate(report["effects"], start=1):  # as the figures are numbered
+    for number, e in enumerate(doc.effects, start=1):  # as the figures are numbered
         console.print(
-            f"[bold]effect {number}: {e['name']}[/bold]"
-            + (f" joint {e['joint']}" if "joint" in e else "")
-            + (f" harmonic {e['harmonic']}" if "harmonic" in e else "")
-            + (f" at {e['at_s']:.0f} s" if "at_s" in e else "")
-            + f": {e['evidence']}"
+            f"[bold]effect {number}: {e.name}[/bold]"
+            + (f" joint {e.joint}" if e.joint is not None else "")
+            + (f" harmonic {e.harmonic}" if e.harmonic is not None else "")
+            + (f" at {e.at_s:.0f} s" if e.at_s is not None else "")
+            + f": {e.evidence}"
         )
-        console.print("  " + tables.effect_parameters(e["parameters"], e.get("uncertainty")))
-        lo, hi = e["holdout_gain_interval_mm"]
+        console.print("  " + tables.effect_parameters(e.parameters, e.uncertainty))
+        lo, hi = e.holdout_gain_interval_mm or (float("nan"), float("nan"))
         console.print(
-            f"  held-out gain {e['holdout_rmse_before_mm'] - e['holdout_rmse_after_mm']:.4f} mm "
+            f"  held-out gain {e.holdout_rmse_before_mm - e.holdout_rmse_after_mm:.4f} mm "
             f"(95% interval over poses {lo:.4f} to {hi:.4f} mm)"
         )
-        if e["alternatives"]:
+        if e.alternatives:
             console.print(
                 "  [yellow]the data cannot tell it from:[/yellow] "
                 + ", ".join(
-                    f"{a['label']} (held-out RMS {a['holdout_rmse_mm']:.4f} mm)"
-                    for a in e["alternatives"]
+                    f"{a.label} (held-out RMS {a.holdout_rmse_mm:.4f} mm)" for a in e.alternatives
                 )
             )
+    total = f" ({doc.seconds.total:.1f} s)" if doc.seconds is not None else ""
     console.print(
-        f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
-        f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)"
+        f"final {final.model}: held-out RMS {final.holdout_rmse_mm:.4f} mm, "
+        f"max {final.holdout_max_mm:.4f} mm{total}"
     )
-    from ..formats.blocks import Validation
-    from ..formats.report_doc import ReportDoc
-
-    doc = ReportDoc.model_validate(report)
     _print_unexplained(doc.unexplained)
     if doc.stability is not None and doc.stability.doubt:
         console.print(f"[yellow]{doc.stability.doubt}[/yellow]")
