@@ -30,6 +30,7 @@ from robocal.solver.measurements import Measurements
 from . import store
 from .acquire import PREDICTOR, AcquireOptions, acquire
 from .compensation import MAX_ERROR_MM, solver_model
+from .formats.blocks import ModelQuote
 from .formats.cell_json import Cell, parse_cell, robot_to_json
 from .formats.errors import InputError
 from .formats.model_json import ModelFile, read_model
@@ -45,6 +46,8 @@ CUBE_SIDE_MM = 400.0
 REFERENCE_CANDIDATES = 60  # visible poses drawn to place the cube near the workspace's middle
 RUNS = ("nominal", "compensated")  # the campaign visits the plan with each joint set, in turn
 RECORD = "verification"  # the campaign settings' key of the plan the figures come from
+# what a verification record quotes of its model's verdict (formats.blocks.ModelQuote)
+QUOTED = {"deployable", "holdout_rms_mm", "tolerance_mm"}
 
 
 @dataclass
@@ -287,7 +290,6 @@ def prepare(
     if why:
         raise InputError(model_path, None, None, f"{why}: not a model of this cell")
     plan, joints = make_plan(model, opts)
-    quoted = {"deployable", "holdout_rms_mm", "tolerance_mm"}
     record = {
         "model": {
             "path": model_name or str(model_path),
@@ -297,7 +299,7 @@ def prepare(
             "meta": {
                 "diagnosis": {"final": model.diagnosis.final.to_json() if model.diagnosis else {}},
                 "validation": (
-                    model.validation.model_dump(include=quoted, exclude_unset=True)
+                    model.validation.model_dump(include=QUOTED, exclude_unset=True)
                     if model.validation
                     else {}
                 ),
@@ -404,7 +406,8 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
     late = overdue(cell, info.created_at)
     tolerance = cell.tolerance_mm
     if tolerance is None:
-        tolerance = (record["model"].get("meta") or {}).get("validation", {}).get("tolerance_mm")
+        quoted = ModelQuote.model_validate(record["model"].get("meta") or {}).validation
+        tolerance = quoted.tolerance_mm if quoted is not None else None
     return {
         "robot": cell.robot.name if hasattr(cell.robot, "name") else str(cell.robot),
         "model": record["model"],

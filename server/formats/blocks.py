@@ -242,3 +242,27 @@ class Unexplained(Block):
     per_pose_share: float | None = None
     per_pose_reading: str | None = None
     reading: str | None = Field(None, description="the finding in one sentence")
+
+
+class QuotedScore(Block):
+    holdout_rmse_mm: Figure | None = None
+
+
+class QuotedDiagnosis(Block):
+    final: QuotedScore | None = None
+
+
+class ModelQuote(Block):
+    """What a verification record quotes of its model's blocks: the diagnosis's final held-out
+    figure (a diagnosis's model) and the verdict's deployable, tolerance and held-out RMS."""
+
+    diagnosis: QuotedDiagnosis | None = None
+    validation: Validation | None = None
+
+    def holdout_rms_mm(self) -> float | None:
+        """The held-out RMS (mm) as the diagnosis stated it, else as the verdict did (a
+        calibration's leave-one-pose-out figure); None if neither did, or without a verdict."""
+        final = self.diagnosis.final if self.diagnosis else None
+        if final is not None and final.holdout_rmse_mm is not None:
+            return final.holdout_rmse_mm
+        return Validation.of(self.validation).holdout_rms_mm

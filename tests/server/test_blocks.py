@@ -17,14 +17,9 @@ BLOCKS = {"fit", "identified", "validation", "diagnosis", "unexplained", "accura
 META_BLOCKS = BLOCKS | {"uncertainty"}
 # formats/ defines the documents and reads and writes their files
 EXEMPT = ("server/formats/",)
-# Reads that remain, each of a stored JSON record that is not yet a document (file, key): a
-# verification record's quote of its model, a job's stored results.
-REMAINING = {
-    ("server/certificate.py", "diagnosis"),
-    ("server/certificate.py", "validation"),
-    ("server/verification.py", "validation"),
-    ("server/api/jobs.py", "validation"),
-}
+# Reads that remain (file, key), of a stored JSON record that is not yet a document: a job's
+# stored results.
+REMAINING = {("server/api/jobs.py", "validation")}
 
 
 def _key(node: ast.AST) -> str | None:
