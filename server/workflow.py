@@ -25,7 +25,6 @@ from .formats.model_json import (
     read_model,
     uncertainty_to_json,
 )
-from .formats.report_doc import ReportDoc
 from .validation import (
     absurd_errors,
     json_number,
@@ -40,6 +39,8 @@ if TYPE_CHECKING:
     from robocal.solver.calibrate import Calibration
     from robocal.solver.metrics import Accuracy, Evaluation
     from robocal.solver.screen import Screening
+
+    from .formats.report_doc import ReportDoc
 
 PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
 
@@ -445,6 +446,8 @@ def _pose_column(a):
 def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
     from robocal.solver.diagnose import diagnose as run_diagnosis
+
+    from .formats.report_doc import ReportDoc  # not loaded for the commands that never diagnose
 
     d = run_diagnosis(cell_problem(cell, meas), log=log, screen_outliers=screen)
     lay, x = d.layout, d.x
