@@ -79,6 +79,7 @@ class ModelFile:
 
     @property
     def method(self) -> str | None:
+        """How it was fitted (minimax, ls-sum+extensions...); None if the file does not say."""
         return self.meta.get("method")
 
     @property

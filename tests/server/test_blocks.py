@@ -17,9 +17,6 @@ BLOCKS = {"fit", "identified", "validation", "diagnosis", "unexplained", "accura
 META_BLOCKS = BLOCKS | {"uncertainty"}
 # formats/ defines the documents and reads and writes their files
 EXEMPT = ("server/formats/",)
-# Reads that remain (file, key), of a stored JSON record that is not yet a document: a job's
-# stored results.
-REMAINING = {("server/api/jobs.py", "validation")}
 
 
 def _key(node: ast.AST) -> str | None:
@@ -85,17 +82,8 @@ def test_no_result_block_is_read_by_string_key_outside_the_formats():
         if rel.startswith(EXEMPT):
             continue
         for line, key in string_key_reads(path.read_text()):
-            if (rel, key) not in REMAINING:
-                found.append(f"{rel}:{line} reads {key!r} by string key")
+            found.append(f"{rel}:{line} reads {key!r} by string key")
     assert not found, "read the typed block (formats.blocks) instead:\n" + "\n".join(found)
-
-
-def test_the_remaining_reads_are_still_there():
-    # an entry fixed is taken off the list, so the list says what is left
-    left = set()
-    for rel, _ in REMAINING:
-        left |= {(rel, key) for _, key in string_key_reads((ROOT / rel).read_text())}
-    assert REMAINING <= left, REMAINING - left
 
 
 @pytest.fixture(scope="module")
