@@ -22,7 +22,7 @@ from pathlib import Path
 
 PRELOAD = (
     "robocal.server.cli",
-    "robocal.server.workflow",
+    "robocal.server.calibration.workflow",
     "robocal.server.store",
     "robocal.solver.calibrate",
     "robocal.solver.diagnose",

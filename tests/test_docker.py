@@ -61,8 +61,8 @@ def test_dockerfile_copies_what_the_installed_service_reads():
     """The wheel's packages and the directories the code finds beside them (page, migrations)."""
     import tomllib
 
+    from robocal.server.service.web import WEB_DIR
     from robocal.server.store.db import MIGRATIONS
-    from robocal.server.web import WEB_DIR
 
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
     needed = set(pyproject["tool"]["hatch"]["build"]["targets"]["wheel"]["packages"])

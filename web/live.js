@@ -119,7 +119,7 @@ function dispatch(type, text) {
 }
 
 // campaign.pose (each pose done, with the counts), campaign.state (each state the engine enters)
-// and campaign.run (a run wound up, its summary stored): server/acquire.py, acquisitions.py.
+// and campaign.run (a run wound up, its summary stored): server/acquisition/acquire.py, acquisitions.py.
 function onCampaignEvent(type, e) {
   if (type === "campaign.pose") heardPoses(e.campaign_id, e.poses_done, e.poses_total);
   if (e.campaign_id === state.campaign) {
@@ -137,7 +137,7 @@ function onCampaignEvent(type, e) {
   later("campaigns", () => refreshCampaigns().catch(() => {}), type === "campaign.pose" ? 2000 : 300);
 }
 
-// job: a job's state, progress and reason (server/worker.py job_event).
+// job: a job's state, progress and reason (server/service/worker.py job_event).
 function onJobEvent(e) {
   const j = { ...e, id: e.job_id };
   live.lastJob.set(j.id, j);

@@ -15,7 +15,7 @@ function plusMinus(value, row) {
   const se = row.standard_error;
   if (se === null || se === undefined || !Number.isFinite(se)) return fmt(value);
   // both to the standard error's second significant digit, as the command line prints them
-  // (server/tables.py plus_minus): 0.01234 ± 0.00089, never 1.234e-2 ± 8.887e-4
+  // (server/cli/tables.py plus_minus): 0.01234 ± 0.00089, never 1.234e-2 ± 8.887e-4
   const places = se > 0 ? Math.min(8, Math.max(0, 1 - Math.floor(Math.log10(se)))) : 4;
   return `${value.toFixed(places)} ± ${se.toFixed(places)}`;
 }

@@ -1,4 +1,4 @@
-"""The HTTP API: one router per resource, mounted under /api by server.app.create_app."""
+"""The HTTP API: one router per resource, mounted under /api by server.service.app.create_app."""
 
 from . import campaigns, cells, charts, checks, events, fleet, health, jobs, measurements, models
 

@@ -9,12 +9,13 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import HTMLResponse, JSONResponse
 
-from robocal.server import store, verification
-from robocal.server.acquire import AcquireOptions
-from robocal.server.acquisitions import Run
-from robocal.server.campaign_planning import check_plan_size, plans_long
+from robocal.server import store
+from robocal.server.acquisition import campaigns, cells
+from robocal.server.acquisition.acquire import AcquireOptions
+from robocal.server.acquisition.planning import check_plan_size, plans_long
+from robocal.server.service.acquisitions import Run
+from robocal.server.verify import run as verification
 
-from .. import campaigns, cells
 from .bodies import json_body, read_json
 from .deps import (
     AcquisitionsDep,

@@ -5,9 +5,9 @@ from __future__ import annotations
 from fastapi import APIRouter, Request
 from starlette.concurrency import run_in_threadpool
 
+from robocal.server.acquisition import cells
 from robocal.server.formats.cell_json import Cell, cell_to_json
 
-from .. import cells
 from .deps import Authorized, SettingsDep
 from .schemas import CellPublic
 

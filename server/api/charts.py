@@ -2,7 +2,7 @@
 
 Drawn in a short-lived worker process under a wall-clock limit (Jobs.call): a campaign the
 numerics choke on costs a 504 and a killed process, never a hung request. Drawn once a job and
-kept (server/chart_cache.py): `X-Robocal-Cache` says whether an answer was kept or drawn."""
+kept (server/figures/cache.py): `X-Robocal-Cache` says whether an answer was kept or drawn."""
 
 from __future__ import annotations
 
@@ -10,7 +10,9 @@ import json
 
 from fastapi import APIRouter, Response
 
-from robocal.server import chart_cache, charts, store
+from robocal.server import store
+from robocal.server.figures import cache as chart_cache
+from robocal.server.figures import charts
 from robocal.server.formats.cell_json import parse_cell
 from robocal.solver.finite import require_inputs
 

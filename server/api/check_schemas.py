@@ -7,7 +7,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from robocal.server.check_plan import DEFAULT_POSES, MAX_POSES, MIN_POSES
+from robocal.server.checks.plan import DEFAULT_POSES, MAX_POSES, MIN_POSES
 from robocal.server.formats.fields import Whole
 
 from .schemas import Real

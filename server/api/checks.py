@@ -10,8 +10,13 @@ from fastapi import APIRouter, Depends, Request, Response
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
-from robocal.server import cells, check, check_charts, check_service, store, uploads
+from robocal.server import store
+from robocal.server.acquisition import cells
+from robocal.server.checks import charts as check_charts
+from robocal.server.checks import check
+from robocal.server.checks import service as check_service
 from robocal.server.formats.model_json import file_digest
+from robocal.server.service import uploads
 from robocal.server.store.model_checks import CheckRecord, model_checks
 from robocal.solver import drift
 

@@ -7,11 +7,11 @@ from typing import Annotated, Literal
 from fastapi import Depends, Path, Query, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from robocal.server.acquisitions import Acquisitions
-from robocal.server.events import Events
-from robocal.server.job_queue import Jobs
-from robocal.server.security import require_token
-from robocal.server.settings import Settings
+from robocal.server.service.acquisitions import Acquisitions
+from robocal.server.service.events import Events
+from robocal.server.service.job_queue import Jobs
+from robocal.server.service.security import require_token
+from robocal.server.service.settings import Settings
 from robocal.server.store import Database
 from robocal.server.store.models import STATUSES
 

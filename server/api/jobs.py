@@ -11,7 +11,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from pydantic import BaseModel, ConfigDict
 
 from robocal.server.formats.blocks import HeldOut, Validation
-from robocal.server.job_queue import DuplicateJob, Job
+from robocal.server.service.job_queue import DuplicateJob, Job
 
 from . import problems
 from .bodies import json_body, read_json

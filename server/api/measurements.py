@@ -8,9 +8,10 @@ from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import StreamingResponse
 from starlette.concurrency import iterate_in_threadpool, run_in_threadpool
 
-from robocal.server import store, uploads
+from robocal.server import store
+from robocal.server.acquisition import campaigns, cells
+from robocal.server.service import uploads
 
-from .. import campaigns, cells
 from .bodies import csv_body
 from .campaigns import public_campaign
 from .deps import AcquisitionsDep, Authorized, CampaignId, DbDep, JobsDep, SettingsDep

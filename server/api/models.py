@@ -11,15 +11,24 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.responses import FileResponse
 from starlette.concurrency import run_in_threadpool
 
-from robocal.server import charts, model_files, store, verification
-from robocal.server.compensation import MAX_ERROR_MM, MAX_JUMP_DEG, MAX_MOVE_DEG, Limits, parse_tcp
+from robocal.server import store
+from robocal.server.acquisition import campaigns
+from robocal.server.calibration.identified import parameters_of
+from robocal.server.calibration.validation import absurd_errors, cell_mismatch, file_refusal
+from robocal.server.compensate import model_files
+from robocal.server.compensate.compensation import (
+    MAX_ERROR_MM,
+    MAX_JUMP_DEG,
+    MAX_MOVE_DEG,
+    Limits,
+    parse_tcp,
+)
+from robocal.server.figures import charts
 from robocal.server.formats.cell_json import parse_cell
 from robocal.server.formats.model_json import read_model
-from robocal.server.identified import parameters_of
-from robocal.server.validation import absurd_errors, cell_mismatch, file_refusal
+from robocal.server.verify import run as verification
 from robocal.solver.finite import require_inputs
 
-from .. import campaigns
 from .bodies import json_body, read_json
 from .campaigns import public_campaign
 from .deps import AcquisitionsDep, Authorized, CampaignQuery, DbDep, JobId, JobsDep

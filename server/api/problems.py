@@ -13,8 +13,8 @@ from pydantic import BaseModel, ConfigDict
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from robocal.drivers.lifecycle import StateError
-from robocal.server.acquisitions import ControllerUnreachable
 from robocal.server.formats.errors import InputError
+from robocal.server.service.acquisitions import ControllerUnreachable
 from robocal.server.store import Conflict, DatabaseGone, NotFound, StoreError, StoreUnavailable
 from robocal.server.store.errors import RETRY_AFTER_S, unavailable
 
@@ -40,7 +40,7 @@ def problem_response(description: str) -> dict:
     }
 
 
-# What every route may answer besides its success (server.app adds them to each route's
+# What every route may answer besides its success (server.service.app adds them to each route's
 # OpenAPI): statuses by which routes can give them.
 # FastAPI's `responses=`: the OpenAPI answers a route documents beside its own, by status code
 Responses = dict[int | str, dict[str, Any]]
@@ -60,7 +60,7 @@ READ_ERRORS: Responses = {
 }
 WRITE_ERRORS: Responses = {
     400: problem_response("the body is not valid JSON"),
-    # server.app replaces it with the route's own limit (api.bodies)
+    # server.service.app replaces it with the route's own limit (api.bodies)
     413: problem_response("the request body is larger than the route takes"),
 }
 DEVICE_ERRORS: Responses = {

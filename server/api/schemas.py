@@ -10,12 +10,12 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from robocal.drivers.lifecycle import ACTIONS, STATES
-from robocal.server.campaign_planning import MAX_CANDIDATES, MAX_CHOICE_WORK
+from robocal.server.acquisition.planning import MAX_CANDIDATES, MAX_CHOICE_WORK
 from robocal.server.formats.cell_doc import CellDoc, Tolerance
 from robocal.server.formats.fields import Integer, Whole
 from robocal.server.formats.limits import COORD_MAX_MM, PRINTABLE
 from robocal.server.store.checks import ARM_MAX
-from robocal.server.verification import CUBE_SIDE_MM, DIRECTIONS
+from robocal.server.verify.run import CUBE_SIDE_MM, DIRECTIONS
 
 from .model_schemas import HeldOut, Validation
 

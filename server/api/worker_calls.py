@@ -8,8 +8,8 @@ from typing import Any
 
 from fastapi import HTTPException
 
-from robocal.server.job_queue import Busy, CallTimedOut, Jobs
-from robocal.server.processes import WorkerDied
+from robocal.server.service.job_queue import Busy, CallTimedOut, Jobs
+from robocal.server.service.processes import WorkerDied
 
 from .problems import Responses
 

@@ -61,9 +61,9 @@ def run_acquire_bench(seed: int = 0, holdout: int = 50, configs=None) -> dict:
     """Each configuration on the same virtual cell; accuracy from minimax on held-out poses."""
     from robocal.drivers.cell import TrackerSpec, VirtualCell
     from robocal.drivers.tracker.sim import SAMPLE_RATE_HZ
+    from robocal.server.acquisition.acquire import AcquireOptions, acquire
+    from robocal.server.calibration import workflow
 
-    from .. import workflow
-    from ..acquire import AcquireOptions, acquire
     from ..formats.cell_json import default_cell
 
     configs = CONFIGS if configs is None else configs

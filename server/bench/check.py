@@ -85,7 +85,8 @@ def _heavier(effect, kg: float):
 
 def _calibrated(vc: VirtualCell, seed: int, d: Path):
     """model.json of a minimax calibration on TRAIN_POSES poses; the campaign's simulated s."""
-    from .. import workflow
+    from robocal.server.calibration import workflow
+
     from ..formats.cell_json import Cell
     from ..formats.model_json import write_model
 
@@ -98,7 +99,8 @@ def _calibrated(vc: VirtualCell, seed: int, d: Path):
 
 def _check(vc: VirtualCell, poses, seed: int, d: Path, db) -> tuple:
     """One check of the fixed poses: (result, simulated s, wall s of the judgement)."""
-    from ..check import run_check
+    from robocal.server.checks.check import run_check
+
     from ..formats.campaign_csv import write_campaign
 
     meas = vc.campaign(len(poses), seed, poses=poses, arm_scatter_deg=SCATTER_DEG)
@@ -127,7 +129,8 @@ def run_arm(arm: str, seed: int, clean: int, changes: int, poses: str = "planned
         out["calibration_campaign_s"] = _calibrated(vc, seed, d)
         q = vc.sample_poses(CHECK_POSES, rng)  # drawn either way: the same changes follow
         if poses == "planned":
-            from ..check_plan import plan_check
+            from robocal.server.checks.plan import plan_check
+
             from ..formats.model_json import read_model
 
             q = plan_check(read_model(d / "model.json"), CHECK_POSES).q
@@ -182,10 +185,11 @@ def on_the_cell(seed: int = 0) -> dict:
     `acquire` (its default campaign and the paper's 10 s pause) then `calibrate`, against
     `acquire --check` of the model (its planned check poses, the same pause, judged and stored);
     the simulated campaign times and the wall time of everything else."""
-    from .. import workflow
-    from ..acquire import AcquireOptions, acquire
-    from ..check_plan import DEFAULT_POSES
-    from ..check_run import CheckRunOptions, acquire_check
+    from robocal.server.acquisition.acquire import AcquireOptions, acquire
+    from robocal.server.calibration import workflow
+    from robocal.server.checks.plan import DEFAULT_POSES
+    from robocal.server.checks.run import CheckRunOptions, acquire_check
+
     from ..formats.cell_json import default_cell
     from ..formats.model_json import write_model
 

@@ -28,9 +28,9 @@ def _setup():
     """A diagnosed model of a simulated cell with compliance, and that cell."""
     from robocal.drivers.cell import VirtualCell
     from robocal.drivers.effects import make_effects
+    from robocal.server.calibration import workflow
+    from robocal.server.compensate.compensation import solver_model
 
-    from .. import workflow
-    from ..compensation import solver_model
     from ..formats.cell_json import default_cell
 
     cell = default_cell()

@@ -33,10 +33,10 @@ def run_recording_bench(sizes=SIZES, seed: int = 1) -> dict:
     """Per campaign size: minimax's time, the nominal registration's, the recording's and its size."""
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     from robocal.drivers.cell import VirtualCell
+    from robocal.server.calibration.workflow import run_method
+    from robocal.server.recordings.calibration import record_calibration
 
     from ..formats.cell_json import default_cell
-    from ..recording import record_calibration
-    from ..workflow import run_method
 
     cell = default_cell()
     targets = {k: list(v) for k, v in cell.targets.items()}

@@ -196,7 +196,7 @@ def _summary(values: list[float]) -> dict:
 
 _FIT_ONLY = """
 import sys
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 cell, meas = workflow.load_data(sys.argv[1])
 workflow.run_method(cell, meas, "ls-sum", screening=False)
 """
@@ -206,7 +206,7 @@ def _in_process(path: Path) -> dict:
     """Peak memory (tracemalloc, MiB) of the fit alone and of the whole command's work in this
     process (read, fit, model file with standard errors and validation), with the fit's and the
     post-fit's share of the time."""
-    from .. import workflow
+    from robocal.server.calibration import workflow
 
     cell = workflow.load_cell(None)
     meas = workflow.load_campaign(path, cell)

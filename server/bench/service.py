@@ -24,7 +24,7 @@ def _serve(settings):
     """A real uvicorn on 127.0.0.1 in a thread; returns (server, thread, app)."""
     import uvicorn
 
-    from ..app import create_app
+    from robocal.server.service.app import create_app
 
     app = create_app(settings)
     server = uvicorn.Server(
@@ -131,8 +131,8 @@ def latency_under_load(poses: int = 100, requests: int = 400) -> dict:
     only a diagnosis job runs (`during_job`, with the job pool's kind)."""
     import httpx
 
-    from ..security import ensure_token
-    from ..settings import Settings
+    from robocal.server.service.security import ensure_token
+    from robocal.server.service.settings import Settings
 
     with tempfile.TemporaryDirectory() as tmp:
         settings = Settings(
@@ -277,8 +277,8 @@ def deleted_database(repeats: int = 3) -> dict:
     simulated cell (virtual clock) each time."""
     import httpx
 
-    from ..security import ensure_token
-    from ..settings import Settings
+    from robocal.server.service.security import ensure_token
+    from robocal.server.service.settings import Settings
 
     runs = []
     for i in range(repeats):

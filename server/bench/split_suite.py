@@ -295,11 +295,10 @@ def real_splits(folder, min_poses: int = 15) -> list[dict]:
     """A real campaign (folder with train.csv and cell.json) fitted in one configuration and
     tested in the other, both ways, for every configuration with min_poses poses on each side;
     a campaign in one configuration only is split at joint 2's median instead."""
+    from robocal.server.calibration.workflow import cell_problem, diagnose, load_data, model_predict
     from robocal.solver.calibrate import calibrate
     from robocal.solver.extrapolation import configuration_folds, region_folds
     from robocal.solver.kinematics import Layout, predict
-
-    from ..workflow import cell_problem, diagnose, load_data, model_predict
 
     folder = Path(folder)
     cell, meas = load_data(folder / "train.csv", folder / "cell.json")

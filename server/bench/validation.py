@@ -30,8 +30,7 @@ def simulated(seed: int, poses: int, effects: list[str], method: str) -> dict:
     """The verdict on one simulated campaign of the default cell."""
     from robocal.drivers.cell import TrackerSpec, VirtualCell
     from robocal.drivers.effects import make_effects
-
-    from .. import workflow
+    from robocal.server.calibration import workflow
 
     cell = workflow.load_cell(None)
     vc = VirtualCell.random(
@@ -44,16 +43,15 @@ def simulated(seed: int, poses: int, effects: list[str], method: str) -> dict:
 
 def real(folder: Path, method: str) -> dict:
     """The verdict on a real campaign: its train.csv with its cell.json."""
-    from .. import workflow
+    from robocal.server.calibration import workflow
 
     cell, meas = workflow.load_data(folder / "train.csv", folder / "cell.json")
     return _verdict(cell, meas, method) | {"campaign": folder.name, "poses": meas.n_poses}
 
 
 def _verdict(cell, meas, method) -> dict:
+    from robocal.server.calibration import workflow
     from robocal.solver.identifiability import NotIdentifiable
-
-    from .. import workflow
 
     t0 = time.perf_counter()
     try:

@@ -13,12 +13,14 @@ EFFECT = "joint_compliance:2=1.0"
 
 def run_verify_bench(seed: int = SEED, cycles: int = 3, directions: int = 3) -> dict:
     """Calibrate a simulated cell (100 poses, diagnosed), then verify its model on the cube."""
-    from .. import store, workflow
-    from ..acquire import AcquireOptions, acquire
-    from ..certificate import holdout_rms
+    from robocal.server import store
+    from robocal.server.acquisition.acquire import AcquireOptions, acquire
+    from robocal.server.calibration import workflow
+    from robocal.server.verify.certificate import holdout_rms
+    from robocal.server.verify.run import VerifyOptions, verify
+
     from ..formats.cell_json import default_cell
     from ..formats.model_json import write_model
-    from ..verification import VerifyOptions, verify
 
     cell = default_cell()
     with tempfile.TemporaryDirectory() as d:

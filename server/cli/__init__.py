@@ -89,12 +89,12 @@ def main(argv=None) -> int:
         return 130
     except Exception as e:  # noqa: BLE001 - the expected kinds get one line; others propagate
         # imported here, not at the top: `robocal --help` must not wait for scipy and the store
+        from robocal.server.acquisition.acquire import AcquisitionFailed, Interrupted
+        from robocal.server.calibration.workflow import DataError
         from robocal.solver.identifiability import NotIdentifiable
 
-        from ..acquire import AcquisitionFailed, Interrupted
         from ..formats.errors import InputError
         from ..store import StoreError
-        from ..workflow import DataError
 
         if isinstance(e, Interrupted):  # Ctrl-C of a run: the arm was e-stopped first
             print(f"robocal: {e}", file=sys.stderr)

@@ -23,8 +23,8 @@ def _arm(text: str) -> str:
 
 def _verify(args, cell) -> None:
     """`acquire --verify model.json`: the ISO 9283 run before and after compensation."""
-    from .. import verification
-    from ..tables import console, verification_table
+    from robocal.server.cli.tables import console, verification_table
+    from robocal.server.verify import run as verification
 
     opts = verification.VerifyOptions(
         cycles=args.cycles,
@@ -44,7 +44,7 @@ def _verify(args, cell) -> None:
     console.print(verification_table(report))
     written = [out]
     if args.certificate:
-        from ..certificate import write_certificate
+        from robocal.server.verify.certificate import write_certificate
 
         write_certificate(report, args.certificate)
         written.append(args.certificate)
@@ -53,10 +53,11 @@ def _verify(args, cell) -> None:
 
 def _check(args, cell) -> int:
     """`acquire --check model.json`: the model's check poses measured, judged, stored."""
-    from ..check import EXIT_RECALIBRATE
-    from ..check_run import CheckRunOptions, acquire_check
+    from robocal.server.checks.check import EXIT_RECALIBRATE
+    from robocal.server.checks.run import CheckRunOptions, acquire_check
+    from robocal.server.cli.tables import console
+
     from ..formats.model_json import write_json_atomic
-    from ..tables import console
 
     if args.check_poses and args.poses is not None:
         raise ValueError("--poses plans that many check poses; --check-poses gives them: not both")
@@ -113,9 +114,9 @@ def _progress(console):
 
 
 def cmd_acquire(args) -> int | None:
-    from .. import workflow
-    from ..acquire import AcquireOptions, acquire
-    from ..tables import console
+    from robocal.server.acquisition.acquire import AcquireOptions, acquire
+    from robocal.server.calibration import workflow
+    from robocal.server.cli.tables import console
 
     cell = workflow.load_cell(args.cell)
     if args.verify and args.check:

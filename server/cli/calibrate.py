@@ -18,8 +18,8 @@ from .common import (
 
 def _held_out_data(args, cell):
     """The --held-out readings (None without it); DataError if they are not of the cell."""
-    from .. import workflow
-    from ..validation import data_mismatch
+    from robocal.server.calibration import workflow
+    from robocal.server.calibration.validation import data_mismatch
 
     if args.held_out is None:
         if args.held_out_campaign is not None:
@@ -50,11 +50,12 @@ def _warn_undeployable(verdict, path) -> None:
 
 
 def cmd_calibrate(args) -> None:
+    from robocal.server.calibration import workflow
+    from robocal.server.cli import tables
+    from robocal.server.cli.tables import console
     from robocal.solver.calibrate import parse_method
 
-    from .. import tables, workflow
     from ..formats.model_json import write_model
-    from ..tables import console
 
     _campaign_only_with_database(args)
     if args.recording:  # refused now, not after the calibration
@@ -68,7 +69,7 @@ def cmd_calibrate(args) -> None:
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
     model = workflow.model_file(cal, cell, meas, data_path=args.meas)
     if hold is not None:  # the separate validation figure beside the leave-one-out one
-        from ..workflow import held_out_errors
+        from robocal.server.calibration.workflow import held_out_errors
 
         held_out = held_out_errors(
             model, hold, file=Path(args.held_out).name, campaign_id=args.held_out_campaign or None
@@ -77,7 +78,7 @@ def cmd_calibrate(args) -> None:
             model.validation.held_out = held_out
     write_model(args.out, model)
     if args.recording:
-        from ..recording import record_calibration
+        from robocal.server.recordings.calibration import record_calibration
 
         record_calibration(
             args.recording,

@@ -13,10 +13,11 @@ def cmd_check(args) -> int:
         return _plan(args)
     if args.check is None:
         raise ValueError("check: give the check.csv to judge, or --plan N to plan its poses")
+    from robocal.server.checks.check import EXIT_RECALIBRATE, run_check
+    from robocal.server.cli.tables import console
+
     from .. import store
-    from ..check import EXIT_RECALIBRATE, run_check
     from ..formats.model_json import write_json_atomic
-    from ..tables import console
 
     with store.open_database(args.db) as db:
         res = run_check(args.model, args.check, db)
@@ -28,9 +29,10 @@ def cmd_check(args) -> int:
 
 def _plan(args) -> int:
     """`check --plan N model.json --out check_poses.csv`: the model's check poses."""
-    from ..check_plan import plan_check, write_plan
+    from robocal.server.checks.plan import plan_check, write_plan
+    from robocal.server.cli.tables import console
+
     from ..formats.model_json import read_model
-    from ..tables import console
 
     if args.check is not None:
         raise ValueError(

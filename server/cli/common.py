@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from ..formats.blocks import Unexplained
+    from robocal.server.formats.blocks import Unexplained
 
 
 def _note(text: str) -> None:
@@ -20,7 +20,7 @@ def _note(text: str) -> None:
 
 def _campaign_only_with_database(args) -> None:
     """--campaign picks a campaign of a database; with a meas.csv it would be silently ignored."""
-    from .. import workflow
+    from robocal.server.calibration import workflow
 
     if args.campaign is not None and not workflow.is_database(args.meas):
         raise workflow.DataError(
@@ -84,11 +84,11 @@ _positive_int = _whole(1, None, "a positive integer")
 
 def _require_deployable(args) -> None:
     """Refuse a model its validation marks not deployable, unless --force (then warn)."""
-    from ..validation import file_refusal
+    from robocal.server.calibration.validation import file_refusal
 
     why = file_refusal(args.model)
     if why and not args.force:
-        from ..workflow import DataError
+        from robocal.server.calibration.workflow import DataError
 
         raise DataError(f"{args.model}: {why}; --force to use it anyway")
     if why:
@@ -97,8 +97,8 @@ def _require_deployable(args) -> None:
 
 def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=True):
     """Run the diagnosis; write the report, its figures beside it and the extended model."""
-    from .. import workflow
-    from ..tables import console
+    from robocal.server.calibration import workflow
+    from robocal.server.cli.tables import console
 
     with console.status("diagnosing: cross-validating candidate effects...") as status:
         d, model = workflow.diagnose(
@@ -116,7 +116,7 @@ def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=Tr
 
 def _print_outliers(outliers, skipped=None) -> None:
     """The readings screened out as gross errors, one line each (None: screening was off)."""
-    from ..tables import console
+    from robocal.server.cli.tables import console
 
     if outliers is None or skipped:
         console.print(
@@ -146,10 +146,10 @@ def _print_screening(cal) -> None:
 
 def _print_diagnosis(report: dict) -> None:
     """The report as report.json has it (formats.report_doc), effect by effect."""
-    from .. import tables
-    from ..formats.blocks import Validation
-    from ..formats.report_doc import ReportDoc
-    from ..tables import console
+    from robocal.server.cli import tables
+    from robocal.server.cli.tables import console
+    from robocal.server.formats.blocks import Validation
+    from robocal.server.formats.report_doc import ReportDoc
 
     doc = ReportDoc.model_validate(report)
     _print_outliers(None if doc.outliers is None else [o.to_json() for o in doc.outliers])
@@ -205,7 +205,7 @@ def _print_diagnosis(report: dict) -> None:
 
 def _print_unexplained(block: Unexplained | None) -> None:
     """What the final model leaves, and the covariates it follows most (strength 0..1)."""
-    from ..tables import console
+    from robocal.server.cli.tables import console
 
     if block is None:
         return

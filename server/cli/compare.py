@@ -12,9 +12,11 @@ from .common import (
 
 
 def cmd_compare(args) -> None:
-    from .. import tables, workflow
+    from robocal.server.calibration import workflow
+    from robocal.server.cli import tables
+    from robocal.server.cli.tables import console
+
     from ..formats.model_json import write_json_atomic
-    from ..tables import console
 
     _campaign_only_with_database(args)
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)

@@ -9,7 +9,7 @@ from .common import _nonnegative, _require_deployable
 
 
 def _tcp(text: str) -> list[float]:
-    from ..compensation import parse_tcp
+    from robocal.server.compensate.compensation import parse_tcp
 
     try:
         return parse_tcp(text)
@@ -18,7 +18,7 @@ def _tcp(text: str) -> list[float]:
 
 
 def cmd_compensate(args) -> None:
-    from ..compensation import Limits, run
+    from robocal.server.compensate.compensation import Limits, run
 
     _require_deployable(args)
     limits = Limits(args.max_error_mm, args.max_move_deg, args.max_jump_deg)

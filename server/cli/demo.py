@@ -12,10 +12,12 @@ from .common import _diagnose_to_files, _nonnegative_int, _positive_int, _print_
 def cmd_demo(args) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-    from .. import tables, workflow
-    from ..acquire import AcquireOptions, acquire
+    from robocal.server.acquisition.acquire import AcquireOptions, acquire
+    from robocal.server.calibration import workflow
+    from robocal.server.cli import tables
+    from robocal.server.cli.tables import console
+
     from ..formats.model_json import write_model
-    from ..tables import console
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -56,7 +58,7 @@ def cmd_demo(args) -> None:
         cell, cal_meas, db, out / "report.json", out / "model-extended.json"
     )
     _print_diagnosis(report)
-    from ..recording import record_calibration
+    from robocal.server.recordings.calibration import record_calibration
 
     extended = workflow.read_model(out / "model-extended.json")
     record_calibration(  # "after" the final, extended model; the minimax one beside it

@@ -15,8 +15,8 @@ from .common import (
 
 
 def cmd_diagnose(args) -> None:
-    from .. import workflow
-    from ..tables import console
+    from robocal.server.calibration import workflow
+    from robocal.server.cli.tables import console
 
     _campaign_only_with_database(args)
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)

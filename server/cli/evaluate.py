@@ -10,9 +10,11 @@ from .common import _campaign_only_with_database, _note, _positive_int
 
 
 def cmd_evaluate(args) -> None:
-    from .. import tables, workflow
+    from robocal.server.calibration import workflow
+    from robocal.server.cli import tables
+    from robocal.server.cli.tables import console
+
     from ..formats.model_json import write_json_atomic
-    from ..tables import console
 
     model = workflow.read_model(args.model)
     _campaign_only_with_database(args)
@@ -27,7 +29,7 @@ def cmd_evaluate(args) -> None:
         res = workflow.evaluate(model, meas)
     except workflow.DataError as e:
         raise workflow.DataError(f"{args.meas}: {e}") from None
-    from ..validation import absurd_errors
+    from robocal.server.calibration.validation import absurd_errors
 
     why = absurd_errors(res, model.verdict)
     if why and not args.force:

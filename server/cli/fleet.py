@@ -4,10 +4,12 @@ from __future__ import annotations
 
 
 def cmd_fleet(args) -> int:
-    from .. import store, tables
+    from robocal.server import store
+    from robocal.server.cli import tables
+    from robocal.server.cli.tables import console
+
     from ..fleet import fleet_models, fleet_view
     from ..formats.model_json import write_json_atomic
-    from ..tables import console
 
     with store.open_database(args.db) as db:
         if args.robot_model is None:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 
 def cmd_predict(args) -> None:
-    from .. import workflow
+    from robocal.server.calibration import workflow
+
     from ..formats.campaign_csv import read_poses, write_predictions
 
     model = workflow.read_model(args.model)

@@ -12,8 +12,8 @@ _port = _whole(0, 65535, "a TCP port (0 to 65535)")
 def _settings(args, make_folder: bool = True):
     """The service's settings: ROBOCAL_* variables, overridden by the options given; its data
     folder made (refused in one line if it is a file)."""
-    from .. import workflow
-    from ..settings import Settings
+    from robocal.server.calibration import workflow
+    from robocal.server.service.settings import Settings
 
     overrides = {
         k: v
@@ -35,8 +35,9 @@ def _settings(args, make_folder: bool = True):
 
 def cmd_serve(args) -> None:
     settings = _settings(args)
+    from robocal.server.service.app import CannotListen, serve
+
     from .. import store
-    from ..app import CannotListen, serve
 
     store.open_database(settings.database).close()  # a wrong --db: one line, before listening
     try:
@@ -46,7 +47,7 @@ def cmd_serve(args) -> None:
 
 
 def cmd_token(args) -> None:
-    from ..security import reset_token
+    from robocal.server.service.security import reset_token
 
     settings = _settings(args, make_folder=args.action == "reset")
     path = settings.token_file

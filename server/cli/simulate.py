@@ -17,11 +17,11 @@ def _fraction(text: str) -> float:
 def cmd_simulate(args) -> None:
     from robocal.drivers.cell import TrackerSpec, VirtualCell
     from robocal.drivers.effects import make_effects
+    from robocal.server.calibration import workflow
+    from robocal.server.cli.tables import console
 
-    from .. import workflow
     from ..formats.campaign_csv import write_campaign
     from ..formats.model_json import write_json_atomic
-    from ..tables import console
 
     cell = workflow.load_cell(args.cell)
     vc = VirtualCell.random(

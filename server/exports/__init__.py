@@ -102,7 +102,7 @@ def _rapid(model: ModelFile, model_path, joints_path, targets_path, out) -> tupl
         )
     error_mm: np.ndarray | None
     if targets_path is not None:
-        from robocal.server.compensation import compensate_file
+        from robocal.server.compensate.compensation import compensate_file
 
         source = targets_path
         c = compensate_file(model_path, targets_path)

@@ -147,7 +147,7 @@ def test_no_out_of_limit_command_reaches_the_controller():
 
 
 def test_controller_fault_stops_keeps_readings_and_resumes(store_url, monkeypatch):
-    import robocal.server.acquire as acq
+    import robocal.server.acquisition.acquire as acq
     from robocal.server import store
     from robocal.server.formats.cell_json import default_cell
 
@@ -188,7 +188,7 @@ def test_the_first_reading_waits_for_the_stored_running_state(tmp_path, monkeypa
     """States are stored on their own thread; a slow "running" write must still land before
     the run's first reading, which the store refuses for a campaign not yet running."""
     from robocal.server import store
-    from robocal.server.acquire import AcquireOptions, acquire
+    from robocal.server.acquisition.acquire import AcquireOptions, acquire
     from robocal.server.formats import default_cell
 
     set_status = store.set_status

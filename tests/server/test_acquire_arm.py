@@ -5,8 +5,8 @@ the fleet view reads it); a bad serial, or a resume naming another arm, is one l
 from __future__ import annotations
 
 from robocal.server import store
-from robocal.server.acquire import AcquireOptions
-from robocal.server.campaigns import plan_campaign
+from robocal.server.acquisition.acquire import AcquireOptions
+from robocal.server.acquisition.campaigns import plan_campaign
 from robocal.server.formats.cell_json import default_cell
 from tests.server.test_cli import robocal
 

@@ -91,7 +91,7 @@ def written(tmp_path_factory):
     """A calibration's and a diagnosis's model.json and the diagnosis's report.json, as the
     commands write them."""
     from robocal.drivers.cell import VirtualCell
-    from robocal.server import workflow
+    from robocal.server.calibration import workflow
     from robocal.server.formats.cell_json import default_cell
     from robocal.server.formats.model_json import write_model
 

@@ -9,14 +9,14 @@ from types import SimpleNamespace
 
 import pytest
 
-from robocal.server import acquisitions as acquisitions_module
 from robocal.server import store
-from robocal.server.acquire import AcquireOptions
-from robocal.server.acquisitions import Acquisitions
+from robocal.server.acquisition.acquire import AcquireOptions
+from robocal.server.acquisition.campaigns import plan_campaign
 from robocal.server.api import campaigns as routes
-from robocal.server.campaigns import plan_campaign
 from robocal.server.formats import default_cell
-from robocal.server.job_queue import check_job
+from robocal.server.service import acquisitions as acquisitions_module
+from robocal.server.service.acquisitions import Acquisitions
+from robocal.server.service.job_queue import check_job
 
 POSES = 3
 WAIT_S = 10.0  # bound on every cross-thread wait; each is answered at once

@@ -3,7 +3,7 @@ calibration's own (its validation's leave-one-pose-out figure), never "-" when e
 
 from __future__ import annotations
 
-from robocal.server.certificate import holdout_rms
+from robocal.server.verify.certificate import holdout_rms
 
 
 def _report(meta: dict) -> dict:

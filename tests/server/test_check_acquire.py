@@ -11,8 +11,9 @@ import json
 import pytest
 
 from robocal.drivers.plan import Measure
-from robocal.server import check_run, store
-from robocal.server.acquire import AcquireOptions, acquire
+from robocal.server import store
+from robocal.server.acquisition.acquire import AcquireOptions, acquire
+from robocal.server.checks import run as check_run
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.model_json import file_digest
 from robocal.server.store.model_checks import model_checks

@@ -9,7 +9,7 @@ import pytest
 
 from robocal.drivers.cell import LIMIT_MARGIN_RAD, VirtualCell
 from robocal.drivers.planning import plan_poses, pose_checks
-from robocal.server.check_plan import (
+from robocal.server.checks.plan import (
     VISIBLE_MM_PER_RAD,
     plan_check,
     standard_errors,

@@ -202,7 +202,7 @@ def euler(R):
 def test_an_oriented_tool(cell, tmp_path):
     """A tool tilted 30 degrees with its orientation wanted at every pose: position and
     orientation of the true arm's tool on target."""
-    from robocal.server.compensation import rotation
+    from robocal.server.compensate.compensation import rotation
 
     d, vc = cell
     tcp, R_tool = np.array([0.0, 40.0, 180.0]), rotation(0.0, 30.0, 10.0)
@@ -246,7 +246,7 @@ def angle_deg(A, B):
 def test_a_model_with_thermal_growth_needs_the_temperature(tmp_path):
     """In process: a model whose thermal term reads temp_c refuses targets without it, at the
     header, or at the pose whose temperature is blank; with it, the joints are found."""
-    from robocal.server.compensation import compensate_file
+    from robocal.server.compensate.compensation import compensate_file
     from robocal.server.formats.errors import InputError
     from robocal.server.formats.model_json import ModelFile, write_model
     from robocal.solver.effects import Extension
@@ -397,8 +397,8 @@ def test_one_smr_a_pose_in_a_configuration_and_the_models_own_prediction():
     """One SMR a pose and only its configuration: joints in that configuration that the model
     puts there, and the reported miss is the model file's own prediction's
     (workflow.model_predict). (From tests/solver/test_compensate.py: it reads the model file.)"""
-    from robocal.server import workflow
-    from robocal.server.compensation import solver_model
+    from robocal.server.calibration import workflow
+    from robocal.server.compensate.compensation import solver_model
     from robocal.solver.compensate import compensate
     from tests.solver.test_compensate import campaign
 

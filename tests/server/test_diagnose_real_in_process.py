@@ -4,7 +4,7 @@ moved from tests/solver, since the campaign files are read as the commands read 
 
 import pytest
 
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from robocal.solver.diagnose import diagnose
 from tests.real import CAMPAIGNS, campaign_files
 

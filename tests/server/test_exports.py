@@ -8,7 +8,7 @@ import pytest
 from pytransform3d.urdf import UrdfTransformManager
 
 from robocal.drivers.cell import VirtualCell
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from robocal.server.cli import main
 from robocal.server.exports.frames import matrix_from_rpy, rpy_from_matrix
 from robocal.server.exports.params import apply_params, params_text, read_params

@@ -137,7 +137,7 @@ def test_cell_reader_takes_what_the_schema_allows(change):
 def test_no_bound_is_lost_from_a_schema(tmp_path):
     """A bound on an Integer (a wrapped int) was once written "ge" instead of "minimum", which
     no validator reads."""
-    from robocal.server.app import create_app
+    from robocal.server.service.app import create_app
 
     texts = [committed(name).read_text() for name in MODELS]
     texts.append(json.dumps(create_app(settings_for(tmp_path)).openapi()))

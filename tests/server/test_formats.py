@@ -596,8 +596,8 @@ def every_effect(seed, fitted_masses: bool | None = None):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_every_effect_round_trips_through_model_json(tmp_path, seed):
+    from robocal.server.calibration.workflow import model_predict
     from robocal.server.formats.model_json import extension_to_json, read_model, write_model
-    from robocal.server.workflow import model_predict
     from robocal.solver.vocabulary import KINDS
 
     assert set(KINDS) == set(STORED_KEYS)

@@ -4,7 +4,7 @@ tests/solver/test_plausibility.py, which keeps the checks on simulated campaigns
 import numpy as np
 import pytest
 
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from robocal.server.formats.campaign_csv import read_campaign
 from robocal.solver.plausibility import RATIO_BAND, check_cell_angles, check_units
 from tests.real import REAL

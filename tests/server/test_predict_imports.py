@@ -13,7 +13,7 @@ def test_predict_path_imports_no_heavy_package():
     code = (
         "import sys\n"
         "from robocal.server.cli import predict\n"
-        "from robocal.server import workflow\n"
+        "from robocal.server.calibration import workflow\n"
         "from robocal.server.formats import campaign_csv\n"
         f"print(' '.join(m for m in {HEAVY!r} if m in sys.modules))\n"
     )

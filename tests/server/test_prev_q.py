@@ -11,7 +11,7 @@ import pytest
 
 from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import make_effects
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from robocal.server.formats.campaign_csv import read_campaign, read_poses, write_campaign
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.errors import InputError

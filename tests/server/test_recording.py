@@ -16,10 +16,10 @@ import pytest
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 
 from robocal.drivers.cell import VirtualCell  # noqa: E402
+from robocal.server.calibration.workflow import run_method  # noqa: E402
 from robocal.server.formats.cell_json import default_cell  # noqa: E402
-from robocal.server.recording import _chain, _rms, record_calibration  # noqa: E402
-from robocal.server.recording_cell import PoseSet, color_scale, error_colors  # noqa: E402
-from robocal.server.workflow import run_method  # noqa: E402
+from robocal.server.recordings.calibration import _chain, _rms, record_calibration  # noqa: E402
+from robocal.server.recordings.cell import PoseSet, color_scale, error_colors  # noqa: E402
 from robocal.solver.kinematics import predict  # noqa: E402
 from robocal.solver.robot import IRB2600  # noqa: E402
 
@@ -271,7 +271,7 @@ def test_recording_streams_live_to_a_viewer(tmp_path):
 def test_a_diagnosis_recording_shows_the_final_model_after_and_the_geometric_beside(tmp_path):
     """The demo's recording of a diagnosis: "after" is the final, extended model (its errors as
     `evaluate` gives them), the geometric calibration beside it under its own entities."""
-    from robocal.server import workflow
+    from robocal.server.calibration import workflow
     from tests.server.test_validation_model import campaign as effect_campaign
 
     cell, meas = effect_campaign(50, 21, ("joint_compliance:2",))

@@ -4,7 +4,7 @@ which keeps the solver's own screening): real campaigns, and the fits that scree
 import numpy as np
 
 from robocal.drivers.cell import displace
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from robocal.server.formats.cell_json import default_cell
 from robocal.solver.kinematics import predict
 from tests.real import CAMPAIGNS, campaign_files

@@ -4,7 +4,7 @@ server's default cell, and the server builds a campaign's Problem from a cell in
 import numpy as np
 
 from robocal.drivers.cell import VirtualCell
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from robocal.server.formats.cell_json import default_cell
 from tests import sim
 

@@ -10,8 +10,8 @@ import pytest
 
 from robocal.server.formats.cell_json import cell_to_json, default_cell, parse_cell
 from robocal.server.formats.errors import InputError
-from robocal.server.verification import overdue
-from robocal.server.verification_uncertainty import decision
+from robocal.server.verify.run import overdue
+from robocal.server.verify.uncertainty import decision
 
 TRACE = {"serial": "AT960-123", "certificate_id": "CAL-2026-17", "certificate_due": "2026-06-30",
          "smr_ids": {"A": "SMR-0001"}}  # fmt: skip

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from robocal.drivers.cell import VirtualCell
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from robocal.server.cli import main
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.model_json import read_model, write_model

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from robocal.drivers.cell import VirtualCell
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from robocal.server.cli import main
 from robocal.server.formats.cell_json import default_cell
 from robocal.solver.measurements import Measurements

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from tests.server.test_cli import robocal
 
 REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"

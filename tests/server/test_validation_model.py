@@ -8,7 +8,7 @@ import pytest
 
 from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import make_effects
-from robocal.server import workflow
+from robocal.server.calibration import workflow
 from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
 
@@ -60,7 +60,7 @@ def test_the_identified_block_names_every_parameter():
 
 def test_a_model_without_an_identified_block_still_has_its_table():
     from robocal.server.api.model_schemas import ModelParameters
-    from robocal.server.identified import parameters_of
+    from robocal.server.calibration.identified import parameters_of
 
     cell, meas = campaign(30, seed=7)
     model = workflow.model_file(workflow.run_method(cell, meas, "ls-sum"), cell, meas)
@@ -100,7 +100,7 @@ def test_the_params_table_gives_the_base_standard_errors_and_smr_nominals():
 
 
 def test_the_base_standard_errors_are_those_of_the_tracker_frame():
-    from robocal.server.identified import base_standard_errors
+    from robocal.server.calibration.identified import base_standard_errors
     from robocal.solver.fit_errors import calibration_errors
 
     cell, meas = campaign(30, seed=9)

@@ -10,11 +10,12 @@ import sys
 import numpy as np
 import pytest
 
-from robocal.server import store, workflow
-from robocal.server.acquire import AcquireOptions, acquire
+from robocal.server import store
+from robocal.server.acquisition.acquire import AcquireOptions, acquire
+from robocal.server.calibration import workflow
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.model_json import write_model
-from robocal.server.verification import VerifyOptions, verify
+from robocal.server.verify.run import VerifyOptions, verify
 
 EFFECT = "joint_compliance:2=1.0"
 
@@ -107,8 +108,8 @@ def test_a_users_points_are_verified_like_the_cube(verified, tmp_path):
 
 
 def test_a_point_beyond_the_arms_reach_is_refused_before_any_solve(verified, monkeypatch):
-    from robocal.server import verification
     from robocal.server.formats.model_json import read_model
+    from robocal.server.verify import run as verification
 
     _, _, d = verified
     model = read_model(d / "model.json")

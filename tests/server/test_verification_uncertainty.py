@@ -9,12 +9,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from robocal.server import store, workflow
-from robocal.server.acquire import AcquireOptions, acquire
+from robocal.server import store
+from robocal.server.acquisition.acquire import AcquireOptions, acquire
+from robocal.server.calibration import workflow
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.model_json import read_model, write_model
-from robocal.server.verification import VerifyOptions, verify
-from robocal.server.verification_uncertainty import decision
+from robocal.server.verify.run import VerifyOptions, verify
+from robocal.server.verify.uncertainty import decision
 
 SEED = 8
 

@@ -75,14 +75,14 @@ def test_the_check_sees_an_upward_import(tmp_path, monkeypatch):
     """Not vacuous: a lazy import inside a function, and one in a helper it uses, are caught."""
     (tmp_path / "tests" / "solver").mkdir(parents=True)
     (tmp_path / "tests" / "solver" / "test_x.py").write_text(
-        "def f():\n    from robocal.server import workflow\n"
+        "def f():\n    from robocal.server.calibration import workflow\n"
     )
     (tmp_path / "tests" / "solver" / "test_y.py").write_text("from tests.helper import x\n")
     (tmp_path / "tests" / "helper.py").write_text("from robocal.server.formats import cell_json\n")
     monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
     found = violations("tests/solver")
     assert found == [
-        "tests/solver/test_x.py:2 imports robocal.server",
+        "tests/solver/test_x.py:2 imports robocal.server.calibration",
         "tests/helper.py:1 imports robocal.server.formats",
     ], found
     assert violations("solver") == []  # an empty folder breaks no rule

@@ -8,7 +8,7 @@ import re
 
 import pytest
 
-from robocal.server.certificate import write_certificate
+from robocal.server.verify.certificate import write_certificate
 
 from ..server.test_verification import calibrated_and_verified
 from .conftest import ARTIFACTS, shot

@@ -11,7 +11,7 @@ import re
 
 import httpx
 
-from robocal.server.tables import plus_minus
+from robocal.server.cli.tables import plus_minus
 from tests.real import import_real
 from tests.server.api.conftest import wait_for
 from tests.web.conftest import said, shot
@@ -155,7 +155,7 @@ def test_healthy_model_parameters_as_the_api_gives_them(served, page):
             elif r["status"] == "held fixed":
                 want.append("fixed")
             else:
-                # as the command line prints it (server/tables.py)
+                # as the command line prints it (server/cli/tables.py)
                 want.append(plus_minus(r["change"], r["standard_error"]))
         assert cells == want, (n, cells, want)
     # beta only where the convention has it (joint 2's parallel axes)

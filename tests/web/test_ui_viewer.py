@@ -39,7 +39,7 @@ def gl_page():
 
 
 def arrow_pixels(png: bytes) -> int:
-    """Pixels of the error arrows in the 3-D view: saturated yellow to red (server/recording_cell.py
+    """Pixels of the error arrows in the 3-D view: saturated yellow to red (server/recordings/cell.py
     colours them green, yellow, red by size; shaded and blended in between), not the pale orange
     of the nominal arm, nor the red of an axis, nor the viewer's bars and charts."""
     from PIL import Image

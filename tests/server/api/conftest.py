@@ -11,9 +11,9 @@ import httpx
 import pytest
 import uvicorn
 
-from robocal.server.app import create_app
-from robocal.server.security import ensure_token
-from robocal.server.settings import Settings
+from robocal.server.service.app import create_app
+from robocal.server.service.security import ensure_token
+from robocal.server.service.settings import Settings
 
 
 def free_port() -> int:

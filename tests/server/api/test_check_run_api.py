@@ -10,7 +10,7 @@ import threading
 import pytest
 
 from robocal.drivers.plan import Measure
-from robocal.server import acquisitions as acquisitions_module
+from robocal.server.service import acquisitions as acquisitions_module
 from tests.server.api.conftest import wait_for
 from tests.server.api.test_checks_api import calibrated, cell  # noqa: F401 - a fixture
 from tests.server.api.test_verify_api import calibrate, run_campaign

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from robocal.drivers.cell import VirtualCell
-from robocal.server.check import MAX_POSES
+from robocal.server.checks.check import MAX_POSES
 from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.cell_json import default_cell
 from tests.server.api.conftest import wait_for

@@ -14,10 +14,10 @@ import time
 import httpx
 import pytest
 
-from robocal.server import app as app_module
 from robocal.server.cli import main as robocal
-from robocal.server.job_queue import CANCELLED
-from robocal.server.security import ensure_token
+from robocal.server.service import app as app_module
+from robocal.server.service.job_queue import CANCELLED
+from robocal.server.service.security import ensure_token
 from tests.server.api.conftest import serve, settings_for, wait_for
 from tests.server.api.test_job_pool import SpiedJobs, csv_text  # noqa: F401 - a fixture
 

@@ -10,10 +10,10 @@ import time
 import httpx
 import pytest
 
-from robocal.server import app as app_module
 from robocal.server import store
 from robocal.server.cli import main as robocal
-from robocal.server.job_queue import RESTART_REASON, Jobs
+from robocal.server.service import app as app_module
+from robocal.server.service.job_queue import RESTART_REASON, Jobs
 from tests.server.api.conftest import serve, settings_for, wait_for
 
 

@@ -4,9 +4,9 @@ import hashlib
 
 import pytest
 
-from robocal.server.app import MUTATING, _api_routes, create_app
-from robocal.server.security import ensure_token, reads_open, reset_token
-from robocal.server.settings import Settings
+from robocal.server.service.app import MUTATING, _api_routes, create_app
+from robocal.server.service.security import ensure_token, reads_open, reset_token
+from robocal.server.service.settings import Settings
 
 from .conftest import serve, settings_for
 
@@ -94,7 +94,7 @@ def test_open_reads_only_on_a_loopback_host(tmp_path):
 def test_an_unguarded_read_route_is_refused_at_build_time(monkeypatch):
     from fastapi import APIRouter
 
-    from robocal.server import app as app_module
+    from robocal.server.service import app as app_module
 
     leak = APIRouter()
 
@@ -151,7 +151,7 @@ def test_settings_listen_on_loopback_by_default(monkeypatch):
 def test_an_unguarded_mutating_route_is_refused_at_build(tmp_path, monkeypatch):
     from fastapi import APIRouter
 
-    import robocal.server.app as app_module
+    import robocal.server.service.app as app_module
 
     extra = APIRouter()
     extra.delete("/oops")(lambda: None)

@@ -8,11 +8,12 @@ from dataclasses import replace
 import numpy as np
 
 from robocal.drivers.cell import GeometricErrors, VirtualCell
-from robocal.server import store, workflow
+from robocal.server import store
+from robocal.server.calibration import workflow
+from robocal.server.calibration.identified import arm_parameters
 from robocal.server.formats import cell_to_json, default_cell
 from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.model_json import to_plain
-from robocal.server.identified import arm_parameters
 
 ARMS = 12
 POSES = 30

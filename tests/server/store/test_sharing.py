@@ -123,7 +123,7 @@ def test_a_run_storing_into_a_replaced_file_is_told_why(tmp_path, cell_json, poo
     old log: neither file's data), DatabaseGone."""
     from types import SimpleNamespace
 
-    from robocal.server.acquire import StoreSink
+    from robocal.server.acquisition.acquire import StoreSink
 
     path = tmp_path / "s.db"
     with open_database(path) as db:

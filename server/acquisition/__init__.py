@@ -1,0 +1,1 @@
+"""Acquisition: `robocal acquire`, the service's runner, campaign planning, the campaigns and cells kept."""

@@ -1,0 +1,1 @@
+"""Calibrate and diagnose between files and the solver: the workflow, the model's validation, identified parameters and position uncertainty."""

@@ -1,0 +1,144 @@
+"""The guard between a fit and its use: whether its data supports the model (model.json's
+`validation` block, solver.guard), whether it may be deployed (compensate, export), and
+whether data it is evaluated on is of its cell."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from robocal.server.formats.blocks import Validation, ValidationLimits
+from robocal.server.formats.cell_json import Cell
+from robocal.server.formats.model_json import ModelFile
+from robocal.solver import guard
+from robocal.solver.effects import Inputs
+from robocal.solver.measurements import Measurements
+
+if TYPE_CHECKING:
+    from robocal.solver.metrics import Evaluation
+
+HOLDOUT_METHOD = "leave-one-pose-out cross-validation, linearised at the fit"
+# Model errors (RMS, mm) on data past which the data cannot be of the model's cell.
+ABSURD_MM = 100.0
+
+
+def noise_floor(cell: Cell, meas: Measurements) -> tuple[float, str]:
+    """The tracker's noise (3-D RMS per reading, mm) and where it comes from: measured in the
+    data (SMR distances with two SMRs or more, else repeated poses), else the cell's tracker
+    spec, else the default spec (said so)."""
+    from robocal.solver.noise import noise_floor as floor
+
+    f = floor(meas.q, meas.xyz, Inputs(meas.q, meas.time_s, meas.temp_c), tracker_spec(cell))
+    return f.mm, f.source
+
+
+def tracker_spec(cell: Cell) -> dict | None:
+    """The cell's tracker spec when its cell.json gave one, None for the default."""
+    return cell.tracker if cell.tracker_spec_given else None
+
+
+def validation_block(
+    v: guard.Validation,
+    pose_ids,
+    source: str,
+    holdout_method: str = HOLDOUT_METHOD,
+    *,
+    nominal_rms_mm: float | None,
+    warnings: list[str],
+) -> Validation:
+    """model.json's `validation` block: the verdict, its reasons, the held-out figure (the
+    headline) beside the fit's and the nominal arm's, the limits applied, the warnings."""
+    return Validation(
+        deployable=v.deployable,
+        reasons=tuple(v.reasons),
+        summary=expected_accuracy(v, holdout_method),
+        tolerance_mm=json_number(v.tolerance_mm),
+        holdout_rms_mm=json_number(v.holdout_rms_mm),
+        holdout_max_mm=json_number(v.holdout_max_mm),
+        fit_rms_mm=json_number(v.fit_rms_mm),
+        holdout=holdout_method,
+        condition_number=json_number(v.condition_number),
+        equations=v.equations,
+        free_parameters=v.free_parameters,
+        noise_floor_mm=json_number(v.noise_floor_mm),
+        noise_floor_source=source,
+        unsupported_poses=[pose_ids[i] for i in v.unsupported_poses],
+        limits=ValidationLimits(
+            min_equations_per_parameter=guard.MIN_EQUATIONS_PER_PARAMETER,
+            noise_floor_fraction=guard.NOISE_FLOOR_FRACTION,
+            max_condition_number=guard.MAX_CONDITION,
+            max_holdout_ratio=guard.MAX_HOLDOUT_RATIO,
+        ),
+        nominal_rms_mm=nominal_rms_mm,
+        warnings=tuple(warnings),
+    )
+
+
+def expected_accuracy(v: guard.Validation, holdout_method: str = HOLDOUT_METHOD) -> str:
+    """The accuracy to expect on new poses in one sentence (the held-out RMS and max), and how
+    it stands against the tolerance; the verdict's reasons are said apart."""
+    how = holdout_method.split(" cross-validation")[0]
+    if not np.isfinite(v.holdout_rms_mm):
+        said = "expected accuracy unknown: no pose could be held out"
+    else:
+        said = (
+            f"expected accuracy on new poses {v.holdout_rms_mm:.3g} mm RMS, max "
+            f"{v.holdout_max_mm:.3g} mm (held out: {how})"
+        )
+    if v.tolerance_mm is None:
+        return said + "; no tolerance given (--tolerance-mm, or the cell's tolerance_mm)"
+    within = np.isfinite(v.holdout_rms_mm) and v.holdout_rms_mm <= v.tolerance_mm
+    return said + f"; {'within' if within else 'beyond'} the tolerance {v.tolerance_mm:g} mm"
+
+
+def json_number(v) -> float | None:
+    """A JSON-safe number: None for NaN and infinity (JSON has neither)."""
+    return None if v is None or not np.isfinite(v) else float(v)
+
+
+def cell_mismatch(model: ModelFile, cell: Cell) -> str | None:
+    """Why data measured on `cell` is not of the model's cell: another robot (name, joint count
+    or nominal geometry) or SMRs the model does not have; None if it may be."""
+    return data_mismatch(model.nominal or model.robot, list(model.targets), cell)
+
+
+def data_mismatch(nominal, targets: list[str], cell: Cell) -> str | None:
+    """Why data measured on `cell` is not of a robot with this nominal geometry and these SMRs
+    (see cell_mismatch); None if it may be."""
+    robot = cell.robot
+    if robot.name != nominal.name:
+        return f"the data is of robot {robot.name!r}, the model of {nominal.name!r}"
+    if robot.param_names() != nominal.param_names() or not np.allclose(
+        robot.param_vector(), nominal.param_vector(), atol=1e-6
+    ):
+        return f"the data's robot {robot.name!r} has another nominal geometry than the model's"
+    unknown = [t for t in cell.targets if t not in targets]
+    if unknown:
+        return f"the data's SMR {unknown[0]!r} is not among the model's ({', '.join(targets)})"
+    return None
+
+
+def absurd_errors(result: Evaluation, verdict: Validation | None = None) -> str | None:
+    """Why an evaluation's errors say the data is of another cell (a moved tracker, another
+    robot), or the model unfit: the model's RMS error past ABSURD_MM; None otherwise."""
+    rms = result.model.rmse
+    if np.isfinite(rms) and rms <= ABSURD_MM:
+        return None
+    nominal = result.nominal.rmse if result.nominal is not None else None
+    unfit = verdict is not None and not verdict.deployable
+    return (
+        f"the model's predictions are {rms:.1f} mm RMS from the readings (limit {ABSURD_MM:g} "
+        "mm): the data is not of the model's cell (another robot, or the tracker or base moved)"
+        + (", or the model is unfit (its validation says not deployable)" if unfit else "")
+        + (f"; the nominal robot registered on it errs {nominal:.3f} mm RMS" if nominal else "")
+    )
+
+
+def file_refusal(path) -> str | None:
+    """Why a model file must not be deployed (its verdict's reasons, or that it has none), None
+    if it may be; InputError, from the model reader, when the file is not a readable model (so a
+    bad file is refused in one line before any work)."""
+    from robocal.server.formats.model_json import read_model
+
+    return read_model(path).verdict.refusal()

@@ -1,0 +1,597 @@
+"""What the commands do, between files and the solver: load, calibrate, predict, compare."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from robocal.server.calibration.validation import (
+    absurd_errors,
+    json_number,
+    noise_floor,
+    tracker_spec,
+    validation_block,
+)
+from robocal.server.formats.blocks import Diagnosis, Fit, HeldOut, Validation
+from robocal.server.formats.campaign_csv import read_campaign
+from robocal.server.formats.cell_json import Cell, default_cell, read_cell
+from robocal.server.formats.model_json import (
+    ModelFile,
+    extension_errors,
+    file_digest,
+    read_model,
+    uncertainty_to_json,
+)
+from robocal.solver.effects import Inputs
+from robocal.solver.extended import predict_model
+from robocal.solver.finite import require_inputs
+from robocal.solver.kinematics import predict
+from robocal.solver.measurements import Measurements
+from robocal.solver.problem import Problem
+
+# The fit, the screening and the diagnosis pull in scipy (seconds on a busy machine): imported in
+# the functions that run them, so `robocal predict` starts with numpy alone.
+if TYPE_CHECKING:
+    from robocal.server.formats.report_doc import ReportDoc
+    from robocal.solver.calibrate import Calibration
+    from robocal.solver.metrics import Accuracy, Evaluation
+    from robocal.solver.screen import Screening
+
+PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
+
+
+class DataError(ValueError):
+    """Inputs that are well-formed but do not fit together; the message names the file."""
+
+
+def cell_problem(cell: Cell, meas: Measurements) -> Problem:
+    """The solver's problem of a campaign in a cell: its arm, SMRs, base guess and tracker spec."""
+    targets = cell.target_positions(meas.target_names)
+    return Problem.of(cell.robot, targets, meas, cell.base, tracker_spec=tracker_spec(cell))
+
+
+def load_cell(path) -> Cell:
+    return default_cell() if path is None else read_cell(path)
+
+
+def load_campaign(path, cell: Cell, cell_path=None) -> Measurements:
+    """A campaign whose targets the cell (read from cell_path, None for the built-in) describes,
+    in the units it implies."""
+    meas = read_campaign(path, cell.robot)
+    unknown = [t for t in meas.target_names if t not in cell.targets]
+    if unknown:
+        raise DataError(
+            f"{path}: target {unknown[0]!r} is not among the cell's targets "
+            f"({', '.join(cell.targets)})"
+        )
+    try:
+        require_inputs(meas.q, meas.xyz)
+    except ValueError as e:
+        raise DataError(f"{path}: {e}") from None
+    refuse_radian_angles(cell_path, cell, meas)  # before the units: it changes the arm's spread
+    refuse_wrong_units(path, cell, meas)
+    return meas
+
+
+def refuse_wrong_units(path, cell: Cell, meas: Measurements) -> None:
+    """DataError naming the file and the likely units (see units_refusal)."""
+    why = units_refusal(cell, meas)
+    if why:
+        raise DataError(f"{path}: {why}")
+
+
+def refuse_radian_angles(cell_path, cell: Cell, meas: Measurements) -> None:
+    """DataError naming the cell.json whose robot's angles the readings say are radians
+    (solver.plausibility.check_cell_angles); a built-in robot's are never."""
+    from robocal.solver.plausibility import check_cell_angles
+
+    if cell_path is None:
+        return
+    targets = cell.target_positions(meas.target_names)
+    check = check_cell_angles(cell.robot, targets, meas.q, meas.xyz)
+    why = check.reason() if check is not None else None
+    if why:
+        raise DataError(f"{cell_path}: {why}")
+
+
+def units_refusal(cell: Cell, meas: Measurements) -> str | None:
+    """Why the readings are not in mm and degrees: their spread is not the one the cell's
+    nominal arm gives at the measured joints (solver.plausibility); None if they may be, or if
+    the cell does not name their SMRs (refused elsewhere)."""
+    from robocal.solver.plausibility import check_units
+
+    if any(t not in cell.targets for t in meas.target_names):
+        return None
+    targets = cell.target_positions(meas.target_names)
+    return check_units(cell.robot, targets, meas.q, meas.xyz).reason()
+
+
+DB_SUFFIXES = (".db", ".sqlite", ".sqlite3")
+
+
+def is_database(path) -> bool:
+    """A store (a URL: sqlite:///..., postgresql+psycopg://...; or a SQLite file), not a CSV."""
+    return "://" in str(path) or str(path).lower().endswith(DB_SUFFIXES)
+
+
+def load_data(path, cell_path=None, campaign_id=None, note=None) -> tuple[Cell, Measurements]:
+    """A campaign from a meas.csv, or from the store's database (latest campaign unless given);
+    the cell from cell_path, else the database campaign's own, else the built-in default.
+    note(text) is told when a database campaign is not done (its measured poses are used)."""
+    if not is_database(path):
+        cell = load_cell(cell_path)
+        return cell, load_campaign(path, cell, cell_path)
+    from robocal.server import store
+    from robocal.server.formats.cell_json import parse_cell
+
+    if "://" not in str(path) and not Path(path).exists():
+        raise FileNotFoundError(2, "no such file", str(path))
+    db = store.open_database(path)
+    campaigns = store.list_campaigns(db)
+    if not campaigns:
+        raise DataError(f"{path}: no campaign in the database")
+    if campaign_id is None:
+        campaign_id = max(c.id for c in campaigns)
+    info = next((c for c in campaigns if c.id == campaign_id), None)
+    if info is None:
+        raise DataError(
+            f"{path}: no campaign {campaign_id}; it has "
+            + ", ".join(f"{c.id} ({c.name}, {c.status})" for c in campaigns[-10:])
+        )
+    if info.n_done == 0:
+        raise DataError(
+            f"{path}: campaign {campaign_id} ({info.name}) has no measured pose yet "
+            f"(it is {info.status}): run it with `robocal acquire --db {path} --name {info.name}`"
+        )
+    if info.status != "done" and note is not None:
+        note(
+            f"{path}: campaign {campaign_id} ({info.name}) is {info.status}, not done: using its "
+            f"{info.n_done} of {info.n_poses} poses measured so far"
+        )
+    cell = load_cell(cell_path) if cell_path else parse_cell(info.cell_json)
+    meas = store.campaign_measurements(db, campaign_id=campaign_id, robot=cell.robot)
+    if meas.n_poses == 0:
+        raise DataError(
+            f"{path}: campaign {campaign_id} ({info.name}) has no reading (all missing)"
+        )
+    refuse_radian_angles(cell_path or f"{path}: campaign {campaign_id}'s cell", cell, meas)
+    refuse_wrong_units(f"{path}: campaign {campaign_id}", cell, meas)
+    return cell, meas
+
+
+def screen_campaign(cell: Cell, meas: Measurements) -> Screening:
+    """The campaign's gross outliers (solver.screen), judged with the cell's nominal model."""
+    from robocal.solver.screen import screen_readings
+
+    return screen_readings(cell_problem(cell, meas))
+
+
+def without_outliers(meas: Measurements, screening: Screening | None) -> Measurements:
+    """The campaign with the screened-out readings missing (as a beam break would leave them)."""
+    if screening is None or not screening.count:
+        return meas
+    nan = lambda a: None if a is None else np.where(screening.excluded, np.nan, a)  # noqa: E731
+    return Measurements(
+        list(meas.pose_ids),
+        meas.q,
+        meas.target_names,
+        screening.apply(meas.xyz),
+        nan(meas.time_s),
+        nan(meas.temp_c),
+        meas.prev_q,
+    )
+
+
+def run_method(
+    cell: Cell,
+    meas: Measurements,
+    method: str,
+    qp="primal-dual",
+    screening: Screening | bool = True,
+) -> Calibration:
+    """One method on the campaign; screening True screens out gross outliers first, False keeps
+    every reading, a Screening reuses one already made (compare screens once for all methods)."""
+    from robocal.solver.calibrate import calibrate
+
+    screened = screen_campaign(cell, meas) if screening is True else screening or None
+    use = without_outliers(meas, screened)
+    problem = replace(cell_problem(cell, use), noise_floor_mm=noise_floor(cell, use)[0])
+    cal = calibrate(problem, method, qp=qp)
+    if screened is not None:
+        cal.screening = screened
+        cal.outliers = screened.report(meas.pose_ids, meas.target_names)
+    return cal
+
+
+def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None) -> ModelFile:
+    """The self-contained model file of a calibration."""
+    from robocal.server.calibration.identified import identified_block
+    from robocal.server.calibration.position_uncertainty import position_block
+    from robocal.solver import metrics
+    from robocal.solver.fit_errors import calibration_figures
+
+    screening = cal.get("screening")
+    used = without_outliers(meas, screening)
+    pred = predict(cal.layout, cal.x, meas.q)
+    acc = metrics.accuracy(pred, used.xyz, meas.target_names, orientation=False)  # positions
+    errors, holdout = calibration_figures(cal, meas.q, used.xyz)
+    data = {"poses": meas.n_poses, "readings": meas.n_readings, "targets": list(meas.target_names)}
+    if data_path is not None and "://" not in str(data_path):  # a server's database: no file
+        data.update(file=Path(data_path).name, sha256=file_digest(data_path))
+    fit = Fit(
+        F_mm2=dict(zip(meas.target_names, np.round(cal.F, 9).tolist())),
+        rmse_phi_mm=acc.rmse_phi,
+        rmse_mm=acc.rmse,
+        ap_max_mm=acc.ap.max,
+        condition_number=cal.condition,
+        fixed_parameters=cal.fixed,
+        iterations=cal.nit,
+        seconds=round(cal.seconds, 4),
+    )
+    if screening is not None:  # the readings the fit left out as gross errors, and why
+        fit.readings_used = used.n_readings
+        fit.excluded_readings = cal.outliers
+        fit.screening = screening.summary()
+    model = ModelFile(
+        cal.robot,
+        cal.base,
+        dict(zip(meas.target_names, cal.targets)),
+        nominal=cell.robot,
+        meta={"method": cal.method, "data": data},
+    )
+    model.fit = fit
+    model.uncertainty = uncertainty = uncertainty_to_json(errors, cal.layout.names())
+    if "qp" in cal:  # minimax
+        model.meta["qp"] = cal.qp
+    if cal.method != "nominal":  # nothing of the arm identified: no table of it
+        model.identified = identified_block(
+            model,
+            errors,
+            fixed=cal.fixed,
+            condition=cal.condition,
+            nominal_targets={t: cell.targets[t] for t in meas.target_names},
+            nominal_base=cell.base,
+        )
+    # the nominal arm, registered, is judged as any calibration: a model without a verdict is
+    # never deployable
+    v = model.validation = validate(cal, cell, used, holdout, errors, acc.rmse)
+    if cal.method != "nominal":
+        block = position_block(
+            cal.layout, cal.x, used.q, errors, v.holdout_rms_mm, v.noise_floor_mm
+        )
+        if block is not None:
+            uncertainty.position = block
+    return model
+
+
+def validate(
+    cal: Calibration, cell: Cell, used: Measurements, holdout, errors, fit_rms
+) -> Validation:
+    """model.json's `validation` block of a calibration on the readings it used (holdout: its
+    leave-one-pose-out residuals, solver.guard.Holdout)."""
+    from robocal.solver import guard
+
+    floor, source = noise_floor(cell, used)
+    v = guard.judge(
+        fit_rms_mm=fit_rms,
+        holdout=holdout,
+        condition_number=cal.condition,
+        equations=3 * int(np.isfinite(used.xyz[..., 0]).sum()),
+        free_parameters=int(np.count_nonzero(errors.column >= 0)),
+        poses=int(np.any(np.isfinite(used.xyz[..., 0]), axis=1).sum()),
+        noise_floor_mm=floor,
+        noise_floor_source=source,
+        tolerance_mm=cell.tolerance_mm,
+    )
+    v.reasons += implausible(cell, used, cal.robot)
+    return validation_block(
+        v,
+        list(used.pose_ids),
+        source,
+        nominal_rms_mm=nominal_rms(cell, used),
+        warnings=layout_warnings(cell, used, cal.targets),
+    )
+
+
+def implausible(cell: Cell, meas: Measurements, robot) -> list[str]:
+    """The verdict's reasons against a model physics rules out (solver.plausibility): readings
+    in other units than the cell's nominal arm implies, or an identified geometry changed from
+    the nominal beyond what an arm of its size can have."""
+    from robocal.solver.plausibility import implausible_changes
+
+    units = units_refusal(cell, meas)
+    changes = implausible_changes(cell.robot, robot).reason()
+    return [why for why in (units, changes) if why]
+
+
+def layout_warnings(cell: Cell, meas: Measurements, targets) -> list[str]:
+    """The verdict's warnings: SMRs (targets (K, 3), the readings' order) identified far from
+    where the cell puts them. The fit holds (the SMR positions are free), so the model stays
+    deployable, but the cell's layout or its flange frame is not what the user thinks."""
+    from robocal.solver.plausibility import check_layout
+
+    names = meas.target_names
+    nominal = cell.target_positions(names)
+    why = check_layout(names, nominal, np.asarray(targets, dtype=float)).reason()
+    return [why] if why else []
+
+
+def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
+    """The nominal model's RMS error (mm a reading) on the readings, its base and SMRs
+    registered on them: what the calibration is to improve on."""
+    from robocal.solver.calibrate import calibrate
+
+    nom = calibrate(cell_problem(cell, meas), "nominal")
+    r = np.linalg.norm(predict(nom.layout, nom.x, meas.q) - meas.xyz, axis=-1)
+    r = r[np.isfinite(r)]
+    return json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
+
+
+def model_predict(model: ModelFile, q, time_s=None, temp_c=None, prev_q=None) -> np.ndarray:
+    """SMR centres (m, K, 3) a model file predicts, with its extensions (time and temperature per
+    pose (m,) or per reading (m, K)).
+
+    Backlash follows each joint's last motion (Inputs computes it): from the joints the arm came
+    from, prev_q (m, n) rad (NaN rows: not given), else the poses as visited in time_s order,
+    else in the given order.
+    """
+    lay, x = model.layout()
+    if not model.extensions:
+        return predict(lay, x, q)
+    m, K = len(q), len(model.targets)
+
+    def per_reading(a, name):
+        if a is None:
+            return None
+        a = np.broadcast_to(np.reshape(np.asarray(a, dtype=float), (m, -1)), (m, K))
+        return a
+
+    inputs = Inputs(q, per_reading(time_s, "time_s"), per_reading(temp_c, "temp_c"), prev_q=prev_q)
+    for e in model.extensions:
+        need = e.kind.needs(e)
+        if need and getattr(inputs, need) is None:
+            raise DataError(f"the model's {e.label()} needs a {need} column in the poses")
+    return predict_model(model.nominal or model.robot, lay, x, model.extensions, inputs)
+
+
+def paper_methods(target_names) -> list[str]:
+    """The paper's conditions 0-6 for these targets, in Table 3's order."""
+    out = ["nominal"] + [f"ls-single:{t}" for t in target_names] + ["ls-sum", "minimax"]
+    if len(target_names) >= 3:
+        out.append("ls-pose")
+    return out
+
+
+def compare(
+    cell: Cell, meas: Measurements, methods=None, qp_solvers=("primal-dual", "exact"), screen=True
+) -> dict[str, tuple[Calibration, Accuracy]]:
+    """Every method on the same data, screened once for gross outliers (unless screen is False):
+    calibrations and their accuracy on the readings they used."""
+    from robocal.solver import metrics
+
+    screening = screen_campaign(cell, meas) if screen else None
+    used = without_outliers(meas, screening)
+    rows = {}
+    for method in methods or paper_methods(meas.target_names):
+        solvers = qp_solvers if method == "minimax" else (None,)
+        for qp in solvers:
+            cal = run_method(cell, meas, method, qp or "primal-dual", screening=screening or False)
+            label = method if qp is None or qp == qp_solvers[0] else f"{method} ({qp} QP)"
+            pred = predict(cal.layout, cal.x, meas.q)
+            rows[label] = (cal, metrics.accuracy(pred, used.xyz, meas.target_names))
+    return rows
+
+
+def evaluate(model: ModelFile, meas: Measurements) -> Evaluation:
+    """Accuracy of a model on measured data, next to the nominal model fitted to the same data."""
+    from robocal.solver import metrics
+    from robocal.solver.calibrate import calibrate
+
+    unknown = [t for t in meas.target_names if t not in model.targets]
+    if unknown:
+        raise DataError(
+            f"target {unknown[0]!r} of the data is not in the model ({', '.join(model.targets)})"
+        )
+    if model.robot.n_joints != meas.q.shape[1]:
+        raise DataError("the data's joint count differs from the model's robot")
+    require_inputs(meas.q, meas.xyz)  # before any arithmetic on them: no overflow warnings
+    names = meas.target_names
+    order = [list(model.targets).index(t) for t in names]
+    pred = model_predict(
+        model, meas.q, _pose_column(meas.time_s), _pose_column(meas.temp_c), meas.prev_q
+    )
+    after = metrics.accuracy(pred[:, order], meas.xyz, names)
+    if model.nominal is None:
+        return metrics.Evaluation(after)
+    targets = np.array([model.targets[t] for t in names])
+    nom = calibrate(Problem.of(model.nominal, targets, meas), "nominal")
+    before = metrics.accuracy(predict(nom.layout, nom.x, meas.q), meas.xyz, names)
+    return metrics.Evaluation(after, before, metrics.compare_accuracy(before, after))
+
+
+def held_out_errors(
+    model: ModelFile, meas: Measurements, *, file: str | None = None, campaign_id: int | None = None
+) -> HeldOut:
+    """A calibration's errors on readings it was not fitted on (mm; RMS and max per reading,
+    the nominal model's RMS registered on them), with a warning when they say the data is not
+    of the model's cell."""
+    result = evaluate(model, meas)
+    # only the keys given: a file's figures name no campaign, a campaign's no file
+    return HeldOut(
+        **({"file": file} if file is not None else {}),
+        **({"campaign_id": campaign_id} if campaign_id is not None else {}),
+        poses=int(np.any(meas.mask, axis=1).sum()),
+        readings=int(meas.mask.sum()),
+        rms_mm=json_number(result.model.rmse),
+        max_mm=json_number(result.model.ap.max),
+        nominal_rms_mm=json_number(result.nominal.rmse) if result.nominal is not None else None,
+        warning=absurd_errors(result, model.verdict),
+    )
+
+
+def _pose_column(a):
+    """Per-pose value of a per-reading column (the first measured reading of each pose)."""
+    if a is None:
+        return None
+    first = np.argmax(np.isfinite(a), axis=1)
+    return a[np.arange(len(a)), first]
+
+
+def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
+    """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
+    from robocal.server.formats.report_doc import (
+        ReportDoc,  # not loaded for the commands that never diagnose
+    )
+    from robocal.solver.diagnose import diagnose as run_diagnosis
+
+    d = run_diagnosis(cell_problem(cell, meas), log=log, screen_outliers=screen)
+    lay, x = d.layout, d.x
+    robot = lay.robot.with_params(x[: lay.n_geo])
+    model = ModelFile(
+        robot,
+        lay.base(x),
+        dict(zip(meas.target_names, lay.targets(x))),
+        nominal=cell.robot,
+        extensions=d.extensions,
+        parameters=d.parameters,
+        meta={"method": "ls-sum+extensions"},
+    )
+    # the solver's report as report.json has it, typed once: what the model keeps of it
+    report = ReportDoc.model_validate(d.report)
+    model.diagnosis = Diagnosis(
+        final=report.final,
+        noise_floor_mm=report.noise_floor_mm,
+        noise_floor_source=report.noise_floor_source,
+        **(
+            {"outliers": [o.to_json() for o in report.outliers]}
+            if report.outliers is not None
+            else {}
+        ),
+    )
+    if d.errors is not None:
+        model.uncertainty = uncertainty_to_json(d.errors.parameters, lay.names())
+        model.extension_errors = extension_errors(d.errors)
+        _judge_diagnosis(d, report, cell, meas, model)
+    return d, model
+
+
+def _judge_diagnosis(
+    d, report: ReportDoc, cell: Cell, meas: Measurements, model: ModelFile
+) -> None:
+    """The `identified` and `validation` blocks of a diagnosis's final model, as a calibration's:
+    the held-fixed parameters and the condition number of the geometry as ls-sum finds them."""
+    from robocal.server.calibration.identified import identified_block
+    from robocal.solver.calibrate import calibrate
+
+    problem = replace(cell_problem(cell, meas), noise_floor_mm=report.noise_floor_mm)
+    geometric = calibrate(problem, "ls-sum")
+    model.identified = identified_block(
+        model,
+        d.errors.parameters,
+        fixed=geometric.fixed,
+        condition=geometric.condition,
+        nominal_targets={t: cell.targets[t] for t in meas.target_names},
+        nominal_base=cell.base,
+    )
+    model.validation = validate_diagnosis(d, report, cell, meas, model, geometric.condition)
+
+
+def validate_diagnosis(
+    d, report: ReportDoc, cell: Cell, meas: Measurements, model: ModelFile, condition: float
+) -> Validation:
+    """model.json's `validation` block of a diagnosis's final model: its own cross-validated
+    held-out figures against its fit, with the geometry's condition number; the report's noise
+    floor, past MAX_FLOOR_RATIO times which the model lacks an effect the report's `unexplained`
+    names."""
+    from robocal.solver import guard
+    from robocal.solver.diagnose import FOLDS
+
+    pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q)
+    r = np.linalg.norm(pred - meas.xyz, axis=-1)
+    r = r[np.isfinite(r)]
+    # the solver's report always says where its floor comes from; a report read from a file may not
+    floor, source = report.noise_floor_mm, report.noise_floor_source or "unstated"
+    final = report.final
+    v = guard.judge(
+        fit_rms_mm=float(np.sqrt(np.mean(r * r))),
+        holdout=guard.CrossValidated(final.holdout_rmse_mm, final.holdout_max_mm),
+        condition_number=condition,
+        equations=3 * int(meas.mask.sum()),
+        free_parameters=int(np.count_nonzero(d.errors.parameters.column >= 0)),
+        poses=int(np.any(meas.mask, axis=1).sum()),
+        noise_floor_mm=floor,
+        noise_floor_source=source,
+        tolerance_mm=cell.tolerance_mm,
+        max_floor_ratio=guard.MAX_FLOOR_RATIO,
+    )
+    v.reasons += implausible(cell, meas, model.robot)
+    method = f"{FOLDS}-fold cross-validation of the diagnosis"
+    return validation_block(
+        v,
+        list(meas.pose_ids),
+        source,
+        method,
+        nominal_rms_mm=nominal_rms(cell, meas),
+        warnings=layout_warnings(cell, meas, [model.targets[t] for t in meas.target_names]),
+    )
+
+
+def write_diagnosis(
+    d, model: ModelFile, report_path: Path, data: dict, model_path=None, list_figures=False
+):
+    """Write the report (each effect naming its figure; with list_figures, every figure in
+    `figures`), its figures beside it and the model. Returns (report, figure paths)."""
+    from robocal.server.figures.diagnosis import write_figures
+    from robocal.server.formats.model_json import write_json_atomic, write_model
+
+    report = d.report
+    exts = _report_order(report, d.extensions)
+    # One numbering everywhere: effect N is report["effects"][N - 1], its figure REPORT_N_*.png,
+    # and `diagnose` prints it as "effect N" (the order the report ranks them in, not found in).
+    rank = {x.label(): k for k, x in enumerate(exts)}
+    ranked = sorted(d.figures, key=lambda f: rank.get(f["label"], len(rank)))
+    figures = write_figures(ranked, report_path)
+    by_label = {f["label"]: path.name for f, path in zip(ranked, figures)}
+    for e, ext in zip(report["effects"], exts):
+        e["figure"] = by_label.get(ext.label())
+    if list_figures:
+        report["figures"] = [p.name for p in figures]
+    # the final model's table and verdict, in the report too
+    if model.identified is not None:
+        report["identified"] = model.identified.to_json()
+    if model.validation is not None:
+        report["validation"] = model.validation.to_json()
+    model.meta["data"] = data
+    write_json_atomic(report_path, report)
+    if model_path:
+        write_model(model_path, model)
+    return report, figures
+
+
+def _report_order(report, exts):
+    """The extensions in the report's order (most important first)."""
+
+    def key(e):
+        return (e["name"], e.get("joint"), e.get("harmonic"))
+
+    index = {(x.name, None if x.joint is None else x.joint + 1, x.harmonic): x for x in exts}
+    return [index[key(e)] for e in report["effects"]]
+
+
+__all__ = [
+    "DataError",
+    "load_cell",
+    "load_campaign",
+    "run_method",
+    "model_file",
+    "model_predict",
+    "compare",
+    "evaluate",
+    "read_model",
+    "paper_methods",
+    "screen_campaign",
+    "without_outliers",
+]

@@ -1,0 +1,1 @@
+"""Rerun recordings of a calibration: the recording, its cell, its blueprint."""

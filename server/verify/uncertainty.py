@@ -1,0 +1,89 @@
+"""A verification's uncertainty and its decision: U of the model at each test point, the AP
+figures' own U from the tracker's specification, and pass / fail / not decided against the
+application's tolerance by the guard-banded rule of ISO 14253-1."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from robocal.server.calibration.position_uncertainty import model_uncertainty
+from robocal.server.formats.cell_json import Cell
+from robocal.server.formats.model_json import ModelFile
+
+RULE = (
+    "ISO 14253-1 guard bands: pass only when every point's AP plus its U is within the "
+    "tolerance, fail when any point's AP minus its U is beyond it, otherwise not decided"
+)
+AP_U = (
+    "U of an AP: the tracker's MPE at the point's range (its spec's per-axis sigma = MPE / 2 "
+    "along the error, k = 2), not averaged over the cycles"
+)
+
+
+def mpe_mm(cell: Cell, points_mm) -> np.ndarray:
+    """The tracker's maximum permissible error (mm) at each point's range from the tracker."""
+    spec = cell.tracker or {}
+    r_m = np.linalg.norm(np.asarray(points_mm, dtype=float), axis=-1) / 1000.0
+    return 1e-3 * (float(spec.get("mpe_um", 10.0)) + float(spec.get("mpe_um_per_m", 2.5)) * r_m)
+
+
+def at_points(model: ModelFile, cell: Cell, q_deg, points_mm) -> dict | None:
+    """The model's U (95 %) at each test point, the arm's position itself and as a reading
+    would find it, from the compensated joints that visit it (q_deg (p, n)); None for a model
+    without a position block."""
+    reading = np.sqrt(3.0) * mpe_mm(cell, points_mm) / 2.0  # 3-D RMS: per-axis sigma MPE / 2
+    q = np.radians(np.asarray(q_deg, dtype=float))
+    own = model_uncertainty(model, q)
+    read = model_uncertainty(model, q, reading[:, None])
+    if own is None or read is None:
+        return None
+    return {
+        "coverage": own.coverage,
+        "map": volume_map(model),
+        "model_U_mm": own.expanded_mm[:, 0].tolist(),
+        "reading_U_mm": read.expanded_mm[:, 0].tolist(),
+        "k": own.k[:, 0].tolist(),
+        "joint_scatter_deg": own.joint_scatter_deg,
+    }
+
+
+def decision(ap_mm, u_mm, tolerance_mm: float | None, tracker_overdue: str | None = None) -> dict:
+    """The verdict on the APs (mm) with their U against the tolerance: `pass`, `fail` or `not
+    decided` (and `no tolerance` without one), with the rule and the figures it used. A tracker
+    past its calibration's due date never passes: its U is not vouched for."""
+    ap, u = np.asarray(ap_mm, dtype=float), np.asarray(u_mm, dtype=float)
+    if tolerance_mm is None:
+        verdict = "no tolerance"
+    elif np.all(ap + u <= tolerance_mm):
+        verdict = "not decided" if tracker_overdue else "pass"
+    elif np.any(ap - u > tolerance_mm):
+        verdict = "fail"
+    else:
+        verdict = "not decided"
+    return {
+        "verdict": verdict,
+        "tracker_overdue": tracker_overdue,
+        "tolerance_mm": tolerance_mm,
+        "rule": RULE,
+        "worst_upper_mm": float(np.max(ap + u)),
+        "worst_lower_mm": float(np.max(ap - u)),
+    }
+
+
+MAP_POSES = 600
+
+
+def volume_map(model: ModelFile, poses: int = MAP_POSES, seed: int = 0) -> dict | None:
+    """U (95 %, the position itself) of the verification SMR over the working volume: at joints
+    drawn uniformly within the arm's limits (seeded: the same map for the same model)."""
+    from robocal.solver.kinematics import predict
+
+    rng = np.random.default_rng(seed)
+    lo, hi = (np.array([j.limits[i] for j in model.robot.joints]) for i in (0, 1))
+    q = rng.uniform(lo, hi, size=(poses, len(lo)))
+    u = model_uncertainty(model, q)
+    if u is None:
+        return None
+    lay, x = model.layout()
+    xyz = predict(lay, x, q)[:, 0]
+    return {"xyz_mm": np.round(xyz, 1).tolist(), "U_mm": np.round(u.expanded_mm[:, 0], 5).tolist()}
