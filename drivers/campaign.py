@@ -235,17 +235,18 @@ class CampaignEngine(Sighting):
             return False
 
     # -- running a plan (the engine's thread) ---------------------------------------------------
-    def run(self, poses_deg, start: int = 0, history=None, partial=None) -> Stats:
+    def run(self, poses_deg, start: int = 0, history=None, partial=None, plan=None) -> Stats:
         """Measure poses[start:]; returns when the campaign is done, aborted or e-stopped.
 
         Runs from planned (start), paused or failed (resume). On resume, history = (q rad, meas)
         of the poses already measured, and partial = {target: xyz} the readings already stored
         for pose `start` (cut off mid-pose): those are kept, not measured again. A device fault
         fails the campaign, halts the arm and re-raises; an e-stop returns without raising.
+        `plan` runs these messages instead of poses_deg's (plan.growing_plan: an adaptive one).
         """
         names = tuple(self.predictor.names)
         stored = dict(partial or {})
-        plan = campaign_plan(poses_deg, names, start, stored)
+        plan = campaign_plan(poses_deg, names, start, stored) if plan is None else plan
         epoch = self._begin()
         try:
             run = _Run(epoch, names, start, stored)

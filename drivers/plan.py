@@ -8,7 +8,7 @@ an e-stop before every message.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -83,10 +83,30 @@ def campaign_plan(
     return _messages(poses, names, start, done)
 
 
-def _messages(poses, names, start, done) -> Iterator[Message]:
-    for i in range(start, len(poses)):
+def growing_plan(
+    next_batch: Callable[[], np.ndarray | None],
+    target_names: Sequence[str],
+    start: int = 0,
+    partial: Mapping[str, object] | None = None,
+) -> Iterator[Message]:
+    """The messages that measure batches of poses numbered on from `start`: next_batch() gives
+    the next poses (m, joints) deg, None to end. The engine asks for a message only once the one
+    before is done, so each batch is asked for after the previous batch's last Save (an
+    adaptive campaign chooses it from every reading so far); `partial` as for campaign_plan."""
+    names = tuple(target_names)
+    done = set(partial or ())
+    i = start
+    while (batch := next_batch()) is not None:
+        poses = np.atleast_2d(np.asarray(batch, dtype=float))
+        yield from _messages(poses, names, i, done, first=i)
+        i, done = i + len(poses), set()
+
+
+def _messages(poses, names, start, done, first: int = 0) -> Iterator[Message]:
+    """Pose `first + j` is poses[j]; from pose `start` on."""
+    for i in range(start, first + len(poses)):
         yield Checkpoint(i)
-        yield Move(i, tuple(float(v) for v in poses[i]))
+        yield Move(i, tuple(float(v) for v in poses[i - first]))
         yield Settle(i)
         for name in names:
             if i == start and name in done:

@@ -11,7 +11,8 @@ const $ = (id) => document.getElementById(id);
 // reload finds them again. Updates come from the event stream (live.js), not from polling.
 const state = { campaign: null, status: null, job: null, diag: null, failureShown: null,
                 jobInfo: null,  // the shown calibration job as last seen
-                verify: null };  // the verification run started from the results: {campaign, job}
+                verify: null,  // the verification run started from the results: {campaign, job}
+                target: null };  // the shown campaign's target accuracy (mm), if adaptive
 const READINGS_SHOWN = 6;  // the latest readings table keeps this many rows
 
 /** Show a message in the header's notice row: an error (until dismissed or replaced) unless ok
@@ -369,6 +370,10 @@ function showCampaign(c) {
     ? `${c.run.active ? "run" : "last run"}: ${c.run.detail}` : "";
   showPoseCount(c.poses_done, c.poses_total);
   if (c.settings) showPlannedEstimate(c);  // plan.js
+  const adaptive = c.settings && c.settings.plan && c.settings.plan.adaptive;
+  const steps = (c.settings && c.settings.adaptive_steps) || [];
+  state.target = adaptive ? adaptive.target_accuracy_mm : null;
+  showAdaptive(steps[steps.length - 1], state.target);  // plan.js
   const actions = new Set(c.actions || []);
   document.querySelectorAll("button[data-action]").forEach((b) => {
     b.disabled = !actions.has(b.dataset.action);

@@ -118,12 +118,15 @@ function dispatch(type, text) {
   else if (type.startsWith("campaign.")) onCampaignEvent(type, e);
 }
 
-// campaign.pose (each pose done, with the counts), campaign.state (each state the engine enters)
-// and campaign.run (a run wound up, its summary stored): server/acquisition/acquire.py, acquisitions.py.
+// campaign.pose (each pose done, with the counts), campaign.adaptive (an adaptive campaign's
+// step: its predicted accuracy), campaign.state (each state the engine enters) and campaign.run
+// (a run wound up, its summary stored): server/acquisition/acquire.py, server/service/acquisitions.py.
 function onCampaignEvent(type, e) {
   if (type === "campaign.pose") heardPoses(e.campaign_id, e.poses_done, e.poses_total);
   if (e.campaign_id === state.campaign) {
-    if (type === "campaign.pose") {
+    if (type === "campaign.adaptive") {
+      showAdaptive(e, state.target);  // plan.js; the target as the campaign's settings had it
+    } else if (type === "campaign.pose") {
       showPoseCount(e.poses_done, e.poses_total);
       // a pose done means the run moves: a status still shown otherwise is stale (the start
       // request's answer, "planned", can land after the state event it preceded)

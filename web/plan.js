@@ -33,7 +33,23 @@ function planBody() {
   };
   if ($("c-name").value.trim()) body.name = $("c-name").value.trim();
   if (Number($("c-choose").value) > 0) body.choose_from = Number($("c-choose").value);
+  if (Number($("c-target").value) > 0) body.target_accuracy_mm = Number($("c-target").value);
   return body;
+}
+
+/** An adaptive campaign's latest step (a campaign.adaptive event, or the last of its settings'
+ * adaptive_steps) beside its target: the predicted held-out RMS, live; why it stopped. */
+function showAdaptive(step, target) {
+  const el = $("p-adaptive");
+  el.hidden = !step && !target;
+  if (el.hidden) return;
+  if (!step) {
+    el.textContent = `target ${target} mm: predicted accuracy after the seed poses`;
+    return;
+  }
+  el.textContent = `predicted held-out RMS ${step.predicted_mm.toFixed(4)} mm at ${step.poses} `
+    + `poses (target ${target} mm, floor ${step.floor_mm.toFixed(4)} mm)`
+    + (step.stop ? ` — stopped (${step.reason}): ${step.message}` : "");
 }
 
 /** Seconds at each pose besides the move: [typical, at most]. */

@@ -60,6 +60,9 @@ class AcquireOptions:
     # the same simulated arm can read it with independent noise
     noise_seed: int | list | None = None
     arm: str | None = None  # the physical arm measured (its serial number), for the fleet view
+    # an adaptive campaign (server/acquisition/adaptive.py): at most `poses` poses, chosen among
+    # `choose_from` candidates (default 400), until the predicted held-out RMS reaches this (mm)
+    target_accuracy_mm: float | None = None
 
 
 class StoreSink:
@@ -242,6 +245,11 @@ def _clients(cell: Cell, sim: SimulatedCell | None, stack: ExitStack):
 def _plan(cell: Cell, base, opts: AcquireOptions, progress=None):
     from robocal.drivers.planning import plan_campaign
 
+    if opts.target_accuracy_mm:
+        from robocal.server.acquisition.adaptive import plan_seed
+
+        return plan_seed(cell, base, opts)
+
     targets = np.array(list(cell.targets.values()))
     rng = np.random.default_rng(opts.seed)
     n_cand = max(opts.choose_from, opts.poses)
@@ -419,14 +427,21 @@ def acquire(
             sink = engine.sink = _Events(sink, on_event, engine, cid, len(poses_deg), start)
         if on_engine:
             on_engine(engine)
+        begin = start if start is not None else len(poses_deg)
+        adaptive = None
+        if opts.target_accuracy_mm:
+            from robocal.server.acquisition.adaptive import adaptive_run
+
+            adaptive = adaptive_run(db, cid, cell, base, opts, clock, known, sink, on_event)
         t0 = clock.now()
         try:
             stats = _run(
                 engine,
                 poses_deg,
-                start=start if start is not None else len(poses_deg),
+                start=begin,
                 history=history,
                 partial=partial,
+                plan=None if adaptive is None else adaptive.plan(begin, partial),
             )
         except KeyboardInterrupt:
             writer.close()
@@ -450,7 +465,7 @@ def acquire(
         "campaign": cid,
         "name": name,
         "resumed_at": start if existing else None,
-        "poses": int(len(poses_deg)),
+        "poses": int(len(poses_deg) if adaptive is None else len(adaptive.planned)),
         "state": engine.state,
         "measured_poses": stats.poses,
         "readings": stats.readings,
@@ -467,6 +482,7 @@ def acquire(
         # campaign clock seconds per kind of plan message (this run's)
         "phase_s": asdict(stats.phase_s),
         "simulated": cell.simulated,
+        "adaptive": None if adaptive is None else adaptive.summary(),
     }
 
 

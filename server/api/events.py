@@ -43,6 +43,26 @@ class CampaignPoseEvent(BaseModel):
     time: dt.datetime
 
 
+class CampaignAdaptiveEvent(BaseModel):
+    """An adaptive campaign refitted its readings: the accuracy it predicts, and whether it
+    stops (the step as the campaign's settings keep it, `adaptive_steps`)."""
+
+    type: Literal["campaign.adaptive"]
+    campaign_id: int
+    poses: int = Field(description="the poses the step fitted")
+    predicted_mm: float = Field(description="predicted held-out RMS over the working volume")
+    floor_mm: float = Field(description="what it tends to with endless poses")
+    parameters_mm: float = Field(description="the parameters' part of it")
+    holdout_mm: float | None = Field(description="the fit's own leave-one-pose-out RMS")
+    expected_holdout_mm: float = Field(description="what the noise alone would give that")
+    kappa: float = Field(description="the data's check on the prediction (>= 1)")
+    stop: bool
+    reason: str = Field(description="target, floor or maximum when it stops, else empty")
+    message: str
+    campaign_s: float | None = Field(description="the campaign clock at the step")
+    time: dt.datetime
+
+
 class CampaignRunEvent(BaseModel):
     """This service's run of a campaign ended: the campaign's state then, and why."""
 
@@ -66,7 +86,7 @@ class JobEvent(BaseModel):
     time: dt.datetime
 
 
-EVENTS = (CampaignStateEvent, CampaignPoseEvent, CampaignRunEvent, JobEvent)
+EVENTS = (CampaignStateEvent, CampaignPoseEvent, CampaignAdaptiveEvent, CampaignRunEvent, JobEvent)
 
 
 def event_item_schema() -> dict[str, Any]:
@@ -101,8 +121,8 @@ def event_item_schema() -> dict[str, Any]:
     },
 )
 async def events(request: Request, bus: EventsDep) -> EventSourceResponse:
-    """Server-sent events: `event:` is the type (campaign.state, campaign.pose, campaign.run,
-    job), `data:` its JSON object; events from before the connection are not replayed."""
+    """Server-sent events: `event:` is the type (campaign.state, campaign.pose,
+    campaign.adaptive, campaign.run, job), `data:` its JSON object; events from before the connection are not replayed."""
     # Subscribed before the response starts, so nothing published after the headers is missed.
     queue = bus.subscribe()
 

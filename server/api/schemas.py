@@ -71,6 +71,18 @@ class CampaignCreate(BaseModel):
         pattern=PRINTABLE,
         description="the physical arm measured (its serial number), for the fleet view",
     )
+    target_accuracy_mm: Real | None = Field(
+        None,
+        gt=0.0,
+        le=100.0,
+        description=(
+            "an adaptive campaign: a D-optimal seed set, then batches of the poses (chosen among "
+            "`choose_from` candidates, default 400) that most reduce the predicted held-out "
+            "error over the working volume, until that prediction (checked by leave-one-pose-"
+            "out) reaches this RMS, the floor, or `poses` poses; each step is kept in the "
+            "campaign's settings (`adaptive_steps`) and sent as a `campaign.adaptive` event"
+        ),
+    )
 
 
 Coordinate = Field(ge=-COORD_MAX_MM, le=COORD_MAX_MM)

@@ -128,8 +128,10 @@ def cmd_acquire(args) -> int | None:
         return _check(args, cell)
     if args.check_poses:
         raise ValueError("--check-poses: the poses of a check, with --check model.json")
+    target = args.target_accuracy_mm
     opts = AcquireOptions(
-        poses=args.poses if args.poses is not None else 100,
+        poses=args.poses if args.poses is not None else (80 if target else 100),
+        target_accuracy_mm=target,
         seed=args.seed,
         name=args.name,
         settle=args.settle,
@@ -143,6 +145,8 @@ def cmd_acquire(args) -> int | None:
     with _progress(console) as progress:
         summary = acquire(args.db, cell, opts, progress=progress, reset=args.reset)
     _print_summary(console, summary)
+    if summary.get("adaptive"):
+        _print_adaptive(console, summary["adaptive"])
     console.print(
         f"stored in {args.db}; calibrate with: robocal calibrate {args.db} "
         f"--campaign {summary['campaign']}"
@@ -173,6 +177,13 @@ def _print_summary(console, summary: dict) -> None:
             else ""
         )
     )
+
+
+def _print_adaptive(console, adaptive: dict) -> None:
+    """The adaptive campaign's steps: poses and predicted held-out RMS, and why it stopped."""
+    steps = ", ".join(f"{s['poses']}: {s['predicted_mm']:.4f}" for s in adaptive["steps"])
+    console.print(f"predicted held-out RMS (mm) by poses: {steps}")
+    console.print(f"stopped ({adaptive['stopped']}): {adaptive['message']}")
 
 
 def add(sub) -> None:
@@ -218,6 +229,14 @@ def add(sub) -> None:
         default=0,
         metavar="N",
         help="choose the poses out of N candidates by D-optimality",
+    )
+    aq.add_argument(
+        "--target-accuracy-mm",
+        type=_positive,
+        metavar="T",
+        help="an adaptive campaign: a D-optimal seed set, then batches of the poses that most "
+        "reduce the predicted held-out error over the working volume, until its predicted "
+        "RMS (checked by leave-one-pose-out) reaches T mm, the floor, or --poses (default 80)",
     )
     aq.add_argument(
         "--beam-break-rate",

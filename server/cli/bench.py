@@ -50,7 +50,7 @@ def cmd_bench(args) -> None:
     elif args.what == "acquire":
         from ..bench.acquire import run_acquire_bench
 
-        result = run_acquire_bench()
+        result = run_acquire_bench(suite_seeds=args.seeds)
     elif args.what == "recording":
         from ..bench.recording import run_recording_bench
 
@@ -101,6 +101,12 @@ def add(sub) -> None:
         help="what to time (validation: the deployment guard's flags on healthy, small and "
         "real campaigns; check: quick checks' false alarms and delays to a change; scale: `robocal calibrate` of a large campaign as a process, next to np.loadtxt of its file, "
         "then diagnose of 1,000 / 3,000 / 10,000 poses)",
+    )
+    b.add_argument(
+        "--seeds",
+        type=_nonnegative_int,
+        default=20,
+        help="acquire: seeds of each arm in the adaptive campaign's suite (default 20, 0: none)",
     )
     b.add_argument(
         "--repeats",

@@ -3,9 +3,11 @@
 from .campaigns import (
     CampaignInfo,
     create_campaign,
+    extend_plan,
     get_campaign,
     list_campaigns,
     set_status,
+    update_settings,
 )
 from .db import Database, open_database
 from .errors import Conflict, DatabaseGone, NotFound, StoreError, StoreUnavailable
@@ -60,12 +62,14 @@ __all__ = [
     "StoreUnavailable",
     "campaign_measurements",
     "create_campaign",
+    "extend_plan",
     "discard_unfinished_pose",
     "export_csv",
     "export_lines",
     "get_campaign",
     "import_csv",
     "list_campaigns",
+    "update_settings",
     "next_unmeasured_pose",
     "open_database",
     "planned_poses",

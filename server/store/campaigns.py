@@ -73,6 +73,32 @@ def create_campaign(
     return campaign.id
 
 
+def extend_plan(db: Database, *, campaign_id: int, poses_deg) -> int:
+    """Append poses (m x N joints, deg) to a campaign's plan, labelled on from its last (an
+    adaptive campaign's next batch); the first new pose's index."""
+    with db.session(write=True) as s:
+        campaign = _campaign(s, campaign_id)
+        cell, _ = checks.cell_text(campaign.cell_json)
+        q = checks.plan_deg(poses_deg, cell.robot)
+        first = s.execute(
+            select(func.count()).where(PlannedPose.campaign_id == campaign_id)
+        ).scalar_one()
+        _add_plan(s, campaign_id, [str(first + 1 + i) for i in range(len(q))], q, first=first)
+    return int(first)
+
+
+def update_settings(db: Database, *, campaign_id: int, **values) -> dict:
+    """Set these keys of a campaign's settings (plain JSON values); the settings after."""
+    with db.session(write=True) as s:
+        campaign = _campaign(s, campaign_id)
+        settings = {**json.loads(campaign.settings_json), **values}
+        try:
+            campaign.settings_json = json.dumps(settings, sort_keys=True, allow_nan=False)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"settings must be plain JSON values: {e}") from None
+    return settings
+
+
 def get_campaign(db: Database, *, campaign_id: int) -> CampaignInfo:
     """The campaign with this id; NotFound if there is none."""
     with db.session() as s:

@@ -68,3 +68,25 @@ def test_bad_plans_are_refused_before_any_message(kwargs, says):
 def test_poses_must_be_a_table():
     with pytest.raises(ValueError, match="poses_deg must be a"):
         campaign_plan(np.zeros(6), ("a",))
+
+
+def test_a_growing_plan_asks_for_each_batch_after_the_last_save_and_numbers_on():
+    from robocal.drivers.plan import growing_plan
+
+    batches = [np.zeros((2, 6)), np.ones((1, 6))]
+    asked = []
+    msgs = []
+
+    def next_batch():
+        asked.append(len(msgs))
+        return batches.pop(0) if batches else None
+
+    for msg in growing_plan(next_batch, ("A", "B"), start=3, partial={"A": 1}):
+        msgs.append(msg)
+    # asked first, then after pose 4's Save, then after pose 5's
+    assert [type(msgs[i - 1]).__name__ for i in asked[1:]] == ["Save", "Save"]
+    assert [m.pose for m in msgs if isinstance(m, Move)] == [3, 4, 5]
+    # the partial reading is skipped at the first pose only
+    aims = [(m.pose, m.target) for m in msgs if isinstance(m, Aim)]
+    assert aims == [(3, "B"), (4, "A"), (4, "B"), (5, "A"), (5, "B")]
+    assert [m.q_deg for m in msgs if isinstance(m, Move)][2] == (1.0,) * 6

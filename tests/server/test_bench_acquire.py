@@ -87,3 +87,21 @@ def test_every_procedure_takes_longer_than_its_bound_and_the_combined_one_least(
     assert out["fastest"] == "combined"
     assert runs["combined"]["ratio_to_bound"] < 0.5 * runs["paper"]["ratio_to_bound"]
     assert out["target"]["ratio_to_bound_max"] == 1.2 and "spanning tree" in out["bound_method"]
+
+
+def test_the_adaptive_procedure_sits_beside_the_fixed_ones_with_its_target():
+    out = run_acquire_bench(
+        holdout=10,
+        configs={
+            "fixed": dict(poses=20, settle="adaptive", order=True),
+            "adaptive_x3": dict(poses=30, settle="adaptive", order=True, target_floor_factor=3.0),
+        },
+    )
+    runs = out["configs"]
+    a = runs["adaptive_x3"]
+    assert a["adaptive"]["target_mm"] == pytest.approx(3.0 * out["noise_floor_mm"])
+    assert a["adaptive"]["stopped"] in ("target", "floor", "maximum")
+    assert a["poses"] == a["poses_in_bound"] == a["adaptive"]["steps"][-1][0] <= 30
+    assert a["campaign_min"] == pytest.approx(a["campaign_s"] / 60.0)
+    assert out["fastest"] == "fixed" and "adaptive" not in runs["fixed"]
+    assert out["adaptive_suite"] is None

@@ -42,6 +42,14 @@ def page():
         browser.close()
 
 
+def sign_in(page, served) -> None:
+    """Open the page, give it the token, and wait for the cells it then lists."""
+    page.goto(served.url + "/")
+    page.fill("#token", served.token)
+    page.click("#token-form button[type=submit]")
+    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+
+
 def shot(page, name: str) -> Path:
     """A full-page screenshot under tests/web/artifacts; its path."""
     ARTIFACTS.mkdir(exist_ok=True)
