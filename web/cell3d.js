@@ -12,6 +12,7 @@ const cell3d = {
   nextPose: 0,  // a campaign's: where its next piece starts
   pulling: false, again: false,  // one pull at a time; a pose heard meanwhile asks for another
   pose: null,  // a pose asked for before the viewer had the recording
+  labels: new Map(),  // a job's recording: pose label -> index on its timeline "pose"
 };
 
 const sourceKey = (s) => (s ? `${s.kind}-${s.id}` : null);
@@ -26,7 +27,34 @@ function setCell3dSource(src) {
   $("c3").hidden = !src;
   $("c3-go").disabled = true;
   $("c3-pose").value = "";
+  cell3d.labels = new Map();
+  linkPoses();
+  if (src && src.kind === "job") loadPoseLabels(src);
   if (cell3d.frame && src) loadCell3d();
+}
+
+/** A job recording's poses by label, so that tables naming poses by label link to it. */
+async function loadPoseLabels(src) {
+  try {
+    const poses = await api("GET", `/jobs/${src.id}/recording/poses`);
+    if (sourceKey(cell3d.source) !== sourceKey(src)) return;
+    // a label of the calibration's own poses first: a held-out campaign may reuse it
+    poses.forEach((p) => { if (!cell3d.labels.has(p.label)) cell3d.labels.set(p.label, p.index); });
+    linkPoses();
+  } catch (e) {
+    console.warn("the tables' poses stay unlinked to the 3-D viewer:", e);  // nothing is lost
+  }
+}
+
+/** Table cells naming a pose by label (data-pose-label): a button to it where the viewer's
+ * recording has that pose, plain text elsewhere. */
+function linkPoses() {
+  document.querySelectorAll("td[data-pose-label]").forEach((td) => {
+    const label = td.dataset.poseLabel;
+    const index = cell3d.labels.get(label);
+    if (index === undefined) td.textContent = label;
+    else td.replaceChildren(poseButton(index, label));
+  });
 }
 
 /** The shown job's recording, if it has one; else the current campaign's, live. */

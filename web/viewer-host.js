@@ -73,10 +73,19 @@ function show(m) {
     if (m.key.startsWith("job-")) document.body.dataset.job = m.key.slice(4);
     setState("shown");
   } else if (m.kind === "pose") {
-    handle.viewer_control(setTimeCursor("pose", m.index))
-      .then(() => { document.body.dataset.pose = String(m.index); })
-      .catch((e) => console.warn("the viewer did not go to pose", m.index, e));
+    goToPose(m.index, 20);
   }
+}
+
+/** The time cursor to a pose; again a little later while the recording just sent is still
+ * being read (its timeline "pose" not there yet). */
+function goToPose(index, tries) {
+  handle.viewer_control(setTimeCursor("pose", index))
+    .then(() => { document.body.dataset.pose = String(index); })
+    .catch((e) => {
+      if (tries > 0) setTimeout(() => goToPose(index, tries - 1), 500);
+      else console.warn("the viewer did not go to pose", index, e);
+    });
 }
 
 window.addEventListener("message", (ev) => {

@@ -8,7 +8,8 @@ import io
 import numpy as np
 
 from tests.web.conftest import ARTIFACTS
-from tests.web.test_ui_viewer import FRAME, gl_page  # noqa: F401 (a fixture)
+from tests.web.test_ui_model import calibrate_on_page, measured_campaign
+from tests.web.test_ui_viewer import FRAME, arrow_pixels, gl_page  # noqa: F401 (a fixture)
 
 POSES = 120  # long enough to see poses come in while it runs
 
@@ -108,3 +109,38 @@ def test_running_campaign_shows_live_in_the_viewer(served, gl_page):  # noqa: F8
     print(f"live: {POSES} poses in {pieces} pieces")
     assert pieces >= 3  # the first (the tracker), one while it ran, the rest
     assert not elsewhere, f"the page asked other hosts: {elsewhere}"
+
+
+def test_outlier_pose_opens_the_calibration_recording_there(served, gl_page):  # noqa: F811
+    """A pose named by label in a table (the diagnosis's outliers) is a button to that pose on
+    the shown calibration recording's timeline, as GET /api/jobs/{id}/recording/poses maps it."""
+    page = gl_page
+    cid = measured_campaign(served, 12)
+    job = calibrate_on_page(served, page, cid)
+    poses = served.client.get(f"/api/jobs/{job['id']}/recording/poses").json()
+    readings = served.client.get(f"/api/campaigns/{cid}/measurements?limit=1000").json()
+    labels = list(dict.fromkeys(r["pose"] for r in readings if r["status"] == "ok"))
+    assert [p["label"] for p in poses] == labels
+    assert [p["index"] for p in poses] == list(range(len(labels)))
+    assert {p["set"] for p in poses} == {"calibration"}
+    # the outliers as a diagnosis report lists them (crafted: this campaign has none)
+    page.evaluate(
+        "(o) => { $('diagnosis').hidden = false; showOutliers(o); }",
+        [
+            {"pose": poses[5]["label"], "target": "A", "residual_mm": 1.2},
+            {"pose": "no-such-pose", "target": "B", "residual_mm": 0.3},
+        ],
+    )
+    cells = page.locator("#outliers-table tbody td:first-child")
+    cells.nth(0).locator("button.pose-link").wait_for()
+    assert cells.nth(1).locator("button").count() == 0  # not on the recording: plain text
+    cells.nth(0).locator("button.pose-link").click()
+    page.wait_for_function(f"{FRAME} && {FRAME}.body && {FRAME}.body.dataset.pose === '5'")
+    assert page.evaluate(f"{FRAME}.body.dataset.job") == str(job["id"])
+    assert "pose 5" in page.text_content("#c3-state")
+    frame = page.locator("#c3-frame")
+    for _ in range(30):  # the picture once the arrows are drawn (not asserted: test_ui_viewer)
+        page.wait_for_timeout(1000)
+        if arrow_pixels(frame.screenshot()) > 150:
+            break
+    frame.screenshot(path=str(ARTIFACTS / "viewer-outlier-pose-5.png"))
