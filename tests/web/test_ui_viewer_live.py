@@ -9,7 +9,12 @@ import numpy as np
 
 from tests.web.conftest import ARTIFACTS
 from tests.web.test_ui_model import calibrate_on_page, measured_campaign
-from tests.web.test_ui_viewer import FRAME, arrow_pixels, gl_page  # noqa: F401 (a fixture)
+from tests.web.test_ui_viewer import (  # noqa: F401 (gl_page: a fixture)
+    FRAME,
+    arrow_pixels,
+    gl_page,
+    picture_until,
+)
 
 POSES = 120  # long enough to see poses come in while it runs
 
@@ -76,15 +81,8 @@ def test_running_campaign_shows_live_in_the_viewer(served, gl_page):  # noqa: F8
         "['paused', 'done'].includes(document.getElementById('p-status').textContent)"
     )
     status = page.text_content("#p-status")
-    ARTIFACTS.mkdir(exist_ok=True)
     frame = page.locator("#c3-frame")
-    seen = 0
-    for _ in range(60):
-        page.wait_for_timeout(1000)
-        png = frame.screenshot(path=str(ARTIFACTS / "viewer-live-campaign.png"))
-        seen = reading_pixels(png)
-        if seen > 100:
-            break
+    seen = picture_until(page, "viewer-live-campaign", reading_pixels, 100)
     assert seen > 100, f"no readings in the viewer's picture: {logs[-10:]}"
     print(f"live: {seen} reading pixels at {page.text_content('#p-count')} ({status})")
     assert "measured in the view" in page.text_content("#c3-state")
@@ -138,9 +136,5 @@ def test_outlier_pose_opens_the_calibration_recording_there(served, gl_page):  #
     page.wait_for_function(f"{FRAME} && {FRAME}.body && {FRAME}.body.dataset.pose === '5'")
     assert page.evaluate(f"{FRAME}.body.dataset.job") == str(job["id"])
     assert "pose 5" in page.text_content("#c3-state")
-    frame = page.locator("#c3-frame")
-    for _ in range(30):  # the picture once the arrows are drawn (not asserted: test_ui_viewer)
-        page.wait_for_timeout(1000)
-        if arrow_pixels(frame.screenshot()) > 150:
-            break
-    frame.screenshot(path=str(ARTIFACTS / "viewer-outlier-pose-5.png"))
+    # the picture once the arrows are drawn (they are asserted in test_ui_viewer)
+    picture_until(page, "viewer-outlier-pose-5", arrow_pixels, 150, tries=30)
