@@ -247,6 +247,7 @@ function useCampaign(c, keepResults = false) {
     forgetJob();
   }
   if (other) $("readings").innerHTML = '<p class="muted">none yet</p>';
+  followCampaign3d();  // cell3d.js: its readings in 3-D, unless a job's results stay shown
   rememberView();  // history.js: the URL says what the page shows
 }
 
@@ -359,6 +360,7 @@ function showPoseCount(done, total) {
   $("p-bar").max = total || 1;
   $("p-bar").value = done;
   $("p-count").textContent = `${done} / ${total} poses`;
+  pullCampaign3d();  // cell3d.js: the poses done since, into the 3-D viewer if it shows them
 }
 
 function showCampaign(c) {
@@ -388,6 +390,7 @@ function showCampaign(c) {
   }
   state.status = c.status;
   if (c.kind === "verification") showVerifyState(c);
+  followCampaign3d();
   refreshCalibrate();
 }
 
@@ -466,10 +469,14 @@ function renderReadings(rows, total) {
   ["pose", "SMR", "status", "x / mm", "y / mm", "z / mm", "std max / mm", "t / s", "T / °C"]
     .forEach((h) => { head.appendChild(document.createElement("th")).textContent = h; });
   const body = table.createTBody();
+  const linked = cell3d.source && cell3d.source.kind === "campaign";
   rows.forEach((r) => {
     const tr = body.insertRow();
     const xyz = r.xyz || [null, null, null];
-    [r.pose, r.target, r.status + (r.detail ? ` (${r.detail})` : ""), ...xyz.map((v) => fmt(v)),
+    // the pose a button when the 3-D viewer shows this campaign: its timeline is the plan's
+    if (linked) tr.insertCell().appendChild(poseButton(r.pose_index, r.pose));
+    else tr.insertCell().textContent = r.pose;
+    [r.target, r.status + (r.detail ? ` (${r.detail})` : ""), ...xyz.map((v) => fmt(v)),
      r.std ? fmt(Math.max(...r.std)) : "-", r.time_s === null ? "-" : r.time_s.toFixed(1),
      r.temp_c === null ? "-" : r.temp_c.toFixed(2)]
       .forEach((v) => { tr.insertCell().textContent = v; });

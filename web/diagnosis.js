@@ -103,6 +103,11 @@ function showOutliers(list) {
       { textContent: `Readings excluded as gross errors (${list.length})` }),
     makeTable("outliers-table", ["pose", "target", "residual / mm"],
       list.map((o) => [String(o.pose), o.target, fmt(o.residual_mm)])));
+  // each pose a button to it in the 3-D viewer, where the shown recording has it (cell3d.js)
+  box.querySelectorAll("#outliers-table tbody tr").forEach((tr, i) => {
+    tr.cells[0].dataset.poseLabel = String(list[i].pose);
+  });
+  linkPoses();
 }
 
 /** The name a person reads for an effect of the report: type, joint, harmonic, time. */

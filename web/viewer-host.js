@@ -19,6 +19,8 @@ const canvas = document.getElementById("canvas");
 let handle = null;
 let channels = 0;  // each recording its own channel (rerun refuses to reopen an id)
 let current = null;
+let currentKey = null;  // the page's name for what the channel shows (job-N, campaign-N)
+let pieces = 0;  // .rrd pieces sent to the current channel
 const waiting = [];  // messages posted before the viewer started
 
 /** The viewer's state for the page and for tests: loading, started, shown, failed. */
@@ -53,20 +55,37 @@ function setTimeCursor(timeline, time) {
 }
 
 function show(m) {
-  if (m.kind === "recording") {
+  if (m.kind === "recording" || (m.kind === "more" && m.key !== currentKey)) {
     channels += 1;
-    const id = `job-${m.job}-${channels}`;
+    const id = `${m.key}-${channels}`;
     if (current) handle.close_channel(current);
     current = id;
-    handle.open_channel(id, `calibration job ${m.job}`);
-    handle.send_rrd_to_channel(id, new Uint8Array(m.bytes));
-    document.body.dataset.job = String(m.job);
+    currentKey = m.key;
+    pieces = 0;
+    handle.open_channel(id, m.title);
+  }
+  if (m.kind === "recording" || m.kind === "more") {
+    // a whole .rrd each time: a campaign's pieces share its recording id, so they add up
+    handle.send_rrd_to_channel(current, new Uint8Array(m.bytes));
+    pieces += 1;
+    document.body.dataset.source = m.key;
+    document.body.dataset.pieces = String(pieces);
+    if (m.key.startsWith("job-")) document.body.dataset.job = m.key.slice(4);
     setState("shown");
   } else if (m.kind === "pose") {
-    handle.viewer_control(setTimeCursor("pose", m.index))
-      .then(() => { document.body.dataset.pose = String(m.index); })
-      .catch((e) => console.warn("the viewer did not go to pose", m.index, e));
+    goToPose(m.index, 20);
   }
+}
+
+/** The time cursor to a pose; again a little later while the recording just sent is still
+ * being read (its timeline "pose" not there yet). */
+function goToPose(index, tries) {
+  handle.viewer_control(setTimeCursor("pose", index))
+    .then(() => { document.body.dataset.pose = String(index); })
+    .catch((e) => {
+      if (tries > 0) setTimeout(() => goToPose(index, tries - 1), 500);
+      else console.warn("the viewer did not go to pose", index, e);
+    });
 }
 
 window.addEventListener("message", (ev) => {

@@ -10,13 +10,14 @@ from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, JSONResponse
 from pydantic import BaseModel, ConfigDict
 
+from robocal.server import store
 from robocal.server.formats.blocks import HeldOut, Validation
 from robocal.server.service.job_queue import DuplicateJob, Job
 
 from . import problems
 from .bodies import json_body, read_json
-from .deps import Authorized, JobId, JobsDep
-from .schemas import FigurePublic, JobCreate, JobPublic
+from .deps import Authorized, DbDep, JobId, JobsDep
+from .schemas import FigurePublic, JobCreate, JobPublic, RecordingPosePublic
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 JobBody = Annotated[JobCreate, Depends(read_json(JobCreate))]
@@ -140,6 +141,25 @@ def get_recording(job_id: JobId, jobs: JobsDep) -> FileResponse:
         media_type="application/octet-stream",
         filename=f"job-{job_id}.rrd",
     )
+
+
+@router.get("/{job_id}/recording/poses")
+def get_recording_poses(job_id: JobId, jobs: JobsDep, db: DbDep) -> list[RecordingPosePublic]:
+    """The recording's timeline "pose", index by index: the calibration's poses (those with a
+    reading, in plan order), then the held-out campaign's; what the page's tables link to."""
+    jobs.result_path(job_id, "recording")  # 404 none, 409 not done
+    job = jobs.get(job_id)
+    sets = [("calibration", job.campaign_id), ("held_out", job.holdout_campaign_id)]
+    out: list[RecordingPosePublic] = []
+    for name, cid in sets:
+        if cid is None:
+            continue
+        # the poses as the worker read them for the recording (store.campaign_measurements)
+        labels = store.campaign_measurements(db, campaign_id=cid).pose_ids
+        out += [
+            RecordingPosePublic(index=len(out) + i, label=p, set=name) for i, p in enumerate(labels)
+        ]
+    return out
 
 
 @router.get("/{job_id}/report")

@@ -10,6 +10,7 @@ from starlette.concurrency import iterate_in_threadpool, run_in_threadpool
 
 from robocal.server import store
 from robocal.server.acquisition import campaigns, cells
+from robocal.server.recordings import live as recording_live
 from robocal.server.service import uploads
 
 from .bodies import csv_body
@@ -127,4 +128,38 @@ def _import(jobs, db, data: bytes, filename: str, cell, name: str, arm: str | No
     meas = run_call(jobs, uploads.read_measurements, data, filename, cell.robot)
     return campaigns.import_campaign(
         db, measurements=meas, filename=filename, cell=cell, name=name, arm=arm
+    )
+
+
+NEXT_POSE_HEADER = "X-Next-Pose"
+
+
+@router.get(
+    "/campaigns/{campaign_id}/recording",
+    response_class=Response,
+    responses={
+        200: {
+            "content": {"application/octet-stream": {}},
+            "headers": {
+                NEXT_POSE_HEADER: {
+                    "description": "the from_pose of the next piece",
+                    "schema": {"type": "integer"},
+                }
+            },
+        }
+    },
+)
+def get_live_recording(
+    campaign_id: CampaignId,
+    db: DbDep,
+    from_pose: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
+) -> Response:
+    """The campaign's readings as a Rerun recording (.rrd), live: the poses from `from_pose` on
+    that have an outcome; X-Next-Pose says where the next piece starts (an empty body: nothing
+    new yet). Pieces of one campaign add up to one recording in the viewer."""
+    piece = recording_live.campaign_piece(db, campaign_id, from_pose)
+    return Response(
+        piece.rrd,
+        media_type="application/octet-stream",
+        headers={NEXT_POSE_HEADER: str(piece.next_pose), "Cache-Control": "no-store"},
     )

@@ -250,6 +250,14 @@ class JobPublic(BaseModel):
     )
 
 
+class RecordingPosePublic(BaseModel):
+    """A pose on a calibration recording's timeline "pose": its index there and its label."""
+
+    index: int
+    label: str
+    set: Literal["calibration", "held_out"]
+
+
 class FigurePublic(BaseModel):
     name: str
     url: str

@@ -270,6 +270,24 @@ def pose_readings(db: Database, *, campaign_id: int, pose_index: int) -> dict[st
         return {r.target: _reading_info(r) for r in rows}
 
 
+def readings_of_poses(
+    db: Database, *, campaign_id: int, first: int, stop: int
+) -> list[ReadingInfo]:
+    """The readings of poses first <= index < stop, in plan order (pose, then arrival)."""
+    with db.session() as s:
+        _campaign(s, campaign_id)
+        rows = s.scalars(
+            select(Reading)
+            .where(
+                Reading.campaign_id == campaign_id,
+                Reading.pose_index >= first,
+                Reading.pose_index < stop,
+            )
+            .order_by(Reading.pose_index, Reading.id)
+        )
+        return [_reading_info(r) for r in rows]
+
+
 IMPORTING = "import in progress (or interrupted: delete and import again)"
 
 

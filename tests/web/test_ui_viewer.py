@@ -50,6 +50,19 @@ def arrow_pixels(png: bytes) -> int:
     return int(((r > 150) & (b < 70) & (g > 60) & (g < r - 40)).sum())
 
 
+def picture_until(page, name: str, count, least: int, tries: int = 60) -> int:
+    """Screenshots of the viewer's frame (tests/web/artifacts/<name>.png) once a second until
+    count(png) > least (it draws over several frames once the bytes are in); the last count."""
+    ARTIFACTS.mkdir(exist_ok=True)
+    seen = 0
+    for _ in range(tries):
+        page.wait_for_timeout(1000)
+        seen = count(page.locator("#c3-frame").screenshot(path=str(ARTIFACTS / f"{name}.png")))
+        if seen > least:
+            break
+    return seen
+
+
 def test_viewer_shows_the_recording_from_the_service_alone(served, gl_page):
     page = gl_page
     elsewhere: list[str] = []
@@ -60,20 +73,15 @@ def test_viewer_shows_the_recording_from_the_service_alone(served, gl_page):
     job = calibrate_on_page(served, page, measured_campaign(served, 12))
     assert page.is_visible("#c3-open")
     page.click("#c3-open")
-    page.wait_for_function(f"{FRAME} && ['shown', 'failed'].includes({FRAME}.body.dataset.state)")
+    # the frame's document has no body for a moment while it loads
+    page.wait_for_function(
+        f"{FRAME} && {FRAME}.body && ['shown', 'failed'].includes({FRAME}.body.dataset.state)"
+    )
     state = page.evaluate(f"{FRAME}.body.dataset.state")
     assert state == "shown", (page.evaluate(f"{FRAME}.getElementById('status').textContent"), logs)
     assert page.evaluate(f"{FRAME}.body.dataset.job") == str(job["id"])
-    ARTIFACTS.mkdir(exist_ok=True)
     frame = page.locator("#c3-frame")
-    # the viewer draws over several frames once the bytes are in: look until the arrows are seen
-    seen = 0
-    for _ in range(60):
-        page.wait_for_timeout(1000)
-        png = frame.screenshot(path=str(ARTIFACTS / "viewer-cell-3d.png"))
-        seen = arrow_pixels(png)
-        if seen > 150:
-            break
+    seen = picture_until(page, "viewer-cell-3d", arrow_pixels, 150)
     assert seen > 150, f"no error arrows in the viewer's picture: {logs[-10:]}"
     # a pose chosen on the page: the viewer's time cursor on timeline "pose" (viewer control API)
     page.fill("#c3-pose", "5")
