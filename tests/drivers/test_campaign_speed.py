@@ -294,3 +294,36 @@ def test_a_point_ahead_that_missed_is_followed_by_a_search_not_the_same_point():
 
     # never the same POINT again right after it missed: it cannot lock there either
     assert not any(i + 1 < len(lines) and same_point(lines[i][0], lines[i + 1][0]) for i in missed)
+
+
+def test_each_pose_s_readings_begin_with_its_farthest_smr_pointed_at_ahead():
+    # the farthest SMR's noise, hence the spread the tracker's still-check allows, is largest:
+    # the first reading after a move, the one the ringing holds back, passes soonest on it
+    from robocal.drivers.plan import Aim
+
+    with simulated_engine(seed=3, n=12) as (engine, poses, sim):
+        seen: list = []
+        engine.trace = seen.append
+        stats = engine.run(poses)
+        names = list(sim.cell.target_names)
+        reach = np.linalg.norm(sim.cell.true_points(np.deg2rad(poses)), axis=-1)
+    assert stats.readings == 12 * 3
+    firsts = [m.first for m in seen if isinstance(m, Move)]
+    assert firsts == [names[k] for k in np.argmax(reach, axis=1)]
+    aims = [m for m in seen if isinstance(m, Aim)]
+    assert [m.target for m in aims[::3]] == firsts
+    assert len(set(np.argmax(reach, axis=1))) > 1  # the order changes from pose to pose
+
+
+def test_a_search_sweeps_out_to_the_prediction_s_reach_at_once():
+    # the spiral ends where it meets the SMR: a narrow search first would sweep its disc twice
+    # whenever the SMR lies beyond it
+    with simulated_engine(seed=3, n=8) as (engine, poses, sim):
+        dev, radii = sim.tracker_device, []
+        search = dev.search
+        dev.search = lambda r: radii.append(r) or search(r)
+        stats = engine.run(poses)
+    assert stats.readings == 8 * 3 and radii
+    assert engine.settings.wide_search_radius_mm in radii  # before the model is registered
+    assert all(r >= engine.settings.search_radius_mm for r in radii)
+    assert stats.searched == len(radii)
