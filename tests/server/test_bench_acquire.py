@@ -80,7 +80,7 @@ def test_every_procedure_takes_longer_than_its_bound_and_the_combined_one_least(
         # the campaign's time, split by plan message, adds up to it (one virtual clock)
         assert sum(run["phase_s"].values()) == pytest.approx(run["campaign_s"], abs=1e-9)
         assert run["phase_s"]["move"] >= bound["tour_s"] - 1e-9
-        assert run["phase_s"]["measure"] >= bound["measuring_s"]
+        assert run["phase_s"]["measure"] >= bound["measuring_s"] - 1e-9  # clock sums round
     # the paper pauses 10 s at each pose; adaptive settling waits inside the stream's readings
     assert runs["paper"]["phase_s"]["settle"] == pytest.approx(10.0 * 14)
     assert runs["combined"]["phase_s"]["settle"] == 0.0
