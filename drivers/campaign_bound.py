@@ -1,5 +1,6 @@
-"""Lower bounds on a campaign's time: its motion (a minimum spanning tree of the move times) and
-the settling the simulated arm's ringing forces before a reading can pass the tracker's check."""
+"""Lower bounds on a campaign's time: its motion (a minimum spanning tree of the move times), the
+settling the simulated arm's ringing forces before a reading can pass the tracker's check, and
+the re-aiming of the tracker's one beam between the readings of a pose."""
 
 from __future__ import annotations
 
@@ -8,7 +9,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .planning import move_time
-from .tracker.sim import INACCURATE_SPREAD, SETTLE_AMPLITUDE_MM, SETTLE_HZ, SETTLE_TAU_S
+from .tracker.sim import (
+    INACCURATE_SPREAD,
+    POINT_S,
+    SETTLE_AMPLITUDE_MM,
+    SETTLE_HZ,
+    SETTLE_TAU_S,
+)
 
 
 def spanning_tree_weight(D: np.ndarray) -> float:
@@ -36,6 +43,14 @@ def motion_lower_bound(q, start, speeds=None) -> float:
     """
     nodes = np.vstack([np.asarray(start, dtype=float)[None], np.asarray(q, dtype=float)])
     return spanning_tree_weight(move_time(nodes[:, None], nodes[None], speeds))
+
+
+def aiming_lower_bound(readings: int, poses: int, point_s: float = POINT_S) -> float:
+    """Seconds of aiming no procedure can overlap: one beam reads a pose's SMRs one after another,
+    all after the arm has settled, and between two readings the head moves and locks (point_s
+    each, the simulated tracker's POINT); only the pose's first SMR may be pointed at while the
+    arm still moves."""
+    return max(0, int(readings) - int(poses)) * float(point_s)
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,9 @@ import difflib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
-from scipy.optimize import OptimizeResult
 
 from . import identifiability as ident
 from . import identify
@@ -34,11 +34,35 @@ from .stop import Stop
 RESIDUAL_OVER_FLOOR = 2.0
 
 
-# An OptimizeResult (a dict with attribute access) rather than a dataclass: every method adds
-# figures of its own (minimax its SQP and QP effort and multipliers, ls-pose its weight), which
-# this carries as attributes without a field per method, lists (`keys()`) and prints with the
-# common ones, and reads as scipy's results do.
-class Calibration(OptimizeResult):
+class Result(dict):
+    """A dict whose keys read as attributes, like scipy's OptimizeResult (without importing
+    scipy.optimize: a third of a second at every command's start)."""
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self[name]
+        except KeyError as e:
+            raise AttributeError(name) from e
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        self[name] = value
+
+    def __delattr__(self, name: str) -> None:
+        del self[name]
+
+    def __dir__(self):
+        return list(self.keys())
+
+    def __repr__(self) -> str:
+        width = max(map(len, self.keys()), default=0) + 1
+        return "\n".join(f"{k.rjust(width)}: {v!r}" for k, v in sorted(self.items()))
+
+
+# A dict with attribute access rather than a dataclass: every method adds figures of its own
+# (minimax its SQP and QP effort and multipliers, ls-pose its weight), which this carries as
+# attributes without a field per method, lists (`keys()`) and prints with the common ones, and
+# reads as scipy's results do.
+class Calibration(Result):
     """A fitted model and how it was obtained, one type for every method.
 
     Common to all: method, layout, x, cost (the method's objective at x, mm^2), success, status
@@ -49,7 +73,7 @@ class Calibration(OptimizeResult):
     qp_iterations, qp_converged, history, lam, mu, constraints, sqp_seconds, ls_sum_F (minimax).
     """
 
-    F: np.ndarray  # typed for checkers, since OptimizeResult's items are untyped to them
+    F: np.ndarray  # typed for checkers, since the dict's items are untyped to them
 
     @property
     def iterations(self) -> int:

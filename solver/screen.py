@@ -29,6 +29,7 @@ about 10% of gross readings the scale grows with them and fewer are found (never
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +42,7 @@ from .problem import Problem
 ALPHA = 0.01  # chance of any false flag on a clean campaign, by the Gaussian reference
 MAX_ROUNDS = 6
 TAIL_Q = 0.9  # quantile of |z| that, with the median, sets the robust scale
+LEVERAGE_POSES = 2048  # poses whose Jacobian rows are formed at once for the leverage
 RESOLUTION_MM = 1e-6  # below a nanometre a fit's own rounding, not a reading, sets the scatter
 
 
@@ -232,6 +234,37 @@ class _Judge:
     def geometric(self, p, k) -> float:
         return float(np.linalg.norm(self.rs[p, k]) / self.s["geometric"])
 
+    def suspects(self) -> np.ndarray:
+        """(m,) bool: the poses judge_pose may exclude from, found for all poses at once; those
+        left out it would pass (a margin keeps borderline ones for the exact per-pose look)."""
+        have, r = self.have, np.where(self.have[..., None], self.r, 0.0)
+        counts = have.sum(axis=1)
+        n = np.maximum(counts[:, None] - 1, 1)  # each reading's mates: the others present
+        mates = (r.sum(axis=1, keepdims=True) - r) / n[..., None]
+        w = (r - mates) / np.sqrt(1.0 + 1.0 / n)[..., None]
+        ratio = np.linalg.norm(w, axis=-1) / self.s["within"] / self.T["within"]
+        if self.dist:
+            K = have.shape[1]
+            near = np.full(have.shape, np.inf)  # per reading, its smallest pair departure
+            for i in range(K):
+                for j in range(K):
+                    if i == j:
+                        continue
+                    e = self.dist.get((min(i, j), max(i, j)))
+                    d = np.zeros(len(r)) if e is None else np.where(np.isfinite(e), np.abs(e), 0.0)
+                    near[:, i] = np.where(have[:, j], np.minimum(near[:, i], d), near[:, i])
+            near[~np.isfinite(near)] = 0.0
+            ratio = np.maximum(ratio, near / self.s["distance"] / self.T["distance"])
+        worst = np.max(np.where(have, ratio, 0.0), axis=1)
+        geo = np.linalg.norm(self.rs, axis=-1) / self.s["geometric"]
+        single = np.max(np.where(have, geo, 0.0), axis=1)
+        margin = 1.0 - 1e-6
+        # NaN scales or thresholds compare false: such poses go to the exact look
+        calm = (counts >= 2) & (worst <= margin) | (counts == 1) & (
+            single <= self.T["geometric"] * margin
+        )
+        return ~(calm | (counts == 0))
+
     def judge_pose(self, p) -> dict[int, str]:
         """The readings of pose p to exclude, with the evidence for each."""
         S = [int(k) for k in np.flatnonzero(self.have[p])]
@@ -287,8 +320,8 @@ def screen(fit, q, meas, time_s=None, temp_c=None, alpha=ALPHA, max_rounds=MAX_R
         judge = _Judge(r, meas, have & ~excluded, time_s, temp_c, alpha, lev)
         new = np.zeros_like(have)
         ev = {}
-        for p in range(meas.shape[0]):
-            for k, why in judge.judge_pose(p).items():
+        for p in np.flatnonzero(judge.suspects()):
+            for k, why in judge.judge_pose(int(p)).items():
                 new[p, k] = True
                 ev[(p, k)] = why
         if np.array_equal(new, excluded):
@@ -306,28 +339,51 @@ def screen(fit, q, meas, time_s=None, temp_c=None, alpha=ALPHA, max_rounds=MAX_R
     )
 
 
-def leverage(J: np.ndarray) -> np.ndarray:
+def leverage(blocks: Callable[[], Iterable[np.ndarray]]) -> np.ndarray:
     """Per reading, the mean diagonal of its 3x3 block of the hat matrix of J (readings x 3, P);
-    parameters the data cannot separate drop out with their null singular values."""
-    J = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)
-    U, sv, _ = np.linalg.svd(finite(J, "the screening's Jacobian"), full_matrices=False)
-    U = U[:, sv > sv[0] * 1e-9]
-    return np.sum(U * U, axis=1).reshape(-1, 3).mean(axis=1)
+    parameters the data cannot separate drop out with their null singular values.
+
+    J comes as its row blocks, each call of `blocks` yielding them again: R of J's QR from the
+    blocks, then the rows of U = J V / s from R's SVD, so the campaign's whole Jacobian (and U)
+    is never held (140 MB each at 50,000 poses of three SMRs).
+    """
+    stacked = None
+    for Jb in blocks():
+        part = np.linalg.qr(finite(Jb, "the screening's Jacobian"), mode="r")
+        stacked = part if stacked is None else np.linalg.qr(np.vstack([stacked, part]), mode="r")
+    if stacked is None:
+        return np.zeros(0)
+    # columns scaled to unit norm, as J's are: ||J e_i|| = ||R e_i||, and R D is J D's R
+    norms = np.maximum(np.linalg.norm(stacked, axis=0), 1e-300)
+    _, sv, Vt = np.linalg.svd(stacked / norms)
+    keep = sv > sv[0] * 1e-9 if sv.size and sv[0] > 0 else np.zeros(sv.shape, bool)
+    W = Vt[keep].T / sv[keep]
+    rows = [np.sum(((Jb / norms) @ W) ** 2, axis=1) for Jb in blocks()]
+    return np.concatenate(rows).reshape(-1, 3).mean(axis=1)
 
 
 def geometric_fit(problem: Problem):
     """fit(meas) for screen(): an ls-sum calibration's predictions and its readings' leverage."""
     from .calibrate import calibrate
-    from .identifiability import jacobian_rows
-    from .kinematics import predict
+    from .kinematics import predict, predict_rows
 
     q = problem.q
 
     def fit(meas):
         cal = calibrate(problem.with_meas(meas), "ls-sum")
         mask = np.all(np.isfinite(meas), axis=-1)
+        cols = np.arange(cal.layout.n_params)
+        starts = range(0, len(q), LEVERAGE_POSES)
+
+        def blocks():
+            for i in starts:
+                b = slice(i, i + LEVERAGE_POSES)
+                if mask[b].any():
+                    _, Jt = predict_rows(cal.layout, cal.x, q[b], mask[b], cols)
+                    yield Jt.reshape(len(cols), -1).T
+
         lev = np.zeros(mask.shape)
-        lev[mask] = leverage(jacobian_rows(cal.layout, cal.x, q, mask))
+        lev[mask] = leverage(blocks)
         return predict(cal.layout, cal.x, q), lev
 
     return fit

@@ -8,7 +8,9 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, JSONResponse
+from pydantic import BaseModel, ConfigDict
 
+from robocal.server.formats.blocks import HeldOut, Validation
 from robocal.server.service.job_queue import DuplicateJob, Job
 
 from . import problems
@@ -20,22 +22,35 @@ router = APIRouter(prefix="/jobs", tags=["jobs"])
 JobBody = Annotated[JobCreate, Depends(read_json(JobCreate))]
 
 
+class JobResults(BaseModel):
+    """A done job's results as the store keeps them: the files it wrote, the campaign it
+    planned, a calibration's verdict and held-out figures (formats.blocks)."""
+
+    model_config = ConfigDict(extra="allow")
+    model: str | None = None
+    recording: str | None = None
+    report: str | None = None
+    campaign: int | None = None
+    validation: Validation | None = None
+    holdout: HeldOut | None = None
+
+
 def public_job(job: Job) -> JobPublic:
     done = job.state == "done"
     urls = {}
     if done:
         base = f"/api/jobs/{job.id}"
+        res = JobResults.model_validate(job.results)
+        has_model = res.model is not None
         urls = dict(
-            model_url=f"/api/models/{job.id}" if "model" in job.results else None,
-            recording_url=f"{base}/recording" if "recording" in job.results else None,
-            report_url=f"{base}/report" if "report" in job.results else None,
-            figures_url=f"{base}/figures" if "report" in job.results else None,
-            campaign_url=(
-                f"/api/campaigns/{job.results['campaign']}" if "campaign" in job.results else None
-            ),
-            parameters_url=f"/api/models/{job.id}/parameters" if "model" in job.results else None,
-            validation=job.results.get("validation"),
-            holdout=job.results.get("holdout"),
+            model_url=f"/api/models/{job.id}" if has_model else None,
+            recording_url=f"{base}/recording" if res.recording is not None else None,
+            report_url=f"{base}/report" if res.report is not None else None,
+            figures_url=f"{base}/figures" if res.report is not None else None,
+            campaign_url=f"/api/campaigns/{res.campaign}" if res.campaign is not None else None,
+            parameters_url=f"/api/models/{job.id}/parameters" if has_model else None,
+            validation=res.validation,
+            holdout=res.holdout,
         )
     return JobPublic(
         id=job.id,

@@ -65,9 +65,9 @@ def model_parameters(job_id: JobId, jobs: JobsDep) -> dict:
     model = read_model(jobs.model_path(job_id))
     return {
         "job_id": job_id,
-        "method": model.meta.get("method"),
+        "method": model.method,
         "identified": parameters_of(model),
-        "validation": model.meta.get("validation"),
+        "validation": model.validation,
     }
 
 

@@ -17,7 +17,7 @@ from robocal.server.formats.limits import COORD_MAX_MM, PRINTABLE
 from robocal.server.store.checks import ARM_MAX
 from robocal.server.verify.run import CUBE_SIDE_MM, DIRECTIONS
 
-from .model_schemas import HoldoutSummary, ValidationSummary
+from .model_schemas import HeldOut, Validation
 
 # A request's unknown field is refused (422), never ignored: a misspelt option is no default.
 REQUEST = ConfigDict(extra="forbid")
@@ -238,14 +238,14 @@ class JobPublic(BaseModel):
     figures_url: str | None = None
     campaign_url: str | None = None
     parameters_url: str | None = None
-    validation: ValidationSummary | None = Field(
+    validation: Validation | None = Field(
         None, description="a done calibration's: is its model deployable, and why not"
     )
     holdout_campaign_id: int | None = Field(None, description="a calibration's held-out campaign")
     tolerance_mm: float | None = Field(
         None, description="the tolerance asked for with the job (null: the cell's is used)"
     )
-    holdout: HoldoutSummary | None = Field(
+    holdout: HeldOut | None = Field(
         None, description="a done calibration's errors on its held-out campaign"
     )
 

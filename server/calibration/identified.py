@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from robocal.server.exports.params import Entry, base_entries, entries
+from robocal.server.formats.blocks import Correlation, FixedParameter, Identified, ParameterRow
 from robocal.server.formats.model_json import ModelFile
 from robocal.solver.guard import strongest_correlations
 from robocal.solver.kinematics import BASE_NAMES, rot, translation
@@ -36,7 +37,7 @@ def base_standard_errors(base: np.ndarray, errors: ParameterErrors) -> dict[str,
     return out
 
 
-def _row(e: Entry, fixed, nominal: float | None, standard_error: float | None) -> dict:
+def _row(e: Entry, fixed, nominal: float | None, standard_error: float | None) -> ParameterRow:
     """One table row of a params entry: where it sits (joint, base, SMR) and its change."""
     where: dict[str, int | str]
     if e.joint is not None:
@@ -46,33 +47,33 @@ def _row(e: Entry, fixed, nominal: float | None, standard_error: float | None) -
     else:
         target, kind = e.name.rsplit("_", 1)
         group, where = "smr", {"target": target}
-    return {
-        "parameter": e.name,
-        "group": group,
-        "kind": kind,
+    return ParameterRow(
+        parameter=e.name,
+        group=group,
+        kind=kind,
         **where,
-        "unit": e.unit,
-        "nominal": nominal,
-        "calibrated": e.calibrated,
-        "change": None if nominal is None else e.calibrated - nominal,
-        "standard_error": standard_error,
-        "status": "held fixed" if e.name in fixed else "identified",
-    }
+        unit=e.unit,
+        nominal=nominal,
+        calibrated=e.calibrated,
+        change=None if nominal is None else e.calibrated - nominal,
+        standard_error=standard_error,
+        status="held fixed" if e.name in fixed else "identified",
+    )
 
 
-def _block(model: ModelFile, rows, fixed, condition, estimator, correlations) -> dict:
-    return {
-        "convention": model.robot.convention,
-        "units": "mm; degrees for theta, alpha, beta, rz, ry, rx",
-        "frames": "joints in the robot's convention; base x, y, z and Rz Ry Rx in the tracker "
+def _block(model: ModelFile, rows, fixed, condition, estimator, correlations) -> Identified:
+    return Identified(
+        convention=model.robot.convention,
+        units="mm; degrees for theta, alpha, beta, rz, ry, rx",
+        frames="joints in the robot's convention; base x, y, z and Rz Ry Rx in the tracker "
         "frame (base = Trans(x, y, z) Rz(rz) Ry(ry) Rx(rx)); SMRs in the flange frame, their "
         "change the offset from the cell's nominal position",
-        "estimator": estimator,
-        "rows": rows,
-        "fixed": [{"parameter": n, "why": why} for n, why in fixed.items()],
-        "condition_number": condition,
-        "correlations": correlations,
-    }
+        estimator=estimator,
+        rows=rows,
+        fixed=[FixedParameter(parameter=n, why=why) for n, why in fixed.items()],
+        condition_number=condition,
+        correlations=correlations,
+    )
 
 
 def identified_block(
@@ -83,7 +84,7 @@ def identified_block(
     condition: float,
     nominal_targets: dict | None = None,
     nominal_base: np.ndarray | None = None,
-) -> dict:
+) -> Identified:
     """model.json's `identified` block: one row per parameter (edge units), the held-fixed
     parameters with why, the condition number and the strongest correlations (between
     identified parameters; the base's are of its small motions along and about its axes)."""
@@ -106,30 +107,30 @@ def identified_block(
     named = [(int(c), n) for n, c in zip(errors.names, errors.column) if c >= 0]
     cols = [c for c, _ in named]
     top = strongest_correlations(errors.cov[np.ix_(cols, cols)], CORRELATIONS)
-    pairs = [{"a": named[i][1], "b": named[j][1], "r": round(r, 6)} for i, j, r in top]
+    pairs = [Correlation(a=named[i][1], b=named[j][1], r=round(r, 6)) for i, j, r in top]
     return _block(model, rows, fixed, condition, errors.estimator, pairs)
 
 
-def parameters_of(model: ModelFile) -> dict:
+def parameters_of(model: ModelFile) -> Identified:
     """A model file's identified block; rebuilt from its parameters and standard errors (no
     correlations, no base standard errors) for a model without one (a diagnosis's, or older)."""
-    if "identified" in model.meta:
-        return model.meta["identified"]
-    fit = model.meta.get("fit") or {}
-    fixed = fit.get("fixed_parameters") or {}
+    if model.identified is not None:
+        return model.identified
+    fixed = (model.fit.fixed_parameters if model.fit else None) or {}
     rows = [
         _row(e, fixed, e.nominal, None if e.name in BASE_NAMES else e.standard_error)
         for e in entries(model)
     ]
-    estimator = (model.meta.get("uncertainty") or {}).get("estimator", "none")
-    return _block(model, rows, fixed, fit.get("condition_number"), estimator, [])
+    estimator = model.uncertainty.estimator if model.uncertainty else None
+    condition = model.fit.condition_number if model.fit else None
+    return _block(model, rows, fixed, condition, estimator or "none", [])
 
 
 def arm_parameters(model: ModelFile) -> list[dict]:
     """The arm's own identified parameters (joints; not the cell's base or SMRs) with their
     standard errors, as a calibration job keeps them for the fleet view."""
     return [
-        {k: r[k] for k in ("parameter", "unit", "calibrated", "standard_error")}
-        for r in parameters_of(model)["rows"]
-        if r["group"] == "joint" and r["status"] == "identified" and r["standard_error"] is not None
+        r.model_dump(include={"parameter", "unit", "calibrated", "standard_error"})
+        for r in parameters_of(model).rows
+        if r.group == "joint" and r.status == "identified" and r.standard_error is not None
     ]

@@ -48,7 +48,7 @@ def model_uncertainty(model: ModelFile, q_rad, instrument_mm=0.0) -> pu.Position
     """U of the model's SMR positions (m, K) at joints q (m, n) rad, a reading's own error
     (3-D RMS, mm) on top; None for a model without a position block (written before it, or an
     extended model whose coefficients' covariance it does not keep)."""
-    block = ((model.meta or {}).get("uncertainty") or {}).get("position")
+    block = model.uncertainty.position if model.uncertainty else None
     if not block or model.extensions:
         return None
     lay, x = model.layout()

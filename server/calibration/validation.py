@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from robocal.server.formats.blocks import Validation, ValidationLimits
 from robocal.server.formats.cell_json import Cell
 from robocal.server.formats.model_json import ModelFile
-from robocal.server.formats.verdict import Verdict
 from robocal.solver import guard
 from robocal.solver.effects import Inputs
 from robocal.solver.measurements import Measurements
@@ -39,32 +39,40 @@ def tracker_spec(cell: Cell) -> dict | None:
 
 
 def validation_block(
-    v: guard.Validation, pose_ids, source: str, holdout_method: str = HOLDOUT_METHOD
-) -> dict:
+    v: guard.Validation,
+    pose_ids,
+    source: str,
+    holdout_method: str = HOLDOUT_METHOD,
+    *,
+    nominal_rms_mm: float | None,
+    warnings: list[str],
+) -> Validation:
     """model.json's `validation` block: the verdict, its reasons, the held-out figure (the
-    headline) beside the fit's, and the limits applied."""
-    return {
-        "deployable": v.deployable,
-        "reasons": list(v.reasons),
-        "summary": expected_accuracy(v, holdout_method),
-        "tolerance_mm": json_number(v.tolerance_mm),
-        "holdout_rms_mm": json_number(v.holdout_rms_mm),
-        "holdout_max_mm": json_number(v.holdout_max_mm),
-        "fit_rms_mm": json_number(v.fit_rms_mm),
-        "holdout": holdout_method,
-        "condition_number": json_number(v.condition_number),
-        "equations": v.equations,
-        "free_parameters": v.free_parameters,
-        "noise_floor_mm": json_number(v.noise_floor_mm),
-        "noise_floor_source": source,
-        "unsupported_poses": [pose_ids[i] for i in v.unsupported_poses],
-        "limits": {
-            "min_equations_per_parameter": guard.MIN_EQUATIONS_PER_PARAMETER,
-            "noise_floor_fraction": guard.NOISE_FLOOR_FRACTION,
-            "max_condition_number": guard.MAX_CONDITION,
-            "max_holdout_ratio": guard.MAX_HOLDOUT_RATIO,
-        },
-    }
+    headline) beside the fit's and the nominal arm's, the limits applied, the warnings."""
+    return Validation(
+        deployable=v.deployable,
+        reasons=tuple(v.reasons),
+        summary=expected_accuracy(v, holdout_method),
+        tolerance_mm=json_number(v.tolerance_mm),
+        holdout_rms_mm=json_number(v.holdout_rms_mm),
+        holdout_max_mm=json_number(v.holdout_max_mm),
+        fit_rms_mm=json_number(v.fit_rms_mm),
+        holdout=holdout_method,
+        condition_number=json_number(v.condition_number),
+        equations=v.equations,
+        free_parameters=v.free_parameters,
+        noise_floor_mm=json_number(v.noise_floor_mm),
+        noise_floor_source=source,
+        unsupported_poses=[pose_ids[i] for i in v.unsupported_poses],
+        limits=ValidationLimits(
+            min_equations_per_parameter=guard.MIN_EQUATIONS_PER_PARAMETER,
+            noise_floor_fraction=guard.NOISE_FLOOR_FRACTION,
+            max_condition_number=guard.MAX_CONDITION,
+            max_holdout_ratio=guard.MAX_HOLDOUT_RATIO,
+        ),
+        nominal_rms_mm=nominal_rms_mm,
+        warnings=tuple(warnings),
+    )
 
 
 def expected_accuracy(v: guard.Validation, holdout_method: str = HOLDOUT_METHOD) -> str:
@@ -111,7 +119,7 @@ def data_mismatch(nominal, targets: list[str], cell: Cell) -> str | None:
     return None
 
 
-def absurd_errors(result: Evaluation, verdict: Verdict | None = None) -> str | None:
+def absurd_errors(result: Evaluation, verdict: Validation | None = None) -> str | None:
     """Why an evaluation's errors say the data is of another cell (a moved tracker, another
     robot), or the model unfit: the model's RMS error past ABSURD_MM; None otherwise."""
     rms = result.model.rmse

@@ -15,6 +15,7 @@ from robocal.server.calibration.validation import (
     tracker_spec,
     validation_block,
 )
+from robocal.server.formats.blocks import Diagnosis, Fit, HeldOut, Validation
 from robocal.server.formats.campaign_csv import read_campaign
 from robocal.server.formats.cell_json import Cell, default_cell, read_cell
 from robocal.server.formats.model_json import (
@@ -34,6 +35,7 @@ from robocal.solver.problem import Problem
 # The fit, the screening and the diagnosis pull in scipy (seconds on a busy machine): imported in
 # the functions that run them, so `robocal predict` starts with numpy alone.
 if TYPE_CHECKING:
+    from robocal.server.formats.report_doc import ReportDoc
     from robocal.solver.calibrate import Calibration
     from robocal.solver.metrics import Accuracy, Evaluation
     from robocal.solver.screen import Screening
@@ -219,37 +221,33 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     data = {"poses": meas.n_poses, "readings": meas.n_readings, "targets": list(meas.target_names)}
     if data_path is not None and "://" not in str(data_path):  # a server's database: no file
         data.update(file=Path(data_path).name, sha256=file_digest(data_path))
-    fit = {
-        "F_mm2": dict(zip(meas.target_names, np.round(cal.F, 9).tolist())),
-        "rmse_phi_mm": acc.rmse_phi,
-        "rmse_mm": acc.rmse,
-        "ap_max_mm": acc.ap.max,
-        "condition_number": cal.condition,
-        "fixed_parameters": cal.fixed,
-        "iterations": cal.nit,
-        "seconds": round(cal.seconds, 4),
-    }
+    fit = Fit(
+        F_mm2=dict(zip(meas.target_names, np.round(cal.F, 9).tolist())),
+        rmse_phi_mm=acc.rmse_phi,
+        rmse_mm=acc.rmse,
+        ap_max_mm=acc.ap.max,
+        condition_number=cal.condition,
+        fixed_parameters=cal.fixed,
+        iterations=cal.nit,
+        seconds=round(cal.seconds, 4),
+    )
     if screening is not None:  # the readings the fit left out as gross errors, and why
-        fit["readings_used"] = used.n_readings
-        fit["excluded_readings"] = cal.outliers
-        fit["screening"] = screening.summary()
-    meta = {
-        "method": cal.method,
-        "data": data,
-        "fit": fit,
-        "uncertainty": uncertainty_to_json(errors, cal.layout.names()),
-    }
-    if "qp" in cal:  # minimax
-        meta["qp"] = cal.qp
+        fit.readings_used = used.n_readings
+        fit.excluded_readings = cal.outliers
+        fit.screening = screening.summary()
     model = ModelFile(
         cal.robot,
         cal.base,
         dict(zip(meas.target_names, cal.targets)),
         nominal=cell.robot,
-        meta=meta,
+        meta={"method": cal.method, "data": data},
     )
+    model.fit = fit
+    model.uncertainty = uncertainty = uncertainty_to_json(errors, cal.layout.names())
+    if "qp" in cal:  # minimax
+        model.meta["qp"] = cal.qp
     if cal.method != "nominal":  # nothing of the arm identified: no table of it
-        model.meta["identified"] = identified_block(
+        model.identified = identified_block(
             model,
             errors,
             fixed=cal.fixed,
@@ -259,18 +257,19 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         )
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable
-    model.meta["validation"] = validate(cal, cell, used, holdout, errors, acc.rmse)
+    v = model.validation = validate(cal, cell, used, holdout, errors, acc.rmse)
     if cal.method != "nominal":
-        v = model.meta["validation"]
         block = position_block(
-            cal.layout, cal.x, used.q, errors, v["holdout_rms_mm"], v["noise_floor_mm"]
+            cal.layout, cal.x, used.q, errors, v.holdout_rms_mm, v.noise_floor_mm
         )
         if block is not None:
-            model.meta["uncertainty"]["position"] = block
+            uncertainty.position = block
     return model
 
 
-def validate(cal: Calibration, cell: Cell, used: Measurements, holdout, errors, fit_rms) -> dict:
+def validate(
+    cal: Calibration, cell: Cell, used: Measurements, holdout, errors, fit_rms
+) -> Validation:
     """model.json's `validation` block of a calibration on the readings it used (holdout: its
     leave-one-pose-out residuals, solver.guard.Holdout)."""
     from robocal.solver import guard
@@ -288,10 +287,13 @@ def validate(cal: Calibration, cell: Cell, used: Measurements, holdout, errors, 
         tolerance_mm=cell.tolerance_mm,
     )
     v.reasons += implausible(cell, used, cal.robot)
-    block = validation_block(v, list(used.pose_ids), source)
-    block["nominal_rms_mm"] = nominal_rms(cell, used)
-    block["warnings"] = layout_warnings(cell, used, cal.targets)
-    return block
+    return validation_block(
+        v,
+        list(used.pose_ids),
+        source,
+        nominal_rms_mm=nominal_rms(cell, used),
+        warnings=layout_warnings(cell, used, cal.targets),
+    )
 
 
 def implausible(cell: Cell, meas: Measurements, robot) -> list[str]:
@@ -410,19 +412,24 @@ def evaluate(model: ModelFile, meas: Measurements) -> Evaluation:
     return metrics.Evaluation(after, before, metrics.compare_accuracy(before, after))
 
 
-def held_out_errors(model: ModelFile, meas: Measurements) -> dict:
+def held_out_errors(
+    model: ModelFile, meas: Measurements, *, file: str | None = None, campaign_id: int | None = None
+) -> HeldOut:
     """A calibration's errors on readings it was not fitted on (mm; RMS and max per reading,
     the nominal model's RMS registered on them), with a warning when they say the data is not
     of the model's cell."""
     result = evaluate(model, meas)
-    return {
-        "poses": int(np.any(meas.mask, axis=1).sum()),
-        "readings": int(meas.mask.sum()),
-        "rms_mm": json_number(result.model.rmse),
-        "max_mm": json_number(result.model.ap.max),
-        "nominal_rms_mm": json_number(result.nominal.rmse) if result.nominal is not None else None,
-        "warning": absurd_errors(result, model.verdict),
-    }
+    # only the keys given: a file's figures name no campaign, a campaign's no file
+    return HeldOut(
+        **({"file": file} if file is not None else {}),
+        **({"campaign_id": campaign_id} if campaign_id is not None else {}),
+        poses=int(np.any(meas.mask, axis=1).sum()),
+        readings=int(meas.mask.sum()),
+        rms_mm=json_number(result.model.rmse),
+        max_mm=json_number(result.model.ap.max),
+        nominal_rms_mm=json_number(result.nominal.rmse) if result.nominal is not None else None,
+        warning=absurd_errors(result, model.verdict),
+    )
 
 
 def _pose_column(a):
@@ -435,6 +442,9 @@ def _pose_column(a):
 
 def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
+    from robocal.server.formats.report_doc import (
+        ReportDoc,  # not loaded for the commands that never diagnose
+    )
     from robocal.solver.diagnose import diagnose as run_diagnosis
 
     d = run_diagnosis(cell_problem(cell, meas), log=log, screen_outliers=screen)
@@ -447,32 +457,38 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
         nominal=cell.robot,
         extensions=d.extensions,
         parameters=d.parameters,
-        meta={
-            "method": "ls-sum+extensions",
-            "diagnosis": {
-                "final": d.report["final"],
-                "noise_floor_mm": d.report["noise_floor_mm"],
-                "noise_floor_source": d.report["noise_floor_source"],
-                **({"outliers": d.report["outliers"]} if "outliers" in d.report else {}),
-            },
-        },
+        meta={"method": "ls-sum+extensions"},
+    )
+    # the solver's report as report.json has it, typed once: what the model keeps of it
+    report = ReportDoc.model_validate(d.report)
+    model.diagnosis = Diagnosis(
+        final=report.final,
+        noise_floor_mm=report.noise_floor_mm,
+        noise_floor_source=report.noise_floor_source,
+        **(
+            {"outliers": [o.to_json() for o in report.outliers]}
+            if report.outliers is not None
+            else {}
+        ),
     )
     if d.errors is not None:
-        model.meta["uncertainty"] = uncertainty_to_json(d.errors.parameters, lay.names())
+        model.uncertainty = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
-        _judge_diagnosis(d, cell, meas, model)
+        _judge_diagnosis(d, report, cell, meas, model)
     return d, model
 
 
-def _judge_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> None:
+def _judge_diagnosis(
+    d, report: ReportDoc, cell: Cell, meas: Measurements, model: ModelFile
+) -> None:
     """The `identified` and `validation` blocks of a diagnosis's final model, as a calibration's:
     the held-fixed parameters and the condition number of the geometry as ls-sum finds them."""
     from robocal.server.calibration.identified import identified_block
     from robocal.solver.calibrate import calibrate
 
-    problem = replace(cell_problem(cell, meas), noise_floor_mm=d.report["noise_floor_mm"])
+    problem = replace(cell_problem(cell, meas), noise_floor_mm=report.noise_floor_mm)
     geometric = calibrate(problem, "ls-sum")
-    model.meta["identified"] = identified_block(
+    model.identified = identified_block(
         model,
         d.errors.parameters,
         fixed=geometric.fixed,
@@ -480,12 +496,12 @@ def _judge_diagnosis(d, cell: Cell, meas: Measurements, model: ModelFile) -> Non
         nominal_targets={t: cell.targets[t] for t in meas.target_names},
         nominal_base=cell.base,
     )
-    model.meta["validation"] = validate_diagnosis(d, cell, meas, model, geometric.condition)
+    model.validation = validate_diagnosis(d, report, cell, meas, model, geometric.condition)
 
 
 def validate_diagnosis(
-    d, cell: Cell, meas: Measurements, model: ModelFile, condition: float
-) -> dict:
+    d, report: ReportDoc, cell: Cell, meas: Measurements, model: ModelFile, condition: float
+) -> Validation:
     """model.json's `validation` block of a diagnosis's final model: its own cross-validated
     held-out figures against its fit, with the geometry's condition number; the report's noise
     floor, past MAX_FLOOR_RATIO times which the model lacks an effect the report's `unexplained`
@@ -496,11 +512,12 @@ def validate_diagnosis(
     pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
-    floor, source = d.report["noise_floor_mm"], d.report["noise_floor_source"]
-    final = d.report["final"]
+    # the solver's report always says where its floor comes from; a report read from a file may not
+    floor, source = report.noise_floor_mm, report.noise_floor_source or "unstated"
+    final = report.final
     v = guard.judge(
         fit_rms_mm=float(np.sqrt(np.mean(r * r))),
-        holdout=guard.CrossValidated(final["holdout_rmse_mm"], final["holdout_max_mm"]),
+        holdout=guard.CrossValidated(final.holdout_rmse_mm, final.holdout_max_mm),
         condition_number=condition,
         equations=3 * int(meas.mask.sum()),
         free_parameters=int(np.count_nonzero(d.errors.parameters.column >= 0)),
@@ -512,10 +529,14 @@ def validate_diagnosis(
     )
     v.reasons += implausible(cell, meas, model.robot)
     method = f"{FOLDS}-fold cross-validation of the diagnosis"
-    block = validation_block(v, list(meas.pose_ids), source, method)
-    block["nominal_rms_mm"] = nominal_rms(cell, meas)
-    block["warnings"] = layout_warnings(cell, meas, [model.targets[t] for t in meas.target_names])
-    return block
+    return validation_block(
+        v,
+        list(meas.pose_ids),
+        source,
+        method,
+        nominal_rms_mm=nominal_rms(cell, meas),
+        warnings=layout_warnings(cell, meas, [model.targets[t] for t in meas.target_names]),
+    )
 
 
 def write_diagnosis(
@@ -538,9 +559,11 @@ def write_diagnosis(
         e["figure"] = by_label.get(ext.label())
     if list_figures:
         report["figures"] = [p.name for p in figures]
-    for block in ("identified", "validation"):  # the final model's table, in the report too
-        if block in model.meta:
-            report[block] = model.meta[block]
+    # the final model's table and verdict, in the report too
+    if model.identified is not None:
+        report["identified"] = model.identified.to_json()
+    if model.validation is not None:
+        report["validation"] = model.validation.to_json()
     model.meta["data"] = data
     write_json_atomic(report_path, report)
     if model_path:

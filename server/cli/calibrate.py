@@ -71,11 +71,11 @@ def cmd_calibrate(args) -> None:
     if hold is not None:  # the separate validation figure beside the leave-one-out one
         from robocal.server.calibration.workflow import held_out_errors
 
-        model.meta.setdefault("validation", {})["held_out"] = {
-            "file": Path(args.held_out).name,
-            **({"campaign_id": args.held_out_campaign} if args.held_out_campaign else {}),
-            **held_out_errors(model, hold),
-        }
+        held_out = held_out_errors(
+            model, hold, file=Path(args.held_out).name, campaign_id=args.held_out_campaign or None
+        )
+        if model.validation is not None:
+            model.validation.held_out = held_out
     write_model(args.out, model)
     if args.recording:
         from robocal.server.recordings.calibration import record_calibration
@@ -88,27 +88,34 @@ def cmd_calibrate(args) -> None:
             held_out=hold,
             viewer_url=args.rerun_viewer,
         )
-    fit = model.meta["fit"]
+    fit, validation, identified, uncertainty = (
+        model.fit,
+        model.validation,
+        model.identified,
+        model.uncertainty,
+    )
+    # model_file writes these three for every method
+    assert fit is not None and validation is not None and uncertainty is not None
     console.print(
         f"{args.method} on {meas.n_poses} poses, {meas.n_readings} readings "
         f"in {cal.seconds * 1000:.0f} ms"
     )
     _print_screening(cal)
-    if "held_out" in model.meta.get("validation", {}):  # the held-out figure is the headline
-        console.print(tables.held_out_line(model.meta["validation"]["held_out"]))
+    if validation.held_out is not None:  # the held-out figure is the headline
+        console.print(tables.held_out_line(validation.held_out))
     for line in tables.validation_lines(model.verdict):
         console.print(line)
     console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
-    console.print(tables.identified_geometry(cal.robot, cell.robot, model.meta["uncertainty"]))
-    if "identified" in model.meta:
-        console.print(tables.frames_table(model.meta["identified"]))
-        console.print(tables.correlations(model.meta["identified"]))
+    console.print(tables.identified_geometry(cal.robot, cell.robot, uncertainty))
+    if identified is not None:
+        console.print(tables.frames_table(identified))
+        console.print(tables.correlations(identified))
     else:
-        console.print(tables.frame_errors(model.meta["uncertainty"], meas.target_names))
+        console.print(tables.frame_errors(uncertainty, meas.target_names))
     console.print(
         f"condition number {cal.condition:.3g}; "
-        + ", ".join(f"F_{k} {v:.4f} mm^2" for k, v in fit["F_mm2"].items())
-        + f"; RMSE(phi) {fit['rmse_phi_mm']:.4f} mm; RMS {fit['rmse_mm']:.4f} mm"
+        + ", ".join(f"F_{k} {v:.4f} mm^2" for k, v in (fit.F_mm2 or {}).items())
+        + f"; RMSE(phi) {fit.rmse_phi_mm:.4f} mm; RMS {fit.rmse_mm:.4f} mm"
     )
     if "history" in cal:  # minimax
         console.print(

@@ -5,8 +5,12 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from robocal.server.formats.blocks import Unexplained
 
 
 def _note(text: str) -> None:
@@ -140,79 +144,76 @@ def _print_screening(cal) -> None:
     _print_outliers(cal.get("outliers"), screening.skipped if screening else None)
 
 
-def _print_diagnosis(report) -> None:
+def _print_diagnosis(report: dict) -> None:
+    """The report as report.json has it (formats.report_doc), effect by effect."""
     from robocal.server.cli import tables
     from robocal.server.cli.tables import console
+    from robocal.server.formats.blocks import Validation
+    from robocal.server.formats.report_doc import ReportDoc
 
-    _print_outliers(report.get("outliers"))
-    floor = report["noise_floor_mm"]
+    doc = ReportDoc.model_validate(report)
+    _print_outliers(None if doc.outliers is None else [o.to_json() for o in doc.outliers])
+    floor, base, final = doc.noise_floor_mm, doc.baseline, doc.final
     console.print(
-        f"baseline (geometric) held-out RMS {report['baseline']['holdout_rmse_mm']:.4f} mm, "
-        f"max {report['baseline']['holdout_max_mm']:.4f} mm; noise floor "
+        f"baseline (geometric) held-out RMS {base.holdout_rmse_mm:.4f} mm, "
+        f"max {base.holdout_max_mm:.4f} mm; noise floor "
         + (f"{floor:.4f} mm" if floor else "unknown")
-        + (
-            f" (from the {report['noise_floor_source']})"
-            if report.get("noise_floor_source")
-            else ""
-        )
+        + (f" (from the {doc.noise_floor_source})" if doc.noise_floor_source else "")
     )
-    if not report["effects"]:
+    if not doc.effects:
         console.print("no effect beyond geometry pays off on held-out poses")
-    for number, e in enumerate(report["effects"], start=1):  # as the figures are numbered
+    for number, e in enumerate(doc.effects, start=1):  # as the figures are numbered
         console.print(
-            f"[bold]effect {number}: {e['name']}[/bold]"
-            + (f" joint {e['joint']}" if "joint" in e else "")
-            + (f" harmonic {e['harmonic']}" if "harmonic" in e else "")
-            + (f" at {e['at_s']:.0f} s" if "at_s" in e else "")
-            + f": {e['evidence']}"
+            f"[bold]effect {number}: {e.name}[/bold]"
+            + (f" joint {e.joint}" if e.joint is not None else "")
+            + (f" harmonic {e.harmonic}" if e.harmonic is not None else "")
+            + (f" at {e.at_s:.0f} s" if e.at_s is not None else "")
+            + f": {e.evidence}"
         )
-        console.print("  " + tables.effect_parameters(e["parameters"], e.get("uncertainty")))
-        lo, hi = e["holdout_gain_interval_mm"]
+        console.print("  " + tables.effect_parameters(e.parameters, e.uncertainty))
+        lo, hi = e.holdout_gain_interval_mm or (float("nan"), float("nan"))
         console.print(
-            f"  held-out gain {e['holdout_rmse_before_mm'] - e['holdout_rmse_after_mm']:.4f} mm "
+            f"  held-out gain {e.holdout_rmse_before_mm - e.holdout_rmse_after_mm:.4f} mm "
             f"(95% interval over poses {lo:.4f} to {hi:.4f} mm)"
         )
-        if e["alternatives"]:
+        if e.alternatives:
             console.print(
                 "  [yellow]the data cannot tell it from:[/yellow] "
                 + ", ".join(
-                    f"{a['label']} (held-out RMS {a['holdout_rmse_mm']:.4f} mm)"
-                    for a in e["alternatives"]
+                    f"{a.label} (held-out RMS {a.holdout_rmse_mm:.4f} mm)" for a in e.alternatives
                 )
             )
+    total = f" ({doc.seconds.total:.1f} s)" if doc.seconds is not None else ""
     console.print(
-        f"final {report['final']['model']}: held-out RMS {report['final']['holdout_rmse_mm']:.4f} mm, "
-        f"max {report['final']['holdout_max_mm']:.4f} mm ({report['seconds']['total']:.1f} s)"
+        f"final {final.model}: held-out RMS {final.holdout_rmse_mm:.4f} mm, "
+        f"max {final.holdout_max_mm:.4f} mm{total}"
     )
-    _print_unexplained(report.get("unexplained"))
-    doubt = (report.get("stability") or {}).get("doubt")
-    if doubt:
-        console.print(f"[yellow]{doubt}[/yellow]")
-    if "validation" in report:  # the final model, judged as a calibration is
-        from ..formats.verdict import Verdict
-
-        for line in tables.validation_lines(Verdict.of(report["validation"])):
+    _print_unexplained(doc.unexplained)
+    if doc.stability is not None and doc.stability.doubt:
+        console.print(f"[yellow]{doc.stability.doubt}[/yellow]")
+    if doc.validation is not None:  # the final model, judged as a calibration is
+        for line in tables.validation_lines(Validation.of(doc.validation)):
             console.print(line)
-    if "identified" in report:
-        ident = report["identified"]
+    if doc.identified is not None:
+        ident = doc.identified
         console.print("held fixed: " + tables.fixed_parameters(
-            {f["parameter"]: f["why"] for f in ident["fixed"]}))  # fmt: skip
+            {f.parameter: f.why for f in ident.fixed}))  # fmt: skip
         console.print(tables.joints_table(ident))
         console.print(tables.frames_table(ident))
         console.print(tables.correlations(ident))
 
 
-def _print_unexplained(block) -> None:
+def _print_unexplained(block: Unexplained | None) -> None:
     """What the final model leaves, and the covariates it follows most (strength 0..1)."""
     from robocal.server.cli.tables import console
 
-    if not block:
+    if block is None:
         return
-    console.print(f"[bold]{block['reading']}[/bold]")
-    for c in block["covariates"]:
-        console.print(f"  {c['strength']:.2f}  {c['name']}: {c['reading']}")
-    if "per_pose_share" in block:
-        console.print(f"  per pose: {block['per_pose_reading']}")
+    console.print(f"[bold]{block.reading}[/bold]")
+    for c in block.covariates:
+        console.print(f"  {c.strength:.2f}  {c.name}: {c.reading}")
+    if block.per_pose_share is not None:
+        console.print(f"  per pose: {block.per_pose_reading}")
 
 
 def _data_arguments(p) -> None:

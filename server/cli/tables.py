@@ -11,7 +11,7 @@ from rich.table import Table
 
 if TYPE_CHECKING:
     from robocal.server.fleet import Fleet
-    from robocal.server.formats.verdict import Verdict
+    from robocal.server.formats.blocks import HeldOut, Identified, Uncertainty, Validation
     from robocal.solver.calibrate import Calibration
     from robocal.solver.metrics import Accuracy, Stats
 
@@ -86,13 +86,13 @@ def plus_minus(v: float, se: float | None, sign: str = "") -> str:
     return f"{v:{sign}.{places}f} ± {se:.{places}f}"
 
 
-def identified_geometry(robot, nominal, uncertainty: dict) -> Table:
+def identified_geometry(robot, nominal, uncertainty: Uncertainty) -> Table:
     """Each joint's identified parameters as change from nominal ± standard error ('fixed' where
     not identifiable), in mm and degrees."""
-    se = uncertainty["standard_errors"]
+    se = uncertainty.standard_errors or {}
     t = Table(
         title="Identified geometry: change from nominal ± standard error "
-        f"({uncertainty['estimator']}; mm, deg)"
+        f"({uncertainty.estimator}; mm, deg)"
     )
     kinds = ("theta", "d", "a", "alpha", "beta")
     for col in ("joint",) + kinds:
@@ -111,16 +111,16 @@ def identified_geometry(robot, nominal, uncertainty: dict) -> Table:
                 ""
                 if n not in by_name
                 else "fixed"
-                if se.get(n) is None
-                else plus_minus(by_name[n], se[n], "+")
+                if (s := se.get(n)) is None
+                else plus_minus(by_name[n], s, "+")
             )
         t.add_row(str(j), *cells)
     return t
 
 
-def frame_errors(uncertainty: dict, target_names) -> str:
+def frame_errors(uncertainty: Uncertainty, target_names) -> str:
     """One line: the base frame's and each SMR's standard errors."""
-    se = uncertainty["standard_errors"]
+    se = uncertainty.standard_errors or {}
 
     def group(names, unit):
         return (
@@ -177,7 +177,7 @@ def verification_table(report: dict) -> Table:
     return t
 
 
-def joints_table(identified: dict) -> Table:
+def joints_table(identified: Identified) -> Table:
     """Each joint's identified parameters from an `identified` block: change from nominal ±
     standard error ('fixed' where held), in mm and degrees."""
     kinds = ("theta", "d", "a", "alpha", "beta")
@@ -185,43 +185,42 @@ def joints_table(identified: dict) -> Table:
     for col in ("joint",) + kinds:
         t.add_column(col, justify="right")
     by_joint: dict[int, dict[str, str]] = {}
-    for r in identified["rows"]:
-        if r["group"] != "joint" or r["change"] is None:
+    for r in identified.rows:
+        if r.group != "joint" or r.change is None or r.joint is None or r.kind is None:
             continue
-        held = r["status"] == "held fixed"
-        by_joint.setdefault(r["joint"], {})[r["kind"]] = (
-            "fixed" if held else plus_minus(r["change"], r["standard_error"], "+")
+        held = r.status == "held fixed"
+        by_joint.setdefault(r.joint, {})[r.kind] = (
+            "fixed" if held else plus_minus(r.change, r.standard_error, "+")
         )
     for j in sorted(by_joint):
         t.add_row(str(j), *(by_joint[j].get(k, "") for k in kinds))
     return t
 
 
-def frames_table(identified: dict) -> Table:
+def frames_table(identified: Identified) -> Table:
     """The base (tracker frame) and each SMR (flange frame), one coordinate a row: calibrated
     value ± standard error, and the change from the cell's nominal where it has one."""
     t = Table(title="Identified base and SMR frames (mm, deg)")
     for col in ("frame", "", "calibrated ± standard error", "change from nominal"):
         t.add_column(col, justify="right" if col.startswith(("cal", "change")) else "left")
-    for r in identified["rows"]:
-        if r["group"] == "joint":
+    for r in identified.rows:
+        if r.group == "joint":
             continue
-        frame = "base (tracker)" if r["group"] == "base" else f"SMR {r['target']} (flange)"
+        frame = "base (tracker)" if r.group == "base" else f"SMR {r.target} (flange)"
         value = (
-            f"{_f(r['calibrated'])} fixed"
-            if r["status"] == "held fixed"
-            else plus_minus(r["calibrated"], r["standard_error"])
+            f"{_f(r.calibrated)} fixed"
+            if r.status == "held fixed" or r.calibrated is None
+            else plus_minus(r.calibrated, r.standard_error)
         )
-        change = "" if r["change"] is None else f"{r['change']:+.4f}"
-        t.add_row(frame, f"{r['kind']} / {r['unit']}", value, change)
+        change = "" if r.change is None else f"{r.change:+.4f}"
+        t.add_row(frame, f"{r.kind} / {r.unit}", value, change)
     return t
 
 
-def correlations(identified: dict) -> str:
+def correlations(identified: Identified) -> str:
     """One line: the strongest correlations between identified parameters."""
-    pairs = identified.get("correlations") or []
     return "strongest correlations: " + (
-        ", ".join(f"{c['a']}~{c['b']} {c['r']:+.3f}" for c in pairs) or "none"
+        ", ".join(f"{c.a}~{c.b} {c.r:+.3f}" for c in identified.correlations) or "none"
     )
 
 
@@ -230,25 +229,25 @@ def _mm(x) -> str:
     return "-" if x is None else f"{x:.4f} mm" if abs(x) < 1000 else f"{x:.3g} mm"
 
 
-def held_out_line(h: dict) -> str:
+def held_out_line(h: HeldOut) -> str:
     """The model's error on readings it was not fitted on (a file or campaign), beside the
     nominal model's on them."""
-    where = h.get("file") or f"campaign {h['campaign_id']}"
+    where = h.file or f"campaign {h.campaign_id}"
     return (
-        f"[bold]on held-out {where} ({h['poses']} poses, {h['readings']} readings): RMS "
-        f"{_mm(h['rms_mm'])}[/bold], max {_mm(h['max_mm'])}; nominal RMS "
-        f"{_mm(h['nominal_rms_mm'])}"
-        + (f"\n[bold red]warning[/bold red]: {h['warning']}" if h.get("warning") else "")
+        f"[bold]on held-out {where} ({h.poses} poses, {h.readings} readings): RMS "
+        f"{_mm(h.rms_mm)}[/bold], max {_mm(h.max_mm)}; nominal RMS "
+        f"{_mm(h.nominal_rms_mm)}"
+        + (f"\n[bold red]warning[/bold red]: {h.warning}" if h.warning else "")
     )
 
 
-def _holdout_kind(v: Verdict) -> str:
+def _holdout_kind(v: Validation) -> str:
     """How the held-out figure was had, in a few words: "leave-one-pose-out", "5-fold"."""
     how = v.holdout or "leave-one-pose-out"
     return how.split(" cross-validation")[0]
 
 
-def validation_lines(v: Verdict) -> list[str]:
+def validation_lines(v: Validation) -> list[str]:
     """The held-out figure (headline) beside the fit's, and the verdict: the accuracy to expect
     (within the tolerance, when one is given) or the reasons it is not deployable."""
     out = []

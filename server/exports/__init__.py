@@ -117,7 +117,7 @@ def _rapid(model: ModelFile, model_path, joints_path, targets_path, out) -> tupl
     stamp = datetime.now(UTC).isoformat(timespec="seconds")
     about = [
         f"Written by robocal export ({stamp}) from {Path(model_path).name} ({model.robot.name}, "
-        f"method {model.meta.get('method', 'unknown')}, sha256 {file_digest(model_path)[:16]}) "
+        f"method {model.method or 'unknown'}, sha256 {file_digest(model_path)[:16]}) "
         f"and {Path(source).name}: {len(pose_ids)} joint targets in the file's order.",
         "Each is the joint command that the calibrated model says puts the SMRs where the "
         "targets ask; MoveAbsJ takes it as it is (no configuration, tool or work object enters).",

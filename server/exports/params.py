@@ -73,10 +73,10 @@ def entries(model: ModelFile) -> list[Entry]:
 
     A model with an `identified` block (written since the table was) gives the base's standard
     errors in these tracker-frame coordinates and the SMRs' nominal positions."""
-    unc = (model.meta.get("uncertainty") or {}).get("standard_errors") or {}
-    known = {r["parameter"]: r for r in (model.meta.get("identified") or {}).get("rows", [])}
-    fixed = (model.meta.get("fit") or {}).get("fixed_parameters") or {}
-    has_fit = bool(model.meta.get("fit"))
+    unc = (model.uncertainty.standard_errors if model.uncertainty else None) or {}
+    known = {r.parameter: r for r in model.identified.rows} if model.identified else {}
+    fixed = (model.fit.fixed_parameters if model.fit else None) or {}
+    has_fit = model.fit is not None and bool(model.fit.to_json())
 
     def status(name):
         if name in fixed:
@@ -114,8 +114,8 @@ def entries(model: ModelFile) -> list[Entry]:
             None,
             u,
             v,
-            known.get(n, {}).get("nominal"),
-            known.get(n, {}).get("standard_error"),
+            known[n].nominal if n in known else None,
+            known[n].standard_error if n in known else None,
             status(n),
         )
         for n, u, v in base_entries(model.base)
@@ -123,7 +123,7 @@ def entries(model: ModelFile) -> list[Entry]:
     for t, xyz in model.targets.items():
         for c, v in zip("xyz", xyz):
             name = f"{t}_{c}"
-            nominal = known.get(name, {}).get("nominal")
+            nominal = known[name].nominal if name in known else None
             rows.append(Entry(name, None, "mm", float(v), nominal, unc.get(name), status(name)))
     return rows
 

@@ -43,7 +43,7 @@ def urdf_text(model: ModelFile, source: str = "model.json") -> str:
     root = ET.Element("robot", name=f"{r.name}_calibrated")
     note = (
         f" robocal export of {source}: {r.name}, {r.convention.upper()} with beta, calibrated"
-        f" joint origins (method {model.meta.get('method', 'unknown')}). Joint values are the"
+        f" joint origins (method {model.method or 'unknown'}). Joint values are the"
         " controller's readings (the zero offsets theta are in the origins). Lengths in m."
         " Geometry only: the model's extensions are not in a URDF. Effort and velocity limits"
         " are not known to the calibration: 0, take them from the vendor's description. "

@@ -18,6 +18,7 @@ from pydantic import (
 from robocal.solver.effects import Extension
 from robocal.solver.vocabulary import KINDS
 
+from .blocks import Diagnosis, Fit, Identified, Uncertainty, Validation
 from .cell_doc import RigidTransform, RobotDoc, check_targets
 from .fields import TARGET_NAME_PATTERN, Doc, Integer, Label, Number, Point, Whole, located
 
@@ -97,61 +98,6 @@ class ExtensionDoc(Doc):
         return self._extension
 
 
-class _Open(Doc):
-    """A block the program writes and partly reads back: what it reads is typed, the rest kept."""
-
-    model_config = ConfigDict(extra="allow")
-
-
-# A statistic read back (a standard error, a nominal value): any finite JSON number
-Statistic = Annotated[float, Field(strict=True, allow_inf_nan=False)]
-Text = Annotated[str, Field(strict=True)]
-
-
-class IdentifiedRow(_Open):
-    parameter: Text = Field(description="its name: a1, theta2, base_x, A_y...")
-    nominal: Statistic | None = Field(None, description="the cell's value, mm or degrees")
-    standard_error: Statistic | None = Field(None, description="null where held fixed")
-
-
-class IdentifiedDoc(_Open):
-    rows: list[IdentifiedRow] = Field([], description="one per parameter")
-
-
-class FitDoc(_Open):
-    fixed_parameters: dict[str, Text] | None = Field(
-        None, description="parameters held fixed, and why"
-    )
-
-
-class UncertaintyDoc(_Open):
-    estimator: Text | None = Field(None, description="how the covariance was estimated")
-    standard_errors: dict[str, Statistic | None] | None = Field(
-        None, description="per parameter, mm or degrees (null: held fixed)"
-    )
-
-
-class ValidationDoc(_Open):
-    deployable: Annotated[bool, Field(strict=True)] | None = Field(
-        None,
-        description="false, or missing: compensate and export refuse the model unless forced",
-    )
-    reasons: list[Text] = Field([], description="why not deployable, one sentence each")
-    warnings: list[Text] = Field(
-        [], description="what deserves a look but leaves the model deployable, one sentence each"
-    )
-    holdout_rms_mm: Statistic | None = Field(None, description="the held-out RMS, mm")
-    holdout_max_mm: Statistic | None = Field(None, description="the held-out maximum, mm")
-    tolerance_mm: Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)] | None = Field(
-        None,
-        description="the accuracy the application needs (--tolerance-mm, else the cell's "
-        "`tolerance_mm`), mm; null: none given",
-    )
-    summary: Text | None = Field(
-        None, description="the accuracy to expect on new poses, in one sentence"
-    )
-
-
 class ModelDoc(Doc):
     """A model.json: the calibrated robot, base, SMRs, extensions; other keys (method, data,
     fit statistics, created) are kept as written."""
@@ -170,23 +116,26 @@ class ModelDoc(Doc):
     )
     extensions: list[ExtensionDoc] = []
     created: Label | None = None
-    fit: FitDoc | None = Field(None, description="the fit's statistics")
-    uncertainty: UncertaintyDoc | None = Field(
+    fit: Fit | None = Field(None, description="the fit's statistics")
+    uncertainty: Uncertainty | None = Field(
         None, description="the parameters' standard errors (mm, degrees) and how estimated"
     )
-    identified: IdentifiedDoc | None = Field(
+    identified: Identified | None = Field(
         None,
         description="a calibration's identified parameters: `rows` (per parameter: group, "
         "nominal, calibrated, change, standard_error in mm and degrees), `fixed` (held and "
         "why), `condition_number`, `correlations` (the strongest |r|)",
     )
-    validation: ValidationDoc | None = Field(
+    validation: Validation | None = Field(
         None,
         description="whether the model may be deployed: `deployable` (false whenever the "
         "held-out error exceeds `tolerance_mm`), `reasons`, `summary`, "
         "`holdout_rms_mm` (leave-one-pose-out, the headline), `fit_rms_mm`, "
         "`condition_number`, `noise_floor_mm`, `limits`; `held_out` with the errors on a "
         "separate held-out campaign or file, when there is one",
+    )
+    diagnosis: Diagnosis | None = Field(
+        None, description="a diagnosis's final model: its final figures, noise floor, outliers"
     )
 
     @field_validator("targets")

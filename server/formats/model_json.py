@@ -7,7 +7,7 @@ import json
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -15,14 +15,44 @@ from robocal.solver.effects import Extension
 from robocal.solver.kinematics import Layout
 from robocal.solver.robot import Robot
 
+from .blocks import Block, Diagnosis, Fit, Identified, Uncertainty, Validation
 from .cell_json import robot_to_json
 from .files import atomic_write_text, read_text
 from .json_doc import JsonDoc
 from .model_doc import SCHEMA, ModelDoc
-from .verdict import Verdict
 
 # what ModelFile holds apart from `meta`
 MODEL_KEYS = ("schema", "robot", "nominal_robot", "base", "targets", "extensions")
+# the result blocks of `meta`, typed (formats.blocks)
+BLOCKS = {
+    "fit": Fit,
+    "uncertainty": Uncertainty,
+    "identified": Identified,
+    "validation": Validation,
+    "diagnosis": Diagnosis,
+}
+
+
+B = TypeVar("B", bound=Block)
+
+
+class _Slot(Generic[B]):
+    """A typed result block of a model file, read and set as an attribute; `meta` keeps it in
+    the order the file had it (or it was set in), so a file written again is the same text."""
+
+    def __init__(self, kind: type[B]):
+        self.kind = kind
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name = name
+
+    def __get__(self, model, owner=None) -> B | None:
+        return model.meta.get(self.name)
+
+    def __set__(self, model, block: B) -> None:
+        if not isinstance(block, self.kind):
+            raise TypeError(f"model.json's {self.name} must be a {self.kind.__name__}")
+        model.meta[self.name] = block
 
 
 @dataclass
@@ -34,16 +64,29 @@ class ModelFile:
     targets: dict[str, np.ndarray]
     nominal: Robot | None = None
     extensions: list = field(default_factory=list)
+    # provenance (method, data, qp...) as written, and the result blocks as typed documents
     meta: dict = field(default_factory=dict)
     parameters: list | None = None  # per extension, its parameters in edge units (for people)
     # per extension: {"coef_standard_errors": [...], "uncertainty": {parameter: standard error}}
     extension_errors: list | None = None
 
+    # not annotated: slots, not dataclass fields
+    fit = _Slot(Fit)
+    uncertainty = _Slot(Uncertainty)
+    identified = _Slot(Identified)
+    validation = _Slot(Validation)
+    diagnosis = _Slot(Diagnosis)
+
     @property
-    def verdict(self) -> Verdict:
-        """Its `validation` block, typed: what compensate, export, the service and the page
-        read (none: not deployable)."""
-        return Verdict.of(self.meta.get("validation"))
+    def method(self) -> str | None:
+        """How it was fitted (minimax, ls-sum+extensions...); None if the file does not say."""
+        return self.meta.get("method")
+
+    @property
+    def verdict(self) -> Validation:
+        """Its `validation` block as the guard reads it: what compensate, export, the service
+        and the page act on (none, or without `deployable`: not deployable)."""
+        return Validation.of(self.validation)
 
     def layout(self) -> tuple[Layout, np.ndarray]:
         """The kinematic layout and parameter vector that reproduce this model's predictions."""
@@ -70,19 +113,19 @@ def extension_to_json(
     return out
 
 
-def uncertainty_to_json(errors, names) -> dict:
+def uncertainty_to_json(errors, names) -> Uncertainty:
     """The standard errors of the named parameters of a fit (solver.uncertainty.ParameterErrors)
     as model.json states them (extension coefficients go with their extension)."""
     se = errors.standard_errors()
-    return {
-        "estimator": errors.estimator,
-        "poses": errors.poses,
-        "units": "mm; degrees for theta, alpha, beta and base_rz, base_ry, base_rx",
-        "frames": "base_x/y/z and base_rz/ry/rx along and about the calibrated base frame's "
+    return Uncertainty(
+        estimator=errors.estimator,
+        poses=errors.poses,
+        units="mm; degrees for theta, alpha, beta and base_rz, base_ry, base_rx",
+        frames="base_x/y/z and base_rz/ry/rx along and about the calibrated base frame's "
         "axes; SMR positions in the flange frame",
-        "standard_errors": {n: se[n] for n in names},
-        "null": "held fixed: not identifiable from this model (see fit.fixed_parameters)",
-    }
+        standard_errors={n: se[n] for n in names},
+        null="held fixed: not identifiable from this model (see fit.fixed_parameters)",
+    )
 
 
 def extension_errors(errors) -> list[dict]:
@@ -131,7 +174,7 @@ def model_to_json(model: ModelFile) -> dict:
             )
         ],
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
-        **model.meta,
+        **{k: v.to_json() if isinstance(v, Block) else v for k, v in model.meta.items()},
     }
 
 
@@ -157,7 +200,7 @@ def read_model(path) -> ModelFile:
         {k: np.array(v, dtype=float) for k, v in m.targets.items()},
         None if m.nominal_robot is None else m.nominal_robot.robot,
         extensions,
-        {k: v for k, v in obj.items() if k not in MODEL_KEYS},
+        {k: getattr(m, k) if k in BLOCKS else v for k, v in obj.items() if k not in MODEL_KEYS},
         parameters,
         errors,
     )

@@ -6,23 +6,17 @@ from pydantic import ConfigDict, Field
 
 from robocal.solver.vocabulary import KINDS
 
-from .fields import Doc
+from .blocks import Block, Figure, Identified, Score, Unexplained, Validation
 
 
-class Open(Doc):
+class Open(Block):
     """A report object: what a writer adds beyond the spec's keys is kept."""
-
-    model_config = ConfigDict(extra="allow")
-
-
-class Fit(Open):
-    model: str = Field(description="geometric, then each effect: geometric+joint_compliance(2)")
-    holdout_rmse_mm: float
-    holdout_max_mm: float
 
 
 class Alternative(Open):
     name: str
+    label: str = Field(description="as the report names effects: joint_periodic(3, harmonic 2)")
+    holdout_rmse_mm: float
 
 
 class Effect(Open):
@@ -30,11 +24,14 @@ class Effect(Open):
 
     name: str = Field(json_schema_extra={"enum": list(KINDS)})
     joint: int | None = Field(None, ge=1, description="joints are numbered from 1")
+    harmonic: int | None = Field(None, description="joint_periodic's multiple of the angle")
+    at_s: float | None = Field(None, description="base_shift's time, s")
     evidence: str = Field(description="one sentence a person can check")
     holdout_rmse_before_mm: float
     holdout_rmse_after_mm: float
-    parameters: dict[str, float | list[float] | None]
-    uncertainty: dict[str, float | None] | None = Field(
+    # as written (an int count stays an int when printed; thermal drift names its driver)
+    parameters: dict[str, Figure | list[Figure] | str | None]
+    uncertainty: dict[str, Figure | list[Figure] | None] | None = Field(
         None, description="each parameter's standard error"
     )
     holdout_gain_interval_mm: list[float] | None = Field(None, min_length=2, max_length=2)
@@ -47,18 +44,6 @@ class Outlier(Open):
     pose: str | int
     target: str
     residual_mm: float
-
-
-class Covariate(Open):
-    name: str
-    strength: float
-    reading: str
-
-
-class Unexplained(Open):
-    holdout_rmse_mm: float
-    share_of_baseline_mse: float
-    covariates: list[Covariate]
 
 
 class RegionFold(Open):
@@ -119,6 +104,10 @@ class Stability(Open):
     )
 
 
+class Seconds(Open):
+    total: float = Field(description="the whole diagnosis, s (its phases beside it)")
+
+
 class ReportDoc(Open):
     """A report.json: what the diagnosis found, most important effect first."""
 
@@ -130,11 +119,12 @@ class ReportDoc(Open):
         description="where the floor comes from: SMR-to-SMR distances or repeated readings in "
         "the data, else the cell's tracker specification (or the default one, said so)",
     )
-    baseline: Fit
+    baseline: Score
     effects: list[Effect] = Field(description="effects judged real, most important first")
-    final: Fit
+    final: Score
     outliers: list[Outlier] | None = Field(None, description="readings excluded as gross errors")
     unexplained: Unexplained | None = None
+    seconds: Seconds | None = Field(None, description="where the diagnosis's time went")
     extrapolation: Extrapolation | None = Field(
         None,
         description="the final model tested off its training region: trained on one side of "
@@ -149,13 +139,13 @@ class ReportDoc(Open):
         "repeated on resamples leaving out every fifth pose, the effects each named, and the "
         "doubt when they name another cause",
     )
-    identified: dict | None = Field(
+    identified: Identified | None = Field(
         None,
         description="the final model's identified parameters, as model.json's `identified` "
         "(per parameter: change from nominal and standard error; held-fixed parameters and "
         "why; condition number; strongest correlations)",
     )
-    validation: dict | None = Field(
+    validation: Validation | None = Field(
         None,
         description="whether the data supports the final model, as model.json's `validation` "
         "(`deployable`, `reasons`, the cross-validated held-out RMS beside the fit RMS)",

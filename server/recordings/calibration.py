@@ -299,10 +299,8 @@ def record_calibration(
     arm = log_frames(rec, models, meas, at)
     _log_per_pose(rec, sets, models, magnify, top)
     _log_error_per_pose(rec, sets)
-    final = None if extended is None else extended.meta.get("diagnosis", {}).get("final", {})
-    summary = _summary(
-        calibration, sets, magnify, top, meas.pose_ids[at], final and final.get("model")
-    )
+    final = None if extended is None or extended.diagnosis is None else extended.diagnosis.final
+    summary = _summary(calibration, sets, magnify, top, meas.pose_ids[at], final and final.model)
     rec.log("summary", rr.TextDocument(summary, media_type=rr.MediaType.MARKDOWN), static=True)
 
     history = calibration.get("history")

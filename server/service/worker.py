@@ -13,9 +13,9 @@ from pathlib import Path
 from robocal.server import store
 from robocal.server.calibration.identified import arm_parameters
 from robocal.server.calibration.workflow import held_out_errors, model_file, run_method
+from robocal.server.formats.blocks import Validation
 from robocal.server.formats.cell_json import parse_cell
 from robocal.server.formats.model_json import model_to_json, to_plain, write_json_atomic
-from robocal.server.formats.verdict import Verdict
 from robocal.server.service.processes import one_line
 
 Report = Callable[[dict], None]  # sends a job event to the service
@@ -132,8 +132,9 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.J
     fitted = model_file(cal, cell, meas)
     summary = None
     if hold is not None:  # the separate validation figure beside the leave-one-out one
-        summary = {"campaign_id": job.holdout_campaign_id, **held_out_errors(fitted, hold[1])}
-        fitted.meta.setdefault("validation", {})["held_out"] = summary
+        summary = held_out_errors(fitted, hold[1], campaign_id=job.holdout_campaign_id)
+        if fitted.validation is not None:
+            fitted.validation.held_out = summary
     model = model_to_json(fitted)
     model["data"]["campaign"] = job.campaign_id
     path = setup.models_dir / f"job-{job.id}.model.json"
@@ -153,26 +154,28 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.J
         # the arm's parameters in the shared database, for the fleet view
         "parameters": to_plain(arm_parameters(fitted)),
         **_verdict(fitted.verdict),
-        **({"holdout": summary} if summary else {}),
+        **({"holdout": summary.to_json()} if summary else {}),
     }
 
 
-def _verdict(v: Verdict) -> dict:
+# what a job's results keep of its model's verdict (GET /api/models/{id}/parameters has it all)
+SUMMARY = {
+    "deployable",
+    "reasons",
+    "warnings",
+    "summary",
+    "holdout_rms_mm",
+    "holdout_max_mm",
+    "fit_rms_mm",
+    "tolerance_mm",
+    "noise_floor_mm",
+    "noise_floor_source",
+}
+
+
+def _verdict(v: Validation) -> dict:
     """A job's results' summary of its model's verdict (a model without one: not deployable)."""
-    return {
-        "validation": {
-            "deployable": v.deployable,
-            "reasons": list(v.reasons),
-            "warnings": list(v.warnings),
-            "summary": v.summary,
-            "holdout_rms_mm": v.holdout_rms_mm,
-            "holdout_max_mm": v.holdout_max_mm,
-            "fit_rms_mm": v.fit_rms_mm,
-            "tolerance_mm": v.tolerance_mm,
-            "noise_floor_mm": v.noise_floor_mm,
-            "noise_floor_source": v.noise_floor_source,
-        }
-    }
+    return {"validation": to_plain(v.model_dump(include=SUMMARY))}
 
 
 def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.JobInfo) -> dict:

@@ -16,7 +16,7 @@ matplotlib.use("Agg")  # files only: the workstation may have no display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from robocal.server.formats.verdict import Verdict  # noqa: E402
+from robocal.server.formats.blocks import ModelQuote  # noqa: E402
 
 CSS = """
 body { font: 11pt/1.4 "DejaVu Sans", Arial, sans-serif; color: #111; max-width: 190mm;
@@ -176,11 +176,7 @@ def _table(head, rows, cls="") -> str:
 def holdout_rms(report: dict):
     """The model's held-out RMS (mm) as its diagnosis stated it, else as its validation did
     (a calibration's leave-one-pose-out figure); None if neither did."""
-    meta = report["model"].get("meta") or {}
-    final = (meta.get("diagnosis") or {}).get("final") or {}
-    if final.get("holdout_rmse_mm") is not None:
-        return final["holdout_rmse_mm"]
-    return Verdict.of(meta.get("validation")).holdout_rms_mm
+    return ModelQuote.model_validate(report["model"].get("meta") or {}).holdout_rms_mm()
 
 
 def render(report: dict) -> str:

@@ -21,6 +21,7 @@ from robocal.server import store
 from robocal.server.acquisition.acquire import PREDICTOR, AcquireOptions, acquire
 from robocal.server.calibration.validation import cell_mismatch
 from robocal.server.compensate.compensation import MAX_ERROR_MM, solver_model
+from robocal.server.formats.blocks import ModelQuote
 from robocal.server.formats.cell_json import Cell, parse_cell, robot_to_json
 from robocal.server.formats.errors import InputError
 from robocal.server.formats.model_json import ModelFile, read_model
@@ -44,6 +45,8 @@ CUBE_SIDE_MM = 400.0
 REFERENCE_CANDIDATES = 60  # visible poses drawn to place the cube near the workspace's middle
 RUNS = ("nominal", "compensated")  # the campaign visits the plan with each joint set, in turn
 RECORD = "verification"  # the campaign settings' key of the plan the figures come from
+# what a verification record quotes of its model's verdict (formats.blocks.ModelQuote)
+QUOTED = {"deployable", "holdout_rms_mm", "tolerance_mm"}
 
 
 @dataclass
@@ -286,7 +289,6 @@ def prepare(
     if why:
         raise InputError(model_path, None, None, f"{why}: not a model of this cell")
     plan, joints = make_plan(model, opts)
-    meta = model.meta or {}
     record = {
         "model": {
             "path": model_name or str(model_path),
@@ -294,12 +296,12 @@ def prepare(
             # what the certificate quotes of the model: its held-out RMS (a diagnosis's final
             # model's, else the calibration's leave-one-pose-out one from its validation)
             "meta": {
-                "diagnosis": {"final": meta.get("diagnosis", {}).get("final", {})},
-                "validation": {
-                    k: v
-                    for k, v in (meta.get("validation") or {}).items()
-                    if k in ("deployable", "holdout_rms_mm", "tolerance_mm")
-                },
+                "diagnosis": {"final": model.diagnosis.final.to_json() if model.diagnosis else {}},
+                "validation": (
+                    model.validation.model_dump(include=QUOTED, exclude_unset=True)
+                    if model.validation
+                    else {}
+                ),
             },
         },
         "smr": list(model.targets)[0],
@@ -403,7 +405,8 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
     late = overdue(cell, info.created_at)
     tolerance = cell.tolerance_mm
     if tolerance is None:
-        tolerance = (record["model"].get("meta") or {}).get("validation", {}).get("tolerance_mm")
+        quoted = ModelQuote.model_validate(record["model"].get("meta") or {}).validation
+        tolerance = quoted.tolerance_mm if quoted is not None else None
     return {
         "robot": cell.robot.name if hasattr(cell.robot, "name") else str(cell.robot),
         "model": record["model"],

@@ -12,7 +12,7 @@ from robocal.drivers.campaign_bound import (
     spanning_tree_weight,
 )
 from robocal.drivers.planning import order_poses, total_move_time
-from robocal.drivers.tracker.sim import INACCURATE_SPREAD
+from robocal.drivers.tracker.sim import INACCURATE_SPREAD, POINT_S
 from robocal.server.bench.acquire import physical_bound, run_acquire_bench
 
 
@@ -48,7 +48,7 @@ def test_settling_bound_is_the_first_start_whose_window_passes():
     assert np.all(s.mean_shift_mm >= 0)
 
 
-def test_the_bound_adds_motion_samples_and_settling():
+def test_the_bound_adds_motion_samples_settling_and_aiming():
     rng = np.random.default_rng(0)
     q = rng.uniform(-1.0, 1.0, size=(12, 6))
     home = np.zeros(6)
@@ -58,7 +58,8 @@ def test_the_bound_adds_motion_samples_and_settling():
     assert b["measuring_s"] == 36.0
     assert b["motion_s"] == motion_lower_bound(q, home) <= b["tour_s"]
     assert b["settling_s"] > 0
-    assert b["bound_s"] == b["motion_s"] + b["measuring_s"] + b["settling_s"]
+    assert b["aiming_s"] == pytest.approx((36 - 12) * POINT_S)  # two re-aims a pose of three
+    assert b["bound_s"] == b["motion_s"] + b["measuring_s"] + b["settling_s"] + b["aiming_s"]
 
 
 def test_every_procedure_takes_longer_than_its_bound_and_the_combined_one_least():
@@ -81,6 +82,9 @@ def test_every_procedure_takes_longer_than_its_bound_and_the_combined_one_least(
         assert sum(run["phase_s"].values()) == pytest.approx(run["campaign_s"], abs=1e-9)
         assert run["phase_s"]["move"] >= bound["tour_s"] - 1e-9
         assert run["phase_s"]["measure"] >= bound["measuring_s"] - 1e-9  # clock sums round
+        # the beam re-aims between a pose's readings whatever the procedure
+        assert bound["aiming_s"] == (run["readings"] - run["poses_in_bound"]) * POINT_S
+        assert run["phase_s"]["aim"] >= bound["aiming_s"] - 1e-9
     # the paper pauses 10 s at each pose; adaptive settling waits inside the stream's readings
     assert runs["paper"]["phase_s"]["settle"] == pytest.approx(10.0 * 14)
     assert runs["combined"]["phase_s"]["settle"] == 0.0

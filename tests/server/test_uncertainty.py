@@ -101,7 +101,7 @@ def test_model_file_round_trips_standard_errors_and_old_files_still_load(tmp_pat
     model.extension_errors = [{"coef_standard_errors": [1e-6], "uncertainty": {"scale_ppm": 1.0}}]
     write_model(tmp_path / "model.json", model)
     back = read_model(tmp_path / "model.json")
-    assert back.meta["uncertainty"] == json.loads(json.dumps(model.meta["uncertainty"]))
+    assert back.uncertainty.to_json() == json.loads(json.dumps(model.uncertainty.to_json()))
     assert back.extension_errors == model.extension_errors and back.parameters == model.parameters
 
     old = json.loads((tmp_path / "model.json").read_text())

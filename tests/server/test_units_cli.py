@@ -137,7 +137,7 @@ def test_a_verdict_on_readings_in_metres_names_them():
     meas = VirtualCell.random(cell.robot, cell.targets, seed=7).campaign(30, seed=7)
     metres = Measurements(meas.pose_ids, meas.q, meas.target_names, meas.xyz / 1000.0)
     v = workflow.model_file(workflow.run_method(cell, metres, "ls-sum"), cell, metres)
-    v = v.meta["validation"]
+    v = v.validation.to_json()
     assert not v["deployable"]
     assert any(r.endswith("x, y, z look like metres; give them in mm") for r in v["reasons"])
     (change,) = [r for r in v["reasons"] if "changed by" in r]

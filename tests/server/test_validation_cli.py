@@ -80,7 +80,7 @@ def test_a_healthy_campaign_is_deployable_and_another_cell_is_refused(tmp_path):
 def test_the_real_campaigns_are_deployable(name):
     cell, meas = workflow.load_data(REAL / name / "train.csv", REAL / name / "cell.json")
     cal = workflow.run_method(cell, meas, "minimax")
-    v = workflow.model_file(cal, cell, meas).meta["validation"]
+    v = workflow.model_file(cal, cell, meas).validation.to_json()
     assert v["deployable"] is True, v["reasons"]
     assert v["holdout_rms_mm"] > v["fit_rms_mm"] > v["noise_floor_mm"]
     if name == "qkm_hl6":  # its cell's SMR layout is the found one turned half a turn

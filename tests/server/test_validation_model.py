@@ -42,7 +42,7 @@ def refit_holdout(cell, meas, method) -> float:
 def test_the_held_out_rms_is_that_of_refits(method, rel):
     cell, meas = campaign(20, seed=4, effects=["joint_compliance:2"])
     cal = workflow.run_method(cell, meas, method, screening=False)
-    v = workflow.model_file(cal, cell, meas).meta["validation"]
+    v = workflow.model_file(cal, cell, meas).validation.to_json()
     assert v["holdout_rms_mm"] == pytest.approx(refit_holdout(cell, meas, method), rel=rel)
     assert v["holdout_rms_mm"] > v["fit_rms_mm"]
 
@@ -51,11 +51,11 @@ def test_the_identified_block_names_every_parameter():
     cell, meas = campaign(40, seed=6)
     cal = workflow.run_method(cell, meas, "ls-pose")
     model = workflow.model_file(cal, cell, meas)
-    ident = model.meta["identified"]
+    ident = model.identified.to_json()
     names = [r["parameter"] for r in ident["rows"]]
     assert set(names) == set(cal.layout.names())
     assert {f["parameter"] for f in ident["fixed"]} == set(cal.fixed)
-    assert model.meta["validation"]["deployable"] is True, model.meta["validation"]["reasons"]
+    assert model.validation.deployable is True, model.validation.reasons
 
 
 def test_a_model_without_an_identified_block_still_has_its_table():
@@ -64,9 +64,9 @@ def test_a_model_without_an_identified_block_still_has_its_table():
 
     cell, meas = campaign(30, seed=7)
     model = workflow.model_file(workflow.run_method(cell, meas, "ls-sum"), cell, meas)
-    full = parameters_of(model)
+    full = parameters_of(model).to_json()
     del model.meta["identified"]  # as a diagnosis's model, or one written before
-    table = parameters_of(model)
+    table = parameters_of(model).to_json()
     ModelParameters.model_validate(
         {"job_id": 1, "method": "ls-sum", "identified": table, "validation": None}
     )
@@ -75,7 +75,7 @@ def test_a_model_without_an_identified_block_still_has_its_table():
             "job_id": 1,
             "method": "ls-sum",
             "identified": full,
-            "validation": model.meta["validation"],
+            "validation": model.validation,
         }
     )
     rows = {r["parameter"]: r for r in table["rows"]}
@@ -92,7 +92,7 @@ def test_the_params_table_gives_the_base_standard_errors_and_smr_nominals():
     cell, meas = campaign(30, seed=8)
     model = workflow.model_file(workflow.run_method(cell, meas, "ls-sum"), cell, meas)
     rows = {r["parameter"]: r for r in csv.DictReader(io.StringIO(params_text(model)))}
-    ident = {r["parameter"]: r for r in model.meta["identified"]["rows"]}
+    ident = {r["parameter"]: r for r in model.identified.to_json()["rows"]}
     for n in ("base_x", "base_rz"):
         assert float(rows[n]["standard_error"]) == pytest.approx(ident[n]["standard_error"], 1e-2)
     assert float(rows["B_y"]["nominal"]) == cell.targets["B"][1]
@@ -120,7 +120,7 @@ def test_the_base_standard_errors_are_those_of_the_tracker_frame():
 def test_a_diagnosis_model_is_judged_on_its_own_cross_validation(poses, effects, deployable):
     cell, meas = campaign(poses, 21, effects)
     d, model = workflow.diagnose(cell, meas, screen=False)
-    v = model.meta["validation"]
+    v = model.validation.to_json()
     assert v["deployable"] is deployable, v["reasons"]
     assert v["holdout"].startswith("5-fold cross-validation")
     assert v["holdout_rms_mm"] == pytest.approx(d.report["final"]["holdout_rmse_mm"])

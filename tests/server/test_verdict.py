@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from robocal.server.formats.verdict import NO_VERDICT, Verdict
+from robocal.server.formats.blocks import NO_VERDICT, Validation
 from robocal.solver import guard
 from tests.server.test_cli import robocal
 
@@ -121,9 +121,9 @@ def test_a_model_without_a_verdict_is_refused_by_compensate_in_one_line(tmp_path
 
 def test_the_verdict_reads_a_missing_or_partial_block_as_not_deployable():
     for block in (None, {}, {"held_out": {"rms_mm": 0.1}}, {"deployable": "yes"}):
-        v = Verdict.of(block)
+        v = Validation.of(block)
         assert not v.deployable and v.reasons == (NO_VERDICT,) and NO_VERDICT in v.refusal()
-    v = Verdict.of({"deployable": True, "reasons": [], "holdout_rms_mm": 0.02, "summary": "s"})
+    v = Validation.of({"deployable": True, "reasons": [], "holdout_rms_mm": 0.02, "summary": "s"})
     assert v.deployable and v.refusal() is None and v.holdout_rms_mm == 0.02
 
 

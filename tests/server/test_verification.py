@@ -26,7 +26,7 @@ def verified(request, tmp_path_factory):
     seed = request.param
     d = tmp_path_factory.mktemp(f"verify{seed}")
     report, model = calibrated_and_verified(d, seed)
-    return report, model.meta["diagnosis"]["final"]["holdout_rmse_mm"], d
+    return report, model.diagnosis.final.holdout_rmse_mm, d
 
 
 def calibrated_and_verified(d, seed: int):

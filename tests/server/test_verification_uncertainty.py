@@ -32,7 +32,7 @@ def calibrated_and_verified(d, tolerance_mm: float | None = 0.5) -> tuple[dict, 
     model = workflow.model_file(workflow.run_method(cell, meas, "ls-sum"), cell, meas)
     write_model(d / "model.json", model)
     report = verify(db_path, cell, d / "model.json", VerifyOptions(seed=SEED))
-    return report, read_model(d / "model.json").meta["uncertainty"]["position"]
+    return report, read_model(d / "model.json").uncertainty.position
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from scipy.optimize import OptimizeResult
 
 from robocal.drivers.cell import VirtualCell
 from robocal.solver import minimax as minimax_module
@@ -31,7 +30,10 @@ def _fit(data, method, **kw):
 @pytest.mark.parametrize("method", [*(m for m in METHODS if m != "ls-single"), "ls-single:B"])
 def test_every_method_returns_the_same_result_type(data, method):
     cal = _fit(data, method)
-    assert isinstance(cal, Calibration) and isinstance(cal, OptimizeResult)
+    assert isinstance(cal, Calibration)
+    assert cal.method == cal["method"] and set(dir(cal)) >= set(COMMON)  # scipy's result's manners
+    with pytest.raises(AttributeError):
+        cal.no_such_figure  # noqa: B018
     for key in COMMON:
         assert key in cal, key
     assert cal.success and cal.status == 0, cal.message

@@ -92,3 +92,29 @@ def test_too_few_poses_for_the_geometry_are_left_unscreened():
     few = meas.subset(np.arange(2))
     s = screen(few, few.xyz)
     assert s.count == 0 and "poses" in s.skipped
+
+
+@pytest.mark.parametrize("targets", [3, 1])
+def test_leverage_from_row_blocks_equals_the_dense_hat_matrix(targets):
+    """The leverage from J's row blocks (R, then U = J V / s) equals the diagonal blocks of the
+    dense hat matrix from J's SVD, rank-deficient J included (one SMR: redundant parameters)."""
+    from robocal.solver.calibrate import calibrate
+    from robocal.solver.identifiability import jacobian_rows
+    from robocal.solver.problem import Problem
+    from robocal.solver.screen import leverage
+
+    cell = default_cell()
+    names = list(cell.targets)[:targets]
+    vc = VirtualCell.random(cell.robot, {n: cell.targets[n] for n in names}, seed=7)
+    meas = vc.campaign(300, seed=8)
+    nominal = np.array([cell.targets[n] for n in names])
+    cal = calibrate(Problem(cell.robot, nominal, names, meas.q, meas.xyz), "ls-sum")
+    J = jacobian_rows(cal.layout, cal.x, meas.q, np.ones(meas.xyz.shape[:2], bool))
+    Js = J / np.linalg.norm(J, axis=0)
+    U, sv, _ = np.linalg.svd(Js, full_matrices=False)
+    U = U[:, sv > sv[0] * 1e-9]
+    hat = np.einsum("ip,jp->ij", U, U)
+    dense = np.diagonal(hat).reshape(-1, 3).mean(axis=1)
+    blocks = leverage(lambda: (J[i : i + 250] for i in range(0, len(J), 250)))
+    assert np.allclose(blocks, dense, rtol=0, atol=1e-12)
+    assert blocks.sum() == pytest.approx(U.shape[1] / 3)  # the rank, a third a coordinate

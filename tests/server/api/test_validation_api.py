@@ -9,7 +9,7 @@ import json
 
 import pytest
 
-from robocal.server.formats.verdict import NO_VERDICT
+from robocal.server.formats.blocks import NO_VERDICT
 from tests.real import import_real
 from tests.server.api.test_verify_api import calibrate, run_campaign
 

@@ -1,0 +1,136 @@
+"""The result blocks cross layers typed: no module of the server reads a block (fit, uncertainty,
+identified, validation, diagnosis, unexplained, accuracy) by its string key, and no verdict is
+read with a default; model.json and report.json, as written, are the documents of
+formats.blocks."""
+
+from __future__ import annotations
+
+import ast
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+BLOCKS = {"fit", "identified", "validation", "diagnosis", "unexplained", "accuracy"}
+# `uncertainty` names other things too (an effect's, a verification's): banned off a model's meta
+META_BLOCKS = BLOCKS | {"uncertainty"}
+# formats/ defines the documents and reads and writes their files
+EXEMPT = ("server/formats/",)
+
+
+def _key(node: ast.AST) -> str | None:
+    return node.value if isinstance(node, ast.Constant) and isinstance(node.value, str) else None
+
+
+def _off_meta(node: ast.AST) -> bool:
+    """Whether the expression is `<something>.meta` or a name `meta`."""
+    return (isinstance(node, ast.Attribute) and node.attr == "meta") or (
+        isinstance(node, ast.Name) and node.id == "meta"
+    )
+
+
+def string_key_reads(source: str) -> list[tuple[int, str]]:
+    """(line, key) of each read of a result block by string key: x["fit"], x.get("fit"),
+    "fit" in x (writes, x["fit"] = ..., are not reads); and each `.get("deployable", ...)`."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Subscript) and isinstance(node.ctx, (ast.Load, ast.Del)):
+            key = _key(node.slice)
+            if key in BLOCKS or (key in META_BLOCKS and _off_meta(node.value)):
+                out.append((node.lineno, key))
+        elif (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr in ("get", "setdefault", "pop")
+            and node.args
+        ):
+            key = _key(node.args[0])
+            owner = node.func.value
+            if key in BLOCKS or (key in META_BLOCKS and _off_meta(owner)):
+                out.append((node.lineno, key))
+            elif key == "deployable" and len(node.args) + len(node.keywords) > 1:
+                out.append((node.lineno, "deployable with a default"))
+        elif isinstance(node, ast.Compare) and any(
+            isinstance(op, (ast.In, ast.NotIn)) for op in node.ops
+        ):
+            key = _key(node.left)
+            if key in BLOCKS or (key in META_BLOCKS and any(map(_off_meta, node.comparators))):
+                out.append((node.lineno, key))
+    return out
+
+
+def test_the_check_finds_each_kind_of_read():
+    src = (
+        'a = m.meta["validation"]\nb = r.get("identified")\nc = "fit" in report\n'
+        'd = meta.get("uncertainty")\ne = v.get("deployable", True)\nm.meta["fit"] = 1\n'
+        'f = e.get("uncertainty")\n'
+    )
+    assert string_key_reads(src) == [
+        (1, "validation"),
+        (2, "identified"),
+        (3, "fit"),
+        (4, "uncertainty"),
+        (5, "deployable with a default"),
+    ]
+
+
+def test_no_result_block_is_read_by_string_key_outside_the_formats():
+    found = []
+    for path in sorted((ROOT / "server").rglob("*.py")):
+        rel = path.relative_to(ROOT).as_posix()
+        if rel.startswith(EXEMPT):
+            continue
+        for line, key in string_key_reads(path.read_text()):
+            found.append(f"{rel}:{line} reads {key!r} by string key")
+    assert not found, "read the typed block (formats.blocks) instead:\n" + "\n".join(found)
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """A calibration's and a diagnosis's model.json and the diagnosis's report.json, as the
+    commands write them."""
+    from robocal.drivers.cell import VirtualCell
+    from robocal.server.calibration import workflow
+    from robocal.server.formats.cell_json import default_cell
+    from robocal.server.formats.model_json import write_model
+
+    d = tmp_path_factory.mktemp("blocks")
+    cell = default_cell()
+    meas = VirtualCell.random(cell.robot, cell.targets, seed=5).campaign(40, seed=5)
+    cal = workflow.run_method(cell, meas, "ls-sum")
+    write_model(d / "cal.json", workflow.model_file(cal, cell, meas))
+    diagnosis, model = workflow.diagnose(cell, meas, screen=False)
+    workflow.write_diagnosis(diagnosis, model, d / "report.json", {"poses": 40}, d / "diag.json")
+    return d
+
+
+@pytest.mark.parametrize("name", ["cal.json", "diag.json"])
+def test_model_json_is_its_document_and_reads_back_the_same(written, name):
+    from robocal.server.formats.blocks import Block
+    from robocal.server.formats.model_doc import ModelDoc
+    from robocal.server.formats.model_json import model_to_json, read_model
+
+    text = json.loads((written / name).read_text())
+    doc = ModelDoc.model_validate(text)
+    for key in ("fit", "uncertainty", "identified", "validation", "diagnosis"):
+        block = getattr(doc, key)
+        assert (block is None) == (key not in text), key
+        if block is not None:
+            assert isinstance(block, Block) and block.to_json() == text[key], key
+    back = model_to_json(read_model(written / name))
+    assert {k: v for k, v in back.items() if k != "created"} == {
+        k: v for k, v in text.items() if k != "created"
+    }
+    assert list(back) == list(text)  # the keys in the order written
+
+
+def test_report_json_is_its_document(written):
+    from robocal.server.formats.report_doc import ReportDoc
+
+    text = json.loads((written / "report.json").read_text())
+    doc = ReportDoc.model_validate(text)
+    assert doc.validation is not None and doc.identified is not None
+    assert doc.validation.to_json() == text["validation"]
+    assert doc.identified.to_json() == text["identified"]
+    assert doc.final.to_json() == text["final"]
