@@ -246,7 +246,8 @@ class CampaignEngine(Sighting):
         """
         names = tuple(self.predictor.names)
         stored = dict(partial or {})
-        plan = campaign_plan(poses_deg, names, start, stored) if plan is None else plan
+        if plan is None:
+            plan = campaign_plan(poses_deg, names, start, stored, order=self.measuring_order)
         epoch = self._begin()
         try:
             run = _Run(epoch, names, start, stored)
@@ -296,6 +297,18 @@ class CampaignEngine(Sighting):
             self._tell(wait_s=TELL_WAIT_S)
         return self.stats
 
+    def measuring_order(self, q_deg) -> tuple[str, ...]:
+        """The targets at a pose, farthest from the tracker first (as predicted now).
+
+        A tracker's error grows with range (MPE A + B L), and so does the sample spread its
+        still-check allows; the first reading after a move is the one the arm's ringing holds
+        back, so the farthest SMR's passes soonest. The later readings start a reading's length
+        after arrival, when the ringing has decayed; a POINT takes as long whichever SMR it is.
+        """
+        names = tuple(self.predictor.names)
+        reach = np.linalg.norm(self.predictor.predict(np.deg2rad(np.asarray(q_deg))), axis=1)
+        return tuple(names[k] for k in np.argsort(-reach, kind="stable"))
+
     def _account(self, msg, seconds: float) -> None:
         phases = self.stats.phase_s
         name = _PHASES.get(type(msg), "other")
@@ -323,7 +336,7 @@ class CampaignEngine(Sighting):
         if (work := self._at_pose(msg, run)) is None:
             return False
         if not work.skipped:
-            self._settle(work, run.names[0])
+            self._settle(work, work.first or run.names[0])
         return True
 
     def _on_aim(self, msg: Aim, run: _Run) -> bool:
@@ -398,6 +411,7 @@ class CampaignEngine(Sighting):
     def _move(self, msg: Move, stored: dict, epoch: int) -> _Pose | None:
         i, q_deg = msg.pose, np.asarray(msg.q_deg, dtype=float)
         work = _Pose(i, q_deg, {n: np.asarray(v, dtype=float) for n, v in stored.items()})
+        work.first = msg.first
         # A pause or an abort never lets a new move begin (it takes effect here as at a
         # checkpoint). This is the last look before motion: an e-stop landing after it is
         # caught by the controller's latch, checked under the same lock as the MOVEJ write.

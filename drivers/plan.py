@@ -27,6 +27,9 @@ class Move:
 
     pose: int
     q_deg: tuple[float, ...]
+    # the SMR the pose's readings begin with (the beam is pointed at it ahead of arrival, and the
+    # arm's ringing is judged on it); None: the first of the campaign's targets
+    first: str | None = None
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,7 @@ class Save:
 
 
 Message = Checkpoint | Move | Settle | Aim | Measure | Save
+Order = Callable[[np.ndarray], Sequence[str]]  # a pose's joints (deg) -> its targets, in order
 
 
 def campaign_plan(
@@ -67,9 +71,11 @@ def campaign_plan(
     target_names: Sequence[str],
     start: int = 0,
     partial: Mapping[str, object] | None = None,
+    order: Order | None = None,
 ) -> Iterator[Message]:
     """The messages that measure poses_deg[start:]; targets in `partial` (already read at pose
-    `start`, cut off mid-pose) are not aimed at or measured again."""
+    `start`, cut off mid-pose) are not aimed at or measured again. order(q_deg), if given, names
+    the targets in the order to measure them at that pose (asked as the pose's Move is due)."""
     poses = np.asarray(poses_deg, dtype=float)
     if poses.ndim != 2:
         raise ValueError(f"poses_deg must be a (poses, joints) array, not shape {poses.shape}")
@@ -80,7 +86,7 @@ def campaign_plan(
     unknown = done - set(names)
     if unknown:
         raise ValueError(f"partial readings name unknown targets: {', '.join(sorted(unknown))}")
-    return _messages(poses, names, start, done)
+    return _messages(poses, names, start, done, order=order)
 
 
 def growing_plan(
@@ -88,29 +94,41 @@ def growing_plan(
     target_names: Sequence[str],
     start: int = 0,
     partial: Mapping[str, object] | None = None,
+    order: Order | None = None,
 ) -> Iterator[Message]:
     """The messages that measure batches of poses numbered on from `start`: next_batch() gives
     the next poses (m, joints) deg, None to end. The engine asks for a message only once the one
     before is done, so each batch is asked for after the previous batch's last Save (an
-    adaptive campaign chooses it from every reading so far); `partial` as for campaign_plan."""
+    adaptive campaign chooses it from every reading so far); `partial`, `order` as for
+    campaign_plan."""
     names = tuple(target_names)
     done = set(partial or ())
     i = start
     while (batch := next_batch()) is not None:
         poses = np.atleast_2d(np.asarray(batch, dtype=float))
-        yield from _messages(poses, names, i, done, first=i)
+        yield from _messages(poses, names, i, done, first=i, order=order)
         i, done = i + len(poses), set()
 
 
-def _messages(poses, names, start, done, first: int = 0) -> Iterator[Message]:
+def _messages(poses, names, start, done, first: int = 0, order=None) -> Iterator[Message]:
     """Pose `first + j` is poses[j]; from pose `start` on."""
     for i in range(start, first + len(poses)):
         yield Checkpoint(i)
-        yield Move(i, tuple(float(v) for v in poses[i - first]))
+        q = poses[i - first]
+        ranked = names if order is None else _ranked(order(q), names)
+        todo = [n for n in ranked if not (i == start and n in done)]
+        lead = todo[0] if order is not None and todo else None
+        yield Move(i, tuple(float(v) for v in q), lead)
         yield Settle(i)
-        for name in names:
-            if i == start and name in done:
-                continue
+        for name in todo:
             yield Aim(i, name)
             yield Measure(i, name)
         yield Save(i)
+
+
+def _ranked(ranked: Sequence[str], names: tuple[str, ...]) -> tuple[str, ...]:
+    """The order's targets, checked to be the campaign's, each once."""
+    ranked = tuple(ranked)
+    if sorted(ranked) != sorted(names):
+        raise ValueError(f"a pose's target order {ranked} is not an order of {names}")
+    return ranked

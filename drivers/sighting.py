@@ -52,6 +52,7 @@ class _Pose:
     # again cannot lock (the SMR is outside the capture radius), a search around it may
     missed_ahead: np.ndarray | None = None
     settle_seen: bool = False
+    first: str | None = None  # the SMR the readings begin with (plan.Move.first)
 
 
 class Sighting:
@@ -69,12 +70,13 @@ class Sighting:
         raise NotImplementedError  # CampaignEngine: the sink, once told of pending transitions
 
     def _point_ahead(self, work: _Pose, at: float) -> None:
-        """Aim at the first SMR's predicted position as the move ends, so the beam is there when
+        """Aim at the pose's first SMR's predicted position as the move ends, so the beam is there when
         the arm arrives. Only a POINT: nothing is measured until the controller reports the arm
         in position (the tracker cannot lock on a moving SMR, and any motion breaks a lock).
         The nominal model is not used: a rough base puts the aim beyond the capture radius."""
-        name = self.predictor.names[0]
-        aim = self.predictor.predict(np.deg2rad(work.q_deg))[0]
+        names = list(self.predictor.names)
+        name = work.first or names[0]
+        aim = self.predictor.predict(np.deg2rad(work.q_deg))[names.index(name)]
         self.clock.sleep(at - self.clock.now())
         try:
             if self.tracker.point(aim):
@@ -113,7 +115,7 @@ class Sighting:
     def _search_here(self, work: _Pose, name: str) -> bool:
         """Search around where the beam points now; True once locked."""
         try:
-            return self._search(work, name, 0)
+            return self._search(work, name)
         except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
             code = _code(e)
             if code is None:
@@ -140,7 +142,7 @@ class Sighting:
             if locked:
                 return True
             self.stats.searched += 1
-            return self._search(work, name, attempt)
+            return self._search(work, name)
         except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
             code = _code(e)
             if code is None:
@@ -149,20 +151,20 @@ class Sighting:
                 self.stats.beam_breaks += 1
             return False
 
-    def _search(self, work: _Pose, name: str, attempt: int) -> bool:
-        """Search around the aim: narrow first, wide on a later attempt unless the model is
-        trusted; a miss of the last search worth making marks the target out of sight here."""
+    def _search(self, work: _Pose, name: str) -> bool:
+        """Search around the aim out to as far as the prediction may be off (at least the narrow
+        radius, at most the wide one); a miss marks the target out of sight here."""
         s = self.settings
         # no further than the prediction may be off: a target missed within that is out of sight
-        # (facing away), and a calibrated model's reach is inside the narrow search
+        # (facing away), and a calibrated model's reach is inside the narrow search. All of it at
+        # once: the spiral grows outwards and ends where it meets the SMR, so a wider limit costs
+        # nothing when the SMR is near, where a narrow search first and a wide one after it
+        # sweep the narrow disc twice when it is not
         reach = min(s.wide_search_radius_mm, self.predictor.reach_mm)
-        last = reach <= s.search_radius_mm or attempt > 0
-        if self.tracker.search(
-            max(reach, s.search_radius_mm) if attempt > 0 else s.search_radius_mm
-        ):
+        if self.tracker.search(max(reach, s.search_radius_mm)):
             return True
-        if last:  # the arm stands still: searching the same place again is no use
-            work.unseen.add(name)
+        # the arm stands still: searching the same place again is no use
+        work.unseen.add(name)
         return False
 
     def _measure(self, msg: Measure, work: _Pose) -> None:
@@ -270,19 +272,19 @@ class Sighting:
         look_s = s.settle_look_samples / NOMINAL_SAMPLE_RATE_HZ
         still: list[np.ndarray] = []
         names = list(self.predictor.names)
-        watched, attempt = name, 0
+        watched = name
         while self.clock.now() - t0 < s.pause_s:
             if watched in work.unseen:  # watch the next SMR in sight, if any
-                still, attempt = [], 0
+                still = []
                 left = [n for n in names if n not in work.unseen]
                 if not left:
                     self.clock.sleep(s.pause_s - (self.clock.now() - t0))
                     break
                 watched = left[0]
             aim = work.predicted[names.index(watched)]
-            m = self._look(work, watched, aim, s.settle_look_samples, attempt)
+            m = self._look(work, watched, aim, s.settle_look_samples)
             if m is None:
-                still, attempt = [], attempt + 1
+                still = []
                 if watched not in work.unseen:
                     self.clock.sleep(look_s)  # a lost beam: give it time rather than spin
                 continue
@@ -294,14 +296,14 @@ class Sighting:
                 break
         self.stats.settle_s.append(self.clock.now() - t0)
 
-    def _look(self, work: _Pose, name: str, aim, samples, attempt: int):
+    def _look(self, work: _Pose, name: str, aim, samples):
         """A short measurement of `name`, locking on it first unless the beam holds it."""
         try:
             if work.locked_on != name:
                 work.locked_on = None
                 if self.tracker.point(aim):
                     work.lock_searched = False
-                elif self._search(work, name, attempt):
+                elif self._search(work, name):
                     work.lock_searched = True
                 else:
                     return None

@@ -441,7 +441,9 @@ def acquire(
                 start=begin,
                 history=history,
                 partial=partial,
-                plan=None if adaptive is None else adaptive.plan(begin, partial),
+                plan=None
+                if adaptive is None
+                else adaptive.plan(begin, partial, engine.measuring_order),
             )
         except KeyboardInterrupt:
             writer.close()

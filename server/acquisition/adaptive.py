@@ -88,8 +88,9 @@ class AdaptiveRun:
         self.steps: list[dict] = list(steps)
         self.last: Step | None = None
 
-    def plan(self, start: int, partial=None):
-        """The messages from pose `start` on: the stored poses left, then batch after batch."""
+    def plan(self, start: int, partial=None, order=None):
+        """The messages from pose `start` on: the stored poses left, then batch after batch;
+        `order` as for plan.campaign_plan."""
         from robocal.drivers.plan import growing_plan
 
         left = [self.planned[start:]] if start < len(self.planned) else []
@@ -99,7 +100,7 @@ class AdaptiveRun:
                 return left.pop()
             return self._next()
 
-        return growing_plan(next_batch, self.names, start, partial)
+        return growing_plan(next_batch, self.names, start, partial, order)
 
     def _next(self):
         meas = store.campaign_measurements(self.db, campaign_id=self.cid, targets=self.names)

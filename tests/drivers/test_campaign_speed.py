@@ -183,20 +183,33 @@ def test_less_searching_once_the_first_pose_registers_the_base(monkeypatch):
     assert with_first < 0.9 * nominal, (with_first, nominal)
 
 
-def test_the_order_is_shorter_than_nearest_neighbour_and_two_opt_on_the_move_time():
-    rng = np.random.default_rng(5)
+def _gain_over(baseline, n: int, seed: int) -> float:
+    """Seconds order_poses saves over baseline(D) on four random tours of n poses from home,
+    never slower on any of them."""
+    rng = np.random.default_rng(seed)
     gained = 0.0
     for _ in range(4):
-        q = rng.uniform(IRB2600.lower * 0.8, IRB2600.upper * 0.8, size=(100, 6))
+        q = rng.uniform(IRB2600.lower * 0.8, IRB2600.upper * 0.8, size=(n, 6))
         home = np.zeros(6)
-        D = np.zeros((101, 101))
+        D = np.zeros((n + 1, n + 1))
         D[1:, 1:] = move_time(q[:, None], q[None])
         D[0, 1:] = move_time(home, q)
-        before = _path_cost(D, _two_opt(D, _nearest_neighbour(D, 0)))
+        before = _path_cost(D, baseline(D))
         after = total_move_time(q, order_poses(q, home), home)
         assert after <= before + 1e-9
         gained += before - after
-    assert gained > 0.05  # seconds of motion saved over the four tours
+    return gained
+
+
+def test_kicks_shorten_the_order_below_its_local_optimum():
+    from robocal.drivers.planning import _local_search
+
+    gained = _gain_over(lambda D: _local_search(D, _nearest_neighbour(D, 0)), 40, 11)
+    assert gained > 0.1, gained
+
+
+def test_the_order_is_shorter_than_nearest_neighbour_and_two_opt_on_the_move_time():
+    assert _gain_over(lambda D: _two_opt(D, _nearest_neighbour(D, 0)), 100, 5) > 0.05
 
 
 def test_the_settle_defaults_look_at_the_tracker_rate():
@@ -294,3 +307,36 @@ def test_a_point_ahead_that_missed_is_followed_by_a_search_not_the_same_point():
 
     # never the same POINT again right after it missed: it cannot lock there either
     assert not any(i + 1 < len(lines) and same_point(lines[i][0], lines[i + 1][0]) for i in missed)
+
+
+def test_each_pose_s_readings_begin_with_its_farthest_smr_pointed_at_ahead():
+    # the farthest SMR's noise, hence the spread the tracker's still-check allows, is largest:
+    # the first reading after a move, the one the ringing holds back, passes soonest on it
+    from robocal.drivers.plan import Aim
+
+    with simulated_engine(seed=3, n=12) as (engine, poses, sim):
+        seen: list = []
+        engine.trace = seen.append
+        stats = engine.run(poses)
+        names = list(sim.cell.target_names)
+        reach = np.linalg.norm(sim.cell.true_points(np.deg2rad(poses)), axis=-1)
+    assert stats.readings == 12 * 3
+    firsts = [m.first for m in seen if isinstance(m, Move)]
+    assert firsts == [names[k] for k in np.argmax(reach, axis=1)]
+    aims = [m for m in seen if isinstance(m, Aim)]
+    assert [m.target for m in aims[::3]] == firsts
+    assert len(set(np.argmax(reach, axis=1))) > 1  # the order changes from pose to pose
+
+
+def test_a_search_sweeps_out_to_the_prediction_s_reach_at_once():
+    # the spiral ends where it meets the SMR: a narrow search first would sweep its disc twice
+    # whenever the SMR lies beyond it
+    with simulated_engine(seed=3, n=8) as (engine, poses, sim):
+        dev, radii = sim.tracker_device, []
+        search = dev.search
+        dev.search = lambda r: radii.append(r) or search(r)
+        stats = engine.run(poses)
+    assert stats.readings == 8 * 3 and radii
+    assert engine.settings.wide_search_radius_mm in radii  # before the model is registered
+    assert all(r >= engine.settings.search_radius_mm for r in radii)
+    assert stats.searched == len(radii)

@@ -47,6 +47,29 @@ def test_a_resumed_plan_skips_measured_poses_and_the_cut_off_pose_s_stored_targe
     assert list(campaign_plan(POSES, ("a",), start=3)) == []
 
 
+def test_an_order_sets_each_pose_s_targets_and_the_one_its_move_leads_with():
+    asked = []
+
+    def order(q_deg):  # pose 1 reversed
+        asked.append(float(q_deg[0]))
+        return ("c", "b", "a") if q_deg[0] == 5 else ("a", "b", "c")
+
+    plan = list(campaign_plan(POSES, ("a", "b", "c"), start=1, partial={"c": 1}, order=order))
+    assert asked == [5.0, 10.0]
+    moves = [m for m in plan if isinstance(m, Move)]
+    # pose 1's c is stored: its readings begin with b
+    assert [m.first for m in moves] == ["b", "a"]
+    assert [(m.pose, m.target) for m in plan if isinstance(m, Aim)] == [
+        (1, "b"),
+        (1, "a"),
+        (2, "a"),
+        (2, "b"),
+        (2, "c"),
+    ]
+    with pytest.raises(ValueError, match="not an order of"):
+        list(campaign_plan(POSES, ("a", "b"), order=lambda q: ("a", "a")))
+
+
 def test_messages_are_frozen():
     with pytest.raises(dataclasses.FrozenInstanceError):
         Move(0, (1.0,)).pose = 2

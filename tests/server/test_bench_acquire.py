@@ -81,7 +81,7 @@ def test_every_procedure_takes_longer_than_its_bound_and_the_combined_one_least(
         # the campaign's time, split by plan message, adds up to it (one virtual clock)
         assert sum(run["phase_s"].values()) == pytest.approx(run["campaign_s"], abs=1e-9)
         assert run["phase_s"]["move"] >= bound["tour_s"] - 1e-9
-        assert run["phase_s"]["measure"] >= bound["measuring_s"]
+        assert run["phase_s"]["measure"] >= bound["measuring_s"] - 1e-9  # clock sums round
         # the beam re-aims between a pose's readings whatever the procedure
         assert bound["aiming_s"] == (run["readings"] - run["poses_in_bound"]) * POINT_S
         assert run["phase_s"]["aim"] >= bound["aiming_s"] - 1e-9

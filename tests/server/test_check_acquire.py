@@ -42,8 +42,15 @@ def test_estop_mid_pose_resume_and_judge_lose_nothing(calibrated, store_url):
     cell = default_cell()
 
     def stop_at_pose_3(engine):
-        target = engine.predictor.names[1]
-        engine.trace = lambda msg: msg == Measure(3, target) and engine.estop()
+        seen = []  # pose 3's measures so far: the engine picks its SMRs' order per pose
+
+        def trace(msg):
+            if isinstance(msg, Measure) and msg.pose == 3:
+                seen.append(msg)
+                if len(seen) == 2:
+                    engine.estop()
+
+        engine.trace = trace
 
     run = check_run.acquire_check(store_url, cell, model, opts, on_engine=stop_at_pose_3)
     assert run.result is None and run.summary["state"] == "estopped"

@@ -38,12 +38,14 @@ class Hold:
                 assert self.release.wait(120)
             if self.mid_pose:
                 self.mid_pose = False
-                target = engine.predictor.names[1]
+                seen = []  # pose 3's measures: the engine picks its SMRs' order per pose
 
                 def trace(msg):
-                    if msg == Measure(3, target):
-                        self.reached.set()
-                        assert self.release.wait(120)
+                    if isinstance(msg, Measure) and msg.pose == 3:
+                        seen.append(msg)
+                        if len(seen) == 2:
+                            self.reached.set()
+                            assert self.release.wait(120)
 
                 engine.trace = trace
             if on_engine is not None:
