@@ -35,6 +35,10 @@ FILES = {
     ("POST", "/api/models/{job_id}/export"),
     ("POST", "/api/models/{job_id}/checks"),
 }
+# A plan's size is bounded by the product poses x choose_from (said in the field's description),
+# which no JSON Schema can state: a schema-valid plan beyond it is refused 422 naming both
+# fields (test_bounds_api's oversized plans). Every other check still runs on it.
+PRODUCT_BOUNDED = {("POST", "/api/campaigns")}
 FILE_CHECKS_EXCLUDED = [checks.positive_data_acceptance]
 # Examples per operation and generation mode: bounded so the whole run stays near a minute.
 EXAMPLES = {GenerationMode.POSITIVE: 20, GenerationMode.NEGATIVE: 10}
@@ -62,7 +66,8 @@ def test_schemathesis_finds_no_failure(live_schema):
         seen_ops += 1
         for mode, n in EXAMPLES.items():
             found = []
-            excluded = FILE_CHECKS_EXCLUDED if (op.method.upper(), op.path) in FILES else []
+            key = (op.method.upper(), op.path)
+            excluded = FILE_CHECKS_EXCLUDED if key in FILES | PRODUCT_BOUNDED else []
 
             @settings(
                 max_examples=n,
