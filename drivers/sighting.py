@@ -117,12 +117,7 @@ class Sighting:
         try:
             return self._search(work, name)
         except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
-            code = _code(e)
-            if code is None:
-                raise
-            if code == "BEAM_BROKEN":
-                self.stats.beam_breaks += 1
-            return False
+            return self._lost(e)
 
     def _count_lock(self, i: int, searched: bool) -> None:
         if searched:
@@ -144,12 +139,17 @@ class Sighting:
             self.stats.searched += 1
             return self._search(work, name)
         except Exception as e:  # noqa: BLE001 - device errors carry a code; others propagate
-            code = _code(e)
-            if code is None:
-                raise
-            if code == "BEAM_BROKEN":
-                self.stats.beam_breaks += 1
-            return False
+            return self._lost(e)
+
+    def _lost(self, e: Exception) -> bool:
+        """A device's refusal of an aim or a search (False, a broken beam counted); anything
+        without a device's code is raised again."""
+        code = _code(e)
+        if code is None:
+            raise e
+        if code == "BEAM_BROKEN":
+            self.stats.beam_breaks += 1
+        return False
 
     def _search(self, work: _Pose, name: str) -> bool:
         """Search around the aim out to as far as the prediction may be off (at least the narrow
