@@ -48,6 +48,41 @@ def _calibrate(page, method: str, requests: list) -> int:
     return job
 
 
+SHOWN = """(job) => ['boxplot', 'errors'].every((id) => {
+    const img = document.getElementById(id);
+    return (img.dataset.url || '').includes(`/jobs/${job}/`) && img.src.startsWith('blob:')
+        && img.complete && !img.closest('figure').classList.contains('loading');
+}) && document.querySelector('#h-jobs-table tr.current')?.dataset.job === String(job)
+  && document.querySelector('#table3-table thead th.chosen') !== null"""
+
+
+def _reopen_from_the_cache(page, other: int, job: int) -> None:
+    """Another job, then this one again from the history: its charts and Table 3 come from the
+    cache (each answer says so); the time from the click to all of them shown is printed and kept
+    in the artifacts (a figure, not an assertion)."""
+    import json
+    import time
+
+    page.click(f"#h-jobs-table button[data-job='{other}']")
+    page.wait_for_function(SHOWN, arg=other, timeout=180_000)
+    answers: list = []
+    page.on(
+        "response",
+        lambda r: (
+            f"/api/charts/jobs/{job}/" in r.url
+            and answers.append((r.url.rsplit("/", 1)[-1], r.headers.get("x-robocal-cache")))
+        ),
+    )
+    t0 = time.monotonic()
+    page.click(f"#h-jobs-table button[data-job='{job}']")
+    page.wait_for_function(SHOWN, arg=job, timeout=180_000)
+    seconds = time.monotonic() - t0
+    assert sorted(answers) == [("boxplot.png", "hit"), ("errors.png", "hit"), ("table3", "hit")]
+    ARTIFACTS.mkdir(exist_ok=True)
+    (ARTIFACTS / "history-reopen.json").write_text(json.dumps({"job": job, "seconds": seconds}))
+    print(f"\njob {job} reopened from the history: charts and Table 3 shown in {seconds:.3f} s")
+
+
 def _no_overflow(page) -> None:
     width = page.evaluate("document.documentElement.scrollWidth")
     inner = page.evaluate("window.innerWidth")
@@ -169,6 +204,7 @@ def test_history_reload_stream_notice_and_compare(served, page):
     assert page.locator("#h-jobs-table tr.current").get_attribute("data-job") == str(minimax)
     page.wait_for_selector("#table3-table thead th.chosen", timeout=180_000)
     assert page.text_content("#table3-table thead th.chosen") == "minimax"  # its own, not ls-sum's
+    _reopen_from_the_cache(page, ls_sum, minimax)
 
     # Two models side by side on the validation campaign.
     page.select_option("#cmp-a", str(minimax))
