@@ -67,20 +67,28 @@ class WriteFault:
         )
 
 
-def on_measure(devices, pose: int, target: str, action) -> None:
-    """Call action() once, as the tracker measures `target` at the pose'th move (1-based), before
-    it answers: the reading is taken, then the service must store it."""
+def on_measure(devices, pose: int, action) -> list[str]:
+    """Call action() once, as the tracker measures the pose'th move's (1-based) second SMR,
+    before it answers: the reading is taken, then the service must store it. The engine picks a
+    pose's order of SMRs (its farthest first): the list returned fills with that pose's SMRs in
+    the order measured, the first of them stored before the fault."""
     device = devices.tracker_server.device
     real, done = device.measure, threading.Event()
+    order: list[str] = []
 
     def measure(*args):
         moves = len(devices.controller.moves)
-        if not done.is_set() and moves == pose and device.locked_target == target:
-            done.set()
-            action()
+        target = device.locked_target
+        if not done.is_set() and moves == pose and target is not None:
+            if target not in order:
+                order.append(target)
+            if len(order) == 2:
+                done.set()
+                action()
         return real(*args)
 
     device.measure = measure
+    return order
 
 
 def controller_lines(devices) -> list[str]:
@@ -143,7 +151,7 @@ def fault_then_resume(
         failed_at.append(time.monotonic())
         fault()
 
-    on_measure(devices, 3, "B", fail)
+    order = on_measure(devices, 3, fail)
     cid, cell_id = start_campaign(c, devices, "disk")
     shown = finished(c, cid)
     stop_at = devices.controller.first_arrival("STOP", since=failed_at[0])
@@ -155,7 +163,8 @@ def fault_then_resume(
     stopped_after_fault(controller_lines(devices))
     moves = len(devices.controller.moves)
     before = readings(database, cid)
-    assert [(p, t) for p, t, *_ in before if p == 2] == [(2, "A")], before  # cut off mid-pose
+    # cut off mid-pose: its first SMR stored, the second measured as the disk failed
+    assert [(p, t) for p, t, *_ in before if p == 2] == [(2, order[0])], (order, before)
     # reads work and never write; actions and new campaigns answer 503 with the reason
     assert c.get(f"/api/campaigns/{cid}").status_code == 200
     assert c.get("/api/campaigns").status_code == 200
@@ -370,7 +379,7 @@ def test_read_only_disk_stops_the_arm_reads_work_and_resume_after_repair(tmp_pat
                 trigger.write_text("robocal test: disk fails\n")
                 failed_at.append(time.monotonic())
 
-            on_measure(devices, 3, "B", fail_disk)
+            on_measure(devices, 3, fail_disk)
             cid, _ = start_campaign(c, devices, "ro")
             shown = finished(c, cid)
             assert shown["status"] == "failed", shown
