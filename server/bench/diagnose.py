@@ -32,9 +32,9 @@ def _case(seed_kind):
 
 
 def _split_case(seed_kind):
-    seed, kind = seed_kind
+    seed, kind, arm = seed_kind
     t0 = time.perf_counter()
-    r = split_suite.run_split_case(split_suite.draw_split_case(seed, kind))
+    r = split_suite.run_split_case(split_suite.draw_split_case(seed, kind, arm))
     r["wall_seconds"] = time.perf_counter() - t0
     return r
 
@@ -158,6 +158,11 @@ def run_diagnose_bench(
     suite_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     split_pairs = split_suite.split_suite(range(seed, seed + counts["split_cases"]))
+    # and a third as many on UR-like arms (split_suite.OTHER_ARMS)
+    for arm in split_suite.OTHER_ARMS:
+        split_pairs += split_suite.split_suite(
+            range(seed, seed + counts["split_cases"] // 3), arm=arm
+        )
     split = run_suite(split_pairs, workers, log, _split_case, _split_line)
     split_s = time.perf_counter() - t0
     real_splits = []

@@ -127,6 +127,24 @@ def random_arm(rng, name: str) -> Robot:
     )
 
 
+def ur_arm(rng, name: str) -> Robot:
+    """A Universal-Robots-like arm (standard DH, UR5 to UR10 sizes): parallel axes 2, 3 and 4,
+    an offset wrist, every joint +-360 deg; a geometry unlike the industrial arms above."""
+    s = rng.uniform(0.75, 1.45)
+    return robot_from_degrees(
+        name,
+        "dh",
+        [
+            (0.0, 89.2 * s * rng.uniform(0.9, 1.1), 0.0, 90.0, (-360.0, 360.0)),
+            (-425.0 * s, 0.0, 0.0, 0.0, (-360.0, 360.0)),
+            (-392.0 * s, 0.0, 0.0, 0.0, (-360.0, 360.0)),
+            (0.0, 109.0 * s, 0.0, 90.0, (-360.0, 360.0)),
+            (0.0, 94.6 * s, 0.0, -90.0, (-360.0, 360.0)),
+            (0.0, 82.3 * s, 0.0, 0.0, (-360.0, 360.0)),
+        ],
+    )
+
+
 def smr_ring(rng) -> dict:
     """1-4 SMRs on a ring of radius 40-120 mm about the flange axis, 20-60 mm out."""
     k = int(rng.integers(1, 5))

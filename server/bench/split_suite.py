@@ -29,7 +29,10 @@ from robocal.solver.robot import KUKA_LIKE, Robot
 from . import diagnose_suite as ds
 
 SPLIT_STREAM = 0x5B117
-ARMS = ("irb2600", "kuka-like", "random")
+ARMS = ("irb2600", "kuka-like", "random")  # taken in turn by seed
+# drawn only when asked for (the bench runs a third as many cases on them): the UR-like arms
+# outside judges calibrate, with an offset wrist and parallel axes 2-3-4
+OTHER_ARMS = ("ur",)
 TRAIN_SIZES = (40, 60, 100)
 TEST_POSES = 60
 NOISE_SCALE = (1.0, 3.0)
@@ -88,16 +91,20 @@ class SplitCase:
         }
 
 
-def draw_split_case(seed: int, kind: str) -> SplitCase:
-    """The case of this seed and kind; the arm goes by the seed (every arm every three seeds)."""
+def draw_split_case(seed: int, kind: str, arm: str | None = None) -> SplitCase:
+    """The case of this seed and kind; the arm goes by the seed (every arm every three seeds)
+    unless one of OTHER_ARMS is asked for."""
     if kind not in KINDS:
         raise ValueError(f"unknown case kind {kind!r}; choose from {', '.join(KINDS)}")
     rng = np.random.default_rng([SPLIT_STREAM, seed, list(KINDS).index(kind)])
-    arm = ARMS[seed % len(ARMS)]
+    arm = arm or ARMS[seed % len(ARMS)]
     irb = default_cell()
-    robot = {"irb2600": irb.robot, "kuka-like": KUKA_LIKE}.get(arm) or ds.random_arm(
-        rng, f"random-6r-{seed}"
-    )
+    if arm == "ur":
+        robot = ds.ur_arm(rng, f"ur-{seed}")
+    else:
+        robot = {"irb2600": irb.robot, "kuka-like": KUKA_LIKE}.get(arm) or ds.random_arm(
+            rng, f"random-6r-{seed}"
+        )
     targets = dict(irb.targets) if arm == "irb2600" and rng.random() < 0.5 else ds.smr_ring(rng)
     options = {"noise_scale": float(np.exp(rng.uniform(*np.log(NOISE_SCALE))))}
     if rng.random() < 0.4:
@@ -226,9 +233,9 @@ def _without_effects(case: SplitCase, q_train, q_test) -> float:
     return _rms(predict(geo.layout, geo.x, test.q) - test.xyz)
 
 
-def split_suite(seeds, kinds=tuple(KINDS)) -> list[tuple[int, str]]:
-    """(seed, kind) pairs taking the kinds in turn (the arm goes by the seed)."""
-    return [(s, kinds[s % len(kinds)]) for s in seeds]
+def split_suite(seeds, kinds=tuple(KINDS), arm: str | None = None) -> list[tuple]:
+    """(seed, kind, arm) taking the kinds in turn (arm None: it goes by the seed)."""
+    return [(s, kinds[s % len(kinds)], arm) for s in seeds]
 
 
 def summarize_split(results: list[dict]) -> dict:
@@ -253,7 +260,7 @@ def summarize_split(results: list[dict]) -> dict:
             "worst_ratio": max((r["ratio"] for r in rs), default=None),
             "median_test_over_floor": median([r["test_over_floor"] for r in rs]),
         }
-        for arm in ARMS
+        for arm in ARMS + OTHER_ARMS
         if (rs := [r for r in results if r["case"]["arm"] == arm])
     }
     return {

@@ -110,3 +110,22 @@ def test_a_periodic_error_seen_by_one_smr_holds_in_the_other_wrist_configuration
     r = ss.run_split_case(case)
     assert r["named"] == [["joint_periodic", 4, 1]], r["named"]
     assert r["ratio"] <= ss.MAX_RATIO and r["removed"] >= ss.REMOVED_MIN, r
+
+
+def test_a_ur_like_arm_is_drawn_when_asked_and_its_compliance_holds_in_the_other_configuration():
+    """The UR-like arms (offset wrist, parallel axes 2-3-4) the bench adds: one SMR, joint-2
+    compliance under a mass model the program does not know, fitted in one wrist configuration:
+    named, and at least 80% of geometry's excess removed in the other."""
+    assert ss.split_suite([1], arm="ur") == [(1, "joint_compliance", "ur")]
+    case = ss.draw_split_case(1, "joint_compliance", "ur")
+    assert case.arm == "ur" and case.robot.name == "ur-1" and len(case.targets) == 1
+    vc = case.cell()
+    q_train, q_test, split = ss.split_poses(case, vc)
+    bit = ss.SPLITS[split]
+    train_side = (configuration.cfx(case.robot, q_train) & bit) > 0
+    test_side = (configuration.cfx(case.robot, q_test) & bit) > 0
+    assert set(train_side) == {case.train_side} and set(test_side) == {not case.train_side}
+    r = ss.run_split_case(case)
+    assert r["named"] == [["joint_compliance", 2, None]], r["named"]
+    assert r["ratio"] <= ss.MAX_RATIO and r["removed"] >= ss.REMOVED_MIN, r
+    assert ss.summarize_split([r])["per_arm"]["ur"]["hurt"] == 0
