@@ -237,11 +237,9 @@ class _Judge:
     def suspects(self) -> np.ndarray:
         """(m,) bool: the poses judge_pose may exclude from, found for all poses at once; those
         left out it would pass (a margin keeps borderline ones for the exact per-pose look)."""
-        have, r = self.have, np.where(self.have[..., None], self.r, 0.0)
+        have, r = self.have, self.r
         counts = have.sum(axis=1)
-        n = np.maximum(counts[:, None] - 1, 1)  # each reading's mates: the others present
-        mates = (r.sum(axis=1, keepdims=True) - r) / n[..., None]
-        w = (r - mates) / np.sqrt(1.0 + 1.0 / n)[..., None]
+        w = within_pose(r, have)  # each reading against all its pose's others present
         ratio = np.linalg.norm(w, axis=-1) / self.s["within"] / self.T["within"]
         if self.dist:
             K = have.shape[1]
