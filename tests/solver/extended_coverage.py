@@ -1,9 +1,8 @@
-"""The expanded uncertainty U of an extended model's positions (a geometric model with effects,
-as `robocal diagnose` fits them) holds what it states: over 204 simulated calibrations with
-effects (three arms; the model's own effect, with the arm's scatter too, or with a weaker effect
-the model does not have), 95 % +- 3 % of independent positions' true errors lie within U, the
-extension's coefficients' covariance propagated through its Jacobian columns; with the
-covariance too small the same check fails, so it can."""
+"""The extended models' coverage suite (tests/solver/test_position_uncertainty.py runs it): a
+geometric model with effects, as `robocal diagnose` fits them, calibrated on a simulated cell
+with effects (the model's own effect; with the arm's scatter too; or with a weaker effect the
+model does not have), its U from the geometry's and the extension's coefficients' covariance
+propagated through its Jacobian columns, against the true error at independent positions."""
 
 from __future__ import annotations
 
@@ -20,7 +19,7 @@ from robocal.solver.fit_errors import extended_fit_rows
 from robocal.solver.identify import register
 from robocal.solver.uncertainty import errors_from_rows
 from robocal.solver.vocabulary import candidates
-from tests.solver.test_position_uncertainty import ARMS, SEEDS, TARGETS, TEST_POSES
+from tests.solver.coverage_suite import TARGETS, TEST_POSES
 
 # (effect the model has: name, 0-based joint, harmonic; the simulator's spec of it)
 MODELLED = (
@@ -30,6 +29,7 @@ MODELLED = (
 )
 UNMODELLED = "joint_periodic:2=0.004"  # the "extra" kind: an effect the model does not have
 POSES = 50
+KINDS = ("effect", "scatter", "extra")
 
 
 def _extension(layout, x0, inputs, name, joint, harmonic):
@@ -41,7 +41,7 @@ def _extension(layout, x0, inputs, name, joint, harmonic):
     )
 
 
-def _case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """(true error, U) at the SMRs of TEST_POSES independent poses, mm, of an extended model
     fitted on POSES poses; its covariance and scatter multiplied by `shrink`."""
     name, joint, harmonic, spec = MODELLED[seed % len(MODELLED)]
@@ -70,26 +70,3 @@ def _case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray,
     err = np.linalg.norm(predict_extended(lay, x, exts, test, at_test) - truth, axis=-1)
     at = pu.extended_spread_at(lay, x, exts, at_test, test, errors.cov * shrink, errors.column)
     return err, pu.position_uncertainty(at, s * np.sqrt(shrink)).expanded_mm
-
-
-def _coverage(shrink: float = 1.0) -> tuple[float, dict]:
-    within, by_kind = [], {}
-    for robot in ARMS.values():
-        for seed in range(SEEDS):
-            kind = ("effect", "scatter", "extra")[seed % 3]
-            err, U = _case(robot, seed, kind, shrink)
-            within.append(err <= U)
-            by_kind.setdefault(kind, []).append(float(np.mean(err <= U)))
-    return float(np.mean(within)), {k: round(float(np.mean(v)), 3) for k, v in by_kind.items()}
-
-
-def test_extended_models_uncertainty_covers_95_percent_of_true_errors():
-    covered, by_kind = _coverage()
-    print(f"\nextended: coverage {covered:.3f} over {len(ARMS) * SEEDS} calibrations; {by_kind}")
-    assert 0.92 <= covered <= 0.98, (covered, by_kind)
-
-
-def test_an_extended_models_covariance_too_small_fails_the_same_check():
-    covered, _ = _coverage(shrink=0.3)
-    print(f"\nextended: coverage with the covariance x0.3: {covered:.3f}")
-    assert covered < 0.92
