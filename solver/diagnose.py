@@ -85,6 +85,7 @@ class Diagnosis:
     figures: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     errors: ExtendedErrors | None = None  # the final model's standard errors
+    fits: int = 0  # the fits its cross-validation ran
 
 
 def folds(m: int, k: int = FOLDS, seed: int = 0) -> list[np.ndarray]:
@@ -581,7 +582,7 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
         "fits": diag.fits,
         "candidates": len(cands),
     }
-    return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors)
+    return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors, diag.fits)
 
 
 def resampled(diag: Diagnoser, cands, steps) -> Stability | None:
