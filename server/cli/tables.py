@@ -12,6 +12,7 @@ from rich.table import Table
 if TYPE_CHECKING:
     from robocal.server.fleet import Fleet
     from robocal.server.formats.blocks import HeldOut, Identified, Uncertainty, Validation
+    from robocal.server.formats.verification_doc import VerificationDoc
     from robocal.solver.calibrate import Calibration
     from robocal.solver.metrics import Accuracy, Stats
 
@@ -151,26 +152,26 @@ def effect_parameters(parameters: dict, uncertainty: dict | None) -> str:
     return ", ".join(out)
 
 
-def verification_table(report: dict) -> Table:
+def verification_table(report: VerificationDoc) -> Table:
     """ISO 9283 figures per test point, before (nominal joints) and after compensation, mm."""
-    t = Table(title=f"verification of {report['model']['path']} on {report['robot']}")
+    t = Table(title=f"verification of {report.model.path} on {report.robot}")
     for col in ("point", "AP before", "AP after", "RP before", "RP after", "vAP before",
                 "vAP after"):  # fmt: skip
         t.add_column(col, justify="left" if col == "point" else "right")
-    for b, a in zip(report["before"]["points"], report["after"]["points"]):
+    for b, a in zip(report.before.points, report.after.points):
         t.add_row(
-            b["point"],
-            *(f"{x:.4f}" for x in (b["AP_mm"], a["AP_mm"], b["RP_mm"], a["RP_mm"])),
-            f"{b['vAP_mm']:.4f}",
-            f"{a['vAP_mm']:.4f}",
+            b.point,
+            *(f"{x:.4f}" for x in (b.AP_mm, a.AP_mm, b.RP_mm, a.RP_mm)),
+            f"{b.vAP_mm:.4f}",
+            f"{a.vAP_mm:.4f}",
         )
-    for b, a in zip(report["before"].get("distances", []), report["after"].get("distances", [])):
+    for d, e in zip(report.before.distances, report.after.distances):
         t.add_row(
-            "AD/RD " + "-".join(b["pair"]),
-            f"{b['AD_mm']:.4f}",
-            f"{a['AD_mm']:.4f}",
-            f"{b['RD_mm']:.4f}",
-            f"{a['RD_mm']:.4f}",
+            "AD/RD " + "-".join(d.pair),
+            f"{d.AD_mm:.4f}",
+            f"{e.AD_mm:.4f}",
+            f"{d.RD_mm:.4f}",
+            f"{e.RD_mm:.4f}",
             "",
             "",
         )

@@ -14,13 +14,14 @@ from robocal.server.acquisition.acquire import AcquireOptions, acquire
 from robocal.server.calibration import workflow
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.model_json import read_model, write_model
+from robocal.server.formats.verification_doc import VerificationDoc
 from robocal.server.verify.run import VerifyOptions, verify
 from robocal.server.verify.uncertainty import decision
 
 SEED = 8
 
 
-def calibrated_and_verified(d, tolerance_mm: float | None = 0.5) -> tuple[dict, dict]:
+def calibrated_and_verified(d, tolerance_mm: float | None = 0.5) -> tuple[VerificationDoc, dict]:
     """(verification report, model.json's position block) of a simulated cell calibrated by
     ls-sum on 60 poses (the arm's scatter included), verified with the cell's tolerance."""
     cell = dataclasses.replace(default_cell(), tolerance_mm=tolerance_mm)
@@ -50,7 +51,7 @@ def test_model_json_keeps_the_position_uncertainty(verified):
 
 
 def test_each_point_has_its_uncertainty_and_the_volume_a_map(verified):
-    report, _ = verified
+    report = verified[0].to_json()  # as verification.json has it
     unc = report["uncertainty"]
     model = unc["model"]
     points = report["after"]["points"]
@@ -66,7 +67,7 @@ def test_each_point_has_its_uncertainty_and_the_volume_a_map(verified):
 
 
 def test_the_decision_follows_the_guard_bands(verified):
-    report, _ = verified
+    report = verified[0].to_json()  # as verification.json has it
     dec = report["uncertainty"]["decision"]
     assert dec["verdict"] == "pass" and dec["tolerance_mm"] == 0.5, dec
     ap = np.array([p["AP_mm"] for p in report["after"]["points"]])
