@@ -121,14 +121,20 @@ def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
     ]
 
 
-def test_no_report_calibration_or_verification_is_read_by_string_key_outside_the_formats():
+def reads_outside_the_formats(check) -> list[str]:
+    """Each read check(source) finds in the server outside formats/, as path:line and what."""
     found = []
     for path in sorted((ROOT / "server").rglob("*.py")):
         rel = path.relative_to(ROOT).as_posix()
-        if rel.startswith(EXEMPT):
-            continue
-        for line, what in result_key_reads(path.read_text()):
-            found.append(f"{rel}:{line} reads {what} by string key")
+        if not rel.startswith(EXEMPT):
+            found += [
+                f"{rel}:{line} reads {what} by string key" for line, what in check(path.read_text())
+            ]
+    return found
+
+
+def test_no_report_calibration_or_verification_is_read_by_string_key_outside_the_formats():
+    found = reads_outside_the_formats(result_key_reads)
     assert not found, (
         "read the typed result (formats.report_doc, formats.verification_doc, Calibration's "
         "attributes) instead:\n" + "\n".join(found)
@@ -151,13 +157,7 @@ def test_the_check_finds_each_kind_of_read():
 
 
 def test_no_result_block_is_read_by_string_key_outside_the_formats():
-    found = []
-    for path in sorted((ROOT / "server").rglob("*.py")):
-        rel = path.relative_to(ROOT).as_posix()
-        if rel.startswith(EXEMPT):
-            continue
-        for line, key in string_key_reads(path.read_text()):
-            found.append(f"{rel}:{line} reads {key!r} by string key")
+    found = reads_outside_the_formats(lambda src: [(n, repr(k)) for n, k in string_key_reads(src)])
     assert not found, "read the typed block (formats.blocks) instead:\n" + "\n".join(found)
 
 
