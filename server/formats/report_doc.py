@@ -165,4 +165,4 @@ class ReportDoc(Open):
         """The solver's diagnosis report, typed once (numpy figures made JSON's numbers)."""
         from .model_json import to_plain
 
-        return cls.model_validate(to_plain(diagnosis.report))
+        return cls.model_validate(to_plain(diagnosis.report.to_json()))
