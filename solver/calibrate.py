@@ -6,7 +6,7 @@ import difflib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from .minimax import MinimaxResult, minimax
 from .problem import Problem
 from .robot import Robot
 from .stop import Stop
+
+if TYPE_CHECKING:
+    from .screen import Screening
 
 # Fit residuals (RMS a reading) past this multiple of the noise floor set the level at which
 # the parameters are judged identified instead of the floor.
@@ -78,6 +81,35 @@ class Calibration(Result):
     @property
     def iterations(self) -> int:
         return self.nit
+
+    # set by whoever screened the readings first (server.calibration.workflow.run_method)
+    @property
+    def screening(self) -> Screening | None:
+        """The gross-outlier screening the fit's readings went through; None: not screened."""
+        return self.get("screening")
+
+    @screening.setter
+    def screening(self, value: Screening | None) -> None:
+        self["screening"] = value
+
+    @property
+    def outliers(self) -> list[dict] | None:
+        """The readings the screening excluded, as report rows; None: not screened."""
+        return self.get("outliers")
+
+    @outliers.setter
+    def outliers(self, value: list[dict] | None) -> None:
+        self["outliers"] = value
+
+    @property
+    def qp(self) -> str | None:
+        """minimax's QP subsolver; None for the other methods."""
+        return self.get("qp")
+
+    @property
+    def history(self) -> list | None:
+        """minimax's SQP iterations; None for the other methods."""
+        return self.get("history")
 
     @property
     def robot(self) -> Robot:

@@ -38,7 +38,8 @@ from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
 from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
 from .tall import tall_qr
 
-if TYPE_CHECKING:  # run_diagnosis imports fit_errors only when it needs it
+if TYPE_CHECKING:  # run_diagnosis imports fit_errors and the report only when it needs them
+    from .diagnosis_report import Report
     from .fit_errors import ExtendedErrors
 
 MIN_GAIN = 0.02  # an accepted effect removes at least this fraction of the held-out MSE
@@ -77,7 +78,7 @@ class CV:
 class Diagnosis:
     """The report (FORMATS.md section 5), the final model and the data behind the figures."""
 
-    report: dict
+    report: Report
     layout: Layout
     x: np.ndarray
     extensions: list
@@ -85,6 +86,7 @@ class Diagnosis:
     figures: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     errors: ExtendedErrors | None = None  # the final model's standard errors
+    fits: int = 0  # the fits its cross-validation ran
 
 
 def folds(m: int, k: int = FOLDS, seed: int = 0) -> list[np.ndarray]:
@@ -557,31 +559,27 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     floor = noise.mm
     from .diagnosis_report import build_report, figure_series
 
-    params, report = build_report(diag, steps, base, final, ee, x, floor, len(cands))
+    params, report = build_report(diag, steps, base, final, ee, x, floor, noise.source, len(cands))
     from .fit_errors import diagnosis_errors
 
     errors = diagnosis_errors(diag, x, ee, report, params)  # adds each effect's `uncertainty`
     figures = figure_series(diag, steps, ee, x)
     from .unexplained import unexplained
 
-    left = unexplained(final.resid, prob.layout, x, ee, inputs, floor, base.mse)
-    if left is not None:
-        report["unexplained"] = left
+    report.unexplained = unexplained(final.resid, prob.layout, x, ee, inputs, floor, base.mse)
     clock["total"] = time.perf_counter() - t0
     if screening is not None:
-        report["outliers"] = screening.report(pose_ids, target_names)
-    head = {k: report.pop(k) for k in ("schema", "noise_floor_mm")}
-    report = {**head, "noise_floor_source": noise.source, **report}
-    report["extrapolation"] = extrapolation_report(region, prob.q)
+        report.outliers = screening.report(pose_ids, target_names)
+    report.extrapolation = extrapolation_report(region, prob.q)
     if stability is not None:
-        report["stability"] = stability.to_report()
-    report["seconds"] = {k: round(v, 3) for k, v in clock.items()}
-    report["cross_validation"] = {
+        report.stability = stability.to_report()
+    report.seconds = {k: round(v, 3) for k, v in clock.items()}
+    report.cross_validation = {
         "folds": len(diag.folds),
         "fits": diag.fits,
         "candidates": len(cands),
     }
-    return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors)
+    return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors, diag.fits)
 
 
 def resampled(diag: Diagnoser, cands, steps) -> Stability | None:

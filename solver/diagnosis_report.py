@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
 import numpy as np
 
 from .effects import Extension, joint_basis, joint_offsets, point_shift, prepare
@@ -29,7 +32,93 @@ def _label(exts) -> str:
     return "+".join(["geometric"] + [e.label() for e in exts])
 
 
-def build_report(diag, steps, base, final, exts, x, floor, n_candidates):
+@dataclass
+class Score:
+    """A model's held-out figures (mm): the geometric baseline's, or the final model's."""
+
+    model: str  # geometric, then each effect: geometric+joint_compliance(2)
+    holdout_rmse_mm: float
+    holdout_max_mm: float
+
+
+@dataclass
+class Finding:
+    """An effect judged real, with the held-out evidence for it (an entry of `effects`)."""
+
+    name: str
+    joint: int | None  # joints from 1; None for an effect of no joint
+    own: dict[str, Any]  # the effect kind's own keys (harmonic, at_s), as its report_keys name
+    evidence: str  # one sentence a person can check
+    holdout_rmse_before_mm: float
+    holdout_rmse_after_mm: float
+    holdout_max_before_mm: float
+    holdout_max_after_mm: float
+    holdout_gain_interval_mm: list[float]
+    significance: dict[str, float]  # z, threshold, p_value
+    alternatives: list[dict]  # candidates the data could not tell apart from it
+    parameters: dict[str, Any]  # in mm, degrees, ppm and seconds
+    uncertainty: dict[str, Any] | None = None  # each parameter's standard error, once estimated
+
+    @property
+    def harmonic(self) -> int | None:
+        """joint_periodic's multiple of the angle; None for the other effects."""
+        return self.own.get("harmonic")
+
+    def to_json(self) -> dict[str, Any]:
+        """The entry as FORMATS.md section 5 has it (joint and uncertainty only when known)."""
+        out: dict[str, Any] = {"name": self.name}
+        if self.joint is not None:
+            out["joint"] = self.joint
+        out.update(self.own)
+        out.update({k: v for k, v in asdict(self).items() if k not in ("name", "joint", "own")})
+        if self.uncertainty is None:
+            del out["uncertainty"]
+        return out
+
+
+@dataclass
+class Report:
+    """A diagnosis's report (FORMATS.md section 5): the effects found, most important first, and
+    what a person needs to check them."""
+
+    noise_floor_mm: float | None
+    noise_floor_source: str | None
+    baseline: Score
+    effects: list[Finding]
+    final: Score
+    poses: int
+    readings: int
+    candidates_tested: int
+    unexplained: dict | None = None  # what the final model leaves (solver/unexplained.py)
+    outliers: list[dict] | None = None  # readings excluded as gross errors, when screened
+    extrapolation: dict | None = None  # the final model off its training region
+    stability: dict | None = None  # resamples of a small campaign (solver/stability.py)
+    seconds: dict[str, float] = field(default_factory=dict)  # per phase
+    cross_validation: dict[str, int] = field(default_factory=dict)  # folds, fits, candidates
+
+    def to_json(self) -> dict[str, Any]:
+        """The report as report.json has it, keys in section 5's order (the optional blocks only
+        when there is one)."""
+        out: dict[str, Any] = {
+            "schema": 1,
+            "noise_floor_mm": self.noise_floor_mm,
+            "noise_floor_source": self.noise_floor_source,
+            "baseline": asdict(self.baseline),
+            "effects": [e.to_json() for e in self.effects],
+            "final": asdict(self.final),
+            "poses": self.poses,
+            "readings": self.readings,
+            "candidates_tested": self.candidates_tested,
+        }
+        for key in ("unexplained", "outliers", "extrapolation", "stability"):
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
+        out["seconds"] = self.seconds
+        out["cross_validation"] = self.cross_validation
+        return out
+
+
+def build_report(diag, steps, base, final, exts, x, floor, source, n_candidates):
     """Each extension's parameters (in step order) and the report: FORMATS.md section 5, plus what
     a person needs to check it (effects most important first)."""
     layout, inputs = diag.prob.layout, diag.inputs
@@ -39,41 +128,33 @@ def build_report(diag, steps, base, final, exts, x, floor, n_candidates):
         basis = joint_basis(fitted, layout, diag.x0, inputs) if fitted.is_joint else None
         p = parameters(fitted, basis)
         params.append(p)
-        e = {"name": fitted.name}
-        if fitted.joint is not None:
-            e["joint"] = fitted.joint + 1
-        e.update({k: getattr(fitted, k) for k in fitted.kind.report_keys})
-        e.update(
-            evidence=evidence(fitted, p, before.rmse, after.rmse, decision, m),
-            holdout_rmse_before_mm=before.rmse,
-            holdout_rmse_after_mm=after.rmse,
-            holdout_max_before_mm=before.maxerr,
-            holdout_max_after_mm=after.maxerr,
-            holdout_gain_interval_mm=list(decision["holdout_gain_interval_mm"]),
-            significance={k: decision[k] for k in ("z", "threshold", "p_value")},
-            alternatives=decision["alternatives"],
-            parameters=p,
+        effects.append(
+            Finding(
+                name=fitted.name,
+                joint=None if fitted.joint is None else fitted.joint + 1,
+                own={k: getattr(fitted, k) for k in fitted.kind.report_keys},
+                evidence=evidence(fitted, p, before.rmse, after.rmse, decision, m),
+                holdout_rmse_before_mm=before.rmse,
+                holdout_rmse_after_mm=after.rmse,
+                holdout_max_before_mm=before.maxerr,
+                holdout_max_after_mm=after.maxerr,
+                holdout_gain_interval_mm=list(decision["holdout_gain_interval_mm"]),
+                significance={k: decision[k] for k in ("z", "threshold", "p_value")},
+                alternatives=decision["alternatives"],
+                parameters=p,
+            )
         )
-        effects.append(e)
-    effects.sort(key=lambda e: e["holdout_rmse_after_mm"] - e["holdout_rmse_before_mm"])
-    return params, {
-        "schema": 1,
-        "noise_floor_mm": floor,
-        "baseline": {
-            "model": "geometric",
-            "holdout_rmse_mm": base.rmse,
-            "holdout_max_mm": base.maxerr,
-        },
-        "effects": effects,
-        "final": {
-            "model": _label(exts),
-            "holdout_rmse_mm": final.rmse,
-            "holdout_max_mm": final.maxerr,
-        },
-        "poses": m,
-        "readings": int(diag.prob.mask.sum()),
-        "candidates_tested": n_candidates,
-    }
+    effects.sort(key=lambda e: e.holdout_rmse_after_mm - e.holdout_rmse_before_mm)
+    return params, Report(
+        noise_floor_mm=floor,
+        noise_floor_source=source,
+        baseline=Score("geometric", base.rmse, base.maxerr),
+        effects=effects,
+        final=Score(_label(exts), final.rmse, final.maxerr),
+        poses=m,
+        readings=int(diag.prob.mask.sum()),
+        candidates_tested=n_candidates,
+    )
 
 
 def figure_series(diag, steps, exts, x) -> list[dict]:

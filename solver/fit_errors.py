@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,6 +16,9 @@ from .identify import Problem, pose_fit, pose_residuals
 from .kinematics import Layout, predict_rows
 from .postfit import Blocks, poses_per_block, post_fit
 from .uncertainty import CLUSTERED, ParameterErrors, Rows, errors_from_rows, propagate
+
+if TYPE_CHECKING:
+    from .diagnosis_report import Report
 
 
 def angles(layout: Layout) -> np.ndarray:
@@ -256,7 +260,7 @@ class ExtendedErrors:
     coefficients: list[list[float]]  # per extension, its coefficients' standard errors
 
 
-def diagnosis_errors(diag, x, exts, report: dict, params: list) -> ExtendedErrors:
+def diagnosis_errors(diag, x, exts, report: Report, params: list) -> ExtendedErrors:
     """Standard errors of a diagnosis's final model; each report effect gets its `uncertainty`.
 
     params: per extension, its parameters as the report states them (matched to the report's
@@ -272,12 +276,9 @@ def diagnosis_errors(diag, x, exts, report: dict, params: list) -> ExtendedError
         basis = joint_basis(ext, lay, diag.x0, diag.inputs) if ext.is_joint else None
         u = effect_uncertainty(errors, exts, i, basis, parameters)
         effects.append(u)
-        e = next(
-            (e for e in report["effects"] if e.get("parameters") == p and "uncertainty" not in e),
-            None,
-        )
+        e = next((e for e in report.effects if e.parameters == p and e.uncertainty is None), None)
         if e is not None:
-            e["uncertainty"] = u
+            e.uncertainty = u
     coefs = [
         np.sqrt(np.clip(np.diag(coef_covariance(errors, exts, i)), 0.0, None)).tolist()
         for i in range(len(exts))

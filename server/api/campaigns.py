@@ -177,7 +177,7 @@ def _verification(jobs, db, campaign_id: int, target):
 def get_verification(campaign_id: CampaignId, db: DbDep, jobs: JobsDep) -> dict:
     """A done verification run's ISO 9283 figures (mm), before (nominal joints) and after
     (compensated): per test point AP, RP and vAP, per pair of points AD and RD."""
-    return _verification(jobs, db, campaign_id, verification.verification_report)
+    return _verification(jobs, db, campaign_id, verification.verification_json)
 
 
 @router.get(

@@ -101,6 +101,7 @@ def timed_campaign(poses: int, seed: int = 0):
 
 def time_campaign(poses: int, seed: int = 0) -> dict:
     """Wall time of one diagnosis of a campaign of that size (the IRB 2600, one hidden effect)."""
+    from robocal.server.formats.report_doc import ReportDoc
     from robocal.solver.diagnose import diagnose
     from robocal.solver.problem import Problem
 
@@ -109,16 +110,17 @@ def time_campaign(poses: int, seed: int = 0) -> dict:
     t0, c0 = time.perf_counter(), time.process_time()
     d = diagnose(problem)
     wall = time.perf_counter() - t0
+    report = ReportDoc.of(d)
     target = TARGET_S.get(poses)
     return {
         "poses": poses,
         "effect": TIMED_EFFECT,
         "seconds": wall,
         "cpu_seconds": time.process_time() - c0,
-        "stages_seconds": d.report["seconds"],
-        "fits": d.report["cross_validation"]["fits"],
+        "stages_seconds": report.seconds.to_json() if report.seconds else None,
+        "fits": d.fits,
         "effects_named": [
-            e["name"] + (f":{e['joint']}" if "joint" in e else "") for e in d.report["effects"]
+            e.name + (f":{e.joint}" if e.joint is not None else "") for e in report.effects
         ],
         "target_seconds": target,
         "met": None if target is None else wall <= target,

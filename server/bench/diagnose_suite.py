@@ -20,6 +20,7 @@ import numpy as np
 from robocal.drivers.cell import TrackerSpec, VirtualCell
 from robocal.drivers.effects import EFFECTS, make_effects
 from robocal.server.formats.cell_json import Cell, default_cell
+from robocal.server.formats.report_doc import ReportDoc
 from robocal.solver.robot import KUKA_LIKE, Robot, robot_from_degrees
 
 SUITE_STREAM = 0x5017E
@@ -325,9 +326,9 @@ def without_outliers(meas, outliers) -> np.ndarray:
     return xyz
 
 
-def named_effects(report) -> list[tuple]:
+def named_effects(report: ReportDoc) -> list[tuple]:
     """(name, joint, harmonic) of each effect the report names."""
-    return [(e["name"], e.get("joint"), e.get("harmonic")) for e in report["effects"]]
+    return [e.key() for e in report.effects]
 
 
 def is_named(hidden, named) -> bool:
@@ -356,7 +357,7 @@ def run_case(case: Case) -> dict:
     t0 = time.perf_counter()
     d = diagnose(Problem.of(case.robot, nominal, meas))
     seconds = time.perf_counter() - t0
-    return score(case, vc, meas, truth, d.report, d, seconds)
+    return score(case, vc, meas, truth, ReportDoc.of(d), d, seconds)
 
 
 def score(
@@ -364,7 +365,7 @@ def score(
     vc: VirtualCell,
     meas,
     truth: dict,
-    report: dict,
+    report: ReportDoc,
     diagnosis=None,
     seconds: float | None = None,
 ) -> dict:
@@ -382,7 +383,7 @@ def score(
     if exts is not None:
         floor = diag.cross_validate(exts).rmse if exts else geometric
     named = named_effects(report)
-    final = report["final"]["holdout_rmse_mm"]
+    final = report.final.holdout_rmse_mm
     out = {
         "case": case.describe(),
         "named": [list(n) for n in named],
@@ -393,7 +394,7 @@ def score(
         "outliers": len(outliers),
         "noise_floor_mm": truth["noise_floor_mm"],
         "arm_scatter_rms_mm": truth.get("arm_scatter_rms_mm"),
-        "baseline_holdout_rmse_mm": report["baseline"]["holdout_rmse_mm"],
+        "baseline_holdout_rmse_mm": report.baseline.holdout_rmse_mm,
         "final_holdout_rmse_mm": final,
         "floor_mm": floor,
         "geometric_floor_mm": geometric,

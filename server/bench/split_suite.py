@@ -151,6 +151,7 @@ def _rms(err) -> float:
 
 def run_split_case(case: SplitCase) -> dict:
     """Simulate both campaigns, diagnose the training one in process and score on the test one."""
+    from robocal.server.formats.report_doc import ReportDoc
     from robocal.solver.calibrate import calibrate
     from robocal.solver.diagnose import diagnose
     from robocal.solver.effects import Inputs
@@ -176,7 +177,8 @@ def run_split_case(case: SplitCase) -> dict:
     diagnosed = _rms(predict_model(case.robot, d.layout, d.x, d.extensions, inputs) - test.xyz)
     oracle = _oracle(case, train, inputs, test.xyz)
     reachable = _without_effects(case, q_train, q_test) if case.hidden else None
-    named = ds.named_effects(d.report)
+    report = ReportDoc.of(d)
+    named = ds.named_effects(report)
     excess = geometric**2 - floor**2
     return {
         "case": {**case.describe(), "split": split},
@@ -198,7 +200,7 @@ def run_split_case(case: SplitCase) -> dict:
         "removable": (
             None if excess <= 0 or reachable is None else (geometric**2 - reachable**2) / excess
         ),
-        "training_holdout_mm": d.report["final"]["holdout_rmse_mm"],
+        "training_holdout_mm": report.final.holdout_rmse_mm,
         "seconds": seconds,
     }
 
@@ -323,6 +325,7 @@ def real_splits(folder, min_poses: int = 15) -> list[dict]:
         fit, held = meas.subset(train), meas.subset(fold.test)
         geo = calibrate(cell_problem(cell, fit), "ls-sum")
         d, model = diagnose(cell, fit)
+        refused = d.report.extrapolation.refused if d.report.extrapolation else []
         diagnosed = model_predict(model, held.q, held.time_s, held.temp_c, held.prev_q)
         out.append(
             {
@@ -330,8 +333,8 @@ def real_splits(folder, min_poses: int = 15) -> list[dict]:
                 "test": fold.label(),
                 "train_poses": len(train),
                 "test_poses": len(fold.test),
-                "named": [e["name"] + f"({e.get('joint')})" for e in d.report["effects"]],
-                "refused": [r["label"] for r in d.report["extrapolation"]["refused"]],
+                "named": [f"{e.name}({e.joint})" for e in d.report.effects],
+                "refused": [r.label for r in refused],
                 "geometric_test_mm": _rms(predict(geo.layout, geo.x, held.q) - held.xyz),
                 "diagnosed_test_mm": _rms(diagnosed - held.xyz),
             }

@@ -26,11 +26,11 @@ def run_verify_bench(seed: int = SEED, cycles: int = 3, directions: int = 3) -> 
     with tempfile.TemporaryDirectory() as d:
         db_path, model_path = Path(d) / "bench.db", Path(d) / "model.json"
         t0 = time.perf_counter()
-        cal = acquire(db_path, cell, AcquireOptions(poses=100, seed=seed, effects=(EFFECT,)))
+        acquired = acquire(db_path, cell, AcquireOptions(poses=100, seed=seed, effects=(EFFECT,)))
         cal_wall = time.perf_counter() - t0
         meas = store.campaign_measurements(
             store.open_database(db_path),
-            campaign_id=cal["campaign"],
+            campaign_id=acquired["campaign"],
             targets=tuple(sorted(cell.targets)),
         )
         _, model = workflow.diagnose(cell, meas, screen=False)
@@ -46,16 +46,16 @@ def run_verify_bench(seed: int = SEED, cycles: int = 3, directions: int = 3) -> 
         "cycles": cycles,
         "directions": directions,
         "poses_per_run": visits,
-        "holdout_rms_mm": holdout_rms(report),
-        "AP_before_mm": report["before"]["AP_max_mm"],
-        "AP_after_mm": report["after"]["AP_max_mm"],
-        "RP_before_mm": report["before"]["RP_max_mm"],
-        "RP_after_mm": report["after"]["RP_max_mm"],
-        "simulated_s": report["simulated_s"],
+        "holdout_rms_mm": holdout_rms(report.model),
+        "AP_before_mm": report.before.AP_max_mm,
+        "AP_after_mm": report.after.AP_max_mm,
+        "RP_before_mm": report.before.RP_max_mm,
+        "RP_after_mm": report.after.RP_max_mm,
+        "simulated_s": report.simulated_s,
         "wall_s": wall,
         "reference": {
             "calibration_poses": 100,
-            "simulated_s": cal["campaign_s"],
+            "simulated_s": acquired["campaign_s"],
             "wall_s": cal_wall,
         },
     }

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -37,6 +37,8 @@ from robocal.solver.problem import Problem
 if TYPE_CHECKING:
     from robocal.server.formats.report_doc import ReportDoc
     from robocal.solver.calibrate import Calibration
+    from robocal.solver.diagnose import Diagnosis as SolverDiagnosis
+    from robocal.solver.fit_errors import ExtendedErrors
     from robocal.solver.metrics import Accuracy, Evaluation
     from robocal.solver.screen import Screening
 
@@ -213,7 +215,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     from robocal.solver import metrics
     from robocal.solver.fit_errors import calibration_figures
 
-    screening = cal.get("screening")
+    screening = cal.screening
     used = without_outliers(meas, screening)
     pred = predict(cal.layout, cal.x, meas.q)
     acc = metrics.accuracy(pred, used.xyz, meas.target_names, orientation=False)  # positions
@@ -244,7 +246,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     )
     model.fit = fit
     model.uncertainty = uncertainty = uncertainty_to_json(errors, cal.layout.names())
-    if "qp" in cal:  # minimax
+    if cal.qp is not None:  # minimax
         model.meta["qp"] = cal.qp
     if cal.method != "nominal":  # nothing of the arm identified: no table of it
         model.identified = identified_block(
@@ -440,27 +442,49 @@ def _pose_column(a):
     return a[np.arange(len(a)), first]
 
 
-def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
+@dataclass
+class Diagnosed:
+    """A diagnosis as the server holds it: its report typed once (formats.report_doc) and the
+    solver's result (the final model, the figures' data, the standard errors)."""
+
+    report: ReportDoc
+    result: SolverDiagnosis
+
+    @property
+    def extensions(self) -> list:
+        return self.result.extensions
+
+    @property
+    def figures(self) -> list:
+        return self.result.figures
+
+    @property
+    def errors(self) -> ExtendedErrors | None:
+        return self.result.errors
+
+
+def diagnose(cell: Cell, meas: Measurements, log=None, screen=True) -> tuple[Diagnosed, ModelFile]:
     """The diagnosis of a campaign (solver.diagnose) and its final model as a model file."""
     from robocal.server.formats.report_doc import (
         ReportDoc,  # not loaded for the commands that never diagnose
     )
     from robocal.solver.diagnose import diagnose as run_diagnosis
 
-    d = run_diagnosis(cell_problem(cell, meas), log=log, screen_outliers=screen)
-    lay, x = d.layout, d.x
+    solved = run_diagnosis(cell_problem(cell, meas), log=log, screen_outliers=screen)
+    lay, x = solved.layout, solved.x
     robot = lay.robot.with_params(x[: lay.n_geo])
     model = ModelFile(
         robot,
         lay.base(x),
         dict(zip(meas.target_names, lay.targets(x))),
         nominal=cell.robot,
-        extensions=d.extensions,
-        parameters=d.parameters,
+        extensions=solved.extensions,
+        parameters=solved.parameters,
         meta={"method": "ls-sum+extensions"},
     )
     # the solver's report as report.json has it, typed once: what the model keeps of it
-    report = ReportDoc.model_validate(d.report)
+    d = Diagnosed(ReportDoc.of(solved), solved)
+    report = d.report
     model.diagnosis = Diagnosis(
         final=report.final,
         noise_floor_mm=report.noise_floor_mm,
@@ -474,12 +498,14 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
     if d.errors is not None:
         model.uncertainty = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
-        _judge_diagnosis(d, report, cell, meas, model)
-        _position_block(d, report, cell, meas, model)
+        _judge_diagnosis(d.report, d.errors, cell, meas, model)
+        _position_block(d.report, d.errors, cell, meas, model)
     return d, model
 
 
-def _position_block(d, report: ReportDoc, cell: Cell, meas: Measurements, model: ModelFile):
+def _position_block(
+    report: ReportDoc, errors: ExtendedErrors, cell: Cell, meas: Measurements, model: ModelFile
+) -> None:
     """An extended model's `uncertainty.position` block: its geometry's and its coefficients'
     covariance, the joint scatter fitted to the diagnosis's final held-out RMS."""
     from robocal.server.calibration.position_uncertainty import extended_block
@@ -488,13 +514,13 @@ def _position_block(d, report: ReportDoc, cell: Cell, meas: Measurements, model:
         return
     inputs = cell_problem(cell, meas).inputs()
     final, floor = report.final.holdout_rmse_mm, report.noise_floor_mm
-    block = extended_block(model, inputs, d.errors.parameters, final, floor)
+    block = extended_block(model, inputs, errors.parameters, final, floor)
     if block is not None:
         model.uncertainty.position = block
 
 
 def _judge_diagnosis(
-    d, report: ReportDoc, cell: Cell, meas: Measurements, model: ModelFile
+    report: ReportDoc, errors: ExtendedErrors, cell: Cell, meas: Measurements, model: ModelFile
 ) -> None:
     """The `identified` and `validation` blocks of a diagnosis's final model, as a calibration's:
     the held-fixed parameters and the condition number of the geometry as ls-sum finds them."""
@@ -505,17 +531,22 @@ def _judge_diagnosis(
     geometric = calibrate(problem, "ls-sum")
     model.identified = identified_block(
         model,
-        d.errors.parameters,
+        errors.parameters,
         fixed=geometric.fixed,
         condition=geometric.condition,
         nominal_targets={t: cell.targets[t] for t in meas.target_names},
         nominal_base=cell.base,
     )
-    model.validation = validate_diagnosis(d, report, cell, meas, model, geometric.condition)
+    model.validation = validate_diagnosis(report, errors, cell, meas, model, geometric.condition)
 
 
 def validate_diagnosis(
-    d, report: ReportDoc, cell: Cell, meas: Measurements, model: ModelFile, condition: float
+    report: ReportDoc,
+    errors: ExtendedErrors,
+    cell: Cell,
+    meas: Measurements,
+    model: ModelFile,
+    condition: float,
 ) -> Validation:
     """model.json's `validation` block of a diagnosis's final model: its own cross-validated
     held-out figures against its fit, with the geometry's condition number; the report's noise
@@ -535,7 +566,7 @@ def validate_diagnosis(
         holdout=guard.CrossValidated(final.holdout_rmse_mm, final.holdout_max_mm),
         condition_number=condition,
         equations=3 * int(meas.mask.sum()),
-        free_parameters=int(np.count_nonzero(d.errors.parameters.column >= 0)),
+        free_parameters=int(np.count_nonzero(errors.parameters.column >= 0)),
         poses=int(np.any(meas.mask, axis=1).sum()),
         noise_floor_mm=floor,
         noise_floor_source=source,
@@ -555,8 +586,13 @@ def validate_diagnosis(
 
 
 def write_diagnosis(
-    d, model: ModelFile, report_path: Path, data: dict, model_path=None, list_figures=False
-):
+    d: Diagnosed,
+    model: ModelFile,
+    report_path: Path,
+    data: dict,
+    model_path=None,
+    list_figures=False,
+) -> tuple[ReportDoc, list[Path]]:
     """Write the report (each effect naming its figure; with list_figures, every figure in
     `figures`), its figures beside it and the model. Returns (report, figure paths)."""
     from robocal.server.figures.diagnosis import write_figures
@@ -564,36 +600,33 @@ def write_diagnosis(
 
     report = d.report
     exts = _report_order(report, d.extensions)
-    # One numbering everywhere: effect N is report["effects"][N - 1], its figure REPORT_N_*.png,
-    # and `diagnose` prints it as "effect N" (the order the report ranks them in, not found in).
+    # One numbering everywhere: effect N is the report's effects[N - 1], its figure
+    # REPORT_N_*.png, and `diagnose` prints it as "effect N" (the order the report ranks them
+    # in, not found in).
     rank = {x.label(): k for k, x in enumerate(exts)}
     ranked = sorted(d.figures, key=lambda f: rank.get(f["label"], len(rank)))
     figures = write_figures(ranked, report_path)
     by_label = {f["label"]: path.name for f, path in zip(ranked, figures)}
-    for e, ext in zip(report["effects"], exts):
-        e["figure"] = by_label.get(ext.label())
+    for e, ext in zip(report.effects, exts):
+        e.figure = by_label.get(ext.label())
     if list_figures:
-        report["figures"] = [p.name for p in figures]
+        report.figures = [p.name for p in figures]
     # the final model's table and verdict, in the report too
     if model.identified is not None:
-        report["identified"] = model.identified.to_json()
+        report.identified = model.identified
     if model.validation is not None:
-        report["validation"] = model.validation.to_json()
+        report.validation = model.validation
     model.meta["data"] = data
-    write_json_atomic(report_path, report)
+    write_json_atomic(report_path, report.to_json())
     if model_path:
         write_model(model_path, model)
     return report, figures
 
 
-def _report_order(report, exts):
+def _report_order(report: ReportDoc, exts) -> list:
     """The extensions in the report's order (most important first)."""
-
-    def key(e):
-        return (e["name"], e.get("joint"), e.get("harmonic"))
-
     index = {(x.name, None if x.joint is None else x.joint + 1, x.harmonic): x for x in exts}
-    return [index[key(e)] for e in report["effects"]]
+    return [index[e.key()] for e in report.effects]
 
 
 __all__ = [

@@ -117,7 +117,7 @@ def cmd_calibrate(args) -> None:
         + ", ".join(f"F_{k} {v:.4f} mm^2" for k, v in (fit.F_mm2 or {}).items())
         + f"; RMSE(phi) {fit.rmse_phi_mm:.4f} mm; RMS {fit.rmse_mm:.4f} mm"
     )
-    if "history" in cal:  # minimax
+    if cal.history is not None:  # minimax
         console.print(
             f"SQP ({cal.qp} QP): {cal.nit} iterations, "
             f"{cal.qp_iterations} QP iterations, max F_i "

@@ -11,6 +11,8 @@ import numpy as np
 
 if TYPE_CHECKING:
     from robocal.server.formats.blocks import Unexplained
+    from robocal.server.formats.report_doc import ReportDoc
+    from robocal.solver.calibrate import Calibration
 
 
 def _note(text: str) -> None:
@@ -139,19 +141,17 @@ def _print_outliers(outliers, skipped=None) -> None:
         )
 
 
-def _print_screening(cal) -> None:
-    screening = cal.get("screening")
-    _print_outliers(cal.get("outliers"), screening.skipped if screening else None)
+def _print_screening(cal: Calibration) -> None:
+    screening = cal.screening
+    _print_outliers(cal.outliers, screening.skipped if screening else None)
 
 
-def _print_diagnosis(report: dict) -> None:
+def _print_diagnosis(doc: ReportDoc) -> None:
     """The report as report.json has it (formats.report_doc), effect by effect."""
     from robocal.server.cli import tables
     from robocal.server.cli.tables import console
     from robocal.server.formats.blocks import Validation
-    from robocal.server.formats.report_doc import ReportDoc
 
-    doc = ReportDoc.model_validate(report)
     _print_outliers(None if doc.outliers is None else [o.to_json() for o in doc.outliers])
     floor, base, final = doc.noise_floor_mm, doc.baseline, doc.final
     console.print(

@@ -24,7 +24,7 @@ def cmd_compare(args) -> None:
     _print_screening(next(iter(rows.values()))[0])
     console.print(tables.table3(rows, meas.target_names))
     for label, (cal, _) in rows.items():
-        if "history" in cal:  # minimax
+        if cal.history is not None:  # minimax
             console.print(
                 f"{label}: {cal.nit} SQP iterations, {cal.qp_iterations} QP "
                 f"iterations, {cal.sqp_seconds * 1000:.1f} ms, final max F_i "

@@ -12,6 +12,7 @@ from rich.table import Table
 if TYPE_CHECKING:
     from robocal.server.fleet import Fleet
     from robocal.server.formats.blocks import HeldOut, Identified, Uncertainty, Validation
+    from robocal.server.formats.verification_doc import VerificationDoc
     from robocal.solver.calibrate import Calibration
     from robocal.solver.metrics import Accuracy, Stats
 
@@ -151,53 +152,54 @@ def effect_parameters(parameters: dict, uncertainty: dict | None) -> str:
     return ", ".join(out)
 
 
-def verification_table(report: dict) -> Table:
+def verification_table(report: VerificationDoc) -> Table:
     """ISO 9283 figures per test point, before (nominal joints) and after compensation, mm."""
-    t = Table(title=f"verification of {report['model']['path']} on {report['robot']}")
+    t = Table(title=f"verification of {report.model.path} on {report.robot}")
     for col in ("point", "AP before", "AP after", "RP before", "RP after (-U/+U)",
                 "vAP before", "vAP after"):  # fmt: skip
         t.add_column(col, justify="left" if col == "point" else "right")
-    for b, a in zip(report["before"]["points"], report["after"]["points"]):
+    for b, a in zip(report.before.points, report.after.points):
         rp_u = (
-            f" (-{a['RP_U_below_mm']:.4f}/+{a['RP_U_above_mm']:.4f})"
-            if "RP_U_above_mm" in a
+            f" (-{a.RP_U_below_mm:.4f}/+{a.RP_U_above_mm:.4f})"
+            if a.RP_U_below_mm is not None and a.RP_U_above_mm is not None
             else ""
         )
         t.add_row(
-            b["point"],
-            *(f"{x:.4f}" for x in (b["AP_mm"], a["AP_mm"], b["RP_mm"])),
-            f"{a['RP_mm']:.4f}{rp_u}",
-            f"{b['vAP_mm']:.4f}",
-            f"{a['vAP_mm']:.4f}",
+            b.point,
+            *(f"{x:.4f}" for x in (b.AP_mm, a.AP_mm, b.RP_mm)),
+            f"{a.RP_mm:.4f}{rp_u}",
+            f"{b.vAP_mm:.4f}",
+            f"{a.vAP_mm:.4f}",
         )
-    for b, a in zip(report["before"].get("distances", []), report["after"].get("distances", [])):
+    for d, e in zip(report.before.distances, report.after.distances):
         t.add_row(
-            "AD/RD " + "-".join(b["pair"]),
-            f"{b['AD_mm']:.4f}",
-            f"{a['AD_mm']:.4f}",
-            f"{b['RD_mm']:.4f}",
-            f"{a['RD_mm']:.4f}",
+            "AD/RD " + "-".join(d.pair),
+            f"{d.AD_mm:.4f}",
+            f"{e.AD_mm:.4f}",
+            f"{d.RD_mm:.4f}",
+            f"{e.RD_mm:.4f}",
             "",
             "",
         )
     return t
 
 
-def verification_decisions(report: dict) -> list[str]:
+def verification_decisions(report: VerificationDoc) -> list[str]:
     """One line per decision of a verification (AP against the tolerance, RP against the arm's
     stated repeatability), as ISO 14253-1's guard bands give it."""
-    unc = report.get("uncertainty") or {}
+    unc = report.uncertainty
+    if unc is None:
+        return []
     out = []
-    for key, figure, against, given in (
-        ("decision", "AP", "the tolerance", "tolerance_mm"),
-        ("rp_decision", "RP", "the arm's stated repeatability", "repeatability_mm"),
+    for d, figure, against, given in (
+        (unc.decision, "AP", "the tolerance", "tolerance_mm"),
+        (unc.rp_decision, "RP", "the arm's stated repeatability", "repeatability_mm"),
     ):
-        d = unc.get(key)
-        if d and d["tolerance_mm"] is None:
+        if d is not None and d.tolerance_mm is None:
             out.append(f"{figure}: no pass or fail (the cell gives no {given})")
-        elif d:
+        elif d is not None:
             out.append(
-                f"{figure}: {d['verdict']} against {against} {d['tolerance_mm']:g} mm "
+                f"{figure}: {d.verdict} against {against} {d.tolerance_mm:g} mm "
                 "(ISO 14253-1 guard bands)"
             )
     return out

@@ -10,10 +10,16 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    PlainSerializer,
     PlainValidator,
+    PrivateAttr,
+    SerializerFunctionWrapHandler,
     ValidationError,
+    ValidatorFunctionWrapHandler,
     WithJsonSchema,
     field_serializer,
+    model_serializer,
+    model_validator,
 )
 from pydantic_core import PydanticCustomError
 
@@ -29,7 +35,12 @@ def _figure(value):
 
 
 # A figure the program wrote (any JSON number, NaN where the writer had one)
-Figure = Annotated[float, PlainValidator(_figure), WithJsonSchema({"type": "number"})]
+Figure = Annotated[
+    float,
+    PlainValidator(_figure),
+    PlainSerializer(lambda v: v),  # as read: an int is no float to warn about
+    WithJsonSchema({"type": "number"}),
+]
 # A figure a reader acts on: a finite JSON number
 Statistic = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 Text = Annotated[str, Field(strict=True)]
@@ -44,6 +55,34 @@ class Block(BaseModel):
     def to_json(self) -> dict[str, Any]:
         """The block as written: the keys it was given, in its fields' order."""
         return self.model_dump(by_alias=True, exclude_unset=True)
+
+
+class Ordered(Block):
+    """A block the solver writes as a dict (a diagnosis report's): its keys written in the order
+    they were given, then in the order set (the figures' names after the solver's keys)."""
+
+    _order: tuple[str, ...] = PrivateAttr(())
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _given_order(cls, data: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+        obj = handler(data)
+        if isinstance(data, dict) and isinstance(obj, Ordered):
+            obj._order = tuple(data)
+        return obj
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        super().__setattr__(name, value)
+        if not name.startswith("_"):
+            field = type(self).model_fields.get(name)
+            key = field.alias if field is not None and field.alias else name
+            if key not in self._order:
+                self._order = (*self._order, key)
+
+    @model_serializer(mode="wrap")
+    def _in_order(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        out = handler(self)
+        return {**{k: out[k] for k in self._order if k in out}, **out}
 
 
 class Fit(Block):
@@ -227,13 +266,13 @@ class Diagnosis(Block):
     outliers: list[dict[str, Any]] | None = None
 
 
-class Covariate(Block):
+class Covariate(Ordered):
     name: str
     strength: float
     reading: str
 
 
-class Unexplained(Block):
+class Unexplained(Ordered):
     """What the final model leaves above the noise floor, and the covariates it follows."""
 
     holdout_rmse_mm: float

@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from pydantic import ConfigDict, Field
 
 from robocal.solver.vocabulary import KINDS
 
-from .blocks import Block, Figure, Identified, Score, Unexplained, Validation
+from .blocks import Figure, Identified, Ordered, Score, Unexplained, Validation
+
+if TYPE_CHECKING:
+    from robocal.solver.diagnose import Diagnosis
 
 
-class Open(Block):
-    """A report object: what a writer adds beyond the spec's keys is kept."""
+class Open(Ordered):
+    """A report object: what a writer adds beyond the spec's keys is kept, in its order."""
 
 
 class Alternative(Open):
@@ -21,6 +26,10 @@ class Alternative(Open):
 
 class Effect(Open):
     """An effect judged real, with the held-out evidence for it."""
+
+    def key(self) -> tuple[str, int | None, int | None]:
+        """(name, joint from 1, harmonic): which effect it is, as a model's extension says."""
+        return self.name, self.joint, self.harmonic
 
     name: str = Field(json_schema_extra={"enum": list(KINDS)})
     joint: int | None = Field(None, ge=1, description="joints are numbered from 1")
@@ -150,3 +159,10 @@ class ReportDoc(Open):
         description="whether the data supports the final model, as model.json's `validation` "
         "(`deployable`, `reasons`, the cross-validated held-out RMS beside the fit RMS)",
     )
+
+    @classmethod
+    def of(cls, diagnosis: Diagnosis) -> ReportDoc:
+        """The solver's diagnosis report, typed once (numpy figures made JSON's numbers)."""
+        from .model_json import to_plain
+
+        return cls.model_validate(to_plain(diagnosis.report.to_json()))

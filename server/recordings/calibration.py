@@ -303,7 +303,7 @@ def record_calibration(
     summary = _summary(calibration, sets, magnify, top, meas.pose_ids[at], final and final.model)
     rec.log("summary", rr.TextDocument(summary, media_type=rr.MediaType.MARKDOWN), static=True)
 
-    history = calibration.get("history")
+    history = calibration.history
     if history:
         rec.log("solver/max_F", rr.SeriesLines(colors=AFTER, names="max F_i / mm^2"), static=True)
         rec.send_columns(

@@ -187,7 +187,6 @@ def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.Jo
     _update(db, report, job.id, progress=0.8)
     report_path = setup.reports_dir / f"job-{job.id}" / "report.json"
     path = setup.models_dir / f"job-{job.id}.model.json"
-    d.report = to_plain(d.report)
     _, figures = write_diagnosis(
         d,
         model,

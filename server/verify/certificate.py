@@ -16,7 +16,15 @@ matplotlib.use("Agg")  # files only: the workstation may have no display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from robocal.server.formats.blocks import ModelQuote  # noqa: E402
+from robocal.server.formats.verification_doc import (  # noqa: E402
+    Decision,
+    PointFigures,
+    RunFigures,
+    VerificationDoc,
+    VerificationUncertainty,
+    VerifiedModel,
+    VolumeMap,
+)
 
 CSS = """
 body { font: 11pt/1.4 "DejaVu Sans", Arial, sans-serif; color: #111; max-width: 190mm;
@@ -43,17 +51,18 @@ def _png(fig) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
-def figure_ap_rp(report: dict) -> str:
+def figure_ap_rp(report: VerificationDoc) -> str:
     """AP and RP per test point, before and after, on a log axis (mm)."""
-    names = [p["point"] for p in report["before"]["points"]]
+    names = [p.point for p in report.before.points]
     x = np.arange(len(names))
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.2), constrained_layout=True)
     for ax, key, title in ((axes[0], "AP_mm", "accuracy AP"), (axes[1], "RP_mm", "repeat. RP")):
         for shift, run, label in (
-            (-0.2, "before", "nominal joints"),
-            (0.2, "after", "compensated"),
+            (-0.2, report.before, "nominal joints"),
+            (0.2, report.after, "compensated"),
         ):
-            ax.bar(x + shift, [p[key] for p in report[run]["points"]], 0.4, label=label)
+            figures = [p.AP_mm if key == "AP_mm" else p.RP_mm for p in run.points]
+            ax.bar(x + shift, figures, 0.4, label=label)
         if key == "AP_mm":  # the two runs differ by orders of magnitude; RP should not
             ax.set_yscale("log")
         ax.set_xticks(x, names)
@@ -64,16 +73,17 @@ def figure_ap_rp(report: dict) -> str:
     return _png(fig)
 
 
-def figure_scatter(report: dict) -> str:
+def figure_scatter(report: VerificationDoc) -> str:
     """Each attained position less its commanded one, x against y (µm), before and after."""
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), constrained_layout=True)
-    for ax, run, title in (
-        (axes[0], "before", "nominal joints"),
-        (axes[1], "after", "compensated"),
-    ):
-        for p in report[run]["points"]:
-            d = 1e3 * (np.array(p["attained_mm"]) - np.array(p["commanded_mm"]))
-            ax.scatter(d[:, 0], d[:, 1], s=12, label=p["point"])
+    runs: tuple[tuple[RunFigures, str], ...] = (
+        (report.before, "nominal joints"),
+        (report.after, "compensated"),
+    )
+    for ax, (run, title) in zip(axes, runs):
+        for p in run.points:
+            d = 1e3 * (np.array(p.attained_mm) - np.array(p.commanded_mm))
+            ax.scatter(d[:, 0], d[:, 1], s=12, label=p.point)
         ax.axhline(0, color="grey", lw=0.8)
         ax.axvline(0, color="grey", lw=0.8)
         ax.set_aspect("equal", adjustable="datalim")
@@ -85,9 +95,9 @@ def figure_scatter(report: dict) -> str:
     return _png(fig)
 
 
-def figure_uncertainty_map(volume: dict) -> str:
+def figure_uncertainty_map(volume: VolumeMap) -> str:
     """U over the working volume: the map's positions in three slices of height, coloured by U."""
-    xyz, u = np.asarray(volume["xyz_mm"]), np.asarray(volume["U_mm"])
+    xyz, u = np.asarray(volume.xyz_mm), np.asarray(volume.U_mm)
     edges = np.quantile(xyz[:, 2], [0, 1 / 3, 2 / 3, 1])
     fig, axes = plt.subplots(1, 3, figsize=(9, 3.3), constrained_layout=True, sharey=True)
     norm = plt.Normalize(float(u.min()), float(u.max()))
@@ -103,15 +113,15 @@ def figure_uncertainty_map(volume: dict) -> str:
     return _png(fig)
 
 
-def verdict_sentence(dec: dict | None, figure: str, against: str, give: str) -> str:
+def verdict_sentence(dec: Decision | None, figure: str, against: str, give: str) -> str:
     """The decision's sentence: PASS / FAIL / NOT DECIDED of `figure` (AP, RP) against the
     tolerance (`against` names it), or why there is none (`give` says where to state it)."""
-    if not dec:
+    if dec is None:
         return ""
-    tol, verdict = dec["tolerance_mm"], dec["verdict"]
+    tol, verdict = dec.tolerance_mm, dec.verdict
     if verdict == "no tolerance":
         return f"No {against} given ({give}): no pass or fail on {figure}."
-    late = dec.get("tracker_overdue")
+    late = dec.tracker_overdue
     return {
         "pass": f"<b>{figure} PASS</b> against the {against} {tol:g} mm: every {figure} plus "
         "its U is within it.",
@@ -126,33 +136,33 @@ def verdict_sentence(dec: dict | None, figure: str, against: str, give: str) -> 
     }[verdict]
 
 
-def _rp(q: dict) -> str:
+def _rp(q: PointFigures) -> str:
     """An RP with its U below and above, as the certificate prints it."""
-    if "RP_U_above_mm" not in q:
-        return f"{q['RP_mm']:.4f}"
-    return f"{q['RP_mm']:.4f} −{q['RP_U_below_mm']:.4f} / +{q['RP_U_above_mm']:.4f}"
+    if q.RP_U_below_mm is None or q.RP_U_above_mm is None:
+        return f"{q.RP_mm:.4f}"
+    return f"{q.RP_mm:.4f} −{q.RP_U_below_mm:.4f} / +{q.RP_U_above_mm:.4f}"
 
 
-def uncertainty_section(report: dict) -> tuple[str, str]:
+def uncertainty_section(report: VerificationDoc) -> tuple[str, str]:
     """The verdicts' sentences on the tolerance (AP) and the arm's repeatability (RP), and the
     uncertainty section's HTML (the model's U "-" without its figures: a model written before
     them, or one whose extensions need a pose's time or temperature)."""
-    unc = report.get("uncertainty") or {}
-    dec, rp_dec = unc.get("decision"), unc.get("rp_decision")
+    unc = report.uncertainty or VerificationUncertainty()
+    dec, rp_dec = unc.decision, unc.rp_decision
     said = verdict_sentence(dec, "AP", "tolerance", "the cell's tolerance_mm or the model's")
     said += " " + verdict_sentence(
         rp_dec, "RP", "arm's stated repeatability", "the cell's repeatability_mm"
     )
-    model = unc.get("model")
+    model = unc.model
     rows = []
-    for i, q in enumerate(report["after"]["points"]):
+    for i, q in enumerate(report.after.points):
         rows.append(
             (
-                q["point"],
-                f"{q['AP_mm']:.4f} ± {q['AP_U_mm']:.4f}" if "AP_U_mm" in q else f"{q['AP_mm']:.4f}",
+                q.point,
+                f"{q.AP_mm:.4f} ± {q.AP_U_mm:.4f}" if q.AP_U_mm is not None else f"{q.AP_mm:.4f}",
                 _rp(q),
-                f"{model['model_U_mm'][i]:.4f}" if model else "-",
-                f"{model['reading_U_mm'][i]:.4f}" if model else "-",
+                f"{model.model_U_mm[i]:.4f}" if model else "-",
+                f"{model.reading_U_mm[i]:.4f}" if model else "-",
             )
         )
     head = ["point", "AP after ± U (mm)", "RP after −U / +U (mm)", "model U (mm)"]
@@ -160,26 +170,26 @@ def uncertainty_section(report: dict) -> tuple[str, str]:
         head + ["a reading's U (mm)"], rows
     )
     html += "</div>"
-    if model and model.get("map"):
+    if model and model.map:
         html += (
             '<figure><img alt="U over the working volume" '
-            f'src="{figure_uncertainty_map(model["map"])}"></figure>'
+            f'src="{figure_uncertainty_map(model.map)}"></figure>'
         )
-    notes = [unc.get("ap_u", ""), unc.get("rp_u", "")]
+    notes = [unc.ap_u, unc.rp_u or ""]
     if model:
         notes.append(
             f"Model U: the radius holding the arm's position error with "
-            f"{100 * model['coverage']:.0f} % probability (k about {np.median(model['k']):.1f}), "
+            f"{100 * model.coverage:.0f} % probability (k about {np.median(model.k):.1f}), "
             "from the parameters' covariance (an extended model's coefficients included) and "
             "the error the model leaves unexplained (a joint "
-            f"scatter of {model['joint_scatter_deg']:.4f} deg RMS); a reading's U adds the "
+            f"scatter of {model.joint_scatter_deg:.4f} deg RMS); a reading's U adds the "
             "tracker's specification."
         )
     else:
         notes.append("The model keeps no position uncertainty: its U is not stated.")
     for d in (dec, rp_dec):
-        if d:
-            notes.append("Decision rule: " + d["rule"] + ".")
+        if d is not None:
+            notes.append("Decision rule: " + d.rule + ".")
     html += "".join(f'<p class="note">{escape(n)}</p>' for n in notes if n)
     return said.strip(), html
 
@@ -196,110 +206,104 @@ def _table(head, rows, cls="") -> str:
     return f'<table class="{cls}">{tr}{_rows(rows)}</table>'
 
 
-def _rp_span(run: dict) -> str:
+def _rp_span(run: RunFigures) -> str:
     """The worst point's RP interval: [RP - U-, RP + U+]."""
-    q = max(run["points"], key=lambda p: p["RP_mm"])
-    return f"{q['RP_mm'] - q['RP_U_below_mm']:.4f} to {q['RP_mm'] + q['RP_U_above_mm']:.4f}"
+    q = max(run.points, key=lambda p: p.RP_mm)
+    return f"{q.RP_mm - (q.RP_U_below_mm or 0.0):.4f} to {q.RP_mm + (q.RP_U_above_mm or 0.0):.4f}"
 
 
-def holdout_rms(report: dict):
+def holdout_rms(model: VerifiedModel) -> float | None:
     """The model's held-out RMS (mm) as its diagnosis stated it, else as its validation did
     (a calibration's leave-one-pose-out figure); None if neither did."""
-    return ModelQuote.model_validate(report["model"].get("meta") or {}).holdout_rms_mm()
+    return model.quote().holdout_rms_mm()
 
 
-def render(report: dict) -> str:
+def render(report: VerificationDoc) -> str:
     """The certificate's HTML."""
-    b, a = report["before"], report["after"]
-    inst = report["instrument"]
-    instrument = inst.get("kind", "laser tracker") + "".join(
-        f", {k} {v}"
-        for k, v in inst.items()
-        if k not in ("kind", "smr_ids", "certificate_id", "certificate_due", "serial")
-        and v is not None
-    )
+    b, a = report.before, report.after
+    inst = report.instrument
     trace = [
-        ("Tracker serial", inst.get("serial") or "not given"),
+        ("Tracker serial", inst.serial or "not given"),
         (
             "Tracker calibration",
-            f"certificate {inst.get('certificate_id') or 'not given'}, due "
-            f"{inst.get('certificate_due') or 'not given'}"
-            + (" - OVERDUE at this run" if report.get("tracker_overdue") else ""),
+            f"certificate {inst.certificate_id or 'not given'}, due "
+            f"{inst.certificate_due or 'not given'}"
+            + (" - OVERDUE at this run" if report.tracker_overdue else ""),
         ),
         (
             "SMR ids",
-            ", ".join(f"{k} {v}" for k, v in (inst.get("smr_ids") or {}).items()) or "not given",
+            ", ".join(f"{k} {v}" for k, v in (inst.smr_ids or {}).items()) or "not given",
         ),
     ]
-    rms = holdout_rms(report)
+    rms = holdout_rms(report.model)
     ident = [
-        ("Robot", report["robot"]),
-        ("Model", report["model"]["path"]),
-        ("Model SHA-256", report["model"]["sha256"]),
+        ("Robot", report.robot),
+        ("Model", report.model.path),
+        ("Model SHA-256", report.model.sha256),
         ("Model held-out RMS", "-" if rms is None else f"{rms:.4f} mm"),
-        ("Instrument", instrument),
+        ("Instrument", inst.description()),
         *trace,
-        ("Cell", "simulated" if report["simulated"] else "real devices"),
-        ("Date (UTC)", report["date"]),
-        ("Measured point", f"SMR {report['smr']}"),
+        ("Cell", "simulated" if report.simulated else "real devices"),
+        ("Date (UTC)", report.date),
+        ("Measured point", f"SMR {report.smr}"),
         (
             "Procedure",
-            f"ISO 9283 test points {', '.join(report['points'])}; {report['cycles']} cycles x "
-            f"{report['directions']} approach directions ({report['approach_mm']:g} mm out)",
+            f"ISO 9283 test points {', '.join(report.points)}; {report.cycles} cycles x "
+            f"{report.directions} approach directions ({report.approach_mm:g} mm out)",
         ),
     ]
     summary = [
-        ("AP, worst point (mm)", f"{b['AP_max_mm']:.4f}", f"{a['AP_max_mm']:.4f}"),
-        ("RP, worst point (mm)", f"{b['RP_max_mm']:.4f}", f"{a['RP_max_mm']:.4f}"),
+        ("AP, worst point (mm)", f"{b.AP_max_mm:.4f}", f"{a.AP_max_mm:.4f}"),
+        ("RP, worst point (mm)", f"{b.RP_max_mm:.4f}", f"{a.RP_max_mm:.4f}"),
         *(
             [("RP, worst point, 95 % interval (mm)", _rp_span(b), _rp_span(a))]
-            if "RP_U_above_mm" in a["points"][0]
+            if a.points[0].RP_U_above_mm is not None
             else []
         ),
     ]
     points = [
         (
-            p["point"],
-            *(f"{v:.1f}" for v in p["commanded_mm"]),
-            f"{p['AP_mm']:.4f}",
-            f"{q['AP_mm']:.4f}",
-            f"{p['RP_mm']:.4f}",
-            f"{q['RP_mm']:.4f}",
-            f"{p['vAP_mm']:.4f}",
-            f"{q['vAP_mm']:.4f}",
+            p.point,
+            *(f"{v:.1f}" for v in p.commanded_mm),
+            f"{p.AP_mm:.4f}",
+            f"{q.AP_mm:.4f}",
+            f"{p.RP_mm:.4f}",
+            f"{q.RP_mm:.4f}",
+            f"{p.vAP_mm:.4f}",
+            f"{q.vAP_mm:.4f}",
         )
-        for p, q in zip(b["points"], a["points"])
+        for p, q in zip(b.points, a.points)
     ]
     distances = [
         (
-            " - ".join(p["pair"]),
-            f"{p['AD_mm']:.4f}",
-            f"{q['AD_mm']:.4f}",
-            f"{p['RD_mm']:.4f}",
-            f"{q['RD_mm']:.4f}",
+            " - ".join(p.pair),
+            f"{p.AD_mm:.4f}",
+            f"{q.AD_mm:.4f}",
+            f"{p.RD_mm:.4f}",
+            f"{q.RD_mm:.4f}",
         )
-        for p, q in zip(b.get("distances", []), a.get("distances", []))
+        for p, q in zip(b.distances, a.distances)
     ]
-    gain = b["AP_max_mm"] / a["AP_max_mm"] if a["AP_max_mm"] > 0 else float("inf")
+    gain = b.AP_max_mm / a.AP_max_mm if a.AP_max_mm > 0 else float("inf")
     decided, uncertainty = uncertainty_section(report)
-    late = report.get("tracker_overdue")
+    late = report.tracker_overdue
     overdue_head = (
-        f' <span class="overdue" id="overdue">- tracker calibration overdue (due {escape(late)}):'
+        f' <span class="overdue" id="overdue">- tracker calibration overdue (due {escape(str(late))}):'
         " not passing</span>"
         if late
         else ""
     )
     return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>Accuracy certificate - {escape(report["robot"])}</title>
+<html lang="en"><head><meta charset="utf-8"><title>Accuracy certificate - {escape(report.robot)}</title>
 <style>{CSS}</style></head><body>
 <h1>Accuracy certificate{overdue_head}</h1>
 <p class="note">Positioning accuracy and repeatability after calibration, measured per ISO 9283:1998
 (clause 7.2: AP, RP and vAP; 7.3: AD and RD), commanded once with the nominal joints
 and once with the model's compensated joints.</p>
 {_table([], ident, "id")}
-<p class="verdict" id="verdict">Worst-point accuracy AP: <b>{b["AP_max_mm"]:.4f} mm</b> with the
-nominal joints, <b>{a["AP_max_mm"]:.4f} mm</b> compensated ({gain:.0f}x better); worst
-repeatability RP {b["RP_max_mm"]:.4f} mm / {a["RP_max_mm"]:.4f} mm. {decided}</p>
+<p class="verdict" id="verdict">Worst-point accuracy AP: <b>{b.AP_max_mm:.4f} mm</b> with the
+nominal joints, <b>{a.AP_max_mm:.4f} mm</b> compensated ({gain:.0f}x better); worst
+repeatability RP {b.RP_max_mm:.4f} mm / {a.RP_max_mm:.4f} mm. {decided}</p>
 <h2>Summary</h2>
 {_table(["figure", "before (nominal)", "after (compensated)"], summary)}
 <h2>Per test point (mm)</h2>
@@ -317,7 +321,7 @@ distance between two points; RD = 3 S<sub>D</sub>.</p>
 """
 
 
-def write_certificate(report: dict, path) -> Path:
+def write_certificate(report: VerificationDoc, path) -> Path:
     """Write the certificate's HTML to path (whole, or not at all); the path."""
     path = Path(path)
     html = render(report)

@@ -25,6 +25,7 @@ from robocal.server.formats.blocks import ModelQuote
 from robocal.server.formats.cell_json import Cell, parse_cell, robot_to_json
 from robocal.server.formats.errors import InputError
 from robocal.server.formats.model_json import ModelFile, read_model
+from robocal.server.formats.verification_doc import RunFigures, VerificationDoc
 from robocal.server.verify.uncertainty import (
     AP_U,
     RP_RULE,
@@ -223,7 +224,7 @@ def joints_for(model: ModelFile, plan: Plan, what: str) -> np.ndarray:
     return np.rad2deg(res.q)
 
 
-def figures(plan: Plan, attained: np.ndarray, tracker_sigma_mm=0.0) -> dict:
+def figures(plan: Plan, attained: np.ndarray, tracker_sigma_mm=0.0) -> RunFigures:
     """The ISO figures (mm) of one run from the verification SMR's readings (m, 3), each RP
     with its U below and above (solver.repeatability; the tracker's per-axis random error
     tracker_sigma_mm at each point)."""
@@ -272,7 +273,7 @@ def figures(plan: Plan, attained: np.ndarray, tracker_sigma_mm=0.0) -> dict:
             }
             for k, (i, j) in enumerate(pairs)
         ]
-    return out
+    return RunFigures.model_validate(out)
 
 
 def _sha256(path) -> str:
@@ -391,7 +392,9 @@ def readings(db, campaign_id: int) -> tuple[store.CampaignInfo, Measurements]:
     return info, store.campaign_measurements(db, campaign_id=campaign_id, targets=[smr])
 
 
-def verification_report(info: store.CampaignInfo, meas: Measurements, report=None) -> dict:
+def verification_report(
+    info: store.CampaignInfo, meas: Measurements, report=None
+) -> VerificationDoc:
     """The verification report of a done campaign from its readings (readings() gives both)."""
     record = info.settings[RECORD]
     plan = _layout(record)
@@ -407,53 +410,61 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
                 times[k] = meas.time_s[row, 0]
     cell = parse_cell(info.cell_json, f"<campaign {info.id} cell>")
     ap_u = mpe_mm(cell, plan.points)
-    runs, seconds = {}, {}
+    runs: dict[str, RunFigures] = {}
+    seconds: dict[str, float | None] = {}
     for h, what in enumerate(RUNS):
         part = slice(h * m, (h + 1) * m)
         runs[what] = figures(plan, attained[part], ap_u / 2.0)  # the spec's sigma: MPE / 2
         t = times[part][np.isfinite(times[part])]
         seconds[what] = float(t.max() - t.min()) if len(t) else None
-    after = runs["compensated"]["points"]
-    ap = [p["AP_mm"] for p in after]
-    for p, u in zip(runs["compensated"]["points"], ap_u):
-        p["AP_U_mm"] = float(u)
+    after = runs["compensated"].points
+    ap = [p.AP_mm for p in after]
+    for p, u in zip(after, ap_u):
+        p.AP_U_mm = float(u)
     late = overdue(cell, info.created_at)
     tolerance = cell.tolerance_mm
     if tolerance is None:
         quoted = ModelQuote.model_validate(record["model"].get("meta") or {}).validation
         tolerance = quoted.tolerance_mm if quoted is not None else None
-    return {
-        "robot": cell.robot.name if hasattr(cell.robot, "name") else str(cell.robot),
-        "model": record["model"],
-        "instrument": _instrument(cell, cell.tracker if cell.simulated else None),
-        "date": info.created_at.astimezone(dt.UTC).isoformat(timespec="seconds"),
-        "smr": record["smr"],
-        "simulated": cell.simulated,
-        "campaign": info.id,
-        "cycles": record["cycles"],
-        "directions": record["directions"],
-        "approach_mm": record["approach_mm"],
-        "points": plan.names,
-        "before": runs["nominal"],
-        "after": runs["compensated"],
-        "simulated_s": seconds if cell.simulated else None,
-        "tracker_overdue": late,
-        "uncertainty": {
-            "model": record.get("uncertainty"),
-            "ap_u": AP_U,
-            "decision": decision(ap, ap_u, tolerance, tracker_overdue=late),
-            "rp_u": RP_U,
-            # the arm's repeatability against its data sheet's (the cell's repeatability_mm)
-            "rp_decision": decision(
-                [p["RP_mm"] for p in after],
-                [p["RP_U_above_mm"] for p in after],
-                cell.repeatability_mm,
-                tracker_overdue=late,
-                below=[p["RP_U_below_mm"] for p in after],
-                rule=RP_RULE,
-            ),
-        },
-    }
+    return VerificationDoc.model_validate(
+        {
+            "robot": cell.robot.name if hasattr(cell.robot, "name") else str(cell.robot),
+            "model": record["model"],
+            "instrument": _instrument(cell, cell.tracker if cell.simulated else None),
+            "date": info.created_at.astimezone(dt.UTC).isoformat(timespec="seconds"),
+            "smr": record["smr"],
+            "simulated": cell.simulated,
+            "campaign": info.id,
+            "cycles": record["cycles"],
+            "directions": record["directions"],
+            "approach_mm": record["approach_mm"],
+            "points": plan.names,
+            "before": runs["nominal"],
+            "after": runs["compensated"],
+            "simulated_s": seconds if cell.simulated else None,
+            "tracker_overdue": late,
+            "uncertainty": {
+                "model": record.get("uncertainty"),
+                "ap_u": AP_U,
+                "decision": decision(ap, ap_u, tolerance, tracker_overdue=late),
+                "rp_u": RP_U,
+                # the arm's repeatability against its data sheet's (the cell's repeatability_mm)
+                "rp_decision": decision(
+                    [p.RP_mm for p in after],
+                    [p.RP_U_above_mm for p in after],
+                    cell.repeatability_mm,
+                    tracker_overdue=late,
+                    below=[p.RP_U_below_mm for p in after],
+                    rule=RP_RULE,
+                ),
+            },
+        }
+    )
+
+
+def verification_json(info: store.CampaignInfo, meas: Measurements, report=None) -> dict:
+    """The verification report of a done campaign as verification.json has it (the API's)."""
+    return verification_report(info, meas).to_json()
 
 
 def acquire_options(cell: Cell, opts: VerifyOptions, poses: int) -> AcquireOptions:
@@ -479,7 +490,7 @@ def certificate(info: store.CampaignInfo, meas: Measurements, report=None) -> st
     return render(verification_report(info, meas))
 
 
-def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> dict:
+def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> VerificationDoc:
     """Run the nominal and the compensated verification on the cell; the verification report."""
     q_deg, labels, settings = prepare(cell, model_path, opts)
     summary = acquire(
@@ -516,11 +527,11 @@ def overdue(cell: Cell, when: dt.datetime) -> str | None:
     return due if when.date() > dt.date.fromisoformat(str(due)) else None
 
 
-def write(report: dict, path) -> None:
+def write(report: VerificationDoc, path) -> None:
     """Write verification.json whole, or not at all."""
     path = Path(path)
     tmp = path.with_name(path.name + ".part")
-    tmp.write_text(json.dumps(report, indent=2, default=_plain))
+    tmp.write_text(json.dumps(report.to_json(), indent=2, default=_plain))
     tmp.replace(path)
 
 

@@ -60,6 +60,87 @@ def string_key_reads(source: str) -> list[tuple[int, str]]:
     return out
 
 
+# The ISO 9283 figures of a verification (formats.verification_doc) are read as attributes only
+VERIFICATION_FIGURES = {"AP_max_mm", "RP_max_mm", "AP_mm", "RP_mm", "vAP_mm", "AP_U_mm", "AD_mm"}
+VERIFICATION_FIGURES |= {"RD_mm"}
+
+
+def _owner(node: ast.AST) -> str | None:
+    """Which typed result an expression names: a report (`report`, `x.report`: a diagnosis's
+    formats.report_doc.ReportDoc or a verification's VerificationDoc) or a calibration (`cal`,
+    `calibration`: solver.calibrate.Calibration, read by attribute)."""
+    name = node.id if isinstance(node, ast.Name) else getattr(node, "attr", None)
+    if name == "report":
+        return "a report"
+    if name in ("cal", "calibration"):
+        return "a calibration"
+    return None
+
+
+def result_key_reads(source: str) -> list[tuple[int, str]]:
+    """(line, what) of each read by string key of a diagnosis or verification report (any key
+    off `report` or `x.report`), of a calibration (any key off `cal`), or of a verification's
+    figures (AP_mm, RP_max_mm... off anything): x["k"], x.get("k"), "k" in x."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Subscript) and isinstance(node.ctx, (ast.Load, ast.Del)):
+            key, owner = _key(node.slice), node.value
+        elif (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr in ("get", "setdefault", "pop")
+            and node.args
+        ):
+            key, owner = _key(node.args[0]), node.func.value
+        elif isinstance(node, ast.Compare) and isinstance(node.ops[0], (ast.In, ast.NotIn)):
+            key, owner = _key(node.left), node.comparators[0]
+        else:
+            continue
+        if key is None:
+            continue
+        what = _owner(owner) or ("a verification" if key in VERIFICATION_FIGURES else None)
+        if what:
+            out.append((node.lineno, f"{key!r} of {what}"))
+    return sorted(out)
+
+
+def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
+    src = (  # as the server read them before they were typed
+        'a = d.report["effects"]\nb = report["before"]["points"]\nc = cal.get("screening")\n'
+        'e = "history" in cal\nf = p["AP_mm"]\ng = report.get("uncertainty") or {}\n'
+        'h = calibration.get("history")\nreport["figures"] = []\ni = row["name"]\n'
+    )
+    assert result_key_reads(src) == [
+        (1, "'effects' of a report"),
+        (2, "'before' of a report"),
+        (3, "'screening' of a calibration"),
+        (4, "'history' of a calibration"),
+        (5, "'AP_mm' of a verification"),
+        (6, "'uncertainty' of a report"),
+        (7, "'history' of a calibration"),
+    ]
+
+
+def reads_outside_the_formats(check) -> list[str]:
+    """Each read check(source) finds in the server outside formats/, as path:line and what."""
+    found = []
+    for path in sorted((ROOT / "server").rglob("*.py")):
+        rel = path.relative_to(ROOT).as_posix()
+        if not rel.startswith(EXEMPT):
+            found += [
+                f"{rel}:{line} reads {what} by string key" for line, what in check(path.read_text())
+            ]
+    return found
+
+
+def test_no_report_calibration_or_verification_is_read_by_string_key_outside_the_formats():
+    found = reads_outside_the_formats(result_key_reads)
+    assert not found, (
+        "read the typed result (formats.report_doc, formats.verification_doc, Calibration's "
+        "attributes) instead:\n" + "\n".join(found)
+    )
+
+
 def test_the_check_finds_each_kind_of_read():
     src = (
         'a = m.meta["validation"]\nb = r.get("identified")\nc = "fit" in report\n'
@@ -76,13 +157,7 @@ def test_the_check_finds_each_kind_of_read():
 
 
 def test_no_result_block_is_read_by_string_key_outside_the_formats():
-    found = []
-    for path in sorted((ROOT / "server").rglob("*.py")):
-        rel = path.relative_to(ROOT).as_posix()
-        if rel.startswith(EXEMPT):
-            continue
-        for line, key in string_key_reads(path.read_text()):
-            found.append(f"{rel}:{line} reads {key!r} by string key")
+    found = reads_outside_the_formats(lambda src: [(n, repr(k)) for n, k in string_key_reads(src)])
     assert not found, "read the typed block (formats.blocks) instead:\n" + "\n".join(found)
 
 

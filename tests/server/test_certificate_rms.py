@@ -3,11 +3,12 @@ calibration's own (its validation's leave-one-pose-out figure), never "-" when e
 
 from __future__ import annotations
 
+from robocal.server.formats.verification_doc import VerifiedModel
 from robocal.server.verify.certificate import holdout_rms
 
 
-def _report(meta: dict) -> dict:
-    return {"model": {"path": "m.json", "sha256": "0" * 64, "meta": meta}}
+def _report(meta: dict) -> VerifiedModel:
+    return VerifiedModel(path="m.json", sha256="0" * 64, meta=meta)
 
 
 def test_a_calibrated_models_own_held_out_rms_is_quoted():

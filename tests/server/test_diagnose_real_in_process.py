@@ -13,7 +13,7 @@ from tests.real import CAMPAIGNS, campaign_files
 def test_real_campaign_names_joint_2_compliance(name):
     meas_path, cell_path = campaign_files(name)
     cell, meas = workflow.load_data(meas_path, cell_path)
-    r = diagnose(workflow.cell_problem(cell, meas)).report
+    r = diagnose(workflow.cell_problem(cell, meas)).report.to_json()  # as report.json has it
     first = r["effects"][0]
     assert (first["name"], first["joint"]) == ("joint_compliance", 2), r["effects"]
     before, after = first["holdout_rmse_before_mm"], first["holdout_rmse_after_mm"]

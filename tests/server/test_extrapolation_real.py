@@ -40,9 +40,9 @@ def test_every_30_pose_subset_of_the_real_irb120_holds_on_its_left_out_poses(cap
         geo = calibrate(workflow.cell_problem(cell, fit), "ls-sum")
         geometric = rms(predict(geo.layout, geo.x, held.q), held.xyz)
         extended = rms(predict_poses(cell, d, held.q), held.xyz)
-        named = [e["name"] + f"({e.get('joint')})" for e in d.report["effects"]]
-        refused = [r["label"] for r in d.report["extrapolation"]["refused"]]
-        resampled = d.report.get("stability") or {}
+        named = [f"{e.name}({e.joint})" for e in d.report.effects]
+        refused = [r["label"] for r in d.report.extrapolation["refused"]]
+        resampled = d.report.stability or {}
         agree = ", ".join(f"{e['effect']} {e['named_in']}/5" for e in resampled.get("effects", []))
         lines.append(
             f"fold {k}: named {named or 'nothing'}, refused {refused or 'nothing'}; held out "
@@ -113,7 +113,7 @@ def test_a_compliance_that_fits_one_regions_quirks_is_refused(monkeypatch):
 
     monkeypatch.setattr(vocabulary.JointCompliance, "candidates", candidates)
     cell, meas = workflow.load_data(*campaign_files("irb120_wu"))
-    r = diagnosed(cell, meas).report
+    r = diagnosed(cell, meas).report.to_json()  # as report.json has it
     refused = r["extrapolation"]["refused"]
     labels = [x["label"] for x in refused]
     assert labels[0] == "joint_compliance(2, masses fitted)", labels
@@ -134,7 +134,7 @@ def test_a_refused_rich_compliance_leaves_its_one_stiffness_to_be_selected(monke
 
     monkeypatch.setattr(diagnosis, "simplest_variant", richest_variant)
     cell, meas = workflow.load_data(*campaign_files("irb120_wu"))
-    r = diagnosed(cell, meas).report
+    r = diagnosed(cell, meas).report.to_json()  # as report.json has it
     refused = [x["label"] for x in r["extrapolation"]["refused"]]
     assert "joint_compliance(2, masses fitted)" in refused, refused
     named = [(e["name"], e.get("joint"), e.get("masses_fitted", False)) for e in r["effects"]]

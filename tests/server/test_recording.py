@@ -302,5 +302,5 @@ def test_a_diagnosis_recording_shows_the_final_model_after_and_the_geometric_bes
         assert rms_geo == pytest.approx(np.sqrt(np.nanmean(e * e)), rel=1e-3)
         assert rms_after < 0.7 * rms_geo, (kind, rms_after, rms_geo)
     summary = _static(chunks, "/summary", "TextDocument:text")[0]
-    assert f"after: the diagnosis's final model **{d.report['final']['model']}**" in summary
+    assert f"after: the diagnosis's final model **{d.report.final.model}**" in summary
     assert "| RMS before | RMS after | RMS geometric |" in summary

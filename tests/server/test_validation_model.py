@@ -123,6 +123,6 @@ def test_a_diagnosis_model_is_judged_on_its_own_cross_validation(poses, effects,
     v = model.validation.to_json()
     assert v["deployable"] is deployable, v["reasons"]
     assert v["holdout"].startswith("5-fold cross-validation")
-    assert v["holdout_rms_mm"] == pytest.approx(d.report["final"]["holdout_rmse_mm"])
+    assert v["holdout_rms_mm"] == pytest.approx(d.report.final.holdout_rmse_mm)
     if not deployable:
         assert any(r.startswith("too few poses") for r in v["reasons"])

@@ -26,7 +26,7 @@ def verified(request, tmp_path_factory):
     seed = request.param
     d = tmp_path_factory.mktemp(f"verify{seed}")
     report, model = calibrated_and_verified(d, seed)
-    return report, model.diagnosis.final.holdout_rmse_mm, d
+    return report.to_json(), model.diagnosis.final.holdout_rmse_mm, d  # as verification.json
 
 
 def calibrated_and_verified(d, seed: int):
@@ -102,7 +102,7 @@ def test_a_users_points_are_verified_like_the_cube(verified, tmp_path):
             (("centre", cube["P1"]), ("low", cube["P4"]), ("high", cube["P2"]))]  # fmt: skip
     pts.write_text("point,x_mm,y_mm,z_mm\n" + "\n".join(rows) + "\n")
     opts = VerifyOptions(cycles=1, directions=2, points_path=str(pts), seed=seed, effects=(EFFECT,))
-    r = verify(d / "cell.db", default_cell(), d / "model.json", opts)
+    r = verify(d / "cell.db", default_cell(), d / "model.json", opts).to_json()
     assert r["points"] == ["centre", "low", "high"]
     np.testing.assert_allclose(r["after"]["points"][1]["commanded_mm"], cube["P4"], atol=1e-3)
     assert [x["pair"] for x in r["after"]["distances"]] == [["centre", "low"], ["centre", "high"]]

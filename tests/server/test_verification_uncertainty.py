@@ -17,6 +17,7 @@ from robocal.server.acquisition.acquire import AcquireOptions, acquire
 from robocal.server.calibration import workflow
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.model_json import read_model, write_model
+from robocal.server.formats.verification_doc import VerificationDoc
 from robocal.server.verify.run import VerifyOptions, verify
 from robocal.server.verify.uncertainty import decision
 
@@ -25,7 +26,7 @@ SEED = 8
 
 def calibrated_and_verified(
     d, tolerance_mm: float | None = 0.5, repeatability_mm: float | None = None
-) -> tuple[dict, dict]:
+) -> tuple[VerificationDoc, dict]:
     """(verification report, model.json's position block) of a simulated cell calibrated by
     ls-sum on 60 poses, verified with the cell's tolerance (and the arm's repeatability, by
     which it scatters)."""
@@ -54,10 +55,9 @@ def scattering(tmp_path_factory):
     return calibrated_and_verified(tmp_path_factory.mktemp("scattering"), repeatability_mm=0.04)[0]
 
 
-def rp_table(report) -> np.ndarray:
+def rp_table(report: VerificationDoc) -> np.ndarray:
     """(p, 3): each compensated point's RP, U below and U above (mm)."""
-    keys = ("RP_mm", "RP_U_below_mm", "RP_U_above_mm")
-    return np.array([[p[k] for k in keys] for p in report["after"]["points"]])
+    return np.array([[p.RP_mm, p.RP_U_below_mm, p.RP_U_above_mm] for p in report.after.points])
 
 
 def test_a_still_arms_rp_is_the_trackers_noise_and_its_u_says_so(verified):
@@ -66,7 +66,7 @@ def test_a_still_arms_rp_is_the_trackers_noise_and_its_u_says_so(verified):
     assert np.all(above > 0) and np.all(below >= 0)
     # no arm scatter: the tracker's noise (sigma MPE / 2) accounts for the whole spread
     assert np.allclose(rp - below, 0.0), (rp, below)
-    assert report["uncertainty"]["rp_decision"]["verdict"] == "no tolerance"
+    assert report.uncertainty.rp_decision.verdict == "no tolerance"
 
 
 def test_the_simulated_arm_scatters_by_its_stated_repeatability(verified, scattering):
@@ -82,9 +82,9 @@ def test_the_simulated_arm_scatters_by_its_stated_repeatability(verified, scatte
         np.mean((moving[:, 0] - moving[:, 1] <= 0.04) & (0.04 <= moving[:, 0] + moving[:, 2]))
         >= 0.8
     )
-    dec = scattering["uncertainty"]["rp_decision"]
-    assert dec["tolerance_mm"] == 0.04 and dec["verdict"] in ("not decided", "pass", "fail")
-    assert dec["verdict"] == decision(*moving[:, [0, 2]].T, 0.04, below=moving[:, 1])["verdict"]
+    dec = scattering.uncertainty.rp_decision
+    assert dec.tolerance_mm == 0.04 and dec.verdict in ("not decided", "pass", "fail")
+    assert dec.verdict == decision(*moving[:, [0, 2]].T, 0.04, below=moving[:, 1])["verdict"]
 
 
 def test_the_rp_decision_guards_each_side_by_its_own_u(scattering):
@@ -111,7 +111,7 @@ def test_model_json_keeps_the_position_uncertainty(verified):
 
 
 def test_each_point_has_its_uncertainty_and_the_volume_a_map(verified):
-    report, _ = verified
+    report = verified[0].to_json()  # as verification.json has it
     unc = report["uncertainty"]
     model = unc["model"]
     points = report["after"]["points"]
@@ -127,7 +127,7 @@ def test_each_point_has_its_uncertainty_and_the_volume_a_map(verified):
 
 
 def test_the_decision_follows_the_guard_bands(verified):
-    report, _ = verified
+    report = verified[0].to_json()  # as verification.json has it
     dec = report["uncertainty"]["decision"]
     assert dec["verdict"] == "pass" and dec["tolerance_mm"] == 0.5, dec
     ap = np.array([p["AP_mm"] for p in report["after"]["points"]])
@@ -137,3 +137,23 @@ def test_the_decision_follows_the_guard_bands(verified):
     assert decision(ap, u, float(ap[worst]))["verdict"] == "not decided"
     assert decision(ap, u, float(ap[worst] - u[worst] * 1.01))["verdict"] == "fail"
     assert decision(ap, u, None)["verdict"] == "no tolerance"
+
+
+def test_a_verification_written_before_rps_u_still_reads(verified):
+    """verification.json without RP's U (written before it) parses, and the table and the
+    certificate show its RPs bare, with no RP decision."""
+    from robocal.server.cli.tables import verification_decisions
+    from robocal.server.verify.certificate import render
+
+    written = verified[0].to_json()
+    for run in ("before", "after"):
+        for p in written[run]["points"]:
+            del p["RP_U_below_mm"], p["RP_U_above_mm"]
+    del written["uncertainty"]["rp_u"], written["uncertainty"]["rp_decision"]
+    old = VerificationDoc.model_validate(written)
+    assert old.to_json() == written  # read back as written: nothing added
+    assert old.after.points[0].RP_U_above_mm is None and old.uncertainty.rp_decision is None
+    assert [line[:3] for line in verification_decisions(old)] == ["AP:"]
+    html = render(old)
+    assert f"<td>{old.after.points[0].RP_mm:.4f}</td>" in html
+    assert "95 % interval" not in html and "U of an RP" not in html

@@ -143,7 +143,7 @@ def test_hidden_effect_is_found(seed):
     magnitude = aim(cell, spec, name, seed, target)
     meas, truth = simulated(cell, seed, [f"{spec}={magnitude:.6g}"])
     d = diagnosed(cell, meas)
-    report = d.report
+    report = d.report.to_json()  # as report.json has it
     floor = truth["noise_floor_mm"]
     ratio = report["baseline"]["holdout_rmse_mm"] / floor
     assert 3.0 <= ratio <= 30.0, f"premise: geometric-only held-out error {ratio:.1f}x the floor"
@@ -165,7 +165,7 @@ def test_hidden_effect_is_found(seed):
 @pytest.mark.parametrize("seed", range(200, 206))
 def test_clean_campaign_has_no_effect(seed):
     meas, truth = simulated(cell_of(robot_for(seed)), seed, [])
-    report = diagnosed(cell_of(robot_for(seed)), meas).report
+    report = diagnosed(cell_of(robot_for(seed)), meas).report.to_json()  # as report.json has it
     assert report["effects"] == []
     assert report["final"]["holdout_rmse_mm"] <= 1.3 * truth["noise_floor_mm"]
     assert report["noise_floor_mm"] == pytest.approx(truth["noise_floor_mm"], rel=0.25)
@@ -174,7 +174,7 @@ def test_clean_campaign_has_no_effect(seed):
 def test_two_effects_are_both_found():
     cell = cell_of("irb2600")
     meas, truth = simulated(cell, 300, ["joint_periodic:4:2=0.015", "thermal_drift=25"])
-    report = diagnosed(cell, meas).report
+    report = diagnosed(cell, meas).report.to_json()  # as report.json has it
     names = {(e["name"], e.get("joint"), e.get("harmonic")) for e in report["effects"]}
     assert names == {("joint_periodic", 4, 2), ("thermal_drift", None, None)}
     assert report["final"]["holdout_rmse_mm"] <= 1.3 * truth["noise_floor_mm"]
@@ -186,7 +186,7 @@ def test_extended_model_predicts_with_time_and_temperature():
     cell = cell_of("irb2600")
     meas, truth = simulated(cell, 301, ["thermal_drift=30"])
     d = diagnosed(cell, meas)
-    assert [e["name"] for e in d.report["effects"]] == ["thermal_drift"]
+    assert [e.name for e in d.report.effects] == ["thermal_drift"]
     assert [e.name for e in d.extensions] == ["thermal_drift"]
     pred = predict_poses(cell, d, meas.q, meas.time_s, meas.temp_c)
     acc = metrics.accuracy(pred, meas.xyz, meas.target_names)
@@ -208,7 +208,7 @@ def test_backlash_is_found_and_predicted_in_visit_order(seed):
     magnitude = aim(cell, spec, "joint_backlash", seed, target)
     meas, truth = simulated(cell, seed, [f"{spec}={magnitude:.6g}"])
     d = diagnosed(cell, meas)
-    report = d.report
+    report = d.report.to_json()  # as report.json has it
     floor = truth["noise_floor_mm"]
     ratio = report["baseline"]["holdout_rmse_mm"] / floor
     assert 3.0 <= ratio <= 30.0, f"premise: geometric-only held-out error {ratio:.1f}x the floor"

@@ -21,7 +21,7 @@ def test_diagnosis_lists_the_outliers_and_keeps_the_floor():
     meas.xyz[:], moved = displace(meas.xyz, SEED, 4 / 120)
     bad = {(int(meas.pose_ids[p]), meas.target_names[k]) for p, k in np.argwhere(moved)}
     floor = vc.noise_floor_mm(meas.q)
-    report = diagnosed(cell, meas).report
+    report = diagnosed(cell, meas).report.to_json()  # as report.json has it
     assert {(o["pose"], o["target"]) for o in report["outliers"]} == bad
     assert all(o["residual_mm"] > 0.2 for o in report["outliers"])
     assert abs(report["noise_floor_mm"] / floor - 1) < 0.3

@@ -27,7 +27,7 @@ def run(robot, meas):
 
 
 def named(d):
-    return [(e["name"], e.get("joint")) for e in d.report["effects"]]
+    return [(e.name, e.joint) for e in d.report.effects]
 
 
 def test_linearised_gains_match_the_fitted_cross_validation():
@@ -71,7 +71,7 @@ def test_a_gain_on_few_poses_is_found(seed):
     meas = campaign(KUKA_LIKE, 40 + seed, 100, [f"joint_scale:1={ppm}"])
     d = run(KUKA_LIKE, meas)
     assert ("joint_scale", 1) in named(d)
-    assert d.report["final"]["holdout_rmse_mm"] < 2.0 * d.report["noise_floor_mm"]
+    assert d.report.final.holdout_rmse_mm < 2.0 * d.report.noise_floor_mm
 
 
 def test_the_null_scales_with_the_campaign():
@@ -108,10 +108,10 @@ def test_two_effects_at_once():
     )
     d = run(default_cell().robot, meas)
     assert set(named(d)) == {("joint_compliance", 2), ("joint_periodic", 4)}
-    for e in d.report["effects"]:
-        lo, hi = e["holdout_gain_interval_mm"]
-        assert 0 < lo <= e["holdout_rmse_before_mm"] - e["holdout_rmse_after_mm"] <= hi
-        assert e["significance"]["p_value"] < 0.005
+    for e in d.report.effects:
+        lo, hi = e.holdout_gain_interval_mm
+        assert 0 < lo <= e.holdout_rmse_before_mm - e.holdout_rmse_after_mm <= hi
+        assert e.significance["p_value"] < 0.005
 
 
 @pytest.mark.parametrize("seed", range(8))

@@ -147,7 +147,7 @@ def test_hidden_effect_ranks_its_covariate_first(seed):
 def test_clean_campaign_gets_no_block_and_weak_strengths(seed, poses):
     cell, _, meas = campaign(seed, poses=poses)
     d = diagnosed(cell, meas)
-    assert "unexplained" not in d.report, d.report["unexplained"]
+    assert d.report.unexplained is None, d.report.unexplained
     top = max(strengths(cell, meas), key=lambda c: c["strength"])
     # the best of ~140 covariate-channel pairs on 30 poses reaches about 0.1 by chance (measured)
     assert top["strength"] < (2 if poses < 60 else 1) * STRONG, top
@@ -160,8 +160,8 @@ def test_wrist_coupling_is_reported_by_the_diagnosis():
     assert name == "joint 4's angle"  # seed 1 draws the coupling
     cell, _, meas = campaign(1, effect)
     d = diagnosed(cell, meas)
-    block = d.report["unexplained"]
-    assert block["holdout_rmse_mm"] == pytest.approx(d.report["final"]["holdout_rmse_mm"])
+    block = d.report.unexplained
+    assert block["holdout_rmse_mm"] == pytest.approx(d.report.final.holdout_rmse_mm)
     assert block["noise_floor_ratio"] > 1.5
     assert (block["covariates"][0]["name"], block["covariates"][0]["channel"]) == (name, channel)
     assert block["reading"].startswith("Unexplained: ")
@@ -216,8 +216,8 @@ def test_no_block_once_the_hidden_effect_is_named(seed):
     vc.effects.extend(make_effects([f"{spec}={magnitude:.6g}"], vc, seed))
     meas = vc.campaign(100, seed=seed)
     d = diagnosed(cell, meas)
-    assert [e["name"] for e in d.report["effects"]] == [name]
-    assert "unexplained" not in d.report, d.report["unexplained"]
+    assert [e.name for e in d.report.effects] == [name]
+    assert d.report.unexplained is None, d.report.unexplained
 
 
 class Together:

@@ -21,7 +21,7 @@ def certificate(tmp_path_factory):
     """(certificate.html, the verification report) of a calibrated simulated cell."""
     d = tmp_path_factory.mktemp("certificate")
     report, _ = calibrated_and_verified(d, SEED)
-    return write_certificate(report, d / "certificate.html"), report
+    return write_certificate(report, d / "certificate.html"), report.to_json()
 
 
 def test_certificate_shows_the_run_and_its_figures(page, certificate):
@@ -64,7 +64,7 @@ def calibrated_certificate(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("certificate-uncertainty")
     report, _ = calibrated(d, tolerance_mm=0.5)
-    return write_certificate(report, d / "certificate.html"), report
+    return write_certificate(report, d / "certificate.html"), report.to_json()
 
 
 def test_certificate_states_the_uncertainty_and_the_decision(page, calibrated_certificate):
@@ -91,7 +91,7 @@ def repeatability_certificate(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("certificate-repeatability")
     report, _ = calibrated(d, tolerance_mm=0.5, repeatability_mm=0.04)
-    return write_certificate(report, d / "certificate.html"), report
+    return write_certificate(report, d / "certificate.html"), report.to_json()
 
 
 def test_certificate_states_each_rp_with_its_uncertainty(page, repeatability_certificate):
