@@ -505,7 +505,9 @@ def validate_diagnosis(
     """model.json's `validation` block of a diagnosis's final model: its own cross-validated
     held-out figures against its fit, with the geometry's condition number; the report's noise
     floor, past MAX_FLOOR_RATIO times which the model lacks an effect the report's `unexplained`
-    names."""
+    names: a reason without a tolerance, a warning with one (the application's need decides; a
+    diagnosis naming nothing is the calibration's geometric model, which `calibrate` finds
+    deployable within that tolerance)."""
     from robocal.solver import guard
     from robocal.solver.diagnose import FOLDS
 
@@ -525,9 +527,12 @@ def validate_diagnosis(
         noise_floor_mm=floor,
         noise_floor_source=source,
         tolerance_mm=cell.tolerance_mm,
-        max_floor_ratio=guard.MAX_FLOOR_RATIO,
+        max_floor_ratio=guard.MAX_FLOOR_RATIO if cell.tolerance_mm is None else None,
     )
     v.reasons += implausible(cell, meas, model.robot)
+    lacking = []
+    if cell.tolerance_mm is not None:
+        lacking = guard.lacking_effect(v.holdout_rms_mm, floor, guard.MAX_FLOOR_RATIO)
     method = f"{FOLDS}-fold cross-validation of the diagnosis"
     return validation_block(
         v,
@@ -535,7 +540,8 @@ def validate_diagnosis(
         source,
         method,
         nominal_rms_mm=nominal_rms(cell, meas),
-        warnings=layout_warnings(cell, meas, [model.targets[t] for t in meas.target_names]),
+        warnings=lacking
+        + layout_warnings(cell, meas, [model.targets[t] for t in meas.target_names]),
     )
 
 

@@ -167,30 +167,44 @@ def test_the_guard_judges_the_tolerance_at_its_edge_and_the_floor_past_three_tim
 
 def test_a_diagnosis_far_above_the_floor_is_not_deployable(tmp_path):
     """An unmodelled wrist coupling: the report names unexplained error far above the floor, and
-    the verdict never says deployable beside it."""
+    without a tolerance the verdict never says deployable beside it; with one, the tolerance
+    decides and the floor's excess is a warning (a real UR5 within 0.3 mm, geometry the best the
+    vocabulary does, was refused by the diagnosis while `calibrate` deployed the same model)."""
     r = robocal(
         "simulate", "--poses", 40, "--seed", 4, "--out", "m.csv",
         "--effect", "joint_coupling:5=300", cwd=tmp_path,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
-    r = robocal(
-        "diagnose", "m.csv", "--out", "report.json", "--model-out", "x.json",
-        "--tolerance-mm", 0.1, cwd=tmp_path,
-    )  # fmt: skip
-    assert r.returncode == 0, r.stderr
-    report = json.loads((tmp_path / "report.json").read_text())
+
+    def diagnose(*extra):
+        r = robocal(
+            "diagnose", "m.csv", "--out", "report.json", "--model-out", "x.json", *extra,
+            cwd=tmp_path,
+        )  # fmt: skip
+        assert r.returncode == 0, r.stderr
+        report = json.loads((tmp_path / "report.json").read_text())
+        v = json.loads((tmp_path / "x.json").read_text())["validation"]
+        assert report["validation"] == v
+        return " ".join(r.stdout.split()), report, v
+
+    out, report, v = diagnose()
     floor, final = report["noise_floor_mm"], report["final"]["holdout_rmse_mm"]
     assert final > guard.MAX_FLOOR_RATIO * floor and "unexplained" in report, (final, floor)
-    v = json.loads((tmp_path / "x.json").read_text())["validation"]
-    assert v["deployable"] is False and report["validation"] == v
-    assert any("x the noise floor" in x and "(see unexplained)" in x for x in v["reasons"]), v
-    # the flag reaches the diagnosis's verdict too
-    assert v["tolerance_mm"] == 0.1 and f"held-out error {final:.3g} mm RMS exceeds the " in (
-        " ".join(v["reasons"])
-    )
-    out = " ".join(r.stdout.split())
+    lacking = [x for x in v["reasons"] if "x the noise floor" in x and "(see unexplained)" in x]
+    assert v["deployable"] is False and len(lacking) == 1, v
     assert "NOT DEPLOYABLE" in out and "deployable:" not in out
     assert v["noise_floor_mm"] == pytest.approx(floor)  # the report's floor, the verdict's
+    # the flag reaches the diagnosis's verdict too: beyond it, its reason; within it, deployable
+    out, _, v = diagnose("--tolerance-mm", final / 2)
+    assert v["deployable"] is False and v["tolerance_mm"] == final / 2, v
+    assert v["reasons"] == [
+        f"held-out error {final:.3g} mm RMS exceeds the tolerance {final / 2:g} mm"
+    ]
+    assert lacking[0] in v["warnings"] and "NOT DEPLOYABLE" in out
+    out, _, v = diagnose("--tolerance-mm", 2 * final)
+    assert v["deployable"] is True and v["reasons"] == [] and lacking[0] in v["warnings"], v
+    assert f"within the tolerance {2 * final:g} mm" in v["summary"]
+    assert f"deployable: {v['summary']}" in out and f"warning: {lacking[0]}" in out
 
 
 def test_the_cells_tolerance_survives_its_json_round_trip():
