@@ -108,6 +108,18 @@ def test_diagnose_reports_the_final_models_parameter_table_and_verdict(tmp_path)
     assert "(5-fold, max" in out and "deployable: expected accuracy on new poses " in out, out
     assert out.index("held-out RMS") < out.index("Identified geometry") < out.index("SMR A")
     assert "strongest correlations: " in out
+    # how far off its training poses the model was tested, and where it may be trusted
+    ext = report["extrapolation"]
+    far = max(ext["folds"], key=lambda f: f["beyond_training_deg"])
+    said = " ".join(out.split())
+    assert (
+        f"tested off its training poses on {len(ext['folds'])} folds (trained on one side, tested "
+        f"on the other), reaching up to {far['beyond_training_deg']:.1f} deg beyond them "
+        f"({far['test']}): "
+    ) in said, said
+    lo, hi = ext["joint_range_deg"][1]
+    assert "trusted within the joint ranges measured (deg): q1 " in said
+    assert f"q2 {lo:.0f}..{hi:.0f}, q3 " in said
 
 
 def test_calibrate_on_held_out_readings(tmp_path):
