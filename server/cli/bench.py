@@ -98,7 +98,7 @@ def add(sub) -> None:
             "check",
             "scale",
         ),
-        help="what to time (validation: the deployment guard's flags on healthy, small and "
+        help="what to time (validation: the deployment guard's flags on clean, effect, small and "
         "real campaigns; check: quick checks' false alarms and delays to a change; scale: `robocal calibrate` of a large campaign as a process, next to np.loadtxt of its file, "
         "then diagnose of 1,000 / 3,000 / 10,000 poses)",
     )
