@@ -171,16 +171,21 @@ def test_the_guard_judges_the_tolerance_at_its_edge_and_the_floor_past_three_tim
         assert len(v.reasons) == 1 and "noise floor 0.010 mm (more" not in v.reasons[0], v.reasons
 
 
-def test_a_diagnosis_far_above_the_floor_is_not_deployable(tmp_path):
-    """An unmodelled wrist coupling: the report names unexplained error far above the floor, and
-    without a tolerance the verdict never says deployable beside it; with one, the tolerance
-    decides and the floor's excess is a warning (a real UR5 within 0.3 mm, geometry the best the
-    vocabulary does, was refused by the diagnosis while `calibrate` deployed the same model)."""
+def coupled_campaign(tmp_path) -> None:
+    """m.csv in tmp_path: 40 poses of an arm with a wrist coupling, outside the vocabulary."""
     r = robocal(
         "simulate", "--poses", 40, "--seed", 4, "--out", "m.csv",
         "--effect", "joint_coupling:5=300", cwd=tmp_path,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
+
+
+def test_a_diagnosis_far_above_the_floor_is_not_deployable(tmp_path):
+    """An unmodelled wrist coupling: the report names unexplained error far above the floor, and
+    without a tolerance the verdict never says deployable beside it; with one, the tolerance
+    decides and the floor's excess is a warning (a real UR5 within 0.3 mm, geometry the best the
+    vocabulary does, was refused by the diagnosis while `calibrate` deployed the same model)."""
+    coupled_campaign(tmp_path)
 
     def diagnose(*extra):
         r = robocal(
@@ -220,11 +225,7 @@ def test_calibrate_judges_the_floor_as_diagnose_does(tmp_path):
     lacks is not deployable from `calibrate` either (the real QKM's, 18x its floor, was
     deployable from calibrate while diagnose refused a better one); with a tolerance the
     tolerance decides and the floor's excess is a warning, as diagnose says it."""
-    r = robocal(
-        "simulate", "--poses", 40, "--seed", 4, "--out", "m.csv",
-        "--effect", "joint_coupling:5=300", cwd=tmp_path,
-    )  # fmt: skip
-    assert r.returncode == 0, r.stderr
+    coupled_campaign(tmp_path)
 
     def calibrate(*extra):
         r = robocal("calibrate", "m.csv", "--method", "ls-sum", "--out", "c.json", *extra,

@@ -11,7 +11,7 @@ import httpx
 
 from tests.real import import_real
 from tests.web.conftest import shot
-from tests.web.test_ui_model import fmt
+from tests.web.test_ui_model import fmt, open_campaign
 
 REFUSED = {
     "name": "joint_periodic",
@@ -35,15 +35,7 @@ def test_the_diagnosis_view_shows_the_folds_and_the_trusted_joint_ranges(served,
         route.fulfill(json=report)
 
     page.route("**/api/jobs/*/report", augment)
-    page.goto(served.url + "/")
-    page.fill("#token", served.token)
-    page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
-    page.evaluate(
-        "async (cid) => { useCampaign(await api('GET', `/campaigns/${cid}`)); refreshCampaign(); }",
-        cid,
-    )
-    page.wait_for_function("!document.getElementById('calibrate').disabled")
+    open_campaign(served, page, cid)
     page.select_option("#j-method", "ls-sum")
     page.check("#j-auto")
     page.click("#calibrate")

@@ -42,9 +42,8 @@ def measured_campaign(served, poses: int) -> int:
         return cid
 
 
-def calibrate_on_page(served, page, cid: int) -> dict:
-    """The campaign made the page's current one, calibrated with ls-sum from the page; the job
-    (as the API gives it) once the page shows its results."""
+def open_campaign(served, page, cid: int) -> None:
+    """The page signed in with the campaign made its current one, ready to calibrate."""
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
@@ -54,6 +53,12 @@ def calibrate_on_page(served, page, cid: int) -> dict:
         cid,
     )
     page.wait_for_function("!document.getElementById('calibrate').disabled")
+
+
+def calibrate_on_page(served, page, cid: int) -> dict:
+    """The campaign made the page's current one, calibrated with ls-sum from the page; the job
+    (as the API gives it) once the page shows its results."""
+    open_campaign(served, page, cid)
     page.select_option("#j-method", "ls-sum")
     page.click("#calibrate")
     page.wait_for_selector("#results:not([hidden])", timeout=180_000)
