@@ -22,6 +22,7 @@ from .kinematics import Layout, predict_rows
 from .robot import Robot
 
 STEP_TOL_RAD = 1e-10  # a pose has converged once its step is below this (1e-7 mm per metre)
+SAME_ERROR_MM = 1e-4  # seeds' solutions this close in error (mm RMS) reach the target alike
 SEED_GRID = 4  # joints 2 and 3 each start from this many values in a configuration's search
 
 
@@ -189,17 +190,43 @@ def compensate(
 
 
 def _seeds(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Starting joints (m, S, 6) within each pose's configuration's ranges: joints 1, 4, 5 and 6
-    mid-range, joints 2 and 3 on a grid (the wrist centre's sides are what the grid tries)."""
+    """Starting joints (m, S, 6) within each pose's configuration's ranges: joints 1, 4 and 6
+    mid-range, joints 2 and 3 on a grid (the wrist centre's sides are what the grid tries), and
+    joint 5 in the middle of each half turn of its side (one, unless its limits pass 180 deg).
+
+    Joint 5 is singular at 0 and 180 deg: the middle of a side of +-360 deg limits is the
+    singularity, and from there a real UR5's own measured pose came out 'unreachable' in its own
+    configuration; the middles of its two half turns (90 and 270 deg) are the wrist's two flips
+    on that side."""
+    m = len(lo)
+    halves = max(1, int(np.ceil(np.max(hi[:, 4] - lo[:, 4]) / np.pi - 1e-9)))
     mid = 0.5 * (lo + hi)
     grid = np.linspace(0.15, 0.85, SEED_GRID)
     s2 = lo[:, None, 1] + grid[None] * (hi - lo)[:, None, 1]
     s3 = lo[:, None, 2] + grid[None] * (hi - lo)[:, None, 2]
-    m = len(lo)
-    out = np.repeat(mid[:, None], SEED_GRID * SEED_GRID, axis=1)
-    out[:, :, 1] = np.repeat(s2, SEED_GRID, axis=1)
-    out[:, :, 2] = np.tile(s3, (1, SEED_GRID))
-    return out.reshape(m, SEED_GRID * SEED_GRID, -1)
+    # per pose, the middles of joint 5's side cut into `halves` equal parts (of at most 180 deg
+    # where its range is that wide; one part, its middle, where the range is within 180 deg)
+    parts = np.maximum(1, np.ceil((hi[:, 4] - lo[:, 4]) / np.pi - 1e-9))  # (m,)
+    k = np.minimum(np.arange(halves)[None], parts[:, None] - 1)  # (m, halves)
+    s5 = lo[:, None, 4] + (k + 0.5) * ((hi - lo)[:, 4] / parts)[:, None]
+    per = SEED_GRID * SEED_GRID
+    out = np.repeat(mid[:, None], halves * per, axis=1)
+    out[:, :, 1] = np.tile(np.repeat(s2, SEED_GRID, axis=1), (1, halves))
+    out[:, :, 2] = np.tile(s3, (1, SEED_GRID * halves))
+    out[:, :, 4] = np.repeat(s5, per, axis=1)
+    return out.reshape(m, halves * per, -1)
+
+
+def least_wound(q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """q (m, n) rad with each joint turned by whole turns to its angle nearest zero within
+    [lo, hi]: the same pose of the arm (every joint revolute), in the same confdata (joints 1, 4
+    and 6 are bound to their quadrants, joint 5 to its side)."""
+    turns = np.arange(-2, 3)[:, None, None] * 2 * np.pi
+    alt = q[None] + turns  # (5, m, n)
+    ok = (alt >= lo[None]) & (alt <= hi[None])
+    pick = np.argmin(np.where(ok, np.abs(alt), np.inf), axis=0)
+    out = np.take_along_axis(alt, pick[None], axis=0)[0]
+    return np.where(np.isfinite(q), out, q)
 
 
 def _in_configuration(model: Model, desired, mask, cf, max_iter):
@@ -226,7 +253,13 @@ def _in_configuration(model: Model, desired, mask, cf, max_iter):
     )
     got = configuration.confdata(robot, res.q).reshape(m, S, 4)
     err = np.where(np.all(got == cf[:, None], axis=2), res.error_mm.reshape(m, S), np.inf)
-    best = np.argmin(err, axis=1)  # the first seed among equals: reproducible
-    out = res.q.reshape(m, S, n)[np.arange(m), best]
+    sols = res.q.reshape(m, S, n)
+    # of the seeds as close as the best (within SAME_ERROR_MM), the least wound joints: a joint
+    # of +-360 deg reaches a position a turn either way in the same confdata, which names the
+    # turn of joints 1, 4 and 6 only (the first among equals: reproducible)
+    close = err <= err.min(axis=1, keepdims=True) + SAME_ERROR_MM
+    wound = np.where(close, np.sum(sols * sols, axis=2), np.inf)
+    best = np.argmin(wound, axis=1)
+    out = least_wound(sols[np.arange(m), best], lo, hi)
     out[~np.isfinite(err[np.arange(m), best])] = np.nan
     return out, lo, hi

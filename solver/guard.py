@@ -31,8 +31,10 @@ MAX_CONDITION = 1e3
 # model does not predict new poses. A sound least-squares fit expects equations / (equations -
 # free): 1.14 at 30 poses of 3 SMRs.
 MAX_HOLDOUT_RATIO = 2.0
-# A diagnosed model whose held-out RMS exceeds this multiple of the noise floor lacks an effect
-# (its report's `unexplained` block says which covariates the remainder follows).
+# A model whose held-out RMS exceeds this multiple of the noise floor lacks an effect (a
+# diagnosis's `unexplained` block says which covariates the remainder follows): without a
+# tolerance not deployable, with one a warning (the tolerance decides). Calibrated and diagnosed
+# models alike, so one model gets one verdict from either command.
 MAX_FLOOR_RATIO = 3.0
 # The smallest singular value of I - H_p below which pose p cannot be held out.
 UNSUPPORTED = 1e-9
@@ -146,6 +148,7 @@ class Validation:
     unsupported_poses: list = field(default_factory=list)
     reasons: list[str] = field(default_factory=list)
     tolerance_mm: float | None = None  # the accuracy the application needs, None: not given
+    warnings: list[str] = field(default_factory=list)  # said beside a verdict they do not decide
 
     @property
     def deployable(self) -> bool:
@@ -163,15 +166,15 @@ def judge(
     noise_floor_mm: float | None,
     noise_floor_source: str = "",
     tolerance_mm: float | None = None,
-    max_floor_ratio: float | None = None,
+    max_floor_ratio: float | None = MAX_FLOOR_RATIO,
 ) -> Validation:
     """The guard: each limit the fit breaks is one reason, naming its figures and the limit.
 
     tolerance_mm: the application's accuracy, which the held-out RMS must not exceed;
     max_floor_ratio: the multiple of the noise floor past which the held-out RMS says the model
-    lacks an effect (a diagnosis, whose vocabulary was tried: MAX_FLOOR_RATIO), None: not judged;
-    not said of a fit with too few poses or one that does not predict new poses (its held-out
-    excess is its own, not a missing effect's).
+    lacks an effect, None: not judged; a reason without a tolerance (stating the accuracy to
+    expect), a warning with one (the tolerance decides); not said of a fit with too few poses or
+    one that does not predict new poses (its held-out excess is its own, not a missing effect's).
     """
     v = Validation(
         fit_rms_mm,
@@ -232,7 +235,11 @@ def judge(
         )
     v.reasons += beyond_tolerance(v.holdout_rms_mm, tolerance_mm)
     if not overfit and equations >= need:  # else the excess is the fit's, said above
-        v.reasons += lacking_effect(v.holdout_rms_mm, noise_floor_mm, max_floor_ratio)
+        lacking = lacking_effect(v, max_floor_ratio)
+        if tolerance_mm is None:
+            v.reasons += lacking
+        else:
+            v.warnings += lacking
     return v
 
 
@@ -255,17 +262,24 @@ def beyond_tolerance(holdout_rms_mm: float, tolerance_mm: float | None) -> list[
     ]
 
 
-def lacking_effect(
-    holdout_rms_mm: float, noise_floor_mm: float | None, max_floor_ratio: float | None
-) -> list[str]:
-    """The reason a held-out error far above the noise floor gives: the model lacks an effect."""
-    if not max_floor_ratio or not noise_floor_mm or not np.isfinite(holdout_rms_mm):
+def lacking_effect(v: Validation, max_floor_ratio: float | None) -> list[str]:
+    """What a held-out error far above the noise floor says: the model lacks an effect; without
+    a tolerance, the accuracy to expect and how to judge it against the application's need."""
+    rms, floor = v.holdout_rms_mm, v.noise_floor_mm
+    if not max_floor_ratio or not floor or not np.isfinite(rms):
         return []
-    ratio = holdout_rms_mm / noise_floor_mm
+    ratio = rms / floor
     if ratio <= max_floor_ratio:
         return []
+    said = (
+        f"held-out error {rms:.3g} mm is {ratio:.3g}x the noise floor {floor:.3f} mm (more than "
+        f"{max_floor_ratio:g}x): an effect the model lacks (a diagnosis's unexplained block says "
+        "what the remainder follows)"
+    )
+    if v.tolerance_mm is not None:
+        return [said]
     return [
-        f"held-out error {holdout_rms_mm:.3g} mm is {ratio:.3g}x the noise floor "
-        f"{noise_floor_mm:.3f} mm (more than {max_floor_ratio:g}x): an effect the model lacks "
-        "(see unexplained)"
+        f"{said}; expect {rms:.3g} mm RMS, max {v.holdout_max_mm:.3g} mm on new poses: give the "
+        "tolerance the application needs (--tolerance-mm, or the cell's tolerance_mm) to deploy "
+        "within it"
     ]

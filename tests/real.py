@@ -1,5 +1,6 @@
 """The real campaigns measured by others, in ../shared/data/real beside the repository."""
 
+import json
 from pathlib import Path
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
@@ -11,10 +12,13 @@ def campaign_files(name: str) -> tuple[Path, Path]:
     return REAL / name / "train.csv", REAL / name / "cell.json"
 
 
-def import_real(client, name: str) -> int:
-    """A real campaign's cell and train.csv uploaded through the API (an httpx client with the
-    token); the imported campaign's id."""
-    r = client.post("/api/cells", content=(REAL / name / "cell.json").read_bytes())
+def import_real(client, name: str, tolerance_mm: float | None = None) -> int:
+    """A real campaign's cell (with the application's tolerance_mm when given) and train.csv
+    uploaded through the API (an httpx client with the token); the imported campaign's id."""
+    cell = json.loads((REAL / name / "cell.json").read_text())
+    if tolerance_mm is not None:
+        cell["tolerance_mm"] = tolerance_mm
+    r = client.post("/api/cells", content=json.dumps(cell).encode())
     assert r.status_code == 201, r.text
     r = client.post(
         "/api/measurements/import",

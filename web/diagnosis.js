@@ -1,5 +1,6 @@
 // The diagnosis on the page: its job followed, its report shown (effects, their parameters and
-// figures, what is left unexplained, the outliers). Uses app.js's globals ($, api, say, state).
+// figures, what is left unexplained, how far off its training poses it holds, the outliers).
+// Uses app.js's globals ($, api, say, state).
 
 /** Make a diagnosis job the page's: its block emptied, then followed to its report. */
 function useDiagnosis(d) {
@@ -7,6 +8,7 @@ function useDiagnosis(d) {
   $("diagnosis").hidden = false;
   $("d-effects").replaceChildren();
   $("d-unexplained").hidden = $("d-outliers").hidden = $("d-doubt").hidden = true;
+  $("d-extrapolation").hidden = true;
   $("d-figures").replaceChildren();
   $("d-links").replaceChildren();
   watchJob(d, followDiagnosis);
@@ -93,6 +95,48 @@ function showUnexplained(u) {
   box.replaceChildren(...parts);
 }
 
+/** How far off its training poses the final model was tested (each fold trained on one side of a
+ * joint or configuration, tested on the other), the effects refused there, and the joint ranges
+ * the data covers: where the model may be trusted. The `diagnose` summary says the same. */
+function showExtrapolation(x) {
+  const box = $("d-extrapolation");
+  box.hidden = !x;
+  if (!x) return box.replaceChildren();
+  const deg = (v) => v.toFixed(1);
+  const parts = [Object.assign(document.createElement("h3"),
+    { textContent: "Off the training poses" })];
+  let said = "Not tested off its training poses: too few poses to split.";
+  if (x.folds.length) {
+    const far = x.folds.reduce((a, f) => (f.beyond_training_deg > a.beyond_training_deg ? f : a));
+    const worse = x.folds.filter((f) => f.worse_only_in_geometric_span).map((f) => f.test);
+    said = `Tested off its training poses on ${x.folds.length} folds (trained on one side, tested `
+      + `on the other), reaching up to ${deg(far.beyond_training_deg)} deg beyond them `
+      + `(${far.test}): ` + (worse.length ? `above geometry only inside geometry's own span on `
+      + `${worse.join(", ")}.` : "no worse than geometry on any.");
+  }
+  parts.push(Object.assign(document.createElement("p"), { id: "x-summary", textContent: said }));
+  if (x.folds.length) {
+    parts.push(makeTable("extrapolation-table",
+      ["tested on", "poses", "beyond training / deg", "geometric / mm", "final model / mm"],
+      x.folds.map((f) => [f.test, String(f.test_poses), deg(f.beyond_training_deg),
+                          fmt(f.geometric_rmse_mm), fmt(f.final_rmse_mm)])));
+  }
+  if (x.refused.length) {
+    const list = Object.assign(document.createElement("ul"), { id: "x-refused", className: "warn" });
+    x.refused.forEach((r) => {
+      list.appendChild(document.createElement("li")).textContent =
+        `Refused ${r.label}: worse than geometry on ${r.worse_on.join("; ")}`;
+    });
+    parts.push(list);
+  }
+  parts.push(Object.assign(document.createElement("p"), { id: "x-trusted",
+    textContent: "Trusted within the joint ranges measured (deg); beyond them the model "
+      + "extrapolates:" }));
+  parts.push(makeTable("trusted-table", ["joint", "from / deg", "to / deg"],
+    x.joint_range_deg.map(([lo, hi], j) => [`q${j + 1}`, deg(lo), deg(hi)])));
+  box.replaceChildren(...parts);
+}
+
 /** Readings excluded as gross errors, by pose and target. */
 function showOutliers(list) {
   const box = $("d-outliers");
@@ -161,6 +205,7 @@ async function showDiagnosis(d) {
   const doubt = report.stability?.doubt;
   Object.assign($("d-doubt"), { hidden: !doubt, textContent: doubt ?? "" });
   showUnexplained(report.unexplained);
+  showExtrapolation(report.extrapolation);
   showOutliers(report.outliers);
   // One figure per effect: its caption names the effect it shows.
   $("d-figures").replaceChildren(...figures.map((fig) => {

@@ -57,9 +57,10 @@ def _line(r) -> str:
         return f"{head}: skipped ({r['skipped']})"
     named = ", ".join(":".join(str(v) for v in n if v is not None) for n in r["named"]) or "nothing"
     ratio = f", held-out/floor {r['ratio']:.2f}" if r["ratio"] is not None else ""
+    doubt = ", in doubt on its resamples" if r.get("in_doubt") else ""
     return (
         f"{head}: {c['poses']} poses, {', '.join(c['effects']) or 'clean'}; named {named}"
-        f"{ratio} ({r['wall_seconds']:.1f} s)"
+        f"{ratio}{doubt} ({r['wall_seconds']:.1f} s)"
     )
 
 

@@ -391,6 +391,9 @@ def score(
         "detected": [is_named(h, named) for h in case.hidden],
         "extra": [list(n) for n in named if not any(is_named(h, [n]) for h in case.hidden)],
         "false_alarm": case.kind == "clean" and bool(named),
+        # a small campaign naming an effect is resampled; its doubt said when they disagree
+        "resampled": report.stability is not None,
+        "in_doubt": report.stability is not None and bool(report.stability.doubt),
         "outliers": len(outliers),
         "noise_floor_mm": truth["noise_floor_mm"],
         "arm_scatter_rms_mm": truth.get("arm_scatter_rms_mm"),
@@ -427,6 +430,22 @@ def payoff(case: Case, vc: VirtualCell, diag, diagnosis) -> dict:
     named = rms(diagnosis.layout, diagnosis.x, diagnosis.extensions)
     geometric = rms(diag.prob.layout, x, [])
     return {"named_rmse_mm": named, "geometric_rmse_mm": geometric, "pays_off": named < geometric}
+
+
+def doubt_rates(ran: list[dict]) -> dict:
+    """How often a small campaign's resamples put its answer in doubt: on clean campaigns, and
+    on effect campaigns whose hidden effects were all named or not."""
+
+    def rate(rs):
+        sampled = [r for r in rs if r.get("resampled")]
+        return {"resampled": len(sampled), "in_doubt": sum(r["in_doubt"] for r in sampled)}
+
+    effect = [r for r in ran if r["case"]["kind"] != "clean"]
+    return {
+        "clean": rate([r for r in ran if r["case"]["kind"] == "clean"]),
+        "effect_all_named": rate([r for r in effect if all(r["detected"])]),
+        "effect_missed": rate([r for r in effect if not all(r["detected"])]),
+    }
 
 
 def summarize(results: list[dict]) -> dict:
@@ -483,6 +502,7 @@ def summarize(results: list[dict]) -> dict:
             "with_any_effect": alarms,
             "rate": alarms / len(clean) if clean else None,
         },
+        "doubt": doubt_rates(ran),
         "extra_effects_named": sum(len(r["extra"]) for r in ran if r["case"]["kind"] != "clean"),
         "holdout_over_floor": stats(ratios),
         "holdout_over_floor_outlier_cases": stats(outlier_ratios),

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from robocal.server.calibration.validation import (
+    HOLDOUT_METHOD,
     absurd_errors,
     json_number,
     noise_floor,
@@ -274,27 +275,59 @@ def validate(
 ) -> Validation:
     """model.json's `validation` block of a calibration on the readings it used (holdout: its
     leave-one-pose-out residuals, solver.guard.Holdout)."""
-    from robocal.solver import guard
-
     floor, source = noise_floor(cell, used)
-    v = guard.judge(
+    return verdict(
+        cell,
+        used,
+        cal.robot,
+        cal.targets,
         fit_rms_mm=fit_rms,
         holdout=holdout,
-        condition_number=cal.condition,
-        equations=3 * int(np.isfinite(used.xyz[..., 0]).sum()),
+        condition=cal.condition,
         free_parameters=int(np.count_nonzero(errors.column >= 0)),
-        poses=int(np.any(np.isfinite(used.xyz[..., 0]), axis=1).sum()),
-        noise_floor_mm=floor,
+        floor=(floor, source),
+    )
+
+
+def verdict(
+    cell: Cell,
+    meas: Measurements,
+    robot,
+    targets,
+    *,
+    fit_rms_mm: float,
+    holdout,
+    condition: float,
+    free_parameters: int,
+    floor: tuple[float | None, str],
+    holdout_method: str = HOLDOUT_METHOD,
+) -> Validation:
+    """The `validation` block of a model fitted on meas, `calibrate`'s and `diagnose`'s alike (one
+    model, one verdict): the guard's limits (solver.guard.judge: past MAX_FLOOR_RATIO times the
+    noise floor a reason without a tolerance, a warning with one), the physics' (implausible),
+    the SMR layout's warnings."""
+    from robocal.solver import guard
+
+    mm, source = floor
+    v = guard.judge(
+        fit_rms_mm=fit_rms_mm,
+        holdout=holdout,
+        condition_number=condition,
+        equations=3 * int(meas.mask.sum()),
+        free_parameters=free_parameters,
+        poses=int(np.any(meas.mask, axis=1).sum()),
+        noise_floor_mm=mm,
         noise_floor_source=source,
         tolerance_mm=cell.tolerance_mm,
     )
-    v.reasons += implausible(cell, used, cal.robot)
+    v.reasons += implausible(cell, meas, robot)
     return validation_block(
         v,
-        list(used.pose_ids),
+        list(meas.pose_ids),
         source,
-        nominal_rms_mm=nominal_rms(cell, used),
-        warnings=layout_warnings(cell, used, cal.targets),
+        holdout_method,
+        nominal_rms_mm=nominal_rms(cell, meas),
+        warnings=v.warnings + layout_warnings(cell, meas, targets),
     )
 
 
@@ -548,40 +581,28 @@ def validate_diagnosis(
     model: ModelFile,
     condition: float,
 ) -> Validation:
-    """model.json's `validation` block of a diagnosis's final model: its own cross-validated
-    held-out figures against its fit, with the geometry's condition number; the report's noise
-    floor, past MAX_FLOOR_RATIO times which the model lacks an effect the report's `unexplained`
-    names."""
+    """model.json's `validation` block of a diagnosis's final model, by the calibration's rule
+    (verdict): its own cross-validated held-out figures against its fit, with the geometry's
+    condition number and the report's noise floor."""
     from robocal.solver import guard
     from robocal.solver.diagnose import FOLDS
 
     pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
-    # the solver's report always says where its floor comes from; a report read from a file may not
-    floor, source = report.noise_floor_mm, report.noise_floor_source or "unstated"
     final = report.final
-    v = guard.judge(
+    return verdict(
+        cell,
+        meas,
+        model.robot,
+        [model.targets[t] for t in meas.target_names],
         fit_rms_mm=float(np.sqrt(np.mean(r * r))),
         holdout=guard.CrossValidated(final.holdout_rmse_mm, final.holdout_max_mm),
-        condition_number=condition,
-        equations=3 * int(meas.mask.sum()),
+        condition=condition,
         free_parameters=int(np.count_nonzero(errors.parameters.column >= 0)),
-        poses=int(np.any(meas.mask, axis=1).sum()),
-        noise_floor_mm=floor,
-        noise_floor_source=source,
-        tolerance_mm=cell.tolerance_mm,
-        max_floor_ratio=guard.MAX_FLOOR_RATIO,
-    )
-    v.reasons += implausible(cell, meas, model.robot)
-    method = f"{FOLDS}-fold cross-validation of the diagnosis"
-    return validation_block(
-        v,
-        list(meas.pose_ids),
-        source,
-        method,
-        nominal_rms_mm=nominal_rms(cell, meas),
-        warnings=layout_warnings(cell, meas, [model.targets[t] for t in meas.target_names]),
+        # the solver's report always says where its floor comes from; one read from a file may not
+        floor=(report.noise_floor_mm, report.noise_floor_source or "unstated"),
+        holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
     )
 
 

@@ -103,7 +103,7 @@ def add(sub) -> None:
             "scale",
             "uncertainty",
         ),
-        help="what to time (validation: the deployment guard's flags on healthy, small and "
+        help="what to time (validation: the deployment guard's flags on clean, effect, small and "
         "real campaigns; check: quick checks' false alarms and delays to a change; scale: `robocal calibrate` of a large campaign as a process, next to np.loadtxt of its file, "
         "then diagnose of 1,000 / 3,000 / 10,000 poses; uncertainty: the coverage of the "
         "position U of diagnosed and ls-sum models on independent positions)",

@@ -11,7 +11,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from robocal.server.formats.blocks import Unexplained
-    from robocal.server.formats.report_doc import ReportDoc
+    from robocal.server.formats.report_doc import Extrapolation, ReportDoc
     from robocal.solver.calibrate import Calibration
 
 
@@ -189,6 +189,7 @@ def _print_diagnosis(doc: ReportDoc) -> None:
         f"max {final.holdout_max_mm:.4f} mm{total}"
     )
     _print_unexplained(doc.unexplained)
+    _print_extrapolation(doc.extrapolation)
     if doc.stability is not None and doc.stability.doubt:
         console.print(f"[yellow]{doc.stability.doubt}[/yellow]")
     if doc.validation is not None:  # the final model, judged as a calibration is
@@ -201,6 +202,36 @@ def _print_diagnosis(doc: ReportDoc) -> None:
         console.print(tables.joints_table(ident))
         console.print(tables.frames_table(ident))
         console.print(tables.correlations(ident))
+
+
+def _print_extrapolation(block: Extrapolation | None) -> None:
+    """How far from its training poses the final model was tested, the effects refused there,
+    and the joint ranges the data covers (where the model may be trusted)."""
+    from robocal.server.cli.tables import console
+
+    if block is None:
+        return
+    if block.folds:
+        far = max(block.folds, key=lambda f: f.beyond_training_deg)
+        worse = [f.test for f in block.folds if f.worse_only_in_geometric_span]
+        console.print(
+            f"tested off its training poses on {len(block.folds)} folds (trained on one side, "
+            f"tested on the other), reaching up to {far.beyond_training_deg:.1f} deg beyond "
+            f"them ({far.test}): "
+            + (
+                "no worse than geometry on any"
+                if not worse
+                else f"above geometry only inside geometry's own span on {', '.join(worse)}"
+            )
+        )
+    else:
+        console.print("not tested off its training poses: too few poses to split")
+    for r in block.refused:
+        console.print(f"  refused {r.label}: worse than geometry on {'; '.join(r.worse_on)}")
+    ranges = ", ".join(
+        f"q{j} {lo:.0f}..{hi:.0f}" for j, (lo, hi) in enumerate(block.joint_range_deg, start=1)
+    )
+    console.print(f"trusted within the joint ranges measured (deg): {ranges}")
 
 
 def _print_unexplained(block: Unexplained | None) -> None:

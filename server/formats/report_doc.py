@@ -106,10 +106,14 @@ class Stability(Open):
     resamples: int
     poses_each: int
     named_nothing: int = Field(description="resamples that named no effect (fewer poses)")
+    agreeing: int | None = Field(
+        None, description="resamples that named a cause the final model has"
+    )
     effects: list[ResampledEffect]
     doubt: str | None = Field(
-        description="when resamples name another cause than the final model's, in a sentence; "
-        "null otherwise"
+        description="when no more than half the resamples name a cause of the final model (one "
+        "naming nothing or another cause counts against it), or another cause is named on two "
+        "or more, in a sentence; null otherwise"
     )
 
 
@@ -146,7 +150,8 @@ class ReportDoc(Open):
         None,
         description="small campaigns (40 poses or fewer) that name an effect: the diagnosis "
         "repeated on resamples leaving out every fifth pose, the effects each named, and the "
-        "doubt when they name another cause",
+        "doubt when no more than half name a cause of the final model, or another cause is "
+        "named on two or more",
     )
     identified: Identified | None = Field(
         None,

@@ -93,6 +93,16 @@ def test_clean_campaigns_name_nothing(results):
     assert not alarms, alarms
 
 
+def test_small_campaigns_named_right_are_seldom_in_doubt(summary):
+    """Resampled small campaigns whose hidden effects were all named are in doubt at most one time
+    in ten (the doubt is for answers a few poses decide, not noise); clean ones name nothing, so
+    are never resampled."""
+    d = summary["doubt"]
+    right = d["effect_all_named"]
+    assert right["resampled"] > 0 and 10 * right["in_doubt"] <= right["resampled"], d
+    assert d["clean"] == {"resampled": 0, "in_doubt": 0}, d
+
+
 def test_final_error_is_near_the_achievable_floor(summary):
     assert summary["holdout_over_floor"]["median"] <= 1.2, summary["holdout_over_floor"]
     outliers = summary["holdout_over_floor_outlier_cases"]
@@ -182,6 +192,9 @@ def test_bench_reports_the_suite_and_the_timing():
         "joint_periodic",
     }
     assert s["false_alarms"]["clean_campaigns"] == 1
+    doubt = s["doubt"]
+    assert set(doubt) == {"clean", "effect_all_named", "effect_missed"}
+    assert sum(d["resampled"] for d in doubt.values()) == sum(r["resampled"] for r in out["cases"])
     assert s["holdout_over_floor"]["count"] + s["holdout_over_floor_outlier_cases"]["count"] == 3
     split = out["configuration_split"]["summary"]
     assert split["cases"] == 1 and split["clean_cases"] == 1 and len(out["split_cases"]) == 1

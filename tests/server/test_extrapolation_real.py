@@ -140,3 +140,31 @@ def test_a_refused_rich_compliance_leaves_its_one_stiffness_to_be_selected(monke
     named = [(e["name"], e.get("joint"), e.get("masses_fitted", False)) for e in r["effects"]]
     assert ("joint_compliance", 2) in [n[:2] for n in named], (named, refused)
     assert r["final"]["model"] != "geometric"
+
+
+def test_a_real_fold_whose_resamples_seldom_name_its_cause_says_the_doubt(tmp_path):
+    """The real IRB 120 without its third sixth of poses (fold 2, 30 poses): joint-2 compliance is
+    named, its resamples name it once and nothing else four times; report.json and the printed
+    summary say the doubt."""
+    import csv
+    import json
+
+    from tests.server.test_cli import robocal
+
+    train, cell = campaign_files("irb120_wu")
+    with open(train, newline="") as f:
+        rows = list(csv.DictReader(f))
+    poses = list(dict.fromkeys(r["pose"] for r in rows))
+    dropped = set(poses[2::6])
+    with open(tmp_path / "fold.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(r for r in rows if r["pose"] not in dropped)
+    r = robocal("diagnose", "fold.csv", "--cell", cell, "--out", "report.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    report = json.loads((tmp_path / "report.json").read_text())
+    st = report["stability"]
+    assert [e["name"] for e in report["effects"]] == ["joint_compliance"], report["effects"]
+    assert st["agreeing"] <= 2 and st["doubt"].startswith("the cause is in doubt"), st
+    assert f"nothing on {st['named_nothing']} of 5" in st["doubt"], st
+    assert st["doubt"] in " ".join(r.stdout.split()), r.stdout

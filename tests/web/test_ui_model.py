@@ -42,9 +42,8 @@ def measured_campaign(served, poses: int) -> int:
         return cid
 
 
-def calibrate_on_page(served, page, cid: int) -> dict:
-    """The campaign made the page's current one, calibrated with ls-sum from the page; the job
-    (as the API gives it) once the page shows its results."""
+def open_campaign(served, page, cid: int) -> None:
+    """The page signed in with the campaign made its current one, ready to calibrate."""
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
@@ -54,6 +53,12 @@ def calibrate_on_page(served, page, cid: int) -> dict:
         cid,
     )
     page.wait_for_function("!document.getElementById('calibrate').disabled")
+
+
+def calibrate_on_page(served, page, cid: int) -> dict:
+    """The campaign made the page's current one, calibrated with ls-sum from the page; the job
+    (as the API gives it) once the page shows its results."""
+    open_campaign(served, page, cid)
     page.select_option("#j-method", "ls-sum")
     page.click("#calibrate")
     page.wait_for_selector("#results:not([hidden])", timeout=180_000)
@@ -193,15 +198,18 @@ def test_healthy_model_parameters_as_the_api_gives_them(served, page):
 
 
 def test_warnings_are_listed_under_the_verdict(served, page):
-    """The real QKM campaign: its cell's SMR layout is the found one turned half a turn about
-    the flange axis; the page lists the verdict's warning, and the model stays deployable."""
+    """The real QKM campaign in a cell of tolerance 0.5 mm: its cell's SMR layout is the found one
+    turned half a turn about the flange axis, and its geometry ends 18x the noise floor held out
+    (an effect it lacks); within the tolerance the model is deployable, the page lists both
+    warnings."""
     with httpx.Client(
         base_url=served.url, timeout=120, headers={"Authorization": f"Bearer {served.token}"}
     ) as c:
-        cid = import_real(c, "qkm_hl6")
+        cid = import_real(c, "qkm_hl6", tolerance_mm=0.5)
     job = calibrate_on_page(served, page, cid)
     v = job["validation"]
-    assert v["deployable"] is True and len(v["warnings"]) == 1, v
+    assert v["deployable"] is True and len(v["warnings"]) == 2, v
     assert page.is_visible("#m-fit-ok") and page.is_visible("#m-warnings")
     shown = page.locator("#m-warnings li").all_text_contents()
-    assert shown == v["warnings"] and "turned 180 deg about the flange axis (z)" in shown[0]
+    assert shown == v["warnings"] and "x the noise floor" in shown[0]
+    assert "turned 180 deg about the flange axis (z)" in shown[1]
