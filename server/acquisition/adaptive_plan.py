@@ -103,13 +103,15 @@ class AdaptivePlanner:
         pred, n = self.predict(meas)
         decision = adaptive.decide(pred, self.opts.target_mm, n, self.opts.max_poses)
         named = None
+        grown = n >= effects.REDIAGNOSE * self.diagnosed_at
         if (
             pred.supported
             and decision.reason != "target"
-            and n >= effects.REDIAGNOSE * self.diagnosed_at
+            and (grown or (decision.stop and n > self.diagnosed_at))
         ):
-            # a checkpoint: the target not reached, the solver's diagnosis says what else the
-            # residuals show, and the fit includes it from now on (or drops what it no longer names)
+            # a checkpoint (the target not reached, the poses grown since the last, or about to
+            # stop short of it): the solver's diagnosis says what else the residuals show, and
+            # the fit includes it from now on (or drops what it no longer names)
             found = effects.diagnose(self.cell, _seen(meas))
             self.diagnosed_at, named = n, found.labels
             if _labels(found.included) != _labels(self.effects):

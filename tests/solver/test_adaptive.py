@@ -174,3 +174,27 @@ def test_the_rule_stops_on_the_upper_bound_the_floor_or_the_maximum():
     assert not adaptive.decide(_prediction(floor_mm=0.02), 0.015, 50, 80).stop
     with pytest.raises(ValueError, match="positive"):
         adaptive.decide(p, 0.0, 50, 80)
+
+
+def test_the_holdout_spread_matches_monte_carlo_and_noise_alone_leaves_kappa_at_one():
+    rng = np.random.default_rng(7)
+    J = _linear(rng, 10)
+    m, r, P = J.shape
+    A = J.reshape(-1, P)
+    C = np.linalg.inv(A.T @ A)
+    readings = m * r // 3
+    noise = 0.02
+    s = noise / np.sqrt(3.0)
+    W = adaptive.volume_weight(_linear(rng, 100), 200)
+    ms, kappas = [], []
+    for _ in range(2000):
+        e = s * rng.normal(size=len(A))
+        res = (e - A @ (C @ (A.T @ e))).reshape(m, r)
+        loo = adaptive.holdout_rms(J, C, res, readings)
+        ms.append(loo**2 / s**2)
+        fit = np.sqrt(np.sum(res**2) / readings)
+        kappas.append(adaptive.predict(J, readings, W, noise, loo, fit).kappa)
+    assert np.std(ms) == pytest.approx(adaptive.holdout_spread(J, C, readings), rel=0.1)
+    assert np.mean(ms) == pytest.approx(adaptive.expected_holdout(J, C, readings), rel=0.05)
+    # noise alone: the check scales the parameters' part in about 1 % of the fits, not half
+    assert np.mean(np.array(kappas) > 1.0) < 0.03
