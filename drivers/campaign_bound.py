@@ -20,29 +20,81 @@ from .tracker.sim import (
 
 def spanning_tree_weight(D: np.ndarray) -> float:
     """Weight of a minimum spanning tree of the complete graph with symmetric weights D (Prim)."""
+    return _spanning_tree(D)[0]
+
+
+def _spanning_tree(D: np.ndarray) -> tuple[float, np.ndarray]:
+    """A minimum spanning tree's weight and each node's degree in it (Prim)."""
     n = len(D)
+    degree = np.zeros(n, dtype=int)
     if n < 2:
-        return 0.0
+        return 0.0, degree
     inside = np.zeros(n, dtype=bool)
     inside[0] = True
     reach = D[0].astype(float).copy()  # cheapest edge from the tree to each node
+    via = np.zeros(n, dtype=int)  # the tree node that edge comes from
     total = 0.0
     for _ in range(n - 1):
         j = int(np.argmin(np.where(inside, np.inf, reach)))
         total += float(reach[j])
+        degree[j] += 1
+        degree[via[j]] += 1
         inside[j] = True
-        reach = np.minimum(reach, D[j])
-    return total
+        closer = D[j] < reach
+        reach = np.where(closer, D[j], reach)
+        via = np.where(closer, j, via)
+    return total, degree
+
+
+# Subgradient steps of the Held-Karp bound: every step's bound is valid, the best is kept
+HELD_KARP_STEPS = 300
+
+
+def path_lower_bound(D: np.ndarray, steps: int = HELD_KARP_STEPS) -> float:
+    """Weight no path from node 0 through every node of the symmetric graph D can beat: the
+    Held-Karp (1-tree) bound, never below the minimum spanning tree's.
+
+    A dummy node joined to node 0 (that edge forced) and at no cost to every other node turns
+    each such path into a tour of the same weight. Adding pi_i + pi_j to each edge adds
+    2 sum(pi) to every tour (each node has degree 2 in it); a tour with the dummy's edges taken
+    out is a spanning tree of the others, so the minimum spanning tree of the others plus the
+    dummy's two cheapest edges, less 2 sum(pi), is at most any tour's weight, whatever pi. pi
+    follows the degrees' excess (subgradient steps); pi = 0, the first, gives the spanning
+    tree's bound.
+    """
+    n = len(D)
+    if n < 3:
+        return spanning_tree_weight(D)
+    W = np.minimum(D, D.T).astype(float)  # the cheaper direction: still a lower bound
+    scale = float(W.max()) or 1.0
+    pi = np.zeros(n)
+    best = -np.inf
+    step = 0.01 * scale
+    for _ in range(steps):
+        tree, degree = _spanning_tree(W + pi[:, None] + pi[None, :])
+        # the dummy: its forced edge to node 0 and its cheapest other (weight 0 + pi_j)
+        j = 1 + int(np.argmin(pi[1:]))
+        degree[0] += 1
+        degree[j] += 1
+        bound = tree + pi[0] + pi[j] - 2.0 * pi.sum()
+        best = max(best, bound)
+        excess = degree - 2
+        if not excess.any():
+            break  # the 1-tree is a tour: the bound is the shortest path
+        pi += step * excess
+        step *= 0.98
+    return float(best)
 
 
 def motion_lower_bound(q, start, speeds=None) -> float:
     """Seconds of motion no order of visiting the poses q (m, n) rad from `start` can beat.
 
-    Any such visit is a path through start and every pose, and a path is a spanning tree, so its
-    move time is at least a minimum spanning tree's on the same move-time graph.
+    Any such visit is a path from start through every pose: its move time is at least the
+    path's Held-Karp bound on the move-time graph (path_lower_bound), itself at least a minimum
+    spanning tree's.
     """
     nodes = np.vstack([np.asarray(start, dtype=float)[None], np.asarray(q, dtype=float)])
-    return spanning_tree_weight(move_time(nodes[:, None], nodes[None], speeds))
+    return path_lower_bound(move_time(nodes[:, None], nodes[None], speeds))
 
 
 def aiming_lower_bound(readings: int, poses: int, point_s: float = POINT_S) -> float:

@@ -64,8 +64,7 @@ class Predictor(Protocol):
     @property
     def stage(self) -> str: ...  # nominal, given, rigid, calibrated
 
-    @property
-    def reach_mm(self) -> float: ...
+    def reach_mm(self, q_rad) -> float: ...  # how far off the SMRs may be at joints q_rad
 
     def predict(self, q_rad) -> np.ndarray: ...
 

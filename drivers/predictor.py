@@ -1,9 +1,11 @@
 """Where each SMR will be at the next pose, so the tracker finds it without searching.
 
-Nominal model at first (with the cell's rough base); from the first pose's readings on, the base
-corrected by the rigid motion that best maps the predicted SMRs onto the measured ones (its
-rotation held near the survey's where a few close SMRs cannot fix it); after a few poses, base
-and SMR positions registered to the readings so far; once the data can identify it, the full
+Nominal model at first (with the cell's rough base); from the first pose's readings on, the most
+probable base and SMR positions given the readings, the survey (the base's translation and
+rotation about its origin each this far off) and the fixture drawing (each SMR this far off): a
+few close poses cannot tell a turned base from SMRs off their drawing, and the priors share the
+misfit between them as their uncertainties say; after a few poses, base and SMR positions
+registered to the readings so far without priors; once the data can identify it, the full
 geometric model. At a pose, the targets not yet measured are also shifted by the offset seen on
 those already measured there: the flange's pose error is common to all its SMRs.
 """
@@ -15,9 +17,8 @@ import numpy as np
 from robocal.solver.calibrate import calibrate
 from robocal.solver.identifiability import NotIdentifiable
 from robocal.solver.identify import register
-from robocal.solver.kinematics import Layout, predict
+from robocal.solver.kinematics import Layout, predict, predict_with_jacobian
 from robocal.solver.problem import Problem
-from robocal.solver.rigid import rigid_correction
 from robocal.solver.robot import Robot
 
 # Base and SMR positions together (15 parameters) fitted to fewer poses extrapolate badly to
@@ -25,10 +26,18 @@ from robocal.solver.robot import Robot
 MIN_REGISTER_POSES = 5
 MIN_CALIBRATE_POSES = 7
 REFIT_EVERY = 5
-# Before MIN_REGISTER_POSES poses: how far off the nominal SMR centres may be (fixture
-# drawings, the arm's own errors; per axis) and the base guess's rotation (a quick survey)
+# Before MIN_REGISTER_POSES poses, the priors (standard deviations): how far off the nominal SMR
+# centres may be (the fixture drawing; per axis) and the base guess's rotation (a quick survey)
 NOMINAL_SIGMA_MM = 1.0
 SURVEY_ROT_SIGMA_DEG = 0.5
+SURVEY_MM = 10.0  # the base's translation, per axis
+# a reading's misfit the base and SMRs cannot explain: the nominal arm's own position error (an
+# uncalibrated arm's absolute accuracy is a few millimetres), per axis
+ARM_SIGMA_MM = 3.0
+MAP_STEPS = 4  # Gauss-Newton steps: the model is nearly linear in base and SMRs here
+# Before registration a search reaches this many standard deviations of the prediction's error
+# (a normal error's chance beyond 5 sigma in 3-D is below 1e-4)
+REACH_SIGMAS = 5.0
 # How far off a prediction may be at each stage (mm), where that is known: the largest error seen
 # over thirty simulated cells' first twenty poses was 14 mm registered and 0.1 mm calibrated (a
 # rigid fit to two poses may still be 30 mm off); a search further out only costs time, the
@@ -50,11 +59,29 @@ class SmrPredictor:
         self.stage = "nominal" if refit else "given"
         self.refit = refit
         self._fitted_at = 0
+        # the survey's base and the drawing's SMRs; the last fit of them, with its covariance
+        self._prior: tuple[Layout, np.ndarray] | None = None
+        self._fit: tuple[Layout, np.ndarray, np.ndarray] | None = None
 
-    @property
-    def reach_mm(self) -> float:
-        """How far off the SMR may be from its prediction at this stage."""
-        return REACH_MM[self.stage]
+    def reach_mm(self, q) -> float:
+        """How far off the SMRs may be from their predictions at joints q: before the SMRs are
+        registered, REACH_SIGMAS standard deviations of the prediction's error, from the
+        posterior of base and SMRs (the survey's and the drawing's before any reading) and the
+        arm's own error; after, what each stage has been seen to need."""
+        if self.stage not in ("nominal", "rigid") or not self.refit:
+            return REACH_MM[self.stage]
+        layout, x, cov = self._posterior()
+        J = predict_with_jacobian(layout, x, np.atleast_2d(q))[1][0][:, :, _free(layout)]
+        spread = np.einsum("kip,pq,kjq->kij", J, cov, J)  # (K, 3, 3) mm^2
+        worst = float(np.linalg.eigvalsh(spread)[:, -1].max())
+        return REACH_SIGMAS * float(np.sqrt(worst + ARM_SIGMA_MM**2))
+
+    def _posterior(self) -> tuple[Layout, np.ndarray, np.ndarray]:
+        """The last fit's layout, vector and covariance of base and SMRs; the priors' alone
+        before any reading."""
+        if self._fit is not None:
+            return self._fit
+        return self.layout, self.x, np.diag(_prior_sigma(len(self.names)) ** 2)
 
     def predict(self, q) -> np.ndarray:
         """(K, 3) predicted centres at one pose."""
@@ -98,15 +125,47 @@ class SmrPredictor:
         return self.stage
 
     def _rigid(self, q, meas) -> str:
-        """Correct the base guess by the rigid motion from predicted to measured SMRs."""
-        pred = predict(self.layout, self.x, np.atleast_2d(q))
+        """Base and SMR positions, most probable given the readings so far and their priors
+        (the survey's base, the drawing's SMRs): Gauss-Newton on the readings and the priors
+        together, from the prior each time; its covariance says how far off a prediction may
+        be."""
+        if self._prior is None:
+            self._prior = (self.layout, self.x.copy())
+        layout, x0 = self._prior
+        free, sigma = _free(layout), _prior_sigma(len(self.names))
+        q = np.atleast_2d(q)
         ok = np.all(np.isfinite(meas), axis=-1)
-        T = rigid_correction(pred[ok], meas[ok], NOMINAL_SIGMA_MM, np.deg2rad(SURVEY_ROT_SIGMA_DEG))
+        x = x0.copy()
+        for _ in range(MAP_STEPS):
+            p, J, _ = predict_with_jacobian(layout, x, q)
+            A = np.vstack(
+                [J[ok][:, :, free].reshape(-1, len(free)) / ARM_SIGMA_MM, np.diag(1.0 / sigma)]
+            )
+            b = np.concatenate([(meas[ok] - p[ok]).ravel() / ARM_SIGMA_MM, (x0 - x)[free] / sigma])
+            x[free] += np.linalg.lstsq(A, b, rcond=None)[0]
+        self._fit = (layout, x.copy(), np.linalg.inv(A.T @ A))
         self._fitted_at = int(np.sum(np.any(ok, axis=1)))
-        self.layout = Layout(self.robot, T @ self.layout.base(self.x), self.names)
-        self.x = self.layout.initial(self.targets)
+        self.layout, self.x = layout.rebased(x)
         self.stage = "rigid"
         return self.stage
 
     def _base_is_identity(self) -> bool:
         return bool(np.allclose(self.layout.base(self.x), np.eye(4)))
+
+
+def _free(layout: Layout) -> np.ndarray:
+    """The entries of x for base and SMR positions."""
+    return np.r_[
+        np.arange(layout.n_params)[layout.base_slice],
+        np.arange(layout.n_params)[layout.target_slice],
+    ]
+
+
+def _prior_sigma(smrs: int) -> np.ndarray:
+    """Standard deviations of base (translation mm, rotation rad) and SMRs (mm) before any
+    reading: the survey's and the fixture drawing's."""
+    return np.r_[
+        np.full(3, SURVEY_MM),
+        np.full(3, np.deg2rad(SURVEY_ROT_SIGMA_DEG)),
+        np.full(3 * smrs, NOMINAL_SIGMA_MM),
+    ]

@@ -160,7 +160,7 @@ class Sighting:
         # once: the spiral grows outwards and ends where it meets the SMR, so a wider limit costs
         # nothing when the SMR is near, where a narrow search first and a wide one after it
         # sweep the narrow disc twice when it is not
-        reach = min(s.wide_search_radius_mm, self.predictor.reach_mm)
+        reach = min(s.wide_search_radius_mm, self.predictor.reach_mm(work.q_rad))
         if self.tracker.search(max(reach, s.search_radius_mm)):
             return True
         # the arm stands still: searching the same place again is no use

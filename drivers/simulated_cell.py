@@ -11,6 +11,8 @@ from .effects import make_effects
 from .tracker.sim import SimulatedTracker, serve_tracker
 from .world import SimulatedWorld
 
+ARRIVAL_STREAM = 31  # the arm's arrival scatter draws from a stream of its own per seed
+
 
 class SimulatedCell:
     """The virtual cell's devices: a simulated tracker and controller on 127.0.0.1 sockets."""
@@ -26,10 +28,17 @@ class SimulatedCell:
         effects=(),
         expected_s: float = 2000.0,
         noise_seed=None,
+        repeatability_mm: float | None = None,
     ):
         self.cell = VirtualCell.random(robot, targets, seed=seed, tracker=TrackerSpec(**tracker))
         self.cell.effects.extend(make_effects(list(effects), self.cell, seed))
-        self.world = SimulatedWorld(self.cell, clock)
+        noise = seed if noise_seed is None else noise_seed
+        self.world = SimulatedWorld(
+            self.cell,
+            clock,
+            repeatability_mm=repeatability_mm or 0.0,
+            rng=np.random.default_rng([*np.atleast_1d(noise).tolist(), ARRIVAL_STREAM]),
+        )
         # effects tied to the campaign's time axis (a base shift's moment, thermal T0) learn it
         # from the expected duration, as VirtualCell.campaign tells them the real one
         span = np.linspace(0.0, expected_s, 50)[:, None]
@@ -40,7 +49,7 @@ class SimulatedCell:
             self.world,
             clock,
             beam_break_rate=beam_break_rate,
-            seed=seed if noise_seed is None else noise_seed,
+            seed=noise,
         )
         self.controller_device = SimulatedController(self.world, robot, clock)
         self.tracker_server = serve_tracker(self.tracker_device)

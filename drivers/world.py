@@ -10,6 +10,8 @@ import threading
 
 import numpy as np
 
+from robocal.solver.repeatability import RP_PER_SIGMA
+
 from .cell import VirtualCell
 
 # ABB IRB 2600-class axis speeds, deg/s; the slowest joint sets a move's duration.
@@ -28,6 +30,8 @@ class SimulatedWorld:
         speeds_deg_s=None,
         air_c: float = 20.0,
         air_drift_c_per_h: float = 0.3,
+        repeatability_mm: float = 0.0,
+        rng=None,
     ):
         self.cell, self.clock = cell, clock
         n = cell.true_robot.n_joints
@@ -39,6 +43,11 @@ class SimulatedWorld:
         self.air_c, self.air_drift = air_c, air_drift_c_per_h
         self._start = clock.now()
         self._lock = threading.RLock()  # command_move asks move_duration, which reads joints
+        # the arm's repeatability: each move ends off its pose by an isotropic Gaussian of this
+        # per-axis sigma (the SMRs moved alike: a data sheet's RP is of a point on the flange)
+        self.arrival_sigma_mm = repeatability_mm / RP_PER_SIGMA
+        self._rng = rng if rng is not None else np.random.default_rng(0)
+        self._arrival = np.zeros(3)
 
     def move_duration(self, q_target) -> float:
         """Seconds a joint move from the current position to q_target takes."""
@@ -53,6 +62,8 @@ class SimulatedWorld:
             self._from, self._to = q_now, np.asarray(q_target, dtype=float)
             self._t0 = self.clock.now()
             self._t1 = self._t0 + duration
+            if self.arrival_sigma_mm > 0:
+                self._arrival = self._rng.normal(scale=self.arrival_sigma_mm, size=3)
         return duration
 
     def stop(self) -> None:
@@ -98,4 +109,4 @@ class SimulatedWorld:
         """True SMR centres (K, 3) in the tracker frame now, with the cell's effects applied."""
         q = self.joints()[None]
         t = np.array([self.elapsed()])
-        return self.cell.true_points(q, t, np.array([self.air_temperature()]))[0]
+        return self.cell.true_points(q, t, np.array([self.air_temperature()]))[0] + self._arrival

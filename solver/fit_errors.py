@@ -202,6 +202,13 @@ def extended_errors(
 ) -> ParameterErrors:
     """Standard errors of the extended model fitted on every pose (geometry, base, SMRs and each
     extension's coefficients), with the bases evaluated at x0 as fit_extended holds them."""
+    rows, names, column, degrees = extended_fit_rows(prob, inputs, x0, free, x, exts)
+    return errors_from_rows(rows, names, column, degrees)
+
+
+def extended_fit_rows(prob: Problem, inputs: Inputs, x0, free, x, exts: list[Extension]):
+    """The extended fit's residual rows, the names of its parameters (the layout's, then every
+    coefficient), each one's column in the rows (-1 where held) and which are angles."""
     lay = prob.layout
     mask = prob.mask
     idx = np.flatnonzero(free)
@@ -219,7 +226,7 @@ def extended_errors(
     n_coef = len(names) - lay.n_params
     column = np.r_[np.full(lay.n_params, -1), np.arange(len(idx), len(idx) + n_coef)]
     column[idx] = np.arange(len(idx))
-    return errors_from_rows(rows, names, column, np.r_[angles(lay), np.zeros(n_coef, bool)])
+    return rows, names, column, np.r_[angles(lay), np.zeros(n_coef, bool)]
 
 
 def coef_covariance(errors: ParameterErrors, exts, i: int) -> np.ndarray:

@@ -62,6 +62,29 @@ def spread_at(layout: Layout, x, q, cov: np.ndarray, column: np.ndarray) -> Spre
     )
 
 
+def extended_spread_at(layout: Layout, x, exts, bases, inputs, cov, column) -> Spread:
+    """The spread of the SMR positions at the poses of `inputs` (solver.effects.Inputs) of a
+    model with extensions (their bases at those poses, solver.effects.prepare): cov over the
+    layout's identified parameters and every extension's coefficients, column each layout
+    parameter's then each coefficient's column in cov (-1 if held), as
+    solver.fit_errors.extended_errors gives them."""
+    from .extended import extension_rows
+
+    n = layout.n_params
+    column = np.asarray(column)
+    idx = np.flatnonzero(column[:n] >= 0)
+    m, K = inputs.q.shape[0], len(layout.target_names)
+    _, Jt = extension_rows(layout, x, exts, bases, inputs, np.ones((m, K), dtype=bool), idx)
+    Jc = np.zeros((m, K, 3, cov.shape[0]))
+    Jc[..., np.r_[column[idx], column[n:]]] = np.moveaxis(Jt, 0, -1).reshape(m, K, 3, -1)
+    # the joints' lever is the geometry's: an effect's few micro-radians do not change it
+    _, _, Jq = predict_with_jacobian(layout, x, inputs.q)
+    return Spread(
+        np.einsum("...ip,...jp->...ij", Jc @ cov, Jc),
+        np.einsum("...in,...jn->...ij", Jq, Jq),
+    )
+
+
 def mean_traces(at: Spread) -> tuple[float, float]:
     """The positions' mean parameter variance (mm^2) and mean lever (mm^2 per rad^2): what
     joint_scatter_rad takes, summed over blocks of positions by the caller if need be."""

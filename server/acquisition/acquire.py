@@ -375,6 +375,7 @@ def acquire(
                 opts.effects,
                 expected_s=20.0 * opts.poses,
                 noise_seed=opts.noise_seed,
+                repeatability_mm=cell.repeatability_mm,
             )
             stack.callback(sim.close)
         else:

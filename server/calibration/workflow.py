@@ -209,7 +209,7 @@ def run_method(
 def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None) -> ModelFile:
     """The self-contained model file of a calibration."""
     from robocal.server.calibration.identified import identified_block
-    from robocal.server.calibration.position_uncertainty import position_block
+    from robocal.server.calibration.position_uncertainty import geometric_block
     from robocal.solver import metrics
     from robocal.solver.fit_errors import calibration_figures
 
@@ -259,7 +259,7 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     # never deployable
     v = model.validation = validate(cal, cell, used, holdout, errors, acc.rmse)
     if cal.method != "nominal":
-        block = position_block(
+        block = geometric_block(
             cal.layout, cal.x, used.q, errors, v.holdout_rms_mm, v.noise_floor_mm
         )
         if block is not None:
@@ -475,7 +475,22 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True):
         model.uncertainty = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
         _judge_diagnosis(d, report, cell, meas, model)
+        _position_block(d, report, cell, meas, model)
     return d, model
+
+
+def _position_block(d, report: ReportDoc, cell: Cell, meas: Measurements, model: ModelFile):
+    """An extended model's `uncertainty.position` block: its geometry's and its coefficients'
+    covariance, the joint scatter fitted to the diagnosis's final held-out RMS."""
+    from robocal.server.calibration.position_uncertainty import extended_block
+
+    if model.uncertainty is None:
+        return
+    inputs = cell_problem(cell, meas).inputs()
+    final, floor = report.final.holdout_rmse_mm, report.noise_floor_mm
+    block = extended_block(model, inputs, d.errors.parameters, final, floor)
+    if block is not None:
+        model.uncertainty.position = block
 
 
 def _judge_diagnosis(

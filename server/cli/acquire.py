@@ -23,7 +23,7 @@ def _arm(text: str) -> str:
 
 def _verify(args, cell) -> None:
     """`acquire --verify model.json`: the ISO 9283 run before and after compensation."""
-    from robocal.server.cli.tables import console, verification_table
+    from robocal.server.cli.tables import console, verification_decisions, verification_table
     from robocal.server.verify import run as verification
 
     opts = verification.VerifyOptions(
@@ -42,6 +42,8 @@ def _verify(args, cell) -> None:
     out = args.out or "verification.json"
     verification.write(report, out)
     console.print(verification_table(report))
+    for line in verification_decisions(report):
+        console.print(line, markup=False)
     written = [out]
     if args.certificate:
         from robocal.server.verify.certificate import write_certificate

@@ -48,6 +48,10 @@ def cmd_bench(args) -> None:
             split_cases=args.split_cases,
             real=() if args.quick else _real_campaigns(),
         )
+    elif args.what == "uncertainty":
+        from ..bench.uncertainty import run_uncertainty_bench
+
+        result = run_uncertainty_bench(seeds=args.seeds)
     elif args.what == "outliers":
         from ..bench.screen import run_screen_bench
 
@@ -122,16 +126,19 @@ def add(sub) -> None:
             "validation",
             "check",
             "scale",
+            "uncertainty",
         ),
         help="what to time (validation: the deployment guard's flags on healthy, small and "
         "real campaigns; check: quick checks' false alarms and delays to a change; scale: `robocal calibrate` of a large campaign as a process, next to np.loadtxt of its file, "
-        "then diagnose of 1,000 / 3,000 / 10,000 poses)",
+        "then diagnose of 1,000 / 3,000 / 10,000 poses; uncertainty: the coverage of the "
+        "position U of diagnosed and ls-sum models on independent positions)",
     )
     b.add_argument(
         "--seeds",
         type=_nonnegative_int,
         default=20,
-        help="acquire: seeds of each arm in the adaptive campaign's suite (default 20, 0: none)",
+        help="acquire: seeds of each arm in the adaptive campaign's suite (default 20, 0: none); "
+        "uncertainty: seeds of each arm (default 20)",
     )
     b.add_argument(
         "--first-seed",

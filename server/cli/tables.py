@@ -154,13 +154,19 @@ def effect_parameters(parameters: dict, uncertainty: dict | None) -> str:
 def verification_table(report: dict) -> Table:
     """ISO 9283 figures per test point, before (nominal joints) and after compensation, mm."""
     t = Table(title=f"verification of {report['model']['path']} on {report['robot']}")
-    for col in ("point", "AP before", "AP after", "RP before", "RP after", "vAP before",
-                "vAP after"):  # fmt: skip
+    for col in ("point", "AP before", "AP after", "RP before", "RP after (-U/+U)",
+                "vAP before", "vAP after"):  # fmt: skip
         t.add_column(col, justify="left" if col == "point" else "right")
     for b, a in zip(report["before"]["points"], report["after"]["points"]):
+        rp_u = (
+            f" (-{a['RP_U_below_mm']:.4f}/+{a['RP_U_above_mm']:.4f})"
+            if "RP_U_above_mm" in a
+            else ""
+        )
         t.add_row(
             b["point"],
-            *(f"{x:.4f}" for x in (b["AP_mm"], a["AP_mm"], b["RP_mm"], a["RP_mm"])),
+            *(f"{x:.4f}" for x in (b["AP_mm"], a["AP_mm"], b["RP_mm"])),
+            f"{a['RP_mm']:.4f}{rp_u}",
             f"{b['vAP_mm']:.4f}",
             f"{a['vAP_mm']:.4f}",
         )
@@ -175,6 +181,26 @@ def verification_table(report: dict) -> Table:
             "",
         )
     return t
+
+
+def verification_decisions(report: dict) -> list[str]:
+    """One line per decision of a verification (AP against the tolerance, RP against the arm's
+    stated repeatability), as ISO 14253-1's guard bands give it."""
+    unc = report.get("uncertainty") or {}
+    out = []
+    for key, figure, against, given in (
+        ("decision", "AP", "the tolerance", "tolerance_mm"),
+        ("rp_decision", "RP", "the arm's stated repeatability", "repeatability_mm"),
+    ):
+        d = unc.get(key)
+        if d and d["tolerance_mm"] is None:
+            out.append(f"{figure}: no pass or fail (the cell gives no {given})")
+        elif d:
+            out.append(
+                f"{figure}: {d['verdict']} against {against} {d['tolerance_mm']:g} mm "
+                "(ISO 14253-1 guard bands)"
+            )
+    return out
 
 
 def joints_table(identified: Identified) -> Table:

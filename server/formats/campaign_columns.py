@@ -67,6 +67,8 @@ class _Columns:
         self.raw, self.sep, self.ends, self.commas = raw, sep, sep[:, -1], sep[:, :-1]
         self.starts = np.concatenate([[0], self.ends[:-1] + 1])
         self.view = np.lib.stride_tricks.sliding_window_view(raw, _PAD)
+        # a 64-bit little-endian word at every byte offset (unaligned reads)
+        self.words = np.ndarray((len(raw) - 7,), dtype="<u8", buffer=raw, strides=(1,))
         self.ok = True
         return True
 
@@ -98,11 +100,18 @@ class _Columns:
             ndmin=2,
         )
 
-    def numbers(self, names: list[str], blank_ok=()) -> dict[str, np.ndarray] | None:
+    def numbers(self, names: list[str], blank_ok=(), rows=None) -> dict[str, np.ndarray] | None:
         """Each column as floats (NaN for a blank in the blank_ok ones), or None if the row reader
         would refuse a value (bounds are the caller's). Plain decimals of an ASCII file straight
-        from its bytes; numpy's loadtxt if any field holds something else."""
-        v = self._decimals([self.header.index(n) for n in names]) if self.ascii else None
+        from its bytes; numpy's loadtxt if any field holds something else. rows: only those data
+        rows, and None unless their fields are plain decimals with points lined up."""
+        cols = [self.header.index(n) for n in names]
+        if rows is not None:
+            v = self._decimals(cols, rows, horner=False) if self.ascii else None
+            if v is None:
+                return None
+        else:
+            v = self._decimals(cols) if self.ascii else None
         if v is None:
             return self._numbers_loaded(names, blank_ok)
         strict = [i for i, n in enumerate(names) if n not in blank_ok]
@@ -110,10 +119,58 @@ class _Columns:
             return None  # a blank: the row reader says where
         return dict(zip(names, v.T, strict=True))
 
-    def _decimals(self, cols: list[int]) -> np.ndarray | None:
+    def _decimals(self, cols: list[int], rows=None, horner=True) -> np.ndarray | None:
         """Fields cols of every data row (rows, len(cols)) as floats (NaN where blank) if each is
         a plain decimal of at most MAX_DIGITS digits; None otherwise (a space, an exponent, a
-        longer number...). All columns at once, in blocks of rows that stay in cache."""
+        longer number...). Eight bytes at a time where each column's points line up (a written
+        file's), else by Horner's rule; all columns of a block of rows at once, so the block's
+        bytes stay in cache. rows: those data rows only (and Horner's rule not tried)."""
+        c = np.asarray(cols)
+        sep = self.sep[1:] if rows is None else self.sep[1:][rows]
+        right = sep[:, c]
+        left = sep[:, np.maximum(c - 1, 0)] + 1  # past the comma before
+        starts = self.starts[1:] if rows is None else self.starts[1:][rows]
+        left[:, c == 0] = starts[:, None]  # the first field: past the line before
+        # the first field given in each column says where its point is (from its end)
+        length = right - left
+        k = np.argmax(length > 0, axis=0)
+        found = [self.text[left[i, j] : right[i, j]].find(".") for j, i in enumerate(k)]
+        point = np.array(
+            [f if f < 0 else int(length[i, j]) - f for j, (i, f) in enumerate(zip(k, found))]
+        )
+        out = np.empty((len(right), len(cols)))
+        step = max(1, _FIELDS // len(cols))
+        for lo in range(0, len(right), step):
+            v = _words(self.words, left[lo : lo + step], right[lo : lo + step], point)
+            if v is None:
+                return self._horner(cols) if horner and rows is None else None
+            out[lo : lo + step] = v
+        return out
+
+    def repeats(self, cols: list[int], ref: np.ndarray) -> bool:
+        """Whether fields cols (adjacent, in order) of every data row are byte for byte those of
+        data row ref[row]: eight bytes at a time over the span from the first to the last."""
+        if list(cols) != list(range(cols[0], cols[0] + len(cols))) or not self.ascii:
+            return False
+        left, _ = self._bounds(cols[0])
+        _, right = self._bounds(cols[-1])
+        span = right - left
+        other = np.flatnonzero(ref != np.arange(len(ref)))  # a pose's later rows
+        if not len(other):
+            return True
+        a, b, n = left[other], left[ref[other]], span[other]
+        if np.any(n != span[ref[other]]) or n.min() < 8 or n.max() > _SPAN_MAX:
+            return False
+        for lo in range(0, len(other), _ROWS_AT_ONCE):  # rows near each other: in cache
+            a1, b1, n1 = (v[lo : lo + _ROWS_AT_ONCE] for v in (a, b, n))
+            for k in range(0, int(n1.max()), 8):
+                off = np.minimum(k, n1 - 8)  # the last word ends at the span's end
+                if np.any(self.words[a1 + off] != self.words[b1 + off]):
+                    return False
+        return True
+
+    def _horner(self, cols: list[int]) -> np.ndarray | None:
+        """_decimals by Horner's rule over each field's bytes, for any layout of points."""
         c = np.asarray(cols)
         out = np.empty((self.n, len(cols)))
         step = max(1, _FIELDS // len(cols))
@@ -200,8 +257,30 @@ class _Columns:
 MAX_DIGITS = 15
 MAX_FIELD = 24  # bytes: a sign, a point, 15 digits and leading zeros
 _POW10 = 10.0 ** np.arange(MAX_FIELD + 1)
+_ROWS_AT_ONCE = 4096
+_SPAN_MAX = 512  # bytes of fields compared as a whole
 _FIELDS = 1 << 15  # fields parsed at once: a window of them stays in cache
 _PAD = LABEL_CHARS_MAX + MAX_FIELD  # spaces after the text: no field's window runs off its end
+_ZEROS = int.from_bytes(b"0" * 8, "little")
+_POW10_INT = np.array([10**k for k in range(17)], dtype=np.uint64)
+_LOW_BYTES = np.array([(1 << (8 * k)) - 1 for k in range(9)], dtype=np.uint64)  # k bytes set
+
+
+def _not_digits(word: np.ndarray) -> bool:
+    """Whether any byte of the words (ASCII: all below 0x80) is not a digit: past '9' the byte
+    plus 0x46 sets its top bit; below '0' the byte with its top bit set, less 0x30, clears it."""
+    top = np.uint64(0x8080808080808080)
+    high = (word + np.uint64(0x4646464646464646)) | ~((word | top) - np.uint64(_ZEROS))
+    return bool((high & top).any())
+
+
+def _swar8(word: np.ndarray) -> np.ndarray:
+    """Eight ASCII digits a word (the first in its lowest byte) as their integer: pairs, then
+    fours, then all eight, each step one multiplication and shift (wrapping arithmetic)."""
+    v = word - np.uint64(_ZEROS)
+    v = (v * np.uint64(10) + (v >> np.uint64(8))) & np.uint64(0x00FF00FF00FF00FF)
+    v = (v * np.uint64(100) + (v >> np.uint64(16))) & np.uint64(0x0000FFFF0000FFFF)
+    return (v * np.uint64(10000) + (v >> np.uint64(32))) & np.uint64(0xFFFFFFFF)
 
 
 def _positions(raw: np.ndarray, chars: tuple[int, ...], chunk: int = 1 << 22) -> np.ndarray:
@@ -216,6 +295,58 @@ def _positions(raw: np.ndarray, chars: tuple[int, ...], chunk: int = 1 << 22) ->
             hit |= part == c
         out.append((np.flatnonzero(hit) + lo).astype(kind))
     return np.concatenate(out) if out else np.zeros(0, dtype=kind)
+
+
+def _words(words: np.ndarray, left: np.ndarray, right: np.ndarray, point: np.ndarray):
+    """Fields [left, right) (rows, columns) as floats (NaN where empty) if each is
+    [+-]digits[.digits] of 1 to MAX_DIGITS digits within 16 bytes, its point `point` bytes from
+    its end (point[j] for column j, -1: none); None otherwise (Horner's rule then decides).
+
+    words holds a little-endian 64-bit word at every byte offset. Each field's last 16 bytes as
+    two words: the bytes before the field, its sign and its point made '0', every byte must be
+    a digit, and eight digits become their integer in three multiplications (SWAR); the point
+    taken out of that integer, one division by a power of ten gives the value, exactly as
+    float() rounds it (Clinger's fast path, as in _parse_decimals)."""
+    length = right - left
+    given = length > 0
+    if length.max() > 16 or int(right.min()) < 16:
+        return None
+    hi = words[right - 16]  # bytes 0-7 of the 16 (byte 0 the word's lowest)
+    lo = words[right - 8]  # bytes 8-15
+    outside = (16 - length).astype(np.uint64)  # bytes before the field
+    has = point >= 0
+    q = np.where(has, 16 - point, 0)  # the point's byte of the 16
+    shift = (8 * (q % 8)).astype(np.uint64)
+    at = (np.where(q < 8, hi, lo) >> shift) & np.uint64(0xFF)
+    if np.any(has & given & ((at != ord(".")) | (outside > q))):
+        return None  # points not lined up: Horner's rule
+    for word, mine in ((hi, has & (q < 8)), (lo, has & (q >= 8))):
+        mask = np.where(mine, np.uint64(0xFF) << shift, np.uint64(0))
+        word &= ~mask
+        word |= np.uint64(_ZEROS) & mask
+    sign = np.where(outside < 8, hi, lo) >> (np.uint64(8) * (outside % np.uint64(8)))
+    sign &= np.uint64(0xFF)
+    minus = sign == ord("-")
+    signed = given & (minus | (sign == ord("+")))
+    outside += signed  # a sign counts as a leading zero
+    for word, skip in ((hi, outside), (lo, np.maximum(outside, 8) - 8)):
+        mask = _LOW_BYTES[np.minimum(skip, 8)]
+        word &= ~mask
+        word |= np.uint64(_ZEROS) & mask
+    digits = length - signed - has
+    if np.any(given & ((digits < 1) | (digits > MAX_DIGITS))):
+        return None
+    if _not_digits(hi) or _not_digits(lo):
+        return None
+    x = _swar8(hi) * np.uint64(10**8) + _swar8(lo)
+    frac = np.where(has, point - 1, 0)  # digits after the point
+    f = _POW10_INT[frac]
+    r = x % f
+    x = np.where(has, (x - r) // np.uint64(10) + r, x)  # the point was a 0 in x: out with it
+    v = x.astype(np.float64) / _POW10[frac]
+    v[minus] *= -1  # -0 too, as float("-0.0")
+    v[~given] = np.nan
+    return v
 
 
 _END = ord(",")  # written past each field's end: no field holds one
@@ -263,6 +394,9 @@ def _text(label) -> str:
 
 def _within(v: np.ndarray, lo: float, hi: float) -> bool:
     """Finite and within bounds, blanks (NaN) aside: the caller decides where blanks may be."""
+    least, most = v.min(initial=lo), v.max(initial=hi)  # NaN if any is blank
+    if not (np.isnan(least) or np.isnan(most)):
+        return bool(lo <= least and most <= hi and np.isfinite(least) and np.isfinite(most))
     given = ~np.isnan(v)
     return bool(np.all(np.isfinite(v[given]) & (v[given] >= lo) & (v[given] <= hi)))
 
@@ -276,21 +410,46 @@ def _joints(cols: dict, robot: Robot, tol_deg: float):
     return None if np.any(q < lo - tol_deg) or np.any(q > hi + tol_deg) else q
 
 
-def _poses(ids: np.ndarray, q_deg: np.ndarray, same_tol_deg: float):
-    """Pose ids in order of first appearance, each row's pose, the first row of each; None if a
-    pose's rows disagree on a joint."""
-    # a pose's rows are usually together: look the ids up once per run of equal ids
+def _groups(ids: np.ndarray):
+    """Pose ids in order of first appearance, each row's pose, the first row of each."""
+    # a pose's rows are usually together: look the ids up once per run of equal ids; numbered
+    # in order of first appearance
     starts = np.flatnonzero(np.concatenate([[True], ids[1:] != ids[:-1]]))
-    index: dict = {}
-    runs = ids[starts]
-    runs = runs.astype("U") if runs.dtype.kind == "S" else runs  # an ASCII file's: as text
-    run_pose = [index.setdefault(p, len(index)) for p in runs.tolist()]
-    inv = np.repeat(np.array(run_pose, dtype=np.intp), np.diff(np.append(starts, len(ids))))
-    first = np.full(len(index), len(ids), dtype=np.intp)
-    np.minimum.at(first, inv, np.arange(len(ids)))
+    names, seen, run_name = np.unique(ids[starts], return_index=True, return_inverse=True)
+    order = np.argsort(seen, kind="stable")
+    number = np.empty(len(order), dtype=np.intp)
+    number[order] = np.arange(len(order))
+    names = names[order]
+    index = (names.astype("U") if names.dtype.kind == "S" else names).tolist()  # as text
+    inv = np.repeat(number[run_name.ravel()], np.diff(np.append(starts, len(ids))))
+    first = starts[seen[order]]  # a pose's first row begins its first run
+    return index, inv, first
+
+
+def _poses(ids: np.ndarray, q_deg: np.ndarray, same_tol_deg: float):
+    """_groups, or None if a pose's rows disagree on a joint."""
+    index, inv, first = _groups(ids)
     if np.any(np.abs(q_deg - q_deg[first[inv]]) > same_tol_deg):
         return None
-    return list(index), inv, first
+    return index, inv, first
+
+
+def _read_numbers(
+    t: _Columns, robot: Robot, joints, others, blank_ok, first, inv, limit_tol, same_tol
+):
+    """Each pose's joints (m, n) degrees and the other columns per row, or None. A pose's rows
+    usually repeat its joints byte for byte: then they are read on its first row only."""
+    if t.repeats([t.header.index(c) for c in joints], first[inv]):
+        at_first = t.numbers(joints, rows=first)
+        cols = None if at_first is None else t.numbers(others, blank_ok=blank_ok)
+        q = None if at_first is None or cols is None else _joints(at_first, robot, limit_tol)
+        if q is not None and cols is not None:
+            return q, cols
+    cols = t.numbers([*joints, *others], blank_ok=blank_ok)
+    q = None if cols is None else _joints(cols, robot, limit_tol)
+    if q is None or cols is None or np.any(np.abs(q - q[first[inv]]) > same_tol):
+        return None  # a pose's rows disagree on a joint: the row reader says where
+    return q[first], cols
 
 
 def read_campaign_columns(
@@ -304,13 +463,18 @@ def read_campaign_columns(
     if any(t.has(f"prev_{c}") for c in joints):  # the row reader checks and reads them
         return None
     present = [c for c in extras if t.has(c)]
-    cols = t.numbers([*joints, *measured, *present], blank_ok=present)
     labels = t.labels(["pose", "target"])
-    if cols is None or labels is None:
+    if labels is None:
         return None
+    pose_ids, inv, first = _groups(labels["pose"])
+    read = _read_numbers(
+        t, robot, joints, [*measured, *present], present, first, inv, limit_tol, same_tol
+    )
+    if read is None:
+        return None
+    q, cols = read
     points = np.column_stack([cols[c] for c in measured])
-    q = _joints(cols, robot, limit_tol)
-    if q is None or np.any(np.isnan(points)):
+    if np.any(np.isnan(points)):
         return None
     if not all(_within(cols[c], *bounds[c][0]) for c in [*measured, *present]):
         return None
@@ -321,10 +485,6 @@ def read_campaign_columns(
     if not all(TARGET_NAME.fullmatch(n) for n in found):
         return None
     k = np.searchsorted(names, labels["target"])
-    poses = _poses(labels["pose"], q, same_tol)
-    if poses is None:
-        return None
-    pose_ids, inv, first = poses
     m, K = len(pose_ids), len(names)
     if np.bincount(inv * K + k, minlength=m * K).max() > 1:  # a (pose, target) twice
         return None
@@ -336,7 +496,7 @@ def read_campaign_columns(
         extra[c][inv, k] = cols[c]
     return Measurements(
         pose_ids,
-        np.deg2rad(q[first]),
+        np.deg2rad(q),
         tuple(found),
         xyz,
         extra.get("time_s"),

@@ -253,6 +253,12 @@ class CellDoc(Doc):
         description="the positioning accuracy the application needs, mm: a model whose held-out "
         "error exceeds it is not deployable",
     )
+    repeatability_mm: Tolerance | None = Field(
+        None,
+        description="the arm's pose repeatability RP (ISO 9283) as its data sheet states it, "
+        "mm: a verification's RP is decided against it, and the simulated arm scatters so "
+        "about each pose it returns to",
+    )
     devices: DevicesDoc | None = None
 
     @field_validator("targets")

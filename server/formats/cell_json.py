@@ -44,6 +44,8 @@ class Cell:
     devices: Devices | None = None  # None: the simulated cell
     tracker_spec_given: bool = False  # tracker holds the default spec unless the file gave one
     tolerance_mm: float | None = None  # the accuracy the application needs; None: not given
+    # the arm's pose repeatability RP (ISO 9283) as its data sheet states it; None: not given
+    repeatability_mm: float | None = None
 
     @property
     def simulated(self) -> bool:
@@ -88,6 +90,7 @@ def cell_from_doc(c: CellDoc) -> Cell:
         devices,
         bool({"mpe_um", "mpe_um_per_m"} & c.tracker.model_fields_set),
         c.tolerance_mm,
+        c.repeatability_mm,
     )
 
 
@@ -146,6 +149,8 @@ def cell_to_json(cell: Cell) -> dict:
         out["payload_kg"] = float(cell.payload_kg)
     if cell.tolerance_mm is not None:
         out["tolerance_mm"] = float(cell.tolerance_mm)
+    if cell.repeatability_mm is not None:
+        out["repeatability_mm"] = float(cell.repeatability_mm)
     if cell.devices is not None:
         out["devices"] = devices_to_json(cell.devices)
     return out

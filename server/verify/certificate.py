@@ -30,6 +30,7 @@ th { background: #eee; } .id td { text-align: left; } .id td:first-child { width
 figure { margin: 3mm 0; text-align: center; } img { max-width: 100%; }
 .note { font-size: 9pt; color: #444; }
 .overdue { color: #a3333d; }
+#uncertainty td { white-space: nowrap; }
 @page { size: A4; margin: 12mm; }
 @media print { body { margin: 0; } h2, table, figure { break-inside: avoid; } }
 """
@@ -102,29 +103,46 @@ def figure_uncertainty_map(volume: dict) -> str:
     return _png(fig)
 
 
+def verdict_sentence(dec: dict | None, figure: str, against: str, give: str) -> str:
+    """The decision's sentence: PASS / FAIL / NOT DECIDED of `figure` (AP, RP) against the
+    tolerance (`against` names it), or why there is none (`give` says where to state it)."""
+    if not dec:
+        return ""
+    tol, verdict = dec["tolerance_mm"], dec["verdict"]
+    if verdict == "no tolerance":
+        return f"No {against} given ({give}): no pass or fail on {figure}."
+    late = dec.get("tracker_overdue")
+    return {
+        "pass": f"<b>{figure} PASS</b> against the {against} {tol:g} mm: every {figure} plus "
+        "its U is within it.",
+        "fail": f"<b>{figure} FAIL</b> against the {against} {tol:g} mm: an {figure} less its U "
+        "is beyond it.",
+        "not decided": f"<b>{figure} NOT DECIDED</b> against the {against} {tol:g} mm: "
+        + (
+            f"the tracker's calibration was due {escape(str(late))}."
+            if late
+            else f"a point's {figure} less its U is within it, but not plus its U."
+        ),
+    }[verdict]
+
+
+def _rp(q: dict) -> str:
+    """An RP with its U below and above, as the certificate prints it."""
+    if "RP_U_above_mm" not in q:
+        return f"{q['RP_mm']:.4f}"
+    return f"{q['RP_mm']:.4f} −{q['RP_U_below_mm']:.4f} / +{q['RP_U_above_mm']:.4f}"
+
+
 def uncertainty_section(report: dict) -> tuple[str, str]:
-    """The verdict's sentence on the tolerance, and the uncertainty section's HTML ("" without
-    the figures: a model written before them, or an extended model)."""
+    """The verdicts' sentences on the tolerance (AP) and the arm's repeatability (RP), and the
+    uncertainty section's HTML (the model's U "-" without its figures: a model written before
+    them, or one whose extensions need a pose's time or temperature)."""
     unc = report.get("uncertainty") or {}
-    dec = unc.get("decision")
-    said = ""
-    if dec:
-        tol, verdict = dec["tolerance_mm"], dec["verdict"]
-        if verdict == "no tolerance":
-            said = "No tolerance given (the cell's tolerance_mm or the model's): no pass or fail."
-        else:
-            said = {
-                "pass": f"<b>PASS</b> against the tolerance {tol:g} mm: every AP plus its U "
-                "is within it.",
-                "fail": f"<b>FAIL</b> against the tolerance {tol:g} mm: an AP less its U is "
-                "beyond it.",
-                "not decided": f"<b>NOT DECIDED</b> against the tolerance {tol:g} mm: "
-                + (
-                    f"the tracker's calibration was due {escape(str(dec['tracker_overdue']))}."
-                    if dec.get("tracker_overdue")
-                    else "an AP is within it only without its uncertainty."
-                ),
-            }[verdict]
+    dec, rp_dec = unc.get("decision"), unc.get("rp_decision")
+    said = verdict_sentence(dec, "AP", "tolerance", "the cell's tolerance_mm or the model's")
+    said += " " + verdict_sentence(
+        rp_dec, "RP", "arm's stated repeatability", "the cell's repeatability_mm"
+    )
     model = unc.get("model")
     rows = []
     for i, q in enumerate(report["after"]["points"]):
@@ -132,33 +150,38 @@ def uncertainty_section(report: dict) -> tuple[str, str]:
             (
                 q["point"],
                 f"{q['AP_mm']:.4f} ± {q['AP_U_mm']:.4f}" if "AP_U_mm" in q else f"{q['AP_mm']:.4f}",
+                _rp(q),
                 f"{model['model_U_mm'][i]:.4f}" if model else "-",
                 f"{model['reading_U_mm'][i]:.4f}" if model else "-",
             )
         )
-    html = "<h2>Uncertainty and decision</h2>" + _table(
-        ["point", "AP after ± U (mm)", "model U at the point (mm)", "a reading's U (mm)"], rows
+    head = ["point", "AP after ± U (mm)", "RP after −U / +U (mm)", "model U (mm)"]
+    html = '<h2>Uncertainty and decision</h2><div id="uncertainty">' + _table(
+        head + ["a reading's U (mm)"], rows
     )
+    html += "</div>"
     if model and model.get("map"):
         html += (
             '<figure><img alt="U over the working volume" '
             f'src="{figure_uncertainty_map(model["map"])}"></figure>'
         )
-    notes = [unc.get("ap_u", "")]
+    notes = [unc.get("ap_u", ""), unc.get("rp_u", "")]
     if model:
         notes.append(
             f"Model U: the radius holding the arm's position error with "
             f"{100 * model['coverage']:.0f} % probability (k about {np.median(model['k']):.1f}), "
-            "from the parameters' covariance and the error the model leaves unexplained (a joint "
+            "from the parameters' covariance (an extended model's coefficients included) and "
+            "the error the model leaves unexplained (a joint "
             f"scatter of {model['joint_scatter_deg']:.4f} deg RMS); a reading's U adds the "
             "tracker's specification."
         )
     else:
         notes.append("The model keeps no position uncertainty: its U is not stated.")
-    if dec:
-        notes.append("Decision rule: " + dec["rule"] + ".")
+    for d in (dec, rp_dec):
+        if d:
+            notes.append("Decision rule: " + d["rule"] + ".")
     html += "".join(f'<p class="note">{escape(n)}</p>' for n in notes if n)
-    return said, html
+    return said.strip(), html
 
 
 def _rows(rows) -> str:
@@ -171,6 +194,12 @@ def _table(head, rows, cls="") -> str:
     th = "".join(f"<th>{escape(h)}</th>" for h in head)
     tr = f"<tr>{th}</tr>" if head else ""
     return f'<table class="{cls}">{tr}{_rows(rows)}</table>'
+
+
+def _rp_span(run: dict) -> str:
+    """The worst point's RP interval: [RP - U-, RP + U+]."""
+    q = max(run["points"], key=lambda p: p["RP_mm"])
+    return f"{q['RP_mm'] - q['RP_U_below_mm']:.4f} to {q['RP_mm'] + q['RP_U_above_mm']:.4f}"
 
 
 def holdout_rms(report: dict):
@@ -222,6 +251,11 @@ def render(report: dict) -> str:
     summary = [
         ("AP, worst point (mm)", f"{b['AP_max_mm']:.4f}", f"{a['AP_max_mm']:.4f}"),
         ("RP, worst point (mm)", f"{b['RP_max_mm']:.4f}", f"{a['RP_max_mm']:.4f}"),
+        *(
+            [("RP, worst point, 95 % interval (mm)", _rp_span(b), _rp_span(a))]
+            if "RP_U_above_mm" in a["points"][0]
+            else []
+        ),
     ]
     points = [
         (

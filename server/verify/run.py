@@ -25,7 +25,14 @@ from robocal.server.formats.blocks import ModelQuote
 from robocal.server.formats.cell_json import Cell, parse_cell, robot_to_json
 from robocal.server.formats.errors import InputError
 from robocal.server.formats.model_json import ModelFile, read_model
-from robocal.server.verify.uncertainty import AP_U, at_points, decision, mpe_mm
+from robocal.server.verify.uncertainty import (
+    AP_U,
+    RP_RULE,
+    RP_U,
+    at_points,
+    decision,
+    mpe_mm,
+)
 from robocal.solver.compensate import compensate
 from robocal.solver.iso9283 import (
     CUBE_PAIRS,
@@ -216,8 +223,12 @@ def joints_for(model: ModelFile, plan: Plan, what: str) -> np.ndarray:
     return np.rad2deg(res.q)
 
 
-def figures(plan: Plan, attained: np.ndarray) -> dict:
-    """The ISO figures (mm) of one run from the verification SMR's readings (m, 3)."""
+def figures(plan: Plan, attained: np.ndarray, tracker_sigma_mm=0.0) -> dict:
+    """The ISO figures (mm) of one run from the verification SMR's readings (m, 3), each RP
+    with its U below and above (solver.repeatability; the tracker's per-axis random error
+    tracker_sigma_mm at each point)."""
+    from robocal.solver.repeatability import rp_uncertainty
+
     p, n = len(plan.points), int(plan.visit.sum()) // len(plan.points)
     a = np.full((p, n, 3), np.nan)
     dirs = np.zeros(n, dtype=int)
@@ -228,6 +239,7 @@ def figures(plan: Plan, attained: np.ndarray) -> dict:
     if not np.all(np.isfinite(a)):
         raise ValueError("a test point's reading is missing; run the verification again")
     pos = position_figures(a, plan.points)
+    rp_u = rp_uncertainty(a, tracker_sigma_mm)
     out = {
         "points": [
             {
@@ -236,6 +248,8 @@ def figures(plan: Plan, attained: np.ndarray) -> dict:
                 "AP_mm": float(pos.ap[j]),
                 "AP_xyz_mm": pos.ap_xyz[j].tolist(),
                 "RP_mm": float(pos.rp[j]),
+                "RP_U_below_mm": float(rp_u.below[j]),
+                "RP_U_above_mm": float(rp_u.above[j]),
                 "vAP_mm": float(multidirectional_variation(a[j : j + 1], dirs)[0]),
                 "attained_mm": a[j].tolist(),
             }
@@ -391,15 +405,16 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
             attained[k] = meas.xyz[row, 0]
             if meas.time_s is not None:
                 times[k] = meas.time_s[row, 0]
+    cell = parse_cell(info.cell_json, f"<campaign {info.id} cell>")
+    ap_u = mpe_mm(cell, plan.points)
     runs, seconds = {}, {}
     for h, what in enumerate(RUNS):
         part = slice(h * m, (h + 1) * m)
-        runs[what] = figures(plan, attained[part])
+        runs[what] = figures(plan, attained[part], ap_u / 2.0)  # the spec's sigma: MPE / 2
         t = times[part][np.isfinite(times[part])]
         seconds[what] = float(t.max() - t.min()) if len(t) else None
-    cell = parse_cell(info.cell_json, f"<campaign {info.id} cell>")
-    ap = [p["AP_mm"] for p in runs["compensated"]["points"]]
-    ap_u = mpe_mm(cell, plan.points)
+    after = runs["compensated"]["points"]
+    ap = [p["AP_mm"] for p in after]
     for p, u in zip(runs["compensated"]["points"], ap_u):
         p["AP_U_mm"] = float(u)
     late = overdue(cell, info.created_at)
@@ -427,6 +442,16 @@ def verification_report(info: store.CampaignInfo, meas: Measurements, report=Non
             "model": record.get("uncertainty"),
             "ap_u": AP_U,
             "decision": decision(ap, ap_u, tolerance, tracker_overdue=late),
+            "rp_u": RP_U,
+            # the arm's repeatability against its data sheet's (the cell's repeatability_mm)
+            "rp_decision": decision(
+                [p["RP_mm"] for p in after],
+                [p["RP_U_above_mm"] for p in after],
+                cell.repeatability_mm,
+                tracker_overdue=late,
+                below=[p["RP_U_below_mm"] for p in after],
+                rule=RP_RULE,
+            ),
         },
     }
 

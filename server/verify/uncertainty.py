@@ -1,6 +1,7 @@
-"""A verification's uncertainty and its decision: U of the model at each test point, the AP
-figures' own U from the tracker's specification, and pass / fail / not decided against the
-application's tolerance by the guard-banded rule of ISO 14253-1."""
+"""A verification's uncertainty and its decisions: U of the model at each test point, the AP
+figures' own U from the tracker's specification, the RP figures' from their visits and the
+tracker's (solver.repeatability), and pass / fail / not decided against the application's
+tolerance (AP) and the arm's stated repeatability (RP) by the guard-banded rule of ISO 14253-1."""
 
 from __future__ import annotations
 
@@ -13,6 +14,17 @@ from robocal.server.formats.model_json import ModelFile
 RULE = (
     "ISO 14253-1 guard bands: pass only when every point's AP plus its U is within the "
     "tolerance, fail when any point's AP minus its U is beyond it, otherwise not decided"
+)
+RP_RULE = (
+    "ISO 14253-1 guard bands: pass only when every point's RP plus its U above is within the "
+    "arm's stated repeatability, fail when any point's RP minus its U below is beyond it, "
+    "otherwise not decided"
+)
+RP_U = (
+    "U of an RP (95 %): below and above the figure, from the spread of the visits (a parametric "
+    "bootstrap of their 3-D scatter: few visits show RP low, so U above is the larger) and, "
+    "below only, the most the tracker's random error (its spec's sigma, MPE / 2) can have "
+    "widened the spread"
 )
 AP_U = (
     "U of an AP: the tracker's MPE at the point's range (its spec's per-axis sigma = MPE / 2 "
@@ -47,16 +59,25 @@ def at_points(model: ModelFile, cell: Cell, q_deg, points_mm) -> dict | None:
     }
 
 
-def decision(ap_mm, u_mm, tolerance_mm: float | None, tracker_overdue: str | None = None) -> dict:
-    """The verdict on the APs (mm) with their U against the tolerance: `pass`, `fail` or `not
-    decided` (and `no tolerance` without one), with the rule and the figures it used. A tracker
-    past its calibration's due date never passes: its U is not vouched for."""
-    ap, u = np.asarray(ap_mm, dtype=float), np.asarray(u_mm, dtype=float)
+def decision(
+    figure_mm,
+    u_mm,
+    tolerance_mm: float | None,
+    tracker_overdue: str | None = None,
+    below=None,
+    rule: str = RULE,
+) -> dict:
+    """The verdict on figures (mm: the APs, or the RPs) with their U against the tolerance:
+    `pass`, `fail` or `not decided` (and `no tolerance` without one), with the rule and the
+    figures it used; `below`, where U differs below the figure, is that U (default u_mm). A
+    tracker past its calibration's due date never passes: its U is not vouched for."""
+    ap, u = np.asarray(figure_mm, dtype=float), np.asarray(u_mm, dtype=float)
+    lower = ap - (u if below is None else np.asarray(below, dtype=float))
     if tolerance_mm is None:
         verdict = "no tolerance"
     elif np.all(ap + u <= tolerance_mm):
         verdict = "not decided" if tracker_overdue else "pass"
-    elif np.any(ap - u > tolerance_mm):
+    elif np.any(lower > tolerance_mm):
         verdict = "fail"
     else:
         verdict = "not decided"
@@ -64,9 +85,9 @@ def decision(ap_mm, u_mm, tolerance_mm: float | None, tracker_overdue: str | Non
         "verdict": verdict,
         "tracker_overdue": tracker_overdue,
         "tolerance_mm": tolerance_mm,
-        "rule": RULE,
+        "rule": rule,
         "worst_upper_mm": float(np.max(ap + u)),
-        "worst_lower_mm": float(np.max(ap - u)),
+        "worst_lower_mm": float(np.max(lower)),
     }
 
 

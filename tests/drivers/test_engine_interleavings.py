@@ -133,7 +133,9 @@ class Tracker:
 class Predictor:
     names = NAMES
     stage = "nominal"  # never aims ahead: each pose's SMRs are pointed at after the move
-    reach_mm = np.inf
+
+    def reach_mm(self, q):
+        return np.inf
 
     def __init__(self):
         self.history = None

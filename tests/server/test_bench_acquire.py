@@ -8,10 +8,11 @@ import pytest
 from robocal.drivers.campaign_bound import (
     Ringing,
     motion_lower_bound,
+    path_lower_bound,
     settling_lower_bound,
     spanning_tree_weight,
 )
-from robocal.drivers.planning import order_poses, total_move_time
+from robocal.drivers.planning import move_time, order_poses, total_move_time
 from robocal.drivers.tracker.sim import INACCURATE_SPREAD, POINT_S
 from robocal.server.bench.acquire import physical_bound, run_acquire_bench
 
@@ -24,6 +25,20 @@ def test_the_spanning_tree_is_no_longer_than_any_visiting_order():
     best = min(total_move_time(q, list(p), home) for p in permutations(range(6)))
     assert 0 < bound <= best
     assert bound <= total_move_time(q, order_poses(q, home), home)
+
+
+def test_the_held_karp_bound_lies_between_the_spanning_tree_and_the_best_order():
+    rng = np.random.default_rng(1)
+    tighter = 0
+    for _ in range(10):
+        q = rng.uniform(-1.0, 1.0, size=(6, 6))
+        nodes = np.vstack([np.zeros((1, 6)), q])
+        D = move_time(nodes[:, None], nodes[None])
+        best = min(total_move_time(q, list(p), nodes[0]) for p in permutations(range(6)))
+        bound = path_lower_bound(D)
+        assert spanning_tree_weight(D) <= bound <= best + 1e-9
+        tighter += bound > spanning_tree_weight(D) + 1e-6
+    assert tighter >= 5  # most often strictly above the spanning tree
 
 
 def test_spanning_tree_weight_of_a_small_graph():

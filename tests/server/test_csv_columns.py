@@ -186,3 +186,67 @@ def test_plain_decimals_from_bytes_equal_float_to_the_bit():
     for refused in ("1e3", "1.2.3", "-", ".", "1 2", "--1", "1234567890123456"):
         w = np.array([list(refused.encode())], dtype=np.uint8).T
         assert _parse_decimals(w.copy(), np.array([len(refused)])) is None, refused
+
+
+def test_decimals_by_words_equal_float_to_the_bit():
+    """The eight-bytes-at-a-time parser (points lined up in each column) against float(), and
+    its refusals (Horner's rule or the row reader then decides)."""
+    from robocal.server.formats.campaign_columns import _words
+
+    rng = np.random.default_rng(1)
+    columns = [
+        [f"{v:.9f}" for v in rng.uniform(-400, 400, 300)] + ["-0.000000000", "+7.000000001"],
+        [f"{v:.6f}" for v in rng.uniform(-3000, 3000, 300)] + ["-.000001", "12345678.999999"],
+        [str(v) for v in rng.integers(-(10**14), 10**15, 300)] + ["0", "-0", "+5", "007"],
+        [f"{v:.0f}." for v in rng.uniform(0, 1e6, 300)] + ["5.", "-0."],
+        [f"{v:.2f}" for v in rng.uniform(-9, 9, 300)] + ["", "1.00"],  # a blank is NaN
+    ]
+
+    def parse(column, point):
+        text = "h" * 16 + "\n" + "".join(f"{t}\n" for t in column) + " " * 24
+        raw = np.frombuffer(text.encode(), dtype=np.uint8)
+        words = np.ndarray((len(raw) - 7,), dtype="<u8", buffer=raw, strides=(1,))
+        ends = np.flatnonzero(raw == ord("\n"))
+        return _words(words, ends[:-1, None] + 1, ends[1:, None], np.array([point]))
+
+    for column in columns:
+        given = next(t for t in column if t)
+        got = parse(column, len(given) - given.find(".") if "." in given else -1)
+        want = np.array([float(t) if t else np.nan for t in column])
+        assert got is not None and got.ravel().tobytes() == want.tobytes()  # -0.0 and NaN too
+    for refused in (
+        ["1.5", "12.25"],
+        ["1.5", "15"],
+        ["1e3"],
+        ["-"],
+        ["."],
+        ["1 2"],
+        ["--1"],
+        ["1234567890123456"],
+        ["1.2.3"],
+        ["12345678901234567"],
+        ["+-1"],
+        ["1-"],
+    ):
+        point = len(refused[0]) - refused[0].find(".") if "." in refused[0] else -1
+        assert parse(refused, point) is None, refused
+
+
+def test_a_pose_whose_rows_spell_its_joints_differently(folder):
+    """A pose's later rows that repeat its joints in other digits (so not byte for byte) are
+    read value by value: within the tolerance the same campaign, beyond it refused by both."""
+    from robocal.drivers.cell import VirtualCell
+    from tests.robots import TARGETS
+
+    cell = VirtualCell.random(IRB2600, TARGETS, seed=4)
+    path = folder / "sim.csv"
+    write_campaign(path, cell.campaign(20, seed=5))
+    lines = path.read_text().splitlines(keepends=True)
+    row = lines[2].split(",")  # the first pose's second row
+    assert lines[1].split(",")[0] == row[0]
+    for q1, verdict in (
+        (f"{float(row[1]):.4f}", "accepted"),
+        (f"{float(row[1]) + 1:.9f}", "refused"),
+    ):
+        changed = [*lines[:2], ",".join([row[0], q1, *row[2:]]), *lines[3:]]
+        assert agree(write(folder, "".join(changed))) == verdict

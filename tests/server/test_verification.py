@@ -87,6 +87,8 @@ def test_acquire_verify_writes_the_figures_and_refuses_bad_points(verified, tmp_
     out = json.loads((tmp_path / "v.json").read_text())
     assert out["cycles"] == 2 and len(out["after"]["points"][0]["attained_mm"]) == 4
     assert out["model"]["sha256"] and "AP after" in r.stdout
+    assert "AP: no pass or fail (the cell gives no tolerance_mm)" in r.stdout, r.stdout
+    assert "RP: no pass or fail (the cell gives no repeatability_mm)" in r.stdout
     html = (tmp_path / "c.html").read_text()
     assert out["model"]["sha256"] in html and f"{out['after']['AP_max_mm']:.4f}" in html
 

@@ -1,6 +1,9 @@
 """A calibrated model's verification states its uncertainty: U of the model at each test point
 and over the working volume (from model.json's position block), each AP with the tracker's U,
-and the decision against the tolerance by the guard-banded rule (pass, fail, not decided)."""
+each RP with its U below and above (its visits and the tracker's noise), and the decisions
+against the tolerance and the arm's stated repeatability by the guard-banded rule (pass, fail,
+not decided). The simulated arm, over the devices' sockets, scatters by the cell's
+repeatability_mm, so that RP is the arm's and not the tracker's alone."""
 
 from __future__ import annotations
 
@@ -20,10 +23,15 @@ from robocal.server.verify.uncertainty import decision
 SEED = 8
 
 
-def calibrated_and_verified(d, tolerance_mm: float | None = 0.5) -> tuple[dict, dict]:
+def calibrated_and_verified(
+    d, tolerance_mm: float | None = 0.5, repeatability_mm: float | None = None
+) -> tuple[dict, dict]:
     """(verification report, model.json's position block) of a simulated cell calibrated by
-    ls-sum on 60 poses (the arm's scatter included), verified with the cell's tolerance."""
-    cell = dataclasses.replace(default_cell(), tolerance_mm=tolerance_mm)
+    ls-sum on 60 poses, verified with the cell's tolerance (and the arm's repeatability, by
+    which it scatters)."""
+    cell = dataclasses.replace(
+        default_cell(), tolerance_mm=tolerance_mm, repeatability_mm=repeatability_mm
+    )
     db_path = d / "cell.db"
     s = acquire(db_path, cell, AcquireOptions(poses=60, seed=SEED, name="cal"))
     meas = store.campaign_measurements(
@@ -38,6 +46,59 @@ def calibrated_and_verified(d, tolerance_mm: float | None = 0.5) -> tuple[dict, 
 @pytest.fixture(scope="module")
 def verified(tmp_path_factory):
     return calibrated_and_verified(tmp_path_factory.mktemp("verification-uncertainty"))
+
+
+@pytest.fixture(scope="module")
+def scattering(tmp_path_factory):
+    """The same cell whose arm's data sheet states an RP of 0.04 mm."""
+    return calibrated_and_verified(tmp_path_factory.mktemp("scattering"), repeatability_mm=0.04)[0]
+
+
+def rp_table(report) -> np.ndarray:
+    """(p, 3): each compensated point's RP, U below and U above (mm)."""
+    keys = ("RP_mm", "RP_U_below_mm", "RP_U_above_mm")
+    return np.array([[p[k] for k in keys] for p in report["after"]["points"]])
+
+
+def test_a_still_arms_rp_is_the_trackers_noise_and_its_u_says_so(verified):
+    report, _ = verified
+    rp, below, above = rp_table(report).T
+    assert np.all(above > 0) and np.all(below >= 0)
+    # no arm scatter: the tracker's noise (sigma MPE / 2) accounts for the whole spread
+    assert np.allclose(rp - below, 0.0), (rp, below)
+    assert report["uncertainty"]["rp_decision"]["verdict"] == "no tolerance"
+
+
+def test_the_simulated_arm_scatters_by_its_stated_repeatability(verified, scattering):
+    still, moving = rp_table(verified[0]), rp_table(scattering)
+    print(f"\nRP after (mm), still arm {np.round(still[:, 0], 4)}, RP 0.04 arm "
+          f"{np.round(moving[:, 0], 4)} (-U {np.round(moving[:, 1], 4)}, +U "
+          f"{np.round(moving[:, 2], 4)})")  # fmt: skip
+    assert moving[:, 0].mean() > 1.3 * still[:, 0].mean()
+    # beyond what the tracker's noise explains at some point: the arm's own scatter is seen
+    assert np.any(moving[:, 0] - moving[:, 1] > 0.0)
+    # its true RP (0.04) within [RP - U-, RP + U+] at most points
+    assert (
+        np.mean((moving[:, 0] - moving[:, 1] <= 0.04) & (0.04 <= moving[:, 0] + moving[:, 2]))
+        >= 0.8
+    )
+    dec = scattering["uncertainty"]["rp_decision"]
+    assert dec["tolerance_mm"] == 0.04 and dec["verdict"] in ("not decided", "pass", "fail")
+    assert dec["verdict"] == decision(*moving[:, [0, 2]].T, 0.04, below=moving[:, 1])["verdict"]
+
+
+def test_the_rp_decision_guards_each_side_by_its_own_u(scattering):
+    rp, below, above = rp_table(scattering).T
+    worst = int(np.argmax(rp + above))
+    assert (
+        decision(rp, above, float(rp[worst] + above[worst]) * 1.001, below=below)["verdict"]
+        == "pass"
+    )
+    low = int(np.argmax(rp - below))
+    beyond = float(rp[low] - below[low]) * 0.999
+    assert decision(rp, above, beyond, below=below)["verdict"] == "fail"
+    # between the two sides: not decided
+    assert decision(rp, above, float(np.max(rp)), below=below)["verdict"] == "not decided"
 
 
 def test_model_json_keeps_the_position_uncertainty(verified):

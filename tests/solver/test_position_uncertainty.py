@@ -1,7 +1,8 @@
 """The expanded uncertainty U of a calibrated model's positions holds what it states: over 204
 simulated calibrations (three arms; clean, with the arm's scatter, with effects the model does
-not have) 95 % +- 3 % of independent positions' true errors lie within U; with the covariance
-too small the same check fails, so it can."""
+not have) 95 % +- 3 % of independent positions' true errors lie within U; so too over 204
+extended models (tests/solver/extended_coverage.py); with the covariance too small the same
+check fails, so it can."""
 
 from __future__ import annotations
 
@@ -16,15 +17,11 @@ from robocal.solver.calibrate import calibrate
 from robocal.solver.fit_errors import angles, calibration_rows, point_errors
 from robocal.solver.kinematics import predict
 from robocal.solver.problem import Problem
-from robocal.solver.robot import IRB2600
 from robocal.solver.uncertainty import errors_from_rows
-from tests.robots import PUMA_LIKE, UR5
+from tests.solver import extended_coverage
+from tests.solver.coverage_suite import ARMS, SEEDS, TARGETS, TEST_POSES, coverage
 
-TARGETS = {"A": [60.0, 0.0, 40.0], "B": [-30.0, 52.0, 40.0], "C": [-30.0, -52.0, 40.0]}
-ARMS = {"irb2600": IRB2600, "ur5": UR5, "puma": PUMA_LIKE}
 EFFECTS = ("joint_compliance:2=0.3", "joint_periodic:3=0.01", "joint_compliance:3=0.3")
-SEEDS = 68  # x 3 arms: 204 calibrations
-TEST_POSES = 20
 
 
 def _case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -51,26 +48,24 @@ def _case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray,
     return err, pu.position_uncertainty(at, s * np.sqrt(shrink)).expanded_mm
 
 
-def _coverage(shrink: float = 1.0) -> tuple[float, dict]:
-    within, by_kind = [], {}
-    for robot in ARMS.values():
-        for seed in range(SEEDS):
-            kind = ("clean", "scatter", "effect")[seed % 3]
-            err, U = _case(robot, seed, kind, shrink)
-            within.append(err <= U)
-            by_kind.setdefault(kind, []).append(float(np.mean(err <= U)))
-    return float(np.mean(within)), {k: round(float(np.mean(v)), 3) for k, v in by_kind.items()}
+# per suite: one calibration's (true error, U) at its test positions, and the kinds in turn
+SUITES = {
+    "geometric": (_case, ("clean", "scatter", "effect")),
+    "extended": (extended_coverage.case, extended_coverage.KINDS),
+}
 
 
-def test_stated_uncertainty_covers_95_percent_of_true_errors():
-    covered, by_kind = _coverage()
-    print(f"\ncoverage {covered:.3f} over {len(ARMS) * SEEDS} calibrations; by kind {by_kind}")
+@pytest.mark.parametrize("suite", SUITES)
+def test_stated_uncertainty_covers_95_percent_of_true_errors(suite):
+    covered, by_kind = coverage(*SUITES[suite])
+    print(f"\n{suite}: coverage {covered:.3f} over {len(ARMS) * SEEDS} calibrations; {by_kind}")
     assert 0.92 <= covered <= 0.98, (covered, by_kind)
 
 
-def test_a_covariance_too_small_fails_the_same_check():
-    covered, _ = _coverage(shrink=0.3)
-    print(f"\ncoverage with the covariance x0.3: {covered:.3f}")
+@pytest.mark.parametrize("suite", SUITES)
+def test_a_covariance_too_small_fails_the_same_check(suite):
+    covered, _ = coverage(*SUITES[suite], shrink=0.3)
+    print(f"\n{suite}: coverage with the covariance x0.3: {covered:.3f}")
     assert covered < 0.92
 
 
