@@ -38,7 +38,8 @@ function planBody() {
 }
 
 /** An adaptive campaign's latest step (a campaign.adaptive event, or the last of its settings'
- * adaptive_steps) beside its target: the predicted held-out RMS, live; why it stopped. */
+ * adaptive_steps) beside its target: the predicted held-out RMS, live; the effects its fit
+ * includes (named by a checkpoint's diagnosis); why it stopped. */
 function showAdaptive(step, target) {
   const el = $("p-adaptive");
   el.hidden = !step && !target;
@@ -49,6 +50,7 @@ function showAdaptive(step, target) {
   }
   el.textContent = `predicted held-out RMS ${step.predicted_mm.toFixed(4)} mm at ${step.poses} `
     + `poses (target ${target} mm, floor ${step.floor_mm.toFixed(4)} mm)`
+    + (step.effects && step.effects.length ? `, fitted with ${step.effects.join(", ")}` : "")
     + (step.stop ? ` — stopped (${step.reason}): ${step.message}` : "");
 }
 

@@ -15,6 +15,7 @@ from collections.abc import Callable
 import numpy as np
 
 from robocal.server import store
+from robocal.server.acquisition.adaptive_effects import from_steps
 from robocal.server.acquisition.adaptive_plan import (
     AdaptiveOptions,
     AdaptivePlanner,
@@ -86,6 +87,8 @@ class AdaptiveRun:
         near = np.abs(self.planned[:, None, :] - cand[None]).max(axis=-1) < 1e-6
         self.planner.taken = [int(np.argmax(row)) for row in near if row.any()]
         self.steps: list[dict] = list(steps)
+        if self.steps:  # a resumed run fits the effects its last step included
+            self.planner.effects = from_steps(self.steps[-1].get("extensions") or ())
         self.last: Step | None = None
 
     def plan(self, start: int, partial=None, order=None):

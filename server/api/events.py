@@ -55,11 +55,20 @@ class CampaignAdaptiveEvent(BaseModel):
     parameters_mm: float = Field(description="the parameters' part of it")
     holdout_mm: float | None = Field(description="the fit's own leave-one-pose-out RMS")
     expected_holdout_mm: float = Field(description="what the noise alone would give that")
-    kappa: float = Field(description="the data's check on the prediction (>= 1)")
+    kappa: float = Field(description="the data's check on the prediction's parameters' part (>= 1)")
     stop: bool
     reason: str = Field(description="target, floor or maximum when it stops, else empty")
     message: str
     campaign_s: float | None = Field(description="the campaign clock at the step")
+    effects: list[str] = Field(
+        default_factory=list, description="the effects the step's fit included (their labels)"
+    )
+    named: list[str] | None = Field(
+        None, description="what the step's diagnosis named (null: no diagnosis at this step)"
+    )
+    extensions: list[dict] = Field(
+        default_factory=list, description="the included effects, fitted, as model.json has them"
+    )
     time: dt.datetime
 
 

@@ -86,10 +86,17 @@ def physical_bound(
     }
 
 
-def run_acquire_bench(seed: int = 0, holdout: int = 50, configs=None, suite_seeds: int = 0) -> dict:
+def run_acquire_bench(
+    seed: int = 0,
+    holdout: int = 50,
+    configs=None,
+    suite_seeds: int = 0,
+    suite_effects=(),
+    first_seed: int = 0,
+) -> dict:
     """Each configuration on the same virtual cell; accuracy from minimax on held-out poses.
     suite_seeds > 0 adds the adaptive campaign's suite (bench/adaptive.py) over that many seeds
-    of each arm."""
+    of each arm from first_seed, its arms with the hidden effects suite_effects."""
     from robocal.drivers.cell import TrackerSpec, VirtualCell
     from robocal.drivers.tracker.sim import SAMPLE_RATE_HZ
     from robocal.server.acquisition.acquire import AcquireOptions, acquire
@@ -190,7 +197,9 @@ def run_acquire_bench(seed: int = 0, holdout: int = 50, configs=None, suite_seed
     if suite_seeds:
         from .adaptive import run_adaptive_suite
 
-        suite = run_adaptive_suite(seeds=suite_seeds)
+        suite = run_adaptive_suite(
+            seeds=suite_seeds, effects=tuple(suite_effects), first_seed=first_seed
+        )
     return {
         "benchmark": "acquire",
         "adaptive_suite": suite,

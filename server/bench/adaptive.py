@@ -42,16 +42,14 @@ def arm_cell(arm: str, seed: int):
     return Cell(robot, ds.smr_ring(rng))
 
 
-def _heldout(db, cell, campaign: int, q_hold, meas_hold) -> float:
-    """Held-out 3-D RMS (mm) of the campaign's ls-sum fit on the independent poses."""
+def _heldout(db, cell, campaign: int, q_hold, meas_hold, exts=()) -> float:
+    """Held-out 3-D RMS (mm) on the independent poses of the campaign's ls-sum fit, with the
+    effects exts (the adaptive campaign's named ones) fitted beside the geometry."""
     from robocal.server import store
-    from robocal.server.acquisition.adaptive_plan import METHOD
-    from robocal.server.calibration import workflow
-    from robocal.solver.kinematics import predict
+    from robocal.server.acquisition.adaptive_effects import fit_campaign
 
     meas = store.campaign_measurements(db, campaign_id=campaign, targets=sorted(cell.targets))
-    cal = workflow.run_method(cell, meas, METHOD, screening=False)
-    err = predict(cal.layout, cal.x, q_hold) - meas_hold
+    err = fit_campaign(cell, meas, exts).predict(q_hold) - meas_hold
     return float(np.sqrt(np.nanmean(np.sum(err**2, axis=-1))))
 
 
@@ -62,6 +60,7 @@ def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
     from robocal.drivers.cell import TrackerSpec, VirtualCell
     from robocal.drivers.effects import make_effects
     from robocal.server.acquisition.acquire import AcquireOptions, acquire
+    from robocal.server.acquisition.adaptive_effects import from_steps
 
     from .. import store
 
@@ -84,13 +83,17 @@ def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
     out["effects"] = list(effects)
     with tempfile.TemporaryDirectory() as tmp, store.open_database(Path(tmp) / "b.db") as db:
 
-        def run(name: str, **kw) -> dict:
+        def run(name: str, exts=(), **kw) -> dict:
             s = acquire(db, cell, AcquireOptions(name=name, **common, **kw))
+            a = s["adaptive"]
+            if a is not None and a["steps"]:  # the model the adaptive campaign ends with
+                exts = from_steps(a["steps"][-1].get("extensions") or ())
             return {
                 "poses": s["poses"],
                 "campaign_s": s["campaign_s"],
-                "heldout_mm": _heldout(db, cell, s["campaign"], q_hold, meas_hold),
-                "adaptive": s["adaptive"],
+                "heldout_mm": _heldout(db, cell, s["campaign"], q_hold, meas_hold, exts),
+                "adaptive": a,
+                "extensions": exts,
             }
 
         fixed = run("fixed", poses=FIXED_POSES)
@@ -98,7 +101,9 @@ def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
         for f in factors:
             target = f * floor
             a = run(f"adaptive-x{f:g}", poses=FIXED_POSES, target_accuracy_mm=target)
-            r = run(f"random-x{f:g}", poses=a["poses"])
+            # as many random poses, fitted with the same effects
+            r = run(f"random-x{f:g}", a["extensions"], poses=a["poses"])
+            steps = a["adaptive"]["steps"]
             predicted = a["adaptive"]["predicted_mm"]
             out["targets"][f"{f:g}"] = {
                 "target_mm": target,
@@ -111,10 +116,12 @@ def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
                 "prediction_error": predicted / a["heldout_mm"] - 1.0,
                 "random_heldout_mm": r["heldout_mm"],
                 "random_campaign_s": r["campaign_s"],
-                "steps": [
-                    (s["poses"], round(s["predicted_mm"], 5)) for s in a["adaptive"]["steps"]
-                ],
-                "last_step": a["adaptive"]["steps"][-1],
+                "steps": [(s["poses"], round(s["predicted_mm"], 5)) for s in steps],
+                "last_step": steps[-1],
+                "effects": list(steps[-1].get("effects") or ()),
+                # every effect a checkpoint's diagnosis named (on a clean cell: false alarms)
+                "named": sorted({n for s in steps for n in (s.get("named") or ())}),
+                "diagnoses": sum(s.get("named") is not None for s in steps),
             }
             print(
                 f"[bench] {arm} seed {seed} x{f:g}: {a['poses']} poses, {a['campaign_s'] / 60:.1f} "
@@ -163,6 +170,10 @@ def summarize(runs: list[dict], factors=FACTORS) -> dict:
             "no_worse_than_random_share": float(np.mean(ratio <= 1.0)),
             "prediction_error_mean": float(err.mean()),
             "prediction_within_share": float(np.mean(err <= PREDICTION_TOL)),
+            # checkpoints' diagnoses: runs that ran one, that named an effect, that fitted one
+            "diagnosed_runs": int(sum(x.get("diagnoses", 0) > 0 for x in t)),
+            "named_runs": int(sum(bool(x.get("named")) for x in t)),
+            "effects_runs": int(sum(bool(x.get("effects")) for x in t)),
         }
         v = out[key]
         v["met"] = bool(
@@ -175,13 +186,17 @@ def summarize(runs: list[dict], factors=FACTORS) -> dict:
     return out
 
 
-def run_adaptive_suite(seeds: int = 20, arms=ARMS, factors=FACTORS, effects=()) -> dict:
-    """Every arm x seed; the runs and their summary per target."""
-    runs = [run_arm(arm, s, factors, effects) for s in range(seeds) for arm in arms]
+def run_adaptive_suite(
+    seeds: int = 20, arms=ARMS, factors=FACTORS, effects=(), first_seed: int = 0
+) -> dict:
+    """Every arm x seed (first_seed on); the runs and their summary per target."""
+    chosen = range(first_seed, first_seed + seeds)
+    runs = [run_arm(arm, s, factors, effects) for s in chosen for arm in arms]
     return {
         "effects": list(effects),
         "arms": list(arms),
         "seeds": seeds,
+        "first_seed": first_seed,
         "fixed_poses": FIXED_POSES,
         "holdout_poses": HOLDOUT,
         "fit": "ls-sum",

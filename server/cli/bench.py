@@ -8,6 +8,27 @@ from pathlib import Path
 from .common import _nonnegative_int, _positive_int
 
 
+def _effect_spec(text: str) -> str:
+    """A hidden effect's spec as `simulate --effect` takes it, checked on the default cell's arm."""
+    import argparse
+
+    import numpy as np
+
+    from robocal.drivers.cell import VirtualCell
+    from robocal.drivers.effects import make_effect
+
+    from ..formats.cell_json import default_cell
+
+    cell = default_cell()
+    try:
+        make_effect(
+            text, VirtualCell.random(cell.robot, cell.targets, seed=0), np.random.default_rng(0)
+        )
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    return text
+
+
 def _real_campaigns() -> list[Path]:
     """The real campaigns beside a checkout (../shared/data/real), when they are there."""
     real = Path(__file__).resolve().parents[3] / "shared" / "data" / "real"
@@ -54,7 +75,11 @@ def cmd_bench(args) -> None:
     elif args.what == "acquire":
         from ..bench.acquire import run_acquire_bench
 
-        result = run_acquire_bench(suite_seeds=args.seeds)
+        result = run_acquire_bench(
+            suite_seeds=args.seeds,
+            suite_effects=tuple(args.suite_effect or ()),
+            first_seed=args.first_seed,
+        )
     elif args.what == "recording":
         from ..bench.recording import run_recording_bench
 
@@ -114,6 +139,20 @@ def add(sub) -> None:
         default=20,
         help="acquire: seeds of each arm in the adaptive campaign's suite (default 20, 0: none); "
         "uncertainty: seeds of each arm (default 20)",
+    )
+    b.add_argument(
+        "--first-seed",
+        type=_nonnegative_int,
+        default=0,
+        help="acquire: the suite's first seed (default 0; others check on seeds not used before)",
+    )
+    b.add_argument(
+        "--suite-effect",
+        action="append",
+        type=_effect_spec,
+        metavar="SPEC",
+        help="acquire: a hidden effect of the suite's arms, as `simulate --effect` takes it "
+        "(repeatable), e.g. joint_periodic:2=0.002",
     )
     b.add_argument(
         "--repeats",

@@ -124,3 +124,13 @@ def test_the_adaptive_procedure_sits_beside_the_fixed_ones_with_its_target():
     assert a["campaign_min"] == pytest.approx(a["campaign_s"] / 60.0)
     assert out["fastest"] == "fixed" and "adaptive" not in runs["fixed"]
     assert out["adaptive_suite"] is None
+
+
+def test_a_bad_hidden_effect_of_the_suite_is_refused_before_anything_runs(tmp_path):
+    from tests import cli_process
+
+    r = cli_process.run(
+        "bench", "acquire", "--suite-effect", "joint_perodic:2=0.002", cwd=tmp_path, timeout=60
+    )
+    assert r.returncode == 2 and "--suite-effect" in r.stderr and "joint_periodic" in r.stderr
+    assert "Traceback" not in r.stderr
