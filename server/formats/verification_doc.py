@@ -127,6 +127,12 @@ class VerificationUncertainty(Ordered):
     model: ModelU | None = Field(
         None, description="the model's U at the test points; null for a model without it"
     )
+    # written since U at the visits' time and temperature: absent from older files
+    model_note: str | None = Field(
+        None,
+        description="where the model's extensions need a pose's time or temperature: at which "
+        "inputs its U was taken, or why it is not given",
+    )
     ap_u: str = Field("", description="how each AP's U is stated")
     decision: Decision | None = Field(
         None,
