@@ -124,14 +124,14 @@ def model_uncertainty(
 
 
 def missing_inputs(model: ModelFile, time_s=None, temp_c=None) -> list[str]:
-    """The model's extensions (label and column, "thermal_drift (temp_c)") whose prediction needs
+    """The model's extensions (label and column, "thermal_drift on temp_c") whose prediction needs
     a pose's time or temperature that is not given, or not at every reading."""
     given = {"time_s": time_s, "temp_c": temp_c}
     out = []
     for e in model.extensions:
         need = e.kind.needs(e)
         if need and (given[need] is None or not np.all(np.isfinite(given[need]))):
-            out.append(f"{e.label()} ({need})")
+            out.append(f"{e.label()} on {need}")
     return out
 
 

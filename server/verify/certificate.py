@@ -191,7 +191,10 @@ def uncertainty_section(report: VerificationDoc) -> tuple[str, str]:
     for d in (dec, rp_dec):
         if d is not None:
             notes.append("Decision rule: " + d.rule + ".")
-    html += "".join(f'<p class="note">{escape(n)}</p>' for n in notes if n)
+    # each note a sentence: the methods' texts are stated without their full stop
+    html += "".join(
+        f'<p class="note">{escape(n if n.endswith(".") else n + ".")}</p>' for n in notes if n
+    )
     return said.strip(), html
 
 

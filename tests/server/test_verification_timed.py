@@ -70,7 +70,7 @@ def compensated_visits(db, report: VerificationDoc):
 def test_u_is_taken_at_each_visits_temperature(timed):
     report, model, db = timed
     unc = report.uncertainty
-    assert unc.model is not None and "thermal_drift (temp_c)" in unc.model_note
+    assert unc.model is not None and "thermal_drift on temp_c" in unc.model_note
     u = np.array(unc.model.model_U_mm)
     q, temp, point = compensated_visits(db, report)
     assert np.all(np.isfinite(temp)) and np.all(np.abs(temp - T_REF_C) > 10.0), temp
@@ -97,7 +97,7 @@ def test_without_the_visits_temperature_the_certificate_says_why(timed):
     assert blind.uncertainty.model is None
     html = entities.unescape(render(blind))
     said = (
-        "Model U is not given: the model's time or temperature terms (thermal_drift (temp_c)) "
+        "Model U is not given: the model's time or temperature terms (thermal_drift on temp_c) "
         "need each visit's time or temperature, which this run's readings do not carry."
     )
     assert said in html and "keeps no position uncertainty" not in html
