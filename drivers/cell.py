@@ -58,6 +58,12 @@ class TrackerSpec:
     mpe_um: float = 10.0
     mpe_um_per_m: float = 2.5
 
+    @classmethod
+    def of(cls, tracker: dict) -> TrackerSpec:
+        """The spec of a cell's tracker block, whose traceability keys (serial, its calibration
+        certificate, SMR ids) say nothing of its accuracy."""
+        return cls(**{k: float(tracker[k]) for k in ("mpe_um", "mpe_um_per_m") if k in tracker})
+
     def sigma_mm(self, distance_mm):
         """Per-axis standard deviation (mm) of a reading at that range: MPE / 2."""
         return 0.5e-3 * (self.mpe_um + self.mpe_um_per_m * np.asarray(distance_mm) / 1000.0)

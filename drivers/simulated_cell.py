@@ -30,7 +30,7 @@ class SimulatedCell:
         noise_seed=None,
         repeatability_mm: float | None = None,
     ):
-        self.cell = VirtualCell.random(robot, targets, seed=seed, tracker=TrackerSpec(**tracker))
+        self.cell = VirtualCell.random(robot, targets, seed=seed, tracker=TrackerSpec.of(tracker))
         self.cell.effects.extend(make_effects(list(effects), self.cell, seed))
         noise = seed if noise_seed is None else noise_seed
         self.world = SimulatedWorld(

@@ -647,7 +647,7 @@ async function showVerification(id) {
     ]);
     table.createCaption().textContent = `${r.robot}, model ${r.model.path}: ${r.cycles} cycles`
       + ` x ${r.directions} approach directions, ${r.date}`;
-    $("v-table").replaceChildren(table);
+    $("v-table").replaceChildren(table, ...verificationUncertainty(r));
     $("v-certificate").dataset.campaign = id;
     $("v-report").hidden = false;
     $("v-state").textContent = `verification campaign ${id}: done`;

@@ -125,7 +125,7 @@ def base_guess(cell: Cell, seed: int, sim: SimulatedCell | None = None) -> np.nd
     from robocal.drivers.cell import TrackerSpec, VirtualCell
 
     true = VirtualCell.random(
-        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(**cell.tracker)
+        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec.of(cell.tracker)
     )
     return surveyed_base(true.base, seed)
 

@@ -107,7 +107,7 @@ def run_acquire_bench(
     configs = CONFIGS if configs is None else configs
     cell = default_cell()
     truth = VirtualCell.random(
-        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(**cell.tracker)
+        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec.of(cell.tracker)
     )
     rng = np.random.default_rng([seed, 99])
     q_hold = truth.sample_poses(holdout, rng)

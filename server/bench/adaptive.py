@@ -70,7 +70,7 @@ def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
         cell.robot,
         {n: cell.targets[n] for n in names},
         seed=seed,
-        tracker=TrackerSpec(**cell.tracker),
+        tracker=TrackerSpec.of(cell.tracker),
     )
     # the arm the simulated devices move (drivers/simulated_cell.py builds it so)
     truth.effects.extend(make_effects(list(effects), truth, seed))

@@ -100,7 +100,7 @@ class Case:
 def virtual_cell(robot: Robot, targets: dict, cell_seed: int, specs) -> VirtualCell:
     """The virtual cell of a case with its hidden effects, as `robocal simulate` builds it."""
     vc = VirtualCell.random(
-        robot, targets, seed=cell_seed, tracker=TrackerSpec(**Cell(robot, targets).tracker)
+        robot, targets, seed=cell_seed, tracker=TrackerSpec.of(Cell(robot, targets).tracker)
     )
     vc.effects.extend(make_effects(specs, vc, cell_seed))
     return vc

@@ -59,7 +59,7 @@ def _campaign(cell, m: int, seed: int):
     from robocal.drivers.cell import TrackerSpec, VirtualCell
 
     vc = VirtualCell.random(
-        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(**cell.tracker)
+        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec.of(cell.tracker)
     )
     return vc.campaign(m, seed=seed)
 

@@ -35,7 +35,7 @@ def simulated(seed: int, poses: int, effects: list[str], method: str) -> dict:
 
     cell = workflow.load_cell(None)
     vc = VirtualCell.random(
-        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec(**cell.tracker)
+        cell.robot, cell.targets, seed=seed, tracker=TrackerSpec.of(cell.tracker)
     )
     vc.effects.extend(make_effects(effects, vc, seed))
     meas = vc.campaign(poses, seed=seed)

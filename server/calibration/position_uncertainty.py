@@ -94,14 +94,17 @@ def model_spread(model: ModelFile, inputs: Inputs, cov, column) -> pu.Spread:
     return pu.extended_spread_at(lay, x, model.extensions, bases, inputs, cov, column)
 
 
-def model_uncertainty(model: ModelFile, q_rad, instrument_mm=0.0) -> pu.PositionUncertainty | None:
-    """U of the model's SMR positions (m, K) at joints q (m, n) rad, a reading's own error
-    (3-D RMS, mm) on top; None for a model without a position block (written before it), or
-    with an extension that needs a pose's time or temperature, which joints alone do not give."""
+def model_uncertainty(
+    model: ModelFile, q_rad, instrument_mm=0.0, time_s=None, temp_c=None
+) -> pu.PositionUncertainty | None:
+    """U of the model's SMR positions (m, K) at joints q (m, n) rad and, where its extensions
+    need them, each reading's time_s and temp_c (m, K); a reading's own error (3-D RMS, mm) on
+    top. None for a model without a position block (written before it), or with an extension
+    whose time or temperature is not given (missing_inputs says which)."""
     from robocal.solver.fit_errors import coef_names
 
     block = model.uncertainty.position if model.uncertainty else None
-    if not block or any(e.kind.needs(e) for e in model.extensions):
+    if not block or missing_inputs(model, time_s, temp_c):
         return None
     lay, _ = model.layout()
     names = list(lay.names()) + coef_names(model.extensions)
@@ -115,9 +118,21 @@ def model_uncertainty(model: ModelFile, q_rad, instrument_mm=0.0) -> pu.Position
         degrees[i] = angle[names.index(n)]
     scale = np.where(degrees, np.radians(1.0), 1.0)
     cov = np.asarray(block["covariance"], dtype=float) * np.outer(scale, scale)
-    at = model_spread(model, Inputs(np.atleast_2d(q_rad)), cov, column)
+    at = model_spread(model, Inputs(np.atleast_2d(q_rad), time_s, temp_c), cov, column)
     scatter = np.radians(float(block["joint_scatter_deg"]))
     return pu.position_uncertainty(at, scatter, instrument_mm, float(block["coverage"]))
+
+
+def missing_inputs(model: ModelFile, time_s=None, temp_c=None) -> list[str]:
+    """The model's extensions (label and column, "thermal_drift on temp_c") whose prediction needs
+    a pose's time or temperature that is not given, or not at every reading."""
+    given = {"time_s": time_s, "temp_c": temp_c}
+    out = []
+    for e in model.extensions:
+        need = e.kind.needs(e)
+        if need and (given[need] is None or not np.all(np.isfinite(given[need]))):
+            out.append(f"{e.label()} on {need}")
+    return out
 
 
 def _angles(layout):

@@ -16,6 +16,10 @@ def cmd_schema(args) -> None:
 
 def add(sub) -> None:
     """The command's parser, on the command line's subparsers."""
-    sc = sub.add_parser("schema", help="the JSON Schema of cell.json, model.json or report.json")
-    sc.add_argument("file", choices=("cell", "model", "report"), help="which file's schema")
+    sc = sub.add_parser(
+        "schema", help="the JSON Schema of cell.json, model.json, report.json or verification.json"
+    )
+    sc.add_argument(
+        "file", choices=("cell", "model", "report", "verification"), help="which file's schema"
+    )
     sc.set_defaults(func=cmd_schema)

@@ -25,7 +25,7 @@ def cmd_simulate(args) -> None:
 
     cell = workflow.load_cell(args.cell)
     vc = VirtualCell.random(
-        cell.robot, cell.targets, seed=args.seed, tracker=TrackerSpec(**cell.tracker)
+        cell.robot, cell.targets, seed=args.seed, tracker=TrackerSpec.of(cell.tracker)
     )
     vc.effects.extend(make_effects(args.effect, vc, args.seed))  # bad specs fail before any output
     meas = vc.campaign(

@@ -95,6 +95,9 @@ JSON_FILES = {
     "cell": "the cell: robot, nominal SMRs, tracker, and optionally its devices",
     "model": "a calibrated model (calibrate, diagnose --model-out)",
     "report": "a diagnosis (diagnose); effect N is `effects[N-1]`, its figure REPORT_N_*.png",
+    "verification": "an ISO 9283 verification run before and after compensation (acquire "
+    "--verify; the API's GET /api/campaigns/{id}/verification), with its uncertainty and "
+    "decisions; see acquisition.md",
 }
 
 
@@ -150,7 +153,8 @@ def type_of(spec: dict) -> str:
         return " or ".join(f"`{json.dumps(v)}`" for v in spec["enum"])
     for key in ("anyOf", "oneOf"):
         if key in spec:
-            kinds = [type_of(s) for s in spec[key] if s.get("type") != "null"]
+            # a date is a string too: each kind said once
+            kinds = list(dict.fromkeys(type_of(s) for s in spec[key] if s.get("type") != "null"))
             null = any(s.get("type") == "null" for s in spec[key])
             return " or ".join(kinds) + (" or null" if null else "")
     kind = spec.get("type", "any")

@@ -12,6 +12,7 @@ MODELS = {
     "cell": ("cell_doc", "CellDoc"),
     "model": ("model_doc", "ModelDoc"),
     "report": ("report_doc", "ReportDoc"),
+    "verification": ("verification_doc", "VerificationDoc"),
 }
 
 

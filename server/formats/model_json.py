@@ -184,7 +184,12 @@ def write_model(path, model: ModelFile) -> None:
 
 def read_model(path) -> ModelFile:
     """Read a model file; refuse a malformed one with file:line:column and the field."""
-    doc, obj = JsonDoc.parse(path, read_text(path))
+    return parse_model(read_text(path), path)
+
+
+def parse_model(text: str, path="<model>") -> ModelFile:
+    """A model file's text as read_model reads it (a model kept elsewhere, in a record)."""
+    doc, obj = JsonDoc.parse(path, text)
     m = doc.validate(ModelDoc, obj)
     extensions = [e.extension for e in m.extensions]
     stored = obj.get("extensions", [])

@@ -7,7 +7,7 @@ from __future__ import annotations
 import datetime as dt
 from typing import Any, ClassVar
 
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from .blocks import Figure, ModelQuote, Ordered
 
@@ -102,31 +102,57 @@ class ModelU(Ordered):
 
 
 class Decision(Ordered):
-    """Pass, fail or not decided against the tolerance (ISO 14253-1 guard bands)."""
+    """Pass, fail or not decided against the tolerance (ISO 14253-1 guard bands): pass only when
+    every point's figure plus its U (above) is within it, fail when any point's figure less its
+    U (below) is beyond it, otherwise not decided; never pass with the tracker overdue."""
 
-    verdict: str = Field(description="pass, fail, not decided or no tolerance")
-    tracker_overdue: dt.date | str | None = None
-    tolerance_mm: Figure | None = None
-    rule: str
-    worst_upper_mm: Figure
-    worst_lower_mm: Figure
+    verdict: str = Field(
+        description="pass, fail, not decided (as well: a pass with the tracker overdue) or no "
+        "tolerance (none given)"
+    )
+    tracker_overdue: dt.date | str | None = Field(
+        None, description="the tracker's calibration due date when the run was after it"
+    )
+    tolerance_mm: Figure | None = Field(
+        None, description="what the figures are decided against, mm; null: not given"
+    )
+    rule: str = Field(description="the decision rule, as a sentence")
+    worst_upper_mm: Figure = Field(description="the largest figure plus its U (above), mm")
+    worst_lower_mm: Figure = Field(description="the largest figure less its U (below), mm")
 
 
 class VerificationUncertainty(Ordered):
     """The model's U at the test points, the figures' U (how stated) and the decisions on them."""
 
-    model: ModelU | None = None
-    ap_u: str = ""
-    decision: Decision | None = Field(None, description="the APs against the tolerance")
+    model: ModelU | None = Field(
+        None, description="the model's U at the test points; null for a model without it"
+    )
+    # written since U at the visits' time and temperature: absent from older files
+    model_note: str | None = Field(
+        None,
+        description="where the model's extensions need a pose's time or temperature: at which "
+        "inputs its U was taken, or why it is not given",
+    )
+    ap_u: str = Field("", description="how each AP's U is stated")
+    decision: Decision | None = Field(
+        None,
+        description="the compensated APs with their U against the tolerance: the cell's "
+        "tolerance_mm, else the one the model's validation quotes",
+    )
     # written since RP's U: absent from older files
-    rp_u: str | None = None
+    rp_u: str | None = Field(None, description="how each RP's U below and above is stated")
     rp_decision: Decision | None = Field(
-        None, description="the RPs against the arm's stated repeatability (the cell's)"
+        None,
+        description="the compensated RPs against the arm's stated repeatability, the cell's "
+        "repeatability_mm: pass when every RP plus its U above is within it, fail when an RP "
+        "less its U below is beyond it, else not decided (no tolerance without the key)",
     )
 
 
 class VerificationDoc(Ordered):
     """A verification.json: the run's setting and its ISO 9283 figures before and after."""
+
+    model_config = ConfigDict(title="verification.json")
 
     robot: str
     model: VerifiedModel
@@ -142,5 +168,7 @@ class VerificationDoc(Ordered):
     before: RunFigures
     after: RunFigures
     simulated_s: dict[str, Figure | None] | None = None
-    tracker_overdue: dt.date | str | None = None
+    tracker_overdue: dt.date | str | None = Field(
+        None, description="the tracker's calibration due date when the run was after it: no pass"
+    )
     uncertainty: VerificationUncertainty | None = None

@@ -146,7 +146,8 @@ def _rp(q: PointFigures) -> str:
 def uncertainty_section(report: VerificationDoc) -> tuple[str, str]:
     """The verdicts' sentences on the tolerance (AP) and the arm's repeatability (RP), and the
     uncertainty section's HTML (the model's U "-" without its figures: a model written before
-    them, or one whose extensions need a pose's time or temperature)."""
+    them, or one whose time or temperature terms the run's readings could not feed, which its
+    note then says)."""
     unc = report.uncertainty or VerificationUncertainty()
     dec, rp_dec = unc.decision, unc.rp_decision
     said = verdict_sentence(dec, "AP", "tolerance", "the cell's tolerance_mm or the model's")
@@ -175,7 +176,7 @@ def uncertainty_section(report: VerificationDoc) -> tuple[str, str]:
             '<figure><img alt="U over the working volume" '
             f'src="{figure_uncertainty_map(model.map)}"></figure>'
         )
-    notes = [unc.ap_u, unc.rp_u or ""]
+    notes = [unc.ap_u, unc.rp_u or "", unc.model_note or ""]
     if model:
         notes.append(
             f"Model U: the radius holding the arm's position error with "
@@ -185,12 +186,15 @@ def uncertainty_section(report: VerificationDoc) -> tuple[str, str]:
             f"scatter of {model.joint_scatter_deg:.4f} deg RMS); a reading's U adds the "
             "tracker's specification."
         )
-    else:
+    elif not unc.model_note:
         notes.append("The model keeps no position uncertainty: its U is not stated.")
     for d in (dec, rp_dec):
         if d is not None:
             notes.append("Decision rule: " + d.rule + ".")
-    html += "".join(f'<p class="note">{escape(n)}</p>' for n in notes if n)
+    # each note a sentence: the methods' texts are stated without their full stop
+    html += "".join(
+        f'<p class="note">{escape(n if n.endswith(".") else n + ".")}</p>' for n in notes if n
+    )
     return said.strip(), html
 
 

@@ -9,6 +9,7 @@ store), and the tracker's readings of one SMR give the ISO figures before and af
 from __future__ import annotations
 
 import csv
+import dataclasses
 import datetime as dt
 import hashlib
 import json
@@ -24,15 +25,17 @@ from robocal.server.compensate.compensation import MAX_ERROR_MM, solver_model
 from robocal.server.formats.blocks import ModelQuote
 from robocal.server.formats.cell_json import Cell, parse_cell, robot_to_json
 from robocal.server.formats.errors import InputError
-from robocal.server.formats.model_json import ModelFile, read_model
+from robocal.server.formats.model_json import ModelFile, parse_model, read_model
 from robocal.server.formats.verification_doc import RunFigures, VerificationDoc
 from robocal.server.verify.uncertainty import (
     AP_U,
     RP_RULE,
     RP_U,
     at_points,
+    at_visits,
     decision,
     mpe_mm,
+    timed_terms,
 )
 from robocal.solver.compensate import compensate
 from robocal.solver.iso9283 import (
@@ -303,7 +306,10 @@ def prepare(
     why = cell_mismatch(model, cell)
     if why:
         raise InputError(model_path, None, None, f"{why}: not a model of this cell")
-    plan, joints = make_plan(model, opts)
+    # a plan made before the run cannot know its visits' time and temperature: the terms that
+    # need them are left out of the joints (the model kept whole for U at the visits' inputs)
+    timed = timed_terms(model)
+    plan, joints = make_plan(untimed(model) if timed else model, opts)
     record = {
         "model": {
             "path": model_name or str(model_path),
@@ -327,6 +333,8 @@ def prepare(
             [joints["compensated"][_first_visit(plan, j)] for j in range(len(plan.names))],
             plan.points,
         ),
+        # the model whose U needs each visit's time or temperature, as its file has it
+        **({"timed_model": Path(model_path).read_text(encoding="utf-8")} if timed else {}),
         "cycles": opts.cycles,
         "directions": opts.directions,
         "approach_mm": APPROACH_MM,
@@ -344,6 +352,18 @@ def prepare(
     }
     settings = {RECORD: record, PREDICTOR: geometry}
     return np.vstack([joints[w] for w in RUNS]), pose_labels(plan), settings
+
+
+def untimed(model: ModelFile) -> ModelFile:
+    """The model without the extensions that need a pose's time or temperature."""
+    keep = [i for i, e in enumerate(model.extensions) if not e.kind.needs(e)]
+    pick = lambda a: None if a is None else [a[i] for i in keep]  # noqa: E731
+    return dataclasses.replace(
+        model,
+        extensions=[model.extensions[i] for i in keep],
+        parameters=pick(model.parameters),
+        extension_errors=pick(model.extension_errors),
+    )
 
 
 def _first_visit(plan: Plan, j: int) -> int:
@@ -401,14 +421,29 @@ def verification_report(
     m = len(plan.visit)
     row_of = {label: k for k, label in enumerate(pose_labels(plan))}
     attained = np.full((2 * m, 3), np.nan)
-    times = np.full(2 * m, np.nan)
+    times, temps = np.full(2 * m, np.nan), np.full(2 * m, np.nan)
+    joints = np.full((2 * m, meas.q.shape[1]), np.nan)
     for row, label in enumerate(meas.pose_ids):
         k = row_of.get(label)
         if k is not None:
-            attained[k] = meas.xyz[row, 0]
+            attained[k], joints[k] = meas.xyz[row, 0], meas.q[row]
             if meas.time_s is not None:
                 times[k] = meas.time_s[row, 0]
+            if meas.temp_c is not None:
+                temps[k] = meas.temp_c[row, 0]
     cell = parse_cell(info.cell_json, f"<campaign {info.id} cell>")
+    model_u: dict = {"model": record.get("uncertainty")}
+    if record.get("timed_model"):
+        visits = m + np.flatnonzero(plan.visit)  # the compensated run's test visits
+        model_u = at_visits(
+            parse_model(record["timed_model"], f"<campaign {info.id} model>"),
+            cell,
+            joints[visits],
+            times[visits] if meas.time_s is not None else None,
+            temps[visits] if meas.temp_c is not None else None,
+            plan.point[plan.visit],
+            plan.points,
+        )
     ap_u = mpe_mm(cell, plan.points)
     runs: dict[str, RunFigures] = {}
     seconds: dict[str, float | None] = {}
@@ -444,7 +479,7 @@ def verification_report(
             "simulated_s": seconds if cell.simulated else None,
             "tracker_overdue": late,
             "uncertainty": {
-                "model": record.get("uncertainty"),
+                **model_u,
                 "ap_u": AP_U,
                 "decision": decision(ap, ap_u, tolerance, tracker_overdue=late),
                 "rp_u": RP_U,

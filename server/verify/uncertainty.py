@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.server.calibration.position_uncertainty import model_uncertainty
+from robocal.server.calibration.position_uncertainty import missing_inputs, model_uncertainty
 from robocal.server.formats.cell_json import Cell
 from robocal.server.formats.model_json import ModelFile
 
@@ -56,6 +56,53 @@ def at_points(model: ModelFile, cell: Cell, q_deg, points_mm) -> dict | None:
         "reading_U_mm": read.expanded_mm[:, 0].tolist(),
         "k": own.k[:, 0].tolist(),
         "joint_scatter_deg": own.joint_scatter_deg,
+    }
+
+
+AT_VISITS = (
+    "Model U at each visit's time and temperature, which its time or temperature terms "
+    "({terms}) need (the largest over "
+    "the point's visits); the joints were compensated without those terms, which a plan made "
+    "before the run cannot know, and the volume's map is not drawn"
+)
+NOT_GIVEN = (
+    "Model U is not given: the model's time or temperature terms ({terms}) need each visit's "
+    "time or temperature, which this run's readings do not carry."
+)
+
+
+def timed_terms(model: ModelFile) -> list[str]:
+    """The model's extensions whose prediction needs a pose's time or temperature."""
+    return missing_inputs(model)
+
+
+def at_visits(model: ModelFile, cell: Cell, q_rad, time_s, temp_c, point, points_mm) -> dict:
+    """The model's U (95 %) at each test point from its visits (q_rad (v, n), each visit's
+    time_s and temp_c (v,) or None, point (v,) its test point): at each visit's time and
+    temperature, the largest over the point's visits; `model` None and `model_note` the reason
+    where a visit lacks what the model's extensions need."""
+    q = np.asarray(q_rad, dtype=float)
+    K = len(model.targets)
+    wide = lambda a: None if a is None else np.repeat(np.asarray(a, float)[:, None], K, 1)  # noqa: E731
+    t, c = wide(time_s), wide(temp_c)
+    point = np.asarray(point)
+    reading = np.sqrt(3.0) * mpe_mm(cell, np.asarray(points_mm)[point]) / 2.0
+    own = model_uncertainty(model, q, 0.0, t, c)
+    read = model_uncertainty(model, q, reading[:, None], t, c)
+    terms = ", ".join(timed_terms(model))
+    if own is None or read is None:
+        return {"model": None, "model_note": NOT_GIVEN.format(terms=terms)}
+    worst = lambda a: [float(a[point == j, 0].max()) for j in range(len(points_mm))]  # noqa: E731
+    return {
+        "model": {
+            "coverage": own.coverage,
+            "map": None,
+            "model_U_mm": worst(own.expanded_mm),
+            "reading_U_mm": worst(read.expanded_mm),
+            "k": worst(own.k),
+            "joint_scatter_deg": own.joint_scatter_deg,
+        },
+        "model_note": AT_VISITS.format(terms=terms),
     }
 
 

@@ -45,3 +45,14 @@ def test_an_smr_id_of_no_target_is_refused_in_one_line():
     with pytest.raises(InputError) as e:
         _cell(smr_ids={"Z": "SMR-9"})
     assert "'Z' is not among the targets" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_simulated_cell_with_traceability_simulates_its_tracker_by_its_spec():
+    """The traceability keys say nothing of the tracker's accuracy: a campaign on such a cell
+    is planned (its base guessed on the simulated arm) with the spec's MPE alone."""
+    from robocal.drivers.cell import TrackerSpec
+    from robocal.server.acquisition.acquire import base_guess
+
+    cell = _cell(**TRACE, mpe_um=15.0)
+    assert TrackerSpec.of(cell.tracker) == TrackerSpec(mpe_um=15.0, mpe_um_per_m=2.5)
+    assert base_guess(cell, 0).shape == (4, 4)
