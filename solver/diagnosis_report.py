@@ -11,6 +11,7 @@ from .effects import Extension, joint_basis, joint_offsets, point_shift, prepare
 from .extended import predict_extended
 from .finite import finite
 from .kinematics import predict_rows
+from .screen import Outlier
 
 
 def parameters(ext: Extension, basis: np.ndarray | None) -> dict:
@@ -90,7 +91,7 @@ class Report:
     readings: int
     candidates_tested: int
     unexplained: dict | None = None  # what the final model leaves (solver/unexplained.py)
-    outliers: list[dict] | None = None  # readings excluded as gross errors, when screened
+    outliers: list[Outlier] | None = None  # readings excluded as gross errors, when screened
     extrapolation: dict | None = None  # the final model off its training region
     stability: dict | None = None  # resamples of a small campaign (solver/stability.py)
     seconds: dict[str, float] = field(default_factory=dict)  # per phase
@@ -110,7 +111,11 @@ class Report:
             "readings": self.readings,
             "candidates_tested": self.candidates_tested,
         }
-        for key in ("unexplained", "outliers", "extrapolation", "stability"):
+        if self.unexplained is not None:
+            out["unexplained"] = self.unexplained
+        if self.outliers is not None:
+            out["outliers"] = [o.to_json() for o in self.outliers]
+        for key in ("extrapolation", "stability"):
             if getattr(self, key) is not None:
                 out[key] = getattr(self, key)
         out["seconds"] = self.seconds

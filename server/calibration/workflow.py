@@ -236,7 +236,8 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     )
     if screening is not None:  # the readings the fit left out as gross errors, and why
         fit.readings_used = used.n_readings
-        fit.excluded_readings = cal.outliers
+        if cal.outliers is not None:
+            fit.excluded_readings = [o.to_json() for o in cal.outliers]
         fit.screening = screening.summary()
     model = ModelFile(
         cal.robot,

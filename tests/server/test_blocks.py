@@ -63,6 +63,8 @@ def string_key_reads(source: str) -> list[tuple[int, str]]:
 # The ISO 9283 figures of a verification (formats.verification_doc) are read as attributes only
 VERIFICATION_FIGURES = {"AP_max_mm", "RP_max_mm", "AP_mm", "RP_mm", "vAP_mm", "AP_U_mm", "AD_mm"}
 VERIFICATION_FIGURES |= {"RD_mm"}
+# The keys only an excluded reading's row has (solver.screen.Outlier, formats.report_doc.Outlier)
+OUTLIER_KEYS = {"residual_mm", "evidence"}
 
 
 def _owner(node: ast.AST) -> str | None:
@@ -79,8 +81,9 @@ def _owner(node: ast.AST) -> str | None:
 
 def result_key_reads(source: str) -> list[tuple[int, str]]:
     """(line, what) of each read by string key of a diagnosis or verification report (any key
-    off `report` or `x.report`), of a calibration (any key off `cal`), or of a verification's
-    figures (AP_mm, RP_max_mm... off anything): x["k"], x.get("k"), "k" in x."""
+    off `report` or `x.report`), of a calibration (any key off `cal`), of a verification's
+    figures (AP_mm, RP_max_mm... off anything) or of an excluded reading's row (residual_mm,
+    evidence off anything): x["k"], x.get("k"), "k" in x."""
     out = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Subscript) and isinstance(node.ctx, (ast.Load, ast.Del)):
@@ -98,7 +101,13 @@ def result_key_reads(source: str) -> list[tuple[int, str]]:
             continue
         if key is None:
             continue
-        what = _owner(owner) or ("a verification" if key in VERIFICATION_FIGURES else None)
+        what = _owner(owner) or (
+            "a verification"
+            if key in VERIFICATION_FIGURES
+            else "an outlier"
+            if key in OUTLIER_KEYS
+            else None
+        )
         if what:
             out.append((node.lineno, f"{key!r} of {what}"))
     return sorted(out)
@@ -109,6 +118,7 @@ def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
         'a = d.report["effects"]\nb = report["before"]["points"]\nc = cal.get("screening")\n'
         'e = "history" in cal\nf = p["AP_mm"]\ng = report.get("uncertainty") or {}\n'
         'h = calibration.get("history")\nreport["figures"] = []\ni = row["name"]\n'
+        "j = f\"{o['residual_mm']:.3f} ({o['evidence']})\"\n"
     )
     assert result_key_reads(src) == [
         (1, "'effects' of a report"),
@@ -118,6 +128,8 @@ def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
         (5, "'AP_mm' of a verification"),
         (6, "'uncertainty' of a report"),
         (7, "'history' of a calibration"),
+        (10, "'evidence' of an outlier"),
+        (10, "'residual_mm' of an outlier"),
     ]
 
 
