@@ -11,6 +11,13 @@ from .effects import Extension, joint_basis, joint_offsets, point_shift, prepare
 from .extended import predict_extended
 from .finite import finite
 from .kinematics import predict_rows
+from .report_blocks import (
+    Alternative,
+    CrossValidation,
+    ExtrapolationReport,
+    Significance,
+    StabilityReport,
+)
 from .screen import Outlier
 
 
@@ -55,8 +62,8 @@ class Finding:
     holdout_max_before_mm: float
     holdout_max_after_mm: float
     holdout_gain_interval_mm: list[float]
-    significance: dict[str, float]  # z, threshold, p_value
-    alternatives: list[dict]  # candidates the data could not tell apart from it
+    significance: Significance
+    alternatives: list[Alternative]  # candidates the data could not tell apart from it
     parameters: dict[str, Any]  # in mm, degrees, ppm and seconds
     uncertainty: dict[str, Any] | None = None  # each parameter's standard error, once estimated
 
@@ -72,6 +79,7 @@ class Finding:
             out["joint"] = self.joint
         out.update(self.own)
         out.update({k: v for k, v in asdict(self).items() if k not in ("name", "joint", "own")})
+        out["alternatives"] = [a.to_json() for a in self.alternatives]
         if self.uncertainty is None:
             del out["uncertainty"]
         return out
@@ -92,10 +100,11 @@ class Report:
     candidates_tested: int
     unexplained: dict | None = None  # what the final model leaves (solver/unexplained.py)
     outliers: list[Outlier] | None = None  # readings excluded as gross errors, when screened
-    extrapolation: dict | None = None  # the final model off its training region
-    stability: dict | None = None  # resamples of a small campaign (solver/stability.py)
-    seconds: dict[str, float] = field(default_factory=dict)  # per phase
-    cross_validation: dict[str, int] = field(default_factory=dict)  # folds, fits, candidates
+    extrapolation: ExtrapolationReport | None = None  # the final model off its training region
+    stability: StabilityReport | None = None  # resamples of a small campaign (solver/stability.py)
+    # per phase (its name, as the clock has it: a map, not a record), then the total
+    seconds: dict[str, float] = field(default_factory=dict)
+    cross_validation: CrossValidation | None = None  # folds, fits, candidates
 
     def to_json(self) -> dict[str, Any]:
         """The report as report.json has it, keys in section 5's order (the optional blocks only
@@ -115,11 +124,14 @@ class Report:
             out["unexplained"] = self.unexplained
         if self.outliers is not None:
             out["outliers"] = [o.to_json() for o in self.outliers]
-        for key in ("extrapolation", "stability"):
-            if getattr(self, key) is not None:
-                out[key] = getattr(self, key)
+        if self.extrapolation is not None:
+            out["extrapolation"] = self.extrapolation.to_json()
+        if self.stability is not None:
+            out["stability"] = self.stability.to_json()
         out["seconds"] = self.seconds
-        out["cross_validation"] = self.cross_validation
+        out["cross_validation"] = (
+            {} if self.cross_validation is None else asdict(self.cross_validation)
+        )
         return out
 
 
@@ -144,7 +156,7 @@ def build_report(diag, steps, base, final, exts, x, floor, source, n_candidates)
                 holdout_max_before_mm=before.maxerr,
                 holdout_max_after_mm=after.maxerr,
                 holdout_gain_interval_mm=list(decision["holdout_gain_interval_mm"]),
-                significance={k: decision[k] for k in ("z", "threshold", "p_value")},
+                significance=Significance(*(decision[k] for k in ("z", "threshold", "p_value"))),
                 alternatives=decision["alternatives"],
                 parameters=p,
             )

@@ -221,3 +221,26 @@ def test_report_json_is_its_document(written):
     assert doc.validation.to_json() == text["validation"]
     assert doc.identified.to_json() == text["identified"]
     assert doc.final.to_json() == text["final"]
+
+
+# The solver's report fields that stay maps: a phase's seconds by its name, an effect kind's own
+# keys and its parameters by their names (each kind has its own); `unexplained` is still a dict
+MAPS = {"seconds", "own", "parameters", "uncertainty", "unexplained"}
+
+
+def test_the_solver_report_nests_typed_blocks():
+    """Each nested block of the solver's report (outliers, extrapolation, stability,
+    significance, alternatives, cross-validation) is a dataclass, not a dict read by key."""
+    from dataclasses import fields
+
+    from robocal.solver.diagnosis_report import Finding, Report
+
+    untyped = [
+        f"{cls.__name__}.{f.name}: {f.type}"
+        for cls in (Report, Finding)
+        for f in fields(cls)
+        if "dict" in str(f.type) and f.name not in MAPS
+    ]
+    assert not untyped, "give these blocks a dataclass (solver/report_blocks.py):\n" + "\n".join(
+        untyped
+    )
