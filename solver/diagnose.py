@@ -40,7 +40,7 @@ from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
 from .tall import tall_qr
 
 if TYPE_CHECKING:  # run_diagnosis imports fit_errors and the report only when it needs them
-    from .diagnosis_report import Report
+    from .diagnosis_report import EffectFigure, Report
     from .fit_errors import ExtendedErrors
 
 MIN_GAIN = 0.02  # an accepted effect removes at least this fraction of the held-out MSE
@@ -84,7 +84,7 @@ class Diagnosis:
     x: np.ndarray
     extensions: list
     parameters: list  # per extension, in edge units
-    figures: list = field(default_factory=list)
+    figures: list[EffectFigure] = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     errors: ExtendedErrors | None = None  # the final model's standard errors
     fits: int = 0  # the fits its cross-validation ran

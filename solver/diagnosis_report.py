@@ -174,7 +174,21 @@ def build_report(diag, steps, base, final, exts, x, floor, source, n_candidates)
     )
 
 
-def figure_series(diag, steps, exts, x) -> list[dict]:
+@dataclass(frozen=True)
+class EffectFigure:
+    """The data of a found effect's figure: its signature per pose, before and after."""
+
+    name: str  # the effect kind
+    label: str  # as the report names the effect: joint_compliance(2)
+    x: np.ndarray  # per pose, the effect's variable
+    before: np.ndarray  # the residual's signature fitted without the effect
+    after: np.ndarray  # ... with the final model
+    expected: np.ndarray  # what the effect leaves once geometry absorbed what it can
+    x_label: str
+    y_label: str
+
+
+def figure_series(diag, steps, exts, x) -> list[EffectFigure]:
     """For each found effect, its signature in the residuals against its variable, before and after.
 
     `before` is the residual of the model fitted without the effect, `expected` what the effect
@@ -206,19 +220,19 @@ def figure_series(diag, steps, exts, x) -> list[dict]:
         xb, eb, _ = fit_extended(prob, inputs, diag.x0, diag.free, others)
         r_before = predict_extended(layout, xb, eb, inputs)[mask] - meas
         sig = _signature(ext, Jq, p, layout, x, pose, m)
-        series = {
-            "name": ext.name,
-            "label": ext.label(),
-            "before": sig(r_before),
-            "after": sig(r_after),
-            "expected": sig(-D_res),
-        }
-        series.update(ext.kind.figure(ext, inputs, series["expected"]))
+        expected = np.asarray(sig(-D_res), dtype=float)
+        axes = ext.kind.figure(ext, inputs, expected)  # the variable and the axes' labels
         out.append(
-            {
-                k: np.asarray(v, dtype=float) if k in ("x", "before", "after", "expected") else v
-                for k, v in series.items()
-            }
+            EffectFigure(
+                name=ext.name,
+                label=ext.label(),
+                x=np.asarray(axes["x"], dtype=float),
+                before=np.asarray(sig(r_before), dtype=float),
+                after=np.asarray(sig(r_after), dtype=float),
+                expected=expected,
+                x_label=axes["x_label"],
+                y_label=axes["y_label"],
+            )
         )
     return out
 

@@ -65,6 +65,8 @@ VERIFICATION_FIGURES = {"AP_max_mm", "RP_max_mm", "AP_mm", "RP_mm", "vAP_mm", "A
 VERIFICATION_FIGURES |= {"RD_mm"}
 # The keys only an excluded reading's row has (solver.screen.Outlier, formats.report_doc.Outlier)
 OUTLIER_KEYS = {"residual_mm", "evidence"}
+# The keys of a diagnosis figure's data (solver.diagnosis_report.EffectFigure)
+FIGURE_KEYS = {"label", "x_label", "y_label", "expected"}
 
 
 def _owner(node: ast.AST) -> str | None:
@@ -82,8 +84,8 @@ def _owner(node: ast.AST) -> str | None:
 def result_key_reads(source: str) -> list[tuple[int, str]]:
     """(line, what) of each read by string key of a diagnosis or verification report (any key
     off `report` or `x.report`), of a calibration (any key off `cal`), of a verification's
-    figures (AP_mm, RP_max_mm... off anything) or of an excluded reading's row (residual_mm,
-    evidence off anything): x["k"], x.get("k"), "k" in x."""
+    figures (AP_mm, RP_max_mm... off anything), of an excluded reading's row (residual_mm,
+    evidence off anything) or of a diagnosis figure's data (label, x_label... off anything): x["k"], x.get("k"), "k" in x."""
     out = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Subscript) and isinstance(node.ctx, (ast.Load, ast.Del)):
@@ -106,6 +108,8 @@ def result_key_reads(source: str) -> list[tuple[int, str]]:
             if key in VERIFICATION_FIGURES
             else "an outlier"
             if key in OUTLIER_KEYS
+            else "a figure"
+            if key in FIGURE_KEYS
             else None
         )
         if what:
@@ -119,6 +123,7 @@ def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
         'e = "history" in cal\nf = p["AP_mm"]\ng = report.get("uncertainty") or {}\n'
         'h = calibration.get("history")\nreport["figures"] = []\ni = row["name"]\n'
         "j = f\"{o['residual_mm']:.3f} ({o['evidence']})\"\n"
+        'k = {f["label"]: p for f, p in z}\nax.set_xlabel(series["x_label"])\n'
     )
     assert result_key_reads(src) == [
         (1, "'effects' of a report"),
@@ -130,6 +135,8 @@ def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
         (7, "'history' of a calibration"),
         (10, "'evidence' of an outlier"),
         (10, "'residual_mm' of an outlier"),
+        (11, "'label' of a figure"),
+        (12, "'x_label' of a figure"),
     ]
 
 
