@@ -87,10 +87,10 @@ def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
         def run(name: str, **kw) -> dict:
             s = acquire(db, cell, AcquireOptions(name=name, **common, **kw))
             return {
-                "poses": s["poses"],
-                "campaign_s": s["campaign_s"],
-                "heldout_mm": _heldout(db, cell, s["campaign"], q_hold, meas_hold),
-                "adaptive": s["adaptive"],
+                "poses": s.poses,
+                "campaign_s": s.campaign_s,
+                "heldout_mm": _heldout(db, cell, s.campaign, q_hold, meas_hold),
+                "adaptive": s.adaptive,
             }
 
         fixed = run("fixed", poses=FIXED_POSES)

@@ -67,6 +67,17 @@ VERIFICATION_FIGURES |= {"RD_mm"}
 OUTLIER_KEYS = {"residual_mm", "evidence"}
 # The keys of a diagnosis figure's data (solver.diagnosis_report.EffectFigure)
 FIGURE_KEYS = {"label", "x_label", "y_label", "expected"}
+# An acquisition's result (acquisition.summary.AcquireSummary), read off `summary`, `acquired`,
+# `x.summary`: its fields' names (other summaries, a benchmark's, have other keys)
+ACQUIRE_KEYS = {"campaign", "name", "resumed_at", "poses", "state", "measured_poses"}
+ACQUIRE_KEYS |= {"readings", "missing", "beam_breaks", "campaign_s", "phase_s", "adaptive"}
+ACQUIRE_KEYS |= {"locked_without_search_after_10", "simulated", "skipped_poses", "searched"}
+
+
+def _acquired(node: ast.AST) -> bool:
+    """Whether the expression names an acquisition's summary."""
+    name = node.id if isinstance(node, ast.Name) else getattr(node, "attr", None)
+    return name in ("summary", "acquired")
 
 
 def _owner(node: ast.AST) -> str | None:
@@ -85,7 +96,8 @@ def result_key_reads(source: str) -> list[tuple[int, str]]:
     """(line, what) of each read by string key of a diagnosis or verification report (any key
     off `report` or `x.report`), of a calibration (any key off `cal`), of a verification's
     figures (AP_mm, RP_max_mm... off anything), of an excluded reading's row (residual_mm,
-    evidence off anything) or of a diagnosis figure's data (label, x_label... off anything): x["k"], x.get("k"), "k" in x."""
+    evidence off anything), of a diagnosis figure's data (label, x_label... off anything) or of
+    an acquisition's summary (its fields off `summary`, `acquired`): x["k"], x.get("k"), "k" in x."""
     out = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Subscript) and isinstance(node.ctx, (ast.Load, ast.Del)):
@@ -110,6 +122,8 @@ def result_key_reads(source: str) -> list[tuple[int, str]]:
             if key in OUTLIER_KEYS
             else "a figure"
             if key in FIGURE_KEYS
+            else "an acquisition"
+            if key in ACQUIRE_KEYS and _acquired(owner)
             else None
         )
         if what:
@@ -124,6 +138,8 @@ def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
         'h = calibration.get("history")\nreport["figures"] = []\ni = row["name"]\n'
         "j = f\"{o['residual_mm']:.3f} ({o['evidence']})\"\n"
         'k = {f["label"]: p for f, p in z}\nax.set_xlabel(series["x_label"])\n'
+        'if summary["state"] != "done":\n    c = run.summary["campaign"]\n'
+        'l = acquired["campaign_s"]\nm = summary["detection"]\n'
     )
     assert result_key_reads(src) == [
         (1, "'effects' of a report"),
@@ -137,6 +153,9 @@ def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
         (10, "'residual_mm' of an outlier"),
         (11, "'label' of a figure"),
         (12, "'x_label' of a figure"),
+        (13, "'state' of an acquisition"),
+        (14, "'campaign' of an acquisition"),
+        (15, "'campaign_s' of an acquisition"),
     ]
 
 
