@@ -30,7 +30,7 @@ from .robot import Robot
 from .stop import Stop
 
 if TYPE_CHECKING:
-    from .screen import Screening
+    from .screen import Outlier, Screening
 
 # Fit residuals (RMS a reading) past this multiple of the noise floor set the level at which
 # the parameters are judged identified instead of the floor.
@@ -93,12 +93,12 @@ class Calibration(Result):
         self["screening"] = value
 
     @property
-    def outliers(self) -> list[dict] | None:
+    def outliers(self) -> list[Outlier] | None:
         """The readings the screening excluded, as report rows; None: not screened."""
         return self.get("outliers")
 
     @outliers.setter
-    def outliers(self, value: list[dict] | None) -> None:
+    def outliers(self, value: list[Outlier] | None) -> None:
         self["outliers"] = value
 
     @property

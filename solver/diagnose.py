@@ -33,13 +33,14 @@ from .motion import visit_order
 from .noise import from_distances as noise_floor  # noqa: F401 (the tests' measured floor)
 from .noise import noise_floor as tracker_noise
 from .problem import Problem
+from .report_blocks import Alternative, CrossValidation, ExtrapolationReport, FoldResult, Refused
 from .screen import screen_readings
 from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
 from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
 from .tall import tall_qr
 
 if TYPE_CHECKING:  # run_diagnosis imports fit_errors and the report only when it needs them
-    from .diagnosis_report import Report
+    from .diagnosis_report import EffectFigure, Report
     from .fit_errors import ExtendedErrors
 
 MIN_GAIN = 0.02  # an accepted effect removes at least this fraction of the held-out MSE
@@ -83,7 +84,7 @@ class Diagnosis:
     x: np.ndarray
     extensions: list
     parameters: list  # per extension, in edge units
-    figures: list = field(default_factory=list)
+    figures: list[EffectFigure] = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     errors: ExtendedErrors | None = None  # the final model's standard errors
     fits: int = 0  # the fits its cross-validation ran
@@ -423,13 +424,13 @@ def select(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFECTS):
         if cv.mse >= cv_now.mse:
             break  # the linear picture promised a gain the fitted model does not keep
         alternatives = [
-            {
-                "name": trial[i].name,
-                "label": trial[i].label(),
-                **({} if trial[i].joint is None else {"joint": trial[i].joint + 1}),
-                **({} if trial[i].harmonic is None else {"harmonic": trial[i].harmonic}),
-                "holdout_rmse_mm": rms(i),
-            }
+            Alternative(
+                name=trial[i].name,
+                label=trial[i].label(),
+                joint=None if trial[i].joint is None else trial[i].joint + 1,
+                harmonic=trial[i].harmonic,
+                holdout_rmse_mm=rms(i),
+            )
             for i in ok
             if i != best
             and paired_t(sc.pose_sse - sc.pose_gain[i], sc.pose_sse - sc.pose_gain[best])
@@ -574,11 +575,7 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     if stability is not None:
         report.stability = stability.to_report()
     report.seconds = {k: round(v, 3) for k, v in clock.items()}
-    report.cross_validation = {
-        "folds": len(diag.folds),
-        "fits": diag.fits,
-        "candidates": len(cands),
-    }
+    report.cross_validation = CrossValidation(len(diag.folds), diag.fits, len(cands))
     return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors, diag.fits)
 
 
@@ -599,7 +596,7 @@ def resampled(diag: Diagnoser, cands, steps) -> Stability | None:
     return Stability(min(map(len, subsets)), final, tuple(named))
 
 
-def extrapolation_report(region: Extrapolation, q) -> dict:
+def extrapolation_report(region: Extrapolation, q) -> ExtrapolationReport:
     """The report's `extrapolation` block: how far from its training poses the model was tested,
     the effects refused there, and the joint-space box the data covers (where it may be trusted)."""
     from .extrapolation import MAX_RATIO
@@ -607,34 +604,34 @@ def extrapolation_report(region: Extrapolation, q) -> dict:
     def num(v):
         return None if not np.isfinite(v) else float(v)
 
-    return {
-        "method": "train on one side of a gravity-loaded joint's median (a smaller end on a "
+    return ExtrapolationReport(
+        method="train on one side of a gravity-loaded joint's median (a smaller end on a "
         "small campaign), or in one elbow or wrist configuration where the data has both, test "
         "on the other",
-        "max_ratio_to_geometric": MAX_RATIO,
-        "folds": [
-            {
-                "test": c.fold.label(),
-                "test_poses": len(c.fold.test),
-                "beyond_training_deg": float(np.degrees(c.fold.beyond_rad)),
-                "geometric_rmse_mm": num(c.geometric_rms),
-                "final_rmse_mm": num(c.extended_rms),
-                "worse_only_in_geometric_span": c.extended_rms > MAX_RATIO * c.geometric_rms
+        max_ratio_to_geometric=MAX_RATIO,
+        folds=[
+            FoldResult(
+                test=c.fold.label(),
+                test_poses=len(c.fold.test),
+                beyond_training_deg=float(np.degrees(c.fold.beyond_rad)),
+                geometric_rmse_mm=num(c.geometric_rms),
+                final_rmse_mm=num(c.extended_rms),
+                worse_only_in_geometric_span=c.extended_rms > MAX_RATIO * c.geometric_rms
                 and c.geometry_to_blame,
-            }
+            )
             for c in region.checks
         ],
-        "refused": [
-            {
-                "name": e.name,
-                "label": e.label(),
-                **({} if e.joint is None else {"joint": e.joint + 1}),
-                "worse_on": [
+        refused=[
+            Refused(
+                name=e.name,
+                label=e.label(),
+                joint=None if e.joint is None else e.joint + 1,
+                worse_on=[
                     f"{c.fold.label()}: {c.extended_rms:.4f} mm vs geometric {c.geometric_rms:.4f}"
                     for c in bad
                 ],
-            }
+            )
             for e, bad in region.refused
         ],
-        "joint_range_deg": np.degrees(joint_ranges(q)).round(3).tolist(),
-    }
+        joint_range_deg=np.degrees(joint_ranges(q)).round(3).tolist(),
+    )

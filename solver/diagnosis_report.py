@@ -11,6 +11,14 @@ from .effects import Extension, joint_basis, joint_offsets, point_shift, prepare
 from .extended import predict_extended
 from .finite import finite
 from .kinematics import predict_rows
+from .report_blocks import (
+    Alternative,
+    CrossValidation,
+    ExtrapolationReport,
+    Significance,
+    StabilityReport,
+)
+from .screen import Outlier
 
 
 def parameters(ext: Extension, basis: np.ndarray | None) -> dict:
@@ -54,8 +62,8 @@ class Finding:
     holdout_max_before_mm: float
     holdout_max_after_mm: float
     holdout_gain_interval_mm: list[float]
-    significance: dict[str, float]  # z, threshold, p_value
-    alternatives: list[dict]  # candidates the data could not tell apart from it
+    significance: Significance
+    alternatives: list[Alternative]  # candidates the data could not tell apart from it
     parameters: dict[str, Any]  # in mm, degrees, ppm and seconds
     uncertainty: dict[str, Any] | None = None  # each parameter's standard error, once estimated
 
@@ -71,6 +79,7 @@ class Finding:
             out["joint"] = self.joint
         out.update(self.own)
         out.update({k: v for k, v in asdict(self).items() if k not in ("name", "joint", "own")})
+        out["alternatives"] = [a.to_json() for a in self.alternatives]
         if self.uncertainty is None:
             del out["uncertainty"]
         return out
@@ -90,11 +99,12 @@ class Report:
     readings: int
     candidates_tested: int
     unexplained: dict | None = None  # what the final model leaves (solver/unexplained.py)
-    outliers: list[dict] | None = None  # readings excluded as gross errors, when screened
-    extrapolation: dict | None = None  # the final model off its training region
-    stability: dict | None = None  # resamples of a small campaign (solver/stability.py)
-    seconds: dict[str, float] = field(default_factory=dict)  # per phase
-    cross_validation: dict[str, int] = field(default_factory=dict)  # folds, fits, candidates
+    outliers: list[Outlier] | None = None  # readings excluded as gross errors, when screened
+    extrapolation: ExtrapolationReport | None = None  # the final model off its training region
+    stability: StabilityReport | None = None  # resamples of a small campaign (solver/stability.py)
+    # per phase (its name, as the clock has it: a map, not a record), then the total
+    seconds: dict[str, float] = field(default_factory=dict)
+    cross_validation: CrossValidation | None = None  # folds, fits, candidates
 
     def to_json(self) -> dict[str, Any]:
         """The report as report.json has it, keys in section 5's order (the optional blocks only
@@ -110,11 +120,18 @@ class Report:
             "readings": self.readings,
             "candidates_tested": self.candidates_tested,
         }
-        for key in ("unexplained", "outliers", "extrapolation", "stability"):
-            if getattr(self, key) is not None:
-                out[key] = getattr(self, key)
+        if self.unexplained is not None:
+            out["unexplained"] = self.unexplained
+        if self.outliers is not None:
+            out["outliers"] = [o.to_json() for o in self.outliers]
+        if self.extrapolation is not None:
+            out["extrapolation"] = self.extrapolation.to_json()
+        if self.stability is not None:
+            out["stability"] = self.stability.to_json()
         out["seconds"] = self.seconds
-        out["cross_validation"] = self.cross_validation
+        out["cross_validation"] = (
+            {} if self.cross_validation is None else asdict(self.cross_validation)
+        )
         return out
 
 
@@ -139,7 +156,7 @@ def build_report(diag, steps, base, final, exts, x, floor, source, n_candidates)
                 holdout_max_before_mm=before.maxerr,
                 holdout_max_after_mm=after.maxerr,
                 holdout_gain_interval_mm=list(decision["holdout_gain_interval_mm"]),
-                significance={k: decision[k] for k in ("z", "threshold", "p_value")},
+                significance=Significance(*(decision[k] for k in ("z", "threshold", "p_value"))),
                 alternatives=decision["alternatives"],
                 parameters=p,
             )
@@ -157,7 +174,21 @@ def build_report(diag, steps, base, final, exts, x, floor, source, n_candidates)
     )
 
 
-def figure_series(diag, steps, exts, x) -> list[dict]:
+@dataclass(frozen=True)
+class EffectFigure:
+    """The data of a found effect's figure: its signature per pose, before and after."""
+
+    name: str  # the effect kind
+    label: str  # as the report names the effect: joint_compliance(2)
+    x: np.ndarray  # per pose, the effect's variable
+    before: np.ndarray  # the residual's signature fitted without the effect
+    after: np.ndarray  # ... with the final model
+    expected: np.ndarray  # what the effect leaves once geometry absorbed what it can
+    x_label: str
+    y_label: str
+
+
+def figure_series(diag, steps, exts, x) -> list[EffectFigure]:
     """For each found effect, its signature in the residuals against its variable, before and after.
 
     `before` is the residual of the model fitted without the effect, `expected` what the effect
@@ -189,19 +220,19 @@ def figure_series(diag, steps, exts, x) -> list[dict]:
         xb, eb, _ = fit_extended(prob, inputs, diag.x0, diag.free, others)
         r_before = predict_extended(layout, xb, eb, inputs)[mask] - meas
         sig = _signature(ext, Jq, p, layout, x, pose, m)
-        series = {
-            "name": ext.name,
-            "label": ext.label(),
-            "before": sig(r_before),
-            "after": sig(r_after),
-            "expected": sig(-D_res),
-        }
-        series.update(ext.kind.figure(ext, inputs, series["expected"]))
+        expected = np.asarray(sig(-D_res), dtype=float)
+        axes = ext.kind.figure(ext, inputs, expected)  # the variable and the axes' labels
         out.append(
-            {
-                k: np.asarray(v, dtype=float) if k in ("x", "before", "after", "expected") else v
-                for k, v in series.items()
-            }
+            EffectFigure(
+                name=ext.name,
+                label=ext.label(),
+                x=np.asarray(axes["x"], dtype=float),
+                before=np.asarray(sig(r_before), dtype=float),
+                after=np.asarray(sig(r_after), dtype=float),
+                expected=expected,
+                x_label=axes["x_label"],
+                y_label=axes["y_label"],
+            )
         )
     return out
 

@@ -46,6 +46,25 @@ LEVERAGE_POSES = 2048  # poses whose Jacobian rows are formed at once for the le
 RESOLUTION_MM = 1e-6  # below a nanometre a fit's own rounding, not a reading, sets the scatter
 
 
+@dataclass(frozen=True)
+class Outlier:
+    """A reading excluded as a gross error: FORMATS.md section 5's `outliers` row."""
+
+    pose: int | str  # the pose's id (an integer when it reads as one), or its number from 1
+    target: str | int  # the SMR's name, or its index when no names were given
+    residual_mm: float  # |geometric residual| under the fit without the excluded readings
+    evidence: str  # which evidence judged it: distance, within-pose or geometric
+
+    def to_json(self) -> dict:
+        """The row as report.json and model.json have it."""
+        return {
+            "pose": self.pose,
+            "target": self.target,
+            "residual_mm": self.residual_mm,
+            "evidence": self.evidence,
+        }
+
+
 @dataclass
 class Screening:
     """Readings judged gross and the figures behind the judgement."""
@@ -72,7 +91,7 @@ class Screening:
         out[self.excluded] = np.nan
         return out
 
-    def report(self, pose_ids=None, target_names=None) -> list[dict]:
+    def report(self, pose_ids=None, target_names=None) -> list[Outlier]:
         """The excluded readings as report rows: pose id (an integer when it reads as one), target
         name, residual (mm) and the evidence that judged it."""
         out = []
@@ -81,12 +100,12 @@ class Screening:
             if isinstance(pid, str) and pid.lstrip("-").isdigit():
                 pid = int(pid)
             out.append(
-                {
-                    "pose": pid,
-                    "target": target_names[k] if target_names is not None else k,
-                    "residual_mm": round(res, 4),
-                    "evidence": why,
-                }
+                Outlier(
+                    pose=pid,
+                    target=target_names[k] if target_names is not None else k,
+                    residual_mm=round(res, 4),
+                    evidence=why,
+                )
             )
         return out
 

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .report_blocks import ResampledEffect, StabilityReport
+
 RESAMPLE_MAX_POSES = 40  # larger campaigns are not resampled (their answer does not hinge on a few)
 RESAMPLES = 5
 AGREE = 4
@@ -77,15 +79,15 @@ class Stability:
             "more poses before acting on these effects"
         )
 
-    def to_report(self) -> dict:
-        return {
-            "resamples": len(self.named),
-            "poses_each": self.poses_each,
-            "named_nothing": sum(not keys for keys in self.named),
-            "agreeing": self.agreeing(),
-            "effects": [
-                {"effect": key_label(k), "named_in": self.count(k), "in_final": k in self.final}
-                for k in self.keys()
+    def to_report(self) -> StabilityReport:
+        """The report's `stability` block."""
+        return StabilityReport(
+            resamples=len(self.named),
+            poses_each=self.poses_each,
+            named_nothing=sum(not keys for keys in self.named),
+            agreeing=self.agreeing(),
+            effects=[
+                ResampledEffect(key_label(k), self.count(k), k in self.final) for k in self.keys()
             ],
-            "doubt": self.doubt(),
-        }
+            doubt=self.doubt(),
+        )

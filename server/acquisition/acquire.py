@@ -15,7 +15,7 @@ import threading
 from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from contextlib import ExitStack, contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -26,6 +26,7 @@ from robocal.drivers.predictor import SmrPredictor
 from robocal.drivers.simulated_cell import SimulatedCell, surveyed_base
 from robocal.server import store
 from robocal.server.acquisition.lease import Lease, process_owner
+from robocal.server.acquisition.summary import AcquireSummary
 from robocal.server.formats.cell_json import Cell, cell_to_json, parse_cell, robot_from_json
 from robocal.server.formats.model_json import to_plain
 from robocal.server.store.checks import arm_name
@@ -323,7 +324,7 @@ def acquire(
     poses_deg=None,
     labels=None,
     settings=None,
-) -> dict:
+) -> AcquireSummary:
     """Run (or resume) a campaign on the cell's devices; a summary with the campaign time.
 
     db_path is a database file or URL, or an open store.Database (the service's own).
@@ -464,29 +465,29 @@ def acquire(
                 f"{engine.stats.poses + (start or 0) + 1}: {e}; its readings "
                 "are stored, run again to resume"
             ) from e
-    return {
-        "campaign": cid,
-        "name": name,
-        "resumed_at": start if existing else None,
-        "poses": int(len(poses_deg) if adaptive is None else len(adaptive.planned)),
-        "state": engine.state,
-        "measured_poses": stats.poses,
-        "readings": stats.readings,
-        "missing": stats.missing,
-        "beam_breaks": stats.beam_breaks,
-        "searched": stats.searched,
-        "locked_without_search_after_10": (
+    return AcquireSummary(
+        campaign=cid,
+        name=name,
+        resumed_at=start if existing else None,
+        poses=int(len(poses_deg) if adaptive is None else len(adaptive.planned)),
+        state=engine.state,
+        measured_poses=stats.poses,
+        readings=stats.readings,
+        missing=stats.missing,
+        beam_breaks=stats.beam_breaks,
+        searched=stats.searched,
+        locked_without_search_after_10=(
             stats.locked_after_10 / stats.aimed_after_10 if stats.aimed_after_10 else None
         ),
-        "campaign_s": clock.now() - t0 if existing is None else None,
-        "campaign_end_s": clock.now(),
-        "predictor": predictor.stage,
-        "skipped_poses": stats.skipped,
+        campaign_s=clock.now() - t0 if existing is None else None,
+        campaign_end_s=clock.now(),
+        predictor=predictor.stage,
+        skipped_poses=stats.skipped,
         # campaign clock seconds per kind of plan message (this run's)
-        "phase_s": asdict(stats.phase_s),
-        "simulated": cell.simulated,
-        "adaptive": None if adaptive is None else adaptive.summary(),
-    }
+        phase_s=replace(stats.phase_s),
+        simulated=cell.simulated,
+        adaptive=None if adaptive is None else adaptive.summary(),
+    )
 
 
 @contextmanager

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 import tempfile
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -125,12 +126,14 @@ def run_acquire_bench(
                 run_kw["target_accuracy_mm"] = factor * floor
             opts = AcquireOptions(seed=seed, name=label, **run_kw)
             summary = acquire(db, cell, opts)
+            campaign_s = summary.campaign_s
+            assert campaign_s is not None  # a new campaign: its time measured
             c, meas = workflow.load_data(db)
             seen = np.isfinite(meas.xyz).all(axis=-1)
             measured = seen.any(axis=1)  # poses with a reading: the ones the arm settled at
             bound = physical_bound(
                 meas.q[measured],
-                summary["readings"],
+                summary.readings,
                 opts.samples,
                 SAMPLE_RATE_HZ,
                 home,
@@ -146,29 +149,29 @@ def run_acquire_bench(
             err = pred - meas_hold
             out[label] = {
                 "options": kw,
-                "campaign_s": summary["campaign_s"],
+                "campaign_s": campaign_s,
                 "bound": bound,
-                "ratio_to_bound": summary["campaign_s"] / bound["bound_s"],
-                "poses": summary["poses"],
+                "ratio_to_bound": campaign_s / bound["bound_s"],
+                "poses": summary.poses,
                 "poses_in_bound": int(measured.sum()),
-                "readings": summary["readings"],
-                "searched": summary["searched"],
+                "readings": summary.readings,
+                "searched": summary.searched,
                 "heldout_rmse_mm": float(np.sqrt(np.mean(np.sum(err**2, axis=-1)))),
-                "campaign_min": summary["campaign_s"] / 60.0,
-                "locked_without_search_after_10": summary["locked_without_search_after_10"],
+                "campaign_min": campaign_s / 60.0,
+                "locked_without_search_after_10": summary.locked_without_search_after_10,
                 # where the campaign's time went, beside the bound's terms
-                "phase_s": summary["phase_s"],
+                "phase_s": asdict(summary.phase_s),
                 "over_bound_s": {
-                    "motion": summary["phase_s"]["move"] - bound["motion_s"],
+                    "motion": summary.phase_s.move - bound["motion_s"],
                     "of_which_tour_over_motion_bound": bound["tour_s"] - bound["motion_s"],
-                    "measure_beyond_sampling": summary["phase_s"]["measure"] - bound["measuring_s"],
-                    "aim": summary["phase_s"]["aim"] - bound["aiming_s"],
-                    "settle": summary["phase_s"]["settle"],
-                    "other": summary["phase_s"]["other"],
+                    "measure_beyond_sampling": summary.phase_s.measure - bound["measuring_s"],
+                    "aim": summary.phase_s.aim - bound["aiming_s"],
+                    "settle": summary.phase_s.settle,
+                    "other": summary.phase_s.other,
                 },
             }
-            if summary["adaptive"] is not None:
-                a = summary["adaptive"]
+            if summary.adaptive is not None:
+                a = summary.adaptive
                 out[label]["adaptive"] = {
                     "target_mm": opts.target_accuracy_mm,
                     "stopped": a["stopped"],
@@ -176,7 +179,7 @@ def run_acquire_bench(
                     "steps": [(s["poses"], s["predicted_mm"]) for s in a["steps"]],
                 }
             print(
-                f"[bench] {label}: {summary['campaign_s']:.1f} s, bound "
+                f"[bench] {label}: {summary.campaign_s:.1f} s, bound "
                 f"{bound['bound_s']:.1f} s (motion {bound['motion_s']:.1f} + measuring "
                 f"{bound['measuring_s']:.1f} + settling {bound['settling_s']:.2f} + aiming "
                 f"{bound['aiming_s']:.1f}; tour "

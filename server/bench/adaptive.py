@@ -85,13 +85,13 @@ def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
 
         def run(name: str, exts=(), **kw) -> dict:
             s = acquire(db, cell, AcquireOptions(name=name, **common, **kw))
-            a = s["adaptive"]
+            a = s.adaptive
             if a is not None and a["steps"]:  # the model the adaptive campaign ends with
                 exts = from_steps(a["steps"][-1].get("extensions") or ())
             return {
-                "poses": s["poses"],
-                "campaign_s": s["campaign_s"],
-                "heldout_mm": _heldout(db, cell, s["campaign"], q_hold, meas_hold, exts),
+                "poses": s.poses,
+                "campaign_s": s.campaign_s,
+                "heldout_mm": _heldout(db, cell, s.campaign, q_hold, meas_hold, exts),
                 "adaptive": a,
                 "extensions": exts,
             }

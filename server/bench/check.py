@@ -199,7 +199,7 @@ def on_the_cell(seed: int = 0) -> dict:
         t0 = time.perf_counter()
         full = acquire(db, cell, AcquireOptions(seed=seed, name="calibration"))
         t1 = time.perf_counter()
-        c, meas = workflow.load_data(db, campaign_id=full["campaign"])
+        c, meas = workflow.load_data(db, campaign_id=full.campaign)
         cal = workflow.run_method(c, meas, "minimax")
         write_model(model, workflow.model_file(cal, c, meas, db))
         t2 = time.perf_counter()
@@ -208,15 +208,15 @@ def on_the_cell(seed: int = 0) -> dict:
     assert run.summary is not None and run.result is not None
     return {
         "recalibration": {
-            "poses": full["poses"],
-            "campaign_simulated_s": full["campaign_s"],
+            "poses": full.poses,
+            "campaign_simulated_s": full.campaign_s,
             "acquire_wall_s": round(t1 - t0, 2),
             "calibrate_wall_s": round(t2 - t1, 2),
         },
         "check": {
             "poses": run.result.poses,
             "planned_poses": DEFAULT_POSES,
-            "campaign_simulated_s": run.summary["campaign_s"],
+            "campaign_simulated_s": run.summary.campaign_s,
             "acquire_check_wall_s": round(t3 - t2, 2),
             "verdict": run.result.verdict,
         },

@@ -30,7 +30,7 @@ def run_verify_bench(seed: int = SEED, cycles: int = 3, directions: int = 3) -> 
         cal_wall = time.perf_counter() - t0
         meas = store.campaign_measurements(
             store.open_database(db_path),
-            campaign_id=acquired["campaign"],
+            campaign_id=acquired.campaign,
             targets=tuple(sorted(cell.targets)),
         )
         _, model = workflow.diagnose(cell, meas, screen=False)
@@ -55,7 +55,7 @@ def run_verify_bench(seed: int = SEED, cycles: int = 3, directions: int = 3) -> 
         "wall_s": wall,
         "reference": {
             "calibration_poses": 100,
-            "simulated_s": acquired["campaign_s"],
+            "simulated_s": acquired.campaign_s,
             "wall_s": cal_wall,
         },
     }

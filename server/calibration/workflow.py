@@ -39,6 +39,7 @@ if TYPE_CHECKING:
     from robocal.server.formats.report_doc import ReportDoc
     from robocal.solver.calibrate import Calibration
     from robocal.solver.diagnose import Diagnosis as SolverDiagnosis
+    from robocal.solver.diagnosis_report import EffectFigure
     from robocal.solver.fit_errors import ExtendedErrors
     from robocal.solver.metrics import Accuracy, Evaluation
     from robocal.solver.screen import Screening
@@ -236,7 +237,8 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     )
     if screening is not None:  # the readings the fit left out as gross errors, and why
         fit.readings_used = used.n_readings
-        fit.excluded_readings = cal.outliers
+        if cal.outliers is not None:
+            fit.excluded_readings = [o.to_json() for o in cal.outliers]
         fit.screening = screening.summary()
     model = ModelFile(
         cal.robot,
@@ -488,7 +490,7 @@ class Diagnosed:
         return self.result.extensions
 
     @property
-    def figures(self) -> list:
+    def figures(self) -> list[EffectFigure]:
         return self.result.figures
 
     @property
@@ -625,9 +627,9 @@ def write_diagnosis(
     # REPORT_N_*.png, and `diagnose` prints it as "effect N" (the order the report ranks them
     # in, not found in).
     rank = {x.label(): k for k, x in enumerate(exts)}
-    ranked = sorted(d.figures, key=lambda f: rank.get(f["label"], len(rank)))
+    ranked = sorted(d.figures, key=lambda f: rank.get(f.label, len(rank)))
     figures = write_figures(ranked, report_path)
-    by_label = {f["label"]: path.name for f, path in zip(ranked, figures)}
+    by_label = {f.label: path.name for f, path in zip(ranked, figures)}
     for e, ext in zip(report.effects, exts):
         e.figure = by_label.get(ext.label())
     if list_figures:

@@ -17,6 +17,7 @@ import numpy as np
 
 from robocal.server import store
 from robocal.server.acquisition.acquire import PREDICTOR, AcquireOptions, _opened, acquire
+from robocal.server.acquisition.summary import AcquireSummary
 from robocal.server.calibration.validation import cell_mismatch
 from robocal.server.checks.check import CheckResult, prepare_measured, record
 from robocal.server.checks.plan import DEFAULT_POSES, check_poses
@@ -50,7 +51,7 @@ class CheckRun:
     """The check campaign's acquisition summary and, once it is done, the check's result."""
 
     campaign: int
-    summary: dict | None  # None: nothing measured now (a done campaign judged)
+    summary: AcquireSummary | None  # None: nothing measured now (a done campaign judged)
     result: CheckResult | None  # None: the campaign did not end done (e-stopped, paused)
 
 
@@ -108,8 +109,8 @@ def acquire_check(
         labels=ids,
         settings=settings,
     )
-    cid = summary["campaign"]
-    if summary["state"] != "done":
+    cid = summary.campaign
+    if summary.state != "done":
         return CheckRun(cid, summary, None)
     with _opened(db_path) as db:
         return CheckRun(cid, summary, judge(db, model, sha, cid))

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from .common import _nonnegative, _nonnegative_int, _positive, _positive_int, _rate, _whole
+
+if TYPE_CHECKING:
+    from robocal.server.acquisition.summary import AcquireSummary
 
 _directions = _whole(1, 6, "a count of directions from 1 to 6")
 
@@ -88,7 +92,7 @@ def _check(args, cell) -> int:
     if run.result is None:
         assert run.summary is not None  # a done campaign is always judged
         console.print(
-            f"check campaign {run.campaign} {run.summary['state']}, not judged; run the same "
+            f"check campaign {run.campaign} {run.summary.state}, not judged; run the same "
             "command again to resume it (with --reset after an e-stop)"
         )
         return 1
@@ -147,30 +151,29 @@ def cmd_acquire(args) -> int | None:
     with _progress(console) as progress:
         summary = acquire(args.db, cell, opts, progress=progress, reset=args.reset)
     _print_summary(console, summary)
-    if summary.get("adaptive"):
-        _print_adaptive(console, summary["adaptive"])
+    if summary.adaptive:
+        _print_adaptive(console, summary.adaptive)
     console.print(
         f"stored in {args.db}; calibrate with: robocal calibrate {args.db} "
-        f"--campaign {summary['campaign']}"
+        f"--campaign {summary.campaign}"
     )
     return None
 
 
-def _print_summary(console, summary: dict) -> None:
-    if summary["resumed_at"] is not None:
+def _print_summary(console, summary: AcquireSummary) -> None:
+    if summary.resumed_at is not None:
         console.print(
-            f"resumed campaign {summary['campaign']} ({summary['name']}) at pose "
-            f"{summary['resumed_at'] + 1}"
+            f"resumed campaign {summary.campaign} ({summary.name}) at pose {summary.resumed_at + 1}"
         )
-    locked = summary["locked_without_search_after_10"]
+    locked = summary.locked_without_search_after_10
     console.print(
-        f"campaign {summary['campaign']} {summary['state']}: {summary['measured_poses']} poses "
-        f"measured now, {summary['readings']} readings, {summary['missing']} missing, "
-        f"{summary['beam_breaks']} beam breaks"
+        f"campaign {summary.campaign} {summary.state}: {summary.measured_poses} poses "
+        f"measured now, {summary.readings} readings, {summary.missing} missing, "
+        f"{summary.beam_breaks} beam breaks"
         + (
-            f"; {'simulated ' if summary.get('simulated', True) else ''}campaign time "
-            f"{summary['campaign_s'] / 60:.1f} min"
-            if summary["campaign_s"] is not None
+            f"; {'simulated ' if summary.simulated else ''}campaign time "
+            f"{summary.campaign_s / 60:.1f} min"
+            if summary.campaign_s is not None
             else ""
         )
         + (

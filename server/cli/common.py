@@ -10,9 +10,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from robocal.server.formats.blocks import Unexplained
     from robocal.server.formats.report_doc import Extrapolation, ReportDoc
+    from robocal.server.formats.report_doc import Outlier as OutlierDoc
     from robocal.solver.calibrate import Calibration
+    from robocal.solver.screen import Outlier
 
 
 def _note(text: str) -> None:
@@ -116,7 +120,9 @@ def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=Tr
     return report, figures, d
 
 
-def _print_outliers(outliers, skipped=None) -> None:
+def _print_outliers(
+    outliers: Sequence[Outlier | OutlierDoc] | None, skipped: str | None = None
+) -> None:
     """The readings screened out as gross errors, one line each (None: screening was off)."""
     from robocal.server.cli.tables import console
 
@@ -136,8 +142,7 @@ def _print_outliers(outliers, skipped=None) -> None:
     )
     for o in outliers:
         console.print(
-            f"  pose {o['pose']} target {o['target']}: residual {o['residual_mm']:.3f} mm "
-            f"({o['evidence']})"
+            f"  pose {o.pose} target {o.target}: residual {o.residual_mm:.3f} mm ({o.evidence})"
         )
 
 
@@ -152,7 +157,7 @@ def _print_diagnosis(doc: ReportDoc) -> None:
     from robocal.server.cli.tables import console
     from robocal.server.formats.blocks import Validation
 
-    _print_outliers(None if doc.outliers is None else [o.to_json() for o in doc.outliers])
+    _print_outliers(doc.outliers)
     floor, base, final = doc.noise_floor_mm, doc.baseline, doc.final
     console.print(
         f"baseline (geometric) held-out RMS {base.holdout_rmse_mm:.4f} mm, "

@@ -42,8 +42,8 @@ def cmd_demo(args) -> None:
     ) as progress:
         summary = acquire(db, cell, opts, progress=progress)
     console.print(
-        f"campaign done: {summary['readings']} readings, simulated campaign time "
-        f"{summary['campaign_s'] / 60:.1f} min"
+        f"campaign done: {summary.readings} readings, simulated campaign time "
+        f"{(summary.campaign_s or 0.0) / 60:.1f} min"
     )
     cell, meas = workflow.load_data(db)
     cal_meas = meas.subset(np.arange(args.poses))

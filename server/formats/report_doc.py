@@ -50,9 +50,14 @@ class Effect(Open):
 
 
 class Outlier(Open):
+    """A reading excluded as a gross error (solver.screen.Outlier)."""
+
     pose: str | int
     target: str
     residual_mm: float
+    evidence: str | None = Field(
+        None, description="which evidence judged it: `distance`, `within-pose` or `geometric`"
+    )
 
 
 class RegionFold(Open):

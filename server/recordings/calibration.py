@@ -6,6 +6,7 @@ import os
 import re
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,6 +32,9 @@ from robocal.server.recordings.cell import (  # noqa: E402
 from robocal.solver.calibrate import Calibration  # noqa: E402
 from robocal.solver.kinematics import flange_frames, joint_frames  # noqa: E402
 from robocal.solver.measurements import Measurements  # noqa: E402
+
+if TYPE_CHECKING:
+    from robocal.solver.diagnosis_report import EffectFigure
 
 BEFORE = (255, 140, 0)
 AFTER = (40, 140, 255)
@@ -81,7 +85,7 @@ def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]+", "_", text).strip("_") or "effect"
 
 
-def _log_diagnosis(rec: rr.RecordingStream, figures: list[dict]) -> list[tuple[str, str]]:
+def _log_diagnosis(rec: rr.RecordingStream, figures: list[EffectFigure]) -> list[tuple[str, str]]:
     """Each figure as 2-D scatters (before, expected, after) and as the PNG server/figures/diagnosis.py draws.
 
     Returns (entity, title) of each figure's image, for the blueprint.
@@ -93,10 +97,10 @@ def _log_diagnosis(rec: rr.RecordingStream, figures: list[dict]) -> list[tuple[s
     shown = []
     with tempfile.TemporaryDirectory() as tmp:
         for i, fig in enumerate(figures, start=1):
-            root = f"diagnosis/{i}_{_slug(fig.get('name', fig['label']))}"
-            x = np.asarray(fig["x"], dtype=float)
+            root = f"diagnosis/{i}_{_slug(fig.name)}"
+            x = np.asarray(fig.x, dtype=float)
             for key, color in (("before", BEFORE), ("expected", (220, 40, 40)), ("after", AFTER)):
-                y = np.asarray(fig[key], dtype=float)
+                y = np.asarray(getattr(fig, key), dtype=float)
                 # scatter apart from the PNG: data units and pixels should not share one 2-D space
                 ok = np.isfinite(x) & np.isfinite(y)
                 scatter = rr.Points2D(
@@ -105,7 +109,7 @@ def _log_diagnosis(rec: rr.RecordingStream, figures: list[dict]) -> list[tuple[s
                 rec.log(f"{root}/scatter/{key}", scatter, static=True)
             rec.log(
                 f"{root}/axes",
-                rr.TextDocument(f"{fig['label']}\n\nx: {fig['x_label']}\ny: {fig['y_label']}"),
+                rr.TextDocument(f"{fig.label}\n\nx: {fig.x_label}\ny: {fig.y_label}"),
                 static=True,
             )
             png = effect_figure(fig, Path(tmp) / f"{i}.png")
@@ -114,7 +118,7 @@ def _log_diagnosis(rec: rr.RecordingStream, figures: list[dict]) -> list[tuple[s
                 rr.EncodedImage(contents=png.read_bytes(), media_type="image/png"),
                 static=True,
             )
-            shown.append((f"{root}/figure", fig["label"]))
+            shown.append((f"{root}/figure", fig.label))
     return shown
 
 

@@ -398,10 +398,10 @@ class Acquisitions:
                 on_event=self.events.publish,
                 owner=self.owner,
             )
-            detail = f"the run ended {summary['state']}"
-            if summary["state"] == "done" and self.on_done is not None:
+            detail = f"the run ended {summary.state}"
+            if summary.state == "done" and self.on_done is not None:
                 detail = self._after_done(cid, detail)
-            change = dict(detail=detail, summary=to_plain(summary))
+            change = dict(detail=detail, summary=to_plain(summary.to_json()))
         except _Cancelled:
             change = dict(detail="stopped before the arm moved")
         except Exception as e:  # a device fault (the engine reported failed), or a refusal

@@ -537,9 +537,9 @@ def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> Ve
         labels=labels,
         settings=settings,
     )
-    if summary["state"] != "done":
-        raise RuntimeError(f"the verification run ended {summary['state']}")
-    return verification_report(*readings(store.open_database(db_path), summary["campaign"]))
+    if summary.state != "done":
+        raise RuntimeError(f"the verification run ended {summary.state}")
+    return verification_report(*readings(store.open_database(db_path), summary.campaign))
 
 
 # What the certificate says of the tracker's traceability, from the cell's tracker block.

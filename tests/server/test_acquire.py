@@ -179,7 +179,7 @@ def test_controller_fault_stops_keeps_readings_and_resumes(store_url, monkeypatc
     info = store.list_campaigns(db)[0]
     assert info.status == "failed" and info.n_done == 5
     summary = acq.acquire(store_url, default_cell(), opts)
-    assert summary["resumed_at"] == 5 and summary["state"] == "done"
+    assert summary.resumed_at == 5 and summary.state == "done"
     ok, missing, dup, outcomes = counts(store_url)
     assert (ok + missing, dup, outcomes) == (36, 0, 12)
 
@@ -200,5 +200,5 @@ def test_the_first_reading_waits_for_the_stored_running_state(tmp_path, monkeypa
 
     monkeypatch.setattr(store, "set_status", slow_set_status)
     out = acquire(tmp_path / "r.db", default_cell(), AcquireOptions(poses=3, seed=4))
-    assert (out["state"], out["measured_poses"], out["readings"]) == ("done", 3, 9)
+    assert (out.state, out.measured_poses, out.readings) == ("done", 3, 9)
     assert counts(tmp_path / "r.db") == (9, 0, 0, 3)

@@ -17,32 +17,32 @@ def _run(tmp_path, **kw):
 
 def test_the_campaign_stops_at_the_target_with_its_steps_stored_and_reported(tmp_path):
     summary, events = _run(tmp_path, target_accuracy_mm=0.045)
-    a = summary["adaptive"]
-    assert summary["state"] == "done" and a["stopped"] == "target"
+    a = summary.adaptive
+    assert summary.state == "done" and a["stopped"] == "target"
     assert a["predicted_mm"] <= 0.045
     steps = a["steps"]
     poses = [s["poses"] for s in steps]
     assert poses == sorted(poses) and len(set(poses)) == len(poses)
-    assert poses[-1] == summary["poses"] == summary["measured_poses"]
+    assert poses[-1] == summary.poses == summary.measured_poses
     assert all(not s["stop"] for s in steps[:-1]) and steps[-1]["stop"]
     with store.open_database(tmp_path / "a.db") as db:
-        info = store.get_campaign(db, campaign_id=summary["campaign"])
-        planned = store.planned_poses(db, campaign_id=summary["campaign"])
+        info = store.get_campaign(db, campaign_id=summary.campaign)
+        planned = store.planned_poses(db, campaign_id=summary.campaign)
     assert info.settings["adaptive_steps"] == steps
     assert info.settings["plan"]["adaptive"]["target_accuracy_mm"] == 0.045
-    assert len(planned) == summary["poses"]
+    assert len(planned) == summary.poses
     assert [p.label for p in planned] == [str(i + 1) for i in range(len(planned))]
     told = [e for e in events if e["type"] == "campaign.adaptive"]
     assert [e["poses"] for e in told] == poses
     # each pose event counts against the plan as it stood then, the last against the whole
     last = [e for e in events if e["type"] == "campaign.pose"][-1]
-    assert last["poses_total"] == summary["poses"]
+    assert last["poses_total"] == summary.poses
 
 
 def test_the_campaign_stops_at_its_maximum_when_the_target_is_out_of_reach(tmp_path):
     summary, _ = _run(tmp_path, target_accuracy_mm=0.001, poses=12)
-    a = summary["adaptive"]
-    assert a["stopped"] == "maximum" and summary["poses"] == 12
+    a = summary.adaptive
+    assert a["stopped"] == "maximum" and summary.poses == 12
     assert "maximum of 12 poses" in a["message"]
     assert a["predicted_mm"] > 0.001
 
@@ -85,8 +85,8 @@ def test_an_interrupted_adaptive_campaign_resumes_with_its_plan_and_steps(tmp_pa
     assert info.status == "estopped"
     assert [s["poses"] for s in info.settings["adaptive_steps"]] == heard
     summary = acquire(tmp_path / "a.db", default_cell(), opts, reset=True)
-    a = summary["adaptive"]
-    assert summary["campaign"] == 1 and summary["state"] == "done" and a["stopped"] == "target"
+    a = summary.adaptive
+    assert summary.campaign == 1 and summary.state == "done" and a["stopped"] == "target"
     poses = [s["poses"] for s in a["steps"]]
     assert poses[:2] == heard and poses == sorted(set(poses))
     with store.open_database(tmp_path / "a.db") as db:
@@ -112,8 +112,8 @@ def test_the_command_prints_each_step_and_why_it_stopped(tmp_path):
 def test_a_target_below_the_tracker_noise_stops_at_the_floor_and_says_so(tmp_path):
     # the tracker's own noise (some 0.016 mm a reading here) is a floor no model goes below
     summary, _ = _run(tmp_path, target_accuracy_mm=0.012)
-    a = summary["adaptive"]
-    assert a["stopped"] == "floor" and summary["poses"] < 80, a["message"]
+    a = summary.adaptive
+    assert a["stopped"] == "floor" and summary.poses < 80, a["message"]
     last = a["steps"][-1]
     assert last["floor_mm"] > 0.012 and last["parameters_mm"] ** 2 < 0.1 * last["predicted_mm"] ** 2
     assert "is above the target 0.0120 mm and reached" in a["message"]
@@ -126,8 +126,8 @@ def test_a_hidden_periodic_error_is_named_and_fitted_and_the_target_reached(tmp_
     # joint 2's cyclic error puts the geometric fit's floor some 3x the tracker's noise, above
     # the target: a checkpoint's diagnosis names it, and the fit includes it from then on
     summary, _ = _run(tmp_path, target_accuracy_mm=0.02, effects=("joint_periodic:2=0.004",))
-    a = summary["adaptive"]
-    assert a["stopped"] == "target" and summary["poses"] < 80, a["message"]
+    a = summary.adaptive
+    assert a["stopped"] == "target" and summary.poses < 80, a["message"]
     first = next(i for i, s in enumerate(a["steps"]) if s["effects"])
     assert a["steps"][first]["named"] and a["steps"][first]["named"][0].startswith(
         "joint_periodic(2"

@@ -63,6 +63,21 @@ def string_key_reads(source: str) -> list[tuple[int, str]]:
 # The ISO 9283 figures of a verification (formats.verification_doc) are read as attributes only
 VERIFICATION_FIGURES = {"AP_max_mm", "RP_max_mm", "AP_mm", "RP_mm", "vAP_mm", "AP_U_mm", "AD_mm"}
 VERIFICATION_FIGURES |= {"RD_mm"}
+# The keys only an excluded reading's row has (solver.screen.Outlier, formats.report_doc.Outlier)
+OUTLIER_KEYS = {"residual_mm", "evidence"}
+# The keys of a diagnosis figure's data (solver.diagnosis_report.EffectFigure)
+FIGURE_KEYS = {"label", "x_label", "y_label", "expected"}
+# An acquisition's result (acquisition.summary.AcquireSummary), read off `summary`, `acquired`,
+# `x.summary`: its fields' names (other summaries, a benchmark's, have other keys)
+ACQUIRE_KEYS = {"campaign", "name", "resumed_at", "poses", "state", "measured_poses"}
+ACQUIRE_KEYS |= {"readings", "missing", "beam_breaks", "campaign_s", "phase_s", "adaptive"}
+ACQUIRE_KEYS |= {"locked_without_search_after_10", "simulated", "skipped_poses", "searched"}
+
+
+def _acquired(node: ast.AST) -> bool:
+    """Whether the expression names an acquisition's summary."""
+    name = node.id if isinstance(node, ast.Name) else getattr(node, "attr", None)
+    return name in ("summary", "acquired")
 
 
 def _owner(node: ast.AST) -> str | None:
@@ -79,8 +94,10 @@ def _owner(node: ast.AST) -> str | None:
 
 def result_key_reads(source: str) -> list[tuple[int, str]]:
     """(line, what) of each read by string key of a diagnosis or verification report (any key
-    off `report` or `x.report`), of a calibration (any key off `cal`), or of a verification's
-    figures (AP_mm, RP_max_mm... off anything): x["k"], x.get("k"), "k" in x."""
+    off `report` or `x.report`), of a calibration (any key off `cal`), of a verification's
+    figures (AP_mm, RP_max_mm... off anything), of an excluded reading's row (residual_mm,
+    evidence off anything), of a diagnosis figure's data (label, x_label... off anything) or of
+    an acquisition's summary (its fields off `summary`, `acquired`): x["k"], x.get("k"), "k" in x."""
     out = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Subscript) and isinstance(node.ctx, (ast.Load, ast.Del)):
@@ -98,7 +115,17 @@ def result_key_reads(source: str) -> list[tuple[int, str]]:
             continue
         if key is None:
             continue
-        what = _owner(owner) or ("a verification" if key in VERIFICATION_FIGURES else None)
+        what = _owner(owner) or (
+            "a verification"
+            if key in VERIFICATION_FIGURES
+            else "an outlier"
+            if key in OUTLIER_KEYS
+            else "a figure"
+            if key in FIGURE_KEYS
+            else "an acquisition"
+            if key in ACQUIRE_KEYS and _acquired(owner)
+            else None
+        )
         if what:
             out.append((node.lineno, f"{key!r} of {what}"))
     return sorted(out)
@@ -109,6 +136,10 @@ def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
         'a = d.report["effects"]\nb = report["before"]["points"]\nc = cal.get("screening")\n'
         'e = "history" in cal\nf = p["AP_mm"]\ng = report.get("uncertainty") or {}\n'
         'h = calibration.get("history")\nreport["figures"] = []\ni = row["name"]\n'
+        "j = f\"{o['residual_mm']:.3f} ({o['evidence']})\"\n"
+        'k = {f["label"]: p for f, p in z}\nax.set_xlabel(series["x_label"])\n'
+        'if summary["state"] != "done":\n    c = run.summary["campaign"]\n'
+        'l = acquired["campaign_s"]\nm = summary["detection"]\n'
     )
     assert result_key_reads(src) == [
         (1, "'effects' of a report"),
@@ -118,6 +149,13 @@ def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
         (5, "'AP_mm' of a verification"),
         (6, "'uncertainty' of a report"),
         (7, "'history' of a calibration"),
+        (10, "'evidence' of an outlier"),
+        (10, "'residual_mm' of an outlier"),
+        (11, "'label' of a figure"),
+        (12, "'x_label' of a figure"),
+        (13, "'state' of an acquisition"),
+        (14, "'campaign' of an acquisition"),
+        (15, "'campaign_s' of an acquisition"),
     ]
 
 
@@ -209,3 +247,26 @@ def test_report_json_is_its_document(written):
     assert doc.validation.to_json() == text["validation"]
     assert doc.identified.to_json() == text["identified"]
     assert doc.final.to_json() == text["final"]
+
+
+# The solver's report fields that stay maps: a phase's seconds by its name, an effect kind's own
+# keys and its parameters by their names (each kind has its own); `unexplained` is still a dict
+MAPS = {"seconds", "own", "parameters", "uncertainty", "unexplained"}
+
+
+def test_the_solver_report_nests_typed_blocks():
+    """Each nested block of the solver's report (outliers, extrapolation, stability,
+    significance, alternatives, cross-validation) is a dataclass, not a dict read by key."""
+    from dataclasses import fields
+
+    from robocal.solver.diagnosis_report import Finding, Report
+
+    untyped = [
+        f"{cls.__name__}.{f.name}: {f.type}"
+        for cls in (Report, Finding)
+        for f in fields(cls)
+        if "dict" in str(f.type) and f.name not in MAPS
+    ]
+    assert not untyped, "give these blocks a dataclass (solver/report_blocks.py):\n" + "\n".join(
+        untyped
+    )

@@ -53,13 +53,13 @@ def test_estop_mid_pose_resume_and_judge_lose_nothing(calibrated, store_url):
         engine.trace = trace
 
     run = check_run.acquire_check(store_url, cell, model, opts, on_engine=stop_at_pose_3)
-    assert run.result is None and run.summary["state"] == "estopped"
+    assert run.result is None and run.summary.state == "estopped"
     ok_before, _, dup, outcomes = counts(store_url)
     assert (outcomes, dup) == (3, 0) and ok_before == 3 * 3 + 1  # pose 3 cut after one SMR
     with pytest.raises(store.Conflict, match="--reset"):
         check_run.acquire_check(store_url, cell, model, opts)
     run = check_run.acquire_check(store_url, cell, model, opts, reset=True)
-    assert run.summary["resumed_at"] == 3 and run.summary["state"] == "done"
+    assert run.summary.resumed_at == 3 and run.summary.state == "done"
     ok, missing, dup, outcomes = counts(store_url)
     assert (ok + missing, dup, outcomes) == (18, 0, 6) and ok >= ok_before
     [info] = store.list_campaigns(store.open_database(store_url))
@@ -105,7 +105,7 @@ def test_a_check_measured_but_not_judged_is_judged_next_and_later_ones_reuse_its
     monkeypatch.setattr(check_run, "check_poses", planned)
     default = check_run.CheckRunOptions(seed=SEED, pause_s=PAUSE_S)
     run = check_run.acquire_check(db, default_cell(), model, default)
-    assert run.summary["state"] == "done" and run.result.history == 2 and run.result.poses == 4
+    assert run.summary.state == "done" and run.result.history == 2 and run.result.poses == 4
 
 
 def test_acquire_check_on_the_command_line_with_planned_poses(calibrated, tmp_path):
@@ -190,6 +190,6 @@ def test_a_check_on_real_devices_over_their_addresses(tmp_path, devices):
     cell = parse_cell(json.dumps(cell_json(devices)))
     opts = check_run.CheckRunOptions(pause_s=0.05, samples=20)
     run = check_run.acquire_check(tmp_path / "h.db", cell, tmp_path / "model.json", opts)
-    assert run.summary["state"] == "done" and run.summary["simulated"] is False
+    assert run.summary.state == "done" and run.summary.simulated is False
     assert run.result.poses == 6 and run.result.verdict == "ok", run.result.reason
     assert len([m for m in devices.controller.received if "MOVEJ" in m]) == 6

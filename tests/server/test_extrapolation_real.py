@@ -41,13 +41,14 @@ def test_every_30_pose_subset_of_the_real_irb120_holds_on_its_left_out_poses(cap
         geometric = rms(predict(geo.layout, geo.x, held.q), held.xyz)
         extended = rms(predict_poses(cell, d, held.q), held.xyz)
         named = [f"{e.name}({e.joint})" for e in d.report.effects]
-        refused = [r["label"] for r in d.report.extrapolation["refused"]]
-        resampled = d.report.stability or {}
-        agree = ", ".join(f"{e['effect']} {e['named_in']}/5" for e in resampled.get("effects", []))
+        refused = [r.label for r in d.report.extrapolation.refused]
+        resampled = d.report.stability
+        effects = resampled.effects if resampled else []
+        agree = ", ".join(f"{e.effect} {e.named_in}/5" for e in effects)
         lines.append(
             f"fold {k}: named {named or 'nothing'}, refused {refused or 'nothing'}; held out "
             f"geometric {geometric:.4f} mm, diagnosed {extended:.4f} mm; resamples: "
-            f"{agree or 'none'}{' (in doubt)' if resampled.get('doubt') else ''}"
+            f"{agree or 'none'}{' (in doubt)' if resampled and resampled.doubt else ''}"
         )
         assert extended <= geometric * (1 + 1e-9), lines[-1]
     with capsys.disabled():

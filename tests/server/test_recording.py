@@ -20,6 +20,7 @@ from robocal.server.calibration.workflow import run_method  # noqa: E402
 from robocal.server.formats.cell_json import default_cell  # noqa: E402
 from robocal.server.recordings.calibration import _chain, _rms, record_calibration  # noqa: E402
 from robocal.server.recordings.cell import PoseSet, color_scale, error_colors  # noqa: E402
+from robocal.solver.diagnosis_report import EffectFigure  # noqa: E402
 from robocal.solver.kinematics import predict  # noqa: E402
 from robocal.solver.robot import IRB2600  # noqa: E402
 
@@ -70,16 +71,16 @@ def _static(chunks, entity: str, column: str) -> list:
 
 def test_recording_reads_back_with_the_cell_every_pose_and_the_blueprint(campaign, tmp_path):
     cell, meas, held, cal = campaign
-    figure = {
-        "name": "joint_offset",
-        "label": "joint offset (q2)",
-        "x": np.linspace(-1, 1, 30),
-        "before": np.sin(np.arange(30.0)),
-        "after": np.zeros(30),
-        "expected": np.ones(30),
-        "x_label": "q2 / deg",
-        "y_label": "joint 2 error / mdeg",
-    }
+    figure = EffectFigure(
+        name="joint_offset",
+        label="joint offset (q2)",
+        x=np.linspace(-1, 1, 30),
+        before=np.sin(np.arange(30.0)),
+        after=np.zeros(30),
+        expected=np.ones(30),
+        x_label="q2 / deg",
+        y_label="joint 2 error / mdeg",
+    )
     out = record_calibration(
         tmp_path / "sub" / "cal.rrd",
         cell=cell,

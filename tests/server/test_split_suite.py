@@ -89,10 +89,10 @@ def test_a_backlash_fitted_on_40_poses_of_one_configuration_holds_in_the_other()
     d = diagnose(
         Problem(case.robot, nominal, train.target_names, train.q, train.xyz, time_s=train.time_s)
     )
-    folds = d.report.extrapolation["folds"]
-    exempt = [f for f in folds if f["worse_only_in_geometric_span"]]
-    assert exempt and d.report.extrapolation["refused"] == [], folds
-    assert all(f["final_rmse_mm"] > ss.MAX_RATIO * f["geometric_rmse_mm"] for f in exempt)
+    folds = d.report.extrapolation.folds
+    exempt = [f for f in folds if f.worse_only_in_geometric_span]
+    assert exempt and d.report.extrapolation.refused == [], folds
+    assert all(f.final_rmse_mm > ss.MAX_RATIO * f.geometric_rmse_mm for f in exempt)
 
 
 def test_a_clean_case_has_no_removable_share():

@@ -36,7 +36,7 @@ def calibrated_and_verified(d, seed: int):
     s = acquire(db_path, cell, AcquireOptions(poses=100, seed=seed, effects=(EFFECT,), name="cal"))
     db = store.open_database(db_path)
     meas = store.campaign_measurements(
-        db, campaign_id=s["campaign"], targets=tuple(sorted(cell.targets))
+        db, campaign_id=s.campaign, targets=tuple(sorted(cell.targets))
     )
     _, model = workflow.diagnose(cell, meas, screen=False)
     write_model(d / "model.json", model)

@@ -37,7 +37,7 @@ def timed(tmp_path_factory):
     cell, db_path = default_cell(), d / "cell.db"
     s = acquire(db_path, cell, AcquireOptions(poses=40, seed=SEED, name="cal"))
     meas = store.campaign_measurements(
-        store.open_database(db_path), campaign_id=s["campaign"], targets=tuple(sorted(cell.targets))
+        store.open_database(db_path), campaign_id=s.campaign, targets=tuple(sorted(cell.targets))
     )
     write_model(
         d / "model.json", workflow.model_file(workflow.run_method(cell, meas, "ls-sum"), cell, meas)

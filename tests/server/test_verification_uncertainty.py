@@ -36,7 +36,7 @@ def calibrated_and_verified(
     db_path = d / "cell.db"
     s = acquire(db_path, cell, AcquireOptions(poses=60, seed=SEED, name="cal"))
     meas = store.campaign_measurements(
-        store.open_database(db_path), campaign_id=s["campaign"], targets=tuple(sorted(cell.targets))
+        store.open_database(db_path), campaign_id=s.campaign, targets=tuple(sorted(cell.targets))
     )
     model = workflow.model_file(workflow.run_method(cell, meas, "ls-sum"), cell, meas)
     write_model(d / "model.json", model)

@@ -118,7 +118,7 @@ def diagnosed(cell, meas):
 
 def figure_of(d, effect):
     """The figure data the diagnosis keeps for a named effect (written as a PNG by the server)."""
-    labels = [f["label"] for f in d.figures]
+    labels = [f.label for f in d.figures]
     ext = next(e for e in d.extensions if e.name == effect["name"])
     return d.figures[labels.index(ext.label())] if ext.label() in labels else None
 

@@ -111,7 +111,7 @@ def test_two_effects_at_once():
     for e in d.report.effects:
         lo, hi = e.holdout_gain_interval_mm
         assert 0 < lo <= e.holdout_rmse_before_mm - e.holdout_rmse_after_mm <= hi
-        assert e.significance["p_value"] < 0.005
+        assert e.significance.p_value < 0.005
 
 
 @pytest.mark.parametrize("seed", range(8))

@@ -22,7 +22,7 @@ def test_each_resample_leaves_out_its_own_share_of_the_poses():
 def test_a_majority_of_resamples_naming_the_cause_raises_no_doubt():
     s = Stability(29, (C2,), ((C2,), (C2,), (C2,), (), (P2,)))
     assert s.count(C2) == 3 and s.count(P2) == 1 and s.agreeing() == 3 and s.doubt() is None
-    rep = s.to_report()
+    rep = s.to_report().to_json()  # as report.json has it
     assert rep["effects"] == [
         {"effect": "joint_compliance(2)", "named_in": 3, "in_final": True},
         {"effect": "joint_periodic(2, harmonic 2)", "named_in": 1, "in_final": False},
@@ -50,5 +50,5 @@ def test_another_cause_named_on_two_resamples_puts_the_answer_in_doubt():
     assert doubt is not None and doubt.startswith("the cause is in doubt: on 5 resamples")
     assert "joint_compliance(2) named on 2 of 5" in doubt
     assert "joint_periodic(2, harmonic 2) named on 2 of 5" in doubt
-    assert [e["in_final"] for e in rival.to_report()["effects"]] == [True, False]
+    assert [e.in_final for e in rival.to_report().effects] == [True, False]
     assert key_label(("thermal_drift", None, None)) == "thermal_drift"
