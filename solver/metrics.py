@@ -16,7 +16,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 # Triangles whose normal is shorter than this (mm^2, |AB x AC|) are treated as collinear:
 # their orientation is undefined rather than numerically garbage.
@@ -99,6 +98,8 @@ def euler_xyz(R) -> np.ndarray:
             # Gimbal lock at b = +-90 deg is exactly AO's known weakness (paper sec. IV-B); AO'
             # is the remedy, so a warning per singular pose would only be noise here.
             warnings.filterwarnings("ignore", message=".*[Gg]imbal lock.*")
+            from scipy.spatial.transform import Rotation  # ~90 ms: only orientation needs it
+
             out[ok] = Rotation.from_matrix(R[ok]).as_euler("xyz", degrees=True)
     return out
 
@@ -125,6 +126,8 @@ def orientation_errors_log(pred, meas) -> np.ndarray:
     out = np.full(R_c.shape[0], np.nan)
     ok = _valid_rotations(R_c) & _valid_rotations(R_m)
     if ok.any():
+        from scipy.spatial.transform import Rotation  # ~90 ms: only orientation needs it
+
         rel = np.einsum("nji,njk->nik", R_m[ok], R_c[ok])
         out[ok] = np.degrees(Rotation.from_matrix(rel).magnitude())
     return out

@@ -291,14 +291,14 @@ class LayoutCheck:
 def check_layout(names, nominal: np.ndarray, identified: np.ndarray) -> LayoutCheck:
     """The SMRs identified farther than TARGET_MOVE_MM from nominal (K, 3), and the rigid
     motion of the whole layout that explains them, when there are three SMRs or more."""
-    from scipy.spatial.transform import Rotation
-
     nominal, identified = np.asarray(nominal, float), np.asarray(identified, float)
     dist = np.linalg.norm(identified - nominal, axis=1)
     moved = [(str(n), float(d)) for n, d in zip(names, dist) if d > TARGET_MOVE_MM]
     spread = np.linalg.svd(nominal - nominal.mean(axis=0), compute_uv=False)
     if not moved or len(names) < 3 or spread[1] < 1.0:  # a line or a point fixes no rotation
         return LayoutCheck(moved)
+    from scipy.spatial.transform import Rotation  # ~90 ms to import: only when SMRs moved
+
     T = kabsch(nominal, identified)
     rms = float(np.sqrt(np.mean(np.sum((nominal @ T[:3, :3].T + T[:3, 3] - identified) ** 2, 1))))
     rotvec = Rotation.from_matrix(T[:3, :3]).as_rotvec()
