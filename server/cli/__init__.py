@@ -39,11 +39,30 @@ class Parser(argparse.ArgumentParser):
                 message += f"; did you mean {close[0]!r}?"
         elif message.startswith("unrecognized arguments:"):
             known = self._option_strings()
+            command = self._command()
             for word in message.split(":", 1)[1].split():
-                close = difflib.get_close_matches(word.split("=")[0], known, n=1)
-                if word.startswith("--") and close:
+                option = word.split("=")[0]
+                close = difflib.get_close_matches(option, known, n=1)
+                if not word.startswith("--"):
+                    continue
+                if option in known:  # another command's option: say so, not "did you mean" itself
+                    message += f"; {option} is not an option of {command or 'this command'}"
+                elif close:
                     message += f"; {word}: did you mean {close[0]}?"
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
+
+    def _command(self) -> str | None:
+        """The command the arguments named ("robocal evaluate"), None before one was parsed."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for word in getattr(self, "_argv", []):
+                    if word in action.choices:
+                        return f"{self.prog} {word}"
+        return None
 
     def _option_strings(self) -> list[str]:
         """Every long option of this parser and of its commands."""

@@ -146,6 +146,11 @@ CASES = [
     (("calibrate", "mysql://host/db"), ["mysql://host/db", "SQLite files and PostgreSQL"]),
     (("calibrate", "::://"), ["not a database file or URL"]),
     (("simulate", "--posess", 3, "--out", "x.csv"), ["--posess", "did you mean --poses?"]),
+    # another command's option is named as such, never "did you mean" itself
+    (
+        ("evaluate", "model.json", "meas.csv", "--cell", "c.json"),
+        ["--cell is not an option of robocal evaluate"],
+    ),
     # issue 20: a model nested too deeply, or whose base is no rotation, by every reader
     *[
         (tuple(model if a == "MODEL" else a for a in cmd), [model, why])
