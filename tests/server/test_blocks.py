@@ -92,14 +92,9 @@ def _owner(node: ast.AST) -> str | None:
     return None
 
 
-def result_key_reads(source: str) -> list[tuple[int, str]]:
-    """(line, what) of each read by string key of a diagnosis or verification report (any key
-    off `report` or `x.report`), of a calibration (any key off `cal`), of a verification's
-    figures (AP_mm, RP_max_mm... off anything), of an excluded reading's row (residual_mm,
-    evidence off anything), of a diagnosis figure's data (label, x_label... off anything) or of
-    an acquisition's summary (its fields off `summary`, `acquired`): x["k"], x.get("k"), "k" in x."""
-    out = []
-    for node in ast.walk(ast.parse(source)):
+def _keyed(tree: ast.AST):
+    """(line, key, owner) of each read by string key in tree: x["k"], x.get("k"), "k" in x."""
+    for node in ast.walk(tree):
         if isinstance(node, ast.Subscript) and isinstance(node.ctx, (ast.Load, ast.Del)):
             key, owner = _key(node.slice), node.value
         elif (
@@ -113,8 +108,18 @@ def result_key_reads(source: str) -> list[tuple[int, str]]:
             key, owner = _key(node.left), node.comparators[0]
         else:
             continue
-        if key is None:
-            continue
+        if key is not None:
+            yield node.lineno, key, owner
+
+
+def result_key_reads(source: str) -> list[tuple[int, str]]:
+    """(line, what) of each read by string key of a diagnosis or verification report (any key
+    off `report` or `x.report`), of a calibration (any key off `cal`), of a verification's
+    figures (AP_mm, RP_max_mm... off anything), of an excluded reading's row (residual_mm,
+    evidence off anything), of a diagnosis figure's data (label, x_label... off anything) or of
+    an acquisition's summary (its fields off `summary`, `acquired`): x["k"], x.get("k"), "k" in x."""
+    out = []
+    for line, key, owner in _keyed(ast.parse(source)):
         what = _owner(owner) or (
             "a verification"
             if key in VERIFICATION_FIGURES
@@ -127,7 +132,7 @@ def result_key_reads(source: str) -> list[tuple[int, str]]:
             else None
         )
         if what:
-            out.append((node.lineno, f"{key!r} of {what}"))
+            out.append((line, f"{key!r} of {what}"))
     return sorted(out)
 
 
@@ -167,22 +172,11 @@ def adaptive_key_reads(source: str) -> list[tuple[int, str]]:
         return isinstance(node, ast.Name) and node.id in steps
 
     out = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Subscript) and isinstance(node.ctx, (ast.Load, ast.Del)):
-            key, owner = _key(node.slice), node.value
-        elif (
-            isinstance(node, ast.Call)
-            and isinstance(node.func, ast.Attribute)
-            and node.func.attr in ("get", "setdefault", "pop")
-            and node.args
-        ):
-            key, owner = _key(node.args[0]), node.func.value
-        else:
-            continue
+    for line, key, owner in _keyed(tree):
         if key == "predicted_mm" or (key in ADAPTIVE_KEYS and summary(owner)):
-            out.append((node.lineno, f"{key!r} of an adaptive summary"))
+            out.append((line, f"{key!r} of an adaptive summary"))
         elif key in STEP_KEYS and step(owner):
-            out.append((node.lineno, f"{key!r} of an adaptive step"))
+            out.append((line, f"{key!r} of an adaptive step"))
     return sorted(out)
 
 
