@@ -19,6 +19,7 @@ from robocal.server.acquisition.adaptive_effects import from_steps
 from robocal.server.acquisition.adaptive_plan import (
     AdaptiveOptions,
     AdaptivePlanner,
+    AdaptiveSummary,
     Step,
     ordered,
     plan_candidates,
@@ -86,9 +87,9 @@ class AdaptiveRun:
         # the stored poses among the candidates (a resumed run's draw is the same)
         near = np.abs(self.planned[:, None, :] - cand[None]).max(axis=-1) < 1e-6
         self.planner.taken = [int(np.argmax(row)) for row in near if row.any()]
-        self.steps: list[dict] = list(steps)
+        self.steps: list[Step] = [Step.from_json(s) for s in steps]  # as the settings keep them
         if self.steps:  # a resumed run fits the effects its last step included
-            self.planner.effects = from_steps(self.steps[-1].get("extensions") or ())
+            self.planner.effects = from_steps(self.steps[-1].extensions)
         self.last: Step | None = None
 
     def plan(self, start: int, partial=None, order=None):
@@ -109,10 +110,11 @@ class AdaptiveRun:
         meas = store.campaign_measurements(self.db, campaign_id=self.cid, targets=self.names)
         step, chosen = self.planner.step(meas, self.clock.now())
         self.last = step
-        if self.steps and self.steps[-1]["poses"] == step.poses:
+        if self.steps and self.steps[-1].poses == step.poses:
             self.steps.pop()  # a resumed run refits the poses its last step had: that step again
-        self.steps.append(step.to_json())
-        store.update_settings(self.db, campaign_id=self.cid, **{STEPS: self.steps})
+        self.steps.append(step)
+        kept = [s.to_json() for s in self.steps]
+        store.update_settings(self.db, campaign_id=self.cid, **{STEPS: kept})
         total = len(self.planned) + (0 if chosen is None else len(chosen))
         self.on_step(step, total)
         if chosen is None:
@@ -123,16 +125,16 @@ class AdaptiveRun:
         self.planned = np.vstack([self.planned, q])
         return q
 
-    def summary(self) -> dict:
+    def summary(self) -> AdaptiveSummary:
         """The campaign's steps and, once it stopped, why."""
         last = self.last
-        return {
-            "target_accuracy_mm": self.planner.opts.target_mm,
-            "steps": self.steps,
-            "stopped": None if last is None or not last.stop else last.reason,
-            "message": None if last is None else last.message,
-            "predicted_mm": None if last is None else last.predicted_mm,
-        }
+        return AdaptiveSummary(
+            target_accuracy_mm=self.planner.opts.target_mm,
+            steps=tuple(self.steps),
+            stopped=None if last is None or not last.stop else last.reason,
+            message=None if last is None else last.message,
+            predicted_mm=None if last is None else last.predicted_mm,
+        )
 
 
 def step_line(step: Step, target_mm: float) -> str:

@@ -8,7 +8,7 @@ campaign could measure. Each batch is ordered into a short tour from the arm's l
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
@@ -67,7 +67,41 @@ class Step:
     extensions: tuple[dict, ...] = ()  # the included effects as model.json has them
 
     def to_json(self) -> dict:
+        """The step as the campaign's settings (`adaptive_steps`) and its event keep it."""
         return {k: _plain(v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_json(cls, d: dict) -> Step:
+        """A stored step (to_json's form) again: None a non-finite float, a list a tuple."""
+        kw = {f.name: _typed(f.name, d[f.name]) for f in fields(cls) if f.name in d}
+        return cls(**kw)
+
+
+# the float fields to_json writes None for when not finite (campaign_s is None when unknown)
+_FLOATS = frozenset(f.name for f in fields(Step) if f.type == "float")
+
+
+def _typed(name: str, v):
+    """A stored step's value as Step has it."""
+    if v is None and name in _FLOATS:
+        return float("nan")
+    return tuple(v) if isinstance(v, list) else v
+
+
+@dataclass(frozen=True)
+class AdaptiveSummary:
+    """An adaptive campaign's run: its steps so far and, once it stopped, why."""
+
+    target_accuracy_mm: float
+    steps: tuple[Step, ...]
+    stopped: str | None  # the stop's reason (target, floor, maximum); None: not stopped
+    message: str | None  # the last step's words; None: no step yet
+    predicted_mm: float | None  # the last step's prediction; None: no step yet
+
+    def to_json(self) -> dict:
+        """The summary as the service stores and answers it (acquire's run summary)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        return {**out, "steps": [s.to_json() for s in self.steps]}
 
 
 class AdaptivePlanner:

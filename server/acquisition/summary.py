@@ -4,9 +4,12 @@ verification and check runs, the benchmarks)."""
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from robocal.drivers.engine_settings import PhaseSeconds
+
+if TYPE_CHECKING:
+    from robocal.server.acquisition.adaptive_plan import AdaptiveSummary
 
 
 @dataclass(frozen=True)
@@ -30,8 +33,10 @@ class AcquireSummary:
     skipped_poses: int
     phase_s: PhaseSeconds  # campaign clock seconds per kind of plan message (this run's)
     simulated: bool
-    adaptive: dict[str, Any] | None  # an adaptive campaign's steps (acquisition.adaptive)
+    adaptive: AdaptiveSummary | None  # an adaptive campaign's steps (acquisition.adaptive)
 
     def to_json(self) -> dict[str, Any]:
         """The summary as the service stores and answers it, keys in the fields' order."""
-        return asdict(self)
+        out = asdict(self)
+        out["adaptive"] = None if self.adaptive is None else self.adaptive.to_json()
+        return out

@@ -174,9 +174,9 @@ def run_acquire_bench(
                 a = summary.adaptive
                 out[label]["adaptive"] = {
                     "target_mm": opts.target_accuracy_mm,
-                    "stopped": a["stopped"],
-                    "predicted_mm": a["predicted_mm"],
-                    "steps": [(s["poses"], s["predicted_mm"]) for s in a["steps"]],
+                    "stopped": a.stopped,
+                    "predicted_mm": a.predicted_mm,
+                    "steps": [(s.poses, s.predicted_mm) for s in a.steps],
                 }
             print(
                 f"[bench] {label}: {summary.campaign_s:.1f} s, bound "

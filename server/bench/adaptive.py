@@ -86,8 +86,8 @@ def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
         def run(name: str, exts=(), **kw) -> dict:
             s = acquire(db, cell, AcquireOptions(name=name, **common, **kw))
             a = s.adaptive
-            if a is not None and a["steps"]:  # the model the adaptive campaign ends with
-                exts = from_steps(a["steps"][-1].get("extensions") or ())
+            if a is not None and a.steps:  # the model the adaptive campaign ends with
+                exts = from_steps(a.steps[-1].extensions)
             return {
                 "poses": s.poses,
                 "campaign_s": s.campaign_s,
@@ -103,25 +103,25 @@ def run_arm(arm: str, seed: int, factors=FACTORS, effects=()) -> dict:
             a = run(f"adaptive-x{f:g}", poses=FIXED_POSES, target_accuracy_mm=target)
             # as many random poses, fitted with the same effects
             r = run(f"random-x{f:g}", a["extensions"], poses=a["poses"])
-            steps = a["adaptive"]["steps"]
-            predicted = a["adaptive"]["predicted_mm"]
+            adaptive = a["adaptive"]
+            steps, predicted = adaptive.steps, adaptive.predicted_mm
             out["targets"][f"{f:g}"] = {
                 "target_mm": target,
                 "poses": a["poses"],
                 "campaign_s": a["campaign_s"],
                 "heldout_mm": a["heldout_mm"],
                 "predicted_mm": predicted,
-                "stopped": a["adaptive"]["stopped"],
+                "stopped": adaptive.stopped,
                 "reached": a["heldout_mm"] <= target,
                 "prediction_error": predicted / a["heldout_mm"] - 1.0,
                 "random_heldout_mm": r["heldout_mm"],
                 "random_campaign_s": r["campaign_s"],
-                "steps": [(s["poses"], round(s["predicted_mm"], 5)) for s in steps],
-                "last_step": steps[-1],
-                "effects": list(steps[-1].get("effects") or ()),
+                "steps": [(s.poses, round(s.predicted_mm, 5)) for s in steps],
+                "last_step": steps[-1].to_json(),
+                "effects": list(steps[-1].effects),
                 # every effect a checkpoint's diagnosis named (on a clean cell: false alarms)
-                "named": sorted({n for s in steps for n in (s.get("named") or ())}),
-                "diagnoses": sum(s.get("named") is not None for s in steps),
+                "named": sorted({n for s in steps for n in (s.named or ())}),
+                "diagnoses": sum(s.named is not None for s in steps),
             }
             print(
                 f"[bench] {arm} seed {seed} x{f:g}: {a['poses']} poses, {a['campaign_s'] / 60:.1f} "

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 from .common import _nonnegative, _nonnegative_int, _positive, _positive_int, _rate, _whole
 
 if TYPE_CHECKING:
+    from robocal.server.acquisition.adaptive_plan import AdaptiveSummary
     from robocal.server.acquisition.summary import AcquireSummary
 
 _directions = _whole(1, 6, "a count of directions from 1 to 6")
@@ -184,11 +185,11 @@ def _print_summary(console, summary: AcquireSummary) -> None:
     )
 
 
-def _print_adaptive(console, adaptive: dict) -> None:
+def _print_adaptive(console, adaptive: AdaptiveSummary) -> None:
     """The adaptive campaign's steps: poses and predicted held-out RMS, and why it stopped."""
-    steps = ", ".join(f"{s['poses']}: {s['predicted_mm']:.4f}" for s in adaptive["steps"])
+    steps = ", ".join(f"{s.poses}: {s.predicted_mm:.4f}" for s in adaptive.steps)
     console.print(f"predicted held-out RMS (mm) by poses: {steps}")
-    console.print(f"stopped ({adaptive['stopped']}): {adaptive['message']}")
+    console.print(f"stopped ({adaptive.stopped}): {adaptive.message}")
 
 
 def add(sub) -> None:

@@ -92,14 +92,9 @@ def _owner(node: ast.AST) -> str | None:
     return None
 
 
-def result_key_reads(source: str) -> list[tuple[int, str]]:
-    """(line, what) of each read by string key of a diagnosis or verification report (any key
-    off `report` or `x.report`), of a calibration (any key off `cal`), of a verification's
-    figures (AP_mm, RP_max_mm... off anything), of an excluded reading's row (residual_mm,
-    evidence off anything), of a diagnosis figure's data (label, x_label... off anything) or of
-    an acquisition's summary (its fields off `summary`, `acquired`): x["k"], x.get("k"), "k" in x."""
-    out = []
-    for node in ast.walk(ast.parse(source)):
+def _keyed(tree: ast.AST):
+    """(line, key, owner) of each read by string key in tree: x["k"], x.get("k"), "k" in x."""
+    for node in ast.walk(tree):
         if isinstance(node, ast.Subscript) and isinstance(node.ctx, (ast.Load, ast.Del)):
             key, owner = _key(node.slice), node.value
         elif (
@@ -113,8 +108,18 @@ def result_key_reads(source: str) -> list[tuple[int, str]]:
             key, owner = _key(node.left), node.comparators[0]
         else:
             continue
-        if key is None:
-            continue
+        if key is not None:
+            yield node.lineno, key, owner
+
+
+def result_key_reads(source: str) -> list[tuple[int, str]]:
+    """(line, what) of each read by string key of a diagnosis or verification report (any key
+    off `report` or `x.report`), of a calibration (any key off `cal`), of a verification's
+    figures (AP_mm, RP_max_mm... off anything), of an excluded reading's row (residual_mm,
+    evidence off anything), of a diagnosis figure's data (label, x_label... off anything) or of
+    an acquisition's summary (its fields off `summary`, `acquired`): x["k"], x.get("k"), "k" in x."""
+    out = []
+    for line, key, owner in _keyed(ast.parse(source)):
         what = _owner(owner) or (
             "a verification"
             if key in VERIFICATION_FIGURES
@@ -127,8 +132,86 @@ def result_key_reads(source: str) -> list[tuple[int, str]]:
             else None
         )
         if what:
-            out.append((node.lineno, f"{key!r} of {what}"))
+            out.append((line, f"{key!r} of {what}"))
     return sorted(out)
+
+
+# An adaptive campaign's summary (acquisition.adaptive_plan.AdaptiveSummary: off `adaptive`,
+# `x.adaptive`, `x["adaptive"]` or a name bound to one) and its steps (Step: off `step`, an item
+# of `steps`, `x.steps`, `x["steps"]`, or a name a loop binds over them); `predicted_mm` off
+# anything. Stored steps (the settings' `adaptive_steps`, events) are JSON, read where stored.
+ADAPTIVE_KEYS = {"target_accuracy_mm", "steps", "stopped", "message", "predicted_mm"}
+STEP_KEYS = {"poses", "predicted_mm", "floor_mm", "parameters_mm", "holdout_mm", "stop"}
+STEP_KEYS |= {"expected_holdout_mm", "kappa", "reason", "message", "campaign_s", "effects"}
+STEP_KEYS |= {"named", "extensions"}
+
+
+def _named(node: ast.AST, name: str) -> bool:
+    """Whether the expression is `name`, `x.name` or `x["name"]`."""
+    if isinstance(node, ast.Subscript):
+        return _key(node.slice) == name
+    return (node.id if isinstance(node, ast.Name) else getattr(node, "attr", None)) == name
+
+
+def adaptive_key_reads(source: str) -> list[tuple[int, str]]:
+    """(line, what) of each read by string key of an adaptive campaign's summary or step."""
+    tree = ast.parse(source)
+    summaries, steps = set(), {"step"}  # names bound to a summary, to a step
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Assign) and _named(node.value, "adaptive"):
+            summaries |= {t.id for t in node.targets if isinstance(t, ast.Name)}
+        elif isinstance(node, (ast.For, ast.comprehension)) and _named(node.iter, "steps"):
+            steps |= {node.target.id} if isinstance(node.target, ast.Name) else set()
+
+    def summary(node):
+        return _named(node, "adaptive") or (isinstance(node, ast.Name) and node.id in summaries)
+
+    def step(node):
+        if isinstance(node, ast.Subscript) and _key(node.slice) is None:
+            return _named(node.value, "steps")  # steps[-1]
+        return isinstance(node, ast.Name) and node.id in steps
+
+    out = []
+    for line, key, owner in _keyed(tree):
+        if key == "predicted_mm" or (key in ADAPTIVE_KEYS and summary(owner)):
+            out.append((line, f"{key!r} of an adaptive summary"))
+        elif key in STEP_KEYS and step(owner):
+            out.append((line, f"{key!r} of an adaptive step"))
+    return sorted(out)
+
+
+def test_the_adaptive_check_finds_the_summary_and_its_steps_read_by_key():
+    src = (  # as the server read them before they were typed
+        'a = s.adaptive\nif a["steps"]:\n    e = a["steps"][-1].get("extensions") or ()\n'
+        'x = r["adaptive"]["stopped"]\nsteps = r["adaptive"]["steps"]\n'
+        'y = [(s["poses"], s["predicted_mm"]) for s in steps]\nz = steps[-1].get("effects")\n'
+        'w = ", ".join(s["poses"] for s in adaptive["steps"])\nv = adaptive["message"]\n'
+        'if self.steps and self.steps[-1]["poses"] == step["poses"]:\n    pass\n'
+        'ok = [a.steps, info.settings["adaptive_steps"], row["poses"], x["stopped"]]\n'
+    )
+    assert adaptive_key_reads(src) == [
+        (2, "'steps' of an adaptive summary"),
+        (3, "'extensions' of an adaptive step"),
+        (3, "'steps' of an adaptive summary"),
+        (4, "'stopped' of an adaptive summary"),
+        (5, "'steps' of an adaptive summary"),
+        (6, "'poses' of an adaptive step"),
+        (6, "'predicted_mm' of an adaptive summary"),
+        (7, "'effects' of an adaptive step"),
+        (8, "'poses' of an adaptive step"),
+        (8, "'steps' of an adaptive summary"),
+        (9, "'message' of an adaptive summary"),
+        (10, "'poses' of an adaptive step"),
+        (10, "'poses' of an adaptive step"),
+    ]
+
+
+def test_no_adaptive_summary_or_step_is_read_by_string_key_outside_the_formats():
+    found = reads_outside_the_formats(adaptive_key_reads)
+    assert not found, (
+        "read the typed summary (acquisition.adaptive_plan.AdaptiveSummary, Step) instead:\n"
+        + "\n".join(found)
+    )
 
 
 def test_the_result_check_finds_reports_calibrations_and_figures_read_by_key():
