@@ -151,15 +151,22 @@ def test_ctrl_c_estops_a_check_on_the_command_line_and_reset_resumes_it(calibrat
         stderr=subprocess.PIPE,
         text=True,
     )
+    # The check runs in simulated time (60 poses in about 2 s of CPU): it is stopped while the
+    # test counts its outcomes and runs on only between counts, so a loaded machine slowing
+    # the counting cannot let it finish before the interrupt.
+    proc.send_signal(signal.SIGSTOP)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:
-        time.sleep(0.05)
+        proc.send_signal(signal.SIGCONT)
+        time.sleep(0.01)
+        proc.send_signal(signal.SIGSTOP)
         try:
             if counts(db)[3] >= 10:
                 break
-        except DBAPIError:  # not made yet
+        except DBAPIError:  # not made yet, or a write of the stopped check holds it
             continue
     proc.send_signal(signal.SIGINT)
+    proc.send_signal(signal.SIGCONT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130 and "--reset" in err, err
     ok_before, _, _, done_before = counts(db)
