@@ -150,6 +150,9 @@ def test_ctrl_c_estops_a_check_on_the_command_line_and_reset_resumes_it(calibrat
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        # Ctrl-C as a terminal gives it: a shell's background job (CI started with `&`) passes
+        # SIGINT on ignored, and a Python started so installs no KeyboardInterrupt handler
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     # The check runs in simulated time (60 poses in about 2 s of CPU): it is stopped while the
     # test counts its outcomes and runs on only between counts, so a loaded machine slowing
