@@ -30,6 +30,7 @@ from .robot import Robot
 from .stop import Stop
 
 if TYPE_CHECKING:
+    from .noise import NoiseFloor
     from .screen import Outlier, Screening
 
 # Fit residuals (RMS a reading) past this multiple of the noise floor set the level at which
@@ -100,6 +101,17 @@ class Calibration(Result):
     @outliers.setter
     def outliers(self, value: list[Outlier] | None) -> None:
         self["outliers"] = value
+
+    # set with the screening (server.calibration.workflow.run_method): the verdict reuses it
+    @property
+    def noise_floor(self) -> NoiseFloor | None:
+        """The tracker's noise floor the fit held its parameters against, and its source; None:
+        not measured on the fit's readings (the default spec's)."""
+        return self.get("noise_floor")
+
+    @noise_floor.setter
+    def noise_floor(self, value: NoiseFloor | None) -> None:
+        self["noise_floor"] = value
 
     @property
     def qp(self) -> str | None:

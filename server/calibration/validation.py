@@ -17,20 +17,20 @@ from robocal.solver.measurements import Measurements
 
 if TYPE_CHECKING:
     from robocal.solver.metrics import Evaluation
+    from robocal.solver.noise import NoiseFloor
 
 HOLDOUT_METHOD = "leave-one-pose-out cross-validation, linearised at the fit"
 # Model errors (RMS, mm) on data past which the data cannot be of the model's cell.
 ABSURD_MM = 100.0
 
 
-def noise_floor(cell: Cell, meas: Measurements) -> tuple[float, str]:
+def noise_floor(cell: Cell, meas: Measurements) -> NoiseFloor:
     """The tracker's noise (3-D RMS per reading, mm) and where it comes from: measured in the
     data (SMR distances with two SMRs or more, else repeated poses), else the cell's tracker
     spec, else the default spec (said so)."""
     from robocal.solver.noise import noise_floor as floor
 
-    f = floor(meas.q, meas.xyz, Inputs(meas.q, meas.time_s, meas.temp_c), tracker_spec(cell))
-    return f.mm, f.source
+    return floor(meas.q, meas.xyz, Inputs(meas.q, meas.time_s, meas.temp_c), tracker_spec(cell))
 
 
 def tracker_spec(cell: Cell) -> dict | None:

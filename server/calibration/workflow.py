@@ -42,6 +42,7 @@ if TYPE_CHECKING:
     from robocal.solver.diagnosis_report import EffectFigure
     from robocal.solver.fit_errors import ExtendedErrors
     from robocal.solver.metrics import Accuracy, Evaluation
+    from robocal.solver.noise import NoiseFloor
     from robocal.solver.screen import Screening
 
 PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
@@ -202,8 +203,10 @@ def run_method(
 
     screened = screen_campaign(cell, meas) if screening is True else screening or None
     use = without_outliers(meas, screened)
-    problem = replace(cell_problem(cell, use), noise_floor_mm=noise_floor(cell, use)[0])
+    floor = noise_floor(cell, use)
+    problem = replace(cell_problem(cell, use), noise_floor_mm=floor.mm)
     cal = calibrate(problem, method, qp=qp)
+    cal.noise_floor = floor  # the verdict's too (model_file): measured once
     if screened is not None:
         cal.screening = screened
         cal.outliers = screened.report(meas.pose_ids, meas.target_names)
@@ -262,7 +265,8 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
         )
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable
-    v = model.validation = validate(cal, cell, used, holdout, errors, acc.rmse)
+    floor = cal.noise_floor or noise_floor(cell, used)  # a fit not made by run_method has none
+    v = model.validation = validate(cal, cell, used, holdout, errors, acc.rmse, floor)
     if cal.method != "nominal":
         block = geometric_block(
             cal.layout, cal.x, used.q, errors, v.holdout_rms_mm, v.noise_floor_mm
@@ -273,11 +277,10 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
 
 
 def validate(
-    cal: Calibration, cell: Cell, used: Measurements, holdout, errors, fit_rms
+    cal: Calibration, cell: Cell, used: Measurements, holdout, errors, fit_rms, floor: NoiseFloor
 ) -> Validation:
     """model.json's `validation` block of a calibration on the readings it used (holdout: its
-    leave-one-pose-out residuals, solver.guard.Holdout)."""
-    floor, source = noise_floor(cell, used)
+    leave-one-pose-out residuals, solver.guard.Holdout; floor: the tracker's noise on them)."""
     return verdict(
         cell,
         used,
@@ -287,7 +290,7 @@ def validate(
         holdout=holdout,
         condition=cal.condition,
         free_parameters=int(np.count_nonzero(errors.column >= 0)),
-        floor=(floor, source),
+        floor=(floor.mm, floor.source),
     )
 
 

@@ -126,3 +126,24 @@ def test_a_diagnosis_model_is_judged_on_its_own_cross_validation(poses, effects,
     assert v["holdout_rms_mm"] == pytest.approx(d.report.final.holdout_rmse_mm)
     if not deployable:
         assert any(r.startswith("too few poses") for r in v["reasons"])
+
+
+def test_the_noise_floor_is_measured_once(monkeypatch):
+    """run_method measures the tracker's noise on the fit's readings; the verdict reuses it."""
+    cell, meas = campaign(20, seed=4)
+    measured = []
+
+    def counted(cell, meas):
+        measured.append(meas)
+        return floor(cell, meas)
+
+    floor = workflow.noise_floor
+    monkeypatch.setattr(workflow, "noise_floor", counted)
+    cal = workflow.run_method(cell, meas, "ls-sum")
+    v = workflow.model_file(cal, cell, meas).validation
+    assert len(measured) == 1
+    assert (v.noise_floor_mm, v.noise_floor_source) == (cal.noise_floor.mm, cal.noise_floor.source)
+    # a calibration made elsewhere has none: the verdict measures it
+    del cal["noise_floor"]
+    again = workflow.model_file(cal, cell, meas).validation
+    assert len(measured) == 2 and again.noise_floor_mm == v.noise_floor_mm
