@@ -14,8 +14,16 @@ from .extended import extension_rows as extended_rows
 from .guard import Holdout
 from .identify import Problem, pose_fit, pose_residuals
 from .kinematics import Layout, predict_rows
-from .postfit import Blocks, poses_per_block, post_fit
-from .uncertainty import CLUSTERED, ParameterErrors, Rows, errors_from_rows, propagate
+from .normal import PointNormal
+from .postfit import BLOCK_ENTRIES, Blocks, Sums, poses_per_block, post_fit
+from .uncertainty import (
+    CLUSTERED,
+    ParameterErrors,
+    Rows,
+    StageSums,
+    errors_from_rows,
+    propagate,
+)
 
 if TYPE_CHECKING:
     from .diagnosis_report import Report
@@ -60,7 +68,7 @@ def calibration_figures(cal: Calibration, q, meas) -> tuple[ParameterErrors, Hol
     """A calibration's standard errors and leave-one-pose-out residuals, its rows taken a block
     of poses at a time (solver.postfit): memory bounded whatever the campaign's size."""
     blocks, column = calibration_blocks(cal, q, meas)
-    post = post_fit(blocks, lambda rows: point_errors(cal, rows))
+    post = post_fit(blocks, lambda rows: point_errors(cal, rows), plain_sums(cal, q, meas, column))
     names = cal.layout.names()
     errors = ParameterErrors(
         tuple(names),
@@ -72,6 +80,38 @@ def calibration_figures(cal: Calibration, q, meas) -> tuple[ParameterErrors, Hol
         post.plain,
     )
     return errors, post.holdout
+
+
+# Entries (8 bytes each) of a block of plain_sums' twists.
+TWIST_BLOCK_ENTRIES = 4 * BLOCK_ENTRIES
+
+
+def plain_sums(cal: Calibration, q, meas, column) -> Sums | None:
+    """The post-fit's first pass (postfit.Sums) of a calibration whose rows are plain least
+    squares (ls-sum, nominal, ls-single on the only SMR): J'J and r'r assembled from the
+    flange's twists (solver.normal), no row formed, a block of poses at a time; None for the
+    others (weighted or staged rows, whose first pass takes the rows). column: as
+    calibration_blocks gives it."""
+    lay, x = cal.layout, np.asarray(cal.x, dtype=float)
+    name, fitted = parse_method(cal.method, list(lay.target_names))
+    if name in ("minimax", "ls-pose") or len(fitted) < len(lay.target_names):
+        return None
+    column = np.asarray(column, dtype=int)
+    cols = np.flatnonzero(column >= 0)[np.argsort(column[column >= 0])]
+    q, meas = np.asarray(q, dtype=float), np.asarray(meas, dtype=float)
+    mask = np.all(np.isfinite(meas), axis=-1)
+    if not mask.any():
+        raise ValueError("no residual rows")
+    # a block's twists (len(cols) + 1, 6, poses) take four of the rows' blocks (16 MiB): fewer
+    # walks down the chain; still small beside the fit's own (all poses' at once)
+    step = max(1, TWIST_BLOCK_ENTRIES // (6 * (len(cols) + 1)))
+    A, rr = np.zeros((len(cols), len(cols))), 0.0
+    for lo in range(0, len(q), step):
+        at = slice(lo, lo + step)
+        normal = PointNormal(lay, q[at], mask[at], meas[at], cols)(x)
+        A += normal.A
+        rr += normal.cost
+    return Sums(A, A, {0: StageSums(rr, 3 * int(mask.sum()), A.copy(), np.diag(A) > 0)})
 
 
 def point_errors(cal: Calibration, rows: Rows) -> np.ndarray:

@@ -3,7 +3,10 @@ a block of whole poses at a time: the normal matrices first, then each pose's sm
 
 Every figure is a sum over poses (the meats) or a function of one pose's rows and the whole fit's
 normal matrix (the held-out residuals, the hat matrix's diagonal blocks), so the blocks give the
-same figures as the whole Jacobian at once, whose 50,000 poses would take 450,000 rows.
+same figures as the whole Jacobian at once, whose 50,000 poses would take 450,000 rows. The
+second pass needs the first's inverse before its first pose, so one pass would have to keep
+every row; a caller that has the normal matrices otherwise (a least-squares fit's, assembled
+without its rows: fit_errors.plain_sums) hands them over, and the rows are built once.
 """
 
 from __future__ import annotations
@@ -52,25 +55,44 @@ class PostFit:
     poses: int
 
 
-def post_fit(blocks: Blocks, point: Callable[[Rows], np.ndarray] | None = None) -> PostFit:
-    """The figures of uncertainty.clustered, uncertainty.plain and guard.leave_one_pose_out of
-    the stacked blocks, holding one block at a time. point(rows): which rows of a block are point
-    errors (default all)."""
+@dataclass
+class Sums:
+    """What the first pass gathers of a fit's rows: A = G'J, B = G'G and each stage's sums."""
+
+    A: np.ndarray
+    B: np.ndarray
+    stages: dict[int, StageSums]
+
+
+def sums(blocks: Blocks) -> Sums:
+    """The first pass: the normal matrices of the stacked blocks, one block at a time."""
     A = B = None
     stages: dict[int, StageSums] = {}
-    for rows in blocks():  # pass one: the normal matrices
+    for rows in blocks():
         if not len(rows.r):
             continue
         GJ = rows.G.T @ rows.J
         GG = GJ if rows.G is rows.J else rows.G.T @ rows.G
         A, B = (GJ, GG) if A is None or B is None else (A + GJ, B + GG)
-        for s, sums in stage_sums(rows, GG).items():
+        for s, part in stage_sums(rows, GG).items():
             if s in stages:
-                stages[s].add(sums)
+                stages[s].add(part)
             else:
-                stages[s] = sums
+                stages[s] = part
     if A is None or B is None:
         raise ValueError("no residual rows")
+    return Sums(A, B, stages)
+
+
+def post_fit(
+    blocks: Blocks, point: Callable[[Rows], np.ndarray] | None = None, known: Sums | None = None
+) -> PostFit:
+    """The figures of uncertainty.clustered, uncertainty.plain and guard.leave_one_pose_out of
+    the stacked blocks, holding one block at a time. point(rows): which rows of a block are point
+    errors (default all); known: the blocks' Sums when the caller has them (the rows are then
+    built once), else a first pass over the blocks takes them."""
+    first = known or sums(blocks)
+    A, B, stages = first.A, first.B, first.stages
     Ai = bread(A)
     C = Ai @ B @ Ai.T
     Ah = holdout_inverse(A)
@@ -78,7 +100,7 @@ def post_fit(blocks: Blocks, point: Callable[[Rows], np.ndarray] | None = None) 
     same = bool(np.linalg.norm(Ai - Ah) <= SAME_INVERSE * np.linalg.norm(Ai))
     meat = np.zeros_like(A)
     held, stage, unsupported, poses = [], [], [], set()
-    for rows in blocks():  # pass two: each pose's blocks
+    for rows in blocks():  # each pose's blocks
         if not len(rows.r):
             continue
         e = np.full(len(rows.r), np.nan)

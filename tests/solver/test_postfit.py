@@ -8,16 +8,18 @@ import numpy as np
 import pytest
 
 from robocal.drivers.cell import VirtualCell
+from robocal.solver import fit_errors
 from robocal.solver.calibrate import calibrate
 from robocal.solver.fit_errors import (
     calibration_blocks,
     calibration_figures,
     calibration_rows,
+    plain_sums,
     point_errors,
     point_rows,
 )
 from robocal.solver.kinematics import predict
-from robocal.solver.postfit import post_fit
+from robocal.solver.postfit import post_fit, sums
 from robocal.solver.problem import Problem
 from robocal.solver.robot import IRB2600
 from robocal.solver.uncertainty import ABSORBED, inverse_root_times
@@ -86,6 +88,35 @@ def test_blocked_figures_equal_the_dense_ones(method, block):
     want = held[point_errors(cal, rows)].reshape(-1, 3)
     np.testing.assert_allclose(got.holdout.residuals, want, rtol=1e-7, atol=1e-12)
     assert got.poses == len(np.unique(rows.pose))
+
+
+@pytest.mark.parametrize("method", ["ls-sum", "nominal", "ls-single:B", "minimax", "ls-pose"])
+def test_a_plain_fit_has_its_first_pass_without_rows(method, monkeypatch):
+    """ls-sum's and nominal's normal matrices, assembled from twists in blocks of 3 poses, are
+    the rows' (their rows are then built once); the weighted and staged fits' are not had so."""
+    cal, q, xyz = fit(method)
+    blocks, column = calibration_blocks(cal, q, xyz)
+    monkeypatch.setattr(fit_errors, "TWIST_BLOCK_ENTRIES", 18 * (int((column >= 0).sum()) + 1))
+    got = plain_sums(cal, q, xyz, column)
+    if method not in ("ls-sum", "nominal"):
+        assert got is None
+        return
+    assert got is not None
+    want = sums(blocks)
+    scale = abs(want.A).max()
+    np.testing.assert_allclose(got.A, want.A, rtol=1e-10, atol=1e-13 * scale)
+    np.testing.assert_allclose(got.B, want.B, rtol=1e-10, atol=1e-13 * scale)
+    (s,) = want.stages.values()
+    (g,) = got.stages.values()
+    assert g.rr == pytest.approx(s.rr, rel=1e-10) and g.count == s.count
+    np.testing.assert_array_equal(g.used, s.used)
+    # and the figures with it are the dense ones
+    rows, _ = calibration_rows(cal, q, xyz)
+    clustered, plain, held = dense(rows)
+    errors, holdout = calibration_figures(cal, q, xyz)
+    np.testing.assert_allclose(errors.cov, clustered, rtol=1e-7, atol=1e-12 * abs(clustered).max())
+    np.testing.assert_allclose(errors.plain_cov, plain, rtol=1e-7, atol=1e-12 * abs(plain).max())
+    np.testing.assert_allclose(holdout.residuals, held.reshape(-1, 3), rtol=1e-7, atol=1e-12)
 
 
 def refit_without(cal, q, xyz, p, iterations=8):
