@@ -196,14 +196,16 @@ def run_method(
     method: str,
     qp="primal-dual",
     screening: Screening | bool = True,
+    floor: NoiseFloor | None = None,
 ) -> Calibration:
     """One method on the campaign; screening True screens out gross outliers first, False keeps
-    every reading, a Screening reuses one already made (compare screens once for all methods)."""
+    every reading, a Screening reuses one already made (compare screens once for all methods);
+    floor: the tracker's noise on the readings used, when measured already (compare's)."""
     from robocal.solver.calibrate import calibrate
 
     screened = screen_campaign(cell, meas) if screening is True else screening or None
     use = without_outliers(meas, screened)
-    floor = noise_floor(cell, use)
+    floor = floor or noise_floor(cell, use)
     problem = replace(cell_problem(cell, use), noise_floor_mm=floor.mm)
     cal = calibrate(problem, method, qp=qp)
     cal.noise_floor = floor  # the verdict's too (model_file): measured once
@@ -414,11 +416,13 @@ def compare(
 
     screening = screen_campaign(cell, meas) if screen else None
     used = without_outliers(meas, screening)
+    floor = noise_floor(cell, used)  # one data, one floor for every method
     rows = {}
     for method in methods or paper_methods(meas.target_names):
         solvers = qp_solvers if method == "minimax" else (None,)
         for qp in solvers:
-            cal = run_method(cell, meas, method, qp or "primal-dual", screening=screening or False)
+            how = qp or "primal-dual"
+            cal = run_method(cell, meas, method, how, screening=screening or False, floor=floor)
             label = method if qp is None or qp == qp_solvers[0] else f"{method} ({qp} QP)"
             pred = predict(cal.layout, cal.x, meas.q)
             rows[label] = (cal, metrics.accuracy(pred, used.xyz, meas.target_names))

@@ -147,3 +147,7 @@ def test_the_noise_floor_is_measured_once(monkeypatch):
     del cal["noise_floor"]
     again = workflow.model_file(cal, cell, meas).validation
     assert len(measured) == 2 and again.noise_floor_mm == v.noise_floor_mm
+    # compare: one data, one measurement for all its methods
+    rows = workflow.compare(cell, meas, ["nominal", "ls-sum"], screen=False)
+    assert len(measured) == 3
+    assert {c.noise_floor for c, _ in rows.values()} == {floor(cell, meas)}
