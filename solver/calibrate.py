@@ -106,7 +106,7 @@ class Calibration(Result):
     @property
     def noise_floor(self) -> NoiseFloor | None:
         """The tracker's noise floor the fit held its parameters against, and its source; None:
-        not measured on the fit's readings (the default spec's)."""
+        the fit was given none (it held them against the default tracker spec's)."""
         return self.get("noise_floor")
 
     @noise_floor.setter
