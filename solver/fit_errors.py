@@ -15,6 +15,7 @@ from .guard import Holdout
 from .identify import Problem, pose_fit, pose_residuals
 from .kinematics import Layout, predict_rows
 from .postfit import Blocks, poses_per_block, post_fit
+from .prior import PriorTerms
 from .uncertainty import CLUSTERED, ParameterErrors, Rows, errors_from_rows, propagate
 
 if TYPE_CHECKING:
@@ -60,7 +61,7 @@ def calibration_figures(cal: Calibration, q, meas) -> tuple[ParameterErrors, Hol
     """A calibration's standard errors and leave-one-pose-out residuals, its rows taken a block
     of poses at a time (solver.postfit): memory bounded whatever the campaign's size."""
     blocks, column = calibration_blocks(cal, q, meas)
-    post = post_fit(blocks, lambda rows: point_errors(cal, rows))
+    post = post_fit(blocks, lambda rows: point_errors(cal, rows), prior_terms(cal, column))
     names = cal.layout.names()
     errors = ParameterErrors(
         tuple(names),
@@ -72,6 +73,17 @@ def calibration_figures(cal: Calibration, q, meas) -> tuple[ParameterErrors, Hol
         post.plain,
     )
     return errors, post.holdout
+
+
+def prior_terms(cal: Calibration, column: np.ndarray) -> PriorTerms | None:
+    """The calibration's prior in its covariance: minimax's estimating equations carry it over
+    the number of SMRs fitted (solver.minimax._Objective), least squares' whole."""
+    prior = cal.get("prior")
+    if prior is None:
+        return None
+    name, rows = parse_method(cal.method, list(cal.layout.target_names))
+    factor = 1.0 / len(rows) if name == "minimax" else 1.0
+    return prior.terms(column, int(column.max()) + 1, factor)
 
 
 def point_errors(cal: Calibration, rows: Rows) -> np.ndarray:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .guard import Holdout, held_out, holdout_inverse
+from .prior import PriorTerms
 from .uncertainty import (
     Rows,
     StageSums,
@@ -52,10 +53,17 @@ class PostFit:
     poses: int
 
 
-def post_fit(blocks: Blocks, point: Callable[[Rows], np.ndarray] | None = None) -> PostFit:
+def post_fit(
+    blocks: Blocks,
+    point: Callable[[Rows], np.ndarray] | None = None,
+    prior: PriorTerms | None = None,
+) -> PostFit:
     """The figures of uncertainty.clustered, uncertainty.plain and guard.leave_one_pose_out of
     the stacked blocks, holding one block at a time. point(rows): which rows of a block are point
-    errors (default all)."""
+    errors (default all). prior: the geometry prior's terms (solver.prior) of a shrunk fit:
+    its information in the bread (and the held-out residuals' fit), its scores' covariance in
+    the meat, so the covariance is the posterior's (Bayesian: true changes drawn from the
+    prior)."""
     A = B = None
     stages: dict[int, StageSums] = {}
     for rows in blocks():  # pass one: the normal matrices
@@ -71,12 +79,14 @@ def post_fit(blocks: Blocks, point: Callable[[Rows], np.ndarray] | None = None) 
                 stages[s] = sums
     if A is None or B is None:
         raise ValueError("no residual rows")
+    if prior is not None:
+        A, B = A + prior.information, B + prior.residual
     Ai = bread(A)
     C = Ai @ B @ Ai.T
     Ah = holdout_inverse(A)
     # the two inverses of a well-conditioned fit agree to rounding: one hat matrix serves both
     same = bool(np.linalg.norm(Ai - Ah) <= SAME_INVERSE * np.linalg.norm(Ai))
-    meat = np.zeros_like(A)
+    meat = np.zeros_like(A) if prior is None else prior.meat.copy()
     held, stage, unsupported, poses = [], [], [], set()
     for rows in blocks():  # pass two: each pose's blocks
         if not len(rows.r):
@@ -97,4 +107,7 @@ def post_fit(blocks: Blocks, point: Callable[[Rows], np.ndarray] | None = None) 
     order = np.argsort(np.concatenate(stage), kind="stable")
     residuals = np.concatenate(held)[order].reshape(-1, 3)
     holdout = Holdout(residuals, np.array(sorted(set(unsupported)), dtype=int))
-    return PostFit(Ai @ meat @ Ai.T, plain_from_sums(Ai, stages), holdout, len(poses))
+    plain = plain_from_sums(Ai, stages)
+    if prior is not None:
+        plain += Ai @ prior.meat @ Ai.T
+    return PostFit(Ai @ meat @ Ai.T, plain, holdout, len(poses))

@@ -259,6 +259,8 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
             condition=cal.condition,
             nominal_targets={t: cell.targets[t] for t in meas.target_names},
             nominal_base=cell.base,
+            shrunk=cal.get("shrunk"),
+            prior=cal.get("prior"),
         )
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable

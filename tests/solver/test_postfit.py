@@ -90,7 +90,7 @@ def test_blocked_figures_equal_the_dense_ones(method, block):
 
 def refit_without(cal, q, xyz, p, iterations=8):
     """The ls-sum fit refitted without pose p (Gauss-Newton from the fit over the same free
-    parameters, to convergence): its point errors at pose p."""
+    parameters, to convergence, with the fit's prior rows): its point errors at pose p."""
     lay, x = cal.layout, np.array(cal.x, dtype=float)
     rows, column = calibration_rows(cal, q, xyz)
     cols = np.flatnonzero(column >= 0)[np.argsort(column[column >= 0])]
@@ -98,7 +98,8 @@ def refit_without(cal, q, xyz, p, iterations=8):
     mask = np.all(np.isfinite(xyz[keep]), axis=-1)
     for _ in range(iterations):
         r = point_rows(lay, x, q[keep], xyz[keep], mask, cols, np.ones(len(cols), bool))
-        x[cols] -= np.linalg.lstsq(r.J, r.r, rcond=None)[0]
+        J = np.vstack([r.J, np.diag(np.sqrt(cal.prior.weight[cols]))])
+        x[cols] -= np.linalg.lstsq(J, np.r_[r.r, cal.prior.rows(x, cols)], rcond=None)[0]
     e = predict(lay, x, q[p : p + 1])[0] - xyz[p]
     return e[np.all(np.isfinite(xyz[p]), axis=-1)]
 
