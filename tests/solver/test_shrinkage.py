@@ -1,6 +1,7 @@
 """Weakly identified geometry shrunk toward nominal: honest standard errors, what is identified."""
 
 import dataclasses
+from functools import partial
 
 import numpy as np
 import pytest
@@ -53,7 +54,7 @@ def z_scores(method: str, smrs: dict):
         blocks, column = calibration_blocks(cal, meas.q, meas.xyz)
         terms = prior_terms(cal, column)
         assert terms is not None
-        point = lambda rows: point_errors(cal, rows)  # noqa: E731
+        point = partial(point_errors, cal)
         post = post_fit(blocks, point, terms)
         zero = np.zeros_like(terms.meat)
         exact = post_fit(blocks, point, PriorTerms(terms.information, zero, zero))
