@@ -176,7 +176,8 @@ class _PoseStages:
         self.cal, self.q, self.meas, self.mask, self.free = cal, q, meas, mask, free
         self.weight = cal.pose_weight_mm_per_rad
         prob = Problem(lay, q, meas)
-        self.x1, _ = pose_fit(prob, cal.x, np.isin(np.arange(lay.n_params), free), self.weight)
+        free_ = np.isin(np.arange(lay.n_params), free)
+        self.x1, _ = pose_fit(prob, cal.x, free_, self.weight, prior=cal.get("prior"))
         self.tcols = np.arange(lay.target_slice.start, lay.target_slice.stop)
         self.cols = np.r_[free, self.tcols]
 
