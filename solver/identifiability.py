@@ -347,3 +347,11 @@ def gram(J: np.ndarray, free: np.ndarray) -> np.ndarray:
     """J'J over the free columns of J (rows, P)."""
     Jf = J[:, np.flatnonzero(free)]
     return Jf.T @ Jf
+
+
+def effective_parameters(column: np.ndarray, shrunk: dict[str, Shrunk] | None) -> int:
+    """How many parameters a fit spends of its equations: those it fits (column >= 0), a shrunk
+    one counting as the share of it the data gives (a prior-fitted model's residuals keep the
+    equations less the trace of its hat matrix)."""
+    spent = np.count_nonzero(np.asarray(column) >= 0)
+    return int(round(spent - sum(1.0 - s.share for s in (shrunk or {}).values())))

@@ -29,6 +29,7 @@ from robocal.server.formats.model_json import (
 from robocal.solver.effects import Inputs
 from robocal.solver.extended import predict_model
 from robocal.solver.finite import require_inputs
+from robocal.solver.identifiability import effective_parameters
 from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
 from robocal.solver.problem import Problem
@@ -288,7 +289,7 @@ def validate(
         fit_rms_mm=fit_rms,
         holdout=holdout,
         condition=cal.condition,
-        free_parameters=int(np.count_nonzero(errors.column >= 0)),
+        free_parameters=effective_parameters(errors.column, cal.get("shrunk")),
         floor=(floor, source),
     )
 
