@@ -567,10 +567,12 @@ def _judge_diagnosis(
 
     problem = replace(cell_problem(cell, meas), noise_floor_mm=report.noise_floor_mm)
     geometric = calibrate(problem, "ls-sum")
+    # the diagnosis holds what the geometry shrinks (solver.diagnose): held fixed here
+    held = {n: f"held at nominal: {s.why}" for n, s in geometric.shrunk.items()}
     model.identified = identified_block(
         model,
         errors.parameters,
-        fixed=geometric.fixed,
+        fixed={**geometric.fixed, **held},
         condition=geometric.condition,
         nominal_targets={t: cell.targets[t] for t in meas.target_names},
         nominal_base=cell.base,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from robocal.server.calibration.workflow import diagnose as workflow_diagnose
 from robocal.server.calibration.workflow import load_data, model_file, run_method
 from robocal.solver.identifiability import SHRUNK_SHARE, condition_number, jacobian_rows
 from tests.real import REAL
@@ -38,3 +39,19 @@ def test_the_real_ur5s_wrist_is_shrunk_named_and_left_out_of_the_condition_numbe
     J = jacobian_rows(cal.layout, cal.x, meas.q, np.all(np.isfinite(meas.xyz), axis=-1))
     np.testing.assert_allclose(cal.condition, condition_number(J[:, identified]), rtol=0.05)
     assert cal.condition < 1e3
+
+
+def test_a_diagnosis_of_the_real_ur5_lists_the_shrunk_wrist_as_held():
+    """The diagnosis fits its extensions without a prior, holding what the geometry shrinks at
+    nominal: its model's identified block says so (held fixed, no standard error)."""
+    cell, meas = load_data(
+        REAL / "ur5_jacobi" / "small" / "train.csv", REAL / "ur5_jacobi" / "cell.json"
+    )
+    _, model = workflow_diagnose(cell, meas)
+    ident = model.identified
+    assert ident is not None
+    fixed = {f.parameter: f.why for f in ident.fixed}
+    rows = {r.parameter: r for r in ident.rows}
+    for n in ("d5", "a5"):
+        assert fixed[n].startswith("held at nominal: the data moves it only together with")
+        assert rows[n].status == "held fixed" and rows[n].standard_error is None
