@@ -7,6 +7,7 @@ import numpy as np
 
 from robocal.server.calibration.workflow import diagnose as workflow_diagnose
 from robocal.server.calibration.workflow import load_data, model_file, run_method
+from robocal.server.exports.params import entries
 from robocal.solver.identifiability import SHRUNK_SHARE, condition_number, jacobian_rows
 from tests.real import REAL
 
@@ -34,6 +35,10 @@ def test_the_real_ur5s_wrist_is_shrunk_named_and_left_out_of_the_condition_numbe
         se = rows[n].standard_error
         assert se is not None and 0.5 < se <= 1.0, (n, se)
     assert rows["theta6"].status == "held fixed"  # structurally redundant: still held
+    model.identified = ident  # as read back from the file: the params export says it
+    exported = {e.name: e.status for e in entries(model)}
+    for n, s in shrunk.items():
+        assert exported[n] == f"shrunk toward nominal ({s.data_share:.0%} from the data): {s.why}"
     names = cal.layout.names()
     identified = [i for i, n in enumerate(names) if n not in cal.fixed and n not in cal.shrunk]
     J = jacobian_rows(cal.layout, cal.x, meas.q, np.all(np.isfinite(meas.xyz), axis=-1))
