@@ -69,13 +69,15 @@ class Result(dict):
 class Calibration(Result):
     """A fitted model and how it was obtained, one type for every method.
 
-    Common to all: method, layout, x, cost (the method's objective at x, mm^2), success, status
-    (0 converged, 1 iteration limit, 2 stopped without converging), message, nit, fixed,
-    shrunk (name -> identifiability.Shrunk), prior (solver.prior.Prior, None for nominal),
-    condition (of the identified parameters), F (per target, mm^2), seconds. The method's own figures are further attributes:
-    structural_condition and lm (the least-squares stage) for every fit; start (ls-sum,
-    ls-single, minimax); pose_weight_mm_per_rad (ls-pose); worst_target, worst_F, qp,
-    qp_iterations, qp_converged, history, lam, mu, constraints, sqp_seconds, ls_sum_F (minimax).
+    Common to all: method, layout, x, cost (the method's objective at x, mm^2, the prior's term
+    left out), success, status (0 converged, 1 iteration limit, 2 stopped without converging),
+    message, nit, fixed, shrunk (name -> identifiability.Shrunk), prior (solver.prior.Prior,
+    None for nominal), condition (of the identified parameters), F (per target, mm^2), seconds.
+    The method's own figures are further attributes: structural_condition, lm (the
+    least-squares stage) and prior_cost (the prior's term, mm^2: the objective is cost plus
+    it) for every fit; start (ls-sum, ls-single, minimax); pose_weight_mm_per_rad (ls-pose);
+    worst_target, worst_F, qp, qp_iterations, qp_converged, history, lam, mu, constraints,
+    sqp_seconds, ls_sum_F (minimax).
     """
 
     F: np.ndarray  # typed for checkers, since the dict's items are untyped to them
@@ -238,9 +240,9 @@ def _ls_pose(problem: Problem, rows: list[int], **_) -> Fitted:
     }
     F = prob.sum_squares(x)
     fixed = {**st.fixed, **data.held}
-    return Fitted(
-        prob, x, F, float(res.cost), res, fixed, data.condition, own, True, data.shrunk, prior
-    )
+    own["prior_cost"] = prior.cost(x)
+    cost = float(res.cost) - own["prior_cost"]
+    return Fitted(prob, x, F, cost, res, fixed, data.condition, own, True, data.shrunk, prior)
 
 
 def geometry_prior(layout: Layout, free, noise_mm: float) -> Prior:
@@ -309,8 +311,9 @@ def _ls_sum(problem: Problem, rows: list[int], **_) -> Fitted:
     prob, x, res = ls.fit.prob, ls.x, ls.res
     # the fit's last residuals, when it kept them, are those of x over every target
     F = ls.fit.per_target(res.r) if res.r is not None else prob.sum_squares(x)
+    own = {**ls.own, "prior_cost": ls.prior.cost(x)}
     return Fitted(
-        prob, x, F, float(res.cost), res, ls.fixed, ls.data.condition, ls.own, True, ls.shrunk,
+        prob, x, F, float(F[rows].sum()), res, ls.fixed, ls.data.condition, own, True, ls.shrunk,
         ls.prior,
     )  # fmt: skip
 
@@ -322,8 +325,9 @@ def _ls_single(problem: Problem, rows: list[int], **_) -> Fitted:
     others = [k for k in range(len(problem.target_names)) if k not in rows]
     x = fit_targets(prob, ls.x, others)
     F = prob.sum_squares(x)
+    own = {**ls.own, "prior_cost": ls.prior.cost(x)}
     return Fitted(
-        prob, x, F, float(res.cost), res, ls.fixed, ls.data.condition, ls.own, True, ls.shrunk,
+        prob, x, F, float(F[rows].sum()), res, ls.fixed, ls.data.condition, own, True, ls.shrunk,
         ls.prior,
     )  # fmt: skip
 
@@ -356,10 +360,11 @@ def _minimax(problem: Problem, rows: list[int], qp="primal-dual", epsilon=None) 
         "worst_target": problem.target_names[worst],
         "worst_F": float(F[worst]),
     }
-    cost = float(F[worst]) + mm.prior_cost
+    own["prior_cost"] = mm.prior_cost
     return Fitted(
-        prob, mm.x, F, cost, mm, ls.fixed, ls.data.condition, own, True, ls.shrunk, ls.prior
-    )
+        prob, mm.x, F, float(F[worst]), mm, ls.fixed, ls.data.condition, own, True, ls.shrunk,
+        ls.prior,
+    )  # fmt: skip
 
 
 # Each method's own steps; the method's parsing, the rebasing and the result are common.
