@@ -106,6 +106,16 @@ class Calibration(Result):
         self["outliers"] = value
 
     @property
+    def shrunk(self) -> dict[str, ident.Shrunk]:
+        """The parameters shrunk toward nominal, with their share from the data and why."""
+        return self.get("shrunk") or {}
+
+    @property
+    def prior(self) -> Prior | None:
+        """The geometry's prior the fit was made with; None for the nominal model."""
+        return self.get("prior")
+
+    @property
     def qp(self) -> str | None:
         """minimax's QP subsolver; None for the other methods."""
         return self.get("qp")

@@ -78,7 +78,7 @@ def calibration_figures(cal: Calibration, q, meas) -> tuple[ParameterErrors, Hol
 def prior_terms(cal: Calibration, column: np.ndarray) -> PriorTerms | None:
     """The calibration's prior in its covariance: minimax's estimating equations carry it over
     the number of SMRs fitted (solver.minimax._Objective), least squares' whole."""
-    prior = cal.get("prior")
+    prior = cal.prior
     if prior is None:
         return None
     name, rows = parse_method(cal.method, list(cal.layout.target_names))
@@ -177,7 +177,7 @@ class _PoseStages:
         self.weight = cal.pose_weight_mm_per_rad
         prob = Problem(lay, q, meas)
         free_ = np.isin(np.arange(lay.n_params), free)
-        self.x1, _ = pose_fit(prob, cal.x, free_, self.weight, prior=cal.get("prior"))
+        self.x1, _ = pose_fit(prob, cal.x, free_, self.weight, prior=cal.prior)
         self.tcols = np.arange(lay.target_slice.start, lay.target_slice.stop)
         self.cols = np.r_[free, self.tcols]
 

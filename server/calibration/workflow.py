@@ -260,8 +260,8 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
             condition=cal.condition,
             nominal_targets={t: cell.targets[t] for t in meas.target_names},
             nominal_base=cell.base,
-            shrunk=cal.get("shrunk"),
-            prior=cal.get("prior"),
+            shrunk=cal.shrunk,
+            prior=cal.prior,
         )
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable
@@ -289,7 +289,7 @@ def validate(
         fit_rms_mm=fit_rms,
         holdout=holdout,
         condition=cal.condition,
-        free_parameters=effective_parameters(errors.column, cal.get("shrunk")),
+        free_parameters=effective_parameters(errors.column, cal.shrunk),
         floor=(floor, source),
     )
 
