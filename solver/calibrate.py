@@ -239,9 +239,11 @@ def _ls_pose(problem: Problem, rows: list[int], **_) -> Fitted:
     # residuals well above the noise pin the parameters less: judged and weighed again there
     scatter = float(np.sqrt(3.0 * (res.cost - prior.cost(x)) / max(1, Jd.shape[0])))
     if scatter > RESIDUAL_OVER_FLOOR * floor:
-        data = ident.check_data(A, st.free, lay, Jd.shape[0], int(full.sum()), scatter)
-        prior = geometry_prior(lay, data.free, scatter)
-        x, res = pose_fit(prob, x0, data.free, weight, prior=prior)
+        again = ident.check_data(A, st.free, lay, Jd.shape[0], int(full.sum()), scatter)
+        if again.least_share < ident.PRIOR_NEGLIGIBLE or not np.array_equal(again.free, data.free):
+            prior = geometry_prior(lay, again.free, scatter)
+            x, res = pose_fit(prob, x0, again.free, weight, prior=prior)
+        data = again
     x = fit_targets(prob, x, range(len(p.target_names)))
     own = {
         "structural_condition": st.condition,
@@ -302,15 +304,16 @@ def _least_squares(problem: Problem, rows: list[int]) -> _LeastSquares:
     scatter = float(np.sqrt(F.sum() / max(1, fit.mask.sum())))
     if scatter > RESIDUAL_OVER_FLOOR * floor:
         again = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], scatter)
-        if not np.array_equal(again.free, data.free):
+        refit = not np.array_equal(again.free, data.free)
+        if refit:
             fit, first = start(again.free)
-        else:  # from the fit so far, its normal equations there
-            fit.x0 = x
-            first = fit.points(x)
+        elif again.least_share < ident.PRIOR_NEGLIGIBLE:  # from the fit so far
+            fit.x0, first, refit = x, fit.points(x), True
         data = again
-        fit.prior = prior = geometry_prior(prob.layout, data.free, scatter)
-        x, res = fit.fit(first)
-        del first
+        if refit:
+            fit.prior = prior = geometry_prior(prob.layout, data.free, scatter)
+            x, res = fit.fit(first)
+            del first
     own = {"structural_condition": st.condition, "start": fit.start, "lm": _lm_figures(res)}
     return _LeastSquares(fit, x, res, data, {**st.fixed, **data.held}, own, data.shrunk, prior)
 

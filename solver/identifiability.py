@@ -38,6 +38,9 @@ HELD_INFO = 1e-2
 # posterior / prior variance; information 1, the prior's, alone) is reported shrunk, and left
 # out of the condition number: the data does not pin it better than the prior.
 SHRUNK_SHARE = 0.5
+# A fit whose free geometric parameters all take at least this share from the data moves by
+# under 1% of each change with the prior's weight: not refitted when only the weight changes.
+PRIOR_NEGLIGIBLE = 0.99
 # The tracker noise (3-D RMS per reading) when the caller knows none: the default tracker spec,
 # MPE 10 um + 2.5 um/m halved per axis, at 2 m.
 DEFAULT_NOISE_FLOOR_MM = float(np.sqrt(3.0) * 0.5e-3 * (10.0 + 2.5 * 2.0))
@@ -237,6 +240,7 @@ class DataCheck:
     held: dict[str, str]  # name -> why the data cannot identify it
     condition: float
     shrunk: dict[str, Shrunk] = field(default_factory=dict)  # name -> its data share and why
+    least_share: float = 1.0  # the least share of a free geometric parameter's from the data
 
 
 def check_data(
@@ -307,7 +311,8 @@ def check_data(
     As = Ak / np.outer(norms, norms)
     s = np.sqrt(np.clip(np.linalg.eigvalsh(finite(As, "the normal matrix"))[::-1], 0.0, None))
     cond = float(s[0] / s[-1]) if len(s) and s[-1] > 0 else float("inf")
-    return DataCheck(keep, held, cond, shrunk)
+    least = float(share[geo[on]].min()) if geo[on].any() else 1.0
+    return DataCheck(keep, held, cond, shrunk, least)
 
 
 def _added(B: np.ndarray, i: int, kept: list[int]) -> float:
