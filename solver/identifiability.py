@@ -256,7 +256,8 @@ def check_data(
     The geometric rest is fitted with the prior (solver.prior); those whose estimate would be
     less than SHRUNK_SHARE the data's (the posterior at this noise) are shrunk toward nominal,
     with the share and the reason. The condition number is that of the unit-column Jacobian of
-    the identified rest.
+    the identified ones: those the data pins better than the prior given the ones before them
+    (so the data alone identifies them together), shrunk ones left out.
     """
     names = layout.names()
     idx = np.flatnonzero(free)
@@ -293,7 +294,9 @@ def check_data(
     # the posterior in prior units: (B + I on the geometry)^-1; its diagonal, the prior's share
     share = data_share(B[np.ix_(on, on)], geo[on].astype(float))
     low = on[geo[on] & (share < SHRUNK_SHARE)]
-    ident = [i for i in on if i not in set(low.tolist())]
+    # the identified: those kept (the data pins each given the ones before it) not shrunk; a
+    # weak one mostly from the data is neither (the prior resolves what it shares with others)
+    ident = sorted(set(kept) - set(low.tolist()))
     shrunk = {
         names[idx[i]]: Shrunk(
             float(share[list(on).index(i)]),

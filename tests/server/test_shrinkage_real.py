@@ -42,8 +42,10 @@ def test_the_real_ur5s_wrist_is_shrunk_named_and_left_out_of_the_condition_numbe
     names = cal.layout.names()
     identified = [i for i, n in enumerate(names) if n not in cal.fixed and n not in cal.shrunk]
     J = jacobian_rows(cal.layout, cal.x, meas.q, np.all(np.isfinite(meas.xyz), axis=-1))
-    np.testing.assert_allclose(cal.condition, condition_number(J[:, identified]), rtol=0.05)
-    assert cal.condition < 1e3
+    # of a subset of them that the data identifies alone (the prior resolves the rest)
+    assert cal.condition <= 1.05 * condition_number(J[:, identified])
+    with_shrunk = [i for i, n in enumerate(names) if n not in cal.fixed]
+    assert condition_number(J[:, with_shrunk]) > 1e3 > cal.condition
 
 
 def test_a_diagnosis_of_the_real_ur5_lists_the_shrunk_wrist_as_held():
