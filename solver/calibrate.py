@@ -25,6 +25,7 @@ from .identify import (
 from .kinematics import Layout, predict_with_jacobian
 from .lm import LMResult
 from .minimax import MinimaxResult, minimax
+from .prior import Prior
 from .problem import Problem
 from .robot import Robot
 from .stop import Stop
@@ -69,12 +70,15 @@ class Result(dict):
 class Calibration(Result):
     """A fitted model and how it was obtained, one type for every method.
 
-    Common to all: method, layout, x, cost (the method's objective at x, mm^2), success, status
-    (0 converged, 1 iteration limit, 2 stopped without converging), message, nit, fixed,
-    condition, F (per target, mm^2), seconds. The method's own figures are further attributes:
-    structural_condition and lm (the least-squares stage) for every fit; start (ls-sum,
-    ls-single, minimax); pose_weight_mm_per_rad (ls-pose); worst_target, worst_F, qp,
-    qp_iterations, qp_converged, history, lam, mu, constraints, sqp_seconds, ls_sum_F (minimax).
+    Common to all: method, layout, x, cost (the method's objective at x, mm^2, the prior's term
+    left out), success, status (0 converged, 1 iteration limit, 2 stopped without converging),
+    message, nit, fixed, shrunk (name -> identifiability.Shrunk), prior (solver.prior.Prior,
+    None for nominal), condition (of the identified parameters), F (per target, mm^2), seconds.
+    The method's own figures are further attributes: structural_condition, lm (the
+    least-squares stage) and prior_cost (the prior's term, mm^2: the objective is cost plus
+    it) for every fit; start (ls-sum, ls-single, minimax); pose_weight_mm_per_rad (ls-pose);
+    worst_target, worst_F, qp, qp_iterations, qp_converged, history, lam, mu, constraints,
+    sqp_seconds, ls_sum_F (minimax).
     """
 
     F: np.ndarray  # typed for checkers, since the dict's items are untyped to them
@@ -112,6 +116,16 @@ class Calibration(Result):
     @noise_floor.setter
     def noise_floor(self, value: NoiseFloor | None) -> None:
         self["noise_floor"] = value
+
+    @property
+    def shrunk(self) -> dict[str, ident.Shrunk]:
+        """The parameters shrunk toward nominal, with their share from the data and why."""
+        return self.get("shrunk") or {}
+
+    @property
+    def prior(self) -> Prior | None:
+        """The geometry's prior the fit was made with; None for the nominal model."""
+        return self.get("prior")
 
     @property
     def qp(self) -> str | None:
@@ -181,6 +195,8 @@ class Fitted:
     condition: float
     own: dict = field(default_factory=dict)  # the method's own figures
     rebase: bool = True  # the base folded into the layout's reference (nominal keeps its own)
+    shrunk: dict = field(default_factory=dict)  # parameter name -> ident.Shrunk
+    prior: Prior | None = None
 
 
 def _nominal(problem: Problem, rows: list[int], **_) -> Fitted:
@@ -227,10 +243,19 @@ def _ls_pose(problem: Problem, rows: list[int], **_) -> Fitted:
     full = np.all(prob.mask, axis=1)
     pred, J, _ = predict_with_jacobian(lay, x0, p.q[full])
     Jd = pose_residuals(pred, pred, J, weight)[1].reshape(-1, lay.n_params)
-    data = ident.check_data(
-        ident.gram(Jd, st.free), st.free, lay, Jd.shape[0], int(full.sum()), p.noise_floor_mm
-    )
-    x, res = pose_fit(prob, x0, data.free, weight)
+    A = ident.gram(Jd, st.free)
+    floor = p.noise_floor_mm or ident.DEFAULT_NOISE_FLOOR_MM
+    data = ident.check_data(A, st.free, lay, Jd.shape[0], int(full.sum()), floor)
+    prior = geometry_prior(lay, data.free, floor)
+    x, res = pose_fit(prob, x0, data.free, weight, prior=prior)
+    # residuals well above the noise pin the parameters less: judged and weighed again there
+    scatter = float(np.sqrt(3.0 * (res.cost - prior.cost(x)) / max(1, Jd.shape[0])))
+    if scatter > RESIDUAL_OVER_FLOOR * floor:
+        again = ident.check_data(A, st.free, lay, Jd.shape[0], int(full.sum()), scatter)
+        if again.least_share < ident.PRIOR_NEGLIGIBLE or not np.array_equal(again.free, data.free):
+            prior = geometry_prior(lay, again.free, scatter)
+            x, res = pose_fit(prob, x0, again.free, weight, prior=prior)
+        data = again
     x = fit_targets(prob, x, range(len(p.target_names)))
     own = {
         "structural_condition": st.condition,
@@ -239,7 +264,17 @@ def _ls_pose(problem: Problem, rows: list[int], **_) -> Fitted:
     }
     F = prob.sum_squares(x)
     fixed = {**st.fixed, **data.held}
-    return Fitted(prob, x, F, float(res.cost), res, fixed, data.condition, own)
+    own["prior_cost"] = prior.cost(x)
+    cost = float(res.cost) - own["prior_cost"]
+    return Fitted(prob, x, F, cost, res, fixed, data.condition, own, True, data.shrunk, prior)
+
+
+def geometry_prior(layout: Layout, free, noise_mm: float) -> Prior:
+    """The prior on the free geometric parameters' change from nominal, weighed at noise_mm
+    (3-D RMS a reading, so noise_mm / sqrt(3) a coordinate)."""
+    nominal = np.zeros(layout.n_params)
+    nominal[: layout.n_geo] = layout.robot.param_vector()
+    return Prior.of(layout, nominal, free, noise_mm / np.sqrt(3.0), ident.PRIOR_MM, ident.PRIOR_DEG)
 
 
 @dataclass
@@ -252,6 +287,8 @@ class _LeastSquares:
     data: ident.DataCheck
     fixed: dict
     own: dict
+    shrunk: dict
+    prior: Prior
 
 
 def _least_squares(problem: Problem, rows: list[int]) -> _LeastSquares:
@@ -265,25 +302,32 @@ def _least_squares(problem: Problem, rows: list[int]) -> _LeastSquares:
     fit, first = start(st.free)
     prob = fit.prob
     A, n_rows = first.A, 3 * int(fit.mask.sum())
-    data = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], p.noise_floor_mm)
+    floor = p.noise_floor_mm or ident.DEFAULT_NOISE_FLOOR_MM
+    data = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], floor)
     if data.held:  # the start's normal equations were of the structurally free columns
         fit, first = start(data.free)
+    fit.prior = prior = geometry_prior(prob.layout, data.free, floor)
     x, res = fit.fit(first)
     del first  # its twists, as large as a Jacobian, would sit beside minimax's own
     # Residuals well above the tracker's noise (the arm's repeatability, unmodelled effects)
-    # pin the parameters less than the noise alone would: judged again at their level.
+    # pin the parameters less than the noise alone would: judged, and the prior weighed,
+    # again at their level.
     F = finite(prob.sum_squares(x)[rows], "the fit's residuals")
     scatter = float(np.sqrt(F.sum() / max(1, fit.mask.sum())))
-    floor = p.noise_floor_mm or ident.DEFAULT_NOISE_FLOOR_MM
     if scatter > RESIDUAL_OVER_FLOOR * floor:
         again = ident.check_data(A, st.free, lay, n_rows, prob.q.shape[0], scatter)
-        if set(again.held) - set(data.held):
-            data = again
-            fit, first = start(data.free)
+        refit = not np.array_equal(again.free, data.free)
+        if refit:
+            fit, first = start(again.free)
+        elif again.least_share < ident.PRIOR_NEGLIGIBLE:  # from the fit so far
+            fit.x0, first, refit = x, fit.points(x), True
+        data = again
+        if refit:
+            fit.prior = prior = geometry_prior(prob.layout, data.free, scatter)
             x, res = fit.fit(first)
             del first
     own = {"structural_condition": st.condition, "start": fit.start, "lm": _lm_figures(res)}
-    return _LeastSquares(fit, x, res, data, {**st.fixed, **data.held}, own)
+    return _LeastSquares(fit, x, res, data, {**st.fixed, **data.held}, own, data.shrunk, prior)
 
 
 def _ls_sum(problem: Problem, rows: list[int], **_) -> Fitted:
@@ -292,7 +336,11 @@ def _ls_sum(problem: Problem, rows: list[int], **_) -> Fitted:
     prob, x, res = ls.fit.prob, ls.x, ls.res
     # the fit's last residuals, when it kept them, are those of x over every target
     F = ls.fit.per_target(res.r) if res.r is not None else prob.sum_squares(x)
-    return Fitted(prob, x, F, float(F[rows].sum()), res, ls.fixed, ls.data.condition, ls.own)
+    own = {**ls.own, "prior_cost": ls.prior.cost(x)}
+    return Fitted(
+        prob, x, F, float(F[rows].sum()), res, ls.fixed, ls.data.condition, own, True, ls.shrunk,
+        ls.prior,
+    )  # fmt: skip
 
 
 def _ls_single(problem: Problem, rows: list[int], **_) -> Fitted:
@@ -302,7 +350,11 @@ def _ls_single(problem: Problem, rows: list[int], **_) -> Fitted:
     others = [k for k in range(len(problem.target_names)) if k not in rows]
     x = fit_targets(prob, ls.x, others)
     F = prob.sum_squares(x)
-    return Fitted(prob, x, F, float(F[rows].sum()), res, ls.fixed, ls.data.condition, ls.own)
+    own = {**ls.own, "prior_cost": ls.prior.cost(x)}
+    return Fitted(
+        prob, x, F, float(F[rows].sum()), res, ls.fixed, ls.data.condition, own, True, ls.shrunk,
+        ls.prior,
+    )  # fmt: skip
 
 
 def _minimax(problem: Problem, rows: list[int], qp="primal-dual", epsilon=None) -> Fitted:
@@ -311,7 +363,7 @@ def _minimax(problem: Problem, rows: list[int], qp="primal-dual", epsilon=None) 
     fit, prob, res = ls.fit, ls.fit.prob, ls.res
     # the fit's last residuals, when it kept them, are those of x over every target
     start_F = fit.per_target(res.r) if res.r is not None else prob.sum_squares(ls.x)
-    mm = minimax(prob, ls.x, ls.data.free, rows=rows, qp=qp, epsilon=epsilon)
+    mm = minimax(prob, ls.x, ls.data.free, rows=rows, qp=qp, epsilon=epsilon, prior=ls.prior)
     # its F_i of the last step are those of every target when it fitted every target
     if sorted(rows) == list(range(len(problem.target_names))):
         F = np.empty(len(problem.target_names))
@@ -333,7 +385,11 @@ def _minimax(problem: Problem, rows: list[int], qp="primal-dual", epsilon=None) 
         "worst_target": problem.target_names[worst],
         "worst_F": float(F[worst]),
     }
-    return Fitted(prob, mm.x, F, float(F[worst]), mm, ls.fixed, ls.data.condition, own)
+    own["prior_cost"] = mm.prior_cost
+    return Fitted(
+        prob, mm.x, F, float(F[worst]), mm, ls.fixed, ls.data.condition, own, True, ls.shrunk,
+        ls.prior,
+    )  # fmt: skip
 
 
 # Each method's own steps; the method's parsing, the rebasing and the result are common.
@@ -369,6 +425,8 @@ def calibrate(problem: Problem, method="minimax", *, qp="primal-dual", epsilon=N
         message=message,
         nit=nit,
         fixed=out.fixed,
+        shrunk=out.shrunk,
+        prior=out.prior,
         condition=out.condition,
         F=out.F,
         seconds=time.perf_counter() - t0,

@@ -545,7 +545,8 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     from .calibrate import calibrate
 
     geo = calibrate(replace(problem, noise_floor_mm=noise.mm), "ls-sum")
-    free = np.array([n not in geo.fixed for n in prob.layout.names()])
+    # shrunk parameters are held at nominal here: the extended fits carry no prior
+    free = np.array([n not in geo.fixed and n not in geo.shrunk for n in prob.layout.names()])
     clock["setup"] = time.perf_counter() - t0
     diag = Diagnoser(prob, x0, free, inputs)
     cands = candidates(prob.layout, x0, inputs)

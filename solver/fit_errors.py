@@ -16,6 +16,7 @@ from .identify import Problem, pose_fit, pose_residuals
 from .kinematics import Layout, predict_rows
 from .normal import PointNormal
 from .postfit import BLOCK_ENTRIES, Blocks, Sums, poses_per_block, post_fit
+from .prior import PriorTerms
 from .uncertainty import (
     CLUSTERED,
     ParameterErrors,
@@ -68,7 +69,12 @@ def calibration_figures(cal: Calibration, q, meas) -> tuple[ParameterErrors, Hol
     """A calibration's standard errors and leave-one-pose-out residuals, its rows taken a block
     of poses at a time (solver.postfit): memory bounded whatever the campaign's size."""
     blocks, column = calibration_blocks(cal, q, meas)
-    post = post_fit(blocks, lambda rows: point_errors(cal, rows), plain_sums(cal, q, meas, column))
+    post = post_fit(
+        blocks,
+        lambda rows: point_errors(cal, rows),
+        known=plain_sums(cal, q, meas, column),
+        prior=prior_terms(cal, column),
+    )
     names = cal.layout.names()
     errors = ParameterErrors(
         tuple(names),
@@ -112,6 +118,17 @@ def plain_sums(cal: Calibration, q, meas, column) -> Sums | None:
         A += normal.A
         rr += normal.cost
     return Sums(A, A, {0: StageSums(rr, 3 * int(mask.sum()), A.copy(), np.diag(A) > 0)})
+
+
+def prior_terms(cal: Calibration, column: np.ndarray) -> PriorTerms | None:
+    """The calibration's prior in its covariance: minimax's estimating equations carry it over
+    the number of SMRs fitted (solver.minimax._Objective), least squares' whole."""
+    prior = cal.prior
+    if prior is None:
+        return None
+    name, rows = parse_method(cal.method, list(cal.layout.target_names))
+    factor = 1.0 / len(rows) if name == "minimax" else 1.0
+    return prior.terms(column, int(column.max()) + 1, factor)
 
 
 def point_errors(cal: Calibration, rows: Rows) -> np.ndarray:
@@ -204,7 +221,8 @@ class _PoseStages:
         self.cal, self.q, self.meas, self.mask, self.free = cal, q, meas, mask, free
         self.weight = cal.pose_weight_mm_per_rad
         prob = Problem(lay, q, meas)
-        self.x1, _ = pose_fit(prob, cal.x, np.isin(np.arange(lay.n_params), free), self.weight)
+        free_ = np.isin(np.arange(lay.n_params), free)
+        self.x1, _ = pose_fit(prob, cal.x, free_, self.weight, prior=cal.prior)
         self.tcols = np.arange(lay.target_slice.start, lay.target_slice.stop)
         self.cols = np.r_[free, self.tcols]
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
@@ -10,6 +10,7 @@ import numpy as np
 from .finite import finite
 from .kinematics import Layout, predict_rows, predict_with_jacobian
 from .observability import BLOCK_ROWS, stacked_r
+from .prior import data_share
 
 # Singular values of the unit-norm Jacobian columns below this fraction of the largest count as
 # zero: exact redundancies sit near 1e-14, weak but real ones far above.
@@ -20,9 +21,26 @@ DEAD = 1e-10
 # A column adding less than this fraction of its norm is kept only if the rank needs it.
 CLEAR_NEW = 0.1
 # The error a parameter may plausibly have: the data must pin a parameter better than this
-# (at the tracker's noise) for it to be identified, else it is held at nominal.
+# (at the tracker's noise) for it to be identified. A geometric parameter pinned worse is
+# shrunk toward nominal by a Gaussian prior of this standard deviation (solver.prior); a base
+# or SMR entry, which has no prior, is held at nominal.
 PRIOR_MM = 1.0
 PRIOR_DEG = 1.0
+# A geometric parameter the data pins, alone, to less than this share of the prior's
+# information (a standard error ten times the prior's) does not move the SMRs: it is held. One
+# the data moves but only together with others is shrunk, never held: holding it would hand
+# its share of their common motion to the others as a precision they do not have (a UR5 whose
+# one SMR is 0.1 mm off the flange axis, tracker noise x10, 80 poses, 30 seeds, true changes
+# drawn from the prior: the identified parameters' 95% intervals covered 88% of the truths
+# with a5 and alpha5 held, 94% with them shrunk; held-out error alike, 0.1662 mm).
+HELD_INFO = 1e-2
+# A geometric parameter less than this share of whose estimate comes from the data (1 -
+# posterior / prior variance; information 1, the prior's, alone) is reported shrunk, and left
+# out of the condition number: the data does not pin it better than the prior.
+SHRUNK_SHARE = 0.5
+# A fit whose free geometric parameters all take at least this share from the data moves by
+# under 1% of each change with the prior's weight: not refitted when only the weight changes.
+PRIOR_NEGLIGIBLE = 0.99
 # The tracker noise (3-D RMS per reading) when the caller knows none: the default tracker spec,
 # MPE 10 um + 2.5 um/m halved per axis, at 2 m.
 DEFAULT_NOISE_FLOOR_MM = float(np.sqrt(3.0) * 0.5e-3 * (10.0 + 2.5 * 2.0))
@@ -203,27 +221,43 @@ def condition_number(J: np.ndarray) -> float:
     return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
 
 
+@dataclass(frozen=True)
+class Shrunk:
+    """A parameter the data sees too little to identify, fitted with the prior: the share of
+    its estimate that comes from the data (1 - posterior / prior variance) and why."""
+
+    share: float
+    why: str
+
+
 @dataclass
 class DataCheck:
-    """What the data itself identifies: the free parameters left, those it holds and why, and
-    the condition number of the free ones."""
+    """What the data itself identifies: the free parameters left (identified or shrunk), those
+    it holds and why, those it sees too little to identify (shrunk toward nominal) and why, and
+    the condition number of the identified ones."""
 
     free: np.ndarray  # bool (P,)
     held: dict[str, str]  # name -> why the data cannot identify it
     condition: float
+    shrunk: dict[str, Shrunk] = field(default_factory=dict)  # name -> its data share and why
+    least_share: float = 1.0  # the least share of a free geometric parameter's from the data
 
 
 def check_data(
     A: np.ndarray, free: np.ndarray, layout: Layout, n_rows: int, n_poses: int, noise_mm=None
 ) -> DataCheck:
-    """Hold the parameters this data cannot identify; refuse only too few equations.
+    """Sort the free parameters into identified, shrunk and held; refuse only too few equations.
 
-    A is J'J over the free parameters (n_rows rows of J). A parameter is identified when the
-    data pins it, given the parameters kept before it (preference order), to better than
-    PRIOR_MM or PRIOR_DEG at the tracker's noise: a column the data does not move (one SMR on
-    the last joint's axis and its offset), or moves below the noise, or only together with
-    others, is held at nominal with the reason. The condition number is that of the
-    unit-column Jacobian of what stays free.
+    A is J'J over the free parameters (n_rows rows of J), noise_mm the residual's RMS a reading.
+    Held at nominal, with the reason: a geometric parameter the data pins, alone, to less than
+    HELD_INFO of the prior's information (a column the data does not move: one SMR on the last
+    joint's axis and its offset), and a base or SMR entry (which has no prior) the data pins,
+    given those it pins better before it (preference order), worse than PRIOR_MM or PRIOR_DEG.
+    The geometric rest is fitted with the prior (solver.prior); those whose estimate would be
+    less than SHRUNK_SHARE the data's (the posterior at this noise) are shrunk toward nominal,
+    with the share and the reason. The condition number is that of the unit-column Jacobian of
+    the identified ones: those the data pins better than the prior given the ones before them
+    (so the data alone identifies them together), shrunk ones left out.
     """
     names = layout.names()
     idx = np.flatnonzero(free)
@@ -238,33 +272,59 @@ def check_data(
     prior = np.where(angle[idx], np.deg2rad(PRIOR_DEG), PRIOR_MM)
     # information in units of the prior: a direction below 1 is known no better than the prior
     B = finite(A, "the normal matrix") * np.outer(prior, prior) / sigma**2
+    geo = idx < layout.n_geo
     at = {int(p): i for i, p in enumerate(idx)}
     kept: list[int] = []
     held: dict[str, str] = {}
+    weak: list[int] = []
     for p in (p for p in preference_order(layout) if p in at):
         i = at[p]
-        info = B[i, i]
-        if kept:
-            L = np.linalg.cholesky(B[np.ix_(kept, kept)])
-            v = np.linalg.solve(L, B[kept, i])
-            info = B[i, i] - v @ v
+        info = _added(B, i, kept)
         if info >= 1.0:
             kept.append(i)
+        elif geo[i] and B[i, i] >= HELD_INFO:
+            weak.append(i)
         else:
             held[names[p]] = _why_held(B, i, info, kept, idx, names, angle[p], sigma * np.sqrt(3.0))
-    keep = np.zeros_like(np.asarray(free, dtype=bool))
     if not kept:
         raise NotIdentifiable(
             "the data moves none of the parameters: measure poses that move the SMRs"
         )
-    sub = np.array(sorted(kept), dtype=int)
-    keep[idx[sub]] = True
+    on = np.array(sorted(kept + weak), dtype=int)
+    # the posterior in prior units: (B + I on the geometry)^-1; its diagonal, the prior's share
+    share = data_share(B[np.ix_(on, on)], geo[on].astype(float))
+    low = on[geo[on] & (share < SHRUNK_SHARE)]
+    # the identified: those kept (the data pins each given the ones before it) not shrunk; a
+    # weak one mostly from the data is neither (the prior resolves what it shares with others)
+    ident = sorted(set(kept) - set(low.tolist()))
+    shrunk = {
+        names[idx[i]]: Shrunk(
+            float(share[list(on).index(i)]),
+            _why_held(
+                B, i, _added(B, i, ident), ident, idx, names, angle[idx[i]], sigma * np.sqrt(3.0)
+            ),
+        )
+        for i in sorted(low.tolist(), key=lambda i: idx[i])
+    }
+    keep = np.zeros_like(np.asarray(free, dtype=bool))
+    keep[idx[on]] = True
+    sub = np.array(ident, dtype=int)
     Ak = A[np.ix_(sub, sub)]
     norms = np.sqrt(np.diag(Ak))
     As = Ak / np.outer(norms, norms)
     s = np.sqrt(np.clip(np.linalg.eigvalsh(finite(As, "the normal matrix"))[::-1], 0.0, None))
     cond = float(s[0] / s[-1]) if len(s) and s[-1] > 0 else float("inf")
-    return DataCheck(keep, held, cond)
+    least = float(share[geo[on]].min()) if geo[on].any() else 1.0
+    return DataCheck(keep, held, cond, shrunk, least)
+
+
+def _added(B: np.ndarray, i: int, kept: list[int]) -> float:
+    """The information (prior units) column i of B adds to the columns kept."""
+    if not kept:
+        return float(B[i, i])
+    L = np.linalg.cholesky(B[np.ix_(kept, kept)])
+    v = np.linalg.solve(L, B[kept, i])
+    return float(B[i, i] - v @ v)
 
 
 def _why_held(B, i, info, kept, idx, names, is_angle, floor) -> str:
@@ -295,3 +355,11 @@ def gram(J: np.ndarray, free: np.ndarray) -> np.ndarray:
     """J'J over the free columns of J (rows, P)."""
     Jf = J[:, np.flatnonzero(free)]
     return Jf.T @ Jf
+
+
+def effective_parameters(column: np.ndarray, shrunk: dict[str, Shrunk] | None) -> int:
+    """How many parameters a fit spends of its equations: those it fits (column >= 0), a shrunk
+    one counting as the share of it the data gives (a prior-fitted model's residuals keep the
+    equations less the trace of its hat matrix)."""
+    spent = np.count_nonzero(np.asarray(column) >= 0)
+    return int(round(spent - sum(1.0 - s.share for s in (shrunk or {}).values())))

@@ -10,6 +10,7 @@ from .finite import finite, require_inputs
 from .kinematics import Layout, predict, predict_rows
 from .lm import Normal, damped_step, levenberg_marquardt, scaled
 from .normal import PointNormal
+from .prior import Prior
 from .rigid import kabsch
 from .robot import Robot
 
@@ -111,6 +112,8 @@ class SumOfSquares:
         self.start: dict = {}  # the poses of a first step on a subset, and whether it was taken
         kinds = {op.param: op.kind for op in prob.layout.ops()}
         self.angle = np.array([kinds.get(int(i)) == "r" for i in self.idx], dtype=bool)
+        # the geometry's prior (solver.prior): its rows follow the readings' in the residuals
+        self.prior: Prior | None = None
 
     def near(self, za, zb) -> bool:
         """The Jacobian at za stands for the one at zb: it changes by ~1e-4 of itself in between."""
@@ -126,12 +129,36 @@ class SumOfSquares:
         return x
 
     def normal(self, z=None) -> Normal:
-        """J'J, J'r and the cost at z (default: the start)."""
-        return self.points(self.x0 if z is None else self.full(z))
+        """J'J, J'r and the cost at z (default: the start), the prior's terms added."""
+        x = self.x0 if z is None else self.full(z)
+        return self.with_prior(self.points(x), x)
+
+    def with_prior(self, ne: Normal, x) -> Normal:
+        """The normal equations ne of the readings at x with the prior's rows added."""
+        pr = self.prior
+        if pr is None:
+            return ne
+        idx, n = self.idx, 3 * int(self.mask.sum())
+        root, rp = np.sqrt(pr.weight[idx]), pr.rows(x, idx)
+        jt = ne.jt
+        return Normal(
+            ne.cost + float(rp @ rp),
+            ne.A + pr.information(idx),
+            ne.g + root * rp,
+            lambda res: jt(res[:n]) + root * res[n:],
+        )
+
+    def residual(self, z) -> np.ndarray:
+        """The readings' residuals at z, then the prior's rows."""
+        x = self.full(z)
+        r = self.points.residual(x)
+        return r if self.prior is None else np.concatenate([r, self.prior.rows(x, self.idx)])
 
     def per_target(self, r: np.ndarray) -> np.ndarray:
-        """F_i of eq. (6) per target from residuals (predict - meas)[mask] flattened."""
+        """F_i of eq. (6) per target from residuals (predict - meas)[mask] flattened (rows past
+        the readings', the prior's, left out)."""
         k = np.nonzero(self.mask)[1]
+        r = r[: 3 * len(k)]
         return np.bincount(k, np.sum(r.reshape(-1, 3) ** 2, axis=1), minlength=self.mask.shape[1])
 
     def step_from(self, ne: Normal) -> bool:
@@ -147,19 +174,21 @@ class SumOfSquares:
     def fit(self, first: Normal | None = None, max_iter=100):
         """Levenberg-Marquardt from the start; returns (x, LMResult).
 
+        first: the readings' normal equations at the start (the prior's terms are added here).
         Without first, a large campaign's first step is taken on START_POSES spread poses.
         """
         sub = start_poses(len(self.mask))
         if first is None and sub is not None:
             prob = self.prob
             subset = PointNormal(prob.layout, prob.q[sub], self.mask[sub], prob.meas[sub], self.idx)
-            self.start = {"poses": len(subset.q), "stepped": self.step_from(subset(self.x0))}
+            ne = self.with_prior(subset(self.x0), self.x0)
+            self.start = {"poses": len(subset.q), "stepped": self.step_from(ne)}
         res = levenberg_marquardt(
             None,
             self.x0[self.idx],
             normal=self.normal,
-            first=first,
-            residual=lambda z: self.points.residual(self.full(z)),
+            first=None if first is None else self.with_prior(first, self.x0),
+            residual=self.residual,
             max_iter=max_iter,
             near=self.near,
         )
@@ -249,8 +278,9 @@ def pose_residuals(pred, meas, J, weight):
     return r, Jr
 
 
-def pose_fit(prob: Problem, x0, free, weight, max_iter=100):
-    """Least squares on position and orientation of the frame spanned by the SMRs (condition 6)."""
+def pose_fit(prob: Problem, x0, free, weight, max_iter=100, prior: Prior | None = None):
+    """Least squares on position and orientation of the frame spanned by the SMRs (condition 6),
+    the prior's rows (solver.prior) after the poses'."""
     full_poses = np.all(prob.mask, axis=1)
     if prob.meas.shape[1] < 3 or full_poses.sum() == 0:
         raise ValueError("ls-pose needs poses with at least three targets measured")
@@ -266,7 +296,10 @@ def pose_fit(prob: Problem, x0, free, weight, max_iter=100):
         p, Jt = predict_rows(prob.layout, xx, q, mask, idx)
         J = Jt.reshape(len(idx), m, K, 3).transpose(1, 2, 3, 0)
         r, Jr = pose_residuals(p.reshape(m, K, 3), meas, J, weight)
-        return r.ravel(), Jr.reshape(-1, len(idx)).T
+        r, Jt = r.ravel(), Jr.reshape(-1, len(idx)).T
+        if prior is None:
+            return r, Jt
+        return np.r_[r, prior.rows(xx, idx)], np.hstack([Jt, np.diag(np.sqrt(prior.weight[idx]))])
 
     res = levenberg_marquardt(fun, x[idx], max_iter=max_iter)
     x[idx] = res.x

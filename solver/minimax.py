@@ -11,6 +11,7 @@ import numpy as np
 from .identify import Problem
 from .kinematics import predict, predict_rows
 from .normal import PointNormal
+from .prior import Prior
 from .qp import SOLVERS
 from .stop import Stop
 
@@ -32,6 +33,7 @@ class MinimaxResult:
     status: Stop
     constraints: np.ndarray = field(default_factory=lambda: np.zeros(0))
     qp_unconverged: int = 0  # SQP iterations whose QP subproblem missed its own optimality test
+    prior_cost: float = 0.0  # the prior's term at x, mm^2 (F leaves it out)
 
 
 def measured_distances(meas: np.ndarray):
@@ -58,10 +60,16 @@ class _Objective:
 
     The scaled variables are z = scale * (x_free - x0_free), scale being the norms of the
     Jacobian columns at x0, so that every variable moves the SMRs alike.
+
+    With a prior (solver.prior), every F_i carries the prior's term divided by the number of
+    SMRs K: at equal multipliers 1/K the SQP's stationarity is then ls-sum's with the prior
+    (sum_i F_i + prior, over K), and at any multipliers a least-squares stationary point
+    weighted by them with the prior's information over K (fit_errors' estimating equations).
     """
 
-    def __init__(self, prob: Problem, x0, free, rows, epsilon, derivatives="twist"):
+    def __init__(self, prob: Problem, x0, free, rows, epsilon, derivatives="twist", prior=None):
         self.prob, self.x0 = prob, np.array(x0, float)
+        self.prior: Prior | None = prior
         self.derivatives = derivatives
         self.points: PointNormal | None = None
         self._kept: tuple | None = None  # (z bytes, residuals, J' operator) of the last trial
@@ -78,6 +86,20 @@ class _Objective:
         self.eps = default_epsilon(sem) if epsilon is None else float(epsilon)
         self.scale = None
         self.pos = {j: n for n, j in enumerate(self.idx)}
+
+    def prior_term(self, x) -> tuple[float, np.ndarray]:
+        """The prior's term each F_i carries (mm^2) and its gradient in x's free entries."""
+        if self.prior is None:
+            return 0.0, np.zeros(len(self.idx))
+        K, pr = len(self.rows), self.prior
+        return pr.cost(x) / K, 2.0 * pr.weight[self.idx] * (x[self.idx] - pr.center[self.idx]) / K
+
+    def prior_hessian(self) -> np.ndarray:
+        """The prior term's Hessian in the scaled variables (after the first call)."""
+        if self.prior is None:
+            return np.zeros((len(self.idx), len(self.idx)))
+        assert self.scale is not None, "the scale is set by the first call"
+        return np.diag(2.0 * self.prior.weight[self.idx] / len(self.rows) / self.scale**2)
 
     def x(self, z):
         x = self.x0.copy()
@@ -113,7 +135,7 @@ class _Objective:
             r, jt, _ = self._points().operator(x)
             self._kept = (z.tobytes(), r, jt)
             r = r.reshape(-1, 3)
-        return np.sum(r * r, axis=1) @ self.onehot, self.constraints(x)[0]
+        return np.sum(r * r, axis=1) @ self.onehot + self.prior_term(x)[0], self.constraints(x)[0]
 
     def _points(self) -> PointNormal:
         if self.points is None:
@@ -136,9 +158,10 @@ class _Objective:
             self.scale = np.sqrt(np.clip(np.diag(JtJ), 0.0, None))
             self.scale[self.scale == 0] = 1.0
             JtJ = JtJ / np.outer(self.scale, self.scale)
-        F = np.sum(r * r, axis=1) @ self.onehot
+        Q, dQ = self.prior_term(x)
+        F = np.sum(r * r, axis=1) @ self.onehot + Q
         c, A = self.constraints(x)
-        return F, c, grad / self.scale[None, :], A, JtJ
+        return F, c, (grad + dQ[None, :]) / self.scale[None, :], A, JtJ
 
     def _twist(self, x, z):
         """Residuals, J'J (at the start, z None) and each SMR's gradient from the twist normal
@@ -177,8 +200,12 @@ def minimax(
     max_iter=100,
     tol=1e-10,
     derivatives="twist",
+    prior: Prior | None = None,
 ) -> MinimaxResult:
     """SQP on the epigraph form (eq. 16-18) from x0 (the ls-sum solution, eq. 32).
+
+    prior: the geometry's prior (solver.prior), its term over K in every F_i (see _Objective);
+    the F returned leaves it out, prior_cost is it.
 
     The Hessian starts at the Gauss-Newton Hessian of the Lagrangian with equal SMR weights
     and is then updated by damped BFGS; each step is accepted by a backtracking line search on
@@ -187,13 +214,13 @@ def minimax(
     """
     t0 = time.perf_counter()
     rows = list(range(prob.meas.shape[1])) if rows is None else list(rows)
-    obj = _Objective(prob, x0, free, rows, epsilon, derivatives)
+    obj = _Objective(prob, x0, free, rows, epsilon, derivatives, prior)
     solve = SOLVERS[qp]
     n = len(obj.idx)
     z = np.zeros(n)
     F, c, g, A, JtJ = obj()
     K = len(rows)
-    H = (2.0 / K) * JtJ + 1e-12 * np.eye(n)
+    H = (2.0 / K) * JtJ + obj.prior_hessian() + 1e-12 * np.eye(n)
     lam, mu = np.full(K, 1.0 / K), np.zeros(len(c))
     history = [float(np.max(F))]
     qp_iters, qp_missed, converged, message = 0, 0, False, "iteration limit reached"
@@ -247,9 +274,10 @@ def minimax(
         history.append(float(np.max(F)))
     if qp_missed:  # the steps still went through the line search, so x is sound; say so
         message += f"; {qp_missed} QP subproblem(s) not solved to tolerance ({missed})"
+    Q = obj.prior_term(obj.x(z))[0]
     return MinimaxResult(
         obj.x(z),
-        F,
+        F - Q,
         history,
         it,
         qp_iters,
@@ -261,4 +289,5 @@ def minimax(
         stop,
         c,
         qp_missed,
+        Q,
     )

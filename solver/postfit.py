@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .guard import Holdout, held_out, holdout_inverse
+from .prior import PriorTerms
 from .uncertainty import (
     Rows,
     StageSums,
@@ -85,20 +86,28 @@ def sums(blocks: Blocks) -> Sums:
 
 
 def post_fit(
-    blocks: Blocks, point: Callable[[Rows], np.ndarray] | None = None, known: Sums | None = None
+    blocks: Blocks,
+    point: Callable[[Rows], np.ndarray] | None = None,
+    known: Sums | None = None,
+    prior: PriorTerms | None = None,
 ) -> PostFit:
     """The figures of uncertainty.clustered, uncertainty.plain and guard.leave_one_pose_out of
     the stacked blocks, holding one block at a time. point(rows): which rows of a block are point
     errors (default all); known: the blocks' Sums when the caller has them (the rows are then
-    built once), else a first pass over the blocks takes them."""
+    built once), else a first pass over the blocks takes them. prior: the geometry prior's terms
+    (solver.prior) of a shrunk fit: its information in the bread (and the held-out residuals'
+    fit), its scores' covariance in the meat, so the covariance is the posterior's (Bayesian:
+    true changes drawn from the prior)."""
     first = known or sums(blocks)
     A, B, stages = first.A, first.B, first.stages
+    if prior is not None:
+        A, B = A + prior.information, B + prior.residual
     Ai = bread(A)
     C = Ai @ B @ Ai.T
     Ah = holdout_inverse(A)
     # the two inverses of a well-conditioned fit agree to rounding: one hat matrix serves both
     same = bool(np.linalg.norm(Ai - Ah) <= SAME_INVERSE * np.linalg.norm(Ai))
-    meat = np.zeros_like(A)
+    meat = np.zeros_like(A) if prior is None else prior.meat.copy()
     held, stage, unsupported, poses = [], [], [], set()
     for rows in blocks():  # each pose's blocks
         if not len(rows.r):
@@ -119,4 +128,7 @@ def post_fit(
     order = np.argsort(np.concatenate(stage), kind="stable")
     residuals = np.concatenate(held)[order].reshape(-1, 3)
     holdout = Holdout(residuals, np.array(sorted(set(unsupported)), dtype=int))
-    return PostFit(Ai @ meat @ Ai.T, plain_from_sums(Ai, stages), holdout, len(poses))
+    plain = plain_from_sums(Ai, stages)
+    if prior is not None:
+        plain += Ai @ prior.meat @ Ai.T
+    return PostFit(Ai @ meat @ Ai.T, plain, holdout, len(poses))

@@ -40,6 +40,10 @@ function groupTable(id, first, rows, key, kinds, value, why) {
       const td = table.tBodies[0].rows[i].cells[k + 1];
       td.className = "fixed";
       td.title = `${r.parameter} held fixed: ${why[r.parameter] || ""}`;
+    } else if (r && r.status === "shrunk toward nominal") {
+      const td = table.tBodies[0].rows[i].cells[k + 1];
+      td.className = "shrunk";
+      td.title = `${r.parameter} shrunk toward nominal: ${why[r.parameter] || ""}`;
     }
   }));
   return table;
@@ -57,11 +61,15 @@ function scroller(table) {
   return box;
 }
 
-/** The identified-parameter tables of a model: joints, base, SMRs, held fixed, correlations. */
+/** The identified-parameter tables of a model: joints, base, SMRs, held fixed, shrunk toward
+ * nominal, correlations. */
 function renderParameters(p) {
   const id = p.identified;
   const rows = id.rows;
-  const why = Object.fromEntries(id.fixed.map((f) => [f.parameter, f.why]));
+  const shrunk = id.shrunk || [];  // models written before shrinkage have none
+  const share = (s) => `${Math.round(100 * s.data_share)}%`;
+  const why = Object.fromEntries([...id.fixed.map((f) => [f.parameter, f.why]),
+    ...shrunk.map((s) => [s.parameter, `${share(s)} from the data; ${s.why}`])]);
   const group = (g) => rows.filter((r) => r.group === g);
   // The kinds a group has: the usual ones in their order, then any other the convention has.
   const present = (list, kinds) => [...new Set([...kinds, ...list.map((r) => r.kind)])]
@@ -90,6 +98,13 @@ function renderParameters(p) {
   parts.push(id.fixed.length
     ? scroller(makeTable("m-fixed", ["parameter", "why"], id.fixed.map((f) => [f.parameter, f.why])))
     : Object.assign(document.createElement("p"), { className: "muted", textContent: "none" }));
+  if (shrunk.length) {
+    parts.push(heading(`Shrunk toward nominal (${shrunk.length})`));
+    if (id.prior) parts.push(Object.assign(document.createElement("p"), { className: "muted",
+      textContent: `Prior: ${id.prior}.` }));
+    parts.push(scroller(makeTable("m-shrunk", ["parameter", "from the data", "why"],
+      shrunk.map((s) => [s.parameter, share(s), s.why]))));
+  }
   if (id.correlations.length) {
     parts.push(heading("Strongest correlations"));
     parts.push(scroller(makeTable("m-correlations", ["parameter", "with", "r"],

@@ -8,10 +8,18 @@ from __future__ import annotations
 import numpy as np
 
 from robocal.server.exports.params import Entry, base_entries, entries
-from robocal.server.formats.blocks import Correlation, FixedParameter, Identified, ParameterRow
+from robocal.server.formats.blocks import (
+    Correlation,
+    FixedParameter,
+    Identified,
+    ParameterRow,
+    ShrunkParameter,
+)
 from robocal.server.formats.model_json import ModelFile
 from robocal.solver.guard import strongest_correlations
+from robocal.solver.identifiability import PRIOR_DEG, PRIOR_MM, Shrunk
 from robocal.solver.kinematics import BASE_NAMES, rot, translation
+from robocal.solver.prior import Prior
 from robocal.solver.uncertainty import ParameterErrors, propagate
 
 CORRELATIONS = 5  # the strongest |r| listed
@@ -37,7 +45,15 @@ def base_standard_errors(base: np.ndarray, errors: ParameterErrors) -> dict[str,
     return out
 
 
-def _row(e: Entry, fixed, nominal: float | None, standard_error: float | None) -> ParameterRow:
+def _status(name: str, fixed, shrunk) -> str:
+    if name in fixed:
+        return "held fixed"
+    return "shrunk toward nominal" if name in shrunk else "identified"
+
+
+def _row(
+    e: Entry, fixed, nominal: float | None, standard_error: float | None, shrunk=()
+) -> ParameterRow:
     """One table row of a params entry: where it sits (joint, base, SMR) and its change."""
     where: dict[str, int | str]
     if e.joint is not None:
@@ -57,11 +73,13 @@ def _row(e: Entry, fixed, nominal: float | None, standard_error: float | None) -
         calibrated=e.calibrated,
         change=None if nominal is None else e.calibrated - nominal,
         standard_error=standard_error,
-        status="held fixed" if e.name in fixed else "identified",
+        status=_status(e.name, fixed, shrunk),
     )
 
 
-def _block(model: ModelFile, rows, fixed, condition, estimator, correlations) -> Identified:
+def _block(
+    model: ModelFile, rows, fixed, condition, estimator, correlations, shrunk=None, prior=None
+) -> Identified:
     return Identified(
         convention=model.robot.convention,
         units="mm; degrees for theta, alpha, beta, rz, ry, rx",
@@ -71,6 +89,11 @@ def _block(model: ModelFile, rows, fixed, condition, estimator, correlations) ->
         estimator=estimator,
         rows=rows,
         fixed=[FixedParameter(parameter=n, why=why) for n, why in fixed.items()],
+        shrunk=[
+            ShrunkParameter(parameter=n, data_share=round(s.share, 6), why=s.why)
+            for n, s in (shrunk or {}).items()
+        ],
+        prior=prior,
         condition_number=condition,
         correlations=correlations,
     )
@@ -84,9 +107,12 @@ def identified_block(
     condition: float,
     nominal_targets: dict | None = None,
     nominal_base: np.ndarray | None = None,
+    shrunk: dict[str, Shrunk] | None = None,
+    prior: Prior | None = None,
 ) -> Identified:
     """model.json's `identified` block: one row per parameter (edge units), the held-fixed
-    parameters with why, the condition number and the strongest correlations (between
+    parameters with why, the shrunk ones with their data share and why, the prior, the
+    condition number (of the identified ones) and the strongest correlations (between
     identified parameters; the base's are of its small motions along and about its axes)."""
     base_se = base_standard_errors(model.base, errors)
     nominal = {}
@@ -100,6 +126,7 @@ def identified_block(
             fixed,
             e.nominal if e.nominal is not None else nominal.get(e.name),
             base_se.get(e.name) if e.name in BASE_NAMES else e.standard_error,
+            shrunk or {},
         )
         for e in entries(model)
     ]
@@ -108,7 +135,18 @@ def identified_block(
     cols = [c for c, _ in named]
     top = strongest_correlations(errors.cov[np.ix_(cols, cols)], CORRELATIONS)
     pairs = [Correlation(a=named[i][1], b=named[j][1], r=round(r, 6)) for i, j, r in top]
-    return _block(model, rows, fixed, condition, errors.estimator, pairs)
+    return _block(model, rows, fixed, condition, errors.estimator, pairs, shrunk, prior_text(prior))
+
+
+def prior_text(prior: Prior | None) -> str | None:
+    """The prior a fit was made with, in a sentence."""
+    if prior is None or not np.any(prior.weight > 0):
+        return None
+    return (
+        f"Gaussian on each geometric parameter's change from nominal: {PRIOR_MM:g} mm, "
+        f"{PRIOR_DEG:g} deg (standard deviation), weighed at the residual's "
+        f"{prior.noise_mm * np.sqrt(3.0):.4g} mm RMS a reading"
+    )
 
 
 def parameters_of(model: ModelFile) -> Identified:

@@ -29,6 +29,7 @@ from robocal.server.formats.model_json import (
 from robocal.solver.effects import Inputs
 from robocal.solver.extended import predict_model
 from robocal.solver.finite import require_inputs
+from robocal.solver.identifiability import effective_parameters
 from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
 from robocal.solver.problem import Problem
@@ -264,6 +265,8 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
             condition=cal.condition,
             nominal_targets={t: cell.targets[t] for t in meas.target_names},
             nominal_base=cell.base,
+            shrunk=cal.shrunk,
+            prior=cal.prior,
         )
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable
@@ -291,7 +294,7 @@ def validate(
         fit_rms_mm=fit_rms,
         holdout=holdout,
         condition=cal.condition,
-        free_parameters=int(np.count_nonzero(errors.column >= 0)),
+        free_parameters=effective_parameters(errors.column, cal.shrunk),
         floor=(floor.mm, floor.source),
     )
 
@@ -571,10 +574,12 @@ def _judge_diagnosis(
 
     problem = replace(cell_problem(cell, meas), noise_floor_mm=report.noise_floor_mm)
     geometric = calibrate(problem, "ls-sum")
+    # the diagnosis holds what the geometry shrinks (solver.diagnose): held fixed here
+    held = {n: f"held at nominal: {s.why}" for n, s in geometric.shrunk.items()}
     model.identified = identified_block(
         model,
         errors.parameters,
-        fixed=geometric.fixed,
+        fixed={**geometric.fixed, **held},
         condition=geometric.condition,
         nominal_targets={t: cell.targets[t] for t in meas.target_names},
         nominal_base=cell.base,

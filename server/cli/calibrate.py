@@ -106,6 +106,8 @@ def cmd_calibrate(args) -> None:
     for line in tables.validation_lines(model.verdict):
         console.print(line)
     console.print("held fixed: " + tables.fixed_parameters(cal.fixed))
+    if cal.shrunk:
+        console.print("shrunk toward nominal: " + tables.shrunk_parameters(cal.shrunk))
     console.print(tables.identified_geometry(cal.robot, cell.robot, uncertainty))
     if identified is not None:
         console.print(tables.frames_table(identified))

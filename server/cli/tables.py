@@ -79,6 +79,11 @@ def fixed_parameters(fixed: dict) -> str:
     return "; ".join(f"{k} ({v})" for k, v in fixed.items()) or "none"
 
 
+def shrunk_parameters(shrunk: dict) -> str:
+    """The shrunk parameters (name -> solver.identifiability.Shrunk) in a line."""
+    return "; ".join(f"{k} ({s.share:.0%} from the data: {s.why})" for k, s in shrunk.items())
+
+
 def plus_minus(v: float, se: float | None, sign: str = "") -> str:
     """A value with its standard error, both to the standard error's second significant digit."""
     if se is None or not np.isfinite(se):

@@ -78,9 +78,14 @@ def entries(model: ModelFile) -> list[Entry]:
     fixed = (model.fit.fixed_parameters if model.fit else None) or {}
     has_fit = model.fit is not None and bool(model.fit.to_json())
 
+    shrunk = {s.parameter: s for s in model.identified.shrunk} if model.identified else {}
+
     def status(name):
         if name in fixed:
             return f"held fixed: {fixed[name]}"
+        if name in shrunk:
+            s = shrunk[name]
+            return f"shrunk toward nominal ({s.data_share:.0%} from the data): {s.why}"
         return "identified" if has_fit else ""
 
     cal = dict(zip(model.robot.param_names(), model.robot.param_vector()))

@@ -133,13 +133,26 @@ class ParameterRow(Block):
     nominal: Statistic | None = Field(None, description="the cell's value, mm or degrees")
     calibrated: Figure | None = None
     change: Figure | None = Field(None, description="calibrated - nominal")
-    standard_error: Statistic | None = Field(None, description="null where held fixed")
-    status: Literal["identified", "held fixed"] | None = None
+    standard_error: Statistic | None = Field(
+        None, description="null where held fixed; the posterior's where shrunk"
+    )
+    status: Literal["identified", "shrunk toward nominal", "held fixed"] | None = None
 
 
 class FixedParameter(Block):
     parameter: Text
     why: Text = Field(description="unidentifiable or redundant with the parameters named")
+
+
+class ShrunkParameter(Block):
+    parameter: Text
+    data_share: Figure = Field(
+        ge=0,
+        le=1,
+        description="the share of its estimate from the data (1 - posterior / prior variance); "
+        "the rest is the prior's pull toward nominal",
+    )
+    why: Text = Field(description="why the data identifies it too little")
 
 
 class Correlation(Block):
@@ -157,7 +170,15 @@ class Identified(Block):
     estimator: Text | None = Field(None, description="how the standard errors were estimated")
     rows: list[ParameterRow] = Field([], description="one per parameter")
     fixed: list[FixedParameter] = Field([], description="held fixed, and why")
-    condition_number: Figure | None = None
+    shrunk: list[ShrunkParameter] = Field(
+        [], description="seen too little to identify: shrunk toward nominal by the prior, and why"
+    )
+    prior: Text | None = Field(
+        None, description="the prior on the geometry's change from nominal, and its weight"
+    )
+    condition_number: Figure | None = Field(
+        None, description="of the identified parameters (shrunk and held ones left out)"
+    )
     correlations: list[Correlation] = Field([], description="the strongest |r|, largest first")
 
 

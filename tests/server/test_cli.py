@@ -98,7 +98,8 @@ def test_calibrate_predict_evaluate(workdir):
     assert r.returncode == 0, r.stderr
     assert "AO' (log)" in r.stdout and "improvement over nominal" in r.stdout
     ev = json.loads((workdir / "eval.json").read_text())
-    assert ev["model"]["rmse"] == pytest.approx(rms, rel=1e-6)
+    # pred.csv holds 1e-6 mm: its RMS of ~0.015 mm differs from the model's by ~1e-8 mm
+    assert ev["model"]["rmse"] == pytest.approx(rms, rel=1e-5)
     assert ev["improvement_pct"]["ap_mean"] > 90
 
 

@@ -17,6 +17,7 @@ from robocal.solver.fit_errors import (
     plain_sums,
     point_errors,
     point_rows,
+    prior_terms,
 )
 from robocal.solver.kinematics import predict
 from robocal.solver.postfit import post_fit, sums
@@ -110,18 +111,20 @@ def test_a_plain_fit_has_its_first_pass_without_rows(method, monkeypatch):
     (g,) = got.stages.values()
     assert g.rr == pytest.approx(s.rr, rel=1e-10) and g.count == s.count
     np.testing.assert_array_equal(g.used, s.used)
-    # and the figures with it are the dense ones
-    rows, _ = calibration_rows(cal, q, xyz)
-    clustered, plain, held = dense(rows)
+    # and the figures with it are those of the rows' own first pass (the fit's prior in both)
+    rows_pass = post_fit(blocks, lambda r: point_errors(cal, r), prior=prior_terms(cal, column))
     errors, holdout = calibration_figures(cal, q, xyz)
+    clustered, plain = rows_pass.clustered, rows_pass.plain
     np.testing.assert_allclose(errors.cov, clustered, rtol=1e-7, atol=1e-12 * abs(clustered).max())
     np.testing.assert_allclose(errors.plain_cov, plain, rtol=1e-7, atol=1e-12 * abs(plain).max())
-    np.testing.assert_allclose(holdout.residuals, held.reshape(-1, 3), rtol=1e-7, atol=1e-12)
+    np.testing.assert_allclose(
+        holdout.residuals, rows_pass.holdout.residuals, rtol=1e-7, atol=1e-12
+    )
 
 
 def refit_without(cal, q, xyz, p, iterations=8):
     """The ls-sum fit refitted without pose p (Gauss-Newton from the fit over the same free
-    parameters, to convergence): its point errors at pose p."""
+    parameters, to convergence, with the fit's prior rows): its point errors at pose p."""
     lay, x = cal.layout, np.array(cal.x, dtype=float)
     rows, column = calibration_rows(cal, q, xyz)
     cols = np.flatnonzero(column >= 0)[np.argsort(column[column >= 0])]
@@ -129,7 +132,8 @@ def refit_without(cal, q, xyz, p, iterations=8):
     mask = np.all(np.isfinite(xyz[keep]), axis=-1)
     for _ in range(iterations):
         r = point_rows(lay, x, q[keep], xyz[keep], mask, cols, np.ones(len(cols), bool))
-        x[cols] -= np.linalg.lstsq(r.J, r.r, rcond=None)[0]
+        J = np.vstack([r.J, np.diag(np.sqrt(cal.prior.weight[cols]))])
+        x[cols] -= np.linalg.lstsq(J, np.r_[r.r, cal.prior.rows(x, cols)], rcond=None)[0]
     e = predict(lay, x, q[p : p + 1])[0] - xyz[p]
     return e[np.all(np.isfinite(xyz[p]), axis=-1)]
 

@@ -213,3 +213,27 @@ def test_warnings_are_listed_under_the_verdict(served, page):
     shown = page.locator("#m-warnings li").all_text_contents()
     assert shown == v["warnings"] and "x the noise floor" in shown[0]
     assert "turned 180 deg about the flange axis (z)" in shown[1]
+
+
+def test_shrunk_parameters_are_listed_with_their_share_and_why(served, page):
+    """The real UR5's 80-pose campaign (one SMR near the flange axis): its wrist's d5 and a5,
+    seen only together with theta5 and alpha5, are shrunk toward nominal; the page lists them
+    with the share of their estimate from the data, and their cells say so."""
+    with httpx.Client(
+        base_url=served.url, timeout=120, headers={"Authorization": f"Bearer {served.token}"}
+    ) as c:
+        cid = import_real(c, "ur5_jacobi/small")
+    job = calibrate_on_page(served, page, cid)
+    p = httpx.get(
+        served.url + job["parameters_url"], headers={"Authorization": f"Bearer {served.token}"}
+    ).json()
+    shrunk = p["identified"]["shrunk"]
+    assert {s["parameter"] for s in shrunk} >= {"d5", "a5"}, shrunk
+    assert page.locator("#m-shrunk tbody tr").all_text_contents() == [
+        s["parameter"] + f"{int(100 * s['data_share'] + 0.5)}%" + s["why"]
+        for s in shrunk  # Math.round
+    ]
+    cells = page.locator("#m-joints td.shrunk")
+    titles = [cells.nth(i).get_attribute("title") for i in range(cells.count())]
+    assert sorted(t.split(" ")[0] for t in titles) == sorted(s["parameter"] for s in shrunk)
+    assert all("% from the data; " in t for t in titles), titles
