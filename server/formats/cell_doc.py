@@ -176,6 +176,18 @@ class TrackerDoc(Doc):
         None, description="each SMR's own id (serial or inventory number), by target name"
     )
 
+    @model_validator(mode="after")
+    def _some_error(self):
+        # A spec of no error at all makes the noise floor 0 mm, against which every verdict
+        # (fit below the noise, held-out error past 3x the floor) means nothing.
+        if self.mpe_um + self.mpe_um_per_m <= 0:
+            raise located(
+                "mpe_um and mpe_um_per_m are both 0: no tracker measures without error; give "
+                "its data sheet's MPE (for instance 10 um + 2.5 um/m)",
+                "mpe_um",
+            )
+        return self
+
 
 class TrackerAddress(Doc):
     host: Label
