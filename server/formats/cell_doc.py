@@ -276,7 +276,7 @@ class CellDoc(Doc):
     @field_validator("targets")
     @classmethod
     def _targets(cls, targets: dict) -> dict:
-        return check_targets(targets)
+        return apart(check_targets(targets))
 
     @field_validator("robot")
     @classmethod
@@ -338,6 +338,39 @@ def check_targets(targets: dict) -> dict:
                 key=True,
             )
     return targets
+
+
+# Two SMRs' centres lie at least a ball's diameter apart (12.7 mm for the smallest, 0.5-inch,
+# SMR): closer ones are a layout in other units (metres, inches, centimetres) or a typing slip.
+SMR_GAP_MIN_MM = 5.0
+UNIT_GUESSES = (("centimetres", 10.0), ("inches", 25.4), ("metres", 1000.0))
+FIXTURE_MM = 1000.0  # an SMR fixture holds its balls within this of the flange
+
+
+def apart(targets: dict) -> dict:
+    """The cell's SMR positions, refused where two lie closer than SMR_GAP_MIN_MM."""
+    names = list(targets)
+    xyz = np.array([[float(v) for v in targets[n]] for n in names]).reshape(len(names), 3)
+    gap = np.linalg.norm(xyz[:, None] - xyz[None], axis=-1) + np.diag(np.full(len(names), np.inf))
+    i, j = np.unravel_index(int(np.argmin(gap)), gap.shape)
+    if len(names) < 2 or gap[i, j] >= SMR_GAP_MIN_MM:
+        return targets
+    # the units in which they would lie a ball apart and within a fixture's reach of the flange
+    far = float(np.max(np.linalg.norm(xyz, axis=1)))
+    units = [
+        u for u, k in UNIT_GUESSES if gap[i, j] * k >= 2 * SMR_GAP_MIN_MM and far * k <= FIXTURE_MM
+    ]
+    hint = (
+        f"the positions look like {' or '.join(units)}; give them in mm"
+        if units
+        else "check the positions"
+    )
+    raise located(
+        f"SMRs {names[i]} and {names[j]} are {gap[i, j]:.3g} mm apart, closer than two SMR "
+        f"balls can sit (their centres lie a diameter apart, 12.7 mm for a 0.5-inch SMR): {hint}",
+        names[i],
+        key=True,
+    )
 
 
 def check_transform(T: np.ndarray) -> None:

@@ -74,6 +74,24 @@ def test_a_tracker_spec_of_zero_error_is_refused_in_one_line(tmp_path):
         assert "cell.json" in line and "mpe_um" in line, line
 
 
+def test_smr_positions_in_metres_are_refused_naming_the_unit(tmp_path):
+    """A cell whose SMR ring was written in metres (0.07 for 70 mm) calibrated to 'not
+    deployable: an effect the model lacks' (0.14 mm held out, 9x the floor of a clean campaign):
+    three SMRs 0.1 mm apart cannot be, since two balls' centres lie a diameter apart."""
+    good = _cell(tmp_path / "good.json", UR10E, RING)
+    metres = {k: [v / 1000 for v in xyz] for k, xyz in RING.items()}
+    bad = _cell(tmp_path / "cell.json", UR10E, metres)
+    r = robocal(
+        "simulate", "--cell", good, "--poses", 30, "--seed", 3, "--out", "m.csv", cwd=tmp_path
+    )
+    assert r.returncode == 0, r.stderr
+    r = robocal("calibrate", "m.csv", "--cell", bad, "--out", "model.json", cwd=tmp_path)
+    assert r.returncode != 0 and not (tmp_path / "model.json").exists(), r.stdout
+    line = r.stderr.strip()
+    assert len(line.splitlines()) == 1 and "Traceback" not in line, r.stderr
+    assert "cell.json" in line and "targets" in line and "metres" in line, line
+
+
 def _confdata_targets(tmp_path, cell_path, meas, out):
     """targets.csv of a campaign's readings with each pose's confdata instead of its joints."""
     from robocal.server.formats.cell_doc import CellDoc
