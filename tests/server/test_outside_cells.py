@@ -167,3 +167,61 @@ def test_the_unexplained_line_reads_a_floor_of_zero(floor):
     }
     line = summary(block, floor)
     assert line.startswith("Unexplained: 0.120 mm held out") and "0 mm" in line, line
+
+
+# Franka Panda's modified DH (seven joints): joint 4's limits [-176, -4] deg exclude every angle
+# in radians
+PANDA = _robot(
+    "panda-like",
+    "mdh",
+    [
+        (0, 333, 0, 0, (-166, 166)),
+        (0, 0, 0, -90, (-101, 101)),
+        (0, 316, 0, 90, (-166, 166)),
+        (82.5, 0, 0, 90, (-176, -4)),
+        (-82.5, 384, 0, -90, (-166, 166)),
+        (0, 0, 0, 90, (-1, 215)),
+        (88, 107, 0, 90, (-166, 166)),
+    ],
+)
+
+
+def test_joints_in_radians_outside_a_limit_are_named_as_radians(tmp_path):
+    """A 7-axis campaign with its joints in radians stopped at joint 4's limits ('-2.0 deg is
+    outside the limits [-176, -4]') before the units check could say radians: the line now
+    says what the row's joints look like."""
+    _cell(tmp_path / "cell.json", PANDA, {"A": [50.0, 10.0, 30.0], "B": [-30.0, 45.0, 25.0]})
+    r = robocal(
+        "simulate",
+        "--cell",
+        "cell.json",
+        "--poses",
+        20,
+        "--seed",
+        4,
+        "--out",
+        "deg.csv",
+        cwd=tmp_path,
+    )
+    assert r.returncode == 0, r.stderr
+    rows = list(csv.DictReader(open(tmp_path / "deg.csv")))
+    for row in rows:
+        for i in range(1, 8):
+            row[f"q{i}"] = repr(float(np.radians(float(row[f"q{i}"]))))
+    with open(tmp_path / "rad.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    for command in ("calibrate", "diagnose", "evaluate"):
+        args = (
+            ("deg.json", "rad.csv") if command == "evaluate" else ("rad.csv", "--cell", "cell.json")
+        )
+        if command == "evaluate":
+            fit = robocal(
+                "calibrate", "deg.csv", "--cell", "cell.json", "--out", "deg.json", cwd=tmp_path
+            )
+            assert fit.returncode == 0, fit.stderr
+        r = robocal(command, *args, cwd=tmp_path)
+        line = r.stderr.strip()
+        assert r.returncode != 0 and len(line.splitlines()) == 1, (command, r.stderr)
+        assert "rad.csv:2:" in line and "radians" in line, line
