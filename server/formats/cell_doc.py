@@ -104,6 +104,16 @@ class RobotDoc(Doc):
                 f"up to at least {REACH_MIN_MM:g} mm: give a and d in mm",
                 "joints",
             )
+        if all(max(abs(v) for v in j.limits) <= RADIANS_TURN for j in self.joints):
+            # no arm turns every joint less than 13 degrees: a joint table in radians
+            raise located(
+                f"every joint's limits lie within +-{RADIANS_TURN:.2f}: they look like radians; "
+                "give them in degrees",
+                "joints",
+                0,
+                "limits",
+                key=True,
+            )
         joints = [j.joint() for j in self.joints]
         detected = detect_parallel(self.convention, joints)
         for i, (det, row) in enumerate(zip(detected, self.joints)):
@@ -339,6 +349,8 @@ def check_targets(targets: dict) -> dict:
             )
     return targets
 
+
+RADIANS_TURN = 2 * np.pi + 1e-6  # a whole turn in radians, as a number of degrees
 
 # Two SMRs' centres lie at least a ball's diameter apart (12.7 mm for the smallest, 0.5-inch,
 # SMR): closer ones are a layout in other units (metres, inches, centimetres) or a typing slip.

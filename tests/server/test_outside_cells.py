@@ -225,3 +225,49 @@ def test_joints_in_radians_outside_a_limit_are_named_as_radians(tmp_path):
         line = r.stderr.strip()
         assert r.returncode != 0 and len(line.splitlines()) == 1, (command, r.stderr)
         assert "rad.csv:2:" in line and "radians" in line, line
+
+
+def test_a_joint_of_one_degree_range_is_simulated(tmp_path):
+    """A joint locked to +-0.5 deg (narrower than the 2 deg margin the pose draw keeps from the
+    limits) ended `simulate` in 'robocal: error: high - low < 0', numpy's words naming nothing."""
+    robot = json.loads(json.dumps(UR10E))
+    robot["joints"][5]["limits"] = [-0.5, 0.5]
+    _cell(tmp_path / "cell.json", robot, RING)
+    r = robocal(
+        "simulate",
+        "--cell",
+        "cell.json",
+        "--poses",
+        20,
+        "--seed",
+        5,
+        "--out",
+        "m.csv",
+        cwd=tmp_path,
+    )
+    assert r.returncode == 0, r.stderr
+    q6 = [float(row["q6"]) for row in csv.DictReader(open(tmp_path / "m.csv"))]
+    assert max(abs(v) for v in q6) <= 0.5
+    r = robocal("calibrate", "m.csv", "--cell", "cell.json", "--out", "model.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+
+
+def test_joint_limits_in_radians_are_refused_at_the_cell(tmp_path):
+    """Limits written in radians ([-6.28, 6.28]) blamed the campaign ('meas.csv:2:2: column q1:
+    -110 deg is outside the limits [-6.28319, 6.28319] deg') and made `simulate` fail with
+    numpy's 'high - low < 0': the cell is named, with the units."""
+    robot = json.loads(json.dumps(UR10E))
+    for j in robot["joints"]:
+        j["limits"] = [float(np.radians(v)) for v in j["limits"]]
+    _cell(tmp_path / "cell.json", robot, RING)
+    for args in (("simulate", "--out", "m.csv"), ("calibrate", "m.csv", "--out", "model.json")):
+        if args[0] == "calibrate":
+            _cell(tmp_path / "good.json", UR10E, RING)
+            ok = robocal(
+                "simulate", "--cell", "good.json", "--poses", 20, "--out", "m.csv", cwd=tmp_path
+            )
+            assert ok.returncode == 0, ok.stderr
+        r = robocal(*args, "--cell", "cell.json", cwd=tmp_path)
+        line = r.stderr.strip()
+        assert r.returncode != 0 and len(line.splitlines()) == 1, r.stderr
+        assert "cell.json" in line and "limits" in line and "radians" in line, line
