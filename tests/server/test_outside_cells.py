@@ -271,3 +271,46 @@ def test_joint_limits_in_radians_are_refused_at_the_cell(tmp_path):
         line = r.stderr.strip()
         assert r.returncode != 0 and len(line.splitlines()) == 1, r.stderr
         assert "cell.json" in line and "limits" in line and "radians" in line, line
+
+
+def test_three_smrs_on_one_line_warn_that_orientation_comes_from_the_start(tmp_path):
+    """Three SMRs on one line leave the roll about it free, as one SMR leaves all of it: the
+    compensated joints came back up to 0.9 deg from the measured ones (from a guess 2 deg off)
+    with no warning, where one SMR a pose gets one."""
+    _cell(
+        tmp_path / "cell.json", UR10E, {"A": [100.0, 0, 30], "B": [0, 0, 30], "C": [-100.0, 0, 30]}
+    )
+    r = robocal(
+        "simulate",
+        "--cell",
+        "cell.json",
+        "--poses",
+        46,
+        "--seed",
+        12,
+        "--out",
+        "all.csv",
+        cwd=tmp_path,
+    )
+    assert r.returncode == 0, r.stderr
+    rows = list(csv.DictReader(open(tmp_path / "all.csv")))
+    with open(tmp_path / "fit.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(row for row in rows if int(row["pose"]) <= 40)
+    r = robocal("calibrate", "fit.csv", "--cell", "cell.json", "--out", "model.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    qs = [f"q{i}" for i in range(1, 7)]
+    with open(tmp_path / "targets.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["pose", "target", "x", "y", "z", *qs])
+        for row in rows:
+            if int(row["pose"]) > 40:
+                w.writerow(
+                    [row[c] for c in ("pose", "target", "x", "y", "z")]
+                    + [float(row[q]) + 2 for q in qs]
+                )
+    r = robocal("compensate", "model.json", "targets.csv", "--out", "joints.csv", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "6 poses (first '41')" in r.stderr and "one line" in r.stderr, r.stderr
+    assert "orientation" in r.stderr, r.stderr
