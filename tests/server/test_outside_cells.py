@@ -314,3 +314,40 @@ def test_three_smrs_on_one_line_warn_that_orientation_comes_from_the_start(tmp_p
     assert r.returncode == 0, r.stderr
     assert "6 poses (first '41')" in r.stderr and "one line" in r.stderr, r.stderr
     assert "orientation" in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("command", ["calibrate", "diagnose"])
+def test_a_base_guess_the_data_contradicts_does_not_flip_the_arm(tmp_path, command):
+    """A cell's base guess in metres (the translation 1000x short, the rotation the identity
+    where the tracker sees the base turned) started the fit so far off that it ended in a
+    mirrored arm: a2 +1225 mm, alpha2 -180 deg from nominal, 'not deployable'. The data's own
+    registration of the nominal arm is the start where it fits the readings better."""
+    _cell(tmp_path / "good.json", UR10E, RING)
+    r = robocal(
+        "simulate",
+        "--cell",
+        "good.json",
+        "--poses",
+        40,
+        "--seed",
+        11,
+        "--out",
+        "m.csv",
+        cwd=tmp_path,
+    )
+    assert r.returncode == 0, r.stderr
+    fit = robocal(
+        "calibrate", "m.csv", "--cell", "good.json", "--out", "good_model.json", cwd=tmp_path
+    )
+    assert fit.returncode == 0, fit.stderr
+    base = np.array(json.loads((tmp_path / "good_model.json").read_text())["base"])
+    guess = np.eye(4)
+    guess[:3, 3] = base[:3, 3] / 1000.0
+    _cell(tmp_path / "cell.json", UR10E, RING, base=guess.tolist())
+    out = "model.json"
+    args = ("--model-out", out, "--out", "report.json") if command == "diagnose" else ("--out", out)
+    r = robocal(command, "m.csv", "--cell", "cell.json", *args, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    model = json.loads((tmp_path / out).read_text())
+    assert model["validation"]["deployable"], model["validation"]["reasons"]
+    assert np.allclose(model["base"], base, atol=0.05), "the base the data gives"
