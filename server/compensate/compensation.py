@@ -165,6 +165,8 @@ def compensate_targets(
                 f"has starting joints in configuration {configuration.describe(have[k])} but "
                 f"cf columns {configuration.describe(cf[k])}",
             )
+    if tcp is None:
+        _refuse_other_units(targets, guess, model, nominal)
     warnings = _orientation_warnings(targets, guess, tcp)
     if tcp is not None:
         targets = tool_targets(targets)
@@ -209,6 +211,21 @@ def _refuse_first(targets: Targets, bad: np.ndarray, what: str) -> None:
 def _more_none(res: Compensation) -> str:
     count = int(np.sum(~np.isfinite(res.error_mm)))
     return f"; {count - 1} more poses have none" if count > 1 else ""
+
+
+def _refuse_other_units(targets: Targets, guess, model: ModelFile, nominal) -> None:
+    """InputError naming the likely units of targets in metres or inches, or of starting joints
+    in radians: their spread is not the nominal arm's at the starting joints (the campaign's
+    check, solver.plausibility); such targets were 'unreachable' by metres."""
+    from robocal.solver.plausibility import check_units
+
+    if not guess.any() or any(n not in model.targets for n in targets.names):
+        return
+    smrs = np.array([model.targets[n] for n in targets.names], dtype=float)
+    xyz = np.where(targets.mask[..., None], targets.desired, np.nan)[guess]
+    why = check_units(nominal, smrs, targets.q0[guess], xyz).reason("targets", "starting")
+    if why:
+        raise InputError(targets.path, None, None, why)
 
 
 def _orientation_warnings(targets: Targets, guess: np.ndarray, tcp) -> list[str]:

@@ -351,3 +351,45 @@ def test_a_base_guess_the_data_contradicts_does_not_flip_the_arm(tmp_path, comma
     model = json.loads((tmp_path / out).read_text())
     assert model["validation"]["deployable"], model["validation"]["reasons"]
     assert np.allclose(model["base"], base, atol=0.05), "the base the data gives"
+
+
+@pytest.mark.parametrize(("scale", "unit"), [("xyz", "metres"), ("q", "radians")])
+def test_targets_in_other_units_are_refused_naming_them(tmp_path, scale, unit):
+    """targets.csv in metres was 'pose 61 is unreachable ... no closer than 1875.589 mm', its
+    starting joints in radians 'pose 62 is unreachable ... 95.519 mm': the units check that
+    guards a campaign guards the targets, whose starting joints say where the SMRs should be."""
+    _cell(tmp_path / "cell.json", UR10E, RING)
+    r = robocal(
+        "simulate",
+        "--cell",
+        "cell.json",
+        "--poses",
+        52,
+        "--seed",
+        11,
+        "--out",
+        "all.csv",
+        cwd=tmp_path,
+    )
+    assert r.returncode == 0, r.stderr
+    rows = list(csv.DictReader(open(tmp_path / "all.csv")))
+    with open(tmp_path / "fit.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(row for row in rows if int(row["pose"]) <= 40)
+    r = robocal("calibrate", "fit.csv", "--cell", "cell.json", "--out", "model.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    qs = [f"q{i}" for i in range(1, 7)]
+    with open(tmp_path / "targets.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["pose", "target", "x", "y", "z", *qs])
+        for row in rows[3 * 40 :]:
+            xyz = [float(row[c]) / (1000.0 if scale == "xyz" else 1.0) for c in "xyz"]
+            q = [float(row[c]) for c in qs]
+            q = [float(np.radians(v)) for v in q] if scale == "q" else q
+            w.writerow([row["pose"], row["target"], *xyz, *q])
+    r = robocal("compensate", "model.json", "targets.csv", "--out", "joints.csv", cwd=tmp_path)
+    line = r.stderr.strip()
+    assert r.returncode != 0 and len(line.splitlines()) == 1, r.stderr
+    assert line.startswith("robocal: error: targets.csv") and unit in line, line
+    assert "targets span" in line, line
