@@ -56,16 +56,20 @@ def _cell(path, robot, targets, **extra):
     return path.name
 
 
+def _simulate(tmp_path, poses: int, seed: int, out: str, cell: str = "cell.json") -> None:
+    r = robocal(
+        "simulate", "--cell", cell, "--poses", poses, "--seed", seed, "--out", out, cwd=tmp_path
+    )
+    assert r.returncode == 0, r.stderr
+
+
 def test_a_tracker_spec_of_zero_error_is_refused_in_one_line(tmp_path):
     """MPE 0 um + 0 um/m made the noise floor 0 mm: calibrate called a one-SMR model deployable
     at any error and diagnose ended in a traceback (KeyError 'chance_strength')."""
     spec = {"mpe_um": 0, "mpe_um_per_m": 0}
     cell = _cell(tmp_path / "cell.json", UR10E, {"A": [0.0, 0.0, 30.0]}, tracker=spec)
     ok = _cell(tmp_path / "ok.json", UR10E, {"A": [0.0, 0.0, 30.0]})
-    r = robocal(
-        "simulate", "--cell", ok, "--poses", 30, "--seed", 3, "--out", "m.csv", cwd=tmp_path
-    )
-    assert r.returncode == 0, r.stderr
+    _simulate(tmp_path, 30, 3, "m.csv", ok)
     for command in ("calibrate", "diagnose"):
         r = robocal(command, "m.csv", "--cell", cell, "--out", "out.json", cwd=tmp_path)
         assert r.returncode != 0, (command, r.stdout)
@@ -81,15 +85,27 @@ def test_smr_positions_in_metres_are_refused_naming_the_unit(tmp_path):
     good = _cell(tmp_path / "good.json", UR10E, RING)
     metres = {k: [v / 1000 for v in xyz] for k, xyz in RING.items()}
     bad = _cell(tmp_path / "cell.json", UR10E, metres)
-    r = robocal(
-        "simulate", "--cell", good, "--poses", 30, "--seed", 3, "--out", "m.csv", cwd=tmp_path
-    )
-    assert r.returncode == 0, r.stderr
+    _simulate(tmp_path, 30, 3, "m.csv", good)
     r = robocal("calibrate", "m.csv", "--cell", bad, "--out", "model.json", cwd=tmp_path)
     assert r.returncode != 0 and not (tmp_path / "model.json").exists(), r.stdout
     line = r.stderr.strip()
     assert len(line.splitlines()) == 1 and "Traceback" not in line, r.stderr
     assert "cell.json" in line and "targets" in line and "metres" in line, line
+
+
+def _fitted(tmp_path, poses: int, seed: int, fit: int) -> list[dict]:
+    """cell.json's campaign of `poses` poses (all.csv, its rows returned), its first `fit` poses
+    (fit.csv) calibrated to model.json, the rest in new.csv."""
+    _simulate(tmp_path, poses, seed, "all.csv")
+    rows = list(csv.DictReader(open(tmp_path / "all.csv")))
+    for name, keep in (("fit.csv", lambda p: p <= fit), ("new.csv", lambda p: p > fit)):
+        with open(tmp_path / name, "w", newline="") as f:
+            w = csv.DictWriter(f, list(rows[0]))
+            w.writeheader()
+            w.writerows(row for row in rows if keep(int(row["pose"])))
+    r = robocal("calibrate", "fit.csv", "--cell", "cell.json", "--out", "model.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    return rows
 
 
 def _confdata_targets(tmp_path, cell_path, meas, out):
@@ -119,27 +135,7 @@ def test_confdata_reaches_a_pose_measured_next_to_the_stretched_elbow(tmp_path):
     _cell(
         cell, SMALL, {"A": [40.0, 0.0, 20.0], "B": [-20.0, 35.0, 20.0], "C": [-20.0, -35.0, 20.0]}
     )
-    r = robocal(
-        "simulate",
-        "--cell",
-        "cell.json",
-        "--poses",
-        72,
-        "--seed",
-        11,
-        "--out",
-        "all.csv",
-        cwd=tmp_path,
-    )
-    assert r.returncode == 0, r.stderr
-    rows = list(csv.DictReader(open(tmp_path / "all.csv")))
-    for name, keep in (("fit.csv", lambda p: p <= 60), ("new.csv", lambda p: p > 60)):
-        with open(tmp_path / name, "w", newline="") as f:
-            w = csv.DictWriter(f, list(rows[0]))
-            w.writeheader()
-            w.writerows(r for r in rows if keep(int(r["pose"])))
-    r = robocal("calibrate", "fit.csv", "--cell", "cell.json", "--out", "model.json", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr
+    _fitted(tmp_path, 72, 11, 60)
     measured = _confdata_targets(tmp_path, cell, "new.csv", "targets.csv")
     assert any(abs(q[2]) < 0.5 for q in measured.values()), "the pose next to the stretched elbow"
     r = robocal("compensate", "model.json", "targets.csv", "--out", "joints.csv", cwd=tmp_path)
@@ -191,19 +187,7 @@ def test_joints_in_radians_outside_a_limit_are_named_as_radians(tmp_path):
     outside the limits [-176, -4]') before the units check could say radians: the line now
     says what the row's joints look like."""
     _cell(tmp_path / "cell.json", PANDA, {"A": [50.0, 10.0, 30.0], "B": [-30.0, 45.0, 25.0]})
-    r = robocal(
-        "simulate",
-        "--cell",
-        "cell.json",
-        "--poses",
-        20,
-        "--seed",
-        4,
-        "--out",
-        "deg.csv",
-        cwd=tmp_path,
-    )
-    assert r.returncode == 0, r.stderr
+    _simulate(tmp_path, 20, 4, "deg.csv")
     rows = list(csv.DictReader(open(tmp_path / "deg.csv")))
     for row in rows:
         for i in range(1, 8):
@@ -233,19 +217,7 @@ def test_a_joint_of_one_degree_range_is_simulated(tmp_path):
     robot = json.loads(json.dumps(UR10E))
     robot["joints"][5]["limits"] = [-0.5, 0.5]
     _cell(tmp_path / "cell.json", robot, RING)
-    r = robocal(
-        "simulate",
-        "--cell",
-        "cell.json",
-        "--poses",
-        20,
-        "--seed",
-        5,
-        "--out",
-        "m.csv",
-        cwd=tmp_path,
-    )
-    assert r.returncode == 0, r.stderr
+    _simulate(tmp_path, 20, 5, "m.csv")
     q6 = [float(row["q6"]) for row in csv.DictReader(open(tmp_path / "m.csv"))]
     assert max(abs(v) for v in q6) <= 0.5
     r = robocal("calibrate", "m.csv", "--cell", "cell.json", "--out", "model.json", cwd=tmp_path)
@@ -263,10 +235,7 @@ def test_joint_limits_in_radians_are_refused_at_the_cell(tmp_path):
     for args in (("simulate", "--out", "m.csv"), ("calibrate", "m.csv", "--out", "model.json")):
         if args[0] == "calibrate":
             _cell(tmp_path / "good.json", UR10E, RING)
-            ok = robocal(
-                "simulate", "--cell", "good.json", "--poses", 20, "--out", "m.csv", cwd=tmp_path
-            )
-            assert ok.returncode == 0, ok.stderr
+            _simulate(tmp_path, 20, 1, "m.csv", "good.json")
         r = robocal(*args, "--cell", "cell.json", cwd=tmp_path)
         line = r.stderr.strip()
         assert r.returncode != 0 and len(line.splitlines()) == 1, r.stderr
@@ -280,26 +249,7 @@ def test_three_smrs_on_one_line_warn_that_orientation_comes_from_the_start(tmp_p
     _cell(
         tmp_path / "cell.json", UR10E, {"A": [100.0, 0, 30], "B": [0, 0, 30], "C": [-100.0, 0, 30]}
     )
-    r = robocal(
-        "simulate",
-        "--cell",
-        "cell.json",
-        "--poses",
-        46,
-        "--seed",
-        12,
-        "--out",
-        "all.csv",
-        cwd=tmp_path,
-    )
-    assert r.returncode == 0, r.stderr
-    rows = list(csv.DictReader(open(tmp_path / "all.csv")))
-    with open(tmp_path / "fit.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, list(rows[0]))
-        w.writeheader()
-        w.writerows(row for row in rows if int(row["pose"]) <= 40)
-    r = robocal("calibrate", "fit.csv", "--cell", "cell.json", "--out", "model.json", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr
+    rows = _fitted(tmp_path, 46, 12, 40)
     qs = [f"q{i}" for i in range(1, 7)]
     with open(tmp_path / "targets.csv", "w", newline="") as f:
         w = csv.writer(f)
@@ -323,19 +273,7 @@ def test_a_base_guess_the_data_contradicts_does_not_flip_the_arm(tmp_path, comma
     mirrored arm: a2 +1225 mm, alpha2 -180 deg from nominal, 'not deployable'. The data's own
     registration of the nominal arm is the start where it fits the readings better."""
     _cell(tmp_path / "good.json", UR10E, RING)
-    r = robocal(
-        "simulate",
-        "--cell",
-        "good.json",
-        "--poses",
-        40,
-        "--seed",
-        11,
-        "--out",
-        "m.csv",
-        cwd=tmp_path,
-    )
-    assert r.returncode == 0, r.stderr
+    _simulate(tmp_path, 40, 11, "m.csv", "good.json")
     fit = robocal(
         "calibrate", "m.csv", "--cell", "good.json", "--out", "good_model.json", cwd=tmp_path
     )
@@ -359,26 +297,7 @@ def test_targets_in_other_units_are_refused_naming_them(tmp_path, scale, unit):
     starting joints in radians 'pose 62 is unreachable ... 95.519 mm': the units check that
     guards a campaign guards the targets, whose starting joints say where the SMRs should be."""
     _cell(tmp_path / "cell.json", UR10E, RING)
-    r = robocal(
-        "simulate",
-        "--cell",
-        "cell.json",
-        "--poses",
-        52,
-        "--seed",
-        11,
-        "--out",
-        "all.csv",
-        cwd=tmp_path,
-    )
-    assert r.returncode == 0, r.stderr
-    rows = list(csv.DictReader(open(tmp_path / "all.csv")))
-    with open(tmp_path / "fit.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, list(rows[0]))
-        w.writeheader()
-        w.writerows(row for row in rows if int(row["pose"]) <= 40)
-    r = robocal("calibrate", "fit.csv", "--cell", "cell.json", "--out", "model.json", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr
+    rows = _fitted(tmp_path, 52, 11, 40)
     qs = [f"q{i}" for i in range(1, 7)]
     with open(tmp_path / "targets.csv", "w", newline="") as f:
         w = csv.writer(f)
