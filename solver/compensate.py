@@ -300,12 +300,14 @@ def _in_configuration(model: Model, desired, mask, cf, max_iter):
     got = configuration.confdata(robot, res.q).reshape(m, S, 4)
     err = np.where(np.all(got == cf[:, None], axis=2), res.error_mm.reshape(m, S), np.inf)
     sols = res.q.reshape(m, S, n)
-    for i in np.flatnonzero(~np.isfinite(err.min(axis=1))):
-        # every start converged to another configuration: next to a boundary (the elbow
-        # stretched) the two sides' solutions are tenths of a degree apart
-        nearest = sols[i, int(np.argmin(res.error_mm.reshape(m, S)[i]))]
+    anywhere = res.error_mm.reshape(m, S)
+    for i in np.flatnonzero(err.min(axis=1) > anywhere.min(axis=1) + SAME_ERROR_MM):
+        # the starts came closer in another configuration than in this one (or none reached
+        # this one): next to a boundary (the elbow stretched) the two sides' solutions are
+        # tenths of a degree apart, and the starts in this one stopped in local minima
+        nearest = sols[i, int(np.argmin(anywhere[i]))]
         found = _across_boundary(geo, desired[i], mask[i], cf[i], nearest, lo[i], hi[i], max_iter)
-        if found is not None:  # the final solve keeps to the far side too
+        if found is not None and found[1] < err[i].min():  # the final solve keeps to that side
             sols[i, 0], err[i, 0], lo[i], hi[i] = found
     # of the seeds as close as the best (within SAME_ERROR_MM), the least wound joints: a joint
     # of +-360 deg reaches a position a turn either way in the same confdata, which names the

@@ -125,17 +125,21 @@ def _confdata_targets(tmp_path, cell_path, meas, out):
     return {r["pose"]: [float(r[f"q{i}"]) for i in range(1, 7)] for r in rows}
 
 
-def test_confdata_reaches_a_pose_measured_next_to_the_stretched_elbow(tmp_path):
+SMALL_RING = {"A": [40.0, 0.0, 20.0], "B": [-20.0, 35.0, 20.0], "C": [-20.0, -35.0, 20.0]}
+
+
+@pytest.mark.parametrize(("robot", "ring", "poses"), [(SMALL, SMALL_RING, 72), (UR10E, RING, 260)])
+def test_confdata_reaches_a_pose_measured_next_to_the_stretched_elbow(tmp_path, robot, ring, poses):
     """The small arm's campaign (seed 11) has a pose measured with joint 3 at -0.16 deg, the
     elbow 0.16 deg from stretched: in its confdata (cfx 2, behind the lower arm) compensate said
     'no solution in its configuration' (every start converged to the mirror elbow, 0.3 deg away
-    in cfx 0), though the arm stood there. Asked for by confdata alone, every pose comes back
-    to the joints it was measured at, at the model's error."""
+    in cfx 0), though the arm stood there; the UR10e's pose 111 (joint 3 at -0.21 deg) was
+    'unreachable ... no closer than 99.232 mm' (the starts that stayed in its configuration
+    stopped in local minima). Asked for by confdata alone, every pose comes back to the joints
+    it was measured at, at the model's error."""
     cell = tmp_path / "cell.json"
-    _cell(
-        cell, SMALL, {"A": [40.0, 0.0, 20.0], "B": [-20.0, 35.0, 20.0], "C": [-20.0, -35.0, 20.0]}
-    )
-    _fitted(tmp_path, 72, 11, 60)
+    _cell(cell, robot, ring)
+    _fitted(tmp_path, poses, 11, 60)
     measured = _confdata_targets(tmp_path, cell, "new.csv", "targets.csv")
     assert any(abs(q[2]) < 0.5 for q in measured.values()), "the pose next to the stretched elbow"
     r = robocal("compensate", "model.json", "targets.csv", "--out", "joints.csv", cwd=tmp_path)
