@@ -24,6 +24,9 @@ from .robot import Robot
 STEP_TOL_RAD = 1e-10  # a pose has converged once its step is below this (1e-7 mm per metre)
 SAME_ERROR_MM = 1e-4  # seeds' solutions this close in error (mm RMS) reach the target alike
 SEED_GRID = 4  # joints 2 and 3 each start from this many values in a configuration's search
+# a start's own configuration is kept where its solution misses by no more than this beyond
+# the other side's
+KEEP_SLACK_MM = 0.005
 BOUNDARY_GRID = 721  # where no start lands in its configuration: a joint's range scanned so
 BISECTIONS = 40  # then its edge found to within range / 2^40
 
@@ -185,10 +188,42 @@ def compensate(
     none = ~np.all(np.isfinite(q), axis=1)
     start = np.where(none[:, None], 0.5 * (lower + upper), q)
     res = solve(model, desired, mask, start, lower, upper, time_s, temp_c, max_iter, prev_q)
+    if _kept_configuration(model, desired, mask, guess & ~none, q, res, lower, upper, max_iter):
+        # some poses solved again on their starting joints' side (all together: the backlash
+        # couples consecutive poses)
+        res = solve(model, desired, mask, res.q, lower, upper, time_s, temp_c, max_iter, prev_q)
     res.q[none] = np.nan
     res.error_mm[none] = np.inf
     res.converged[none] = False
     return res
+
+
+def _kept_configuration(model: Model, desired, mask, guess, q0, res, lower, upper, max_iter):
+    """Where a pose's solution left its starting joints' configuration (a start by an edge, the
+    elbow nearly stretched: the damped steps fell to the mirror solution, degrees away), its
+    joints and ranges set (in place) to the solution on the start's side; whether any was."""
+    robot = model.nominal
+    if not guess.any() or not configuration.supports(robot):
+        return False
+    want = configuration.confdata(robot, np.where(guess[:, None], q0, 0.0))
+    got = configuration.confdata(robot, np.where(guess[:, None], res.q, 0.0))
+    geo = Model(model.layout, model.x, [], robot)
+    moved = False
+    for i in np.flatnonzero(guess & np.any(want != got, axis=1)):
+        found = _across_boundary(
+            geo, desired[i], mask[i], want[i], res.q[i], lower[i], upper[i], max_iter
+        )
+        # kept where it reaches the targets as well and lies no further from the start (a
+        # start across the edge from every solution, or by the wrist's singularity, keeps the
+        # nearer solution and its warning)
+        if (
+            found is not None
+            and found[1] <= res.error_mm[i] + KEEP_SLACK_MM
+            and np.max(np.abs(found[0] - q0[i])) <= np.max(np.abs(res.q[i] - q0[i]))
+        ):
+            res.q[i], _, lower[i], upper[i] = found
+            moved = True
+    return moved
 
 
 def _seeds(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

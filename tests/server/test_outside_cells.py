@@ -316,3 +316,57 @@ def test_targets_in_other_units_are_refused_naming_them(tmp_path, scale, unit):
     assert r.returncode != 0 and len(line.splitlines()) == 1, r.stderr
     assert line.startswith("robocal: error: targets.csv") and unit in line, line
     assert "targets span" in line, line
+
+
+# a 3 m arm in modified DH (KUKA KR 1000 titan-like proportions): axes 2 and 3 parallel
+LARGE = _robot(
+    "titan-like",
+    "mdh",
+    [
+        (0, 1045, 0, 0, (-150, 150)),
+        (500, 0, -90, -90, (-130, 20)),
+        (1300, 0, 0, 0, (-94, 130)),
+        (55, 1525, 0, -90, (-350, 350)),
+        (0, 0, 0, 90, (-118, 118)),
+        (0, 290, 0, -90, (-350, 350)),
+    ],
+)
+
+
+def test_a_two_degree_guess_keeps_its_configuration_by_the_stretched_elbow(tmp_path):
+    """Starting joints 2 deg off the measured ones, in the measured configuration: by the
+    stretched elbow the damped steps fell to the mirror solution across the edge (pose 74 of
+    this 3 m arm: cfx 3 -> 1, 4.3 deg from the measured joints) and compensate only warned. Now
+    every pose whose guess shares the measured joints' arm configuration keeps it."""
+    from robocal.server.formats.cell_doc import CellDoc
+    from robocal.solver.configuration import confdata
+
+    ring = {"A": [150.0, 0.0, 80.0], "B": [-75.0, 130.0, 80.0], "C": [-75.0, -130.0, 80.0]}
+    cell = tmp_path / "cell.json"
+    _cell(cell, LARGE, ring)
+    rows = _fitted(tmp_path, 260, 11, 60)
+    qs = [f"q{i}" for i in range(1, 7)]
+    off = [-2, -2, 2, -2, -2, 2]  # deg: pose 74's guess across the edge from its solution
+    measured, guess = {}, {}
+    with open(tmp_path / "targets.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["pose", "target", "x", "y", "z", *qs])
+        for row in rows[3 * 60 :]:
+            p = row["pose"]
+            measured[p] = [float(row[q]) for q in qs]
+            guess[p] = [v + d for v, d in zip(measured[p], off)]
+            w.writerow([p, row["target"], row["x"], row["y"], row["z"], *guess[p]])
+    r = robocal("compensate", "model.json", "targets.csv", "--out", "joints.csv", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    robot = CellDoc.model_validate(json.loads(cell.read_text())).robot_model
+
+    def cfx(q):
+        return int(np.asarray(confdata(robot, np.radians([q]))).reshape(-1)[3])
+
+    for row in csv.DictReader(open(tmp_path / "joints.csv")):
+        p = row["pose"]
+        if cfx(guess[p]) == cfx(measured[p]):
+            assert cfx([float(row[q]) for q in qs]) == cfx(measured[p]), p
+    got = {row["pose"]: row for row in csv.DictReader(open(tmp_path / "joints.csv"))}
+    q74 = [float(got["74"][q]) for q in qs]
+    assert np.max(np.abs(np.subtract(q74, measured["74"]))) < 0.5, q74
