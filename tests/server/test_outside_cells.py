@@ -370,3 +370,12 @@ def test_a_two_degree_guess_keeps_its_configuration_by_the_stretched_elbow(tmp_p
     got = {row["pose"]: row for row in csv.DictReader(open(tmp_path / "joints.csv"))}
     q74 = [float(got["74"][q]) for q in qs]
     assert np.max(np.abs(np.subtract(q74, measured["74"]))) < 0.5, q74
+
+
+@pytest.mark.parametrize("value", ["-1", "0", "nan"])
+def test_a_tolerance_not_above_zero_says_above_zero(tmp_path, value):
+    """--tolerance-mm=-1 said 'is not a finite number >= 0', though 0 is refused too."""
+    r = robocal("calibrate", "m.csv", f"--tolerance-mm={value}", cwd=tmp_path)
+    line = r.stderr.strip()
+    assert r.returncode != 0 and len(line.splitlines()) == 1, r.stderr
+    assert f"'{value}' is not a finite number > 0" in line, line
