@@ -12,6 +12,14 @@ from robocal.solver.measurements import Measurements
 from robocal.solver.robot import Robot
 
 LIMIT_MARGIN_RAD = np.deg2rad(2.0)
+
+
+def limit_margin(robot) -> np.ndarray:
+    """Per joint (rad), how far drawn poses keep from the limits: LIMIT_MARGIN_RAD, or a quarter
+    of the range of a joint narrower than four of it (a locked joint's +-0.5 deg)."""
+    return np.minimum(LIMIT_MARGIN_RAD, 0.25 * (robot.upper - robot.lower))
+
+
 MIN_RANGE_MM = 1000.0  # trackers are specified from about 1 m; closer, the head cannot follow
 AXIS_CLEARANCE_MM = 300.0  # flange near the base z axis: the shoulder singularity
 WRIST_MIN_RAD = np.deg2rad(10.0)  # axes of joints N-2 and N nearly aligned: the wrist singularity
@@ -178,7 +186,7 @@ class VirtualCell:
         normal = np.einsum("ij,mj->mi", self.base[:3, :3], R[:, :, 2])  # flange z in tracker frame
         facing = np.einsum("mj,mkj->mk", normal, -pt) / dist  # tracker sits at its frame's origin
         checks = {
-            "limits": self.true_robot.within_limits(q, LIMIT_MARGIN_RAD),
+            "limits": self.true_robot.within_limits(q, limit_margin(self.true_robot)),
             "floor": np.all(p[..., 2] >= self.floor_clearance_mm, axis=1),
             "facing": np.all(facing >= np.cos(self.acceptance_rad), axis=1),
             "range": np.all(dist >= MIN_RANGE_MM, axis=1),
@@ -193,7 +201,8 @@ class VirtualCell:
 
     def sample_poses(self, n: int, rng, max_batches: int = 50) -> np.ndarray:
         """n poses (n, N) rad drawn uniformly within the limits and meeting every pose check."""
-        lo, hi = self.true_robot.lower + LIMIT_MARGIN_RAD, self.true_robot.upper - LIMIT_MARGIN_RAD
+        margin = limit_margin(self.true_robot)
+        lo, hi = self.true_robot.lower + margin, self.true_robot.upper - margin
         batch = max(1024, 4 * n)
         found: list[np.ndarray] = []
         passed: dict[str, int] = {}

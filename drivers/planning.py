@@ -9,7 +9,7 @@ from robocal.solver.identifiability import structural
 from robocal.solver.kinematics import Layout, flange_frames, predict, predict_rows
 from robocal.solver.robot import Robot
 
-from .cell import LIMIT_MARGIN_RAD, VirtualCell, too_constrained
+from .cell import VirtualCell, limit_margin, too_constrained
 from .world import ACCEL_S, DEFAULT_SPEEDS_DEG_S
 
 
@@ -68,7 +68,8 @@ def plan_poses(
     max_batches: int = 50,
 ) -> np.ndarray:
     """n poses (n, N) rad, uniform within the limits, meeting every check on the nominal model."""
-    lo, hi = robot.lower + LIMIT_MARGIN_RAD, robot.upper - LIMIT_MARGIN_RAD
+    margin = limit_margin(robot)
+    lo, hi = robot.lower + margin, robot.upper - margin
     batch = max(1024, 4 * n)
     found: list[np.ndarray] = []
     passed: dict[str, int] = {}

@@ -24,6 +24,11 @@ from .robot import Robot
 STEP_TOL_RAD = 1e-10  # a pose has converged once its step is below this (1e-7 mm per metre)
 SAME_ERROR_MM = 1e-4  # seeds' solutions this close in error (mm RMS) reach the target alike
 SEED_GRID = 4  # joints 2 and 3 each start from this many values in a configuration's search
+# a start's own configuration is kept where its solution misses by no more than this beyond
+# the other side's
+KEEP_SLACK_MM = 0.005
+BOUNDARY_GRID = 721  # where no start lands in its configuration: a joint's range scanned so
+BISECTIONS = 40  # then its edge found to within range / 2^40
 
 
 @dataclass
@@ -183,10 +188,42 @@ def compensate(
     none = ~np.all(np.isfinite(q), axis=1)
     start = np.where(none[:, None], 0.5 * (lower + upper), q)
     res = solve(model, desired, mask, start, lower, upper, time_s, temp_c, max_iter, prev_q)
+    if _kept_configuration(model, desired, mask, guess & ~none, q, res, lower, upper, max_iter):
+        # some poses solved again on their starting joints' side (all together: the backlash
+        # couples consecutive poses)
+        res = solve(model, desired, mask, res.q, lower, upper, time_s, temp_c, max_iter, prev_q)
     res.q[none] = np.nan
     res.error_mm[none] = np.inf
     res.converged[none] = False
     return res
+
+
+def _kept_configuration(model: Model, desired, mask, guess, q0, res, lower, upper, max_iter):
+    """Where a pose's solution left its starting joints' configuration (a start by an edge, the
+    elbow nearly stretched: the damped steps fell to the mirror solution, degrees away), its
+    joints and ranges set (in place) to the solution on the start's side; whether any was."""
+    robot = model.nominal
+    if not guess.any() or not configuration.supports(robot):
+        return False
+    want = configuration.confdata(robot, np.where(guess[:, None], q0, 0.0))
+    got = configuration.confdata(robot, np.where(guess[:, None], res.q, 0.0))
+    geo = Model(model.layout, model.x, [], robot)
+    moved = False
+    for i in np.flatnonzero(guess & np.any(want != got, axis=1)):
+        found = _across_boundary(
+            geo, desired[i], mask[i], want[i], res.q[i], lower[i], upper[i], max_iter
+        )
+        # kept where it reaches the targets as well and lies no further from the start (a
+        # start across the edge from every solution, or by the wrist's singularity, keeps the
+        # nearer solution and its warning)
+        if (
+            found is not None
+            and found[1] <= res.error_mm[i] + KEEP_SLACK_MM
+            and np.max(np.abs(found[0] - q0[i])) <= np.max(np.abs(res.q[i] - q0[i]))
+        ):
+            res.q[i], _, lower[i], upper[i] = found
+            moved = True
+    return moved
 
 
 def _seeds(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -229,6 +266,50 @@ def least_wound(q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(q), out, q)
 
 
+def _across_boundary(geo: Model, desired, mask, cf, q, lo, hi, max_iter):
+    """The solution in configuration cf (4,) nearest a solution q (n,) rad in another one, where
+    the configuration's edge is a joint's angle (joint 3 for the lower-arm side, else joint 2):
+    solved from just across that edge with the joint held on its far side. (joints, error mm,
+    the joint ranges that keep it there), or None.
+    Near the edge both sides' solutions attract the damped steps to the nearer one, so every
+    start of the search lands on the wrong side."""
+    robot = geo.nominal
+    for j in (2, 1):
+        grid = np.linspace(lo[j], hi[j], BOUNDARY_GRID)
+        trial = np.repeat(q[None], len(grid), axis=0)
+        trial[:, j] = grid
+        inside = np.all(configuration.confdata(robot, trial) == cf, axis=1)
+        if not inside.any():
+            continue
+        k = int(np.flatnonzero(inside)[np.argmin(np.abs(grid[inside] - q[j]))])
+        a, b = q[j], grid[k]  # a outside, b inside: the edge between them by bisection
+        for _ in range(BISECTIONS):
+            trial = q.copy()
+            trial[j] = 0.5 * (a + b)
+            if np.all(configuration.confdata(robot, trial[None])[0] == cf):
+                b = trial[j]
+            else:
+                a = trial[j]
+        # the far side's run of grid points from b on, as the joint's range
+        step = 1 if grid[k] >= q[j] else -1
+        end = k
+        while 0 <= end + step < len(grid) and inside[end + step]:
+            end += step
+        lo_j, hi_j = sorted((b, grid[end]))
+        low, high = lo.copy(), hi.copy()
+        low[j], high[j] = lo_j, hi_j
+        start = q.copy()
+        # the mirror of q across the edge: where the far side's solution lies when the edge is
+        # a singularity (the stretched elbow), at which the joint's own gradient vanishes
+        start[j] = np.clip(2.0 * b - q[j], lo_j, hi_j)
+        res = solve(
+            geo, desired[None], mask[None], start[None], low[None], high[None], max_iter=max_iter
+        )
+        if np.all(configuration.confdata(robot, res.q)[0] == cf):
+            return res.q[0], float(res.error_mm[0]), low, high
+    return None
+
+
 def _in_configuration(model: Model, desired, mask, cf, max_iter):
     """Per pose, the geometric model's best joints in configuration cf (m, 4) (NaN where none
     reaches the target there), and the joint ranges the configuration allows (m, n) rad."""
@@ -254,6 +335,15 @@ def _in_configuration(model: Model, desired, mask, cf, max_iter):
     got = configuration.confdata(robot, res.q).reshape(m, S, 4)
     err = np.where(np.all(got == cf[:, None], axis=2), res.error_mm.reshape(m, S), np.inf)
     sols = res.q.reshape(m, S, n)
+    anywhere = res.error_mm.reshape(m, S)
+    for i in np.flatnonzero(err.min(axis=1) > anywhere.min(axis=1) + SAME_ERROR_MM):
+        # the starts came closer in another configuration than in this one (or none reached
+        # this one): next to a boundary (the elbow stretched) the two sides' solutions are
+        # tenths of a degree apart, and the starts in this one stopped in local minima
+        nearest = sols[i, int(np.argmin(anywhere[i]))]
+        found = _across_boundary(geo, desired[i], mask[i], cf[i], nearest, lo[i], hi[i], max_iter)
+        if found is not None and found[1] < err[i].min():  # the final solve keeps to that side
+            sols[i, 0], err[i, 0], lo[i], hi[i] = found
     # of the seeds as close as the best (within SAME_ERROR_MM), the least wound joints: a joint
     # of +-360 deg reaches a position a turn either way in the same confdata, which names the
     # turn of joints 1, 4 and 6 only (the first among equals: reproducible)

@@ -43,6 +43,9 @@ class Problem:
 
 # The closed-form start needs no more poses than this (spread evenly over the campaign).
 REGISTER_POSES = 32
+# a base guess that fits the readings worse than the data's own registration by more than this
+# (RMS, the nominal arm's millimetres of error and the guess's few) is not used
+GUESS_SLACK_MM = 25.0
 # On large campaigns the fits' first step is taken on about this many poses: it only has to
 # land near the minimum, where the Jacobian of all the data is then taken once.
 START_POSES = 64
@@ -70,12 +73,9 @@ def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None,
     """
     targets = np.asarray(targets, dtype=float)
     require_inputs(q, meas, targets, base_guess)
+    base_guess = trusted_guess(robot, targets, names, q, meas, base_guess)
     if base_guess is None:
-        lay0 = Layout(robot, np.eye(4), tuple(names))
-        some = spread(len(q), REGISTER_POSES)
-        nominal = predict(lay0, lay0.initial(targets), np.asarray(q)[some])
-        ok = np.all(np.isfinite(meas[some]), axis=-1)
-        base_guess = kabsch(nominal[ok], meas[some][ok])
+        base_guess = _registered(robot, targets, names, q, meas)[0]
     prob = Problem(Layout(robot, np.asarray(base_guess, float), tuple(names)), q, meas)
     x0 = prob.layout.initial(targets)
     if not refine:
@@ -85,6 +85,32 @@ def register(robot: Robot, targets: np.ndarray, names, q, meas, base_guess=None,
     free[prob.layout.target_slice] = True
     x, _ = least_squares_fit(prob, x0, free)
     return prob.rebased(x)
+
+
+def _registered(robot: Robot, targets, names, q, meas):
+    """The base registering the nominal arm onto the readings (closed form, REGISTER_POSES spread
+    poses), the nominal points there in the base frame (N, 3) and the readings (N, 3)."""
+    lay0 = Layout(robot, np.eye(4), tuple(names))
+    some = spread(len(q), REGISTER_POSES)
+    nominal = predict(lay0, lay0.initial(np.asarray(targets, float)), np.asarray(q)[some])
+    ok = np.all(np.isfinite(meas[some]), axis=-1)
+    return kabsch(nominal[ok], meas[some][ok]), nominal[ok], meas[some][ok]
+
+
+def trusted_guess(robot: Robot, targets, names, q, meas, base_guess):
+    """The user's base guess, or None where the data's registration fits the readings better by
+    more than GUESS_SLACK_MM RMS: a guess in metres or turned the wrong way starts the fit so far
+    off that it ends in a mirrored arm (links flipped by 180 degrees, a2 +1225 mm)."""
+    if base_guess is None:
+        return None
+    base, nominal, measured = _registered(robot, targets, names, q, meas)
+
+    def rms(T):
+        T = np.asarray(T, float)
+        e = nominal @ T[:3, :3].T + T[:3, 3] - measured
+        return float(np.sqrt(np.mean(np.sum(e * e, axis=-1))))
+
+    return None if rms(base_guess) > rms(base) + GUESS_SLACK_MM else base_guess
 
 
 # Moves under which the point Jacobian of a metre-sized arm changes by about 1e-4 of itself.
@@ -205,6 +231,7 @@ def start_fit(robot: Robot, targets, names, q, meas, free, rows=None, base_guess
     taken once, there.
     """
     q, meas = np.asarray(q, dtype=float), np.asarray(meas, dtype=float)
+    base_guess = trusted_guess(robot, targets, names, q, meas, base_guess)
     lay = Layout(
         robot, np.eye(4) if base_guess is None else np.asarray(base_guess, float), tuple(names)
     )

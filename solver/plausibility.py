@@ -76,14 +76,15 @@ class UnitCheck:
     def plausible(self) -> bool:
         return self.likely is None
 
-    def reason(self) -> str | None:
-        """One sentence naming the likely units, None when the data's units are plausible."""
+    def reason(self, points: str = "readings", joints_are: str = "measured") -> str | None:
+        """One sentence naming the likely units, None when the data's units are plausible;
+        points and joints_are name the data (a targets file's points at its starting joints)."""
         if self.likely is None:
             return None
         length, joints = self.likely
         told = (
-            f"the readings span {_mm(self.measured_spread_mm)} (RMS from their centroid) while "
-            f"the nominal arm at the measured joints spans {_mm(self.predicted_spread_mm)}"
+            f"the {points} span {_mm(self.measured_spread_mm)} (RMS from their centroid) while "
+            f"the nominal arm at the {joints_are} joints spans {_mm(self.predicted_spread_mm)}"
         )
         wrong = []
         if length != "mm":

@@ -90,8 +90,9 @@ class Robot:
             raise ValueError(f"expected {k} geometric parameters, got {len(values)}")
         return Robot(self.name, self.convention, tuple(joints), self.parallel)
 
-    def within_limits(self, q: np.ndarray, margin: float = 0.0) -> np.ndarray:
-        """Per pose, whether every joint angle (rad) lies within its limits shrunk by margin."""
+    def within_limits(self, q: np.ndarray, margin: float | np.ndarray = 0.0) -> np.ndarray:
+        """Per pose, whether every joint angle (rad) lies within its limits shrunk by margin (rad,
+        one for all joints or one a joint)."""
         q = np.atleast_2d(q)
         return np.all((q >= self.lower + margin) & (q <= self.upper - margin), axis=-1)
 

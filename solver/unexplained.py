@@ -495,11 +495,12 @@ def per_pose_reading(share: float, dominates: bool) -> str:
 def summary(block: dict, floor: float | None) -> str:
     """One line: how much is left and where to look first."""
     left = f"{block['holdout_rmse_mm']:.3f} mm held out"
-    left += (
-        f" ({block['noise_floor_ratio']:.1f}x the noise floor)"
-        if floor
-        else f" (noise floor unknown; chance level of a strength {block['chance_strength']:.2f})"
-    )
+    if floor:
+        left += f" ({block['noise_floor_ratio']:.1f}x the noise floor)"
+    elif floor is not None:  # noise-free readings: a floor, not an unknown one
+        left += " (the noise floor is 0 mm)"
+    else:
+        left += f" (noise floor unknown; chance level of a strength {block['chance_strength']:.2f})"
     share = block["share_of_baseline_mse"]
     if share is not None:
         left += f", {100 * share:.0f}% of the geometric model's held-out MSE"

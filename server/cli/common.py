@@ -56,9 +56,9 @@ def _nonnegative(text: str) -> float:
 
 
 def _positive(text: str) -> float:
-    v = _nonnegative(text)
-    if v == 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number > 0")
+    v = _number(text)
+    if not np.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number > 0")
     return v
 
 

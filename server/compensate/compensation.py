@@ -24,6 +24,9 @@ MAX_ERROR_MM = 0.1  # a pose the model cannot bring closer than this is refused 
 MAX_MOVE_DEG = 10.0
 MAX_JUMP_DEG = 90.0  # consecutive poses whose joints turn more than this are reported
 ORIENTING_SMRS = 3  # SMRs that fix the flange's orientation
+# SMRs closer than this (RMS) to one line fix no roll about it: 0.1 mm of the tracker's noise
+# over 1 mm is 6 degrees
+LINE_MM = 1.0
 
 
 def parse_tcp(text: str) -> list[float]:
@@ -162,6 +165,8 @@ def compensate_targets(
                 f"has starting joints in configuration {configuration.describe(have[k])} but "
                 f"cf columns {configuration.describe(cf[k])}",
             )
+    if tcp is None:
+        _refuse_other_units(targets, guess, model, nominal)
     warnings = _orientation_warnings(targets, guess, tcp)
     if tcp is not None:
         targets = tool_targets(targets)
@@ -208,6 +213,21 @@ def _more_none(res: Compensation) -> str:
     return f"; {count - 1} more poses have none" if count > 1 else ""
 
 
+def _refuse_other_units(targets: Targets, guess, model: ModelFile, nominal) -> None:
+    """InputError naming the likely units of targets in metres or inches, or of starting joints
+    in radians: their spread is not the nominal arm's at the starting joints (the campaign's
+    check, solver.plausibility); such targets were 'unreachable' by metres."""
+    from robocal.solver.plausibility import check_units
+
+    if not guess.any() or any(n not in model.targets for n in targets.names):
+        return
+    smrs = np.array([model.targets[n] for n in targets.names], dtype=float)
+    xyz = np.where(targets.mask[..., None], targets.desired, np.nan)[guess]
+    why = check_units(nominal, smrs, targets.q0[guess], xyz).reason("targets", "starting")
+    if why:
+        raise InputError(targets.path, None, None, why)
+
+
 def _orientation_warnings(targets: Targets, guess: np.ndarray, tcp) -> list[str]:
     """One line for the poses whose targets leave the flange's orientation free: fewer than three
     SMRs (or a tool point without rx, ry, rz)."""
@@ -219,7 +239,7 @@ def _orientation_warnings(targets: Targets, guess: np.ndarray, tcp) -> list[str]
         )
         free = ~oriented
     else:
-        free = targets.mask.sum(axis=1) < ORIENTING_SMRS
+        free = (targets.mask.sum(axis=1) < ORIENTING_SMRS) | _on_a_line(targets)
     if not free.any():
         return []
     ids = [targets.pose_ids[k] for k in np.flatnonzero(free)]
@@ -229,9 +249,21 @@ def _orientation_warnings(targets: Targets, guess: np.ndarray, tcp) -> list[str]
         else "the starting joints or the configuration's search"
     )
     return [
-        f"{len(ids)} poses (first {ids[0]!r}) give too few SMRs to fix the "
-        f"flange's orientation: it comes from {source}, not from the targets"
+        f"{len(ids)} poses (first {ids[0]!r}) give too few SMRs (or SMRs on one line) to fix "
+        f"the flange's orientation: it comes from {source}, not from the targets"
     ]
+
+
+def _on_a_line(targets: Targets) -> np.ndarray:
+    """Per pose, whether its desired SMRs lie within LINE_MM (RMS) of one line: the roll about
+    it is then as free as with one SMR."""
+    out = np.zeros(len(targets.mask), dtype=bool)
+    for k, (xyz, given) in enumerate(zip(targets.desired, targets.mask)):
+        p = xyz[given]
+        if len(p) >= ORIENTING_SMRS:
+            s = np.linalg.svd(p - p.mean(axis=0), compute_uv=False)
+            out[k] = s[1] / np.sqrt(len(p)) < LINE_MM
+    return out
 
 
 def _kept(targets: Targets, res: Compensation, guess, nominal, max_move_deg: float) -> list[str]:

@@ -45,9 +45,27 @@ def joint_deg(t: Table, row: Row, i: int, name: str, robot: Robot) -> float:
             row,
             name,
             f"{t.raw(row, name)} deg is outside the limits "
-            f"[{lo:.6g}, {hi:.6g}] deg of joint {i + 1} of {robot.name}",
+            f"[{lo:.6g}, {hi:.6g}] deg of joint {i + 1} of {robot.name}"
+            + _radians_hint(t, row, name.removesuffix(str(i + 1)), robot),
         )
     return value
+
+
+def _radians_hint(t: Table, row: Row, prefix: str, robot: Robot) -> str:
+    """What a row whose joints all lie within one turn in radians looks like: a joint limit that
+    excludes small angles (a 7-axis elbow's [-176, -4] deg) stops such a file before the
+    campaign's units check can name them."""
+    names = [f"{prefix}{k}" for k in range(1, robot.n_joints + 1)]
+    try:
+        values = [t.number(row, c) for c in names]
+    except (InputError, KeyError):
+        return ""
+    if max(abs(v) for v in values) > 2 * np.pi:
+        return ""
+    return (
+        f"; the row's {names[0]}..{names[-1]} all lie within +-{2 * np.pi:.2f}: they look like "
+        "radians; give them in degrees"
+    )
 
 
 def prev_columns(robot: Robot) -> list[str]:

@@ -104,6 +104,16 @@ class RobotDoc(Doc):
                 f"up to at least {REACH_MIN_MM:g} mm: give a and d in mm",
                 "joints",
             )
+        if all(max(abs(v) for v in j.limits) <= RADIANS_TURN for j in self.joints):
+            # no arm turns every joint less than 13 degrees: a joint table in radians
+            raise located(
+                f"every joint's limits lie within +-{RADIANS_TURN:.2f}: they look like radians; "
+                "give them in degrees",
+                "joints",
+                0,
+                "limits",
+                key=True,
+            )
         joints = [j.joint() for j in self.joints]
         detected = detect_parallel(self.convention, joints)
         for i, (det, row) in enumerate(zip(detected, self.joints)):
@@ -175,6 +185,18 @@ class TrackerDoc(Doc):
     smr_ids: dict[str, Label] | None = Field(
         None, description="each SMR's own id (serial or inventory number), by target name"
     )
+
+    @model_validator(mode="after")
+    def _some_error(self):
+        # A spec of no error at all makes the noise floor 0 mm, against which every verdict
+        # (fit below the noise, held-out error past 3x the floor) means nothing.
+        if self.mpe_um + self.mpe_um_per_m <= 0:
+            raise located(
+                "mpe_um and mpe_um_per_m are both 0: no tracker measures without error; give "
+                "its data sheet's MPE (for instance 10 um + 2.5 um/m)",
+                "mpe_um",
+            )
+        return self
 
 
 class TrackerAddress(Doc):
@@ -264,7 +286,7 @@ class CellDoc(Doc):
     @field_validator("targets")
     @classmethod
     def _targets(cls, targets: dict) -> dict:
-        return check_targets(targets)
+        return apart(check_targets(targets))
 
     @field_validator("robot")
     @classmethod
@@ -326,6 +348,41 @@ def check_targets(targets: dict) -> dict:
                 key=True,
             )
     return targets
+
+
+RADIANS_TURN = 2 * np.pi + 1e-6  # a whole turn in radians, as a number of degrees
+
+# Two SMRs' centres lie at least a ball's diameter apart (12.7 mm for the smallest, 0.5-inch,
+# SMR): closer ones are a layout in other units (metres, inches, centimetres) or a typing slip.
+SMR_GAP_MIN_MM = 5.0
+UNIT_GUESSES = (("centimetres", 10.0), ("inches", 25.4), ("metres", 1000.0))
+FIXTURE_MM = 1000.0  # an SMR fixture holds its balls within this of the flange
+
+
+def apart(targets: dict) -> dict:
+    """The cell's SMR positions, refused where two lie closer than SMR_GAP_MIN_MM."""
+    names = list(targets)
+    xyz = np.array([[float(v) for v in targets[n]] for n in names]).reshape(len(names), 3)
+    gap = np.linalg.norm(xyz[:, None] - xyz[None], axis=-1) + np.diag(np.full(len(names), np.inf))
+    i, j = np.unravel_index(int(np.argmin(gap)), gap.shape)
+    if len(names) < 2 or gap[i, j] >= SMR_GAP_MIN_MM:
+        return targets
+    # the units in which they would lie a ball apart and within a fixture's reach of the flange
+    far = float(np.max(np.linalg.norm(xyz, axis=1)))
+    units = [
+        u for u, k in UNIT_GUESSES if gap[i, j] * k >= 2 * SMR_GAP_MIN_MM and far * k <= FIXTURE_MM
+    ]
+    hint = (
+        f"the positions look like {' or '.join(units)}; give them in mm"
+        if units
+        else "check the positions"
+    )
+    raise located(
+        f"SMRs {names[i]} and {names[j]} are {gap[i, j]:.3g} mm apart, closer than two SMR "
+        f"balls can sit (their centres lie a diameter apart, 12.7 mm for a 0.5-inch SMR): {hint}",
+        names[i],
+        key=True,
+    )
 
 
 def check_transform(T: np.ndarray) -> None:
