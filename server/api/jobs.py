@@ -135,7 +135,7 @@ def get_job(job_id: JobId, jobs: JobsDep) -> JobPublic:
     responses={200: {"content": {"application/octet-stream": {}}}},
 )
 def get_recording(job_id: JobId, jobs: JobsDep) -> FileResponse:
-    """The Rerun recording (.rrd) of a done calibration (404 none, 409 not done)."""
+    """The Rerun recording (.rrd) of a done calibration or diagnosis (404 none, 409 not done)."""
     return FileResponse(
         jobs.result_path(job_id, "recording"),
         media_type="application/octet-stream",

@@ -494,6 +494,8 @@ class Diagnosed:
 
     report: ReportDoc
     result: SolverDiagnosis
+    # the geometry as ls-sum finds it on the same readings (judged beside the final model)
+    geometric: Calibration | None = None
 
     @property
     def extensions(self) -> list:
@@ -543,7 +545,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True) -> tuple[Dia
     if d.errors is not None:
         model.uncertainty = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
-        _judge_diagnosis(d.report, d.errors, cell, meas, model)
+        d.geometric = _judge_diagnosis(d.report, d.errors, cell, meas, model)
         _position_block(d.report, d.errors, cell, meas, model)
     return d, model
 
@@ -566,9 +568,10 @@ def _position_block(
 
 def _judge_diagnosis(
     report: ReportDoc, errors: ExtendedErrors, cell: Cell, meas: Measurements, model: ModelFile
-) -> None:
+) -> Calibration:
     """The `identified` and `validation` blocks of a diagnosis's final model, as a calibration's:
-    the held-fixed parameters and the condition number of the geometry as ls-sum finds them."""
+    the held-fixed parameters and the condition number of the geometry as ls-sum finds them
+    (that geometry returned)."""
     from robocal.server.calibration.identified import identified_block
     from robocal.solver.calibrate import calibrate
 
@@ -585,6 +588,7 @@ def _judge_diagnosis(
         nominal_base=cell.base,
     )
     model.validation = validate_diagnosis(report, errors, cell, meas, model, geometric.condition)
+    return geometric
 
 
 def validate_diagnosis(

@@ -11,6 +11,7 @@ from .common import (
     _note,
     _outlier_argument,
     _print_screening,
+    _recording_arguments,
     _tolerance_argument,
     _with_tolerance,
 )
@@ -162,11 +163,5 @@ def add(sub) -> None:
     )
     _outlier_argument(c)
     _tolerance_argument(c)
-    c.add_argument("--recording", help="also write a rerun recording (.rrd) of the calibration")
-    c.add_argument(
-        "--rerun-viewer",
-        metavar="URL",
-        help="also stream the recording live to a running viewer, e.g. "
-        "rerun+http://127.0.0.1:9876/proxy",
-    )
+    _recording_arguments(c, "the calibration")
     c.set_defaults(func=cmd_calibrate)

@@ -102,7 +102,8 @@ def _require_deployable(args) -> None:
 
 
 def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=True):
-    """Run the diagnosis; write the report, its figures beside it and the extended model."""
+    """Run the diagnosis; write the report, its figures beside it and the extended model (the
+    report, the figures' paths, the diagnosis and its final model returned)."""
     from robocal.server.calibration import workflow
     from robocal.server.cli.tables import console
 
@@ -117,7 +118,7 @@ def _diagnose_to_files(cell, meas, meas_path, report_path, model_path, screen=Tr
         {"file": Path(meas_path).name, "poses": meas.n_poses, "readings": meas.n_readings},
         model_path,
     )
-    return report, figures, d
+    return report, figures, d, model
 
 
 def _print_outliers(
@@ -293,3 +294,14 @@ def _with_tolerance(cell, args):
     from dataclasses import replace
 
     return replace(cell, tolerance_mm=args.tolerance_mm)
+
+
+def _recording_arguments(parser, what: str) -> None:
+    """--recording and --rerun-viewer: a rerun recording of what the command fits."""
+    parser.add_argument("--recording", help=f"also write a rerun recording (.rrd) of {what}")
+    parser.add_argument(
+        "--rerun-viewer",
+        metavar="URL",
+        help="also stream the recording live to a running viewer, e.g. "
+        "rerun+http://127.0.0.1:9876/proxy",
+    )

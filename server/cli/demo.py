@@ -54,7 +54,7 @@ def cmd_demo(args) -> None:
     model = workflow.model_file(cal, cell, cal_meas)
     write_model(out / "model.json", model)
     geo = workflow.evaluate(model, hold)
-    report, figures, diagnosis = _diagnose_to_files(
+    report, figures, diagnosis, _ = _diagnose_to_files(
         cell, cal_meas, db, out / "report.json", out / "model-extended.json"
     )
     _print_diagnosis(report)

@@ -34,6 +34,7 @@ from robocal.solver.kinematics import flange_frames, joint_frames  # noqa: E402
 from robocal.solver.measurements import Measurements  # noqa: E402
 
 if TYPE_CHECKING:
+    from robocal.server.calibration.workflow import Diagnosed
     from robocal.solver.diagnosis_report import EffectFigure
 
 BEFORE = (255, 140, 0)
@@ -332,3 +333,30 @@ def record_calibration(
 
 
 __all__ = ["record_calibration"]
+
+
+def record_diagnosis(
+    path,
+    *,
+    cell: Cell,
+    meas: Measurements,
+    diagnosed: Diagnosed,
+    model: ModelFile,
+    viewer_url: str | None = None,
+) -> Path:
+    """Write a .rrd of a diagnosis: "after" its final model, the geometry (ls-sum on the same
+    readings) beside it, the effects' figures."""
+    geometric = diagnosed.geometric
+    if geometric is None:  # a diagnosis without standard errors judged no geometry
+        from robocal.server.calibration.workflow import run_method
+
+        geometric = run_method(cell, meas, "ls-sum")
+    return record_calibration(
+        path,
+        cell=cell,
+        meas=meas,
+        calibration=geometric,
+        diagnosis=diagnosed,
+        extended=model,
+        viewer_url=viewer_url,
+    )

@@ -180,6 +180,7 @@ def _verdict(v: Validation) -> dict:
 
 def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.JobInfo) -> dict:
     from robocal.server.calibration.workflow import diagnose, write_diagnosis
+    from robocal.server.recordings.calibration import record_diagnosis
 
     cell, meas = job_data(db, job)
     _update(db, report, job.id, progress=0.1)
@@ -195,9 +196,18 @@ def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.Jo
         path,
         list_figures=True,
     )
+    rrd = record_diagnosis(
+        setup.recordings_dir / f"job-{job.id}.rrd",
+        cell=cell,
+        meas=meas,
+        diagnosed=d,
+        model=model,
+        viewer_url=setup.viewer_url,
+    )
     return {
         "model": str(path),
         "report": str(report_path),
+        "recording": str(rrd),
         "figures": [str(p) for p in figures],
         **_verdict(model.verdict),
     }

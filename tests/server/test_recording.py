@@ -305,3 +305,31 @@ def test_a_diagnosis_recording_shows_the_final_model_after_and_the_geometric_bes
     summary = _static(chunks, "/summary", "TextDocument:text")[0]
     assert f"after: the diagnosis's final model **{d.report.final.model}**" in summary
     assert "| RMS before | RMS after | RMS geometric |" in summary
+
+
+def test_robocal_diagnose_writes_its_recording_with_the_final_model_after(tmp_path):
+    """`robocal diagnose --recording`: the final model "after", the geometry beside it, the
+    summary naming the final model the report names."""
+    import json
+
+    from robocal.server.formats.campaign_csv import write_campaign
+    from tests.server.test_validation_model import campaign as effect_campaign
+
+    _, meas = effect_campaign(40, 21, ("joint_compliance:2",))  # the default cell's
+    csv, out = tmp_path / "meas.csv", tmp_path / "d.rrd"
+    write_campaign(csv, meas)
+    run = subprocess.run(
+        [sys.executable, "-m", "robocal.server.cli", "diagnose", str(csv)]
+        + ["--out", str(tmp_path / "report.json"), "--recording", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=dict(os.environ, RERUN_ANALYTICS="0"),
+    )
+    assert run.returncode == 0, run.stderr
+    assert f"rerun recording to {out}" in " ".join(run.stdout.split())
+    final = json.loads((tmp_path / "report.json").read_text())["final"]["model"]
+    chunks = _chunks(out)
+    assert "/world/frames/geometric/links" in chunks
+    summary = _static(chunks, "/summary", "TextDocument:text")[0]
+    assert f"after: the diagnosis's final model **{final}**" in summary

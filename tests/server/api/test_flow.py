@@ -81,7 +81,15 @@ def test_simulated_campaign_runs_then_calibrates_to_a_model(live):
         png = c.get(f["url"])
         assert png.status_code == 200 and png.content.startswith(b"\x89PNG")
     assert c.get(f"/api/jobs/{diag['id']}/figures/..%2Fsecret.png").status_code == 404
-    assert c.get(f"/api/jobs/{diag['id']}/recording").status_code == 404
+    # its recording: "after" the final model, the geometry beside it
+    rec = c.get(f"/api/jobs/{diag['id']}/recording")
+    assert rec.status_code == 200, rec.text
+    drrd = live.settings.data_dir / "diagnosis.rrd"
+    drrd.write_bytes(rec.content)
+    text = subprocess.run(
+        [str(rerun), "rrd", "print", str(drrd)], capture_output=True, text=True, timeout=120
+    ).stdout
+    assert "/world/frames/geometric/links" in text, text[:2000]
     assert c.get(diag["model_url"]).status_code == 200
 
 
