@@ -11,10 +11,10 @@ import html as entities
 import numpy as np
 import pytest
 
-from robocal.drivers.cell import VirtualCell
 from robocal.server import store
-from robocal.server.acquisition.acquire import acquire
+from robocal.server.acquisition.acquire import AcquireOptions, acquire
 from robocal.server.acquisition.compensated import KEY, TEMPS, without
+from robocal.server.calibration import workflow
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.model_json import ModelFile, write_model
 from robocal.server.verify.certificate import render
@@ -27,28 +27,45 @@ from robocal.server.verify.run import (
     verification_report,
     verify,
 )
-from robocal.solver.effects import Extension
+from robocal.solver.effects import Extension, Inputs
+from robocal.solver.extended import fit_extended
+from robocal.solver.fit_errors import calibration_figures
+from robocal.solver.identify import Problem
 
 SEED = 4
 GROWTH_PPM_PER_C = 100.0  # the simulated arm's growth, and the model's coefficient
-AIR_C = 20.0  # the simulated air when a campaign begins: the growth's zero
+AIR_C = 20.0  # the simulated air when a campaign begins
 OPTS = dict(seed=SEED, cycles=2, directions=2, effects=(f"thermal_drift={GROWTH_PPM_PER_C}",))
 
 
-def model_of_the_cell(growth_per_c: float) -> ModelFile:
-    """The simulated cell's true geometry with a thermal term of that coefficient (per degC)."""
-    c = default_cell()
-    vc = VirtualCell.random(c.robot, c.targets, seed=SEED)
-    term = Extension("thermal_drift", variable="temp_c", t_ref=AIR_C, coef=np.array([growth_per_c]))
-    targets = dict(zip(vc.target_names, vc.true_targets))
-    return ModelFile(vc.true_robot, vc.base, targets, c.robot, [term])
+def fitted_model(db_path) -> ModelFile:
+    """A calibration campaign on the warming cell, its geometry and growth fitted together."""
+    cell = default_cell()
+    s = acquire(db_path, cell, AcquireOptions(poses=60, seed=SEED, effects=OPTS["effects"]))
+    names = tuple(sorted(cell.targets))
+    meas = store.campaign_measurements(
+        store.open_database(db_path), campaign_id=s.campaign, targets=names
+    )
+    cal = workflow.run_method(cell, meas, "ls-sum", screening=False)
+    errors, _ = calibration_figures(cal, meas.q, meas.xyz)
+    term = Extension("thermal_drift", variable="temp_c", t_ref=float(np.nanmean(meas.temp_c)))
+    inputs = Inputs(meas.q, meas.time_s, meas.temp_c)
+    prob = Problem(cal.layout, meas.q, meas.xyz)
+    x, fitted, _ = fit_extended(prob, inputs, cal.x, errors.column >= 0, [term])
+    lay = cal.layout
+    targets = dict(zip(meas.target_names, lay.targets(x)))
+    robot = lay.robot.with_params(x[: lay.n_geo])
+    return ModelFile(robot, lay.base(x), targets, nominal=cell.robot, extensions=fitted)
 
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     """(report with the joints solved per pose, report of the plan without the term, folder)."""
     d = tmp_path_factory.mktemp("thermal")
-    cell, model = default_cell(), model_of_the_cell(1e-6 * GROWTH_PPM_PER_C)
+    cell, model = default_cell(), fitted_model(d / "cell.db")
+    growth = 1e6 * float(model.extensions[0].coef[0])
+    print(f"\nfitted growth {growth:.2f} ppm/degC, simulated {GROWTH_PPM_PER_C:g}")
+    assert abs(growth - GROWTH_PPM_PER_C) < 0.05 * GROWTH_PPM_PER_C
     write_model(d / "model.json", model)
     write_model(d / "planned.json", without(model, {"temp_c"}))  # as the old plan's joints
     per_pose = verify(d / "cell.db", cell, d / "model.json", VerifyOptions(**OPTS, name="a"))
