@@ -41,16 +41,23 @@ def without(model: ModelFile, needs: set[str]) -> ModelFile:
     )
 
 
-def plan_block(model_text: str, desired_mm, q_start_rad, labels) -> dict:
-    """The settings block (KEY) of poses compensated during the run: the model (its file's
-    text), the SMR positions wanted (m, K, 3) mm, the joints each solution starts from (n,) rad
-    and the poses' labels."""
+def plan_block(model_text: str, desired_mm, q_start_rad, labels, after: int) -> dict:
+    """The settings block (KEY) of poses compensated during the run, after the `after` poses
+    planned before it: the model (its file's text), the SMR positions wanted (m, K, 3) mm, the
+    joints each solution starts from (n,) rad and the poses' labels."""
     return {
+        "after": int(after),
         "model": model_text,
         "desired_mm": np.asarray(desired_mm, dtype=float).tolist(),
         "q_start_rad": np.asarray(q_start_rad, dtype=float).tolist(),
         "labels": list(labels),
     }
+
+
+def total_poses(settings: dict | None, stored: int) -> int:
+    """A campaign's poses once every one is stored (`stored`: those stored so far)."""
+    block = (settings or {}).get(KEY)
+    return stored if block is None else max(stored, block["after"] + len(block["labels"]))
 
 
 def latest_temp_c(db, cid: int) -> float | None:

@@ -24,6 +24,7 @@ from robocal.server.acquisition.compensated import (
     TEMPS,
     plan_block,
     temperature_terms,
+    total_poses,
     without,
 )
 from robocal.server.calibration.validation import cell_mismatch
@@ -325,7 +326,8 @@ def prepare(
     if temperature_terms(model):
         assert plan.q_ref is not None  # make_plan's plan has its reference pose
         text = Path(model_path).read_text(encoding="utf-8")
-        deferred = {KEY: plan_block(text, plan.desired, plan.q_ref, labels[len(plan.visit) :])}
+        m = len(plan.visit)
+        deferred = {KEY: plan_block(text, plan.desired, plan.q_ref, labels[m:], after=m)}
     record = {
         "model": {
             "path": model_name or str(model_path),
@@ -374,7 +376,7 @@ def prepare(
 
 def run_poses(q_deg, settings: dict) -> int:
     """The run's poses: those prepare() planned, and those solved during the run."""
-    return len(q_deg) + len(settings.get(KEY, {}).get("labels", ()))
+    return total_poses(settings, len(q_deg))
 
 
 def untimed(model: ModelFile) -> ModelFile:

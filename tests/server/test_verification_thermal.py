@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from robocal.server import store
+from robocal.server.acquisition import compensated
 from robocal.server.acquisition.acquire import AcquireOptions, acquire
-from robocal.server.acquisition.compensated import KEY, TEMPS, without
+from robocal.server.acquisition.compensated import KEY, TEMPS, total_poses, without
 from robocal.server.calibration import workflow
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.model_json import ModelFile, write_model
@@ -87,11 +88,11 @@ def test_ap_after_is_at_the_floor_with_the_joints_solved_at_each_poses_temperatu
     temps = info.settings[TEMPS]
     rows = [i for i, p in enumerate(meas.pose_ids) if p.startswith("compensated-")]
     assert len(temps) == len(rows) and all(t is not None for t in temps)
+    assert per_pose.uncertainty.compensation_note is None
     # each pose solved at the temperature of the reading before it, which the air warmed past
     read = np.nanmean(meas.temp_c, axis=1)
     assert np.allclose(temps, read[[rows[0] - 1] + rows[:-1]], atol=1e-9)
     assert max(temps) - AIR_C > 1.0, temps
-    assert per_pose.uncertainty.compensation_note is None
 
 
 def test_the_stored_joints_are_those_commanded_and_a_cut_off_run_resumes(runs, tmp_path):
@@ -118,6 +119,8 @@ def test_the_stored_joints_are_those_commanded_and_a_cut_off_run_resumes(runs, t
     assert (
         len(stored) == stop_at and [p.label for p in stored] == labels + settings[KEY]["labels"][:2]
     )
+    # the campaign's view counts the poses still to be solved
+    assert total_poses(store.get_campaign(db, campaign_id=cid).settings, stop_at) == 2 * len(q_deg)
     s = acquire(db_path, cell, opts, campaign_id=cid)
     assert s.state == "done" and s.poses == run_poses(q_deg, settings)
     stored_after = store.planned_poses(db, campaign_id=cid)
@@ -127,17 +130,23 @@ def test_the_stored_joints_are_those_commanded_and_a_cut_off_run_resumes(runs, t
     assert len(store.get_campaign(db, campaign_id=cid).settings[TEMPS]) == len(q_deg)
 
 
-def test_without_a_temperature_the_certificate_says_so(runs):
-    per_pose, _, d = runs
-    db = store.open_database(d / "cell.db")
-    info, meas = readings(db, per_pose.campaign)
-    temps = list(info.settings[TEMPS])
-    temps[3] = temps[7] = None
-    info.settings[TEMPS] = temps
-    html = entities.unescape(render(verification_report(info, meas)))
+def test_without_a_temperature_the_poses_leave_the_term_out_and_the_certificate_says_so(
+    runs, tmp_path, monkeypatch
+):
+    """A cell that reports no temperature: each pose is solved without the term (as the old
+    plan was), and the certificate says so in one sentence."""
+    _, planned, d = runs
+    monkeypatch.setattr(compensated, "latest_temp_c", lambda db, cid: None)
+    blind = verify(tmp_path / "blind.db", default_cell(), d / "model.json", VerifyOptions(**OPTS))
+    db = store.open_database(tmp_path / "blind.db")
+    temps = store.get_campaign(db, campaign_id=blind.campaign).settings[TEMPS]
+    assert len(temps) == 4 * len(blind.points) * 2 and all(t is None for t in temps)
+    assert blind.after.AP_max_mm == pytest.approx(planned.after.AP_max_mm, rel=1e-6)
+    html = entities.unescape(render(blind))
     said = (
-        f"2 of the compensated run's {len(temps)} poses were compensated without the model's "
-        "temperature terms (thermal_drift on temp_c): the cell had reported no temperature "
-        "before them."
+        f"{len(temps)} of the compensated run's {len(temps)} poses were compensated without the "
+        "model's temperature terms (thermal_drift on temp_c): the cell had reported no "
+        "temperature before them."
     )
     assert html.count(said) == 1
+    assert runs[0].uncertainty.compensation_note is None
