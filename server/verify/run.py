@@ -465,8 +465,9 @@ def verification_report(
             plan.points,
             joints_clause(timed, per_visit),
         )
-        if per_visit:
-            model_u["compensation_note"] = untempered(timed, info.settings.get(TEMPS, ()))
+        said = untempered(timed, info.settings.get(TEMPS, ())) if per_visit else None
+        if said:
+            model_u["compensation_note"] = said
     ap_u = mpe_mm(cell, plan.points)
     runs: dict[str, RunFigures] = {}
     seconds: dict[str, float | None] = {}
