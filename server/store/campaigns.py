@@ -73,7 +73,9 @@ def create_campaign(
     return campaign.id
 
 
-def extend_plan(db: Database, *, campaign_id: int, poses_deg, labels=None) -> int:
+def extend_plan(
+    db: Database, *, campaign_id: int, poses_deg, labels: Sequence[str] | None = None
+) -> int:
     """Append poses (m x N joints, deg) to a campaign's plan, with these labels or numbered on
     from its last (an adaptive campaign's next batch); the first new pose's index."""
     with db.session(write=True) as s:

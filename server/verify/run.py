@@ -309,7 +309,9 @@ def prepare(
 ):
     """The run's joint commands (2m, n) deg, the nominal visits then the compensated ones, their
     pose labels, and the campaign's settings: the plan the figures are computed from, and the
-    model's geometry, from which the tracker is aimed (clustered poses teach a predictor little)."""
+    model's geometry, from which the tracker is aimed (clustered poses teach a predictor little).
+    A model with a temperature term: the nominal visits' (m, n) only, the compensated ones to be
+    solved during the run from the settings' compensated_plan (run_poses counts them all)."""
     check_options(opts)
     model = read_model(model_path)
     why = cell_mismatch(model, cell)
