@@ -25,6 +25,7 @@ from robocal.drivers.lifecycle import MOVING, StateError, next_state
 from robocal.drivers.predictor import SmrPredictor
 from robocal.drivers.simulated_cell import SimulatedCell, surveyed_base
 from robocal.server import store
+from robocal.server.acquisition.compensated import compensated_run
 from robocal.server.acquisition.lease import Lease, process_owner
 from robocal.server.acquisition.summary import AcquireSummary
 from robocal.server.formats.cell_json import Cell, cell_to_json, parse_cell, robot_from_json
@@ -419,14 +420,17 @@ def acquire(
         writer = StateWriter(db, cid, on_event, log)
         stack.callback(writer.close)  # every state reported is stored before acquire returns
         sink: StoreSink | _Progress | _Events = StoreSink(db, cid, writer.settled)
+        # poses a model compensates as each is due (a verification of a thermal model)
+        grown = compensated_run(db, cid, known, names)
+        total = len(poses_deg) if grown is None else grown.total
         if progress:
-            sink = _Progress(sink, progress, len(poses_deg), start)
+            sink = _Progress(sink, progress, total, start)
         engine = CampaignEngine(
             controller, tracker, clock, predictor, sink, run, log, state=state, on_state=writer
         )
         stopper.engine = engine
         if on_event:
-            sink = engine.sink = _Events(sink, on_event, engine, cid, len(poses_deg), start)
+            sink = engine.sink = _Events(sink, on_event, engine, cid, total, start)
         if on_engine:
             on_engine(engine)
         begin = start if start is not None else len(poses_deg)
@@ -435,6 +439,7 @@ def acquire(
             from robocal.server.acquisition.adaptive import adaptive_run
 
             adaptive = adaptive_run(db, cid, cell, base, opts, clock, known, sink, on_event)
+        growing = adaptive if adaptive is not None else grown  # a plan that grows as it runs
         t0 = clock.now()
         try:
             stats = _run(
@@ -444,8 +449,8 @@ def acquire(
                 history=history,
                 partial=partial,
                 plan=None
-                if adaptive is None
-                else adaptive.plan(begin, partial, engine.measuring_order),
+                if growing is None
+                else growing.plan(begin, partial, engine.measuring_order),
             )
         except KeyboardInterrupt:
             writer.close()
@@ -469,7 +474,7 @@ def acquire(
         campaign=cid,
         name=name,
         resumed_at=start if existing else None,
-        poses=int(len(poses_deg) if adaptive is None else len(adaptive.planned)),
+        poses=int(total if adaptive is None else len(adaptive.planned)),
         state=engine.state,
         measured_poses=stats.poses,
         readings=stats.readings,

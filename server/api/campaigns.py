@@ -12,6 +12,7 @@ from fastapi.responses import HTMLResponse, JSONResponse
 from robocal.server import store
 from robocal.server.acquisition import campaigns, cells
 from robocal.server.acquisition.acquire import AcquireOptions
+from robocal.server.acquisition.compensated import total_poses
 from robocal.server.acquisition.planning import check_plan_size, plans_long
 from robocal.server.service.acquisitions import Run
 from robocal.server.verify import run as verification
@@ -78,7 +79,8 @@ def public_campaign(
         simulated=info.simulated,
         notes=info.notes,
         arm=info.arm,
-        poses_total=info.n_poses,
+        # a verification's compensated poses are stored one by one as the run reaches them
+        poses_total=total_poses(info.settings, info.n_poses),
         poses_done=info.n_done,
         run=None
         if run is None

@@ -360,7 +360,7 @@ def verify_model(
     cid = campaigns.plan_given(
         db,
         cell=cell,
-        opts=verification.acquire_options(cell, opts, len(q_deg)),
+        opts=verification.acquire_options(cell, opts, verification.run_poses(q_deg, settings)),
         poses_deg=q_deg,
         labels=labels,
         settings={**settings, "model_job": job_id},

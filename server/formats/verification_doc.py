@@ -133,6 +133,12 @@ class VerificationUncertainty(Ordered):
         description="where the model's extensions need a pose's time or temperature: at which "
         "inputs its U was taken, or why it is not given",
     )
+    # written since the temperature terms are compensated during the run: absent from older files
+    compensation_note: str | None = Field(
+        None,
+        description="where the model's temperature terms were compensated as each pose was due: "
+        "how many poses were compensated without them, the cell having reported no temperature",
+    )
     ap_u: str = Field("", description="how each AP's U is stated")
     decision: Decision | None = Field(
         None,

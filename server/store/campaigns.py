@@ -73,9 +73,11 @@ def create_campaign(
     return campaign.id
 
 
-def extend_plan(db: Database, *, campaign_id: int, poses_deg) -> int:
-    """Append poses (m x N joints, deg) to a campaign's plan, labelled on from its last (an
-    adaptive campaign's next batch); the first new pose's index."""
+def extend_plan(
+    db: Database, *, campaign_id: int, poses_deg, labels: Sequence[str] | None = None
+) -> int:
+    """Append poses (m x N joints, deg) to a campaign's plan, with these labels or numbered on
+    from its last (an adaptive campaign's next batch); the first new pose's index."""
     with db.session(write=True) as s:
         campaign = _campaign(s, campaign_id)
         cell, _ = checks.cell_text(campaign.cell_json)
@@ -83,7 +85,9 @@ def extend_plan(db: Database, *, campaign_id: int, poses_deg) -> int:
         first = s.execute(
             select(func.count()).where(PlannedPose.campaign_id == campaign_id)
         ).scalar_one()
-        _add_plan(s, campaign_id, [str(first + 1 + i) for i in range(len(q))], q, first=first)
+        if labels is None:
+            labels = [str(first + 1 + i) for i in range(len(q))]
+        _add_plan(s, campaign_id, checks.pose_labels(labels, len(q)), q, first=first)
     return int(first)
 
 

@@ -176,7 +176,7 @@ def uncertainty_section(report: VerificationDoc) -> tuple[str, str]:
             '<figure><img alt="U over the working volume" '
             f'src="{figure_uncertainty_map(model.map)}"></figure>'
         )
-    notes = [unc.ap_u, unc.rp_u or "", unc.model_note or ""]
+    notes = [unc.ap_u, unc.rp_u or "", unc.model_note or "", unc.compensation_note or ""]
     if model:
         notes.append(
             f"Model U: the radius holding the arm's position error with "

@@ -9,7 +9,6 @@ store), and the tracker's readings of one SMR give the ISO figures before and af
 from __future__ import annotations
 
 import csv
-import dataclasses
 import datetime as dt
 import hashlib
 import json
@@ -20,6 +19,14 @@ import numpy as np
 
 from robocal.server import store
 from robocal.server.acquisition.acquire import PREDICTOR, AcquireOptions, acquire
+from robocal.server.acquisition.compensated import (
+    KEY,
+    TEMPS,
+    plan_block,
+    temperature_terms,
+    total_poses,
+    without,
+)
 from robocal.server.calibration.validation import cell_mismatch
 from robocal.server.compensate.compensation import MAX_ERROR_MM, solver_model
 from robocal.server.formats.blocks import ModelQuote
@@ -34,8 +41,10 @@ from robocal.server.verify.uncertainty import (
     at_points,
     at_visits,
     decision,
+    joints_clause,
     mpe_mm,
     timed_terms,
+    untempered,
 )
 from robocal.solver.compensate import compensate
 from robocal.solver.iso9283 import (
@@ -300,16 +309,27 @@ def prepare(
 ):
     """The run's joint commands (2m, n) deg, the nominal visits then the compensated ones, their
     pose labels, and the campaign's settings: the plan the figures are computed from, and the
-    model's geometry, from which the tracker is aimed (clustered poses teach a predictor little)."""
+    model's geometry, from which the tracker is aimed (clustered poses teach a predictor little).
+    A model with a temperature term: the nominal visits' (m, n) only, the compensated ones to be
+    solved during the run from the settings' compensated_plan (run_poses counts them all)."""
     check_options(opts)
     model = read_model(model_path)
     why = cell_mismatch(model, cell)
     if why:
         raise InputError(model_path, None, None, f"{why}: not a model of this cell")
     # a plan made before the run cannot know its visits' time and temperature: the terms that
-    # need them are left out of the joints (the model kept whole for U at the visits' inputs)
+    # need them are left out of the planned joints (the model kept whole for U at the visits'
+    # inputs); a temperature term's compensated joints are solved as each pose is due, at the
+    # temperature the cell reported last (acquisition/compensated.py)
     timed = timed_terms(model)
     plan, joints = make_plan(untimed(model) if timed else model, opts)
+    labels = pose_labels(plan)
+    deferred = {}
+    if temperature_terms(model):
+        assert plan.q_ref is not None  # make_plan's plan has its reference pose
+        text = Path(model_path).read_text(encoding="utf-8")
+        m = len(plan.visit)
+        deferred = {KEY: plan_block(text, plan.desired, plan.q_ref, labels[m:], after=m)}
     record = {
         "model": {
             "path": model_name or str(model_path),
@@ -350,20 +370,20 @@ def prepare(
         "base": np.asarray(model.base).tolist(),
         "targets": {k: np.asarray(v).tolist() for k, v in model.targets.items()},
     }
-    settings = {RECORD: record, PREDICTOR: geometry}
-    return np.vstack([joints[w] for w in RUNS]), pose_labels(plan), settings
+    settings = {RECORD: record, PREDICTOR: geometry, **deferred}
+    if deferred:  # the nominal run is planned; the compensated one is solved during the run
+        return joints["nominal"], labels[: len(plan.visit)], settings
+    return np.vstack([joints[w] for w in RUNS]), labels, settings
+
+
+def run_poses(q_deg, settings: dict) -> int:
+    """The run's poses: those prepare() planned, and those solved during the run."""
+    return total_poses(settings, len(q_deg))
 
 
 def untimed(model: ModelFile) -> ModelFile:
     """The model without the extensions that need a pose's time or temperature."""
-    keep = [i for i, e in enumerate(model.extensions) if not e.kind.needs(e)]
-    pick = lambda a: None if a is None else [a[i] for i in keep]  # noqa: E731
-    return dataclasses.replace(
-        model,
-        extensions=[model.extensions[i] for i in keep],
-        parameters=pick(model.parameters),
-        extension_errors=pick(model.extension_errors),
-    )
+    return without(model, {"time_s", "temp_c"})
 
 
 def _first_visit(plan: Plan, j: int) -> int:
@@ -435,15 +455,21 @@ def verification_report(
     model_u: dict = {"model": record.get("uncertainty")}
     if record.get("timed_model"):
         visits = m + np.flatnonzero(plan.visit)  # the compensated run's test visits
+        timed = parse_model(record["timed_model"], f"<campaign {info.id} model>")
+        per_visit = KEY in info.settings  # its temperature terms solved as each pose was due
         model_u = at_visits(
-            parse_model(record["timed_model"], f"<campaign {info.id} model>"),
+            timed,
             cell,
             joints[visits],
             times[visits] if meas.time_s is not None else None,
             temps[visits] if meas.temp_c is not None else None,
             plan.point[plan.visit],
             plan.points,
+            joints_clause(timed, per_visit),
         )
+        said = untempered(timed, info.settings.get(TEMPS, ())) if per_visit else None
+        if said:
+            model_u["compensation_note"] = said
     ap_u = mpe_mm(cell, plan.points)
     runs: dict[str, RunFigures] = {}
     seconds: dict[str, float | None] = {}
@@ -531,7 +557,7 @@ def verify(db_path, cell: Cell, model_path, opts: VerifyOptions, log=None) -> Ve
     summary = acquire(
         db_path,
         cell,
-        acquire_options(cell, opts, len(q_deg)),
+        acquire_options(cell, opts, run_poses(q_deg, settings)),
         log=log,
         poses_deg=q_deg,
         labels=labels,

@@ -61,9 +61,23 @@ def at_points(model: ModelFile, cell: Cell, q_deg, points_mm) -> dict | None:
 
 AT_VISITS = (
     "Model U at each visit's time and temperature, which its time or temperature terms "
-    "({terms}) need (the largest over "
-    "the point's visits); the joints were compensated without those terms, which a plan made "
-    "before the run cannot know, and the volume's map is not drawn"
+    "({terms}) need (the largest over the point's visits); {joints}, and the volume's map is "
+    "not drawn"
+)
+# how the compensated joints took the model's time or temperature terms
+PLANNED = (
+    "the joints were compensated without those terms, which a plan made before the run cannot know"
+)
+PER_VISIT = (
+    "the joints were compensated at the air temperature the cell reported last before each pose"
+)
+PER_VISIT_UNTIMED = (
+    PER_VISIT
+    + " and without its time terms ({untimed}), which a plan made before the run cannot know"
+)
+UNTEMPERED = (
+    "{n} of the compensated run's {total} poses were compensated without the model's "
+    "temperature terms ({terms}): the cell had reported no temperature before them."
 )
 NOT_GIVEN = (
     "Model U is not given: the model's time or temperature terms ({terms}) need each visit's "
@@ -76,11 +90,38 @@ def timed_terms(model: ModelFile) -> list[str]:
     return missing_inputs(model)
 
 
-def at_visits(model: ModelFile, cell: Cell, q_rad, time_s, temp_c, point, points_mm) -> dict:
+def terms_on(model: ModelFile, column: str) -> list[str]:
+    """The model's extensions that need this pose column (time_s, temp_c), as timed_terms."""
+    return [t for t in timed_terms(model) if t.endswith(f" on {column}")]
+
+
+def joints_clause(model: ModelFile, per_visit: bool) -> str:
+    """How the compensated joints took the model's time or temperature terms: left out of a
+    plan made before the run, or (per_visit) its temperature terms at each pose's."""
+    if not per_visit:
+        return PLANNED
+    untimed = terms_on(model, "time_s")
+    return PER_VISIT_UNTIMED.format(untimed=", ".join(untimed)) if untimed else PER_VISIT
+
+
+def untempered(model: ModelFile, temps) -> str | None:
+    """The sentence saying how many of the compensated poses (each one's temperature, None when
+    the cell had reported none) were compensated without the temperature terms; None if none."""
+    n = sum(1 for t in temps if t is None)
+    if not n:
+        return None
+    terms = ", ".join(terms_on(model, "temp_c"))
+    return UNTEMPERED.format(n=n, total=len(temps), terms=terms)
+
+
+def at_visits(
+    model: ModelFile, cell: Cell, q_rad, time_s, temp_c, point, points_mm, joints: str = PLANNED
+) -> dict:
     """The model's U (95 %) at each test point from its visits (q_rad (v, n), each visit's
     time_s and temp_c (v,) or None, point (v,) its test point): at each visit's time and
     temperature, the largest over the point's visits; `model` None and `model_note` the reason
-    where a visit lacks what the model's extensions need."""
+    where a visit lacks what the model's extensions need. `joints` (joints_clause) says how the
+    compensated joints took those terms."""
     q = np.asarray(q_rad, dtype=float)
     K = len(model.targets)
     wide = lambda a: None if a is None else np.repeat(np.asarray(a, float)[:, None], K, 1)  # noqa: E731
@@ -90,6 +131,8 @@ def at_visits(model: ModelFile, cell: Cell, q_rad, time_s, temp_c, point, points
     own = model_uncertainty(model, q, 0.0, t, c)
     read = model_uncertainty(model, q, reading[:, None], t, c)
     terms = ", ".join(timed_terms(model))
+    if (own is None or read is None) and not missing_inputs(model, t, c):
+        return {"model": None}  # a model without a position block: the certificate says so
     if own is None or read is None:
         return {"model": None, "model_note": NOT_GIVEN.format(terms=terms)}
     worst = lambda a: [float(a[point == j, 0].max()) for j in range(len(points_mm))]  # noqa: E731
@@ -102,7 +145,7 @@ def at_visits(model: ModelFile, cell: Cell, q_rad, time_s, temp_c, point, points
             "k": worst(own.k),
             "joint_scatter_deg": own.joint_scatter_deg,
         },
-        "model_note": AT_VISITS.format(terms=terms),
+        "model_note": AT_VISITS.format(terms=terms, joints=joints),
     }
 
 

@@ -120,3 +120,55 @@ def test_verify_refuses_what_it_cannot_run(live, tmp_path):
 def test_imported_readings_on_a_simulated_cell_have_no_arm_to_verify_on(live, model_job):
     r = live.client.post(f"/api/models/{model_job[0]}/verify", json={})
     assert r.status_code == 409 and "imported" in r.json()["detail"], r.text
+
+
+@pytest.mark.sqlite_only
+def test_a_thermal_models_compensated_poses_are_solved_as_due_and_resumed_over_the_api(live):
+    """A model with a temperature term: its compensated poses are stored one by one as the run
+    reaches them; e-stopped among them, reset and resumed over the API, the run replays the
+    stored joints, solves the rest at the temperature then read, and is done."""
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    from robocal.server import store
+    from robocal.server.acquisition.compensated import KEY, TEMPS
+    from robocal.server.formats.model_json import extension_to_json
+    from robocal.solver.effects import Extension
+
+    c = live.client
+    job = calibrate(c, run_campaign(c, name="cal", poses=40, seed=5, pause_s=0))
+    db = store.open_database(live.settings.database)
+    path = Path(store.get_job(db, job_id=job).results["model"])
+    doc = json.loads(path.read_text())
+    growth = Extension("thermal_drift", variable="temp_c", t_ref=20.0, coef=np.array([1e-6]))
+    doc["extensions"] = [extension_to_json(growth)]
+    doc.pop("uncertainty", None)  # its block has no row for the term: U not stated
+    path.write_text(json.dumps(doc))
+
+    r = c.post(f"/api/models/{job}/verify", json={"cycles": 2, "directions": 2, "pause_s": 0})
+    assert r.status_code == 201, r.text
+    v = r.json()
+    vid, total = v["id"], 2 * 5 * 2 * 2 * 2
+    assert v["poses_total"] == total and KEY in v["settings"], v["poses_total"]
+    half = total // 2
+    wait_for(lambda: c.get(f"/api/campaigns/{vid}").json(), lambda j: j["poses_done"] >= half + 3)
+    assert c.post(f"/api/campaigns/{vid}/estop").json()["status"] == "estopped"
+    stopped = wait_for(
+        lambda: c.get(f"/api/campaigns/{vid}").json(),
+        lambda j: j["status"] == "estopped" and not (j["run"] or {}).get("active"),
+    )
+    assert stopped["poses_total"] == total and stopped["poses_done"] < total, stopped
+    stored = store.planned_poses(db, campaign_id=vid)
+    assert half + 3 <= len(stored) < total  # the compensated poses stored only as reached
+    assert c.post(f"/api/campaigns/{vid}/reset").json()["status"] == "paused"
+    assert c.post(f"/api/campaigns/{vid}/resume").status_code == 202
+    wait_for(lambda: c.get(f"/api/campaigns/{vid}").json(), lambda j: j["status"] == "done")
+    after = store.planned_poses(db, campaign_id=vid)
+    assert len(after) == total
+    assert [p.joints_deg for p in after[: len(stored)]] == [p.joints_deg for p in stored]
+    temps = store.get_campaign(db, campaign_id=vid).settings[TEMPS]
+    assert len(temps) == half and all(t is not None for t in temps)
+    rep = c.get(f"/api/campaigns/{vid}/verification").json()
+    assert rep["after"]["AP_max_mm"] < 0.1 and "compensation_note" not in rep["uncertainty"], rep
