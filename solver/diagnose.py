@@ -550,6 +550,10 @@ def select_suspecting(diag: Diagnoser, cands, log=None, max_effects: int = MAX_E
         return steps, base, final, region
     if log:
         log("  nothing named: the gravity-loaded joints' one-stiffness compliance on its own")
+    diag.warm = base.fits  # geometry's fits, converged: its cross-validation again starts there
+    if not select(diag, suspects, None, 1, SUSPECT_ALPHA, SUSPECT_RESAMPLES)[0]:
+        # none clears the null: the region folds' geometric fits (select_holding) would be idle
+        return steps, base, final, region
     found, _, found_final, found_region = select_holding(
         diag,
         suspects,
