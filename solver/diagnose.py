@@ -27,6 +27,7 @@ from .extrapolation import (
     span_parts,
 )
 from .finite import finite
+from .gravity import gravity_suspects
 from .identify import register
 from .kinematics import Layout, predict_rows
 from .motion import visit_order
@@ -35,7 +36,14 @@ from .noise import noise_floor as tracker_noise
 from .problem import Problem
 from .report_blocks import Alternative, CrossValidation, ExtrapolationReport, FoldResult, Refused
 from .screen import screen_readings
-from .selection import EDGE_POSES, linear_scores, paired_t, rmse_gain_interval
+from .selection import (
+    ALPHA,
+    EDGE_POSES,
+    RESAMPLES,
+    linear_scores,
+    paired_t,
+    rmse_gain_interval,
+)
 from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
 from .tall import tall_qr
 
@@ -367,7 +375,14 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
     return kept, Extrapolation(folds, [g.check for g in geo], refused)
 
 
-def select(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFECTS):
+def select(
+    diag: Diagnoser,
+    cands,
+    log=None,
+    max_effects: int = MAX_EFFECTS,
+    alpha: float = ALPHA,
+    resamples: int = RESAMPLES,
+):
     """Forward selection; returns the accepted steps and the baseline's and final model's CV.
 
     Each round scores every remaining candidate by its linearised held-out gain against the
@@ -396,11 +411,12 @@ def select(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFECTS):
             pose_of_row,
             diag.folds,
             m,
+            resamples=resamples,
             seed=len(steps),
             scans=scans,
             null_residual=fresh,
         )
-        thr = sc.threshold()
+        thr = sc.threshold(alpha)
         n_read = cv_now.n.sum()
         # called only within this iteration, so the loop variables it reads are the current ones
         rms = lambda i: float(np.sqrt(max(sc.sse - sc.gain[i], 0.0) / n_read))  # noqa: E731, B023
@@ -462,7 +478,15 @@ def select(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFECTS):
     return steps, base, cv_now
 
 
-def select_holding(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFECTS, clock=None):
+def select_holding(
+    diag: Diagnoser,
+    cands,
+    log=None,
+    max_effects: int = MAX_EFFECTS,
+    clock=None,
+    alpha: float = ALPHA,
+    resamples: int = RESAMPLES,
+):
     """Forward selection whose effects hold off the training region: the steps, the baseline's
     and final CV, and the region folds' verdict.
 
@@ -478,7 +502,7 @@ def select_holding(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFE
     for round_ in range(REFUSAL_ROUNDS):
         t = time.perf_counter()
         diag.warm = {}  # each round starts from geometry alike
-        steps, base, final = select(diag, pool, log, max_effects)
+        steps, base, final = select(diag, pool, log, max_effects, alpha, resamples)
         clock["selection"] += time.perf_counter() - t
         t = time.perf_counter()
         kept, region = extrapolating(diag, steps, log)
@@ -495,6 +519,59 @@ def select_holding(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFE
         if log:
             log("  selecting again without the refused effects")
     return steps, base, final, replace(region, refused=refused)
+
+
+# The second look's family-wise false-alarm rate per round: a sixth of the first's (ALPHA), so
+# both together stay near ALPHA. At ALPHA itself it named a compliance on 2 of 200 clean simulated
+# campaigns (seeds 101000-101199) that the first look did not (their p 0.0008 and 0.0015 over the
+# two suspects); the real arms' suspects it names have p below 0.00005.
+SUSPECT_ALPHA = 0.0005
+SUSPECT_RESAMPLES = 20_000  # the 0.9995 quantile of the null from its 10 largest
+
+
+def select_suspecting(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFECTS, clock=None):
+    """select_holding over every candidate; when that names nothing, the usual suspects alone:
+    the one-stiffness compliance of the joints carrying the arm's weight (gravity.gravity_suspects).
+
+    Among some forty candidates the family-wise bar is high, and an effect refused off the training
+    region takes the innocent ones selected with it: on the real UR5's 1,000 poses joint 2's
+    compliance held on every region fold alone yet went refused beside periodic terms that did
+    not. Tested alone, a family of two, it must clear the campaign's own null at SUSPECT_ALPHA,
+    gain on the random folds and hold on every region and configuration fold, or it is not named.
+    """
+    steps, base, final, region = select_holding(diag, cands, log, max_effects, clock)
+    joints = gravity_suspects(diag.prob.layout, diag.x0, diag.prob.q)
+    suspects = [
+        c
+        for c in cands
+        if c.name == "joint_compliance" and c.masses is not None and c.joint in joints
+    ]
+    if steps or not suspects:
+        return steps, base, final, region
+    if log:
+        log("  nothing named: the gravity-loaded joints' one-stiffness compliance on its own")
+    diag.warm = base.fits  # geometry's fits, converged: its cross-validation again starts there
+    if not select(diag, suspects, None, 1, SUSPECT_ALPHA, SUSPECT_RESAMPLES)[0]:
+        # none clears the null: the region folds' geometric fits (select_holding) would be idle
+        return steps, base, final, region
+    found, _, found_final, found_region = select_holding(
+        diag,
+        suspects,
+        log,
+        min(max_effects, len(suspects)),
+        clock,
+        SUSPECT_ALPHA,
+        SUSPECT_RESAMPLES,
+    )
+    # refused alone, its own figures replace those beside others; named, it held alone
+    alone = found_region.refused + [(st[0], []) for st in found]
+    refused = [r for r in region.refused if not any(same_variant(r[0], a[0]) for a in alone)]
+    refused += found_region.refused
+    if not found:
+        return steps, base, final, replace(region, refused=refused)
+    for step in found:
+        step[3]["suspect"] = True
+    return found, base, found_final, replace(found_region, refused=refused)
 
 
 def same_variant(a: Extension, b: Extension) -> bool:
@@ -550,7 +627,7 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     clock["setup"] = time.perf_counter() - t0
     diag = Diagnoser(prob, x0, free, inputs)
     cands = candidates(prob.layout, x0, inputs)
-    steps, base, final, region = select_holding(diag, cands, log, clock=clock)
+    steps, base, final, region = select_suspecting(diag, cands, log, clock=clock)
     t_resample = time.perf_counter()
     stability = resampled(diag, cands, steps)
     clock["resamples"] = time.perf_counter() - t_resample
@@ -591,7 +668,7 @@ def resampled(diag: Diagnoser, cands, steps) -> Stability | None:
     for keep in subsets:
         prob = identify.Problem(diag.prob.layout, diag.prob.q[keep], diag.prob.meas[keep])
         sub = Diagnoser(prob, diag.x0, diag.free, diag.inputs.subset(keep))
-        chosen, _, _, _ = select_holding(sub, cands, max_effects=1)  # the top cause may differ
+        chosen, _, _, _ = select_suspecting(sub, cands, max_effects=1)  # the top cause may differ
         named.append(tuple(effect_key(st[0]) for st in chosen))
     final = tuple(effect_key(st[0]) for st in steps)
     return Stability(min(map(len, subsets)), final, tuple(named))

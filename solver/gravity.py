@@ -71,3 +71,24 @@ def select_independent(B: np.ndarray, tol: float = 1e-6) -> np.ndarray:
     rank = int(np.sum(np.abs(np.diag(R)) > tol * abs(R[0, 0])))
     keep[live[piv[:rank]]] = True
     return keep
+
+
+# A joint is a usual suspect of compliance when the nominal gravity torque it carries varies over
+# the campaign at least this share of the most loaded joint's: the shoulder and elbow of a serial
+# arm, far from the wrist's few percent (the nominal model lumps the wrist at the last joint).
+SUSPECT_SHARE = 0.25
+
+
+def gravity_suspects(layout: Layout, x, q: np.ndarray) -> list[int]:
+    """The joints (0-based) whose nominal gravity torque varies most over the poses q: those that
+    carry the arm's weight, where a compliance is the physics' first guess."""
+    g = gravity_in_base(layout, x)
+    spread = np.array(
+        [
+            np.std(gravity_basis(layout, x, q, j, g) @ nominal_masses(layout, x, j))
+            for j in range(layout.robot.n_joints)
+        ]
+    )
+    if not spread.max() > 0:
+        return []
+    return [int(j) for j in np.flatnonzero(spread >= SUSPECT_SHARE * spread.max())]
