@@ -32,7 +32,7 @@ MAX_CONDITION = 1e3
 # said as a warning, since no poses lower it (a 3 m arm, its SMR 1 mm off the flange axis:
 # 1535 on 60 poses, 1551 on 240, the layout's 1311) and the parameters' standard errors and
 # the held-out error already say what it costs. Poor poses sit far above their layout's (5
-# poses of a 6-axis arm: 1959-4751 against about 20).
+# poses of a 6-axis arm: 1959-4751 against 15.6).
 LAYOUT_EXCESS = 2.0
 # Held-out RMS more than this multiple of the fit RMS (or of the noise floor, if larger): the
 # model does not predict new poses. A sound least-squares fit expects equations / (equations -

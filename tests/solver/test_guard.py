@@ -119,6 +119,6 @@ def test_a_condition_number_near_its_layouts_warns_and_one_far_above_it_refuses(
     far above it (few or alike poses): the poses', a reason."""
     v = verdict(condition_number=1535.0, layout_condition=1311.0)
     assert v.deployable and "layout's own (1.31e+03" in v.warnings[0], v.warnings
-    v = verdict(condition_number=1959.0, layout_condition=20.0)
+    v = verdict(condition_number=1959.0, layout_condition=15.6)
     assert not v.deployable and v.reasons[0].startswith("condition number 1.96e+03"), v.reasons
     assert not verdict(condition_number=2000.0, layout_condition=float("nan")).deployable
