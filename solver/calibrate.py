@@ -74,7 +74,8 @@ class Calibration(Result):
     left out), success, status (0 converged, 1 iteration limit, 2 stopped without converging),
     message, nit, fixed, shrunk (name -> identifiability.Shrunk), prior (solver.prior.Prior,
     None for nominal), condition (of the identified parameters), F (per target, mm^2), seconds.
-    The method's own figures are further attributes: structural_condition, lm (the
+    The method's own figures are further attributes: structural_condition, layout_condition
+    (the identified parameters' condition number on rich poses, identifiability), lm (the
     least-squares stage) and prior_cost (the prior's term, mm^2: the objective is cost plus
     it) for every fit; start (ls-sum, ls-single, minimax); pose_weight_mm_per_rad (ls-pose);
     worst_target, worst_F, qp, qp_iterations, qp_converged, history, lam, mu, constraints,
@@ -116,6 +117,12 @@ class Calibration(Result):
     @noise_floor.setter
     def noise_floor(self, value: NoiseFloor | None) -> None:
         self["noise_floor"] = value
+
+    @property
+    def layout_condition(self) -> float | None:
+        """The identified parameters' condition number on rich random poses: the least the
+        robot and SMR layout allow, whatever the poses; None for the nominal model."""
+        return self.get("layout_condition")
 
     @property
     def shrunk(self) -> dict[str, ident.Shrunk]:
@@ -220,6 +227,13 @@ def _structural(problem: Problem, rows: list[int], weight=None):
     return lay, ident.structural(lay, x0, candidates, rows=rows, pose_weight=weight)
 
 
+def _layout_condition(problem: Problem, rows: list[int], data: ident.DataCheck, weight=None):
+    """The condition number data's identified parameters have on rich poses (the layout's)."""
+    lay = Layout(problem.robot, np.eye(4), problem.target_names)
+    x0 = lay.initial(problem.targets)
+    return ident.layout_condition(lay, x0, data.identified, rows, weight)
+
+
 def _lm_figures(res) -> dict:
     """The least-squares stage's effort, as every fitting method reports it."""
     return {
@@ -259,6 +273,7 @@ def _ls_pose(problem: Problem, rows: list[int], **_) -> Fitted:
     x = fit_targets(prob, x, range(len(p.target_names)))
     own = {
         "structural_condition": st.condition,
+        "layout_condition": _layout_condition(p, rows, data, weight),
         "pose_weight_mm_per_rad": weight,
         "lm": _lm_figures(res),
     }
@@ -326,7 +341,12 @@ def _least_squares(problem: Problem, rows: list[int]) -> _LeastSquares:
             fit.prior = prior = geometry_prior(prob.layout, data.free, scatter)
             x, res = fit.fit(first)
             del first
-    own = {"structural_condition": st.condition, "start": fit.start, "lm": _lm_figures(res)}
+    own = {
+        "structural_condition": st.condition,
+        "layout_condition": _layout_condition(p, rows, data),
+        "start": fit.start,
+        "lm": _lm_figures(res),
+    }
     return _LeastSquares(fit, x, res, data, {**st.fixed, **data.held}, own, data.shrunk, prior)
 
 

@@ -27,6 +27,13 @@ NOISE_FLOOR_FRACTION = 0.6
 # Jacobi-scaled condition number of the identification past which the model is not deployed
 # (healthy campaigns of 20 poses or more: 10 to 100; identifiability refuses past 1e7).
 MAX_CONDITION = 1e3
+# A condition number past MAX_CONDITION but within this multiple of the layout's (the same
+# parameters' on 240 random poses within the limits) is the robot's and SMRs', not the poses':
+# said as a warning, since no poses lower it (a 3 m arm, its SMR 1 mm off the flange axis:
+# 1535 on 60 poses, 1551 on 240, the layout's 1311) and the parameters' standard errors and
+# the held-out error already say what it costs. Poor poses sit far above their layout's (5
+# poses of a 6-axis arm: 1959-4751 against 15.6).
+LAYOUT_EXCESS = 2.0
 # Held-out RMS more than this multiple of the fit RMS (or of the noise floor, if larger): the
 # model does not predict new poses. A sound least-squares fit expects equations / (equations -
 # free): 1.14 at 30 poses of 3 SMRs.
@@ -167,6 +174,7 @@ def judge(
     noise_floor_source: str = "",
     tolerance_mm: float | None = None,
     max_floor_ratio: float | None = MAX_FLOOR_RATIO,
+    layout_condition: float | None = None,
 ) -> Validation:
     """The guard: each limit the fit breaks is one reason, naming its figures and the limit.
 
@@ -174,7 +182,9 @@ def judge(
     max_floor_ratio: the multiple of the noise floor past which the held-out RMS says the model
     lacks an effect, None: not judged; a reason without a tolerance (stating the accuracy to
     expect), a warning with one (the tolerance decides); not said of a fit with too few poses or
-    one that does not predict new poses (its held-out excess is its own, not a missing effect's).
+    one that does not predict new poses (its held-out excess is its own, not a missing effect's);
+    layout_condition: the identified parameters' condition number on rich poses (None: unknown),
+    within LAYOUT_EXCESS of which a condition number past the limit is a warning.
     """
     v = Validation(
         fit_rms_mm,
@@ -206,6 +216,13 @@ def judge(
         v.reasons.append(
             "the condition number is not a figure: nothing of the arm was identified (the "
             "nominal model, only registered on the data), or its identification failed"
+        )
+    elif not condition_number <= MAX_CONDITION and _layouts(condition_number, layout_condition):
+        v.warnings.append(
+            f"condition number {condition_number:.3g} exceeds {MAX_CONDITION:.0f}, as the robot "
+            f"and SMR layout's own ({layout_condition:.3g} on random poses within the limits): "
+            "more poses would not lower it; the parameters it barely separates are as well "
+            "known as their standard errors say (SMRs further from the joint axes separate them)"
         )
     elif not condition_number <= MAX_CONDITION:
         v.reasons.append(
@@ -283,3 +300,8 @@ def lacking_effect(v: Validation, max_floor_ratio: float | None) -> list[str]:
         "tolerance the application needs (--tolerance-mm, or the cell's tolerance_mm) to deploy "
         "within it"
     ]
+
+
+def _layouts(condition: float, layout: float | None) -> bool:
+    """Whether a condition number is within LAYOUT_EXCESS of its layout's (the poses' no fault)."""
+    return layout is not None and np.isfinite(layout) and condition <= LAYOUT_EXCESS * layout

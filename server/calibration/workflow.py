@@ -296,6 +296,7 @@ def validate(
         condition=cal.condition,
         free_parameters=effective_parameters(errors.column, cal.shrunk),
         floor=(floor.mm, floor.source),
+        layout_condition=cal.layout_condition,
     )
 
 
@@ -311,11 +312,13 @@ def verdict(
     free_parameters: int,
     floor: tuple[float | None, str],
     holdout_method: str = HOLDOUT_METHOD,
+    layout_condition: float | None = None,
 ) -> Validation:
     """The `validation` block of a model fitted on meas, `calibrate`'s and `diagnose`'s alike (one
     model, one verdict): the guard's limits (solver.guard.judge: past MAX_FLOOR_RATIO times the
     noise floor a reason without a tolerance, a warning with one), the physics' (implausible),
-    the SMR layout's warnings."""
+    the SMR layout's warnings; layout_condition: the identified parameters' condition number on
+    rich poses (solver.identifiability.layout_condition), None: unknown."""
     from robocal.solver import guard
 
     mm, source = floor
@@ -329,6 +332,7 @@ def verdict(
         noise_floor_mm=mm,
         noise_floor_source=source,
         tolerance_mm=cell.tolerance_mm,
+        layout_condition=layout_condition,
     )
     v.reasons += implausible(cell, meas, robot)
     return validation_block(
@@ -587,7 +591,9 @@ def _judge_diagnosis(
         nominal_targets={t: cell.targets[t] for t in meas.target_names},
         nominal_base=cell.base,
     )
-    model.validation = validate_diagnosis(report, errors, cell, meas, model, geometric.condition)
+    model.validation = validate_diagnosis(
+        report, errors, cell, meas, model, geometric.condition, geometric.layout_condition
+    )
     return geometric
 
 
@@ -598,10 +604,11 @@ def validate_diagnosis(
     meas: Measurements,
     model: ModelFile,
     condition: float,
+    layout_condition: float | None = None,
 ) -> Validation:
     """model.json's `validation` block of a diagnosis's final model, by the calibration's rule
     (verdict): its own cross-validated held-out figures against its fit, with the geometry's
-    condition number and the report's noise floor."""
+    condition number (and its layout's) and the report's noise floor."""
     from robocal.solver import guard
     from robocal.solver.diagnose import FOLDS
 
@@ -621,6 +628,7 @@ def validate_diagnosis(
         # the solver's report always says where its floor comes from; one read from a file may not
         floor=(report.noise_floor_mm, report.noise_floor_source or "unstated"),
         holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
+        layout_condition=layout_condition,
     )
 
 

@@ -112,3 +112,13 @@ def test_each_limit_gives_its_reason_and_a_healthy_fit_none():
     # a held-out error near the tracker's noise is no alarm, however small the fit's
     assert verdict(fit_rms_mm=0.01, holdout=_Holdout(0.025), noise_floor_mm=0.015).deployable
     assert verdict(condition_number=float("nan")).reasons  # not a figure: not deployable
+
+
+def test_a_condition_number_near_its_layouts_warns_and_one_far_above_it_refuses():
+    """Past the limit within LAYOUT_EXCESS of the layout's own: the robot's and SMRs', a warning;
+    far above it (few or alike poses): the poses', a reason."""
+    v = verdict(condition_number=1535.0, layout_condition=1311.0)
+    assert v.deployable and "layout's own (1.31e+03" in v.warnings[0], v.warnings
+    v = verdict(condition_number=1959.0, layout_condition=15.6)
+    assert not v.deployable and v.reasons[0].startswith("condition number 1.96e+03"), v.reasons
+    assert not verdict(condition_number=2000.0, layout_condition=float("nan")).deployable

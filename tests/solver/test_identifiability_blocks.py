@@ -82,6 +82,7 @@ def test_the_structural_checks_memory_grows_linearly_with_the_smrs():
     # needed about (16/3)^2 (8x measured before issue 20)
     def check(k):
         ident._structural.cache_clear()
+        ident._rich_r.cache_clear()  # the rich poses' R it is built on, cached apart
         names = tuple(f"T{i}" for i in range(k))
         layout = Layout(IRB2600, np.eye(4), names)
         return lambda: ident.structural(
