@@ -129,7 +129,7 @@ def test_a_refused_rich_compliance_leaves_its_one_stiffness_to_be_selected(monke
     stiffness on the nominal mass model holds off the training region and is named."""
     from robocal.solver import diagnose as diagnosis
 
-    def richest_variant(trial, ok, best, sc):
+    def richest_variant(trial, ok, best, sc, grouped=None):
         same = [i for i in ok if diagnosis.same_effect(trial[i], trial[best])]
         return max(same, key=lambda i: trial[i].n_params)
 
