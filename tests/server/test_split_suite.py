@@ -137,7 +137,8 @@ def test_a_compliance_with_a_periodic_error_of_its_joint_holds_in_the_other_elbo
     masses fitted win on random folds and absorb the periodic term (it lies in the driven link's
     columns) but fit the training configuration's quirks: 0.78 of geometry's excess removed in the
     other configuration. Judged on the grouped folds, the compliance with only its driven link's
-    masses fitted is taken and removes at least 80%."""
+    masses fitted is taken and removes at least 80% (the periodic term, inside its span, is the
+    same function under another name, not another cause it stands in for)."""
     case = ss.draw_split_case(29, "compliance_periodic")
     assert case.arm == "random" and case.n_train == 60
     r = ss.run_split_case(case)
