@@ -431,10 +431,12 @@ def select(diag: Diagnoser, cands, log=None, max_effects: int = MAX_EFFECTS):
         else:
             best = simplest_variant(trial, ok, best, sc)
         simplest = min(variants, key=lambda i: trial[i].n_params)
+        system = (A, r, blocks, pose_of_row)
         if best != simplest and another_cause(
-            trial, ok, best, simplest, (A, r, blocks, pose_of_row), grouped_tests or diag.folds
+            trial, ok, best, simplest, system, grouped_tests or diag.folds, diag.folds, len(steps)
         ):
             best = simplest
+        best = nested_simpler(trial, ok, best, system, sc)
         # a richer variant of an accepted effect replaces it (a compliance's masses fitted
         # where the nominal mass model's one stiffness left a clear part of its signature)
         replaced = next((k for k, st in enumerate(steps) if same_effect(st[0], trial[best])), None)
@@ -555,31 +557,64 @@ def simplest_variant(trial, ok, best: int, sc, grouped=None) -> int:
     return choice
 
 
-def another_cause(trial, ok, rich: int, simple: int, system, folds) -> bool:
-    """Whether the simpler variant with another candidate cause does as well held out as the
-    richer variant (not clearly beaten by it, paired t over poses below T_SIMPLER, on `folds`):
-    the richer variant's extra freedom then stands in for another effect (a joint-2 compliance's
-    driven-link masses for joint 3's compliance on 40 poses, which was then no longer named), so
-    the simpler variant is taken and the other cause competes next on its own evidence. Causes
-    inside the richer variant's span are the same function under another name (a periodic error
-    of the joint in its driven link's first harmonic) and are not counted. `system` is the
-    current model's columns and residual, the candidates' columns and each row's pose."""
-    A, r, blocks, pose_of_row = system
-    m = int(pose_of_row.max()) + 1
+def inside_span(trial, ok, of: int, system) -> list[int]:
+    """The candidates among ok (other than `of`) whose columns, beyond the current model's, lie
+    in the span of candidate `of`'s (all but SAME_SPAN of them): the same function under another
+    name."""
+    A, _, blocks, _ = system
 
     def outside(X, B):  # B's part outside the span of X's columns
         Q, _ = np.linalg.qr(X)
         return B - Q @ (Q.T @ B)
 
     base = outside(A, np.concatenate([blocks[o] for o in ok], axis=1))
-    beside = outside(np.concatenate([A, blocks[rich]], axis=1), base)
+    beside = outside(np.concatenate([A, blocks[of]], axis=1), base)
     cuts = np.cumsum([0] + [blocks[o].shape[1] for o in ok])
-    others = [
+    return [
         o
         for k, o in enumerate(ok)
-        if not same_effect(trial[o], trial[rich])
+        if o != of
         and np.linalg.norm(beside[:, cuts[k] : cuts[k + 1]])
-        > SAME_SPAN * np.linalg.norm(base[:, cuts[k] : cuts[k + 1]])
+        <= SAME_SPAN * np.linalg.norm(base[:, cuts[k] : cuts[k + 1]])
+    ]
+
+
+def nested_simpler(trial, ok, best: int, system, sc) -> int:
+    """The best candidate, or a candidate of another effect with fewer parameters inside its span
+    that it does not clearly beat on the random folds (paired t below T_SIMPLER): a joint-2
+    periodic error is a first harmonic of q2, which a compliance with its driven link's masses
+    fitted also spans with one term more."""
+    simpler = [
+        o
+        for o in inside_span(trial, ok, best, system)
+        if trial[o].n_params < trial[best].n_params
+        and not same_effect(trial[o], trial[best])
+        and paired_t(sc.pose_sse - sc.pose_gain[o], sc.pose_sse - sc.pose_gain[best]) < T_SIMPLER
+    ]
+    return max(simpler, key=lambda o: sc.gain[o]) if simpler else best
+
+
+def another_cause(trial, ok, rich: int, simple: int, system, folds, random_folds, seed) -> bool:
+    """Whether the simpler variant with another candidate cause does as well held out as the
+    richer variant (not clearly beaten by it, paired t over poses below T_SIMPLER, on `folds`),
+    that cause clearing the selection's own bar beside the simpler variant (its null over
+    `random_folds`): the richer variant's extra freedom then stands in for another effect (a
+    joint-2 compliance's driven-link masses for joint 3's compliance on 40 poses, which was then
+    no longer named), so the simpler variant is taken and the other cause is selected next on
+    its own evidence. Causes inside the richer variant's span are the same function under another
+    name (a periodic error of the joint in its driven link's first harmonic) and are not counted.
+    `system` is the current model's columns and residual, the candidates' columns and each row's
+    pose."""
+    A, r, blocks, pose_of_row = system
+    m = int(pose_of_row.max()) + 1
+    same = inside_span(trial, ok, rich, system)
+    others = [
+        o
+        for o in ok
+        if o != rich
+        and o not in same
+        and not same_effect(trial[o], trial[rich])
+        and not trial[o].kind.located_in_time  # its evidence needs its own scan for a time
     ]
     if not others:
         return False
@@ -587,10 +622,20 @@ def another_cause(trial, ok, rich: int, simple: int, system, folds) -> bool:
     sc = linear_scores(A, r, [blocks[rich]] + pairs, pose_of_row, folds, m, resamples=0)
     tested = sc.pose_sse > 0
     rich_sse = (sc.pose_sse - sc.pose_gain[0])[tested]
-    return any(
-        paired_t((sc.pose_sse - sc.pose_gain[k])[tested], rich_sse) < T_SIMPLER
-        for k in range(1, len(pairs) + 1)
-    )
+    tied = [
+        o
+        for k, o in enumerate(others, start=1)
+        if paired_t((sc.pose_sse - sc.pose_gain[k])[tested], rich_sse) < T_SIMPLER
+    ]
+    if not tied:
+        return False
+    # beside the simpler variant, does a tied cause pass the selection's test on its own?
+    A2 = np.concatenate([A, blocks[simple]], axis=1)
+    tb = [blocks[o] for o in tied]
+    fresh = linear_scores(A2, r, tb, pose_of_row, random_folds, m, resamples=0).fresh
+    sc2 = linear_scores(A2, r, tb, pose_of_row, random_folds, m, seed=seed, null_residual=fresh)
+    thr = sc2.threshold()
+    return bool(np.any((sc2.z > thr) & (sc2.gain > MIN_GAIN * sc2.sse)))
 
 
 def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
