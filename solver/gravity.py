@@ -11,6 +11,9 @@ from .kinematics import Layout, joint_frames
 DOWN = np.array([0.0, 0.0, -1.0])  # gravity in a levelled tracker's frame
 
 
+LINK_TERMS = 4  # gravity_basis's columns per link: its mass and three first mass moments
+
+
 def gravity_basis(layout: Layout, x, q, joint: int, gravity: np.ndarray) -> np.ndarray:
     """Gravity torque on a joint per unit of each link's mass and first mass moments, (m, 4 (n - j)).
 

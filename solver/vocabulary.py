@@ -15,7 +15,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .gravity import gravity_basis, gravity_in_base, nominal_masses, select_independent
+from .extrapolation import gravity_loaded
+from .gravity import (
+    LINK_TERMS,
+    gravity_basis,
+    gravity_in_base,
+    nominal_masses,
+    select_independent,
+)
 from .motion import last_motion
 
 MDEG_PER_RAD = np.degrees(1.0) * 1000.0
@@ -206,26 +213,34 @@ class JointScale(Effect):
 
 class JointCompliance(Effect):
     """dq_j = one stiffness x the gravity torque of the nominal mass model (the physics'
-    parsimony: it extrapolates), or the torque's terms of every link beyond j with their masses
-    and mass moments fitted (a richer model, taken only where it pays off on its own test)."""
+    parsimony: it extrapolates); that torque with the mass moments of the link the joint drives
+    fitted beside it (the body nearest the joint, a counterbalance acting on its angle); or the
+    torque's terms of every link beyond j with their masses and mass moments fitted. The richer
+    models are taken only where they pay off on their own test."""
 
     name = "joint_compliance"
 
     def n_params(self, ext):
-        if ext.masses is not None:
-            return 1
-        return 0 if ext.keep is None else int(ext.keep.sum())
+        fitted = 0 if ext.keep is None else int(ext.keep.sum())
+        return fitted + (1 if ext.masses is not None else 0)
 
     def label(self, ext):
-        rich = "" if ext.masses is not None else ", masses fitted"
-        return f"{self.name}({ext.joint + 1}{rich})"
+        if ext.masses is None:
+            return f"{self.name}({ext.joint + 1}, masses fitted)"
+        if ext.keep is not None:
+            return f"{self.name}({ext.joint + 1}, its link's masses fitted)"
+        return f"{self.name}({ext.joint + 1})"
 
     def basis(self, ext, layout, x, inputs):
         raw = gravity_basis(layout, x, inputs.q, ext.joint, ext.gravity)
-        return raw @ ext.masses[:, None] if ext.masses is not None else raw[:, ext.keep]
+        cols = [] if ext.masses is None else [raw @ ext.masses[:, None]]
+        return np.concatenate(cols + ([] if ext.keep is None else [raw[:, ext.keep]]), axis=1)
 
     def candidates(self, layout, x, inputs):
         g = gravity_in_base(layout, x)
+        # a vertical axis carries next to no gravity torque: its driven link's moment fitted
+        # would be a first harmonic of its angle under another name
+        loaded = gravity_loaded(layout, x, inputs.q)
         out = []
         for j in range(layout.robot.n_joints):
             raw = gravity_basis(layout, x, inputs.q, j, g)
@@ -233,8 +248,16 @@ class JointCompliance(Effect):
             if not keep.any():
                 continue
             w = nominal_masses(layout, x, j)
-            if select_independent(raw @ w[:, None]).any():
+            nominal = raw @ w[:, None]
+            if select_independent(nominal).any():
                 out.append(Extension(self.name, joint=j, gravity=g, masses=w))
+            if j in loaded:
+                # the driven link's columns (gravity_basis's first four) beside the nominal torque
+                own = select_independent(np.concatenate([nominal, raw[:, :LINK_TERMS]], axis=1))
+                mid = np.zeros(len(keep), dtype=bool)
+                mid[:LINK_TERMS] = own[1:]
+                if own[0] and 0 < mid.sum() < keep.sum() - 1:
+                    out.append(Extension(self.name, joint=j, gravity=g, masses=w, keep=mid))
             if keep.sum() > 1:
                 out.append(Extension(self.name, joint=j, keep=keep, gravity=g))
         return out
@@ -255,26 +278,26 @@ class JointCompliance(Effect):
         )
 
     def to_json(self, ext):
+        out = {"gravity": np.asarray(ext.gravity, dtype=float).tolist()}
         if ext.masses is not None:
-            return {
-                "gravity": np.asarray(ext.gravity, dtype=float).tolist(),
-                "masses": np.asarray(ext.masses, dtype=float).tolist(),
-            }
-        return {
-            "gravity": np.asarray(ext.gravity, dtype=float).tolist(),
-            "gravity_terms": np.flatnonzero(ext.keep).tolist(),
-            "gravity_terms_total": len(ext.keep),
-        }
+            out["masses"] = np.asarray(ext.masses, dtype=float).tolist()
+        if ext.keep is not None:
+            out["gravity_terms"] = np.flatnonzero(ext.keep).tolist()
+            out["gravity_terms_total"] = len(ext.keep)
+        return out
 
     def from_json(self, read):
+        out = {"gravity": read.vector("gravity")}
         if read.has("masses"):
-            return {"gravity": read.vector("gravity"), "masses": read.vector("masses")}
-        keep = np.zeros(read.integer("gravity_terms_total"), dtype=bool)
-        terms = read.vector("gravity_terms")
-        if np.any(terms != np.round(terms)) or np.any((terms < 0) | (terms >= len(keep))):
-            raise read.error("gravity_terms", f"expected indices 0 to {len(keep) - 1}")
-        keep[terms.astype(int)] = True
-        return {"gravity": read.vector("gravity"), "keep": keep}
+            out["masses"] = read.vector("masses")
+        if not read.has("masses") or read.has("gravity_terms"):
+            keep = np.zeros(read.integer("gravity_terms_total"), dtype=bool)
+            terms = read.vector("gravity_terms")
+            if np.any(terms != np.round(terms)) or np.any((terms < 0) | (terms >= len(keep))):
+                raise read.error("gravity_terms", f"expected indices 0 to {len(keep) - 1}")
+            keep[terms.astype(int)] = True
+            out["keep"] = keep
+        return out
 
     def figure(self, ext, inputs, expected):
         return {

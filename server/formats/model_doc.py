@@ -158,12 +158,12 @@ class ModelDoc(Doc):
             if ext.gravity is not None and ext.joint is not None:
                 # the gravity basis has four columns (mass, three moments) per link the joint moves
                 want = 4 * (n - ext.joint)
-                key, got = (
-                    ("masses", len(ext.masses))
-                    if ext.masses is not None
-                    else ("gravity_terms_total", len(ext.keep) if ext.keep is not None else 0)
-                )
-                if got != want:
+                stored = (("masses", ext.masses), ("gravity_terms_total", ext.keep))
+                sizes = [(k, v) for k, v in stored if v is not None] or [stored[1]]
+                for key, v in sizes:
+                    got = 0 if v is None else len(v)
+                    if got == want:
+                        continue
                     raise located(
                         f"expected {want} values for joint {e.joint}'s {n - ext.joint} links, "
                         f"got {got}",

@@ -107,12 +107,16 @@ def test_a_compliance_that_fits_one_regions_quirks_is_refused(monkeypatch):
     random folds accept it; trained on one side of a joint and tested on the other it errs more
     than geometry, so the diagnosis refuses it and says where; selected again without it, the
     next causes are refused alike, and the model stays geometric."""
+    from robocal.solver import diagnose as diagnosis
+
     rich_only = vocabulary.JointCompliance.candidates
 
     def candidates(self, layout, x, inputs):
         return [e for e in rich_only(self, layout, x, inputs) if e.masses is None]
 
     monkeypatch.setattr(vocabulary.JointCompliance, "candidates", candidates)
+    # the rich compliance taken, not the joint-2 periodic term inside its span
+    monkeypatch.setattr(diagnosis, "nested_simpler", lambda trial, ok, best, *_: best)
     cell, meas = workflow.load_data(*campaign_files("irb120_wu"))
     r = diagnosed(cell, meas).report.to_json()  # as report.json has it
     refused = r["extrapolation"]["refused"]
@@ -129,11 +133,13 @@ def test_a_refused_rich_compliance_leaves_its_one_stiffness_to_be_selected(monke
     stiffness on the nominal mass model holds off the training region and is named."""
     from robocal.solver import diagnose as diagnosis
 
-    def richest_variant(trial, ok, best, sc):
+    def richest_variant(trial, ok, best, sc, grouped=None):
         same = [i for i in ok if diagnosis.same_effect(trial[i], trial[best])]
         return max(same, key=lambda i: trial[i].n_params)
 
     monkeypatch.setattr(diagnosis, "simplest_variant", richest_variant)
+    monkeypatch.setattr(diagnosis, "another_cause", lambda *args: False)
+    monkeypatch.setattr(diagnosis, "nested_simpler", lambda trial, ok, best, *_: best)
     cell, meas = workflow.load_data(*campaign_files("irb120_wu"))
     r = diagnosed(cell, meas).report.to_json()  # as report.json has it
     refused = [x["label"] for x in r["extrapolation"]["refused"]]

@@ -544,13 +544,15 @@ def test_cell_with_bom_is_accepted(tmp_path):
 
 # the keys each effect has always been stored with: files written before must keep loading, and a
 # new effect adds its own line here
-# the keys each kind stores (compliance: on the nominal mass model, or with the masses fitted)
+# the keys each kind stores (compliance: on the nominal mass model, with the masses fitted, or both)
 STORED_KEYS = {
     "joint_periodic": [{"name", "joint", "harmonic", "coef"}],
     "joint_scale": [{"name", "joint", "coef"}],
     "joint_compliance": [
         {"name", "joint", "gravity", "masses", "coef"},
         {"name", "joint", "gravity", "gravity_terms", "gravity_terms_total", "coef"},
+        # the nominal mass model's torque with the driven link's masses fitted beside it
+        {"name", "joint", "gravity", "masses", "gravity_terms", "gravity_terms_total", "coef"},
     ],
     "joint_backlash": [{"name", "joint", "coef"}],
     "thermal_drift": [{"name", "t_ref", "variable", "coef"}],
@@ -616,6 +618,41 @@ def test_every_effect_round_trips_through_model_json(tmp_path, seed):
         model.extensions[i].coef = model.extensions[i].coef * 0.0
         assert np.abs(model_predict(model, q, time_s, temp_c) - want).max() > 1e-4
         model.extensions[i] = back.extensions[i]
+
+
+def test_a_compliance_with_its_driven_links_masses_round_trips_and_its_sizes_are_checked(tmp_path):
+    """The middle compliance variant stores the nominal masses and the driven link's terms; read
+    back it predicts the same; a gravity_terms_total that does not fit the joint is refused."""
+    from robocal.server.calibration.workflow import model_predict
+    from robocal.server.formats.model_json import model_to_json, read_model, write_model
+
+    model, q, time_s, temp_c = every_effect(1, fitted_masses=False)
+    from robocal.solver.effects import Inputs
+    from robocal.solver.kinematics import Layout
+    from robocal.solver.vocabulary import KINDS
+
+    lay = Layout(IRB2600, np.eye(4), tuple(model.targets))
+    x = lay.initial(np.array(list(model.targets.values())))
+    mid = next(
+        c
+        for c in KINDS["joint_compliance"].candidates(lay, x, Inputs(q, time_s, temp_c))
+        if c.masses is not None and c.keep is not None
+    )
+    mid.coef = np.full(mid.n_params, 1e-3)
+    model.extensions = [e for e in model.extensions if e.name != "joint_compliance"] + [mid]
+    write_model(tmp_path / "model.json", model)
+    stored = json.loads((tmp_path / "model.json").read_text())["extensions"][-1]
+    assert set(stored) - {"parameters"} == STORED_KEYS["joint_compliance"][2], stored
+    back = read_model(tmp_path / "model.json")
+    np.testing.assert_array_equal(back.extensions[-1].keep, mid.keep)
+    np.testing.assert_allclose(
+        model_predict(back, q, time_s, temp_c), model_predict(model, q, time_s, temp_c), atol=1e-9
+    )
+    obj = model_to_json(model)
+    obj["extensions"][-1]["gravity_terms_total"] += 4
+    path = put(tmp_path, "bad.json", json.dumps(obj))
+    with pytest.raises(InputError, match="gravity_terms_total"):
+        read_model(path)
 
 
 @pytest.mark.parametrize(

@@ -122,3 +122,40 @@ def test_a_gain_on_few_poses_is_found_on_a_small_campaign(seed):
     meas = campaign(KUKA_LIKE, 60 + seed, 30, [f"joint_scale:1={ppm}"], noise=3.0)
     d = run(KUKA_LIKE, meas)
     assert ("joint_scale", 1) in named(d)
+
+
+def test_how_rich_a_compliance_is_judged_on_the_grouped_folds_where_the_campaign_has_them():
+    """Three variants of one compliance (one stiffness, its driven link's masses, every link's):
+    on random folds every link's masses clearly beat the driven link's, which clearly beat one
+    stiffness; on the folds grouped by region and configuration every link's masses lose to the
+    driven link's. Those folds decide how rich the model is; without them the random ones."""
+    from robocal.solver.diagnose import simplest_variant
+    from robocal.solver.selection import Scores
+    from robocal.solver.vocabulary import Extension
+
+    keep = lambda k: np.arange(20) < k  # noqa: E731
+    trial = [
+        Extension("joint_compliance", joint=1, masses=np.ones(20)),
+        Extension("joint_compliance", joint=1, masses=np.ones(20), keep=keep(2)),
+        Extension("joint_compliance", joint=1, keep=keep(10)),
+        Extension("joint_periodic", joint=1, harmonic=1),
+    ]
+    assert [e.n_params for e in trial] == [1, 3, 10, 2]
+    rng = np.random.default_rng(0)
+    m = 40
+
+    def scores(per_pose_gain):  # per pose: squared error 1 before, minus each candidate's gain
+        g = np.array([v + rng.normal(scale=0.02, size=m) for v in per_pose_gain])
+        return Scores(float(m), np.ones(m), g.sum(axis=1), g, np.zeros(4), np.zeros(1))
+
+    random = scores([0.3, 0.5, 0.7, 0.4])
+    grouped = scores([0.3, 0.6, 0.4, 0.2])
+    ok = [0, 1, 2, 3]
+    assert trial[simplest_variant(trial, ok, 2, random)].n_params == 10
+    assert trial[simplest_variant(trial, ok, 2, random, grouped)].n_params == 3
+    # a richer variant no better on the grouped folds than one stiffness: one stiffness
+    flat = scores([0.3, 0.3, 0.3, 0.2])
+    assert trial[simplest_variant(trial, ok, 2, random, flat)].n_params == 1
+    # only the variants the null let through compete: without the middle one, every link's
+    # masses beat one stiffness on both kinds of folds
+    assert trial[simplest_variant(trial, [0, 2, 3], 2, random, grouped)].n_params == 10

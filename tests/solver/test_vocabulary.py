@@ -72,3 +72,36 @@ def test_backlash_reads_as_a_lag_in_degrees():
     assert "Joint 2" in text and "lags behind" in text and "24.0 mdeg" in text and "0.0200" in text
     ext.coef = -ext.coef
     assert "runs ahead of" in evidence(ext, parameters(ext, None), 0.2, 0.02, decision, 100)
+
+
+def test_a_gravity_loaded_joint_has_three_compliance_variants_the_middle_one_its_links_masses():
+    """Joint 2 of the IRB 2600 (horizontal axis): one stiffness on the nominal mass model, that
+    torque with the driven link's masses fitted beside it, and every link's masses; the middle one
+    spans the joint's first harmonic (a periodic error or the driven link's moment: one function).
+    Joint 1 (vertical axis) has no middle variant: its first harmonic is no gravity torque."""
+    lay, x, q, time_s, temp_c = data(4, m=60)
+    inputs = Inputs(q, time_s, temp_c)
+    comp = [c for c in candidates(lay, x, inputs) if c.name == "joint_compliance"]
+    j2 = [c for c in comp if c.joint == 1]
+    assert [c.n_params for c in j2][0] == 1 and len(j2) == 3, [c.label() for c in j2]
+    one, mid, rich = j2
+    assert 1 < mid.n_params < rich.n_params
+    assert mid.label() == "joint_compliance(2, its link's masses fitted)"
+    B = np.c_[joint_basis(mid, lay, x, inputs), np.ones(len(q))]
+    harmonic = np.c_[np.sin(q[:, 1]), np.cos(q[:, 1])]
+    coef, *_ = np.linalg.lstsq(B, harmonic, rcond=None)
+    assert np.linalg.norm(B @ coef - harmonic) < 1e-6 * np.linalg.norm(harmonic)
+    np.testing.assert_allclose(
+        joint_basis(mid, lay, x, inputs)[:, 0], joint_basis(one, lay, x, inputs)[:, 0]
+    )
+    # a base tilted by a degree: joint 1 carries a little gravity torque, but it stays vertical
+    tilt = np.eye(4)
+    tilt[1:3, 1:3] = [[np.cos(0.017), -np.sin(0.017)], [np.sin(0.017), np.cos(0.017)]]
+    tilted = Layout(IRB2600, tilt, NAMES)
+    at = tilted.initial(np.array([TARGETS[n] for n in NAMES]))
+    j1 = [
+        c for c in candidates(tilted, at, inputs) if c.name == "joint_compliance" and c.joint == 0
+    ]
+    assert j1 and not any(c.masses is not None and c.keep is not None for c in j1), j1
+    mid.coef = np.ones(mid.n_params)
+    assert parameters(mid, joint_basis(mid, lay, x, inputs))["gravity_terms"] == mid.n_params
