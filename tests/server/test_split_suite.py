@@ -97,7 +97,12 @@ def test_a_backlash_fitted_on_40_poses_of_one_configuration_holds_in_the_other()
 
 def test_a_clean_case_has_no_removable_share():
     r = ss.run_split_case(ss.draw_split_case(5, "clean"))
-    assert r["named"] == [] and r["removable"] is None and r["ratio"] == pytest.approx(1.0)
+    # nothing named: the diagnosis's geometry, which holds the weakly identified parameters at
+    # nominal where ls-sum shrinks them toward it (solver.prior), so equal to within the prior's
+    # pull, not to rounding
+    assert (
+        r["named"] == [] and r["removable"] is None and r["ratio"] == pytest.approx(1.0, abs=0.01)
+    )
 
 
 def test_a_periodic_error_seen_by_one_smr_holds_in_the_other_wrist_configuration():
