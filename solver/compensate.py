@@ -29,6 +29,9 @@ SEED_GRID = 4  # joints 2 and 3 each start from this many values in a configurat
 KEEP_SLACK_MM = 0.005
 BOUNDARY_GRID = 721  # where no start lands in its configuration: a joint's range scanned so
 BISECTIONS = 40  # then its edge found to within range / 2^40
+# the far side's range ends this far (rad) inside the edge: at the edge itself the side's test
+# is zero to rounding, and a solution held there reads as either configuration
+EDGE_MARGIN_RAD = 1e-7
 
 
 @dataclass
@@ -192,6 +195,12 @@ def compensate(
         # some poses solved again on their starting joints' side (all together: the backlash
         # couples consecutive poses)
         res = solve(model, desired, mask, res.q, lower, upper, time_s, temp_c, max_iter, prev_q)
+    if not guess.all():
+        # the ranges bound joints 1, 4, 5 and 6 only: a pose asked by confdata whose full-model
+        # solve crossed a wrist centre's edge has no solution in it (never joints in another)
+        asked = ~guess & ~none
+        got = configuration.confdata(model.nominal, np.where(asked[:, None], res.q, 0.0))
+        none |= asked & np.any(got != np.where(asked[:, None], np.nan_to_num(cf), 0), axis=1)
     res.q[none] = np.nan
     res.error_mm[none] = np.inf
     res.converged[none] = False
@@ -295,7 +304,8 @@ def _across_boundary(geo: Model, desired, mask, cf, q, lo, hi, max_iter):
         end = k
         while 0 <= end + step < len(grid) and inside[end + step]:
             end += step
-        lo_j, hi_j = sorted((b, grid[end]))
+        inner = b + step * min(EDGE_MARGIN_RAD, 0.5 * abs(grid[end] - b))
+        lo_j, hi_j = sorted((inner, grid[end]))
         low, high = lo.copy(), hi.copy()
         low[j], high[j] = lo_j, hi_j
         start = q.copy()

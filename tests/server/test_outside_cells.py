@@ -128,28 +128,43 @@ def _confdata_targets(tmp_path, cell_path, meas, out):
 SMALL_RING = {"A": [40.0, 0.0, 20.0], "B": [-20.0, 35.0, 20.0], "C": [-20.0, -35.0, 20.0]}
 
 
-@pytest.mark.parametrize(("robot", "ring", "poses"), [(SMALL, SMALL_RING, 72), (UR10E, RING, 260)])
-def test_confdata_reaches_a_pose_measured_next_to_the_stretched_elbow(tmp_path, robot, ring, poses):
+@pytest.mark.parametrize(
+    ("robot", "ring", "poses", "seed"),
+    [(SMALL, SMALL_RING, 72, 11), (UR10E, RING, 260, 11), (UR10E, RING, 260, 18)],
+)
+def test_confdata_reaches_a_pose_measured_next_to_the_stretched_elbow(
+    tmp_path, robot, ring, poses, seed
+):
     """The small arm's campaign (seed 11) has a pose measured with joint 3 at -0.16 deg, the
     elbow 0.16 deg from stretched: in its confdata (cfx 2, behind the lower arm) compensate said
     'no solution in its configuration' (every start converged to the mirror elbow, 0.3 deg away
     in cfx 0), though the arm stood there; the UR10e's pose 111 (joint 3 at -0.21 deg) was
     'unreachable ... no closer than 99.232 mm' (the starts that stayed in its configuration
-    stopped in local minima). Asked for by confdata alone, every pose comes back to the joints
-    it was measured at, at the model's error."""
+    stopped in local minima), and again once the calibrated model's elbow stretched at +0.09 deg
+    (its best joints in the configuration then lie on the edge, q3 = 0, where the bound the
+    search held joint 3 to ended, and the side's test there reads either way); the UR10e's
+    seed-18 pose 223 (joint 3 at +0.93 deg, cfx 0) came back in cfx 2 (the final solve, unbound
+    by the edge, walked across it). Asked for by confdata alone, every pose comes back in its
+    configuration, near the joints it was measured at, at the model's error."""
     cell = tmp_path / "cell.json"
     _cell(cell, robot, ring)
-    _fitted(tmp_path, poses, 11, 60)
+    _fitted(tmp_path, poses, seed, 60)
     measured = _confdata_targets(tmp_path, cell, "new.csv", "targets.csv")
     assert any(abs(q[2]) < 0.5 for q in measured.values()), "the pose next to the stretched elbow"
     r = robocal("compensate", "model.json", "targets.csv", "--out", "joints.csv", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     got = list(csv.DictReader(open(tmp_path / "joints.csv")))
     assert len(got) == len(measured)
+    from robocal.server.formats.cell_doc import CellDoc
+    from robocal.solver.configuration import confdata
+
+    nominal = CellDoc.model_validate(json.loads(cell.read_text())).robot_model
     for row in got:
         q = [float(row[f"q{i}"]) for i in range(1, 7)]
         moved = np.max(np.abs(np.subtract(q, measured[row["pose"]])))
         assert moved < 1.0, (row["pose"], q, measured[row["pose"]])
+        asked = confdata(nominal, np.radians([measured[row["pose"]]]))
+        assert np.array_equal(confdata(nominal, np.radians([q])), asked), (row["pose"], q)
         assert float(row["predicted_error_mm"]) < 0.05, row
 
 
