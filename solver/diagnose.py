@@ -22,7 +22,7 @@ from .extrapolation import (
     FoldCheck,
     RegionFold,
     configuration_folds,
-    joint_ranges,
+    extrapolation_report,
     region_folds,
     span_parts,
 )
@@ -34,7 +34,7 @@ from .motion import visit_order
 from .noise import from_distances as noise_floor  # noqa: F401 (the tests' measured floor)
 from .noise import noise_floor as tracker_noise
 from .problem import Problem
-from .report_blocks import Alternative, CrossValidation, ExtrapolationReport, FoldResult, Refused
+from .report_blocks import Alternative, CrossValidation
 from .screen import screen_readings
 from .selection import (
     ALPHA,
@@ -46,19 +46,21 @@ from .selection import (
 )
 from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
 from .tall import tall_qr
+from .variants import (
+    MIN_GAIN,
+    T_SIMPLER,
+    another_cause,
+    nested_simpler,
+    same_effect,
+    same_variant,
+    simplest_variant,
+)
 
 if TYPE_CHECKING:  # run_diagnosis imports fit_errors and the report only when it needs them
     from .diagnosis_report import EffectFigure, Report
     from .fit_errors import ExtendedErrors
 
-MIN_GAIN = 0.02  # an accepted effect removes at least this fraction of the held-out MSE
-T_SIMPLER = (
-    2.0  # candidates the best does not beat by this paired t over poses are its alternatives
-)
 MAX_EFFECTS = 4
-# a candidate whose columns the richer variant's span leaves less than this share of (beyond the
-# current model's) is the same function under another name
-SAME_SPAN = 0.1
 REFUSAL_ROUNDS = 3  # selections run again after the region folds refuse effects
 FOLDS = 5
 GAP_BLOCK = 4096  # gaps between readings whose base-shift gains are solved at once
@@ -597,124 +599,6 @@ def select_suspecting(diag: Diagnoser, cands, log=None, max_effects: int = MAX_E
     return found, base, found_final, replace(found_region, refused=refused)
 
 
-def same_variant(a: Extension, b: Extension) -> bool:
-    """The same effect with as many parameters (a compliance's one stiffness or fitted masses)."""
-    return same_effect(a, b) and a.n_params == b.n_params
-
-
-def same_effect(a: Extension, b: Extension) -> bool:
-    """Two variants of one effect: the same kind on the same joint and harmonic."""
-    return a.name == b.name and a.joint == b.joint and a.harmonic == b.harmonic
-
-
-def simplest_variant(trial, ok, best: int, sc, grouped=None) -> int:
-    """The variant of the best candidate's effect (same kind and joint) the data calls for: from
-    the fewest parameters up (a compliance on the nominal mass model, then its driven link's
-    masses fitted, then every link's), a richer variant is taken only where it clearly beats the
-    one taken so far (paired t over poses of T_SIMPLER) on held-out poses that differ from the
-    training ones: the folds grouped by region and configuration (`grouped`, their scores) where
-    the campaign has them, else the random folds (`sc`). The random folds have shown the effect;
-    how rich its model should be is a question of where the model will be used (issue 21: richer
-    mass models only where they pay off on their own test). A simulated joint-2 compliance with
-    a periodic error of joint 2 (the driven link's first harmonic): the random folds preferred
-    every link's masses fitted, which fitted the training configuration's quirks; the grouped
-    folds the driven link's, which removed 0.82 of geometry's excess in the other elbow
-    configuration instead of 0.78 (the configuration-split suite's seed 29)."""
-    same = [i for i in ok if same_effect(trial[i], trial[best])]
-    same.sort(key=lambda i: (trial[i].n_params, -sc.gain[i]))
-    judge, poses = (sc, slice(None)) if grouped is None else (grouped, grouped.pose_sse > 0)
-    choice = same[0]
-    for i in same[1:]:
-        worse = (judge.pose_sse - judge.pose_gain[choice])[poses]
-        if (
-            trial[i].n_params > trial[choice].n_params
-            and paired_t(worse, (judge.pose_sse - judge.pose_gain[i])[poses]) >= T_SIMPLER
-        ):
-            choice = i
-    return choice
-
-
-def inside_span(trial, ok, of: int, system) -> list[int]:
-    """The candidates among ok (other than `of`) whose columns, beyond the current model's, lie
-    in the span of candidate `of`'s (all but SAME_SPAN of them): the same function under another
-    name."""
-    A, _, blocks, _ = system
-
-    def outside(X, B):  # B's part outside the span of X's columns
-        Q, _ = np.linalg.qr(X)
-        return B - Q @ (Q.T @ B)
-
-    base = outside(A, np.concatenate([blocks[o] for o in ok], axis=1))
-    beside = outside(np.concatenate([A, blocks[of]], axis=1), base)
-    cuts = np.cumsum([0] + [blocks[o].shape[1] for o in ok])
-    return [
-        o
-        for k, o in enumerate(ok)
-        if o != of
-        and np.linalg.norm(beside[:, cuts[k] : cuts[k + 1]])
-        <= SAME_SPAN * np.linalg.norm(base[:, cuts[k] : cuts[k + 1]])
-    ]
-
-
-def nested_simpler(trial, ok, best: int, system, sc) -> int:
-    """The best candidate, or a candidate of another effect with fewer parameters inside its span
-    that it does not clearly beat on the random folds (paired t below T_SIMPLER): a joint-2
-    periodic error is a first harmonic of q2, which a compliance with its driven link's masses
-    fitted also spans with one term more."""
-    simpler = [
-        o
-        for o in inside_span(trial, ok, best, system)
-        if trial[o].n_params < trial[best].n_params
-        and not same_effect(trial[o], trial[best])
-        and paired_t(sc.pose_sse - sc.pose_gain[o], sc.pose_sse - sc.pose_gain[best]) < T_SIMPLER
-    ]
-    return max(simpler, key=lambda o: sc.gain[o]) if simpler else best
-
-
-def another_cause(trial, ok, rich: int, simple: int, system, folds, random_folds, seed) -> bool:
-    """Whether the simpler variant with another candidate cause does as well held out as the
-    richer variant (not clearly beaten by it, paired t over poses below T_SIMPLER, on `folds`),
-    that cause clearing the selection's own bar beside the simpler variant (its null over
-    `random_folds`): the richer variant's extra freedom then stands in for another effect (a
-    joint-2 compliance's driven-link masses for joint 3's compliance on 40 poses, which was then
-    no longer named), so the simpler variant is taken and the other cause is selected next on
-    its own evidence. Causes inside the richer variant's span are the same function under another
-    name (a periodic error of the joint in its driven link's first harmonic) and are not counted.
-    `system` is the current model's columns and residual, the candidates' columns and each row's
-    pose."""
-    A, r, blocks, pose_of_row = system
-    m = int(pose_of_row.max()) + 1
-    same = inside_span(trial, ok, rich, system)
-    others = [
-        o
-        for o in ok
-        if o != rich
-        and o not in same
-        and not same_effect(trial[o], trial[rich])
-        and not trial[o].kind.located_in_time  # its evidence needs its own scan for a time
-    ]
-    if not others:
-        return False
-    pairs = [np.concatenate([blocks[simple], blocks[o]], axis=1) for o in others]
-    sc = linear_scores(A, r, [blocks[rich]] + pairs, pose_of_row, folds, m, resamples=0)
-    tested = sc.pose_sse > 0
-    rich_sse = (sc.pose_sse - sc.pose_gain[0])[tested]
-    tied = [
-        o
-        for k, o in enumerate(others, start=1)
-        if paired_t((sc.pose_sse - sc.pose_gain[k])[tested], rich_sse) < T_SIMPLER
-    ]
-    if not tied:
-        return False
-    # beside the simpler variant, does a tied cause pass the selection's test on its own?
-    A2 = np.concatenate([A, blocks[simple]], axis=1)
-    tb = [blocks[o] for o in tied]
-    fresh = linear_scores(A2, r, tb, pose_of_row, random_folds, m, resamples=0).fresh
-    sc2 = linear_scores(A2, r, tb, pose_of_row, random_folds, m, seed=seed, null_residual=fresh)
-    thr = sc2.threshold()
-    return bool(np.any((sc2.z > thr) & (sc2.gain > MIN_GAIN * sc2.sse)))
-
-
 def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     """Baseline geometric calibration, candidate effects, selection and the extended model.
 
@@ -765,7 +649,7 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     clock["total"] = time.perf_counter() - t0
     if screening is not None:
         report.outliers = screening.report(pose_ids, target_names)
-    report.extrapolation = extrapolation_report(region, prob.q)
+    report.extrapolation = extrapolation_report(region.checks, region.refused, prob.q)
     if stability is not None:
         report.stability = stability.to_report()
     report.seconds = {k: round(v, 3) for k, v in clock.items()}
@@ -788,44 +672,3 @@ def resampled(diag: Diagnoser, cands, steps) -> Stability | None:
         named.append(tuple(effect_key(st[0]) for st in chosen))
     final = tuple(effect_key(st[0]) for st in steps)
     return Stability(min(map(len, subsets)), final, tuple(named))
-
-
-def extrapolation_report(region: Extrapolation, q) -> ExtrapolationReport:
-    """The report's `extrapolation` block: how far from its training poses the model was tested,
-    the effects refused there, and the joint-space box the data covers (where it may be trusted)."""
-    from .extrapolation import MAX_RATIO
-
-    def num(v):
-        return None if not np.isfinite(v) else float(v)
-
-    return ExtrapolationReport(
-        method="train on one side of a gravity-loaded joint's median (a smaller end on a "
-        "small campaign), or in one elbow or wrist configuration where the data has both, test "
-        "on the other",
-        max_ratio_to_geometric=MAX_RATIO,
-        folds=[
-            FoldResult(
-                test=c.fold.label(),
-                test_poses=len(c.fold.test),
-                beyond_training_deg=float(np.degrees(c.fold.beyond_rad)),
-                geometric_rmse_mm=num(c.geometric_rms),
-                final_rmse_mm=num(c.extended_rms),
-                worse_only_in_geometric_span=c.extended_rms > MAX_RATIO * c.geometric_rms
-                and c.geometry_to_blame,
-            )
-            for c in region.checks
-        ],
-        refused=[
-            Refused(
-                name=e.name,
-                label=e.label(),
-                joint=None if e.joint is None else e.joint + 1,
-                worse_on=[
-                    f"{c.fold.label()}: {c.extended_rms:.4f} mm vs geometric {c.geometric_rms:.4f}"
-                    for c in bad
-                ],
-            )
-            for e, bad in region.refused
-        ],
-        joint_range_deg=np.degrees(joint_ranges(q)).round(3).tolist(),
-    )

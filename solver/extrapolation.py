@@ -17,6 +17,7 @@ import numpy as np
 from . import configuration
 from .gravity import gravity_in_base
 from .kinematics import Layout, joint_frames
+from .report_blocks import ExtrapolationReport, FoldResult, Refused
 from .tall import tall_svd
 
 # A joint is gravity-loaded when its axis is on average this far from vertical (|cos| below).
@@ -193,3 +194,44 @@ def configuration_folds(robot, q: np.ndarray, min_poses: int) -> list[RegionFold
 def joint_ranges(q: np.ndarray) -> np.ndarray:
     """(n, 2) the joint-space box the campaign covers, rad: where the model may be trusted."""
     return np.stack([q.min(axis=0), q.max(axis=0)], axis=1)
+
+
+def extrapolation_report(checks, refused, q) -> ExtrapolationReport:
+    """The report's `extrapolation` block: how far from its training poses the model was tested
+    (checks: the folds' FoldCheck), the effects refused there (refused: (extension, the
+    checks it failed)), and the joint-space box the data covers (where it may be trusted)."""
+
+    def num(v):
+        return None if not np.isfinite(v) else float(v)
+
+    return ExtrapolationReport(
+        method="train on one side of a gravity-loaded joint's median (a smaller end on a "
+        "small campaign), or in one elbow or wrist configuration where the data has both, test "
+        "on the other",
+        max_ratio_to_geometric=MAX_RATIO,
+        folds=[
+            FoldResult(
+                test=c.fold.label(),
+                test_poses=len(c.fold.test),
+                beyond_training_deg=float(np.degrees(c.fold.beyond_rad)),
+                geometric_rmse_mm=num(c.geometric_rms),
+                final_rmse_mm=num(c.extended_rms),
+                worse_only_in_geometric_span=c.extended_rms > MAX_RATIO * c.geometric_rms
+                and c.geometry_to_blame,
+            )
+            for c in checks
+        ],
+        refused=[
+            Refused(
+                name=e.name,
+                label=e.label(),
+                joint=None if e.joint is None else e.joint + 1,
+                worse_on=[
+                    f"{c.fold.label()}: {c.extended_rms:.4f} mm vs geometric {c.geometric_rms:.4f}"
+                    for c in bad
+                ],
+            )
+            for e, bad in refused
+        ],
+        joint_range_deg=np.degrees(joint_ranges(q)).round(3).tolist(),
+    )
