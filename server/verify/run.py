@@ -322,12 +322,12 @@ def prepare(
     # inputs); a temperature term's compensated joints are solved as each pose is due, at the
     # temperature the cell reported last (acquisition/compensated.py)
     timed = timed_terms(model)
+    text = Path(model_path).read_text(encoding="utf-8") if timed else None
     plan, joints = make_plan(untimed(model) if timed else model, opts)
     labels = pose_labels(plan)
     deferred = {}
     if temperature_terms(model):
-        assert plan.q_ref is not None  # make_plan's plan has its reference pose
-        text = Path(model_path).read_text(encoding="utf-8")
+        assert plan.q_ref is not None and text is not None  # a temperature term is timed
         m = len(plan.visit)
         deferred = {KEY: plan_block(text, plan.desired, plan.q_ref, labels[m:], after=m)}
     record = {
@@ -353,8 +353,9 @@ def prepare(
             [joints["compensated"][_first_visit(plan, j)] for j in range(len(plan.names))],
             plan.points,
         ),
-        # the model whose U needs each visit's time or temperature, as its file has it
-        **({"timed_model": Path(model_path).read_text(encoding="utf-8")} if timed else {}),
+        # the model whose U needs each visit's time or temperature, as its file has it; kept
+        # once: where the run compensates its temperature terms, in the plan block (KEY) alone
+        **({"timed_model": text} if timed and not deferred else {}),
         "cycles": opts.cycles,
         "directions": opts.directions,
         "approach_mm": APPROACH_MM,
@@ -453,9 +454,10 @@ def verification_report(
                 temps[k] = meas.temp_c[row, 0]
     cell = parse_cell(info.cell_json, f"<campaign {info.id} cell>")
     model_u: dict = {"model": record.get("uncertainty")}
-    if record.get("timed_model"):
+    timed_text = timed_model_text(info.settings)
+    if timed_text:
         visits = m + np.flatnonzero(plan.visit)  # the compensated run's test visits
-        timed = parse_model(record["timed_model"], f"<campaign {info.id} model>")
+        timed = parse_model(timed_text, f"<campaign {info.id} model>")
         per_visit = KEY in info.settings  # its temperature terms solved as each pose was due
         model_u = at_visits(
             timed,
@@ -521,6 +523,13 @@ def verification_report(
             },
         }
     )
+
+
+def timed_model_text(settings: dict) -> str | None:
+    """The text of a verification's model whose U needs each visit's time or temperature: the
+    record's, or the compensated plan's where the run solved its temperature terms (campaigns
+    stored before it was kept once have both, the same); None for an untimed model."""
+    return settings[RECORD].get("timed_model") or (settings.get(KEY) or {}).get("model")
 
 
 def verification_json(info: store.CampaignInfo, meas: Measurements, report=None) -> dict:

@@ -7,6 +7,7 @@ run cut off midway resumes with the stored ones replayed and the rest solved at 
 from __future__ import annotations
 
 import html as entities
+import json
 
 import numpy as np
 import pytest
@@ -25,6 +26,7 @@ from robocal.server.verify.run import (
     prepare,
     readings,
     run_poses,
+    timed_model_text,
     verification_report,
     verify,
 )
@@ -115,6 +117,11 @@ def test_the_stored_joints_are_those_commanded_and_a_cut_off_run_resumes(runs, t
                 on_event=on_event)  # fmt: skip
     db = store.open_database(db_path)
     cid = store.list_campaigns(db)[0].id
+    # the model's text is kept once in the campaign's settings: the plan block's, which the
+    # resume solves from and the report takes each visit's U from
+    text = (d / "model.json").read_text(encoding="utf-8")
+    kept = json.dumps(store.get_campaign(db, campaign_id=cid).settings)
+    assert kept.count(json.dumps(text)) == 1 and settings[KEY]["model"] == text
     stored = store.planned_poses(db, campaign_id=cid)
     assert (
         len(stored) == stop_at and [p.label for p in stored] == labels + settings[KEY]["labels"][:2]
@@ -126,6 +133,9 @@ def test_the_stored_joints_are_those_commanded_and_a_cut_off_run_resumes(runs, t
     stored_after = store.planned_poses(db, campaign_id=cid)
     assert [p.joints_deg for p in stored_after[:stop_at]] == [p.joints_deg for p in stored]
     report = verification_report(*readings(db, cid))
+    # the report takes the model from there (the certificate's sentence on poses solved without
+    # a temperature comes of it: the last test)
+    assert timed_model_text(store.get_campaign(db, campaign_id=cid).settings) == text
     assert report.after.AP_max_mm <= max(np.sqrt(3.0) * p.AP_U_mm for p in report.after.points)
     assert len(store.get_campaign(db, campaign_id=cid).settings[TEMPS]) == len(q_deg)
 
