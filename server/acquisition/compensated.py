@@ -62,14 +62,8 @@ def total_poses(settings: dict | None, stored: int) -> int:
 
 def latest_temp_c(db, cid: int) -> float | None:
     """The air temperature (degC) of the campaign's latest reading that has one; None if none."""
-    meas = store.campaign_measurements(db, campaign_id=cid)
-    if meas.temp_c is None or meas.time_s is None:
-        return None
-    ok = np.isfinite(meas.temp_c) & np.isfinite(meas.time_s)
-    if not ok.any():
-        return None
-    k = np.argmax(np.where(ok, meas.time_s, -np.inf))
-    return float(meas.temp_c.flat[k])
+    air = store.latest_air(db, campaign_id=cid)
+    return None if air is None else air.temp_c
 
 
 def joints_at(model: ModelFile, desired_mm, q_start_rad, temp_c: float | None):

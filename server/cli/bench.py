@@ -68,6 +68,10 @@ def cmd_bench(args) -> None:
         from ..bench.compensate import run_compensate_bench
 
         result = run_compensate_bench()
+    elif args.what == "air":
+        from ..bench.air import run_air_bench
+
+        result = run_air_bench(poses=max(args.poses))
     elif args.what == "verify":
         from ..bench.verify import run_verify_bench
 
@@ -122,6 +126,7 @@ def add(sub) -> None:
             "startup",
             "compensate",
             "verify",
+            "air",
             "recording",
             "validation",
             "check",
@@ -131,7 +136,8 @@ def add(sub) -> None:
         help="what to time (validation: the deployment guard's flags on clean, effect, small and "
         "real campaigns; check: quick checks' false alarms and delays to a change; scale: `robocal calibrate` of a large campaign as a process, next to np.loadtxt of its file, "
         "then diagnose of 1,000 / 3,000 / 10,000 poses; uncertainty: the coverage of the "
-        "position U of diagnosed and ls-sum models on independent positions)",
+        "position U of diagnosed and ls-sum models on independent positions; air: the latest "
+        "air temperature looked up before each pose of a 1,000-pose run, or --poses N)",
     )
     b.add_argument(
         "--seeds",
@@ -165,7 +171,8 @@ def add(sub) -> None:
         type=_positive_int,
         nargs="+",
         default=[100, 1000],
-        help="diagnose: sizes of the campaigns timed one at a time",
+        help="diagnose: sizes of the campaigns timed one at a time; air: the run's poses (the "
+        "largest given, default 1,000)",
     )
     b.add_argument(
         "--scale-poses",

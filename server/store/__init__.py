@@ -32,9 +32,11 @@ from .leases import (
     take_lease,
 )
 from .readings import (
+    AirReading,
     PoseInfo,
     ReadingInfo,
     discard_unfinished_pose,
+    latest_air,
     next_unmeasured_pose,
     planned_poses,
     pose_readings,
@@ -57,6 +59,7 @@ __all__ = [
     "Database",
     "DatabaseGone",
     "NotFound",
+    "AirReading",
     "PoseInfo",
     "ReadingInfo",
     "StoreError",
@@ -71,6 +74,7 @@ __all__ = [
     "import_csv",
     "list_campaigns",
     "update_settings",
+    "latest_air",
     "next_unmeasured_pose",
     "open_database",
     "planned_poses",

@@ -21,6 +21,7 @@ from sqlalchemy import (
     Float,
     ForeignKey,
     ForeignKeyConstraint,
+    Index,
     Integer,
     MetaData,
     String,
@@ -143,6 +144,9 @@ class Reading(Base):
     __table_args__ = (
         UniqueConstraint("campaign_id", "pose_index", "target"),
         _pose_fk(),
+        # a campaign's latest readings without reading all of them (the air temperature a
+        # compensated pose is solved at, migration 0011)
+        Index("ix_reading_campaign_time", "campaign_id", "time_s", "id"),
         CheckConstraint(one_of("status", READING_STATUSES), name="status"),
         CheckConstraint(
             "(status = 'ok' AND x IS NOT NULL AND y IS NOT NULL AND z IS NOT NULL) OR "

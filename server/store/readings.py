@@ -55,6 +55,32 @@ class ReadingInfo:
     created_at: dt.datetime
 
 
+@dataclass(frozen=True)
+class AirReading:
+    """The air temperature of one stored reading (degC) and its time (s since campaign start)."""
+
+    temp_c: float
+    time_s: float
+
+
+def latest_air(db: Database, *, campaign_id: int) -> AirReading | None:
+    """The air temperature of the campaign's latest reading that has one (and a time); None if
+    no reading has. One indexed row (ix_reading_campaign_time), however long the campaign."""
+    with db.session() as s:
+        row = s.execute(
+            select(Reading.temp_c, Reading.time_s)
+            .where(
+                Reading.campaign_id == campaign_id,
+                Reading.status == "ok",
+                Reading.temp_c.is_not(None),
+                Reading.time_s.is_not(None),
+            )
+            .order_by(Reading.time_s.desc(), Reading.id.desc())
+            .limit(1)
+        ).first()
+    return None if row is None else AirReading(float(row.temp_c), float(row.time_s))
+
+
 def planned_poses(db: Database, *, campaign_id: int) -> list[PoseInfo]:
     """The plan in order, each pose with its outcome if it has one."""
     with db.session() as s:
