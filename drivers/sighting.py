@@ -8,6 +8,7 @@ and the statistics it uses; kept apart so the engine's file holds its state and 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -26,6 +27,23 @@ SAME_AIM_MM = 0.01
 
 def _code(exc) -> str | None:
     return getattr(exc, "code", None)
+
+
+def weather_of(tracker):
+    """The tracker's weather station now; None if it answers with a device error (a fault of
+    the connection itself is raised)."""
+    try:
+        return tracker.weather()
+    except Exception as e:  # noqa: BLE001
+        if _code(e) is None:
+            raise
+        return None
+
+
+def air_temperature(tracker) -> float | None:
+    """The air temperature (degC) the tracker's weather station reads now; None if it gives none."""
+    t = getattr(weather_of(tracker), "temp_c", None)
+    return float(t) if t is not None and math.isfinite(t) else None
 
 
 @dataclass
@@ -316,12 +334,7 @@ class Sighting:
             return None
 
     def _weather(self):
-        try:
-            return self.tracker.weather()
-        except Exception as e:  # noqa: BLE001
-            if _code(e) is None:
-                raise
-            return None
+        return weather_of(self.tracker)
 
 
 def _spread(points) -> float:

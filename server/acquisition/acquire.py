@@ -23,6 +23,7 @@ from robocal.drivers.campaign import CampaignEngine, Settings
 from robocal.drivers.clock import RealClock, VirtualClock
 from robocal.drivers.lifecycle import MOVING, StateError, next_state
 from robocal.drivers.predictor import SmrPredictor
+from robocal.drivers.sighting import air_temperature
 from robocal.drivers.simulated_cell import SimulatedCell, surveyed_base
 from robocal.server import store
 from robocal.server.acquisition.compensated import compensated_run
@@ -34,6 +35,9 @@ from robocal.server.store.checks import arm_name
 
 # The campaign settings' key of a known geometry for the SMR predictor (robot, base, targets).
 PREDICTOR = "predictor"
+# a resumed simulated run begins this long (campaign clock, s) after its last reading; a real
+# one as long after it as it really is
+SIMULATED_RESUME_S = 30.0
 
 
 class AcquisitionFailed(RuntimeError):
@@ -406,7 +410,11 @@ def acquire(
             base = np.array(settings.get("base_guess", base))
             clock.advance_to(
                 _last_time(db, cid)
-                + (30.0 if cell.simulated else _since_last_reading(db, cid, start, len(poses_deg)))
+                + (
+                    SIMULATED_RESUME_S
+                    if cell.simulated
+                    else _since_last_reading(db, cid, start, len(poses_deg))
+                )
             )
         try:
             tracker, controller = _clients(cell, sim, stack)
@@ -421,7 +429,9 @@ def acquire(
         stack.callback(writer.close)  # every state reported is stored before acquire returns
         sink: StoreSink | _Progress | _Events = StoreSink(db, cid, writer.settled)
         # poses a model compensates as each is due (a verification of a thermal model)
-        grown = compensated_run(db, cid, known, names)
+        grown = compensated_run(
+            db, cid, known, names, lambda: air_temperature(tracker), clock.now, log
+        )
         total = len(poses_deg) if grown is None else grown.total
         if progress:
             sink = _Progress(sink, progress, total, start)

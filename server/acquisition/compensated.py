@@ -1,11 +1,14 @@
-"""Poses whose joints a model compensates during the run, each at the latest air temperature.
+"""Poses whose joints a model compensates during the run, each at the air temperature of then.
 
 A model with a temperature term (thermal growth) cannot have its joints planned before the run:
 they depend on the air the arm is in when it gets there. Such a campaign stores the positions
-wanted and the model (settings `compensated_plan`); before each of these poses, its joints are
-solved at the temperature of the campaign's latest reading (the tracker's weather station, read
-with every reading), checked, stored as the pose's commanded joints, and only then moved to. A
-resumed run replays the poses already stored and computes the rest.
+wanted and the model (settings `compensated_plan`); before each of these poses, the tracker's
+weather station is read and the pose's joints solved at that temperature, checked, stored as the
+pose's commanded joints, and only then moved to. A resumed run replays the poses already stored
+and computes the rest, each at the air of its own time however long the run was stopped. Where
+the weather station gives no temperature, the pose is solved at the campaign's latest reading's,
+and how old that was is kept with it (settings `compensated_temp_age_s`) and said in the log and
+on the certificate.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from robocal.solver.compensate import compensate
 
 KEY = "compensated_plan"  # the campaign settings' key of the poses to compensate during the run
 TEMPS = "compensated_temps_c"  # the settings' key of the temperature each pose was solved at
+AGES = "compensated_temp_age_s"  # and of how old it was then (s; 0: read as the pose was due)
 TEMPERATURE = "temp_c"
 
 
@@ -60,12 +64,6 @@ def total_poses(settings: dict | None, stored: int) -> int:
     return stored if block is None else max(stored, block["after"] + len(block["labels"]))
 
 
-def latest_temp_c(db, cid: int) -> float | None:
-    """The air temperature (degC) of the campaign's latest reading that has one; None if none."""
-    air = store.latest_air(db, campaign_id=cid)
-    return None if air is None else air.temp_c
-
-
 def joints_at(model: ModelFile, desired_mm, q_start_rad, temp_c: float | None):
     """(joints (n,) deg, miss mm) for which the model puts its SMRs on desired (K, 3) mm at the
     air temperature temp_c (None: its temperature terms left out), within the joint limits;
@@ -81,10 +79,13 @@ def joints_at(model: ModelFile, desired_mm, q_start_rad, temp_c: float | None):
 
 class CompensatedRun:
     """The poses of campaign `cid`'s plan block (KEY) after its stored plan's first poses: the
-    stored ones replayed, each of the rest compensated at the latest temperature as it is due."""
+    stored ones replayed, each of the rest compensated at the air temperature as it is due.
+    air(): the tracker's weather station's temperature now (None if it gives none); now(): the
+    campaign's clock (s), which the readings' times are on."""
 
-    def __init__(self, db, cid: int, block: dict, names, temps=()):
+    def __init__(self, db, cid: int, block: dict, names, air, now, temps=(), ages=(), log=None):
         self.db, self.cid, self.names = db, cid, tuple(names)
+        self.air, self.now, self.log = air, now, log or (lambda _: None)
         self.model = parse_model(block["model"], f"<campaign {cid} compensated plan model>")
         self.desired = np.asarray(block["desired_mm"], dtype=float)
         self.q_start = np.asarray(block["q_start_rad"], dtype=float)
@@ -94,6 +95,8 @@ class CompensatedRun:
         have = {p.label for p in stored}
         self.done = sum(1 for label in self.labels if label in have)  # stored in order
         self.temps: list[float | None] = list(temps)[: self.done]
+        # campaigns stored before the ages were kept: their poses' ages unknown (None)
+        self.ages: list[float | None] = [*ages, *[None] * self.done][: self.done]
 
     @property
     def total(self) -> int:
@@ -110,12 +113,24 @@ class CompensatedRun:
             lambda: left.pop() if left else self._next(), self.names, start, partial, order
         )
 
+    def temperature(self) -> tuple[float | None, float | None]:
+        """The air temperature (degC) to solve the next pose at and its age (s): the weather
+        station's now (age 0); else the campaign's latest reading's, however old (a run resumed
+        hours after it stopped: hours); (None, None) if the cell has reported none."""
+        fresh = self.air()
+        if fresh is not None:
+            return fresh, 0.0
+        last = store.latest_air(self.db, campaign_id=self.cid)
+        if last is None:
+            return None, None
+        return last.temp_c, max(0.0, self.now() - last.time_s)
+
     def _next(self):
         """The next pose's joints (1, n) deg, stored before the arm moves; None when all are."""
         k = self.done
         if k >= len(self.labels):
             return None
-        temp = latest_temp_c(self.db, self.cid)
+        temp, age = self.temperature()
         q_deg, miss = joints_at(self.model, self.desired[k], self.q_start, temp)
         if not miss <= MAX_ERROR_MM:
             at = "without a temperature" if temp is None else f"at {temp:.2f} degC"
@@ -123,8 +138,14 @@ class CompensatedRun:
                 f"pose {self.labels[k]} is unreachable with the model's joints {at}: "
                 f"{miss:.3f} mm RMS off"
             )
+        if age:
+            self.log(
+                f"pose {self.labels[k]}: the tracker's weather station gave no temperature; "
+                f"compensated at {temp:.2f} degC, its latest reading's, {age / 60.0:.1f} min old"
+            )
         self.temps.append(temp)
-        store.update_settings(self.db, campaign_id=self.cid, **{TEMPS: self.temps})
+        self.ages.append(age)
+        store.update_settings(self.db, campaign_id=self.cid, **{TEMPS: self.temps, AGES: self.ages})
         # the store refuses joints beyond the arm's limits: nothing out of them is moved to
         store.extend_plan(
             self.db, campaign_id=self.cid, poses_deg=q_deg[None], labels=[self.labels[k]]
@@ -134,10 +155,13 @@ class CompensatedRun:
         return q_deg[None]
 
 
-def compensated_run(db, cid: int, known: dict, names) -> CompensatedRun | None:
+def compensated_run(db, cid: int, known: dict, names, air, now, log=None) -> CompensatedRun | None:
     """The campaign's poses compensated during the run, if its settings (`known`) have any;
-    names: the campaign's targets as the engine measures them."""
+    names: the campaign's targets as the engine measures them; air, now, log as CompensatedRun
+    takes them."""
     block = known.get(KEY)
     if block is None:
         return None
-    return CompensatedRun(db, cid, block, names, known.get(TEMPS) or ())
+    return CompensatedRun(
+        db, cid, block, names, air, now, known.get(TEMPS) or (), known.get(AGES) or (), log
+    )

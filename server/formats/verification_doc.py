@@ -137,7 +137,9 @@ class VerificationUncertainty(Ordered):
     compensation_note: str | None = Field(
         None,
         description="where the model's temperature terms were compensated as each pose was due: "
-        "how many poses were compensated without them, the cell having reported no temperature",
+        "how many poses were compensated without them, the cell having reported no temperature, "
+        "and how many at an earlier reading's temperature (the weather station giving none as "
+        "they were due) and how old the oldest was",
     )
     ap_u: str = Field("", description="how each AP's U is stated")
     decision: Decision | None = Field(

@@ -20,6 +20,7 @@ import numpy as np
 from robocal.server import store
 from robocal.server.acquisition.acquire import PREDICTOR, AcquireOptions, acquire
 from robocal.server.acquisition.compensated import (
+    AGES,
     KEY,
     TEMPS,
     plan_block,
@@ -43,6 +44,7 @@ from robocal.server.verify.uncertainty import (
     decision,
     joints_clause,
     mpe_mm,
+    stale,
     timed_terms,
     untempered,
 )
@@ -320,7 +322,7 @@ def prepare(
     # a plan made before the run cannot know its visits' time and temperature: the terms that
     # need them are left out of the planned joints (the model kept whole for U at the visits'
     # inputs); a temperature term's compensated joints are solved as each pose is due, at the
-    # temperature the cell reported last (acquisition/compensated.py)
+    # air temperature the tracker reads then (acquisition/compensated.py)
     timed = timed_terms(model)
     text = Path(model_path).read_text(encoding="utf-8") if timed else None
     plan, joints = make_plan(untimed(model) if timed else model, opts)
@@ -469,9 +471,13 @@ def verification_report(
             plan.points,
             joints_clause(timed, per_visit),
         )
-        said = untempered(timed, info.settings.get(TEMPS, ())) if per_visit else None
-        if said:
-            model_u["compensation_note"] = said
+        if per_visit:
+            said = [
+                untempered(timed, info.settings.get(TEMPS, ())),
+                stale(info.settings.get(AGES, ())),
+            ]
+            if any(said):
+                model_u["compensation_note"] = " ".join(filter(None, said))
     ap_u = mpe_mm(cell, plan.points)
     runs: dict[str, RunFigures] = {}
     seconds: dict[str, float | None] = {}

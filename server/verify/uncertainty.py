@@ -69,7 +69,7 @@ PLANNED = (
     "the joints were compensated without those terms, which a plan made before the run cannot know"
 )
 PER_VISIT = (
-    "the joints were compensated at the air temperature the cell reported last before each pose"
+    "the joints were compensated at the air temperature the tracker read as each pose was due"
 )
 PER_VISIT_UNTIMED = (
     PER_VISIT
@@ -78,6 +78,11 @@ PER_VISIT_UNTIMED = (
 UNTEMPERED = (
     "{n} of the compensated run's {total} poses were compensated without the model's "
     "temperature terms ({terms}): the cell had reported no temperature before them."
+)
+STALE = (
+    "{n} of the compensated run's {total} poses were compensated at the air temperature of an "
+    "earlier reading, the tracker's weather station giving none as they were due: up to "
+    "{minutes:.1f} min old."
 )
 NOT_GIVEN = (
     "Model U is not given: the model's time or temperature terms ({terms}) need each visit's "
@@ -112,6 +117,16 @@ def untempered(model: ModelFile, temps) -> str | None:
         return None
     terms = ", ".join(terms_on(model, "temp_c"))
     return UNTEMPERED.format(n=n, total=len(temps), terms=terms)
+
+
+def stale(ages_s) -> str | None:
+    """The sentence saying how many of the compensated poses (each one's temperature's age, s:
+    0 read as the pose was due, None not kept or none) were compensated at an earlier reading's
+    temperature, and how old the oldest was; None if none."""
+    old = [a for a in ages_s if a]
+    if not old:
+        return None
+    return STALE.format(n=len(old), total=len(ages_s), minutes=max(old) / 60.0)
 
 
 def at_visits(

@@ -88,7 +88,7 @@ def test_u_is_taken_at_each_visits_temperature(timed):
     html = entities.unescape(render(report))
     assert "Model U at each visit's time and temperature" in html
     # the term's joints were solved at each pose's temperature, not left out of a plan
-    assert "compensated at the air temperature the cell reported last before each pose" in html
+    assert "compensated at the air temperature the tracker read as each pose was due" in html
     assert all(f"{x:.4f}" in html for x in u)
 
 

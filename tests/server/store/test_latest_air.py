@@ -7,7 +7,6 @@ import numpy as np
 from sqlalchemy import event, text
 
 from robocal.drivers.cell import VirtualCell
-from robocal.server.acquisition.compensated import latest_temp_c
 from robocal.server.store import (
     campaign_measurements,
     create_campaign,
@@ -44,7 +43,7 @@ def test_the_latest_air_temperature_as_readings_arrive(db, cell_json):
     meas = VirtualCell.random(IRB2600, TARGETS, seed=11).campaign(20, seed=12, beam_break_rate=0.2)
     q_deg = np.rad2deg(meas.q)
     cid = started(db, cell_json, q_deg)
-    assert latest_temp_c(db, cid) is None and latest_air(db, campaign_id=cid) is None
+    assert latest_air(db, campaign_id=cid) is None
     seen = []
     for i in range(meas.n_poses):
         for k, t in enumerate(meas.target_names):
@@ -58,10 +57,9 @@ def test_the_latest_air_temperature_as_readings_arrive(db, cell_json):
         record_pose_outcome(db, campaign_id=cid, pose_index=i, state="measured"
                             if meas.mask[i].all() else "missing-target", reached_deg=q_deg[i])  # fmt: skip
         want = whole_campaign_answer(db, cid)
-        assert latest_temp_c(db, cid) == want
-        seen.append(want)
         air = latest_air(db, campaign_id=cid)
-        assert air is None or (air.temp_c == want and air.time_s <= 20.0 * i + 2)
+        assert (air is None and want is None) or (air.temp_c == want and air.time_s <= 20.0 * i + 2)
+        seen.append(want)
     assert len(set(seen)) > 10  # it followed the air as the readings came
 
 
@@ -78,7 +76,7 @@ def test_the_latest_air_temperature_is_one_indexed_row(db, cell_json):
     listen = lambda conn, cursor, statement, params, *a: said.append((statement, params))  # noqa: E731
     event.listen(db.engine, "before_cursor_execute", listen)
     try:
-        latest_temp_c(db, cid)
+        latest_air(db, campaign_id=cid)
     finally:
         event.remove(db.engine, "before_cursor_execute", listen)
     asked = [(s, p) for s, p in said if s.lstrip().upper().startswith("SELECT")]
