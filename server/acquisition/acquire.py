@@ -35,9 +35,8 @@ from robocal.server.store.checks import arm_name
 
 # The campaign settings' key of a known geometry for the SMR predictor (robot, base, targets).
 PREDICTOR = "predictor"
-# a resumed simulated run begins this long (campaign clock, s) after its last reading; a real
-# one as long after it as it really is
-SIMULATED_RESUME_S = 30.0
+# a resumed simulated run's gap after its last reading, campaign clock s (a real one's is real)
+RESUME_S = 30.0
 
 
 class AcquisitionFailed(RuntimeError):
@@ -408,14 +407,10 @@ def acquire(
             names = tuple(sorted(cell.targets))
             history, partial = _history(db, cid, names, start, cell)
             base = np.array(settings.get("base_guess", base))
-            clock.advance_to(
-                _last_time(db, cid)
-                + (
-                    SIMULATED_RESUME_S
-                    if cell.simulated
-                    else _since_last_reading(db, cid, start, len(poses_deg))
-                )
+            gap = (
+                RESUME_S if cell.simulated else _since_last_reading(db, cid, start, len(poses_deg))
             )
+            clock.advance_to(_last_time(db, cid) + gap)
         try:
             tracker, controller = _clients(cell, sim, stack)
         except DeviceUnreachable as e:

@@ -197,7 +197,7 @@ def late_resume(runs, tmp_path, monkeypatch, weather: bool):
     db = store.open_database(db_path)
     last = store.latest_air(db, campaign_id=cid)
     assert last is not None
-    monkeypatch.setattr(acquisition, "SIMULATED_RESUME_S", HOURS * 3600.0)
+    monkeypatch.setattr(acquisition, "RESUME_S", HOURS * 3600.0)
     if not weather:
         monkeypatch.setattr(SimulatedTracker, "weather", no_weather_station)
     said: list[str] = []
