@@ -7,7 +7,8 @@ extension, evaluated at the current joints: compliance under the gravity torques
 joints, periodic and scale terms, backlash with the approach direction from the previous pose in
 visit order, thermal growth at the given temperature); the step uses the geometric joint
 Jacobian only. Extensions move joints by millidegrees, so the step's Jacobian is off by parts
-in ten thousand: Newton then converges a little more slowly, to the same exact solution.
+in ten thousand: Newton then converges a little more slowly, to the same exact solution. A joint
+on its limit that the step would push through is held on it, the step taken by the others.
 """
 
 from __future__ import annotations
@@ -119,27 +120,42 @@ def solve(
     done = np.zeros(m, dtype=bool)
     eye = np.eye(n)
     iterations = 0
+    # without extensions each pose is its own problem: only those still iterating are walked
+    # (the configuration search's 16 starts a pose, most of them done long before the last);
+    # an extension's basis may couple poses (the backlash's visit order), so all are walked
+    alone = not model.extensions
+    every = np.arange(m)
     while iterations < max_iter and not done.all():
         iterations += 1
-        Jw = (J * w[..., None, None]).reshape(m, -1, n)
+        a = np.flatnonzero(~done) if alone else every
+        qa, lo_a, hi_a, wa = q[a], lower[a], upper[a], w[a]
+        Jw = (J[a] * wa[..., None, None]).reshape(len(a), -1, n)
         A = np.einsum("mri,mrj->mij", Jw, Jw)
-        g = np.einsum("mri,mr->mi", Jw, r.reshape(m, -1))
+        g = np.einsum("mri,mr->mi", Jw, r[a].reshape(len(a), -1))
         scale = np.trace(A, axis1=1, axis2=2)[:, None, None] / n + 1e-12
-        step = -np.linalg.solve(A + (mu[:, None, None] * scale) * eye, g[..., None])[..., 0]
-        step[done] = 0.0
-        trial = np.clip(q + step, lower, upper)
-        p_t, J_t = model.evaluate(trial, time_s, temp_c, prev_q)
-        r_t, cost_t = _cost(p_t, desired, w)
-        better = (cost_t <= cost) & ~done
-        q[better], r[better], cost[better], J[better] = (
-            trial[better],
-            r_t[better],
-            cost_t[better],
-            J_t[better],
-        )
-        mu = np.where(better, np.maximum(mu * 0.3, 1e-12), np.minimum(mu * 10.0, 1e12))
+        # a joint on its limit that the descent would push through is held there and the step
+        # solved over the others (the bound's active set): a pose whose best joints lie on a
+        # limit then meets the step test, where the clipped full step pushed at the bound,
+        # never shrank, and kept every pose of the batch iterating to max_iter
+        held = ((qa <= lo_a) & (g > 0.0)) | ((qa >= hi_a) & (g < 0.0))
+        if held.any():
+            free = ~held
+            A = A * (free[:, :, None] & free[:, None, :]) + held[:, :, None] * eye
+            g = np.where(held, 0.0, g)
+        step = -np.linalg.solve(A + (mu[a, None, None] * scale) * eye, g[..., None])[..., 0]
+        step[done[a]] = 0.0
+        trial = np.clip(qa + step, lo_a, hi_a)
+        if alone:  # the inputs only extensions need
+            p_t, J_t = model.evaluate(trial)
+        else:
+            p_t, J_t = model.evaluate(trial, time_s, temp_c, prev_q)
+        r_t, cost_t = _cost(p_t, desired[a], wa)
+        better = (cost_t <= cost[a]) & ~done[a]
+        b = a[better]
+        q[b], r[b], cost[b], J[b] = trial[better], r_t[better], cost_t[better], J_t[better]
+        mu[a] = np.where(better, np.maximum(mu[a] * 0.3, 1e-12), np.minimum(mu[a] * 10.0, 1e12))
         small = np.max(np.abs(step), axis=1) < STEP_TOL_RAD
-        done |= (better & small) | (~better & (mu >= 1e12)) | (cost < 1e-24)
+        done[a] |= (better & small) | (~better & (mu[a] >= 1e12)) | (cost[a] < 1e-24)
     # the backlash couples poses: report the miss of the joints as they stand, all together
     p, _ = model.evaluate(q, time_s, temp_c, prev_q)
     r, cost = _cost(p, desired, w)

@@ -224,3 +224,58 @@ def test_prev_q_gives_a_shuffled_program_its_approach_directions():
     assert np.degrees(np.abs(shuffled.q - ordered.q[perm])).max() < 1e-6
     blind = compensate(model, desired[perm], mask[perm], q[perm])
     assert np.degrees(np.abs(blind.q - ordered.q[perm])).max() > 0.05
+
+
+def test_a_pose_whose_best_joints_lie_on_a_limit_converges_there():
+    """SMRs where joint 2 would stand a tenth of a degree past its limit (a calibrated arm's
+    pose at its limit, compensated): the best joints within the limits hold joint 2 on it and
+    the others where the miss is least given that (no joint's gradient points inside its
+    range). The step is solved over the free joints, so the pose meets the step test; the
+    clipped full step pushed at the bound, its joint-2 part never shrinking, until max_iter (and
+    a configuration search's starts that walked onto a limit kept the whole batch iterating)."""
+    from robocal.solver.compensate import solve
+
+    cell = default_cell()
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=3)
+    q = vc.sample_poses(4, np.random.default_rng(1))
+    lo, hi = vc.true_robot.lower, vc.true_robot.upper
+    q[2, 1] = lo[1] - np.deg2rad(0.1)
+    desired = vc.true_points(q)
+    mask = np.ones(desired.shape[:2], dtype=bool)
+    model = Model(*_true_layout(vc), [], cell.robot)
+    start = np.clip(q + np.deg2rad(3.0), lo, hi)  # off the solutions, joint 2 inside its range
+    res = solve(model, desired, mask, start, np.repeat(lo[None], 4, 0), np.repeat(hi[None], 4, 0))
+    assert res.converged.all() and res.iterations < 100, res.iterations
+    print(
+        f"\n{res.iterations} iterations; the pose at the limit misses by {res.error_mm[2]:.3f} mm"
+    )
+    assert res.q[2, 1] == lo[1] and res.error_mm[2] > 0.1
+    assert res.error_mm[[0, 1, 3]].max() < 1e-6
+    # at the bound's optimum the cost's gradient is zero in the free joints and points out of
+    # the range in the held one
+    _, J = model.evaluate(res.q[2:3])
+    g = np.einsum("kci,kc->i", J[0], model.predict(res.q[2:3])[0] - desired[2])
+    assert g[1] > 0.0 and np.abs(np.delete(g, 1)).max() < 1e-6 * np.abs(g[1]), g
+
+
+def test_a_batch_of_poses_is_solved_as_each_pose_alone():
+    """Poses of a geometric model are walked only while they iterate: each pose's joints in a
+    batch are those it is solved to alone, bit for bit."""
+    from robocal.solver.compensate import solve
+
+    cell = default_cell()
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=5)
+    q = vc.sample_poses(12, np.random.default_rng(2))
+    lo, hi = vc.true_robot.lower, vc.true_robot.upper
+    q[3, 2] = hi[2] + np.deg2rad(4.0)  # one on a limit, iterating longer than the rest
+    desired = vc.true_points(q)
+    mask = np.ones(desired.shape[:2], dtype=bool)
+    model = Model(*_true_layout(vc), [], cell.robot)
+    start = np.clip(q + np.deg2rad(2.0), lo, hi)
+    both = (np.repeat(lo[None], 12, 0), np.repeat(hi[None], 12, 0))
+    batch = solve(model, desired, mask, start, *both)
+    for i in range(12):
+        one = solve(
+            model, desired[i : i + 1], mask[i : i + 1], start[i : i + 1], lo[None], hi[None]
+        )
+        assert np.array_equal(one.q[0], batch.q[i]) and one.error_mm[0] == batch.error_mm[i], i
