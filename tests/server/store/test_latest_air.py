@@ -7,8 +7,8 @@ import numpy as np
 from sqlalchemy import event, text
 
 from robocal.drivers.cell import VirtualCell
+from robocal.server.bench.air import whole_campaign  # how it was found, from all readings
 from robocal.server.store import (
-    campaign_measurements,
     create_campaign,
     latest_air,
     record_missing,
@@ -18,17 +18,6 @@ from robocal.server.store import (
 )
 from robocal.solver.robot import IRB2600
 from tests.robots import TARGETS
-
-
-def whole_campaign_answer(db, cid) -> float | None:
-    """The answer read from all of the campaign's readings (how it was found before)."""
-    meas = campaign_measurements(db, campaign_id=cid)
-    if meas.temp_c is None or meas.time_s is None:
-        return None
-    ok = np.isfinite(meas.temp_c) & np.isfinite(meas.time_s)
-    if not ok.any():
-        return None
-    return float(meas.temp_c.flat[np.argmax(np.where(ok, meas.time_s, -np.inf))])
 
 
 def started(db, cell_json, q_deg) -> int:
@@ -56,7 +45,7 @@ def test_the_latest_air_temperature_as_readings_arrive(db, cell_json):
                 record_missing(db, campaign_id=cid, pose_index=i, target=t, time_s=time_s)
         record_pose_outcome(db, campaign_id=cid, pose_index=i, state="measured"
                             if meas.mask[i].all() else "missing-target", reached_deg=q_deg[i])  # fmt: skip
-        want = whole_campaign_answer(db, cid)
+        want = whole_campaign(db, cid)
         air = latest_air(db, campaign_id=cid)
         assert (air is None and want is None) or (air.temp_c == want and air.time_s <= 20.0 * i + 2)
         seen.append(want)
