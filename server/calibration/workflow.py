@@ -574,26 +574,24 @@ def _judge_diagnosis(
     report: ReportDoc, errors: ExtendedErrors, cell: Cell, meas: Measurements, model: ModelFile
 ) -> Calibration:
     """The `identified` and `validation` blocks of a diagnosis's final model, as a calibration's:
-    the held-fixed parameters and the condition number of the geometry as ls-sum finds them
-    (that geometry returned)."""
+    the held-fixed and the shrunk parameters, the prior and the condition number of the geometry
+    as ls-sum finds them (that geometry returned; the diagnosis fits under its prior)."""
     from robocal.server.calibration.identified import identified_block
     from robocal.solver.calibrate import calibrate
 
     problem = replace(cell_problem(cell, meas), noise_floor_mm=report.noise_floor_mm)
     geometric = calibrate(problem, "ls-sum")
-    # the diagnosis holds what the geometry shrinks (solver.diagnose): held fixed here
-    held = {n: f"held at nominal: {s.why}" for n, s in geometric.shrunk.items()}
     model.identified = identified_block(
         model,
         errors.parameters,
-        fixed={**geometric.fixed, **held},
+        fixed=geometric.fixed,
         condition=geometric.condition,
         nominal_targets={t: cell.targets[t] for t in meas.target_names},
         nominal_base=cell.base,
+        shrunk=geometric.shrunk,
+        prior=geometric.prior,
     )
-    model.validation = validate_diagnosis(
-        report, errors, cell, meas, model, geometric.condition, geometric.layout_condition
-    )
+    model.validation = validate_diagnosis(report, errors, cell, meas, model, geometric)
     return geometric
 
 
@@ -603,12 +601,12 @@ def validate_diagnosis(
     cell: Cell,
     meas: Measurements,
     model: ModelFile,
-    condition: float,
-    layout_condition: float | None = None,
+    geometric: Calibration,
 ) -> Validation:
     """model.json's `validation` block of a diagnosis's final model, by the calibration's rule
     (verdict): its own cross-validated held-out figures against its fit, with the geometry's
-    condition number (and its layout's) and the report's noise floor."""
+    condition number (and its layout's) and shrunk parameters (each counted as the share of it
+    the data gives, as the diagnosis fits them under its prior) and the report's noise floor."""
     from robocal.solver import guard
     from robocal.solver.diagnose import FOLDS
 
@@ -623,12 +621,12 @@ def validate_diagnosis(
         [model.targets[t] for t in meas.target_names],
         fit_rms_mm=float(np.sqrt(np.mean(r * r))),
         holdout=guard.CrossValidated(final.holdout_rmse_mm, final.holdout_max_mm),
-        condition=condition,
-        free_parameters=int(np.count_nonzero(errors.parameters.column >= 0)),
+        condition=geometric.condition,
+        free_parameters=effective_parameters(errors.parameters.column, geometric.shrunk),
         # the solver's report always says where its floor comes from; one read from a file may not
         floor=(report.noise_floor_mm, report.noise_floor_source or "unstated"),
         holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
-        layout_condition=layout_condition,
+        layout_condition=geometric.layout_condition,
     )
 
 
