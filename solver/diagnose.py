@@ -42,7 +42,7 @@ from .selection import (
     paired_t,
     rmse_gain_interval,
 )
-from .shift_scan import shift_gains, shift_time  # noqa: F401 (shift_gains: the tests')
+from .shift_scan import shift_time
 from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
 from .variants import (
     MIN_GAIN,

@@ -65,7 +65,7 @@ def shift_time(
 
 
 def shift_gains(ZZ, QZ, Zr, Qr) -> np.ndarray:
-    """Per gap, the gain b' G^-1 b of a base shift after it (Diagnoser.scan_shift), for a block of
+    """Per gap, the gain b' G^-1 b of a base shift after it (shift_time), for a block of
     gaps at once; a gap whose normal matrix is singular gains nothing (-inf)."""
     QZt = np.swapaxes(QZ, 1, 2)
     G = ZZ - QZt @ QZ
