@@ -55,6 +55,7 @@ from .variants import (
 )
 
 if TYPE_CHECKING:  # run_diagnosis imports fit_errors and the report only when it needs them
+    from .calibrate import Calibration
     from .diagnosis_report import EffectFigure, Report
     from .fit_errors import ExtendedErrors
 
@@ -98,6 +99,9 @@ class Diagnosis:
     seconds: dict = field(default_factory=dict)
     errors: ExtendedErrors | None = None  # the final model's standard errors
     fits: int = 0  # the fits its cross-validation ran
+    # the ls-sum calibration on the same readings whose held parameters, shrunk ones and prior
+    # every fit took
+    geometric: Calibration | None = None
 
 
 def folds(m: int, k: int = FOLDS, seed: int = 0) -> list[np.ndarray]:
@@ -625,7 +629,7 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
         report.stability = stability.to_report()
     report.seconds = {k: round(v, 3) for k, v in clock.items()}
     report.cross_validation = CrossValidation(len(diag.folds), diag.fits, len(cands))
-    return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors, diag.fits)
+    return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors, diag.fits, geo)
 
 
 def resampled(diag: Diagnoser, cands, steps) -> Stability | None:

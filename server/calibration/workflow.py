@@ -549,7 +549,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True) -> tuple[Dia
     if d.errors is not None:
         model.uncertainty = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
-        d.geometric = _judge_diagnosis(d.report, d.errors, cell, meas, model)
+        d.geometric = _judge_diagnosis(d.report, d.errors, cell, meas, model, solved.geometric)
         _position_block(d.report, d.errors, cell, meas, model)
     return d, model
 
@@ -571,16 +571,23 @@ def _position_block(
 
 
 def _judge_diagnosis(
-    report: ReportDoc, errors: ExtendedErrors, cell: Cell, meas: Measurements, model: ModelFile
+    report: ReportDoc,
+    errors: ExtendedErrors,
+    cell: Cell,
+    meas: Measurements,
+    model: ModelFile,
+    geometric: Calibration | None = None,
 ) -> Calibration:
     """The `identified` and `validation` blocks of a diagnosis's final model, as a calibration's:
     the held-fixed and the shrunk parameters, the prior and the condition number of the geometry
-    as ls-sum finds them (that geometry returned; the diagnosis fits under its prior)."""
+    the diagnosis fitted under (`geometric`, its ls-sum; else ls-sum's on these readings),
+    that geometry returned."""
     from robocal.server.calibration.identified import identified_block
     from robocal.solver.calibrate import calibrate
 
-    problem = replace(cell_problem(cell, meas), noise_floor_mm=report.noise_floor_mm)
-    geometric = calibrate(problem, "ls-sum")
+    if geometric is None:
+        problem = replace(cell_problem(cell, meas), noise_floor_mm=report.noise_floor_mm)
+        geometric = calibrate(problem, "ls-sum")
     model.identified = identified_block(
         model,
         errors.parameters,
