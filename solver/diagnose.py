@@ -26,7 +26,6 @@ from .extrapolation import (
     region_folds,
     span_parts,
 )
-from .finite import finite
 from .gravity import gravity_suspects
 from .identify import register
 from .kinematics import Layout, predict_rows
@@ -38,14 +37,13 @@ from .report_blocks import Alternative, CrossValidation
 from .screen import screen_readings
 from .selection import (
     ALPHA,
-    EDGE_POSES,
     RESAMPLES,
     linear_scores,
     paired_t,
     rmse_gain_interval,
 )
+from .shift_scan import shift_time
 from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
-from .tall import tall_qr
 from .variants import (
     MIN_GAIN,
     T_SIMPLER,
@@ -57,13 +55,13 @@ from .variants import (
 )
 
 if TYPE_CHECKING:  # run_diagnosis imports fit_errors and the report only when it needs them
+    from .calibrate import Calibration
     from .diagnosis_report import EffectFigure, Report
     from .fit_errors import ExtendedErrors
 
 MAX_EFFECTS = 4
 REFUSAL_ROUNDS = 3  # selections run again after the region folds refuse effects
 FOLDS = 5
-GAP_BLOCK = 4096  # gaps between readings whose base-shift gains are solved at once
 
 
 @dataclass
@@ -101,6 +99,9 @@ class Diagnosis:
     seconds: dict = field(default_factory=dict)
     errors: ExtendedErrors | None = None  # the final model's standard errors
     fits: int = 0  # the fits its cross-validation ran
+    # the ls-sum calibration on the same readings whose held parameters, shrunk ones and prior
+    # every fit took
+    geometric: Calibration | None = None
 
 
 def folds(m: int, k: int = FOLDS, seed: int = 0) -> list[np.ndarray]:
@@ -116,8 +117,21 @@ def candidates(layout, x, inputs: Inputs) -> list[Extension]:
 class Diagnoser:
     """Cross-validation of model variants on one campaign."""
 
-    def __init__(self, prob: identify.Problem, x0, free, inputs: Inputs, k_folds=FOLDS):
+    def __init__(
+        self,
+        prob: identify.Problem,
+        x0,
+        free,
+        inputs: Inputs,
+        k_folds=FOLDS,
+        prior=None,
+        shrunk=None,
+    ):
         self.prob, self.x0, self.free, self.inputs = prob, x0, free, inputs
+        # the geometric calibration's prior (solver.prior) in every fit, and the parameters
+        # (bool mask) it rather than the data pins: free, but no poses are needed for them
+        self.prior = prior
+        self.shrunk = np.zeros(len(free), bool) if shrunk is None else np.asarray(shrunk, bool)
         self.folds = folds(prob.q.shape[0], k_folds)
         self.centroid = np.nanmean(prob.meas.reshape(-1, 3), axis=0)
         self.fits = 0
@@ -159,7 +173,7 @@ class Diagnoser:
                 for i, (e, k) in enumerate(zip(exts, known + [None] * len(exts)))
             ]
         x, ee, _ = fit_extended(
-            self.prob, self.inputs, self.x0, self.free, exts, poses, start=start
+            self.prob, self.inputs, self.x0, self.free, exts, poses, start=start, prior=self.prior
         )
         return x, ee
 
@@ -189,48 +203,11 @@ class Diagnoser:
         return CV(sq, n, maxerr, ee, fits, resid)
 
     def scan_shift(self, others, poses) -> float:
-        """The time of a base shift that best explains the training residuals (linearised).
-
-        Every gap between two consecutive readings is a candidate (a shift may fall between the
-        SMRs of one pose). For each, the gain of the six shift columns, made orthogonal to the
-        geometric Jacobian, is b' (Z'Z)^-1 b; all the Gram sums are suffix sums over readings in
-        time order, so the whole scan costs about one Jacobian.
-        """
+        """The time of a base shift that best explains the training residuals (solver.shift_scan)
+        of the model with `others` fitted on the poses."""
         x, ee = self.fit_plain(others, poses)
-        sub = self.inputs.subset(poses)
-        meas = self.prob.meas[poses]
-        assert sub.time_s is not None  # a base shift is only scanned for with timed readings
-        mask = np.all(np.isfinite(meas), axis=-1) & np.isfinite(sub.time_s)
-        r = predict_extended(self.prob.layout, x, ee, sub)[mask] - meas[mask]  # (N, 3)
-        idx = np.flatnonzero(self.free)
-        _, Jt = predict_rows(self.prob.layout, x, sub.q, mask, idx)  # (P, N, 3)
-        Q, _ = tall_qr(finite(Jt.reshape(len(idx), -1).T, "an effect's Jacobian"))
-        Q = Q.reshape(-1, 3, Q.shape[1])  # (N, 3, P)
-        t = sub.time_s[mask]
-        order = np.argsort(t, kind="stable")
-        t, r, Q = t[order], r[order], Q[order]
-        v = meas[mask][order] - self.centroid
-        Z = np.zeros((len(t), 3, 6))  # per reading: translation and rotation columns
-        Z[:, [0, 1, 2], [0, 1, 2]] = 1.0
-        for a in range(3):
-            e = np.zeros(3)
-            e[a] = 1.0
-            Z[:, :, 3 + a] = np.cross(e, v)
-        suffix = lambda a: np.cumsum(a[::-1], axis=0)[::-1]  # noqa: E731
-        ZZ = suffix(np.einsum("nci,ncj->nij", Z, Z))
-        QZ = suffix(np.einsum("ncp,nci->npi", Q, Z))
-        Zr = suffix(np.einsum("nci,nc->ni", Z, r))
-        Qr = np.einsum("ncp,nc->p", Q, r)
-        lo = EDGE_POSES * meas.shape[1]
-        gaps = np.arange(max(lo, 1), len(t) - lo)
-        gaps = gaps[t[gaps] != t[gaps - 1]]
-        blocks = np.array_split(gaps, 1 + len(gaps) // GAP_BLOCK)
-        gain = np.concatenate([[]] + [shift_gains(ZZ[n], QZ[n], Zr[n], Qr) for n in blocks])
-        gain = np.nan_to_num(gain, nan=-np.inf)  # as the comparison in time order skipped them
-        if not len(gain) or not gain.max() > -1.0:
-            return float(np.median(t))
-        n = gaps[int(np.argmax(gain))]  # the first of equal gains, as a scan in time order keeps
-        return 0.5 * float(t[n - 1] + t[n])
+        sub, meas = self.inputs.subset(poses), self.prob.meas[poses]
+        return shift_time(self.prob.layout, x, ee, sub, meas, self.free, self.centroid, self.prior)
 
     def linear_system(self, fit, current, cands):
         """The current model's Jacobian and residual on all readings, and each candidate's columns.
@@ -261,8 +238,18 @@ class Diagnoser:
                 scans[i] = (Z.reshape(6, -1).T, visit_order(inputs.time_s, len(inputs.q)))
         return trial, J[:, :n_cur], r, blocks, pose_of_row, scans
 
+    def prior_rows(self, x):
+        """The geometry prior's rows at x over the free entries and their residual, as
+        selection.linear_scores takes them; None without a prior."""
+        if self.prior is None:
+            return None
+        idx = np.flatnonzero(self.free)
+        return np.diag(np.sqrt(self.prior.weight[idx])), self.prior.rows(x, idx)
+
     def fit_plain(self, exts, poses):
-        x, ee, _ = fit_extended(self.prob, self.inputs, self.x0, self.free, exts, poses)
+        x, ee, _ = fit_extended(
+            self.prob, self.inputs, self.x0, self.free, exts, poses, prior=self.prior
+        )
         return x, ee
 
     def region_residuals(self, exts, fold: RegionFold) -> tuple[np.ndarray, np.ndarray] | None:
@@ -305,28 +292,6 @@ class Diagnoser:
         return FoldCheck(
             fold, geo.check.geometric_rms, rms, geo.check.geometric_parts, parts, shift
         )
-
-
-def shift_gains(ZZ, QZ, Zr, Qr) -> np.ndarray:
-    """Per gap, the gain b' G^-1 b of a base shift after it (Diagnoser.scan_shift), for a block of
-    gaps at once; a gap whose normal matrix is singular gains nothing (-inf)."""
-    QZt = np.swapaxes(QZ, 1, 2)
-    G = ZZ - QZt @ QZ
-    b = Zr - QZt @ Qr
-    G = G + 1e-12 * np.trace(G, axis1=1, axis2=2)[:, None, None] * np.eye(6)
-    finite(G, "a time shift's normal matrix")
-    finite(b, "a time shift's gradient")
-    solvable = np.ones(len(G), bool)
-    try:
-        x = np.linalg.solve(G, b[..., None])[..., 0]
-    except np.linalg.LinAlgError:  # a singular gap in the block: the others one by one
-        x = np.zeros_like(b)
-        for i in range(len(G)):
-            try:
-                x[i] = np.linalg.solve(G[i], b[i])
-            except np.linalg.LinAlgError:
-                solvable[i] = False
-    return np.where(solvable, np.sum(b * x, axis=1), -np.inf)
 
 
 @dataclass
@@ -380,7 +345,8 @@ def grouped_folds(diag: Diagnoser) -> list[RegionFold]:
     """The campaign's folds grouped by region of joint space and by arm configuration."""
     q = diag.prob.q
     per_pose = max(1, int(diag.prob.mask.any(axis=0).sum()))  # SMRs a pose
-    least = int(np.ceil(diag.free.sum() / per_pose)) + 1  # poses enough to fit on one side
+    # poses enough to fit on one side (the prior, not the data, pins the shrunk parameters)
+    least = int(np.ceil((diag.free & ~diag.shrunk).sum() / per_pose)) + 1
     folds = region_folds(diag.prob.layout, diag.x0, q, least)
     return folds + configuration_folds(diag.prob.layout.robot, q, least)
 
@@ -414,7 +380,10 @@ def select(
         trial, A, r, blocks, pose_of_row, scans = diag.linear_system(
             cv_now.fits["all"], current, remaining
         )
-        fresh = linear_scores(A, r, blocks, pose_of_row, diag.folds, m, resamples=0).fresh
+        prior = diag.prior_rows(cv_now.fits["all"][0])
+        fresh = linear_scores(
+            A, r, blocks, pose_of_row, diag.folds, m, resamples=0, prior=prior
+        ).fresh
         sc = linear_scores(
             A,
             r,
@@ -426,6 +395,7 @@ def select(
             seed=len(steps),
             scans=scans,
             null_residual=fresh,
+            prior=prior,
         )
         thr = sc.threshold(alpha)
         n_read = cv_now.n.sum()
@@ -444,14 +414,17 @@ def select(
         variants = [i for i in ok if same_effect(trial[i], trial[best])]
         if grouped_tests and len(variants) > 1:
             # the variants' gains where the model will be used: off the training region
-            grouped = linear_scores(A, r, blocks, pose_of_row, grouped_tests, m, resamples=0)
+            grouped = linear_scores(
+                A, r, blocks, pose_of_row, grouped_tests, m, resamples=0, prior=prior
+            )
             best = simplest_variant(trial, ok, best, sc, grouped)
         else:
             best = simplest_variant(trial, ok, best, sc)
         simplest = min(variants, key=lambda i: trial[i].n_params)
         system = (A, r, blocks, pose_of_row)
+        folds_ = grouped_tests or diag.folds
         if best != simplest and another_cause(
-            trial, ok, best, simplest, system, grouped_tests or diag.folds, diag.folds, len(steps)
+            trial, ok, best, simplest, system, folds_, diag.folds, len(steps), prior
         ):
             best = simplest
         best = nested_simpler(trial, ok, best, system, sc)
@@ -622,10 +595,12 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     from .calibrate import calibrate
 
     geo = calibrate(replace(problem, noise_floor_mm=noise.mm), "ls-sum")
-    # shrunk parameters are held at nominal here: the extended fits carry no prior
-    free = np.array([n not in geo.fixed and n not in geo.shrunk for n in prob.layout.names()])
+    # the shrunk parameters are fitted under its prior in every fit: with no effect named the
+    # diagnosis's geometry is ls-sum's
+    free = np.array([n not in geo.fixed for n in prob.layout.names()])
     clock["setup"] = time.perf_counter() - t0
-    diag = Diagnoser(prob, x0, free, inputs)
+    shrunk = np.isin(prob.layout.names(), list(geo.shrunk))
+    diag = Diagnoser(prob, x0, free, inputs, prior=geo.prior, shrunk=shrunk)
     cands = candidates(prob.layout, x0, inputs)
     steps, base, final, region = select_suspecting(diag, cands, log, clock=clock)
     t_resample = time.perf_counter()
@@ -654,7 +629,7 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
         report.stability = stability.to_report()
     report.seconds = {k: round(v, 3) for k, v in clock.items()}
     report.cross_validation = CrossValidation(len(diag.folds), diag.fits, len(cands))
-    return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors, diag.fits)
+    return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors, diag.fits, geo)
 
 
 def resampled(diag: Diagnoser, cands, steps) -> Stability | None:
@@ -667,7 +642,9 @@ def resampled(diag: Diagnoser, cands, steps) -> Stability | None:
     subsets = leave_out(m)
     for keep in subsets:
         prob = identify.Problem(diag.prob.layout, diag.prob.q[keep], diag.prob.meas[keep])
-        sub = Diagnoser(prob, diag.x0, diag.free, diag.inputs.subset(keep))
+        sub = Diagnoser(
+            prob, diag.x0, diag.free, diag.inputs.subset(keep), prior=diag.prior, shrunk=diag.shrunk
+        )
         chosen, _, _, _ = select_suspecting(sub, cands, max_effects=1)  # the top cause may differ
         named.append(tuple(effect_key(st[0]) for st in chosen))
     final = tuple(effect_key(st[0]) for st in steps)

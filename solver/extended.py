@@ -8,6 +8,7 @@ from .effects import Extension, Inputs, joint_offsets, point_shift, prepare
 from .identify import Problem
 from .kinematics import Layout, predict, predict_rows
 from .lm import levenberg_marquardt
+from .prior import Prior
 
 
 def _origin(ext: Extension, layout: Layout, x) -> np.ndarray:
@@ -53,12 +54,22 @@ def extension_rows(layout, x, exts, bases, inputs, mask, idx):
 
 
 def fit_extended(
-    prob: Problem, inputs: Inputs, x0, free, exts, poses=None, max_iter=50, start=None
+    prob: Problem,
+    inputs: Inputs,
+    x0,
+    free,
+    exts,
+    poses=None,
+    max_iter=50,
+    start=None,
+    prior: Prior | None = None,
 ):
     """Fit free geometric parameters and every extension's coefficients on the given poses.
 
     Returns (x, exts with fitted coef, LMResult). Bases are evaluated at x0 and held; the fit
-    starts from `start` (default x0) and from each extension's coef where it has one.
+    starts from `start` (default x0) and from each extension's coef where it has one. prior: the
+    geometric calibration's (solver.prior), its rows after the readings' (the LMResult's cost
+    includes them), so that without extensions the fit is ls-sum's.
     """
     poses = np.arange(prob.q.shape[0]) if poses is None else np.asarray(poses)
     sub = inputs.subset(poses)
@@ -92,6 +103,9 @@ def fit_extended(
         xx, ee = unpack(z)
         return (predict_extended(layout, xx, ee, sub, bases)[mask] - y).ravel()
 
-    res = levenberg_marquardt(fun, z0, residual, max_iter=max_iter)
+    if prior is None:
+        res = levenberg_marquardt(fun, z0, residual, max_iter=max_iter)
+    else:
+        res = levenberg_marquardt(None, z0, max_iter=max_iter, **prior.fit(fun, x, idx, residual))
     xx, ee = unpack(res.x)
     return xx, ee, res

@@ -16,7 +16,7 @@ from .identify import Problem, pose_fit, pose_residuals
 from .kinematics import Layout, predict_rows
 from .normal import PointNormal
 from .postfit import BLOCK_ENTRIES, Blocks, Sums, poses_per_block, post_fit
-from .prior import PriorTerms
+from .prior import Prior, PriorTerms
 from .uncertainty import (
     CLUSTERED,
     ParameterErrors,
@@ -260,12 +260,20 @@ def coef_names(exts) -> list[str]:
 
 
 def extended_errors(
-    prob: Problem, inputs: Inputs, x0, free, x, exts: list[Extension]
+    prob: Problem, inputs: Inputs, x0, free, x, exts: list[Extension], prior: Prior | None = None
 ) -> ParameterErrors:
     """Standard errors of the extended model fitted on every pose (geometry, base, SMRs and each
-    extension's coefficients), with the bases evaluated at x0 as fit_extended holds them."""
+    extension's coefficients), with the bases evaluated at x0 as fit_extended holds them; with
+    the geometry's prior it was fitted under, the posterior's (its terms in the sandwich, as a
+    calibration's: prior_terms)."""
     rows, names, column, degrees = extended_fit_rows(prob, inputs, x0, free, x, exts)
-    return errors_from_rows(rows, names, column, degrees)
+    if prior is None:
+        return errors_from_rows(rows, names, column, degrees)
+    terms = prior.terms(column[: prob.layout.n_params], rows.J.shape[1])
+    post = post_fit(lambda: [rows], prior=terms)
+    return ParameterErrors(
+        tuple(names), column, post.clustered, degrees, CLUSTERED, post.poses, post.plain
+    )
 
 
 def extended_fit_rows(prob: Problem, inputs: Inputs, x0, free, x, exts: list[Extension]):
@@ -327,7 +335,7 @@ def diagnosis_errors(diag, x, exts, report: Report, params: list) -> ExtendedErr
     from .diagnosis_report import parameters
     from .effects import joint_basis
 
-    errors = extended_errors(diag.prob, diag.inputs, diag.x0, diag.free, x, exts)
+    errors = extended_errors(diag.prob, diag.inputs, diag.x0, diag.free, x, exts, diag.prior)
     lay = diag.prob.layout
     effects = []
     for i, (ext, p) in enumerate(zip(exts, params)):

@@ -161,24 +161,13 @@ class SumOfSquares:
 
     def with_prior(self, ne: Normal, x) -> Normal:
         """The normal equations ne of the readings at x with the prior's rows added."""
-        pr = self.prior
-        if pr is None:
-            return ne
-        idx, n = self.idx, 3 * int(self.mask.sum())
-        root, rp = np.sqrt(pr.weight[idx]), pr.rows(x, idx)
-        jt = ne.jt
-        return Normal(
-            ne.cost + float(rp @ rp),
-            ne.A + pr.information(idx),
-            ne.g + root * rp,
-            lambda res: jt(res[:n]) + root * res[n:],
-        )
+        return ne if self.prior is None else self.prior.normal(ne, x, self.idx)
 
     def residual(self, z) -> np.ndarray:
         """The readings' residuals at z, then the prior's rows."""
         x = self.full(z)
         r = self.points.residual(x)
-        return r if self.prior is None else np.concatenate([r, self.prior.rows(x, self.idx)])
+        return r if self.prior is None else self.prior.residual(r, x, self.idx)
 
     def per_target(self, r: np.ndarray) -> np.ndarray:
         """F_i of eq. (6) per target from residuals (predict - meas)[mask] flattened (rows past
@@ -323,11 +312,11 @@ def pose_fit(prob: Problem, x0, free, weight, max_iter=100, prior: Prior | None 
         p, Jt = predict_rows(prob.layout, xx, q, mask, idx)
         J = Jt.reshape(len(idx), m, K, 3).transpose(1, 2, 3, 0)
         r, Jr = pose_residuals(p.reshape(m, K, 3), meas, J, weight)
-        r, Jt = r.ravel(), Jr.reshape(-1, len(idx)).T
-        if prior is None:
-            return r, Jt
-        return np.r_[r, prior.rows(xx, idx)], np.hstack([Jt, np.diag(np.sqrt(prior.weight[idx]))])
+        return r.ravel(), Jr.reshape(-1, len(idx)).T
 
-    res = levenberg_marquardt(fun, x[idx], max_iter=max_iter)
+    if prior is None:
+        res = levenberg_marquardt(fun, x[idx], max_iter=max_iter)
+    else:
+        res = levenberg_marquardt(None, x[idx], max_iter=max_iter, **prior.fit(fun, x, idx))
     x[idx] = res.x
     return x, res

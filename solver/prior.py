@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kinematics import Layout
+from .lm import Normal, from_jacobian
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,46 @@ class Prior:
     def rows(self, x, idx) -> np.ndarray:
         """The prior's residual rows sqrt(w_j) (x_j - c_j) over the entries idx."""
         return np.sqrt(self.weight[idx]) * (np.asarray(x)[idx] - self.center[idx])
+
+    def residual(self, r: np.ndarray, x, idx) -> np.ndarray:
+        """A fit's residuals r with the prior's rows over the entries idx after them."""
+        return np.concatenate([r, self.rows(x, idx)])
+
+    def normal(self, ne: Normal, x, idx) -> Normal:
+        """The normal equations ne of a fit's readings at x, whose first len(idx) unknowns are
+        the entries idx (any after them, an extension's coefficients, have no prior), with the
+        prior's rows added after the readings' (as `residual` places them)."""
+        k = len(idx)
+        root, rp = np.sqrt(self.weight[idx]), self.rows(x, idx)
+        A, g = ne.A.copy(), ne.g.copy()
+        A[:k, :k] += np.diag(self.weight[idx])
+        g[:k] += root * rp
+        jt = ne.jt
+
+        def jt_all(res: np.ndarray) -> np.ndarray:
+            n = len(res) - k
+            out = np.array(jt(res[:n]), dtype=float)
+            out[:k] += root * res[n:]
+            return out
+
+        return Normal(ne.cost + float(rp @ rp), A, g, jt_all)
+
+    def fit(self, fun, x, idx, residual=None) -> dict:
+        """levenberg_marquardt's normal and residual of fun(z) -> (r, Jt) (the readings', over
+        unknowns z whose first len(idx) are the entries idx of x, any after them without a prior;
+        residual(z) -> r the readings' alone, default fun's) with the prior's rows after them."""
+        normal = from_jacobian(fun)
+        residual = residual or (lambda z: fun(z)[0])
+
+        def full(z):
+            xx = np.array(x, dtype=float)
+            xx[idx] = z[: len(idx)]
+            return xx
+
+        return {
+            "normal": lambda z: self.normal(normal(z), full(z), idx),
+            "residual": lambda z: self.residual(residual(z), full(z), idx),
+        }
 
     def information(self, idx) -> np.ndarray:
         """diag(w) over the entries idx: what the prior adds to J'J."""

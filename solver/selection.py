@@ -134,6 +134,7 @@ def linear_scores(
     seed: int = 0,
     scans: dict | None = None,
     null_residual: np.ndarray | None = None,
+    prior: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Scores:
     """Cross-validated gains of candidate column blocks over the current model's columns A.
 
@@ -152,6 +153,10 @@ def linear_scores(
     thousands of null resamples cost a product of (columns x poses) by (poses x resamples),
     taken RESAMPLE_BLOCK resamples at a time: memory grows with the poses alone, not with poses
     x resamples (SignFlips holds the signs as bits).
+
+    prior: (D, rp), the geometry prior's rows (solver.prior) on A's first columns, D (k, <= P)
+    and their residual rp (k,) at the fit: rows every fold trains on and none tests, which the
+    null leaves at zero (the current model, taken as the truth, is where the prior is centred).
     """
     rng = np.random.default_rng(seed)
     sizes = [A.shape[1]] + [B.shape[1] for B in blocks]
@@ -193,6 +198,14 @@ def linear_scores(
         for X, test_poses in zip(X_fold, folds):
             X[:, cols] = G0[test_poses].T @ S[test_poses]
     JJ_all = J.T @ J
+    rr_prior = 0.0
+    if prior is not None:
+        D = np.zeros((len(prior[1]), sizes[0]))
+        D[:, : prior[0].shape[1]] = prior[0]
+        D /= np.maximum(norms[a], 1e-300)  # as J's columns
+        JJ_all[a, a] += D.T @ D
+        X_all[a, 0] += D.T @ prior[1]
+        rr_prior = float(prior[1] @ prior[1])
     C = len(blocks)
     gain = np.zeros((C, 1 + resamples))
     fresh = np.zeros(rows)  # held-out residual of the model the training poses alone would pick
@@ -209,7 +222,7 @@ def linear_scores(
         coefA = AA_inv @ X_T[a]  # the current model refitted on the training poses
         e0_obs = r[test_rows] - Js[:, a] @ coefA[:, 0]
         fresh[test_rows] = e0_obs
-        s2 = (rr.sum() - rr[test_poses].sum() - coefA[:, 0] @ X_T[a, 0]) / max(
+        s2 = (rr.sum() + rr_prior - rr[test_poses].sum() - coefA[:, 0] @ X_T[a, 0]) / max(
             np.count_nonzero(~test_rows) - len(coefA), 1
         )  # training residual variance
         pick = 0.0
@@ -253,7 +266,7 @@ def linear_scores(
             order,
             X_all[a],
             JJ_all[a, a],
-            squares(np.arange(m)),
+            squares(np.arange(m)) + np.r_[rr_prior, np.zeros(resamples)],
             flips,
         )
     null = lr[:, 1:]

@@ -91,7 +91,9 @@ def nested_simpler(trial, ok, best: int, system, sc) -> int:
     return max(simpler, key=lambda o: sc.gain[o]) if simpler else best
 
 
-def another_cause(trial, ok, rich: int, simple: int, system, folds, random_folds, seed) -> bool:
+def another_cause(
+    trial, ok, rich: int, simple: int, system, folds, random_folds, seed, prior=None
+) -> bool:
     """Whether the simpler variant with another candidate cause does as well held out as the
     richer variant (not clearly beaten by it, paired t over poses below T_SIMPLER, on `folds`),
     that cause clearing the selection's own bar beside the simpler variant (its null over
@@ -101,7 +103,7 @@ def another_cause(trial, ok, rich: int, simple: int, system, folds, random_folds
     its own evidence. Causes inside the richer variant's span are the same function under another
     name (a periodic error of the joint in its driven link's first harmonic) and are not counted.
     `system` is the current model's columns and residual, the candidates' columns and each row's
-    pose."""
+    pose; prior the geometry prior's rows on its first columns (selection.linear_scores)."""
     A, r, blocks, pose_of_row = system
     m = int(pose_of_row.max()) + 1
     same = inside_span(trial, ok, rich, system)
@@ -116,7 +118,9 @@ def another_cause(trial, ok, rich: int, simple: int, system, folds, random_folds
     if not others:
         return False
     pairs = [np.concatenate([blocks[simple], blocks[o]], axis=1) for o in others]
-    sc = linear_scores(A, r, [blocks[rich]] + pairs, pose_of_row, folds, m, resamples=0)
+    sc = linear_scores(
+        A, r, [blocks[rich]] + pairs, pose_of_row, folds, m, resamples=0, prior=prior
+    )
     tested = sc.pose_sse > 0
     rich_sse = (sc.pose_sse - sc.pose_gain[0])[tested]
     tied = [
@@ -129,7 +133,9 @@ def another_cause(trial, ok, rich: int, simple: int, system, folds, random_folds
     # beside the simpler variant, does a tied cause pass the selection's test on its own?
     A2 = np.concatenate([A, blocks[simple]], axis=1)
     tb = [blocks[o] for o in tied]
-    fresh = linear_scores(A2, r, tb, pose_of_row, random_folds, m, resamples=0).fresh
-    sc2 = linear_scores(A2, r, tb, pose_of_row, random_folds, m, seed=seed, null_residual=fresh)
+    fresh = linear_scores(A2, r, tb, pose_of_row, random_folds, m, resamples=0, prior=prior).fresh
+    sc2 = linear_scores(
+        A2, r, tb, pose_of_row, random_folds, m, seed=seed, null_residual=fresh, prior=prior
+    )
     thr = sc2.threshold()
     return bool(np.any((sc2.z > thr) & (sc2.gain > MIN_GAIN * sc2.sse)))

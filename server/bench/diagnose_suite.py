@@ -286,7 +286,9 @@ def suite(seeds, kinds=tuple(KINDS)) -> list[tuple[int, str]]:
 
 
 def _diagnoser(case: Case, meas, xyz):
-    """A Diagnoser set up on this data as `diagnose()` sets up its own."""
+    """A Diagnoser on this data, every structurally free parameter fitted and no prior: the
+    reference fits of the true structure (`diagnose()` holds what ls-sum holds and fits the
+    rest under ls-sum's prior)."""
     from robocal.solver import identifiability as ident
     from robocal.solver.diagnose import Diagnoser
     from robocal.solver.effects import Inputs

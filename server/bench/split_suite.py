@@ -149,10 +149,21 @@ def _rms(err) -> float:
     return float(np.sqrt(np.nanmean(np.sum(np.asarray(err) ** 2, axis=-1))))
 
 
+def geometry(problem):
+    """ls-sum as `robocal calibrate` and the diagnosis fit it: the prior weighed at the
+    campaign's measured noise floor (solver.noise), not the default tracker's."""
+    from dataclasses import replace
+
+    from robocal.solver.calibrate import calibrate
+    from robocal.solver.noise import noise_floor
+
+    floor = noise_floor(problem.q, problem.meas, problem.inputs(), problem.tracker_spec)
+    return calibrate(replace(problem, noise_floor_mm=floor.mm), "ls-sum")
+
+
 def run_split_case(case: SplitCase) -> dict:
     """Simulate both campaigns, diagnose the training one in process and score on the test one."""
     from robocal.server.formats.report_doc import ReportDoc
-    from robocal.solver.calibrate import calibrate
     from robocal.solver.diagnose import diagnose
     from robocal.solver.effects import Inputs
     from robocal.solver.extended import predict_model
@@ -168,7 +179,7 @@ def run_split_case(case: SplitCase) -> dict:
     names = train.target_names
     nominal = np.array([case.targets[t] for t in names])
     problem = Problem.of(case.robot, nominal, train)
-    geo = calibrate(problem, "ls-sum")
+    geo = geometry(problem)
     geometric = _rms(predict(geo.layout, geo.x, test.q) - test.xyz)
     t0 = time.perf_counter()
     d = diagnose(problem)
@@ -222,7 +233,6 @@ def _oracle(case: SplitCase, train, inputs, xyz) -> float | None:
 def _without_effects(case: SplitCase, q_train, q_test) -> float:
     """Test RMS of geometry fitted on the training poses of the same cell without its effects
     (the same noise and scatter): what the true structure reaches, the effects known exactly."""
-    from robocal.solver.calibrate import calibrate
     from robocal.solver.kinematics import predict
     from robocal.solver.problem import Problem
 
@@ -231,7 +241,7 @@ def _without_effects(case: SplitCase, q_train, q_test) -> float:
     train = vc.campaign(case.n_train, case.cell_seed, poses=q_train, **case.options)
     test = vc.campaign(TEST_POSES, case.cell_seed + 1, poses=q_test, **case.options)
     nominal = np.array([case.targets[t] for t in train.target_names])
-    geo = calibrate(Problem.of(case.robot, nominal, train), "ls-sum")
+    geo = geometry(Problem.of(case.robot, nominal, train))
     return _rms(predict(geo.layout, geo.x, test.q) - test.xyz)
 
 
@@ -305,7 +315,6 @@ def real_splits(folder, min_poses: int = 15) -> list[dict]:
     tested in the other, both ways, for every configuration with min_poses poses on each side;
     a campaign in one configuration only is split at joint 2's median instead."""
     from robocal.server.calibration.workflow import cell_problem, diagnose, load_data, model_predict
-    from robocal.solver.calibrate import calibrate
     from robocal.solver.extrapolation import configuration_folds, region_folds
     from robocal.solver.kinematics import Layout, predict
 
@@ -323,7 +332,7 @@ def real_splits(folder, min_poses: int = 15) -> list[dict]:
     for fold in folds:
         train = np.setdiff1d(np.arange(meas.n_poses), fold.test)
         fit, held = meas.subset(train), meas.subset(fold.test)
-        geo = calibrate(cell_problem(cell, fit), "ls-sum")
+        geo = geometry(cell_problem(cell, fit))
         d, model = diagnose(cell, fit)
         refused = d.report.extrapolation.refused if d.report.extrapolation else []
         diagnosed = model_predict(model, held.q, held.time_s, held.temp_c, held.prev_q)

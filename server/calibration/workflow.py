@@ -549,7 +549,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True) -> tuple[Dia
     if d.errors is not None:
         model.uncertainty = uncertainty_to_json(d.errors.parameters, lay.names())
         model.extension_errors = extension_errors(d.errors)
-        d.geometric = _judge_diagnosis(d.report, d.errors, cell, meas, model)
+        d.geometric = _judge_diagnosis(d.report, d.errors, cell, meas, model, solved.geometric)
         _position_block(d.report, d.errors, cell, meas, model)
     return d, model
 
@@ -571,29 +571,34 @@ def _position_block(
 
 
 def _judge_diagnosis(
-    report: ReportDoc, errors: ExtendedErrors, cell: Cell, meas: Measurements, model: ModelFile
+    report: ReportDoc,
+    errors: ExtendedErrors,
+    cell: Cell,
+    meas: Measurements,
+    model: ModelFile,
+    geometric: Calibration | None = None,
 ) -> Calibration:
     """The `identified` and `validation` blocks of a diagnosis's final model, as a calibration's:
-    the held-fixed parameters and the condition number of the geometry as ls-sum finds them
-    (that geometry returned)."""
+    the held-fixed and the shrunk parameters, the prior and the condition number of the geometry
+    the diagnosis fitted under (`geometric`, its ls-sum; else ls-sum's on these readings),
+    that geometry returned."""
     from robocal.server.calibration.identified import identified_block
     from robocal.solver.calibrate import calibrate
 
-    problem = replace(cell_problem(cell, meas), noise_floor_mm=report.noise_floor_mm)
-    geometric = calibrate(problem, "ls-sum")
-    # the diagnosis holds what the geometry shrinks (solver.diagnose): held fixed here
-    held = {n: f"held at nominal: {s.why}" for n, s in geometric.shrunk.items()}
+    if geometric is None:
+        problem = replace(cell_problem(cell, meas), noise_floor_mm=report.noise_floor_mm)
+        geometric = calibrate(problem, "ls-sum")
     model.identified = identified_block(
         model,
         errors.parameters,
-        fixed={**geometric.fixed, **held},
+        fixed=geometric.fixed,
         condition=geometric.condition,
         nominal_targets={t: cell.targets[t] for t in meas.target_names},
         nominal_base=cell.base,
+        shrunk=geometric.shrunk,
+        prior=geometric.prior,
     )
-    model.validation = validate_diagnosis(
-        report, errors, cell, meas, model, geometric.condition, geometric.layout_condition
-    )
+    model.validation = validate_diagnosis(report, errors, cell, meas, model, geometric)
     return geometric
 
 
@@ -603,12 +608,12 @@ def validate_diagnosis(
     cell: Cell,
     meas: Measurements,
     model: ModelFile,
-    condition: float,
-    layout_condition: float | None = None,
+    geometric: Calibration,
 ) -> Validation:
     """model.json's `validation` block of a diagnosis's final model, by the calibration's rule
     (verdict): its own cross-validated held-out figures against its fit, with the geometry's
-    condition number (and its layout's) and the report's noise floor."""
+    condition number (and its layout's) and shrunk parameters (each counted as the share of it
+    the data gives, as the diagnosis fits them under its prior) and the report's noise floor."""
     from robocal.solver import guard
     from robocal.solver.diagnose import FOLDS
 
@@ -623,12 +628,12 @@ def validate_diagnosis(
         [model.targets[t] for t in meas.target_names],
         fit_rms_mm=float(np.sqrt(np.mean(r * r))),
         holdout=guard.CrossValidated(final.holdout_rmse_mm, final.holdout_max_mm),
-        condition=condition,
-        free_parameters=int(np.count_nonzero(errors.parameters.column >= 0)),
+        condition=geometric.condition,
+        free_parameters=effective_parameters(errors.parameters.column, geometric.shrunk),
         # the solver's report always says where its floor comes from; one read from a file may not
         floor=(report.noise_floor_mm, report.noise_floor_source or "unstated"),
         holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
-        layout_condition=layout_condition,
+        layout_condition=geometric.layout_condition,
     )
 
 

@@ -162,7 +162,8 @@ class ReportDoc(Open):
         None,
         description="the final model's identified parameters, as model.json's `identified` "
         "(per parameter: change from nominal and standard error; held-fixed parameters and "
-        "why; condition number; strongest correlations)",
+        "why; shrunk ones with their share from the data and the prior they were fitted "
+        "under; condition number; strongest correlations)",
     )
     validation: Validation | None = Field(
         None,

@@ -48,17 +48,24 @@ def test_the_real_ur5s_wrist_is_shrunk_named_and_left_out_of_the_condition_numbe
     assert condition_number(J[:, with_shrunk]) > 1e3 > cal.condition
 
 
-def test_a_diagnosis_of_the_real_ur5_lists_the_shrunk_wrist_as_held():
-    """The diagnosis fits its extensions without a prior, holding what the geometry shrinks at
-    nominal: its model's identified block says so (held fixed, no standard error)."""
+def test_a_diagnosis_of_the_real_ur5_lists_the_shrunk_wrist_as_shrunk():
+    """The diagnosis fits under the geometry's prior: its model's identified block lists d5 and
+    a5 as shrunk toward nominal with their share from the data (not held fixed), the prior said,
+    their standard errors the posterior's as the calibration's are."""
     cell, meas = load_data(
         REAL / "ur5_jacobi" / "small" / "train.csv", REAL / "ur5_jacobi" / "cell.json"
     )
-    _, model = workflow_diagnose(cell, meas)
+    d, model = workflow_diagnose(cell, meas)
     ident = model.identified
-    assert ident is not None
-    fixed = {f.parameter: f.why for f in ident.fixed}
+    assert ident is not None and ident.prior and d.geometric is not None
+    fixed = {f.parameter for f in ident.fixed}
+    shrunk = {s.parameter: s for s in ident.shrunk}
     rows = {r.parameter: r for r in ident.rows}
-    for n in ("d5", "a5"):
-        assert fixed[n].startswith("held at nominal: the data moves it only together with")
-        assert rows[n].status == "held fixed" and rows[n].standard_error is None
+    assert {"d5", "a5"} <= set(shrunk) and not fixed & set(shrunk), (fixed, shrunk)
+    assert set(shrunk) == set(d.geometric.shrunk)
+    for n, s in shrunk.items():
+        assert s.data_share == round(d.geometric.shrunk[n].share, 6) and s.why, s
+        assert rows[n].status == "shrunk toward nominal"
+        se = rows[n].standard_error
+        assert se is not None and 0.5 < se <= 1.0, (n, se)
+    assert rows["theta6"].status == "held fixed"

@@ -5,8 +5,7 @@ import tracemalloc
 
 import numpy as np
 
-from robocal.solver import diagnose as diagnose_mod
-from robocal.solver import selection
+from robocal.solver import selection, shift_scan
 from robocal.solver.selection import SignFlips, linear_scores, rmse_gain_interval
 
 
@@ -82,7 +81,7 @@ def test_shift_gains_in_a_batch_are_the_gaps_one_by_one():
     Zr, Qr = rng.normal(size=(k, 6)), rng.normal(size=p)
     ZZ[3] = 0.0  # a singular gap: it gains nothing, the others are still solved
     QZ[3] = 0.0
-    got = diagnose_mod.shift_gains(ZZ, QZ, Zr, Qr)
+    got = shift_scan.shift_gains(ZZ, QZ, Zr, Qr)
     for n in range(k):
         G = ZZ[n] - QZ[n].T @ QZ[n]
         G = G + 1e-12 * np.trace(G) * np.eye(6)
