@@ -69,7 +69,10 @@ def extended_fit(cal, meas, column, exts) -> ExtendedFit:
     q = np.asarray(meas.q, dtype=float)
     prob = Problem(cal.layout, q, np.asarray(meas.xyz, dtype=float))
     free = np.asarray(column) >= 0
-    x, ee, _ = fit_extended(prob, Inputs(q), cal.x, free, [_fresh(e) for e in exts])
+    # under the calibration's prior, as it was fitted: its shrunk columns would wander without
+    x, ee, _ = fit_extended(
+        prob, Inputs(q), cal.x, free, [_fresh(e) for e in exts], prior=cal.prior
+    )
     idx = np.flatnonzero(free)
     train = _rows(cal.layout, x, ee, q, idx, prob.mask)
     pred = predict_extended(cal.layout, x, ee, Inputs(q))
