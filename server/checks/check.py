@@ -21,6 +21,7 @@ from robocal.server.calibration.workflow import (
     model_predict,
 )
 from robocal.server.formats.cell_json import Cell
+from robocal.server.formats.errors import InputError
 from robocal.server.formats.model_json import ModelFile, file_digest, read_model
 from robocal.server.store.model_checks import CheckRecord, NewCheck, append_check
 from robocal.solver import drift
@@ -35,6 +36,10 @@ VERDICTS = ("ok", "watch", "recalibrate")
 # The most poses a check uploaded to the service takes: it is judged in the service's own thread
 # (in the store's write transaction), and a quick check is a few fixed poses.
 MAX_POSES = 100
+# A check pose is the same pose when its joints are: a model's error differs from place to place
+# by more than the scatter between checks, so an earlier check's error at a pose of the same name
+# measured elsewhere (another plan's 'check1') is no baseline for it.
+SAME_POSE_DEG = 0.5
 
 
 @dataclass(frozen=True)
@@ -116,8 +121,30 @@ def _matched(history: list[CheckRecord], keys) -> np.ndarray:
         for pose, target, *e in rec.errors:
             i = at.get((str(pose), str(target)))
             if i is not None:
-                out[c, i] = e
+                out[c, i] = e[:3]
     return out
+
+
+def moved_pose(history: list[CheckRecord], r: _Readings) -> str | None:
+    """Why an earlier check's pose of a name this check uses is not the same pose (its joints,
+    stored with its errors, differ by more than SAME_POSE_DEG), or None."""
+    q = np.degrees(r.q)
+    by_name = {pose: q[i] for (pose, _), i in zip(r.keys, r.reading_pose)}
+    for rec in history:
+        for pose, _target, *e in rec.errors:
+            now = by_name.get(str(pose))
+            if now is None or len(e) != 3 + len(now):  # a check stored without its joints
+                continue
+            gap = np.abs(np.asarray(e[3:], dtype=float) - now)
+            if gap.max() > SAME_POSE_DEG:
+                j = int(np.argmax(gap))
+                return (
+                    f"pose {pose!r} has q{j + 1} {now[j]:.3f} deg, but check {rec.id} of this "
+                    f"model measured a pose of that name at q{j + 1} {e[3 + j]:.3f} deg: a check "
+                    "measures the same poses every time, and an error measured elsewhere is no "
+                    "baseline for it; give new poses new names (or check a new model)"
+                )
+    return None
 
 
 def _joint_columns(model: ModelFile, r: _Readings) -> dict:
@@ -250,7 +277,12 @@ def judge(model: ModelFile, r: _Readings, history: list[CheckRecord], expected: 
     elif found is not None:  # watch
         like = f", like {_name(found[0])}" if len(found) == 1 else ""
         said += f"{why}: a change that may be scatter{like}; check again soon"
-    errors = [[p, t, *np.round(e, 6).tolist()] for (p, t), e in zip(r.keys, r.error)]
+    # each reading's joints beside its error, so a later check can tell the same pose from
+    # another of the same name
+    q = np.round(np.degrees(r.q[r.reading_pose]), 6)
+    errors = [
+        [p, t, *np.round(e, 6).tolist(), *qq.tolist()] for (p, t), e, qq in zip(r.keys, r.error, q)
+    ]
     new = NewCheck(
         source="",
         poses=n_poses,
@@ -325,6 +357,9 @@ def record(db: store.Database, p: Prepared, source: str) -> CheckResult:
     out: dict = {}
 
     def judged(history: list[CheckRecord]) -> NewCheck:
+        moved = moved_pose(history, p.readings)
+        if moved:
+            raise InputError(source, None, None, moved)
         new, change, cause = judge(p.model, p.readings, history, p.expected_rms_mm)
         out.update(change=change, cause=cause)
         return NewCheck(**{**vars(new), "source": source})
