@@ -78,6 +78,11 @@ class _Readings:
     reading_target: np.ndarray  # (n,) index into the model's targets
     predicted: np.ndarray  # (n, 3)
     error: np.ndarray  # (n, 3) measured - predicted
+    # what the model's extensions read beside the joints: time and air temperature (m,) a pose,
+    # the joints the arm came from (m, N) rad; None where the check has no such column
+    time_s: np.ndarray | None = None
+    temp_c: np.ndarray | None = None
+    prev_q: np.ndarray | None = None
 
 
 def expected_rms(model: ModelFile) -> float:
@@ -97,9 +102,8 @@ def _readings(model: ModelFile, meas: Measurements, check_path) -> _Readings:
         raise DataError(f"{check_path}: target {unknown[0]!r} is not in the model")
     names = list(model.targets)
     order = [names.index(t) for t in meas.target_names]
-    pred = model_predict(
-        model, meas.q, _pose_column(meas.time_s), _pose_column(meas.temp_c), meas.prev_q
-    )[:, order]
+    time_s, temp_c = _pose_column(meas.time_s), _pose_column(meas.temp_c)
+    pred = model_predict(model, meas.q, time_s, temp_c, meas.prev_q)[:, order]
     pi, ki = np.nonzero(meas.mask)
     if len(pi) == 0:
         raise DataError(f"{check_path}: no reading to check")
@@ -110,6 +114,9 @@ def _readings(model: ModelFile, meas: Measurements, check_path) -> _Readings:
         np.array(order)[ki],
         pred[pi, ki],
         meas.xyz[pi, ki] - pred[pi, ki],
+        time_s,
+        temp_c,
+        meas.prev_q,
     )
 
 
@@ -154,8 +161,10 @@ def _joint_columns(model: ModelFile, r: _Readings) -> dict:
     for j in range(r.q.shape[1]):
         step = np.zeros(r.q.shape[1])
         step[j] = FD_STEP_RAD
-        plus = model_predict(model, r.q + step)
-        minus = model_predict(model, r.q - step)
+        # at the check's own time, temperature and motion: a thermal or backlash model
+        # predicts nothing without them
+        plus = model_predict(model, r.q + step, r.time_s, r.temp_c, r.prev_q)
+        minus = model_predict(model, r.q - step, r.time_s, r.temp_c, r.prev_q)
         col = (plus - minus)[r.reading_pose, r.reading_target] / (2 * FD_STEP_RAD)
         moves.append(col)
         if np.linalg.norm(col) > 0:
@@ -324,6 +333,9 @@ def _subset(r: _Readings, keep: np.ndarray) -> _Readings:
         r.reading_target[keep],
         r.predicted[keep],
         r.error[keep],
+        r.time_s,
+        r.temp_c,
+        r.prev_q,
     )
 
 

@@ -191,3 +191,34 @@ def test_a_pose_name_measured_elsewhere_is_refused(cell, tmp_path):
         assert con.execute("SELECT count(*) FROM model_check").fetchone() == (1,)
     measured(vc, poses, 3, d / "again.csv")  # the first plan's poses again: judged as before
     assert check(d, "again", str(db))[0] == 0
+
+
+def test_a_moved_check_of_a_thermal_model_gets_its_verdict(tmp_path):
+    """A diagnosed model with thermal drift (simulated, seed 4: 50 ppm/degC found) checked on six
+    of its poses, then on them with every reading 0.3 mm along x (the tracker bumped): the
+    changed check ended 'robocal: error: the model's thermal_drift needs a temp_c column in the
+    poses', exit 1 and nothing stored, though check.csv has temp_c: the causes were computed
+    without the check's temperatures. The check that matters gets its verdict."""
+    d = tmp_path
+    r = robocal(
+        "simulate", "--poses", 60, "--seed", 4, "--effect", "thermal_drift", "--out", "m.csv", cwd=d
+    )
+    assert r.returncode == 0, r.stderr
+    r = robocal("diagnose", "m.csv", "--out", "r.json", "--model-out", "x.json", cwd=d)
+    assert r.returncode == 0, r.stderr
+    kinds = [e["name"] for e in json.loads((d / "x.json").read_text())["extensions"]]
+    assert "thermal_drift" in kinds, kinds
+    lines = (d / "m.csv").read_text().splitlines(keepends=True)
+    (d / "c1.csv").write_text("".join(lines[:19]))
+    head = lines[0].strip().split(",")
+    moved = [lines[0]]
+    for line in lines[1:19]:
+        f = line.strip().split(",")
+        f[head.index("x")] = f"{float(f[head.index('x')]) + 0.3:.6f}"
+        moved.append(",".join(f) + "\n")
+    (d / "c2.csv").write_text("".join(moved))
+    assert robocal("check", "x.json", "c1.csv", "--db", "h.db", cwd=d).returncode == 0
+    r = robocal("check", "x.json", "c2.csv", "--db", "h.db", "--out", "c2.json", cwd=d)
+    assert r.returncode == 3, r.stderr
+    doc = json.loads((d / "c2.json").read_text())
+    assert doc["verdict"] == "recalibrate" and doc["cause"] == "rigid", doc
