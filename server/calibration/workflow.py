@@ -379,7 +379,9 @@ def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
     return json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
 
 
-def model_predict(model: ModelFile, q, time_s=None, temp_c=None, prev_q=None) -> np.ndarray:
+def model_predict(
+    model: ModelFile, q, time_s=None, temp_c=None, prev_q=None, pose_ids=None
+) -> np.ndarray:
     """SMR centres (m, K, 3) a model file predicts, with its extensions (time and temperature per
     pose (m,) or per reading (m, K)).
 
@@ -403,6 +405,15 @@ def model_predict(model: ModelFile, q, time_s=None, temp_c=None, prev_q=None) ->
         need = e.kind.needs(e)
         if need and getattr(inputs, need) is None:
             raise DataError(f"the model's {e.label()} needs a {need} column in the poses")
+        if need:
+            lacking = np.flatnonzero(~np.isfinite(getattr(inputs, need)).all(axis=1))
+            if len(lacking):
+                k = int(lacking[0])
+                pose = repr(pose_ids[k]) if pose_ids is not None else f"number {k + 1}"
+                raise DataError(
+                    f"pose {pose} has no {need} (a blank field), which the model's {e.label()} "
+                    f"needs ({len(lacking)} such pose{'s' if len(lacking) > 1 else ''})"
+                )
     return predict_model(model.nominal or model.robot, lay, x, model.extensions, inputs)
 
 
@@ -452,7 +463,12 @@ def evaluate(model: ModelFile, meas: Measurements) -> Evaluation:
     names = meas.target_names
     order = [list(model.targets).index(t) for t in names]
     pred = model_predict(
-        model, meas.q, _pose_column(meas.time_s), _pose_column(meas.temp_c), meas.prev_q
+        model,
+        meas.q,
+        _pose_column(meas.time_s),
+        _pose_column(meas.temp_c),
+        meas.prev_q,
+        meas.pose_ids,
     )
     after = metrics.accuracy(pred[:, order], meas.xyz, names)
     if model.nominal is None:
@@ -612,7 +628,7 @@ def validate_diagnosis(
     from robocal.solver import guard
     from robocal.solver.diagnose import FOLDS
 
-    pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q)
+    pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q, meas.pose_ids)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
     final = report.final

@@ -103,7 +103,11 @@ def _readings(model: ModelFile, meas: Measurements, check_path) -> _Readings:
     names = list(model.targets)
     order = [names.index(t) for t in meas.target_names]
     time_s, temp_c = _pose_column(meas.time_s), _pose_column(meas.temp_c)
-    pred = model_predict(model, meas.q, time_s, temp_c, meas.prev_q)[:, order]
+    try:
+        pred = model_predict(model, meas.q, time_s, temp_c, meas.prev_q, meas.pose_ids)
+    except DataError as e:
+        raise DataError(f"{check_path}: {e}") from None
+    pred = pred[:, order]
     pi, ki = np.nonzero(meas.mask)
     if len(pi) == 0:
         raise DataError(f"{check_path}: no reading to check")

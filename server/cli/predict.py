@@ -11,7 +11,7 @@ def cmd_predict(args) -> None:
     model = workflow.read_model(args.model)
     pose_ids, q, time_s, temp_c, prev_q = read_poses(args.poses, model.robot)
     try:
-        xyz = workflow.model_predict(model, q, time_s, temp_c, prev_q)
+        xyz = workflow.model_predict(model, q, time_s, temp_c, prev_q, pose_ids)
     except workflow.DataError as e:
         raise workflow.DataError(f"{args.poses}: {e}") from None
     write_predictions(args.out, pose_ids, list(model.targets), xyz)

@@ -409,3 +409,48 @@ def test_a_condition_number_the_smr_layout_sets_warns_instead_of_refusing(tmp_pa
     v = json.loads((tmp_path / "model.json").read_text())["validation"]
     assert v["deployable"] and v["condition_number"] > 1000, v
     assert any("robot and SMR layout's own" in w for w in v["warnings"]), v["warnings"]
+
+
+def _blanked(src, dst, lines, column="temp_c"):
+    """src's campaign with `column` blank on the given data lines (1-based), written to dst."""
+    rows = list(csv.DictReader(open(src)))
+    for i in lines:
+        rows[i - 1][column] = ""
+    with open(dst, "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def test_a_blank_temperature_is_not_recorded_not_a_crash(tmp_path):
+    """A blank temp_c is 'not recorded' (the reader says so), yet one blank reading (or 'nan')
+    ended diagnose in 'robocal: error: non-finite values in the information matrix', and a pose
+    without its temperature ended predict in 'predictions must be finite' (evaluate and check
+    alike named no file or pose). A reading takes its pose's temperature; a pose with none is
+    said by name where a thermal model needs it, and the diagnosis then grows with time."""
+    r = robocal(
+        "simulate", "--poses", 60, "--seed", 4, "--effect", "thermal_drift", "--out", "m.csv",
+        cwd=tmp_path,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    _blanked(tmp_path / "m.csv", tmp_path / "one.csv", [5])
+    r = robocal("diagnose", "one.csv", "--out", "r.json", "--model-out", "x.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    effects = json.loads((tmp_path / "r.json").read_text())["effects"]
+    assert [e["name"] for e in effects] == ["thermal_drift"], effects
+    assert effects[0]["parameters"]["variable"] == "temp_c", effects
+    _blanked(tmp_path / "m.csv", tmp_path / "pose.csv", [7, 8, 9])  # pose 3's three readings
+    for args in (
+        ("predict", "x.json", "pose.csv", "--out", "pred.csv"),
+        ("evaluate", "x.json", "pose.csv"),
+        ("check", "x.json", "pose.csv", "--db", "h.db"),
+    ):
+        r = robocal(*args, cwd=tmp_path)
+        line = r.stderr.strip()
+        assert r.returncode == 1 and len(line.splitlines()) == 1, (args[0], r.stderr)
+        assert "pose.csv" in line and "pose '3'" in line and "temp_c" in line, line
+    assert not (tmp_path / "pred.csv").exists()
+    r = robocal("diagnose", "pose.csv", "--out", "r2.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    effects = json.loads((tmp_path / "r2.json").read_text())["effects"]
+    assert [e["parameters"]["variable"] for e in effects] == ["time_s"], effects
