@@ -454,3 +454,38 @@ def test_a_blank_temperature_is_not_recorded_not_a_crash(tmp_path):
     assert r.returncode == 0, r.stderr
     effects = json.loads((tmp_path / "r2.json").read_text())["effects"]
     assert [e["parameters"]["variable"] for e in effects] == ["time_s"], effects
+
+
+@pytest.mark.parametrize("column", ["q5", "cfx", "prev_q3"])
+def test_rows_of_a_pose_that_disagree_name_the_field_that_differs(tmp_path, column):
+    """The second row of a pose with another cfx was refused as 'column cf1: the configuration
+    differs ...' (and another prev_q3 as 'column prev_q1', another q5 in targets.csv as 'column
+    q1'): the line named the group's first column, which agreed. It names the one that differs."""
+    _cell(tmp_path / "cell.json", UR10E, RING)
+    rows = _fitted(tmp_path, 40, 3, 40)[:6]
+    kind = "q" if column == "q5" else column[:-1] if column != "prev_q3" else "prev_q"
+    cfs = ["cf1", "cf4", "cf6", "cfx"]
+    qs = [f"q{i}" for i in range(1, 7)]
+    cols = {"q": qs, "cf": cfs, "prev_q": [f"prev_{q}" for q in qs]}[kind]
+    header = ["pose", "target", "x", "y", "z", *(qs if kind != "cf" else []), *cols]
+    header = list(dict.fromkeys(header))
+    out = []
+    for k, row in enumerate(rows):
+        row = dict(row)
+        row.update({c: "0" for c in cfs})
+        row.update({f"prev_{q}": row[q] for q in qs})
+        if k == 1:  # pose 1's second row
+            row[column] = str(float(row[column]) + 1) if column != "cfx" else "1"
+        out.append(row)
+    name = "meas.csv" if kind == "prev_q" else "targets.csv"
+    with open(tmp_path / name, "w", newline="") as f:
+        w = csv.DictWriter(f, header if kind != "prev_q" else list(out[0]), extrasaction="ignore")
+        w.writeheader()
+        w.writerows(out)
+    if kind == "prev_q":
+        r = robocal("calibrate", name, "--cell", "cell.json", "--out", "m.json", cwd=tmp_path)
+    else:
+        r = robocal("compensate", "model.json", name, "--out", "joints.csv", cwd=tmp_path)
+    line = r.stderr.strip()
+    assert r.returncode == 1 and len(line.splitlines()) == 1, r.stderr
+    assert line.startswith(f"robocal: error: {name}:3:") and f"column '{column}'" in line, line
