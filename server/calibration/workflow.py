@@ -313,6 +313,7 @@ def verdict(
     floor: tuple[float | None, str],
     holdout_method: str = HOLDOUT_METHOD,
     layout_condition: float | None = None,
+    extension_reason: str | None = None,
 ) -> Validation:
     """The `validation` block of a model fitted on meas, `calibrate`'s and `diagnose`'s alike (one
     model, one verdict): the guard's limits (solver.guard.judge: past MAX_FLOOR_RATIO times the
@@ -335,6 +336,8 @@ def verdict(
         layout_condition=layout_condition,
     )
     v.reasons += implausible(cell, meas, robot)
+    if extension_reason:
+        v.reasons.append(extension_reason)
     return validation_block(
         v,
         list(meas.pose_ids),
@@ -627,7 +630,9 @@ def validate_diagnosis(
     condition number (and its layout's) and the report's noise floor."""
     from robocal.solver import guard
     from robocal.solver.diagnose import FOLDS
+    from robocal.solver.plausibility import implausible_extensions
 
+    lay, x = model.layout()
     pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q, meas.pose_ids)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
@@ -645,6 +650,7 @@ def validate_diagnosis(
         floor=(report.noise_floor_mm, report.noise_floor_source or "unstated"),
         holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
         layout_condition=layout_condition,
+        extension_reason=implausible_extensions(lay, x, model.extensions, meas.q),
     )
 
 
