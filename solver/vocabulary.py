@@ -513,6 +513,17 @@ KINDS: dict[str, Effect] = {
 }
 
 
+def after_campaign(extensions) -> float | None:
+    """A time (s) on the campaign's clock past everything the extensions locate in it, for data
+    measured after the campaign, where their only clock is a base shift's: the cell then stands as
+    the campaign left it (moved). None where another extension needs the time itself. A later
+    file's time_s counts from its own start, not the campaign's: it says nothing of that."""
+    timed = [e for e in extensions if e.kind.needs(e) == "time_s"]
+    if not timed or any(e.name != BaseShift.name for e in timed):
+        return None
+    return max(float(e.at_s) for e in timed) + 1.0
+
+
 def candidates(layout, x, inputs: Inputs) -> list[Extension]:
     """Every effect of the vocabulary that this data could show, per joint and harmonic."""
     return [c for kind in KINDS.values() for c in kind.candidates(layout, x, inputs)]

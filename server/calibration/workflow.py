@@ -33,6 +33,7 @@ from robocal.solver.identifiability import effective_parameters
 from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
 from robocal.solver.problem import Problem
+from robocal.solver.vocabulary import after_campaign
 
 # The fit, the screening and the diagnosis pull in scipy (seconds on a busy machine): imported in
 # the functions that run them, so `robocal predict` starts with numpy alone.
@@ -403,6 +404,9 @@ def model_predict(
         a = np.broadcast_to(np.reshape(np.asarray(a, dtype=float), (m, -1)), (m, K))
         return a
 
+    later = after_campaign(model.extensions)
+    if time_s is None and later is not None:
+        time_s = np.full(m, later)
     inputs = Inputs(q, per_reading(time_s, "time_s"), per_reading(temp_c, "temp_c"), prev_q=prev_q)
     for e in model.extensions:
         need = e.kind.needs(e)

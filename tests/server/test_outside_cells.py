@@ -544,3 +544,42 @@ def test_a_deployable_diagnosis_holds_beyond_its_joint_1_range(tmp_path):
     assert not v["deployable"] or ext <= 2 * geo, (geo, ext, v)
     if not v["deployable"] and ext > 2 * geo:
         assert any("joint 1" in why and "peak to peak" in why for why in v["reasons"]), v
+
+
+def test_a_base_that_moved_during_the_campaign_stays_moved_after_it(tmp_path):
+    """simulate --effect base_shift=0.3 (seed 5): the diagnosis finds the shift at t = 566 s. The
+    cell then stands as the campaign left it, but a quick check measured next (its time_s from
+    its own start, 5 s) was predicted before the shift: 'recalibrate ... every point moved as
+    one rigid body (0.244 mm)', exit 3, on an unchanged cell; and predict, check and compensate
+    without a time_s refused ('needs a time_s column'), though no time on the campaign's clock
+    means anything to a later program. Data after the campaign is predicted after the shift."""
+    r = robocal(
+        "simulate", "--poses", 80, "--seed", 5, "--effect", "base_shift=0.3", "--out", "m.csv",
+        cwd=tmp_path,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    r = robocal("diagnose", "m.csv", "--out", "r.json", "--model-out", "x.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    ext = json.loads((tmp_path / "x.json").read_text())["extensions"]
+    assert [e["name"] for e in ext] == ["base_shift"], ext
+    rows = list(csv.DictReader(open(tmp_path / "m.csv")))
+    late = [r for r in rows if float(r["time_s"]) > ext[0]["at_s"] + 60]
+    late = [r for r in late if r["pose"] in {x["pose"] for x in late[:3]} | {late[-1]["pose"]}]
+    t0 = float(late[0]["time_s"])
+    for r in late:
+        r["time_s"] = f"{float(r['time_s']) - t0 + 5:.3f}"  # the check's own clock
+    _write_rows(tmp_path / "check.csv", late)
+    r = robocal("check", "x.json", "check.csv", "--db", "h.db", "--out", "c.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "c.json").read_text())
+    assert doc["verdict"] == "ok" and doc["rms_mm"] < 0.05, doc
+    qs = [f"q{i}" for i in range(1, 7)]
+    targets = [{k: r[k] for k in ("pose", "target", "x", "y", "z", *qs)} for r in late]
+    _write_rows(tmp_path / "targets.csv", targets)
+    r = robocal("compensate", "x.json", "targets.csv", "--out", "joints.csv", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    measured = {r["pose"]: [float(r[q]) for q in qs] for r in late}
+    for row in csv.DictReader(open(tmp_path / "joints.csv")):
+        moved = np.subtract([float(row[q]) for q in qs], measured[row["pose"]])
+        assert np.max(np.abs(moved)) < 0.05, (row["pose"], moved)
+        assert float(row["predicted_error_mm"]) < 0.05, row
