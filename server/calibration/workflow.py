@@ -563,6 +563,9 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True) -> tuple[Dia
         final=report.final,
         noise_floor_mm=report.noise_floor_mm,
         noise_floor_source=report.noise_floor_source,
+        joint_range_deg=np.round(
+            np.degrees([meas.q.min(axis=0), meas.q.max(axis=0)]).T, 3
+        ).tolist(),
         **(
             {"outliers": [o.to_json() for o in report.outliers]}
             if report.outliers is not None

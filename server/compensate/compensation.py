@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from robocal.server.formats.errors import InputError
-from robocal.server.formats.model_json import ModelFile, read_model
+from robocal.server.formats.model_json import ModelFile, extrapolated, read_model
 from robocal.server.formats.targets_csv import Targets, read_targets
 from robocal.solver import configuration
 from robocal.solver.compensate import Compensation, Model, compensate
@@ -201,6 +201,9 @@ def compensate_targets(
         )
     if guess.any():
         warnings += _kept(targets, res, guess, nominal, max_move_deg)
+    beyond = extrapolated(model, res.q, targets.pose_ids)
+    if beyond:
+        warnings.append(beyond)
     return res, warnings
 
 
