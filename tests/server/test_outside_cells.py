@@ -622,3 +622,23 @@ def test_poses_past_the_measured_range_of_an_extended_joint_are_said(tmp_path):
         assert len(said) == 1 and f"{len(far) // 3} poses" in said[0], r.stderr
     r = robocal("predict", "x.json", "fit.csv", "--out", "pred.csv", cwd=tmp_path)
     assert r.returncode == 0 and "outside" not in r.stderr, r.stderr
+
+
+def test_a_check_plan_of_readings_in_the_robots_frame_says_why_not(tmp_path):
+    """The real UR5's readings are in its base frame (the authors' registration): `check --plan
+    6` said 'constraints too tight: only 0 of 1000 poses valid ... range: move the tracker at
+    least 1 m from every SMR: check the base guess', though the cell gives no base guess: the
+    planner put the tracker at the frame's origin, 0.4 mm from the robot's base."""
+    from tests.real import REAL
+
+    src = REAL / "ur5_jacobi"
+    r = robocal(
+        "calibrate", str(src / "small" / "train.csv"), "--cell", str(src / "cell.json"),
+        "--out", "model.json", cwd=tmp_path,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    r = robocal("check", "--plan", "6", "model.json", "--out", "plan.csv", cwd=tmp_path)
+    line = r.stderr.strip()
+    assert r.returncode == 1 and len(line.splitlines()) == 1, r.stderr
+    assert "registered to the robot" in line and "base guess" not in line, line
+    assert not (tmp_path / "plan.csv").exists()
