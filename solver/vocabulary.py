@@ -524,6 +524,27 @@ def after_campaign(extensions) -> float | None:
     return max(float(e.at_s) for e in timed) + 1.0
 
 
+def missing_input(extensions, inputs: Inputs, pose_ids=None) -> str | None:
+    """Why the extensions cannot predict these inputs (a column they need absent, or blank on a
+    pose), in a sentence naming the first such pose; None when they can."""
+    for e in extensions:
+        need = e.kind.needs(e)
+        if not need:
+            continue
+        have = getattr(inputs, need)
+        if have is None:
+            return f"the model's {e.label()} needs a {need} column in the poses"
+        lacking = np.flatnonzero(~np.isfinite(have).all(axis=1))
+        if len(lacking):
+            k = int(lacking[0])
+            pose = repr(pose_ids[k]) if pose_ids is not None else f"number {k + 1}"
+            return (
+                f"pose {pose} has no {need} (a blank field), which the model's {e.label()} "
+                f"needs ({len(lacking)} such pose{'s' if len(lacking) > 1 else ''})"
+            )
+    return None
+
+
 def candidates(layout, x, inputs: Inputs) -> list[Extension]:
     """Every effect of the vocabulary that this data could show, per joint and harmonic."""
     return [c for kind in KINDS.values() for c in kind.candidates(layout, x, inputs)]

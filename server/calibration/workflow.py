@@ -23,6 +23,7 @@ from robocal.server.formats.model_json import (
     ModelFile,
     extension_errors,
     file_digest,
+    joint_range_deg,
     read_model,
     uncertainty_to_json,
 )
@@ -33,7 +34,7 @@ from robocal.solver.identifiability import effective_parameters
 from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
 from robocal.solver.problem import Problem
-from robocal.solver.vocabulary import after_campaign
+from robocal.solver.vocabulary import after_campaign, missing_input
 
 # The fit, the screening and the diagnosis pull in scipy (seconds on a busy machine): imported in
 # the functions that run them, so `robocal predict` starts with numpy alone.
@@ -336,9 +337,7 @@ def verdict(
         tolerance_mm=cell.tolerance_mm,
         layout_condition=layout_condition,
     )
-    v.reasons += implausible(cell, meas, robot)
-    if extension_reason:
-        v.reasons.append(extension_reason)
+    v.reasons += implausible(cell, meas, robot) + ([extension_reason] if extension_reason else [])
     return validation_block(
         v,
         list(meas.pose_ids),
@@ -401,26 +400,14 @@ def model_predict(
     def per_reading(a, name):
         if a is None:
             return None
-        a = np.broadcast_to(np.reshape(np.asarray(a, dtype=float), (m, -1)), (m, K))
-        return a
+        return np.broadcast_to(np.reshape(np.asarray(a, dtype=float), (m, -1)), (m, K))
 
-    later = after_campaign(model.extensions)
-    if time_s is None and later is not None:
+    if time_s is None and (later := after_campaign(model.extensions)) is not None:
         time_s = np.full(m, later)
     inputs = Inputs(q, per_reading(time_s, "time_s"), per_reading(temp_c, "temp_c"), prev_q=prev_q)
-    for e in model.extensions:
-        need = e.kind.needs(e)
-        if need and getattr(inputs, need) is None:
-            raise DataError(f"the model's {e.label()} needs a {need} column in the poses")
-        if need:
-            lacking = np.flatnonzero(~np.isfinite(getattr(inputs, need)).all(axis=1))
-            if len(lacking):
-                k = int(lacking[0])
-                pose = repr(pose_ids[k]) if pose_ids is not None else f"number {k + 1}"
-                raise DataError(
-                    f"pose {pose} has no {need} (a blank field), which the model's {e.label()} "
-                    f"needs ({len(lacking)} such pose{'s' if len(lacking) > 1 else ''})"
-                )
+    why = missing_input(model.extensions, inputs, pose_ids)
+    if why:
+        raise DataError(why)
     return predict_model(model.nominal or model.robot, lay, x, model.extensions, inputs)
 
 
@@ -469,14 +456,8 @@ def evaluate(model: ModelFile, meas: Measurements) -> Evaluation:
     require_inputs(meas.q, meas.xyz)  # before any arithmetic on them: no overflow warnings
     names = meas.target_names
     order = [list(model.targets).index(t) for t in names]
-    pred = model_predict(
-        model,
-        meas.q,
-        _pose_column(meas.time_s),
-        _pose_column(meas.temp_c),
-        meas.prev_q,
-        meas.pose_ids,
-    )
+    time_s, temp_c = _pose_column(meas.time_s), _pose_column(meas.temp_c)
+    pred = model_predict(model, meas.q, time_s, temp_c, meas.prev_q, meas.pose_ids)
     after = metrics.accuracy(pred[:, order], meas.xyz, names)
     if model.nominal is None:
         return metrics.Evaluation(after)
@@ -563,9 +544,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True) -> tuple[Dia
         final=report.final,
         noise_floor_mm=report.noise_floor_mm,
         noise_floor_source=report.noise_floor_source,
-        joint_range_deg=np.round(
-            np.degrees([meas.q.min(axis=0), meas.q.max(axis=0)]).T, 3
-        ).tolist(),
+        joint_range_deg=joint_range_deg(meas.q),
         **(
             {"outliers": [o.to_json() for o in report.outliers]}
             if report.outliers is not None
@@ -639,7 +618,6 @@ def validate_diagnosis(
     from robocal.solver.diagnose import FOLDS
     from robocal.solver.plausibility import implausible_extensions
 
-    lay, x = model.layout()
     pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q, meas.pose_ids)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
@@ -657,7 +635,7 @@ def validate_diagnosis(
         floor=(report.noise_floor_mm, report.noise_floor_source or "unstated"),
         holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
         layout_condition=layout_condition,
-        extension_reason=implausible_extensions(lay, x, model.extensions, meas.q),
+        extension_reason=implausible_extensions(*model.layout(), model.extensions, meas.q),
     )
 
 

@@ -211,6 +211,12 @@ def parse_model(text: str, path="<model>") -> ModelFile:
     )
 
 
+def joint_range_deg(q_rad: np.ndarray) -> list[list[float]]:
+    """Per joint, the [min, max] deg of poses q_rad (m, n): the range a campaign covered."""
+    q = np.degrees(np.asarray(q_rad, dtype=float))
+    return np.round(np.stack([q.min(axis=0), q.max(axis=0)], axis=1), 3).tolist()
+
+
 # How far past the joint range its campaign covered a pose may put a joint whose extensions
 # correct it before a warning says so: a few degrees of a smooth correction is interpolation.
 RANGE_MARGIN_DEG = 5.0
