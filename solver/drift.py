@@ -37,6 +37,10 @@ PRIOR_DOF = 3.0  # the degrees of freedom the repeatability guess weighs as
 POSE_PRIOR_DOF = 6.0  # those a pose's own scatter is shrunk toward the pooled one with
 BASELINE_CHECKS = 3  # the first checks of a model, which later ones are compared with
 ADEQUATE_P = 1e-3  # a change explained when what is left is as likely as this from scatter
+# A cause that another contains (joint 1's zero is a rigid turn about axis 1) gives way to it when
+# the larger fits the change better than scatter would by this chance (F test): a shifted
+# tracker is no joint-1 zero because a turn about axis 1 leaves scatter-sized residuals
+NESTED_P = 1e-2
 Z_CAP = 38.0  # normal scores beyond this are rounding (sf below 1e-300)
 
 
@@ -224,4 +228,29 @@ def explain(
                 found.append((float(r @ r), Explanation(kind, joint, coef, left)))
         if found:
             break
+    found = [_widened(f, y, w, candidates) for f in found]
     return [e for _, e in sorted(found, key=lambda f: f[0])]
+
+
+def _widened(f: tuple[float, Explanation], y, w, candidates) -> tuple[float, Explanation]:
+    """f, or the candidate that contains it (its columns within the other's span) and fits y
+    significantly better (F test at NESTED_P)."""
+    rss, e = f
+    A = candidates[(e.kind, e.joint)] * w[:, None]
+    for (kind, joint), B in candidates.items():
+        Bw = B * w[:, None]
+        k, K = A.shape[1], B.shape[1]
+        nu = len(y) - K
+        if K <= k or nu <= 0:
+            continue
+        inside = np.linalg.lstsq(Bw, A, rcond=None)[0]
+        if np.linalg.norm(A - Bw @ inside) > 1e-6 * np.linalg.norm(A):
+            continue
+        coef = np.linalg.lstsq(Bw, y, rcond=None)[0]
+        r = y - Bw @ coef
+        big = float(r @ r)
+        F = ((rss - big) / (K - k)) / max(big / nu, 1e-300)
+        if float(stats.f.sf(F, K - k, nu)) < NESTED_P:
+            left = float(np.sqrt(np.mean(np.sum((r / w).reshape(-1, 3) ** 2, axis=1))))
+            return big, Explanation(kind, joint, coef, left)
+    return f

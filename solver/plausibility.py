@@ -315,3 +315,45 @@ def _mm(v: float) -> str:
 
 def _signed(c: ParameterChange) -> str:
     return f"{c.change:+.1f} {c.unit}" if c.unit == "mm" else f"{c.change:+.2f} {c.unit}"
+
+
+# Most an extension may turn its joint, peak to peak across the joint's limits. A gear's cyclic
+# error, an encoder's scale and a joint's compliance turn it by hundredths of a degree (the
+# simulator's defaults: 0.01 deg periodic, 100 ppm of the angle, tens of mdeg of compliance;
+# the real UR5's joint-2 compliance 72 mdeg peak to peak over its poses); past a degree the terms
+# trade against the geometry within the measured range and say nothing of the joint beyond it.
+EXTENSION_SPAN_DEG = 1.0
+SWEEP_ANGLES = 73  # angles across a joint's limits (every 10 deg of a 720 deg joint)
+SWEEP_POSES = 40  # the campaign's poses the other joints are held at
+
+
+def implausible_extensions(layout, x, extensions, q: np.ndarray) -> str | None:
+    """One sentence naming the joints whose extensions turn them by more than EXTENSION_SPAN_DEG
+    peak to peak, swept across each joint's limits with the others at the campaign's poses q
+    (m, n) rad; None when none does."""
+    from .vocabulary import Inputs
+
+    q = np.asarray(q, dtype=float)
+    held = q[np.linspace(0, len(q) - 1, min(len(q), SWEEP_POSES)).astype(int)]
+    out = []
+    for j in sorted({e.joint for e in extensions if e.is_joint}):
+        lo, hi = layout.robot.joints[j].limits
+        grid = np.repeat(held, SWEEP_ANGLES, axis=0)
+        grid[:, j] = np.tile(np.linspace(lo, hi, SWEEP_ANGLES), len(held))
+        inputs = Inputs(grid)
+        dq = sum(
+            e.kind.basis(e, layout, x, inputs) @ e.coef
+            for e in extensions
+            if e.is_joint and e.joint == j
+        )
+        span = float(np.degrees(np.ptp(dq)))
+        if span > EXTENSION_SPAN_DEG:
+            labels = ", ".join(e.label() for e in extensions if e.is_joint and e.joint == j)
+            seen = np.degrees([q[:, j].min(), q[:, j].max()])
+            out.append(
+                f"{labels} turn joint {j + 1} by {span:.3g} deg peak to peak across its limits, "
+                f"past any gear, encoder or compliance error ({EXTENSION_SPAN_DEG:g} deg): the "
+                f"terms trade against the geometry within the measured q{j + 1} "
+                f"{seen[0]:.1f} to {seen[1]:.1f} deg and do not hold beyond it"
+            )
+    return "; ".join(out) if out else None

@@ -158,7 +158,7 @@ def distance_residuals(meas, keep, time_s=None, temp_c=None) -> dict:
             d = np.linalg.norm(meas[:, i] - meas[:, j], axis=-1)
             cols = [np.ones_like(d)]
             for a in (temp_c, time_s):
-                if a is not None:
+                if a is not None and np.isfinite(a).any():  # a column of blanks: not recorded
                     # where both readings are missing so is the distance: any value will do
                     c = np.where(np.isfinite(a[:, i]), a[:, i], a[:, j])
                     c = np.where(np.isfinite(c), c - np.nanmean(c), 0.0)

@@ -42,6 +42,9 @@ class Inputs:
     prev_q: np.ndarray | None = None
 
     def __post_init__(self):
+        # A reading without its time or temperature (a blank field: not recorded) takes its
+        # pose's: the SMRs of a pose are read seconds apart, the air does not change between.
+        self.time_s, self.temp_c = (_pose_filled(a) for a in (self.time_s, self.temp_c))
         if self.motion is None:
             self.motion = last_motion(self.q, self.time_s, self.prev_q)
 
@@ -50,6 +53,20 @@ class Inputs:
         return Inputs(
             self.q[idx], pick(self.time_s), pick(self.temp_c), pick(self.motion), pick(self.prev_q)
         )
+
+
+def _pose_filled(a: np.ndarray | None) -> np.ndarray | None:
+    """A per-reading column (m, K) with each NaN replaced by its pose's mean (NaN where a pose
+    has none; None where no reading has one)."""
+    if a is None or np.isfinite(a).all():
+        return a
+    a = np.asarray(a, dtype=float)
+    given = np.isfinite(a)
+    if not given.any():
+        return None  # a column of blanks: not recorded
+    n = given.sum(axis=1, keepdims=True)
+    mean = np.where(given, a, 0.0).sum(axis=1, keepdims=True) / np.maximum(n, 1)
+    return np.where(given, a, np.where(n > 0, mean, np.nan))
 
 
 @dataclass
@@ -378,11 +395,12 @@ class ThermalDrift(PointEffect):
         return getattr(inputs, ext.variable) - ext.t_ref
 
     def candidates(self, layout, x, inputs):
+        # a variable some pose lacks altogether leaves that pose's growth undefined
         t = inputs.temp_c
-        if t is not None and np.nanmax(t) - np.nanmin(t) >= THERMAL_MIN_SPAN_C:
-            return [Extension(self.name, variable="temp_c", t_ref=float(np.nanmean(t)))]
-        if inputs.time_s is not None:
-            return [Extension(self.name, variable="time_s", t_ref=float(np.nanmean(inputs.time_s)))]
+        if t is not None and np.isfinite(t).all() and np.ptp(t) >= THERMAL_MIN_SPAN_C:
+            return [Extension(self.name, variable="temp_c", t_ref=float(np.mean(t)))]
+        if inputs.time_s is not None and np.isfinite(inputs.time_s).all():
+            return [Extension(self.name, variable="time_s", t_ref=float(np.mean(inputs.time_s)))]
         return []
 
     def needs(self, ext):
@@ -493,6 +511,38 @@ KINDS: dict[str, Effect] = {
         BaseShift(),
     )
 }
+
+
+def after_campaign(extensions) -> float | None:
+    """A time (s) on the campaign's clock past everything the extensions locate in it, for data
+    measured after the campaign, where their only clock is a base shift's: the cell then stands as
+    the campaign left it (moved). None where another extension needs the time itself. A later
+    file's time_s counts from its own start, not the campaign's: it says nothing of that."""
+    timed = [e for e in extensions if e.kind.needs(e) == "time_s"]
+    if not timed or any(e.name != BaseShift.name for e in timed):
+        return None
+    return max(float(e.at_s) for e in timed) + 1.0
+
+
+def missing_input(extensions, inputs: Inputs, pose_ids=None) -> str | None:
+    """Why the extensions cannot predict these inputs (a column they need absent, or blank on a
+    pose), in a sentence naming the first such pose; None when they can."""
+    for e in extensions:
+        need = e.kind.needs(e)
+        if not need:
+            continue
+        have = getattr(inputs, need)
+        if have is None:
+            return f"the model's {e.label()} needs a {need} column in the poses"
+        lacking = np.flatnonzero(~np.isfinite(have).all(axis=1))
+        if len(lacking):
+            k = int(lacking[0])
+            pose = repr(pose_ids[k]) if pose_ids is not None else f"number {k + 1}"
+            return (
+                f"pose {pose} has no {need} (a blank field), which the model's {e.label()} "
+                f"needs ({len(lacking)} such pose{'s' if len(lacking) > 1 else ''})"
+            )
+    return None
 
 
 def candidates(layout, x, inputs: Inputs) -> list[Extension]:

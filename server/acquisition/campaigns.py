@@ -62,7 +62,7 @@ def import_campaign(
 ) -> int:
     """Store an uploaded meas.csv, read already (uploads.read_measurements), as a done campaign;
     InputError naming `filename`."""
-    from robocal.server.calibration.workflow import units_refusal
+    from robocal.server.calibration.units import units_refusal
 
     filename = Path(filename).name or "meas.csv"  # only a label: never a path on this machine
     why = units_refusal(cell, measurements)

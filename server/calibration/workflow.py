@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from robocal.server.calibration.units import radian_refusal, units_refusal
 from robocal.server.calibration.validation import (
     HOLDOUT_METHOD,
     absurd_errors,
@@ -23,6 +24,7 @@ from robocal.server.formats.model_json import (
     ModelFile,
     extension_errors,
     file_digest,
+    joint_range_deg,
     read_model,
     uncertainty_to_json,
 )
@@ -33,6 +35,7 @@ from robocal.solver.identifiability import effective_parameters
 from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
 from robocal.solver.problem import Problem
+from robocal.solver.vocabulary import after_campaign, missing_input
 
 # The fit, the screening and the diagnosis pull in scipy (seconds on a busy machine): imported in
 # the functions that run them, so `robocal predict` starts with numpy alone.
@@ -77,42 +80,18 @@ def load_campaign(path, cell: Cell, cell_path=None) -> Measurements:
         require_inputs(meas.q, meas.xyz)
     except ValueError as e:
         raise DataError(f"{path}: {e}") from None
-    refuse_radian_angles(cell_path, cell, meas)  # before the units: it changes the arm's spread
-    refuse_wrong_units(path, cell, meas)
+    refuse_wrong_units(cell_path, path, cell, meas)
     return meas
 
 
-def refuse_wrong_units(path, cell: Cell, meas: Measurements) -> None:
-    """DataError naming the file and the likely units (see units_refusal)."""
-    why = units_refusal(cell, meas)
-    if why:
-        raise DataError(f"{path}: {why}")
-
-
-def refuse_radian_angles(cell_path, cell: Cell, meas: Measurements) -> None:
-    """DataError naming the cell.json whose robot's angles the readings say are radians
-    (solver.plausibility.check_cell_angles); a built-in robot's are never."""
-    from robocal.solver.plausibility import check_cell_angles
-
-    if cell_path is None:
-        return
-    targets = cell.target_positions(meas.target_names)
-    check = check_cell_angles(cell.robot, targets, meas.q, meas.xyz)
-    why = check.reason() if check is not None else None
-    if why:
+def refuse_wrong_units(cell_path, path, cell: Cell, meas: Measurements) -> None:
+    """DataError naming the cell.json whose robot's angles the readings say are radians, or the
+    campaign whose readings are not in mm and degrees (server.calibration.units)."""
+    # the angles before the units: radians change the arm's spread; a built-in robot's are never
+    if cell_path is not None and (why := radian_refusal(cell, meas)):
         raise DataError(f"{cell_path}: {why}")
-
-
-def units_refusal(cell: Cell, meas: Measurements) -> str | None:
-    """Why the readings are not in mm and degrees: their spread is not the one the cell's
-    nominal arm gives at the measured joints (solver.plausibility); None if they may be, or if
-    the cell does not name their SMRs (refused elsewhere)."""
-    from robocal.solver.plausibility import check_units
-
-    if any(t not in cell.targets for t in meas.target_names):
-        return None
-    targets = cell.target_positions(meas.target_names)
-    return check_units(cell.robot, targets, meas.q, meas.xyz).reason()
+    if why := units_refusal(cell, meas):
+        raise DataError(f"{path}: {why}")
 
 
 DB_SUFFIXES = (".db", ".sqlite", ".sqlite3")
@@ -163,8 +142,8 @@ def load_data(path, cell_path=None, campaign_id=None, note=None) -> tuple[Cell, 
         raise DataError(
             f"{path}: campaign {campaign_id} ({info.name}) has no reading (all missing)"
         )
-    refuse_radian_angles(cell_path or f"{path}: campaign {campaign_id}'s cell", cell, meas)
-    refuse_wrong_units(f"{path}: campaign {campaign_id}", cell, meas)
+    where = f"{path}: campaign {campaign_id}"
+    refuse_wrong_units(cell_path or f"{where}'s cell", where, cell, meas)
     return cell, meas
 
 
@@ -313,6 +292,7 @@ def verdict(
     floor: tuple[float | None, str],
     holdout_method: str = HOLDOUT_METHOD,
     layout_condition: float | None = None,
+    extension_reason: str | None = None,
 ) -> Validation:
     """The `validation` block of a model fitted on meas, `calibrate`'s and `diagnose`'s alike (one
     model, one verdict): the guard's limits (solver.guard.judge: past MAX_FLOOR_RATIO times the
@@ -334,7 +314,7 @@ def verdict(
         tolerance_mm=cell.tolerance_mm,
         layout_condition=layout_condition,
     )
-    v.reasons += implausible(cell, meas, robot)
+    v.reasons += implausible(cell, meas, robot) + ([extension_reason] if extension_reason else [])
     return validation_block(
         v,
         list(meas.pose_ids),
@@ -379,7 +359,9 @@ def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
     return json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
 
 
-def model_predict(model: ModelFile, q, time_s=None, temp_c=None, prev_q=None) -> np.ndarray:
+def model_predict(
+    model: ModelFile, q, time_s=None, temp_c=None, prev_q=None, pose_ids=None
+) -> np.ndarray:
     """SMR centres (m, K, 3) a model file predicts, with its extensions (time and temperature per
     pose (m,) or per reading (m, K)).
 
@@ -395,14 +377,14 @@ def model_predict(model: ModelFile, q, time_s=None, temp_c=None, prev_q=None) ->
     def per_reading(a, name):
         if a is None:
             return None
-        a = np.broadcast_to(np.reshape(np.asarray(a, dtype=float), (m, -1)), (m, K))
-        return a
+        return np.broadcast_to(np.reshape(np.asarray(a, dtype=float), (m, -1)), (m, K))
 
+    if time_s is None and (later := after_campaign(model.extensions)) is not None:
+        time_s = np.full(m, later)
     inputs = Inputs(q, per_reading(time_s, "time_s"), per_reading(temp_c, "temp_c"), prev_q=prev_q)
-    for e in model.extensions:
-        need = e.kind.needs(e)
-        if need and getattr(inputs, need) is None:
-            raise DataError(f"the model's {e.label()} needs a {need} column in the poses")
+    why = missing_input(model.extensions, inputs, pose_ids)
+    if why:
+        raise DataError(why)
     return predict_model(model.nominal or model.robot, lay, x, model.extensions, inputs)
 
 
@@ -451,9 +433,8 @@ def evaluate(model: ModelFile, meas: Measurements) -> Evaluation:
     require_inputs(meas.q, meas.xyz)  # before any arithmetic on them: no overflow warnings
     names = meas.target_names
     order = [list(model.targets).index(t) for t in names]
-    pred = model_predict(
-        model, meas.q, _pose_column(meas.time_s), _pose_column(meas.temp_c), meas.prev_q
-    )
+    time_s, temp_c = _pose_column(meas.time_s), _pose_column(meas.temp_c)
+    pred = model_predict(model, meas.q, time_s, temp_c, meas.prev_q, meas.pose_ids)
     after = metrics.accuracy(pred[:, order], meas.xyz, names)
     if model.nominal is None:
         return metrics.Evaluation(after)
@@ -540,6 +521,7 @@ def diagnose(cell: Cell, meas: Measurements, log=None, screen=True) -> tuple[Dia
         final=report.final,
         noise_floor_mm=report.noise_floor_mm,
         noise_floor_source=report.noise_floor_source,
+        joint_range_deg=joint_range_deg(meas.q),
         **(
             {"outliers": [o.to_json() for o in report.outliers]}
             if report.outliers is not None
@@ -616,8 +598,9 @@ def validate_diagnosis(
     the data gives, as the diagnosis fits them under its prior) and the report's noise floor."""
     from robocal.solver import guard
     from robocal.solver.diagnose import FOLDS
+    from robocal.solver.plausibility import implausible_extensions
 
-    pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q)
+    pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q, meas.pose_ids)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
     final = report.final
@@ -634,6 +617,7 @@ def validate_diagnosis(
         floor=(report.noise_floor_mm, report.noise_floor_source or "unstated"),
         holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
         layout_condition=geometric.layout_condition,
+        extension_reason=implausible_extensions(*model.layout(), model.extensions, meas.q),
     )
 
 

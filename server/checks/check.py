@@ -21,11 +21,13 @@ from robocal.server.calibration.workflow import (
     model_predict,
 )
 from robocal.server.formats.cell_json import Cell
+from robocal.server.formats.errors import InputError
 from robocal.server.formats.model_json import ModelFile, file_digest, read_model
 from robocal.server.store.model_checks import CheckRecord, NewCheck, append_check
 from robocal.solver import drift
 from robocal.solver.kinematics import joint_frames, predict
 from robocal.solver.measurements import Measurements
+from robocal.solver.vocabulary import after_campaign
 
 EXIT_RECALIBRATE = 3
 STEEL_PPM_PER_K = 11.7  # the thermal expansion of an arm's steel and cast iron
@@ -35,6 +37,10 @@ VERDICTS = ("ok", "watch", "recalibrate")
 # The most poses a check uploaded to the service takes: it is judged in the service's own thread
 # (in the store's write transaction), and a quick check is a few fixed poses.
 MAX_POSES = 100
+# A check pose is the same pose when its joints are: a model's error differs from place to place
+# by more than the scatter between checks, so an earlier check's error at a pose of the same name
+# measured elsewhere (another plan's 'check1') is no baseline for it.
+SAME_POSE_DEG = 0.5
 
 
 @dataclass(frozen=True)
@@ -73,6 +79,11 @@ class _Readings:
     reading_target: np.ndarray  # (n,) index into the model's targets
     predicted: np.ndarray  # (n, 3)
     error: np.ndarray  # (n, 3) measured - predicted
+    # what the model's extensions read beside the joints: time and air temperature (m,) a pose,
+    # the joints the arm came from (m, N) rad; None where the check has no such column
+    time_s: np.ndarray | None = None
+    temp_c: np.ndarray | None = None
+    prev_q: np.ndarray | None = None
 
 
 def expected_rms(model: ModelFile) -> float:
@@ -92,9 +103,14 @@ def _readings(model: ModelFile, meas: Measurements, check_path) -> _Readings:
         raise DataError(f"{check_path}: target {unknown[0]!r} is not in the model")
     names = list(model.targets)
     order = [names.index(t) for t in meas.target_names]
-    pred = model_predict(
-        model, meas.q, _pose_column(meas.time_s), _pose_column(meas.temp_c), meas.prev_q
-    )[:, order]
+    time_s, temp_c = _pose_column(meas.time_s), _pose_column(meas.temp_c)
+    if after_campaign(model.extensions) is not None:
+        time_s = None  # the check's clock starts with the check: the cell as the campaign left it
+    try:
+        pred = model_predict(model, meas.q, time_s, temp_c, meas.prev_q, meas.pose_ids)
+    except DataError as e:
+        raise DataError(f"{check_path}: {e}") from None
+    pred = pred[:, order]
     pi, ki = np.nonzero(meas.mask)
     if len(pi) == 0:
         raise DataError(f"{check_path}: no reading to check")
@@ -105,6 +121,9 @@ def _readings(model: ModelFile, meas: Measurements, check_path) -> _Readings:
         np.array(order)[ki],
         pred[pi, ki],
         meas.xyz[pi, ki] - pred[pi, ki],
+        time_s,
+        temp_c,
+        meas.prev_q,
     )
 
 
@@ -116,8 +135,30 @@ def _matched(history: list[CheckRecord], keys) -> np.ndarray:
         for pose, target, *e in rec.errors:
             i = at.get((str(pose), str(target)))
             if i is not None:
-                out[c, i] = e
+                out[c, i] = e[:3]
     return out
+
+
+def moved_pose(history: list[CheckRecord], r: _Readings) -> str | None:
+    """Why an earlier check's pose of a name this check uses is not the same pose (its joints,
+    stored with its errors, differ by more than SAME_POSE_DEG), or None."""
+    q = np.degrees(r.q)
+    by_name = {pose: q[i] for (pose, _), i in zip(r.keys, r.reading_pose)}
+    for rec in history:
+        for pose, _target, *e in rec.errors:
+            now = by_name.get(str(pose))
+            if now is None or len(e) != 3 + len(now):  # a check stored without its joints
+                continue
+            gap = np.abs(np.asarray(e[3:], dtype=float) - now)
+            if gap.max() > SAME_POSE_DEG:
+                j = int(np.argmax(gap))
+                return (
+                    f"pose {pose!r} has q{j + 1} {now[j]:.3f} deg, but check {rec.id} of this "
+                    f"model measured a pose of that name at q{j + 1} {e[3 + j]:.3f} deg: a check "
+                    "measures the same poses every time, and an error measured elsewhere is no "
+                    "baseline for it; give new poses new names (or check a new model)"
+                )
+    return None
 
 
 def _joint_columns(model: ModelFile, r: _Readings) -> dict:
@@ -127,8 +168,10 @@ def _joint_columns(model: ModelFile, r: _Readings) -> dict:
     for j in range(r.q.shape[1]):
         step = np.zeros(r.q.shape[1])
         step[j] = FD_STEP_RAD
-        plus = model_predict(model, r.q + step)
-        minus = model_predict(model, r.q - step)
+        # at the check's own time, temperature and motion: a thermal or backlash model
+        # predicts nothing without them
+        plus = model_predict(model, r.q + step, r.time_s, r.temp_c, r.prev_q)
+        minus = model_predict(model, r.q - step, r.time_s, r.temp_c, r.prev_q)
         col = (plus - minus)[r.reading_pose, r.reading_target] / (2 * FD_STEP_RAD)
         moves.append(col)
         if np.linalg.norm(col) > 0:
@@ -250,7 +293,12 @@ def judge(model: ModelFile, r: _Readings, history: list[CheckRecord], expected: 
     elif found is not None:  # watch
         like = f", like {_name(found[0])}" if len(found) == 1 else ""
         said += f"{why}: a change that may be scatter{like}; check again soon"
-    errors = [[p, t, *np.round(e, 6).tolist()] for (p, t), e in zip(r.keys, r.error)]
+    # each reading's joints beside its error, so a later check can tell the same pose from
+    # another of the same name
+    q = np.round(np.degrees(r.q[r.reading_pose]), 6)
+    errors = [
+        [p, t, *np.round(e, 6).tolist(), *qq.tolist()] for (p, t), e, qq in zip(r.keys, r.error, q)
+    ]
     new = NewCheck(
         source="",
         poses=n_poses,
@@ -292,6 +340,9 @@ def _subset(r: _Readings, keep: np.ndarray) -> _Readings:
         r.reading_target[keep],
         r.predicted[keep],
         r.error[keep],
+        r.time_s,
+        r.temp_c,
+        r.prev_q,
     )
 
 
@@ -325,6 +376,9 @@ def record(db: store.Database, p: Prepared, source: str) -> CheckResult:
     out: dict = {}
 
     def judged(history: list[CheckRecord]) -> NewCheck:
+        moved = moved_pose(history, p.readings)
+        if moved:
+            raise InputError(source, None, None, moved)
         new, change, cause = judge(p.model, p.readings, history, p.expected_rms_mm)
         out.update(change=change, cause=cause)
         return NewCheck(**{**vars(new), "source": source})

@@ -64,6 +64,17 @@ def plan_check(model: ModelFile, n: int = DEFAULT_POSES) -> CheckPlan:
 
     if not MIN_POSES <= n <= MAX_POSES:
         raise ValueError(f"--plan: {n} poses; a check plans {MIN_POSES} to {MAX_POSES}")
+    from robocal.drivers.cell import AXIS_CLEARANCE_MM
+
+    origin = float(np.linalg.norm(np.asarray(model.base)[:3, 3]))
+    if origin < AXIS_CLEARANCE_MM:
+        # the planner puts the tracker at its frame's origin, and keeps it 1 m from every SMR
+        raise ValueError(
+            f"--plan: the model's frame has its origin {origin:.1f} mm from the robot's base, "
+            "where no tracker stands: its readings were registered to the robot, so where the "
+            "tracker is (which poses face it, at what range) is unknown; measure poses of your "
+            "choice as the check, the same every time, or calibrate in the tracker's own frame"
+        )
     rng = np.random.default_rng(PLAN_SEED)
     cand = plan_poses(model.robot, model.base, model.targets, CANDIDATES, rng)
     lay, x = model.layout()

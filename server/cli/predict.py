@@ -4,17 +4,23 @@ from __future__ import annotations
 
 
 def cmd_predict(args) -> None:
+    import sys
+
     from robocal.server.calibration import workflow
+    from robocal.server.formats.model_json import extrapolated
 
     from ..formats.campaign_csv import read_poses, write_predictions
 
     model = workflow.read_model(args.model)
     pose_ids, q, time_s, temp_c, prev_q = read_poses(args.poses, model.robot)
     try:
-        xyz = workflow.model_predict(model, q, time_s, temp_c, prev_q)
+        xyz = workflow.model_predict(model, q, time_s, temp_c, prev_q, pose_ids)
     except workflow.DataError as e:
         raise workflow.DataError(f"{args.poses}: {e}") from None
     write_predictions(args.out, pose_ids, list(model.targets), xyz)
+    beyond = extrapolated(model, q, pose_ids)
+    if beyond:
+        print(f"robocal: warning: {args.poses}: {beyond}", file=sys.stderr)
     # plain print, not rich's console: rich's import would be a fifth of predict's start
     print(f"predicted {len(pose_ids)} poses x {len(model.targets)} targets to {args.out}")
 

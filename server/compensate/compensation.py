@@ -8,11 +8,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from robocal.server.formats.errors import InputError
-from robocal.server.formats.model_json import ModelFile, read_model
+from robocal.server.formats.model_json import ModelFile, extrapolated, read_model
 from robocal.server.formats.targets_csv import Targets, read_targets
 from robocal.solver import configuration
 from robocal.solver.compensate import Compensation, Model, compensate
 from robocal.solver.kinematics import Layout, rot
+from robocal.solver.vocabulary import after_campaign
 
 TCP_NAME = "TCP"  # the virtual SMR's name in targets.csv when a tool centre point is given
 # an oriented tool is three virtual SMRs: its point and points this far along its x and z axes
@@ -126,6 +127,10 @@ def compensate_targets(
     and pose of the first one given neither starting joints nor a configuration, that the model
     cannot reach within the limits (in that configuration), or whose solution would leave its
     starting joints' configuration."""
+    later = after_campaign(model.extensions)
+    if targets.time_s is None and later is not None:
+        # the program runs after the campaign: the cell as the campaign left it (moved)
+        targets = replace(targets, time_s=np.full(targets.mask.shape, later))
     for e in model.extensions:
         need = e.kind.needs(e)
         if need and getattr(targets, need) is None:
@@ -196,6 +201,9 @@ def compensate_targets(
         )
     if guess.any():
         warnings += _kept(targets, res, guess, nominal, max_move_deg)
+    beyond = extrapolated(model, res.q, targets.pose_ids)
+    if beyond:
+        warnings.append(beyond)
     return res, warnings
 
 

@@ -285,6 +285,8 @@ class Diagnosis(Block):
     noise_floor_mm: Figure | None = None
     noise_floor_source: Text | None = None
     outliers: list[dict[str, Any]] | None = None
+    # per joint, the [min, max] deg its campaign covered: the extensions hold within it
+    joint_range_deg: list[list[float]] | None = None
 
 
 class Covariate(Ordered):

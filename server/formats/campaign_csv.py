@@ -118,9 +118,14 @@ class PrevJoints:
             and w is not None
             and max(abs(a - b) for a, b in zip(v, w)) > SAME_POSE_TOL_DEG
         ):
+            differs = (
+                next(c for c, a, b in zip(self.have, v, w) if abs(a - b) > SAME_POSE_TOL_DEG)
+                if v is not None and w is not None
+                else self.have[0]
+            )
             raise t.error(
                 row,
-                self.have[0],
+                differs,
                 f"the joints the arm came from differ from line {first.line}, an earlier row of "
                 f"pose {pid!r}",
             )

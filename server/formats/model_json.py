@@ -209,3 +209,37 @@ def parse_model(text: str, path="<model>") -> ModelFile:
         parameters,
         errors,
     )
+
+
+def joint_range_deg(q_rad: np.ndarray) -> list[list[float]]:
+    """Per joint, the [min, max] deg of poses q_rad (m, n): the range a campaign covered."""
+    q = np.degrees(np.asarray(q_rad, dtype=float))
+    return np.round(np.stack([q.min(axis=0), q.max(axis=0)], axis=1), 3).tolist()
+
+
+# How far past the joint range its campaign covered a pose may put a joint whose extensions
+# correct it before a warning says so: a few degrees of a smooth correction is interpolation.
+RANGE_MARGIN_DEG = 5.0
+
+
+def extrapolated(model: ModelFile, q_rad: np.ndarray, pose_ids) -> str | None:
+    """One sentence naming the poses (q_rad (m, n)) that put a joint the model's extensions
+    correct outside the range its diagnosis measured (by more than RANGE_MARGIN_DEG), where the
+    correction is extrapolated; None when every pose is inside (or the model does not say)."""
+    ranges = model.diagnosis.joint_range_deg if model.diagnosis is not None else None
+    joints = sorted({e.joint for e in model.extensions if e.is_joint})
+    if not ranges or not joints or len(q_rad) == 0:
+        return None
+    q = np.degrees(np.asarray(q_rad, dtype=float))
+    for j in joints:
+        lo, hi = ranges[j]
+        out = np.flatnonzero((q[:, j] < lo - RANGE_MARGIN_DEG) | (q[:, j] > hi + RANGE_MARGIN_DEG))
+        if len(out):
+            k = int(out[0])
+            labels = ", ".join(e.label() for e in model.extensions if e.is_joint and e.joint == j)
+            return (
+                f"{len(out)} poses (first {pose_ids[k]!r}, q{j + 1} {q[k, j]:.1f} deg) lie outside "
+                f"the q{j + 1} range the diagnosis measured ({lo:.1f} to {hi:.1f} deg): "
+                f"{labels} there is extrapolated, not measured"
+            )
+    return None

@@ -92,15 +92,15 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
             first.append(row)
             guesses.append(q)
             confs.append(_confdata(t, row, cfs, robot))
-        elif not _same(confs[k], _confdata(t, row, cfs, robot)):
+        elif not _same(conf := _confdata(t, row, cfs, robot), confs[k]):
             raise t.error(
                 row,
-                cfs[0],
+                _differing(cfs, conf, confs[k]),
                 f"the configuration differs from line {first[k].line}, an earlier row of "
                 f"pose {pid!r}",
             )
         elif not _same(guesses[k], q):
-            name = have[0] if have else "pose"
+            name = _differing(have, q, guesses[k]) if have else "pose"
             raise t.error(
                 row,
                 name,
@@ -238,3 +238,11 @@ def _same(a, b) -> bool:
     if a is None or b is None:
         return a is b
     return all(abs(u - v) <= 1e-6 for u, v in zip(a, b))
+
+
+def _differing(columns, a, b, tol: float = 1e-6) -> str:
+    """The column of a row's values a that differs from an earlier row's b (the first column
+    where one row gives none): the field a refusal names."""
+    if a is None or b is None:
+        return columns[0]
+    return next((c for c, u, v in zip(columns, a, b) if abs(u - v) > tol), columns[0])

@@ -25,7 +25,7 @@ class NewCheck:
     cusum: float
     verdict: str
     reason: str
-    errors: list  # per reading [pose, target, dx, dy, dz], mm
+    errors: list  # per reading [pose, target, dx, dy, dz, q1 ... qN], mm and deg
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,31 @@
+"""Why a campaign's readings or its cell's robot are not in mm and degrees (solver.plausibility),
+in a sentence; None when they may be."""
+
+from __future__ import annotations
+
+from robocal.server.formats.cell_json import Cell
+from robocal.solver.measurements import Measurements
+
+
+def units_refusal(cell: Cell, meas: Measurements) -> str | None:
+    """Why the readings are not in mm and degrees: their spread is not the one the cell's
+    nominal arm gives at the measured joints; None if they may be, or if the cell does not name
+    their SMRs (refused elsewhere)."""
+    from robocal.solver.plausibility import check_units
+
+    if any(t not in cell.targets for t in meas.target_names):
+        return None
+    targets = cell.target_positions(meas.target_names)
+    return check_units(cell.robot, targets, meas.q, meas.xyz).reason()
+
+
+def radian_refusal(cell: Cell, meas: Measurements) -> str | None:
+    """Why the cell's robot's angles look like radians to the readings
+    (solver.plausibility.check_cell_angles); None otherwise."""
+    from robocal.solver.plausibility import check_cell_angles
+
+    if any(t not in cell.targets for t in meas.target_names):
+        return None
+    targets = cell.target_positions(meas.target_names)
+    check = check_cell_angles(cell.robot, targets, meas.q, meas.xyz)
+    return check.reason() if check is not None else None
