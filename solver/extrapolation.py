@@ -53,6 +53,7 @@ class RegionFold:
     test: np.ndarray  # pose indices
     beyond_rad: float  # how far the test poses reach past the training poses' range
     configuration: str | None = None  # configuration folds: the test poses' configuration
+    own: bool = False  # judges only the effects of its joint (a joint gravity does not load)
 
     def label(self) -> str:
         if self.configuration is not None:
@@ -142,12 +143,18 @@ def region_folds(layout: Layout, x, q: np.ndarray, min_poses: int) -> list[Regio
     (at least MIN_TEST_POSES poses) and trains on the min_poses others: without that, a small
     campaign's effects went untested off their poses (on 18 real poses a periodic term doubled
     the error on the other half)."""
+    return joint_folds(q, min_poses, gravity_loaded(layout, x, q))
+
+
+def joint_folds(q: np.ndarray, min_poses: int, joints, own: bool = False) -> list[RegionFold]:
+    """Both ends of each of the joints that moves (region_folds); own: folds that judge only
+    the effects of their joint."""
     m = q.shape[0]
     n_test = min(m // 2, m - min_poses)
     if n_test < MIN_TEST_POSES:
         return []
     out = []
-    for j in gravity_loaded(layout, x, q):
+    for j in joints:
         qj = q[:, j]
         if np.ptp(qj) < MIN_SPAN_RAD:
             continue
@@ -158,7 +165,7 @@ def region_folds(layout: Layout, x, q: np.ndarray, min_poses: int) -> list[Regio
             at = float(qj[test].min() if above else qj[test].max())
             tq, rq = qj[test], qj[train]
             beyond = (tq.max() - rq.max()) if above else (rq.min() - tq.min())
-            out.append(RegionFold(j, at, above, test, float(max(beyond, 0.0))))
+            out.append(RegionFold(j, at, above, test, float(max(beyond, 0.0)), own=own))
     return out
 
 
@@ -227,7 +234,10 @@ def extrapolation_report(checks, refused, q) -> ExtrapolationReport:
                 label=e.label(),
                 joint=None if e.joint is None else e.joint + 1,
                 worse_on=[
-                    f"{c.fold.label()}: {c.extended_rms:.4f} mm vs geometric {c.geometric_rms:.4f}"
+                    c
+                    if isinstance(c, str)
+                    else f"{c.fold.label()}: {c.extended_rms:.4f} mm vs geometric "
+                    f"{c.geometric_rms:.4f}"
                     for c in bad
                 ],
             )

@@ -329,13 +329,20 @@ SWEEP_POSES = 40  # the campaign's poses the other joints are held at
 
 def implausible_extensions(layout, x, extensions, q: np.ndarray) -> str | None:
     """One sentence naming the joints whose extensions turn them by more than EXTENSION_SPAN_DEG
-    peak to peak, swept across each joint's limits with the others at the campaign's poses q
-    (m, n) rad; None when none does."""
+    peak to peak (implausible_joints); None when none does."""
+    out = implausible_joints(layout, x, extensions, q)
+    return "; ".join(out.values()) if out else None
+
+
+def implausible_joints(layout, x, extensions, q: np.ndarray) -> dict[int, str]:
+    """Per joint (0-based) whose extensions turn it by more than EXTENSION_SPAN_DEG peak to peak,
+    swept across its limits with the others at the campaign's poses q (m, n) rad, a clause
+    saying so."""
     from .vocabulary import Inputs
 
     q = np.asarray(q, dtype=float)
     held = q[np.linspace(0, len(q) - 1, min(len(q), SWEEP_POSES)).astype(int)]
-    out = []
+    out = {}
     for j in sorted({e.joint for e in extensions if e.is_joint}):
         lo, hi = layout.robot.joints[j].limits
         grid = np.repeat(held, SWEEP_ANGLES, axis=0)
@@ -350,10 +357,10 @@ def implausible_extensions(layout, x, extensions, q: np.ndarray) -> str | None:
         if span > EXTENSION_SPAN_DEG:
             labels = ", ".join(e.label() for e in extensions if e.is_joint and e.joint == j)
             seen = np.degrees([q[:, j].min(), q[:, j].max()])
-            out.append(
+            out[j] = (
                 f"{labels} turn joint {j + 1} by {span:.3g} deg peak to peak across its limits, "
                 f"past any gear, encoder or compliance error ({EXTENSION_SPAN_DEG:g} deg): the "
                 f"terms trade against the geometry within the measured q{j + 1} "
                 f"{seen[0]:.1f} to {seen[1]:.1f} deg and do not hold beyond it"
             )
-    return "; ".join(out) if out else None
+    return out
