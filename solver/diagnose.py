@@ -34,7 +34,7 @@ from .kinematics import Layout, predict_rows
 from .motion import visit_order
 from .noise import from_distances as noise_floor  # noqa: F401 (the tests' measured floor)
 from .noise import noise_floor as tracker_noise
-from .plausibility import implausible_joints
+from .plausibility import REFUSED_SPAN_DEG, implausible_joints
 from .problem import Problem
 from .report_blocks import Alternative, CrossValidation
 from .screen import screen_readings
@@ -344,7 +344,7 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
         if not bad:
             own = [c for c in checks if c.worse]
             x, ee = diag.fit(exts)
-            wild = implausible_joints(diag.prob.layout, x, ee, diag.prob.q)
+            wild = implausible_joints(diag.prob.layout, x, ee, diag.prob.q, REFUSED_SPAN_DEG)
             joint = own[0].fold.joint if own else min(wild, default=None)
             if joint is None:
                 return kept, Extrapolation(folds, checks, refused)

@@ -233,15 +233,20 @@ def extrapolation_report(checks, refused, q) -> ExtrapolationReport:
                 name=e.name,
                 label=e.label(),
                 joint=None if e.joint is None else e.joint + 1,
-                worse_on=[
-                    c
-                    if isinstance(c, str)
-                    else f"{c.fold.label()}: {c.extended_rms:.4f} mm vs geometric "
-                    f"{c.geometric_rms:.4f}"
-                    for c in bad
-                ],
+                worse_on=_worse_on(bad),
+                reason="; ".join([c for c in bad if isinstance(c, str)])
+                or "worse than geometry on " + "; ".join(_worse_on(bad)),
             )
             for e, bad in refused
         ],
         joint_range_deg=np.degrees(joint_ranges(q)).round(3).tolist(),
     )
+
+
+def _worse_on(bad) -> list[str]:
+    """The folds among an effect's refusals (FoldCheck, or a sentence why), in a phrase each."""
+    return [
+        f"{c.fold.label()}: {c.extended_rms:.4f} mm vs geometric {c.geometric_rms:.4f}"
+        for c in bad
+        if not isinstance(c, str)
+    ]

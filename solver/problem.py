@@ -114,7 +114,17 @@ class Problem:
         """The per-pose inputs the model's extensions read (joints, time, temperature, motion)."""
         from .effects import Inputs
 
-        return Inputs(self.q, self.time_s, self.temp_c, prev_q=self.prev_q)
+        seen = self.mask.any(axis=1)
+
+        def filled(a):
+            # a pose with no reading (its beams all broken) has no time or temperature either;
+            # every fit masks its rows out, so any finite value serves, and the campaign's
+            # thermal drift stays a candidate (it needs a value at every pose)
+            if a is None or seen.all() or not np.isfinite(a).any():
+                return a
+            return np.where(~seen[:, None] & ~np.isfinite(a), np.nanmean(a), a)
+
+        return Inputs(self.q, filled(self.time_s), filled(self.temp_c), prev_q=self.prev_q)
 
     def subset(self, rows) -> Problem:
         """The problem restricted to the poses at rows (indices or a boolean mask), for folds."""

@@ -61,11 +61,13 @@ class Refused:
     label: str
     joint: int | None
     worse_on: list[str]  # the folds it made worse than geometry, in a phrase each
+    reason: str  # why refused, in a sentence: the folds, or a term no gear can have, or no fold
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "label": self.label}
         _with_joint(out, self.joint)
         out["worse_on"] = self.worse_on
+        out["reason"] = self.reason
         return out
 
 

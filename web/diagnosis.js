@@ -125,7 +125,7 @@ function showExtrapolation(x) {
     const list = Object.assign(document.createElement("ul"), { id: "x-refused", className: "warn" });
     x.refused.forEach((r) => {
       list.appendChild(document.createElement("li")).textContent =
-        `Refused ${r.label}: worse than geometry on ${r.worse_on.join("; ")}`;
+        `Refused ${r.label}: ${r.reason || "worse than geometry on " + r.worse_on.join("; ")}`;
     });
     parts.push(list);
   }

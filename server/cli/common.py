@@ -233,7 +233,8 @@ def _print_extrapolation(block: Extrapolation | None) -> None:
     else:
         console.print("not tested off its training poses: too few poses to split")
     for r in block.refused:
-        console.print(f"  refused {r.label}: worse than geometry on {'; '.join(r.worse_on)}")
+        why = r.reason or f"worse than geometry on {'; '.join(r.worse_on)}"
+        console.print(f"  refused {r.label}: {why}")
     ranges = ", ".join(
         f"q{j} {lo:.0f}..{hi:.0f}" for j, (lo, hi) in enumerate(block.joint_range_deg, start=1)
     )

@@ -87,6 +87,12 @@ class Refused(Open):
     label: str
     joint: int | None = None
     worse_on: list[str] = Field(description="the region folds it made worse than geometry")
+    reason: str | None = Field(
+        None,
+        description="why it was refused, in a sentence: worse than geometry on region folds, "
+        "terms that turn their joint by more than any gear or compliance error can, or no fold "
+        "that could test it off its training poses",
+    )
 
 
 class Extrapolation(Open):

@@ -58,11 +58,13 @@ def test_the_real_ur5_names_joint_2_compliance_and_tests_better_off_its_poses():
     assert rms(predict_poses(cell, d, test.q), test.xyz) < geometric
 
 
-def test_the_real_irb120_half_names_the_suspect_tested_alone_and_extrapolates():
+def test_the_real_irb120_half_names_the_suspect_and_extrapolates():
     """The real IRB 120 fitted on its poses with joint 2 beyond its region fold's split (18
-    poses): the open selection's periodic term is refused off the training region and nothing
-    is named; tested alone, joint 2's one stiffness is named, and on the other half (never
-    seen) it tests better than geometry (measured 0.823 -> 0.476 mm)."""
+    poses): joint 2's one stiffness is named, and on the other half (never seen) it tests
+    better than geometry (measured 0.818 -> 0.476 mm). With the shrunk geometry held at nominal
+    the open selection named a periodic term the region folds refused, and only the suspects'
+    tested-alone path named the stiffness; fitted under calibrate's prior, the open selection
+    names it."""
     from robocal.solver.extrapolation import region_folds
 
     folder = REAL / "irb120_wu"
@@ -75,7 +77,6 @@ def test_the_real_irb120_half_names_the_suspect_tested_alone_and_extrapolates():
     d = diagnose(workflow.cell_problem(cell, train))
     (effect,) = d.report.effects
     assert (effect.name, effect.joint) == ("joint_compliance", 2)
-    assert "tested alone" in effect.evidence, effect.evidence
     geo = calibrate(workflow.cell_problem(cell, train), "ls-sum")
     geometric = rms(predict(geo.layout, geo.x, other.q), other.xyz)
     assert rms(predict_poses(cell, d, other.q), other.xyz) < 0.8 * geometric

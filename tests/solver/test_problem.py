@@ -71,3 +71,21 @@ def test_inputs_that_do_not_fit_together_are_named(meas):
     q[2, 1] = np.inf
     with pytest.raises(NonFinite, match="non-finite values in the joint angles"):
         Problem(IRB2600, targets, meas.target_names, q, meas.xyz)
+
+
+def test_a_pose_without_any_reading_keeps_the_thermal_drift_a_candidate(meas):
+    """A pose whose beams all broke has no temperature either; its readings are out of every fit,
+    so its input takes a finite value and the campaign's thermal drift stays a candidate (bench
+    seed 12, one SMR a pose: a tenth of the poses blank, thermal drift never tried)."""
+    from robocal.solver.vocabulary import KINDS
+
+    span = np.linspace(20.0, 26.0, meas.n_poses)[:, None] * np.ones(meas.xyz.shape[1])
+    p = dataclasses.replace(CELL.problem(meas), temp_c=span)
+    xyz, temp = meas.xyz.copy(), span.copy()
+    xyz[4], temp[4] = np.nan, np.nan
+    blank = dataclasses.replace(p.with_meas(xyz), temp_c=temp)
+    got = blank.inputs()
+    assert np.isfinite(got.temp_c).all() and np.isfinite(got.time_s).all()
+    np.testing.assert_array_equal(got.temp_c[[3, 5]], span[[3, 5]])  # measured poses as read
+    (drift,) = KINDS["thermal_drift"].candidates(None, None, got)  # it reads the inputs alone
+    assert drift.variable == "temp_c"
