@@ -19,6 +19,14 @@ REFUSED = {
     "joint": 2,
     "worse_on": ["q2 <= -0.1 deg (0.52 vs 0.48 mm)"],
 }
+# a refusal no fold made: its reason is the sentence shown
+WILD = {
+    "name": "joint_periodic",
+    "label": "joint_periodic(1,k=1)",
+    "joint": 1,
+    "worse_on": [],
+    "reason": "joint_periodic(1,k=1) turn joint 1 by 118 deg peak to peak across its limits",
+}
 
 
 def test_the_diagnosis_view_shows_the_folds_and_the_trusted_joint_ranges(served, page):
@@ -31,7 +39,10 @@ def test_the_diagnosis_view_shows_the_folds_and_the_trusted_joint_ranges(served,
     def augment(route):
         report = route.fetch().json()
         seen["report"] = report
-        report = {**report, "extrapolation": {**report["extrapolation"], "refused": [REFUSED]}}
+        report = {
+            **report,
+            "extrapolation": {**report["extrapolation"], "refused": [REFUSED, WILD]},
+        }
         route.fulfill(json=report)
 
     page.route("**/api/jobs/*/report", augment)
@@ -59,7 +70,8 @@ def test_the_diagnosis_view_shows_the_folds_and_the_trusted_joint_ranges(served,
             fmt(f["final_rmse_mm"]),
         ]
     assert page.locator("#x-refused li").all_text_contents() == [
-        "Refused joint_periodic(2,k=1): worse than geometry on q2 <= -0.1 deg (0.52 vs 0.48 mm)"
+        "Refused joint_periodic(2,k=1): worse than geometry on q2 <= -0.1 deg (0.52 vs 0.48 mm)",
+        f"Refused joint_periodic(1,k=1): {WILD['reason']}",
     ]
     assert page.text_content("#x-trusted").startswith("Trusted within the joint ranges measured")
     trusted = page.locator("#trusted-table tbody tr")
