@@ -2,8 +2,9 @@
 
 Random folds test a model on poses among its training poses; a user's later poses lie elsewhere:
 in another elbow or wrist configuration, another part of the joint space. Region folds split the
-campaign at the median of a gravity-loaded joint, and configuration folds by the arm's
-configuration (elbow, wrist) where the campaign has poses in both: train on
+campaign at the median of a gravity-loaded joint (of any other joint, for that joint's own
+effects: own folds), and configuration folds by the arm's configuration (elbow, wrist) where the
+campaign has poses in both: train on
 one side, test on the other, so an effect that only fitted the quirks of one region shows up as
 a worse test than geometry's there.
 """
@@ -212,8 +213,8 @@ def extrapolation_report(checks, refused, q) -> ExtrapolationReport:
         return None if not np.isfinite(v) else float(v)
 
     return ExtrapolationReport(
-        method="train on one side of a gravity-loaded joint's median (a smaller end on a "
-        "small campaign), or in one elbow or wrist configuration where the data has both, test "
+        method="train on one side of a gravity-loaded joint's median (of any other joint for "
+        "that joint's own effects; a smaller end on a small campaign), or in one elbow or wrist configuration where the data has both, test "
         "on the other",
         max_ratio_to_geometric=MAX_RATIO,
         folds=[

@@ -61,7 +61,7 @@ class Refused:
     label: str
     joint: int | None
     worse_on: list[str]  # the folds it made worse than geometry, in a phrase each
-    reason: str  # why refused, in a sentence: the folds, or a term no gear can have, or no fold
+    reason: str  # why refused, in a sentence: the folds, or a term no gear can have
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "label": self.label}

@@ -90,8 +90,7 @@ class Refused(Open):
     reason: str | None = Field(
         None,
         description="why it was refused, in a sentence: worse than geometry on region folds, "
-        "terms that turn their joint by more than any gear or compliance error can, or no fold "
-        "that could test it off its training poses",
+        "or terms that turn their joint by more than any gear or compliance error can",
     )
 
 
@@ -152,7 +151,8 @@ class ReportDoc(Open):
     extrapolation: Extrapolation | None = Field(
         None,
         description="the final model tested off its training region: trained on one side of "
-        "each gravity-loaded joint's median (a smaller end on a small campaign), or in one elbow or "
+        "each gravity-loaded joint's median (of any other joint for that joint's own effects; a "
+        "smaller end on a small campaign), or in one elbow or "
         "wrist configuration where the data has both, tested on the other; an effect that made "
         "any such "
         "fold worse than geometry is refused",
