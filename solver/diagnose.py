@@ -310,11 +310,13 @@ class GeometricFold:
 
 @dataclass
 class Extrapolation:
-    """The region folds' verdict: the checks of the model kept, and the effects refused."""
+    """The region folds' verdict: the checks of the model kept, the effects refused, and the kept
+    model's fit on all poses where the verdict made one."""
 
     folds: list[RegionFold]
     checks: list[FoldCheck]
     refused: list[tuple[Extension, list[FoldCheck | str]]]  # the folds failed, or why implausible
+    fit: tuple | None = None  # the kept model's (x, extensions) on all poses: the final model's
 
 
 def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapolation]:
@@ -347,7 +349,7 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
             wild = implausible_joints(diag.prob.layout, x, ee, diag.prob.q, REFUSED_SPAN_DEG)
             joint = own[0].fold.joint if own else min(wild, default=None)
             if joint is None:
-                return kept, Extrapolation(folds, checks, refused)
+                return kept, Extrapolation(folds, checks, refused, (x, ee))
             at = max(i for i, s in enumerate(kept) if s[0].is_joint and s[0].joint == joint)
             bad = [c for c in own if c.fold.joint == joint] or [wild[joint]]
         last = kept.pop(at)
@@ -544,6 +546,7 @@ def select_holding(
         if round_ == REFUSAL_ROUNDS - 1 or not pool:
             diag.warm = {}
             steps, final = kept, (diag.cross_validate([st[0] for st in kept]) if kept else base)
+            region = replace(region, fit=final.fits["all"] if kept else None)  # the final fit
             break
         if log:
             log("  selecting again without the refused effects")
@@ -639,7 +642,8 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     clock["resamples"] = time.perf_counter() - t_resample
     t2 = time.perf_counter()
     exts = [s[0] for s in steps]
-    x, ee = diag.fit(exts)
+    # the region folds' verdict fitted the kept model on all poses already, from the same start
+    x, ee = region.fit if region.fit is not None else diag.fit(exts)
     clock["final_fit"] = time.perf_counter() - t2
     floor = noise.mm
     from .diagnosis_report import build_report, figure_series

@@ -374,14 +374,14 @@ def model_predict(
         return predict(lay, x, q)
     m, K = len(q), len(model.targets)
 
-    def per_reading(a, name):
+    def per_reading(a):
         if a is None:
             return None
         return np.broadcast_to(np.reshape(np.asarray(a, dtype=float), (m, -1)), (m, K))
 
     if time_s is None and (later := after_campaign(model.extensions)) is not None:
         time_s = np.full(m, later)
-    inputs = Inputs(q, per_reading(time_s, "time_s"), per_reading(temp_c, "temp_c"), prev_q=prev_q)
+    inputs = Inputs(q, per_reading(time_s), per_reading(temp_c), prev_q=prev_q)
     why = missing_input(model.extensions, inputs, pose_ids)
     if why:
         raise DataError(why)
