@@ -1,0 +1,61 @@
+"""Issue 21 as an outside judge drives it, third round: arms, SMR layouts and user mistakes the
+other tests do not try, through the public commands only (real files, real processes)."""
+
+import csv
+
+import numpy as np
+
+from .test_cli import robocal
+from .test_outside_cells import UR10E, _cell, _simulate
+
+# a nest plate 300 mm across: SMRs far off the flange's axis
+FAR_RING = {"A": [300.0, 0.0, 100.0], "B": [-150.0, 260.0, 100.0], "C": [-150.0, -260.0, 100.0]}
+
+
+def _rewrite(src, dst, change):
+    """dst: the rows of csv src, each changed in place by change(row)."""
+    rows = list(csv.DictReader(open(src)))
+    for row in rows:
+        change(row)
+    with open(dst, "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def _radians(row):
+    for i in range(1, 7):
+        row[f"q{i}"] = repr(float(np.radians(float(row[f"q{i}"]))))
+
+
+def test_a_check_in_radians_with_smrs_far_off_the_flange_is_refused_not_recalibrate(tmp_path):
+    """A quick check of six poses whose joints were written in radians, on a UR10e-like arm with
+    its SMRs 300 mm off the flange: `check` said 'recalibrate' (exit 3: 'no single cause ...
+    explains it'), `evaluate` 'the data is not of the model's cell', `calibrate` 'the data
+    moves none of the parameters'. The ring's own 300 mm had hidden how little the arm moves
+    in radians read as degrees (spread ratio 2.40, inside the band of 2.5)."""
+    _cell(tmp_path / "cell.json", UR10E, FAR_RING)
+    _simulate(tmp_path, 36, 2, "all.csv")
+    rows = list(csv.DictReader(open(tmp_path / "all.csv")))
+    with open(tmp_path / "fit.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(r for r in rows if int(r["pose"]) <= 30)
+    with open(tmp_path / "deg.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(r for r in rows if int(r["pose"]) > 30)
+    _rewrite(tmp_path / "deg.csv", tmp_path / "rad.csv", _radians)
+    r = robocal("calibrate", "fit.csv", "--cell", "cell.json", "--out", "model.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    ok = robocal("check", "model.json", "deg.csv", "--db", "ok.db", "--out", "c.json", cwd=tmp_path)
+    assert ok.returncode == 0, ok.stdout + ok.stderr
+    for args in (
+        ("check", "model.json", "rad.csv", "--db", "h.db", "--out", "c.json"),
+        ("evaluate", "model.json", "rad.csv"),
+        ("calibrate", "rad.csv", "--cell", "cell.json", "--out", "rad.json"),
+    ):
+        r = robocal(*args, cwd=tmp_path)
+        line = r.stderr.strip()
+        assert r.returncode not in (0, 3) and len(line.splitlines()) == 1, (args, r.stdout, line)
+        assert line.startswith("robocal: error: rad.csv") and "look like radians" in line, line
