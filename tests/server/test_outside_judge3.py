@@ -88,3 +88,32 @@ def test_a_tracker_that_beats_its_specification_is_no_reason_to_refuse(tmp_path)
         assert v["holdout_rms_mm"] < v["noise_floor_mm"], v
         assert v["deployable"] and v["reasons"] == [], (command, v["reasons"])
         assert any("quieter than that floor" in w for w in v["warnings"]), v["warnings"]
+
+
+def test_a_misspelt_tolerance_or_tracker_spec_in_the_cell_is_refused_not_ignored(tmp_path):
+    """cell.json's `"tolerance": 0.01` (for tolerance_mm) was ignored without a word: the model,
+    0.016 mm held out, came back 'deployable' as if no tolerance had been asked for, and the
+    tracker's `"mpe": 15` left the default spec's floor. A joint's misspelt key was refused
+    ('did you mean theta?') while the cell's own keys were not. A key that is no misspelling
+    (notes, a name beside the robot) stays ignored, as the contract lets files grow."""
+    _cell(tmp_path / "sim.json", UR10E, FAR_RING)
+    _simulate(tmp_path, 30, 5, "m.csv", "sim.json")
+    for extra, key, meant in (
+        ({"tolerance": 0.01}, "tolerance", "tolerance_mm"),
+        ({"Tolerance_mm": 0.01}, "Tolerance_mm", "tolerance_mm"),
+        ({"tolerance_um": 10}, "tolerance_um", "tolerance_mm"),
+        ({"payload": 5.0}, "payload", "payload_kg"),
+        ({"tracker": {"mpe": 15, "mpe_um_per_m": 6}}, "tracker.mpe", "mpe_um"),
+    ):
+        _cell(tmp_path / "cell.json", UR10E, FAR_RING, **extra)
+        r = robocal("calibrate", "m.csv", "--cell", "cell.json", "--out", "x.json", cwd=tmp_path)
+        line = r.stderr.strip()
+        assert r.returncode != 0 and not (tmp_path / "x.json").exists(), (extra, r.stdout)
+        assert len(line.splitlines()) == 1 and "Traceback" not in line, line
+        assert line.startswith("robocal: error: cell.json:1:"), line
+        assert f"{key}: unknown key" in line and f"did you mean {meant!r}" in line, line
+    fine = {"notes": "cell 4, east bay", "robot_name": "UR10 #2", "tolerance_mm": 0.05}
+    _cell(tmp_path / "cell.json", UR10E, FAR_RING, **fine)
+    r = robocal("calibrate", "m.csv", "--cell", "cell.json", "--out", "x.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "x.json").read_text())["validation"]["tolerance_mm"] == 0.05
