@@ -74,6 +74,7 @@ class UnitCheck:
     likely: tuple[str, str] | None = None  # (length unit, joint unit) that explain the data
     likely_ratio: float = float("nan")  # the spread ratio in those units
     n_joints: int = 0
+    per_smr: bool = True  # spreads about each SMR's centroid, else about all points' one
 
     @property
     def plausible(self) -> bool:
@@ -85,8 +86,9 @@ class UnitCheck:
         if self.likely is None:
             return None
         length, joints = self.likely
+        about = "each SMR's centroid" if self.per_smr else "their centroid"
         told = (
-            f"the {points} span {_mm(self.measured_spread_mm)} (RMS from each SMR's centroid) while "
+            f"the {points} span {_mm(self.measured_spread_mm)} (RMS from {about}) while "
             f"the nominal arm at the {joints_are} joints spans {_mm(self.predicted_spread_mm)}"
         )
         wrong = []
@@ -97,8 +99,12 @@ class UnitCheck:
         return f"{told}: " + " and ".join(wrong)
 
 
-def smr_spread(points: np.ndarray, mask: np.ndarray) -> float:
-    """RMS distance of each SMR's points (m, K, 3) where mask (m, K) from that SMR's centroid."""
+def smr_spread(points: np.ndarray, mask: np.ndarray, per_smr: bool = True) -> float:
+    """RMS distance of each SMR's points (m, K, 3) where mask (m, K) from that SMR's centroid;
+    not per_smr: of all the points from their one centroid."""
+    if not per_smr:
+        c = points[mask] - points[mask].mean(axis=0)
+        return float(np.sqrt(np.mean(np.sum(c * c, axis=1))))
     sq, n = 0.0, 0
     for k in range(points.shape[1]):
         p = points[mask[:, k], k]
@@ -111,19 +117,29 @@ def smr_spread(points: np.ndarray, mask: np.ndarray) -> float:
 def check_units(robot: Robot, targets: np.ndarray, q: np.ndarray, xyz: np.ndarray) -> UnitCheck:
     """Whether readings xyz (m, K, 3, mm, NaN where missing) of SMRs at targets (K, 3, flange
     frame) at joints q (m, n, rad as read from degrees) are in the units the nominal robot
-    implies (see the module's docstring)."""
+    implies (see the module's docstring): each SMR's spread (what the joints move), else the
+    spread of all the points (one pose of several SMRs spreads only as its ring)."""
+    motion = _check_units(robot, targets, q, xyz, per_smr=True)
+    if motion.likely is not None:
+        return motion
+    cloud = _check_units(robot, targets, q, xyz, per_smr=False)
+    return cloud if cloud.likely is not None else motion
+
+
+def _check_units(robot, targets, q, xyz, per_smr: bool) -> UnitCheck:
+    """check_units on one kind of spread (smr_spread's per_smr)."""
     mask = np.all(np.isfinite(xyz), axis=-1)
     measured = xyz[mask]
     bound = max(NOMINAL_ERROR_MIN_MM, NOMINAL_ERROR_FRACTION * robot.reach_mm)
 
     def predicted(q_rad):
         lay = Layout(robot, np.eye(4), tuple(str(k) for k in range(len(targets))))
-        return smr_spread(predict(lay, lay.initial(targets), q_rad), mask)
+        return smr_spread(predict(lay, lay.initial(targets), q_rad), mask, per_smr)
 
-    s_m = smr_spread(xyz, mask) if len(measured) > 1 else 0.0
+    s_m = smr_spread(xyz, mask, per_smr) if len(measured) > 1 else 0.0
     s_p = predicted(q) if len(measured) > 1 else 0.0
     ratio = s_m / s_p if s_p > 0 else float("nan")
-    check = UnitCheck(s_m, s_p, ratio, bound)
+    check = UnitCheck(s_m, s_p, ratio, bound, per_smr=per_smr)
     if not (s_p > 0 and s_m > 0) or 1 / RATIO_BAND <= ratio <= RATIO_BAND:
         return check
     if abs(s_m - s_p) <= bound:  # the nominal arm's own error may explain the difference
@@ -144,7 +160,7 @@ def check_units(robot: Robot, targets: np.ndarray, q: np.ndarray, xyz: np.ndarra
             best = ((length, unit), r)
     if best is None:  # no unit explains it: the geometry or the cell, not a unit mistake
         return check
-    return UnitCheck(s_m, s_p, ratio, bound, best[0], best[1], robot.n_joints)
+    return UnitCheck(s_m, s_p, ratio, bound, best[0], best[1], robot.n_joints, per_smr)
 
 
 @dataclass(frozen=True)

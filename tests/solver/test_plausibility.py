@@ -159,3 +159,7 @@ def test_radians_named_with_smrs_far_from_the_flange(robot, n):
     assert c.likely == ("mm", "radians"), c
     for unit, scale in (("metres", 1000.0), ("inches", 25.4)):
         assert check_units(robot, targets, meas.q, meas.xyz / scale).likely == (unit, "degrees")
+    # one pose of the ring: no SMR moves, the ring's own spread still tells a length unit
+    one = check_units(robot, targets, meas.q[:1], meas.xyz[:1] / 1000.0)
+    assert one.likely == ("metres", "degrees"), one
+    assert "(RMS from their centroid)" in one.reason(), one.reason()
