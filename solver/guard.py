@@ -178,6 +178,7 @@ def judge(
     tolerance_mm: float | None = None,
     max_floor_ratio: float | None = MAX_FLOOR_RATIO,
     layout_condition: float | None = None,
+    max_fit_mm: float | None = None,
 ) -> Validation:
     """The guard: each limit the fit breaks is one reason, naming its figures and the limit.
 
@@ -187,7 +188,9 @@ def judge(
     expect), a warning with one (the tolerance decides); not said of a fit with too few poses or
     one that does not predict new poses (its held-out excess is its own, not a missing effect's);
     layout_condition: the identified parameters' condition number on rich poses (None: unknown),
-    within LAYOUT_EXCESS of which a condition number past the limit is a warning.
+    within LAYOUT_EXCESS of which a condition number past the limit is a warning;
+    max_fit_mm: the most a right description of the arm errs once calibrated on its own
+    readings (solver.plausibility), past which the description, not an effect, is at fault.
     """
     v = Validation(
         fit_rms_mm,
@@ -264,7 +267,16 @@ def judge(
             "fitted on"
         )
     v.reasons += beyond_tolerance(v.holdout_rms_mm, tolerance_mm)
-    if not overfit and equations >= need:  # else the excess is the fit's, said above
+    wrong_arm = max_fit_mm is not None and not fit_rms_mm <= max_fit_mm
+    if wrong_arm:
+        v.reasons.append(
+            f"the calibrated model errs {fit_rms_mm:.4g} mm RMS on the readings it was fitted on "
+            f"(more than the {max_fit_mm:.3g} mm any calibration of a right description of this "
+            "arm leaves): the cell's robot is not the arm measured (a twist's or a joint's sign, "
+            "a joint offset convention, another robot) or the tracker moved during the campaign"
+        )
+    # else the excess is the fit's or the description's, said above
+    if not overfit and not wrong_arm and equations >= need:
         lacking = lacking_effect(v, max_floor_ratio)
         if tolerance_mm is None:
             v.reasons += lacking

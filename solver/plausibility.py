@@ -99,6 +99,13 @@ class UnitCheck:
         return f"{told}: " + " and ".join(wrong)
 
 
+def nominal_error_bound(robot: Robot) -> float:
+    """The most (mm RMS) a nominal model registered on its arm's data errs (1% of the reach, at
+    least 10 mm): past it, and past it after calibration all the more, the description is not
+    the arm's."""
+    return max(NOMINAL_ERROR_MIN_MM, NOMINAL_ERROR_FRACTION * robot.reach_mm)
+
+
 def smr_spread(points: np.ndarray, mask: np.ndarray, per_smr: bool = True) -> float:
     """RMS distance of each SMR's points (m, K, 3) where mask (m, K) from that SMR's centroid;
     not per_smr: of all the points from their one centroid."""
@@ -130,7 +137,7 @@ def _check_units(robot, targets, q, xyz, per_smr: bool) -> UnitCheck:
     """check_units on one kind of spread (smr_spread's per_smr)."""
     mask = np.all(np.isfinite(xyz), axis=-1)
     measured = xyz[mask]
-    bound = max(NOMINAL_ERROR_MIN_MM, NOMINAL_ERROR_FRACTION * robot.reach_mm)
+    bound = nominal_error_bound(robot)
 
     def predicted(q_rad):
         lay = Layout(robot, np.eye(4), tuple(str(k) for k in range(len(targets))))
@@ -204,7 +211,7 @@ def check_cell_angles(
             for j in robot.joints
         ),
     )
-    bound = max(NOMINAL_ERROR_MIN_MM, NOMINAL_ERROR_FRACTION * robot.reach_mm)
+    bound = nominal_error_bound(robot)
     return CellAngles(
         registered_rms(robot, targets, q, xyz), registered_rms(as_radians, targets, q, xyz), bound
     )

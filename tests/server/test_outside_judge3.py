@@ -117,3 +117,38 @@ def test_a_misspelt_tolerance_or_tracker_spec_in_the_cell_is_refused_not_ignored
     r = robocal("calibrate", "m.csv", "--cell", "cell.json", "--out", "x.json", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "x.json").read_text())["validation"]["tolerance_mm"] == 0.05
+
+
+def test_a_cell_robot_that_no_geometry_fits_is_not_called_a_missing_effect(tmp_path):
+    """A DH table with one twist's sign typed wrong (alpha4 -90 for +90): calibrate ended 599 mm
+    RMS from its own readings (the nominal 363 mm) and said 'held-out error 604 mm is 3.72e+04x
+    the noise floor: an effect the model lacks (a diagnosis's unexplained block says ...)', which
+    sends the user to diagnose an arm whose description is wrong. No calibration of a right
+    description errs so on its own readings: the reason names the cell's robot."""
+    _cell(tmp_path / "sim.json", UR10E, FAR_RING)
+    bad = json.loads(json.dumps(UR10E))
+    bad["joints"][3]["alpha"] = -bad["joints"][3]["alpha"]
+    _cell(tmp_path / "cell.json", bad, FAR_RING)
+    _simulate(tmp_path, 30, 5, "m.csv", "sim.json")
+    r = robocal("calibrate", "m.csv", "--cell", "cell.json", "--out", "x.json", cwd=tmp_path)
+    assert "Traceback" not in r.stderr, r.stderr
+    v = json.loads((tmp_path / "x.json").read_text())["validation"]
+    assert not v["deployable"] and v["fit_rms_mm"] > 50, v
+    assert not any("an effect the model lacks" in why for why in v["reasons"]), v["reasons"]
+    assert any("the cell's robot is not the arm measured" in why for why in v["reasons"]), v
+    # a UR10's a2 sign typed wrong: 'the data moves none of the parameters: measure poses that
+    # move the SMRs' (every column below a 424 mm residual taken for noise), as if the poses
+    # were at fault
+    ur10 = json.loads(json.dumps(UR10E))
+    for j, (a, d) in enumerate([(0, 127.3), (-612, 0), (-572.3, 0), (0, 163.941), (0, 115.7)]):
+        ur10["joints"][j].update(a=a, d=d, limits=[-360, 360])
+    ur10["joints"][5]["limits"] = [-360, 360]
+    ur10["joints"][5]["d"] = 92.2
+    _cell(tmp_path / "sim.json", ur10, FAR_RING)
+    _simulate(tmp_path, 60, 5, "m.csv", "sim.json")
+    ur10["joints"][1]["a"] = 612
+    _cell(tmp_path / "cell.json", ur10, FAR_RING)
+    r = robocal("calibrate", "m.csv", "--cell", "cell.json", "--out", "y.json", cwd=tmp_path)
+    line = r.stderr.strip()
+    assert r.returncode == 1 and len(line.splitlines()) == 1, r.stderr
+    assert "the cell's robot is not the arm measured" in line and "measure poses" not in line
