@@ -152,3 +152,33 @@ def test_a_cell_robot_that_no_geometry_fits_is_not_called_a_missing_effect(tmp_p
     line = r.stderr.strip()
     assert r.returncode == 1 and len(line.splitlines()) == 1, r.stderr
     assert "the cell's robot is not the arm measured" in line and "measure poses" not in line
+
+
+def test_a_poses_first_row_without_temp_c_takes_its_other_rows(tmp_path):
+    """A meas.csv whose pose has temp_c blank on its first row (SMR A's reading) but given on
+    B's and C's: `evaluate` used B's, `predict` and `check` refused ('pose 72 has no temp_c (a
+    blank field), which the model's thermal_drift needs'). Each pose's value is now its first
+    given one, in every reader (the column reader and the row reader, which prev_q selects)."""
+    from robocal.server.formats.campaign_csv import read_poses
+    from robocal.server.formats.cell_json import read_cell
+
+    _cell(tmp_path / "cell.json", UR10E, FAR_RING)
+    _simulate(tmp_path, 4, 3, "m.csv")
+    robot = read_cell(tmp_path / "cell.json").robot
+    whole = read_poses(tmp_path / "m.csv", robot)
+    rows = list(csv.DictReader(open(tmp_path / "m.csv")))
+    firsts = [i for i, r in enumerate(rows) if i == 0 or rows[i - 1]["pose"] != r["pose"]]
+    rows[firsts[1]]["temp_c"] = rows[firsts[1]]["time_s"] = ""
+    for prev in (False, True):
+        if prev:  # prev_q columns: the row reader
+            for r in rows:
+                r.update({f"prev_q{i}": r[f"q{i}"] for i in range(1, 7)})
+        with open(tmp_path / "b.csv", "w", newline="") as f:
+            w = csv.DictWriter(f, list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        ids, _, time_s, temp_c, _ = read_poses(tmp_path / "b.csv", robot)
+        assert ids == whole[0]
+        assert np.all(np.isfinite(temp_c)) and np.all(np.isfinite(time_s)), (prev, temp_c)
+        other = float(rows[firsts[1] + 1]["temp_c"])
+        assert temp_c[1] == other and temp_c[0] == whole[3][0], (prev, temp_c)
