@@ -182,3 +182,16 @@ def test_a_poses_first_row_without_temp_c_takes_its_other_rows(tmp_path):
         assert np.all(np.isfinite(temp_c)) and np.all(np.isfinite(time_s)), (prev, temp_c)
         other = float(rows[firsts[1] + 1]["temp_c"])
         assert temp_c[1] == other and temp_c[0] == whole[3][0], (prev, temp_c)
+
+
+def test_a_campaign_too_small_to_identify_is_named_in_its_refusal(tmp_path):
+    """'robocal: error: 8 poses give 24 equations for 25 parameters: measure at least 9 poses'
+    named no file (calibrate, diagnose, compare alike): the campaign's path now leads it."""
+    _cell(tmp_path / "cell.json", UR10E, {"A": [0.0, 0.0, 30.0]})
+    _simulate(tmp_path, 8, 3, "tiny.csv")
+    for command in ("calibrate", "diagnose", "compare"):
+        args = ("--out", "x.json") if command != "compare" else ()
+        r = robocal(command, "tiny.csv", "--cell", "cell.json", *args, cwd=tmp_path)
+        line = r.stderr.strip()
+        assert r.returncode == 1 and len(line.splitlines()) == 1, (command, r.stderr)
+        assert line.startswith("robocal: error: tiny.csv: 8 poses give 24 equations"), line
