@@ -195,3 +195,22 @@ def test_a_campaign_too_small_to_identify_is_named_in_its_refusal(tmp_path):
         line = r.stderr.strip()
         assert r.returncode == 1 and len(line.splitlines()) == 1, (command, r.stderr)
         assert line.startswith("robocal: error: tiny.csv: 8 poses give 24 equations"), line
+
+
+def test_an_effects_figure_file_name_is_a_plain_word(tmp_path):
+    """A compliance with its link's masses fitted wrote 'report_1_joint_compliance_2_ its
+    link's masses fitted.png' (a space and an apostrophe in a file name a script or a URL then
+    has to quote): letters, digits and underscores only now, the report naming that file."""
+    from robocal.server.figures.diagnosis import write_figures
+    from robocal.solver.diagnosis_report import EffectFigure
+
+    y = np.arange(3.0)
+    label = "joint_compliance(2, its link's masses fitted)"
+    figure = EffectFigure("joint_compliance", label, y, y, y, y, "x", "y")
+    periodic = EffectFigure("joint_periodic", "joint_periodic(4,k=2)", y, y, y, y, "x", "y")
+    paths = write_figures([figure, periodic], tmp_path / "report.json")
+    assert [p.name for p in paths] == [
+        "report_1_joint_compliance_2_its_link_s_masses_fitted.png",
+        "report_2_joint_periodic_4_k2.png",  # as before
+    ]
+    assert all(p.exists() for p in paths)
