@@ -214,3 +214,16 @@ def test_an_effects_figure_file_name_is_a_plain_word(tmp_path):
         "report_2_joint_periodic_4_k2.png",  # as before
     ]
     assert all(p.exists() for p in paths)
+
+
+def test_acquire_names_the_cell_of_a_robot_no_controller_drives(tmp_path):
+    """`acquire --cell iiwa.json` (seven joints) said 'robocal: error: robot.joints: 7 joints;
+    the controller protocol drives at most 6 ...', naming no file."""
+    from .test_outside_cells import PANDA
+
+    _cell(tmp_path / "iiwa.json", PANDA, {"A": [50.0, 10.0, 30.0]})
+    r = robocal("acquire", "--db", "a.db", "--poses", 5, "--cell", "iiwa.json", cwd=tmp_path)
+    line = r.stderr.strip()
+    assert r.returncode == 1 and len(line.splitlines()) == 1, r.stderr
+    assert line.startswith("robocal: error: iiwa.json: robot.joints: 7 joints"), line
+    assert not (tmp_path / "a.db").exists()
