@@ -20,9 +20,12 @@ from .uncertainty import Rows, hat_blocks, pose_blocks
 
 # A deployable model has at least this many equations (3 per reading) per free parameter.
 MIN_EQUATIONS_PER_PARAMETER = 3
-# A fit RMS below this fraction of the tracker's noise floor has absorbed measurement noise.
-# A sound least-squares fit leaves sqrt(1 - free/equations) of the noise: 0.94 at 30 poses of
-# 3 SMRs and 33 free parameters, 0.6 only below 1.6 equations per parameter.
+# A fit RMS below this fraction of the tracker's noise floor has absorbed measurement noise, when
+# its held-out RMS says so too (more than MAX_HOLDOUT_RATIO x the fit's). A sound least-squares
+# fit leaves sqrt(1 - free/equations) of the noise: 0.94 at 30 poses of 3 SMRs and 33 free
+# parameters, 0.6 only below 1.6 equations per parameter; with 3 or more (the size limit) a fit
+# that far below with its held-out error beside it means the floor is above the readings' noise
+# (a floor from the tracker's spec, an MPE that the tracker beats): a warning.
 NOISE_FLOOR_FRACTION = 0.6
 # Jacobi-scaled condition number of the identification past which the model is not deployed
 # (healthy campaigns of 20 poses or more: 10 to 100; identifiability refuses past 1e7).
@@ -175,6 +178,7 @@ def judge(
     tolerance_mm: float | None = None,
     max_floor_ratio: float | None = MAX_FLOOR_RATIO,
     layout_condition: float | None = None,
+    max_fit_mm: float | None = None,
 ) -> Validation:
     """The guard: each limit the fit breaks is one reason, naming its figures and the limit.
 
@@ -184,7 +188,9 @@ def judge(
     expect), a warning with one (the tolerance decides); not said of a fit with too few poses or
     one that does not predict new poses (its held-out excess is its own, not a missing effect's);
     layout_condition: the identified parameters' condition number on rich poses (None: unknown),
-    within LAYOUT_EXCESS of which a condition number past the limit is a warning.
+    within LAYOUT_EXCESS of which a condition number past the limit is a warning;
+    max_fit_mm: the most a right description of the arm errs once calibrated on its own
+    readings (solver.plausibility), past which the description, not an effect, is at fault.
     """
     v = Validation(
         fit_rms_mm,
@@ -206,12 +212,22 @@ def judge(
             f"parameter ({need}): measure at least {int(np.ceil(need / max(per_pose, 1)))} poses"
         )
     if noise_floor_mm and fit_rms_mm < NOISE_FLOOR_FRACTION * noise_floor_mm:
-        v.reasons.append(
+        below = (
             f"fit RMS {fit_rms_mm:.4f} mm is below {NOISE_FLOOR_FRACTION:g} x the tracker's "
             f"noise floor {noise_floor_mm:.4f} mm"
             + (f" (from the {noise_floor_source})" if noise_floor_source else "")
-            + ": the fit absorbed measurement noise"
         )
+        # a fit that absorbed noise predicts new poses worse than it fits them; one whose
+        # held-out error stays near its fit says the readings are quieter than the floor (a
+        # tracker better than its specification's MPE), which no more poses would change
+        if np.isfinite(v.holdout_rms_mm) and v.holdout_rms_mm <= MAX_HOLDOUT_RATIO * fit_rms_mm:
+            v.warnings.append(
+                f"{below}, and the held-out RMS {v.holdout_rms_mm:.4f} mm with it: the readings "
+                "are quieter than that floor (a tracker better than its specification); the "
+                "held-out RMS is the accuracy to expect"
+            )
+        else:
+            v.reasons.append(f"{below}: the fit absorbed measurement noise")
     if np.isnan(condition_number):
         v.reasons.append(
             "the condition number is not a figure: nothing of the arm was identified (the "
@@ -251,7 +267,16 @@ def judge(
             "fitted on"
         )
     v.reasons += beyond_tolerance(v.holdout_rms_mm, tolerance_mm)
-    if not overfit and equations >= need:  # else the excess is the fit's, said above
+    wrong_arm = max_fit_mm is not None and not fit_rms_mm <= max_fit_mm
+    if wrong_arm:
+        v.reasons.append(
+            f"the calibrated model errs {fit_rms_mm:.4g} mm RMS on the readings it was fitted on "
+            f"(more than the {max_fit_mm:.3g} mm any calibration of a right description of this "
+            "arm leaves): the cell's robot is not the arm measured (a twist's or a joint's sign, "
+            "a joint offset convention, another robot) or the tracker moved during the campaign"
+        )
+    # else the excess is the fit's or the description's, said above
+    if not overfit and not wrong_arm and equations >= need:
         lacking = lacking_effect(v, max_floor_ratio)
         if tolerance_mm is None:
             v.reasons += lacking

@@ -10,6 +10,7 @@ import numpy as np
 from .finite import finite
 from .kinematics import Layout, predict_rows, predict_with_jacobian
 from .observability import BLOCK_ROWS, stacked_r
+from .plausibility import nominal_error_bound
 from .prior import data_share
 
 # Singular values of the unit-norm Jacobian columns below this fraction of the largest count as
@@ -306,6 +307,14 @@ def check_data(
         else:
             held[names[p]] = _why_held(B, i, info, kept, idx, names, angle[p], sigma * np.sqrt(3.0))
     if not kept:
+        bound = nominal_error_bound(layout.robot)
+        if noise_mm and noise_mm > bound:  # a fit's residual: the description, not the poses
+            raise NotIdentifiable(
+                f"the fit stays {noise_mm:.4g} mm RMS from the readings (more than the "
+                f"{bound:.3g} mm any calibration of a right description of this arm leaves): the "
+                "cell's robot is not the arm measured (a twist's or a joint's sign, a joint "
+                "offset convention, a link's length, another robot)"
+            )
         raise NotIdentifiable(
             "the data moves none of the parameters: measure poses that move the SMRs"
         )

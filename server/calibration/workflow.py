@@ -300,6 +300,7 @@ def verdict(
     the SMR layout's warnings; layout_condition: the identified parameters' condition number on
     rich poses (solver.identifiability.layout_condition), None: unknown."""
     from robocal.solver import guard
+    from robocal.solver.plausibility import nominal_error_bound
 
     mm, source = floor
     v = guard.judge(
@@ -313,6 +314,7 @@ def verdict(
         noise_floor_source=source,
         tolerance_mm=cell.tolerance_mm,
         layout_condition=layout_condition,
+        max_fit_mm=nominal_error_bound(cell.robot),
     )
     v.reasons += implausible(cell, meas, robot) + ([extension_reason] if extension_reason else [])
     return validation_block(

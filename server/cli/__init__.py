@@ -118,6 +118,9 @@ def main(argv=None) -> int:
         if isinstance(e, Interrupted):  # Ctrl-C of a run: the arm was e-stopped first
             print(f"robocal: {e}", file=sys.stderr)
             return 130
+        if isinstance(e, NotIdentifiable) and getattr(args, "meas", None):
+            print(f"robocal: error: {args.meas}: {e}", file=sys.stderr)  # the data it fits
+            return 1
         if isinstance(e, (InputError, DataError, NotIdentifiable, AcquisitionFailed, StoreError)):
             print(f"robocal: error: {e}", file=sys.stderr)
             return 1

@@ -126,6 +126,13 @@ def cmd_acquire(args) -> int | None:
     from robocal.server.cli.tables import console
 
     cell = workflow.load_cell(args.cell)
+    if args.cell is not None:  # a robot no controller drives: the cell's file named
+        from robocal.server.acquisition.acquire import check_drivable
+
+        try:
+            check_drivable(cell)
+        except ValueError as e:
+            raise workflow.DataError(f"{args.cell}: {e}") from None
     if args.verify and args.check:
         raise ValueError("--verify and --check are two runs: one at a time")
     if args.verify:

@@ -36,6 +36,10 @@ def cmd_evaluate(args) -> None:
         raise workflow.DataError(f"{args.meas}: {why}; --force to evaluate anyway")
     if why:
         print(f"robocal: warning: {args.meas}: {why}", file=sys.stderr)
+    from robocal.server.formats.model_json import approach_unknown
+
+    if unknown := approach_unknown(model, meas.q, meas.time_s, meas.prev_q, meas.pose_ids):
+        print(f"robocal: warning: {args.meas}: {unknown}", file=sys.stderr)
     if res.nominal is not None:
         console.print(
             tables.accuracy(res.nominal, "Nominal model (base and SMRs fitted)", meas.target_names)

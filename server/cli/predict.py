@@ -7,7 +7,7 @@ def cmd_predict(args) -> None:
     import sys
 
     from robocal.server.calibration import workflow
-    from robocal.server.formats.model_json import extrapolated
+    from robocal.server.formats.model_json import approach_unknown, extrapolated
 
     from ..formats.campaign_csv import read_poses, write_predictions
 
@@ -18,9 +18,12 @@ def cmd_predict(args) -> None:
     except workflow.DataError as e:
         raise workflow.DataError(f"{args.poses}: {e}") from None
     write_predictions(args.out, pose_ids, list(model.targets), xyz)
-    beyond = extrapolated(model, q, pose_ids)
-    if beyond:
-        print(f"robocal: warning: {args.poses}: {beyond}", file=sys.stderr)
+    for why in (
+        extrapolated(model, q, pose_ids),
+        approach_unknown(model, q, time_s, prev_q, pose_ids),
+    ):
+        if why:
+            print(f"robocal: warning: {args.poses}: {why}", file=sys.stderr)
     # plain print, not rich's console: rich's import would be a fifth of predict's start
     print(f"predicted {len(pose_ids)} poses x {len(model.targets)} targets to {args.out}")
 

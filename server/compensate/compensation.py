@@ -8,7 +8,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from robocal.server.formats.errors import InputError
-from robocal.server.formats.model_json import ModelFile, extrapolated, read_model
+from robocal.server.formats.model_json import (
+    ModelFile,
+    approach_unknown,
+    extrapolated,
+    read_model,
+)
 from robocal.server.formats.targets_csv import Targets, read_targets
 from robocal.solver import configuration
 from robocal.solver.compensate import Compensation, Model, compensate
@@ -204,6 +209,8 @@ def compensate_targets(
     beyond = extrapolated(model, res.q, targets.pose_ids)
     if beyond:
         warnings.append(beyond)
+    if unknown := approach_unknown(model, res.q, targets.time_s, targets.prev_q, targets.pose_ids):
+        warnings.append(unknown)
     return res, warnings
 
 

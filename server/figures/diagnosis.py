@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -51,6 +52,8 @@ def write_figures(figures: list[EffectFigure], report_path) -> list[Path]:
     out = []
     for i, series in enumerate(figures, start=1):
         stem = series.label.replace("(", "_").replace(")", "").replace(",", "_").replace("=", "")
+        # a label's words ("2, its link's masses fitted"): a file name needs no quoting
+        stem = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9_]+", "_", stem)).strip("_")
         out.append(
             effect_figure(series, report_path.with_name(f"{report_path.stem}_{i}_{stem}.png"))
         )

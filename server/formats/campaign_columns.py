@@ -426,6 +426,15 @@ def _groups(ids: np.ndarray):
     return index, inv, first
 
 
+def first_given(values: np.ndarray, inv: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """Per pose, its first row's value that is given (not blank: a reading's temperature may
+    be missing where the pose's other SMRs have it), NaN where none is."""
+    rows = np.full(len(first), len(values))
+    given = np.flatnonzero(~np.isnan(values))  # a blank is NaN; an infinity is refused later
+    np.minimum.at(rows, inv[given], given)
+    return np.where(rows < len(values), values[np.minimum(rows, len(values) - 1)], np.nan)
+
+
 def _poses(ids: np.ndarray, q_deg: np.ndarray, same_tol_deg: float):
     """_groups, or None if a pose's rows disagree on a joint."""
     index, inv, first = _groups(ids)
@@ -522,13 +531,12 @@ def read_poses_columns(text: str, robot: Robot, extras, bounds, limit_tol: float
     poses = None if q is None else _poses(labels["pose"], q, same_tol)
     if q is None or poses is None:
         return None
-    pose_ids, _, first = poses
+    pose_ids, inv, first = poses
     if not t.has("target") and len(pose_ids) != t.n:  # a pose twice, one row each expected
         return None
     values = {}
     for c in present:
-        # the row reader reads these on each pose's first row only
-        values[c] = cols[c][first]
+        values[c] = first_given(cols[c], inv, first)
         if not _within(values[c], *bounds[c][0]):
             return None
     return pose_ids, np.deg2rad(q[first]), values.get("time_s"), values.get("temp_c"), None

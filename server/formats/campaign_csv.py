@@ -255,7 +255,7 @@ def read_poses(path, robot: Robot):
     temp_c, prev_q rad).
 
     time_s and temp_c are (m,) arrays, or None when the column is absent; for a `meas.csv`
-    they come from the first row of each pose. prev_q is (m, n), NaN rows where a pose gives
+    each pose's is its first row's that is given (NaN where no row gives one). prev_q is (m, n), NaN rows where a pose gives
     none, or None without the columns. Column-wise first, as read_campaign.
     """
     text = read_text(path)
@@ -279,9 +279,11 @@ def read_poses_rows(path, robot: Robot, text: str | None = None):
         if not new and not per_target:
             first = poses.first[k]
             raise t.error(row, "pose", f"pose {poses.ids[k]!r} is already on line {first.line}")
-        if new:
-            for c in extras:
+        for c in extras:  # each pose's first value given (a reading's may be blank)
+            if new:
                 values[c].append(t.number(row, c, np.nan, *BOUNDS[c]))
+            elif np.isnan(values[c][k]):
+                values[c][k] = t.number(row, c, np.nan, *BOUNDS[c])
     arrays = {c: np.array(v, dtype=float) for c, v in values.items()}
     ids = list(poses.ids)
     return ids, poses.q_rad(), arrays.get("time_s"), arrays.get("temp_c"), prev.rad(len(ids))

@@ -171,6 +171,7 @@ class TrackerDoc(Doc):
     kept as given."""
 
     model_config = ConfigDict(extra="allow")
+    MISSPELT_REFUSED = True
     mpe_um: NonNegative = 10.0
     mpe_um_per_m: NonNegative = 2.5
     serial: Label | None = Field(None, description="the tracker's serial number")
@@ -256,6 +257,7 @@ class CellDoc(Doc):
     """A cell.json: the robot, its SMR targets (flange frame, mm) and the tracker setup."""
 
     model_config = ConfigDict(extra="ignore", title="cell.json")
+    MISSPELT_REFUSED = True
     robot: RobotField
     targets: dict[str, Point] = Field(
         description="nominal SMR positions in the flange frame, mm",

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import difflib
-from typing import Annotated, Any
+from typing import Annotated, Any, ClassVar
 
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 from pydantic.fields import FieldInfo
@@ -83,20 +83,34 @@ Matrix4 = Annotated[list[Row4], Field(min_length=4, max_length=4)]
 
 
 class Doc(BaseModel):
-    """An object of a JSON file: unknown keys refused, with the nearest known one suggested."""
+    """An object of a JSON file: unknown keys refused, with the nearest known one suggested.
+    Where a document lets unknown keys pass (MISSPELT_REFUSED), one that reads as a misspelt
+    known key the document lacks is still refused."""
 
     model_config = ConfigDict(extra="forbid", populate_by_name=True)
+    # an open document's misspelt key (cell.json's "tolerance" for tolerance_mm) would be
+    # ignored without a word and its default taken: refused like a closed document's
+    MISSPELT_REFUSED: ClassVar[bool] = False
 
     @model_validator(mode="before")
     @classmethod
     def _known_keys(cls, value: Any) -> Any:
-        if isinstance(value, dict) and cls.model_config.get("extra") == "forbid":
+        closed = cls.model_config.get("extra") == "forbid"
+        if isinstance(value, dict) and (closed or cls.MISSPELT_REFUSED):
             known = [f.alias or n for n, f in cls.model_fields.items()]
             for k in value:
                 if k not in known:
-                    hint = difflib.get_close_matches(str(k), known, n=1)
-                    extra = (
-                        f"; did you mean {hint[0]!r}?" if hint else f" (known: {', '.join(known)})"
-                    )
+                    lower = {n.lower(): n for n in known}  # MPE_um is mpe_um misspelt
+                    hint = [lower[h] for h in difflib.get_close_matches(str(k).lower(), lower, 1)]
+                    if closed:
+                        extra = (
+                            f"; did you mean {hint[0]!r}?"
+                            if hint
+                            else f" (known: {', '.join(known)})"
+                        )
+                    elif hint and hint[0] not in value:
+                        extra = f"; did you mean {hint[0]!r}? (a misspelt key would be ignored)"
+                    else:
+                        continue
                     raise located(f"unknown key {k!r}{extra}", k, key=True)
         return value

@@ -243,3 +243,32 @@ def extrapolated(model: ModelFile, q_rad: np.ndarray, pose_ids) -> str | None:
                 f"{labels} there is extrapolated, not measured"
             )
     return None
+
+
+def approach_unknown(model: ModelFile, q_rad, time_s, prev_q, pose_ids) -> str | None:
+    """One sentence naming the poses (q_rad (m, n)) where a joint the model gives backlash has no
+    direction of its last motion (the first pose visited, without prev_q; solver.motion), so
+    that its backlash is not applied there; None when every such pose has one."""
+    from robocal.solver.motion import last_motion
+
+    lost = [e for e in model.extensions if e.name == "joint_backlash"]
+    if not lost or len(q_rad) == 0:
+        return None
+    motion = last_motion(np.asarray(q_rad, dtype=float), time_s, prev_q)
+    for e in lost:
+        none = np.flatnonzero(motion[:, e.joint] == 0)
+        if len(none):
+            b = abs(float(np.degrees(e.coef[0])))
+            n = model.robot.n_joints
+            first = pose_ids[none[0]]
+            who = (
+                f"{len(none)} poses (first {first!r}) give"
+                if len(none) > 1
+                else f"pose {first!r} gives"
+            )
+            return (
+                f"{who} no direction of joint {e.joint + 1}'s last motion (the first visited, "
+                f"without prev_q): the model's {e.label()} ({b:.3g} deg) is not applied there; "
+                f"give prev_q1 ... prev_q{n}, the joints the arm comes from"
+            )
+    return None

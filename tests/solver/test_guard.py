@@ -95,7 +95,7 @@ def test_each_limit_gives_its_reason_and_a_healthy_fit_none():
     cases = {
         "too few poses: 10 poses give 90 equations": dict(equations=90, poses=10),
         "fit RMS 0.0050 mm is below 0.6 x the tracker's noise floor": dict(
-            fit_rms_mm=0.005, holdout=_Holdout(0.006)
+            fit_rms_mm=0.005, holdout=_Holdout(0.012)
         ),
         "condition number 2e+03 exceeds 1000": dict(condition_number=2000.0),
         "held-out RMS 0.04 mm is 2.67 x the fit RMS": dict(
@@ -112,6 +112,19 @@ def test_each_limit_gives_its_reason_and_a_healthy_fit_none():
     # a held-out error near the tracker's noise is no alarm, however small the fit's
     assert verdict(fit_rms_mm=0.01, holdout=_Holdout(0.025), noise_floor_mm=0.015).deployable
     assert verdict(condition_number=float("nan")).reasons  # not a figure: not deployable
+
+
+def test_a_fit_below_a_floor_its_held_out_error_matches_is_a_quiet_tracker_not_overfit():
+    """A one-SMR campaign judged against the cell's tracker spec (MPE 15 um + 6 um/m, a real
+    tracker's) that the tracker beats: fit 0.0114 mm, held out 0.0136 mm, floor 0.0248 mm was
+    'not deployable: the fit absorbed measurement noise', which no campaign could mend. The
+    held-out error beside the fit says the floor is above the noise: a warning."""
+    v = verdict(fit_rms_mm=0.0114, holdout=_Holdout(0.0136), noise_floor_mm=0.0248)
+    assert v.deployable and v.reasons == [], v.reasons
+    assert v.warnings[0].startswith("fit RMS 0.0114 mm is below 0.6 x the tracker's noise floor")
+    assert "quieter than that floor" in v.warnings[0]
+    v = verdict(fit_rms_mm=0.0114, holdout=_Holdout(0.024), noise_floor_mm=0.0248)
+    assert not v.deployable and v.reasons[0].endswith("the fit absorbed measurement noise")
 
 
 def test_a_condition_number_near_its_layouts_warns_and_one_far_above_it_refuses():
