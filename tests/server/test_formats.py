@@ -192,6 +192,22 @@ CSV_REFUSALS = [
     ),
     ("no data", f"{HEAD}\n\n", 1, None, ["no data rows"], None),
     ("duplicate header", f"{HEAD},x\n{ROW},1\n", 1, 12, ["'x' appears twice"], None),
+    (
+        "two files concatenated",
+        f"{HEAD}\n{ROW}\n{HEAD}\n2,0,0,0,0,0,0,A,1,2,3\n",
+        3,
+        None,
+        ["line 3 is a second header row", "line 1"],
+        None,
+    ),
+    (
+        "second header, columns reordered",
+        f"{HEAD}\n{ROW}\n{HEAD.replace('x,y,z', 'z,y,x').upper()}\n",
+        3,
+        None,
+        ["line 3 is a second header row"],
+        None,
+    ),
 ]
 
 
