@@ -223,6 +223,18 @@ def test_campaign_refusals(tmp_path, name, text, line, column, words, bad):
         assert bad in text.splitlines()[line - 1]
 
 
+def test_target_not_in_the_cell_is_named_at_its_line(tmp_path):
+    """A lowercase 'a' where the cell has 'A' was refused with the file alone: now its line, its
+    field, and that names are case-sensitive; a name unlike any gets no such hint."""
+    path = put(tmp_path, "meas.csv", f"{HEAD}\n{ROW}\n1,0,0,0,0,0,0,b,1,2,3\n")
+    msg = refused(lambda: read_campaign(path, IRB2600, ["A", "B", "C"]), path, 3, 8)
+    assert "column 'target'" in msg and "'b'" in msg and "case-sensitive: 'B'" in msg
+    path = put(tmp_path, "meas.csv", f"{HEAD}\n{ROW}\n1,0,0,0,0,0,0,D,1,2,3\n")
+    msg = refused(lambda: read_campaign(path, IRB2600, ["A", "B", "C"]), path, 3, 8)
+    assert "target 'D' is not among the cell's targets (A, B, C)" in msg and "case" not in msg
+    assert read_campaign(path, IRB2600).target_names == ("A", "D")
+
+
 def test_pose_disagreement_within_print_rounding_is_accepted(tmp_path):
     text = f"{HEAD}\n{ROW}\n1,0,0,0,0.0000001,0,0,B,1,2,3\n"
     meas = read_campaign(put(tmp_path, "m.csv", text), IRB2600)
