@@ -138,18 +138,42 @@ def gravity_loaded(layout: Layout, x, q: np.ndarray) -> list[int]:
     ]
 
 
+def more_than_a_turn(robot) -> np.ndarray:
+    """Per joint, whether its limits hold more than a turn (a wrist's +-400 deg)."""
+    return robot.upper - robot.lower > 2 * np.pi
+
+
+def beyond(test: np.ndarray, train: np.ndarray, turns: bool = False) -> float:
+    """How far (rad) the test angles reach outside the training angles' range; on a joint that
+    turns, on the circle: -355 deg is where 5 deg is. That holds for the kinematics only (a
+    cable-wound joint, or an effect in the joint's own angle such as a scale error, is another
+    arm a turn further), so it serves the distance figure the report shows, never a judgement."""
+    lo, hi = float(train.min()), float(train.max())
+    if not turns:
+        return max(float(test.max()) - hi, lo - float(test.min()), 0.0)
+    span, turn = hi - lo, 2 * np.pi
+    if span >= turn:
+        return 0.0
+    d = np.mod(test - lo, turn)  # where each test angle lies a turn from the range's start
+    return float(np.max(np.where(d <= span, 0.0, np.minimum(d - span, turn - d))))
+
+
 def region_folds(layout: Layout, x, q: np.ndarray, min_poses: int) -> list[RegionFold]:
     """Both ends of each gravity-loaded joint that moves: the poses above (below) its median
     tested, the others trained on. A campaign too small to fit on half of it tests a smaller end
     (at least MIN_TEST_POSES poses) and trains on the min_poses others: without that, a small
     campaign's effects went untested off their poses (on 18 real poses a periodic term doubled
     the error on the other half)."""
-    return joint_folds(q, min_poses, gravity_loaded(layout, x, q))
+    turns = more_than_a_turn(layout.robot)
+    return joint_folds(q, min_poses, gravity_loaded(layout, x, q), turns=turns)
 
 
-def joint_folds(q: np.ndarray, min_poses: int, joints, own: bool = False) -> list[RegionFold]:
+def joint_folds(
+    q: np.ndarray, min_poses: int, joints, own: bool = False, turns=None
+) -> list[RegionFold]:
     """Both ends of each of the joints that moves (region_folds); own: folds that judge only
-    the effects of their joint."""
+    the effects of their joint; turns (per joint, more_than_a_turn): whose reach beyond the
+    training poses is measured on the circle."""
     m = q.shape[0]
     n_test = min(m // 2, m - min_poses)
     if n_test < MIN_TEST_POSES:
@@ -164,9 +188,8 @@ def joint_folds(q: np.ndarray, min_poses: int, joints, own: bool = False) -> lis
             test = np.sort(order[m - n_test :] if above else order[:n_test])
             train = np.setdiff1d(np.arange(m), test)
             at = float(qj[test].min() if above else qj[test].max())
-            tq, rq = qj[test], qj[train]
-            beyond = (tq.max() - rq.max()) if above else (rq.min() - tq.min())
-            out.append(RegionFold(j, at, above, test, float(max(beyond, 0.0)), own=own))
+            far = beyond(qj[test], qj[train], turns is not None and bool(turns[j]))
+            out.append(RegionFold(j, at, above, test, far, own=own))
     return out
 
 
@@ -179,6 +202,7 @@ def configuration_folds(robot, q: np.ndarray, min_poses: int) -> list[RegionFold
     if not configuration.supports(robot):
         return []
     bits = configuration.cfx(robot, q)
+    turns = more_than_a_turn(robot)
     out = []
     for name, bit, set_side, clear_side in CONFIGURATIONS:
         side = (bits & bit) > 0
@@ -189,13 +213,9 @@ def configuration_folds(robot, q: np.ndarray, min_poses: int) -> list[RegionFold
             train = q[side != tested]
             if len(train) < max(min_poses, MIN_TRAIN_SHARE * len(q)):
                 continue
-            reach = np.maximum(q[test].max(0) - train.max(0), train.min(0) - q[test].min(0))
+            reach = [beyond(q[test, j], train[:, j], t) for j, t in enumerate(turns)]
             j = int(np.argmax(reach))
-            out.append(
-                RegionFold(
-                    j, float("nan"), tested, test, float(max(reach[j], 0.0)), f"{name}: {label}"
-                )
-            )
+            out.append(RegionFold(j, float("nan"), tested, test, reach[j], f"{name}: {label}"))
     return out
 
 

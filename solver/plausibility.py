@@ -170,6 +170,24 @@ def _check_units(robot, targets, q, xyz, per_smr: bool) -> UnitCheck:
     return UnitCheck(s_m, s_p, ratio, bound, best[0], best[1], robot.n_joints, per_smr)
 
 
+def radian_guess_misses(
+    layout: Layout, x, q: np.ndarray, xyz: np.ndarray, mask: np.ndarray
+) -> tuple[float, float] | None:
+    """One pose's starting joints q (n,) rad as read from degrees, meant as radians? The model's
+    miss (mm RMS over the SMRs in mask (K,) of xyz (K, 3)) at them as read and as radians, when
+    read as radians they lie within the limits and miss RATIO_BAND times less; else None. One
+    pose has no spread for check_units to judge: its points against the model's are what tell."""
+    robot = layout.robot
+    as_rad = np.rad2deg(np.asarray(q, dtype=float))
+    if not mask.any() or not np.all(
+        (as_rad >= robot.lower - LIMIT_SLACK_RAD) & (as_rad <= robot.upper + LIMIT_SLACK_RAD)
+    ):
+        return None
+    p = predict(layout, x, np.array([q, as_rad]))[:, mask]
+    miss = np.sqrt(np.mean(np.sum((p - xyz[mask]) ** 2, axis=-1), axis=-1))
+    return (float(miss[0]), float(miss[1])) if miss[1] * RATIO_BAND < miss[0] else None
+
+
 @dataclass(frozen=True)
 class CellAngles:
     """The nominal arm's error on the readings (base registered) with its angles as given in

@@ -125,7 +125,7 @@ async def import_readings(
 
 def _import(jobs, db, data: bytes, filename: str, cell, name: str, arm: str | None) -> int:
     """The file read in a worker process (no parse holds this one's GIL), stored from here."""
-    meas = run_call(jobs, uploads.read_measurements, data, filename, cell.robot)
+    meas = run_call(jobs, uploads.read_measurements, data, filename, cell.robot, list(cell.targets))
     return campaigns.import_campaign(
         db, measurements=meas, filename=filename, cell=cell, name=name, arm=arm
     )

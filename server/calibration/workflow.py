@@ -69,13 +69,7 @@ def load_cell(path) -> Cell:
 def load_campaign(path, cell: Cell, cell_path=None) -> Measurements:
     """A campaign whose targets the cell (read from cell_path, None for the built-in) describes,
     in the units it implies."""
-    meas = read_campaign(path, cell.robot)
-    unknown = [t for t in meas.target_names if t not in cell.targets]
-    if unknown:
-        raise DataError(
-            f"{path}: target {unknown[0]!r} is not among the cell's targets "
-            f"({', '.join(cell.targets)})"
-        )
+    meas = read_campaign(path, cell.robot, list(cell.targets))
     try:
         require_inputs(meas.q, meas.xyz)
     except ValueError as e:

@@ -18,6 +18,7 @@ from robocal.server.formats.targets_csv import Targets, read_targets
 from robocal.solver import configuration
 from robocal.solver.compensate import Compensation, Model, compensate
 from robocal.solver.kinematics import Layout, rot
+from robocal.solver.plausibility import radian_guess_misses
 from robocal.solver.vocabulary import after_campaign
 
 TCP_NAME = "TCP"  # the virtual SMR's name in targets.csv when a tool centre point is given
@@ -180,8 +181,9 @@ def compensate_targets(
     warnings = _orientation_warnings(targets, guess, tcp)
     if tcp is not None:
         targets = tool_targets(targets)
+    solver = solver_model(model, tcp)
     res = compensate(
-        solver_model(model, tcp),
+        solver,
         targets.desired,
         targets.mask,
         targets.q0,
@@ -205,7 +207,7 @@ def compensate_targets(
             f"{res.error_mm[k]:.3f} mm RMS (at most {max_error_mm:g} mm allowed){_more(len(bad))}",
         )
     if guess.any():
-        warnings += _kept(targets, res, guess, nominal, max_move_deg)
+        warnings += _kept(targets, res, guess, solver, max_move_deg)
     beyond = extrapolated(model, res.q, targets.pose_ids)
     if beyond:
         warnings.append(beyond)
@@ -281,22 +283,33 @@ def _on_a_line(targets: Targets) -> np.ndarray:
     return out
 
 
-def _kept(targets: Targets, res: Compensation, guess, nominal, max_move_deg: float) -> list[str]:
+def _kept(
+    targets: Targets, res: Compensation, guess, solver: Model, max_move_deg: float
+) -> list[str]:
     """Refuse a pose whose joints moved further from its starting guess than max_move_deg (the
-    solver left the guess's configuration); one warning for those whose confdata changed within
-    that (a guess by a quadrant's edge)."""
+    solver left the guess's configuration), naming radians when they explain the guess; one
+    warning for those whose confdata changed within that (a guess by a quadrant's edge)."""
     moved = np.where(guess[:, None], np.degrees(np.abs(res.q - targets.q0)), 0.0)
     far = np.flatnonzero(moved.max(axis=1) > max_move_deg)
     if len(far):
         k = int(far[0])
         j = int(np.argmax(moved[k]))
+        why = "a correction needs far less: check the starting joints"
+        if miss := radian_guess_misses(
+            solver.layout, solver.x, targets.q0[k], targets.desired[k], targets.mask[k]
+        ):
+            why = (
+                f"the model misses the targets by {miss[0]:.3g} mm at the starting joints, "
+                f"{miss[1]:.3g} mm with them read as radians: q1..q{len(targets.q0[k])} look "
+                "like radians: give them in degrees"
+            )
         raise _pose_error(
             targets,
             k,
             f"would leave its starting joints' configuration: joint {j + 1} moves "
-            f"{moved[k, j]:.1f} deg (more than {max_move_deg:g} deg; a correction needs far less: "
-            f"check the starting joints){_more(len(far))}",
+            f"{moved[k, j]:.1f} deg (more than {max_move_deg:g} deg; {why}){_more(len(far))}",
         )
+    nominal = solver.nominal
     if not configuration.supports(nominal):
         return []
     before = configuration.confdata(nominal, targets.q0[guess])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Collection
 
 import numpy as np
 
@@ -179,17 +180,29 @@ class _Poses:
         return np.deg2rad(np.array(self.q_deg, dtype=float).reshape(len(self.ids), -1))
 
 
-def read_campaign(path, robot: Robot) -> Measurements:
-    """Read a `meas.csv` campaign (spec section 1) for this robot; InputError on any bad input.
+def read_campaign(path, robot: Robot, targets: Collection[str] | None = None) -> Measurements:
+    """Read a `meas.csv` campaign (spec section 1) for this robot, its SMRs among `targets` when
+    given (the cell's); InputError on any bad input.
     Column-wise at numpy's speed; row by row when that declines, to name the first bad line."""
     text = read_text(path)
     fast = read_campaign_columns(
         text, robot, MEASURED, EXTRAS, BOUNDS, LIMIT_TOL_DEG, SAME_POSE_TOL_DEG
     )
-    return fast if fast is not None else read_campaign_rows(path, robot, text)
+    if fast is not None and (targets is None or set(fast.target_names) <= set(targets)):
+        return fast
+    return read_campaign_rows(path, robot, text, targets)
 
 
-def read_campaign_rows(path, robot: Robot, text: str | None = None) -> Measurements:
+def _unknown_target(target: str, targets: Collection[str]) -> str:
+    """Why a target name the cell lacks is refused; a name that differs only in case says so."""
+    alike = [n for n in targets if n.lower() == target.lower()]
+    hint = f"; names are case-sensitive: {alike[0]!r}?" if alike else ""
+    return f"target {target!r} is not among the cell's targets ({', '.join(targets)}){hint}"
+
+
+def read_campaign_rows(
+    path, robot: Robot, text: str | None = None, targets: Collection[str] | None = None
+) -> Measurements:
     """read_campaign a row at a time: each row checked in turn, the first bad one named."""
     t = Table.read(path) if text is None else Table(path, text)
     t.require(["pose", *joint_columns(robot), "target", *MEASURED])
@@ -198,7 +211,7 @@ def read_campaign_rows(path, robot: Robot, text: str | None = None) -> Measureme
     t.require_rows()
     poses = _Poses(t, robot)
     seen: dict[tuple[str, str], Row] = {}
-    targets: set[str] = set()
+    names: set[str] = set()
     readings = []  # (pose index, target, xyz, extras)
     for row in t.rows:
         k, _ = poses.add(row)
@@ -211,11 +224,13 @@ def read_campaign_rows(path, robot: Robot, text: str | None = None) -> Measureme
                 f"{target!r} is not a target name (a letter, then up "
                 "to 15 letters, digits or '_', as in cell.json)",
             )
-        targets.add(target)
-        if len(targets) > SMRS_MAX:
+        if targets is not None and target not in targets:
+            raise t.error(row, "target", _unknown_target(target, targets))
+        names.add(target)
+        if len(names) > SMRS_MAX:
             # The readings become a (poses, targets) table: bounded before it is built.
             raise t.error(
-                row, "target", f"{target!r} is target {len(targets)}; a cell has at most {SMRS_MAX}"
+                row, "target", f"{target!r} is target {len(names)}; a cell has at most {SMRS_MAX}"
             )
         key = (poses.ids[k], target)
         if key in seen:
@@ -230,9 +245,9 @@ def read_campaign_rows(path, robot: Robot, text: str | None = None) -> Measureme
         more = [t.number(row, c, np.nan, *BOUNDS[c]) for c in extras]
         readings.append((k, target, point, more))
 
-    names = tuple(sorted({r[1] for r in readings}))
-    col = {n: j for j, n in enumerate(names)}
-    m, K = len(poses.ids), len(names)
+    order = tuple(sorted(names))
+    col = {n: j for j, n in enumerate(order)}
+    m, K = len(poses.ids), len(order)
     xyz = np.full((m, K, 3), np.nan)
     extra = {c: np.full((m, K), np.nan) for c in extras}
     for k, target, p, more in readings:
@@ -242,7 +257,7 @@ def read_campaign_rows(path, robot: Robot, text: str | None = None) -> Measureme
     return Measurements(
         list(poses.ids),
         poses.q_rad(),
-        names,
+        order,
         xyz,
         extra.get("time_s"),
         extra.get("temp_c"),

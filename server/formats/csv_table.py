@@ -36,7 +36,9 @@ class Table:
         self.header_line, raw = records[0]
         self.header = [h.strip() for h in raw]
         self.rows: list[Row] = []
+        names = {h.lower() for h in self.header if h}
         for line, fields in records[1:]:
+            self._check_repeated_header(line, fields, names)
             self._check_width(line, fields)
             self.rows.append(Row(line, fields))
         self._index: dict[str, int] = {}
@@ -66,6 +68,17 @@ class Table:
         except csv.Error as e:
             raise InputError(self.path, reader.line_num or 1, None, f"malformed CSV: {e}") from None
         return records
+
+    def _check_repeated_header(self, line: int, fields: list[str], names: set[str]) -> None:
+        # Two files concatenated: said as such, not as the first column's "'q1' is not a number".
+        if fields[0].strip().lower() in names and all(f.strip().lower() in names for f in fields):
+            raise InputError(
+                self.path,
+                line,
+                None,
+                f"line {line} is a second header row (the header is line {self.header_line}): "
+                "two files concatenated? remove it",
+            )
 
     def _check_width(self, line: int, fields: list[str]) -> None:
         n, width = len(fields), len(self.header)

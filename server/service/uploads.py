@@ -10,14 +10,14 @@ from robocal.server.compensate.model_files import _named, _upload
 from robocal.server.formats.campaign_csv import read_campaign
 
 
-def read_measurements(data: bytes, filename: str, robot, report=None):
-    """The campaign an uploaded meas.csv holds (Measurements); InputError names the upload's
-    line."""
+def read_measurements(data: bytes, filename: str, robot, targets=None, report=None):
+    """The campaign an uploaded meas.csv holds (Measurements), its SMRs among `targets` when
+    given; InputError names the upload's line."""
     shown = Path(filename).name or "meas.csv"  # only a label: never a path on this machine
     with tempfile.TemporaryDirectory(prefix="robocal-import-") as tmp:
         path = _upload(Path(tmp), shown, data)
         with _named({str(path): shown}):
-            return read_campaign(path, robot)
+            return read_campaign(path, robot, targets)
 
 
 def read_check(model_path, data: bytes, filename: str, report=None):

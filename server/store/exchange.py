@@ -129,7 +129,7 @@ def import_csv(
     cell, cell_text = checks.cell_text(cell_json)
     robot = checks.matching_robot(robot, cell)
     # the whole file is checked before the database is touched
-    meas = read_campaign(path, robot) if measurements is None else measurements
+    meas = read_campaign(path, robot, list(cell.targets)) if measurements is None else measurements
     q = np.rad2deg(meas.q)
     prev = None if meas.prev_q is None else np.rad2deg(meas.prev_q)
     mask = meas.mask

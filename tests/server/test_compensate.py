@@ -366,6 +366,24 @@ def test_a_guess_in_another_configuration_is_refused(cell, tmp_path):
     assert "targets.csv:5: pose '1' would leave its starting joints' configuration: joint 1 " in err
 
 
+def test_one_pose_with_starting_joints_in_radians_is_told_so(cell, tmp_path):
+    """A single pose (no spread for the units check) whose starting joints are radians: it was
+    refused as a configuration move, 'check the starting joints'; now the unit is named. A pose
+    whose guess is 40 deg off in degrees is not called radians."""
+    _, vc = cell
+    rows = _good_rows(vc, 1)
+    for r in rows:
+        r[5:] = [float(np.radians(v)) for v in r[5:]]
+    err = refused(cell, tmp_path, rows)
+    assert "targets.csv:2: pose '0' would leave its starting joints' configuration" in err, err
+    assert "q1..q6 look like radians: give them in degrees" in err, err
+    rows = _good_rows(vc, 1)
+    for r in rows:
+        r[5] = float(r[5]) + (40.0 if float(r[5]) < 0 else -40.0)
+    err = refused(cell, tmp_path, rows)
+    assert "would leave its starting joints' configuration" in err and "radians" not in err, err
+
+
 def test_a_configuration_contradicting_the_joints_is_refused(cell, tmp_path):
     _, vc = cell
     rows = _good_rows(vc)

@@ -192,6 +192,22 @@ CSV_REFUSALS = [
     ),
     ("no data", f"{HEAD}\n\n", 1, None, ["no data rows"], None),
     ("duplicate header", f"{HEAD},x\n{ROW},1\n", 1, 12, ["'x' appears twice"], None),
+    (
+        "two files concatenated",
+        f"{HEAD}\n{ROW}\n{HEAD}\n2,0,0,0,0,0,0,A,1,2,3\n",
+        3,
+        None,
+        ["line 3 is a second header row", "line 1"],
+        None,
+    ),
+    (
+        "second header, columns reordered",
+        f"{HEAD}\n{ROW}\n{HEAD.replace('x,y,z', 'z,y,x').upper()}\n",
+        3,
+        None,
+        ["line 3 is a second header row"],
+        None,
+    ),
 ]
 
 
@@ -205,6 +221,18 @@ def test_campaign_refusals(tmp_path, name, text, line, column, words, bad):
         assert w in msg
     if bad is not None:
         assert bad in text.splitlines()[line - 1]
+
+
+def test_target_not_in_the_cell_is_named_at_its_line(tmp_path):
+    """A lowercase 'a' where the cell has 'A' was refused with the file alone: now its line, its
+    field, and that names are case-sensitive; a name unlike any gets no such hint."""
+    path = put(tmp_path, "meas.csv", f"{HEAD}\n{ROW}\n1,0,0,0,0,0,0,b,1,2,3\n")
+    msg = refused(lambda: read_campaign(path, IRB2600, ["A", "B", "C"]), path, 3, 8)
+    assert "column 'target'" in msg and "'b'" in msg and "case-sensitive: 'B'" in msg
+    path = put(tmp_path, "meas.csv", f"{HEAD}\n{ROW}\n1,0,0,0,0,0,0,D,1,2,3\n")
+    msg = refused(lambda: read_campaign(path, IRB2600, ["A", "B", "C"]), path, 3, 8)
+    assert "target 'D' is not among the cell's targets (A, B, C)" in msg and "case" not in msg
+    assert read_campaign(path, IRB2600).target_names == ("A", "D")
 
 
 def test_pose_disagreement_within_print_rounding_is_accepted(tmp_path):

@@ -59,3 +59,27 @@ def test_a_fold_worse_only_inside_the_geometric_span_blames_geometry():
     assert check(0.354, (10.37, 2.256), (29.23, 2.094), 5.287, geometric_rms=0.2247).worse
     assert check(0.11, (0.18, 0.22), None, None).worse  # no span measured
     assert not check(0.101, (0.18, 0.22), (0.9, 0.9), 0.9).worse  # within 1.02x: never refused
+
+
+def test_a_joint_of_more_than_a_turn_reaches_beyond_its_training_poses_on_the_circle():
+    """The IRB 2600's q6 (+-400 deg) trained at 5..20 deg and tested at -355..-340 deg: the same
+    arm positions, not 360 deg beyond them; the fold's figure is q5's 40 deg. A joint whose
+    limits hold less than a turn keeps the straight distance."""
+    from robocal.solver.extrapolation import configuration_folds, joint_folds
+    from robocal.solver.robot import IRB2600
+
+    m = 20
+    q = np.zeros((m, 6))
+    q[:, 1], q[:, 2] = np.radians(10.0), np.radians(-20.0)
+    neg = np.arange(m) < m // 2
+    q[:, 4] = np.radians(np.where(neg, -30.0, 10.0) + np.tile(np.linspace(0, 20, m // 2), 2))
+    q[:, 5] = np.radians(np.where(neg, -355.0, 5.0) + np.tile(np.linspace(0, 15, m // 2), 2))
+    folds = {f.label(): f for f in configuration_folds(IRB2600, q, 5)}
+    fold = folds["wrist: q5 < 0"]
+    assert fold.joint == 4 and np.degrees(fold.beyond_rad) == pytest.approx(40.0)
+    # a region fold across q6 itself: trained at the lower end, tested a turn from it
+    turns = IRB2600.upper - IRB2600.lower > 2 * np.pi
+    below = [f for f in joint_folds(q, 5, [5], turns=turns) if not f.above]
+    assert np.degrees(below[0].beyond_rad) == pytest.approx(0.0, abs=1e-9)
+    straight = [f for f in joint_folds(q, 5, [5]) if not f.above]
+    assert np.degrees(straight[0].beyond_rad) == pytest.approx(360.0)

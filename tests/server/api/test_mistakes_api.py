@@ -108,6 +108,12 @@ def test_the_openapi_says_what_the_uploads_refuse(live):
         assert body["required"] and body["content"]["text/csv"]["schema"]["minLength"] == 1
     r = c.post("/api/measurements/import", content=b"", headers={"content-type": "text/csv"})
     assert r.status_code == 422 and "empty file" in r.json()["detail"], r.text
+    # an SMR the cell lacks (a lowercase 'a' for 'A'): its line and field, not stored
+    body = b"pose,q1,q2,q3,q4,q5,q6,target,x,y,z\n1,0,0,0,0,0,0,a,1,2,3\n"
+    r = c.post("/api/measurements/import", content=body, headers={"content-type": "text/csv"})
+    p = r.json()
+    assert r.status_code == 422 and (p["line"], p["column"]) == (2, 8), r.text
+    assert "case-sensitive: 'A'" in p["detail"], r.text
     # a body nested past the parser's limit is a 4xx too, not a 500
     deep = "[" * 100_000 + "]" * 100_000
     for url in ("/api/campaigns", "/api/cells"):
