@@ -46,7 +46,7 @@ from .selection import (
     rmse_gain_interval,
 )
 from .shift_scan import shift_time
-from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
+from .stability import RESAMPLE_MAX_POSES, Stability, agreed_cause, effect_key, leave_out
 from .variants import (
     MIN_GAIN,
     T_SIMPLER,
@@ -636,6 +636,9 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     steps, base, final, region = select_suspecting(diag, cands, log, clock=clock)
     t_resample = time.perf_counter()
     stability = resampled(diag, cands, steps)
+    if stability is not None:  # the cause its resamples agree on, if not the campaign's own
+        chosen = (steps, final, region)
+        (steps, final, region), stability = agreed_cause(diag, cands, stability, chosen, log)
     clock["resamples"] = time.perf_counter() - t_resample
     t2 = time.perf_counter()
     exts = [s[0] for s in steps]

@@ -110,6 +110,9 @@ class StabilityReport:
     agreeing: int
     effects: list[ResampledEffect]
     doubt: str | None  # why the answer is in doubt, in a sentence; None when it is not
+    # the whole campaign's causes, replaced by the one the resamples agree on (None: kept)
+    replaced: list[str] | None = None
+    agreed: str | None = None  # that replacement, in a sentence
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)

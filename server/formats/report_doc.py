@@ -125,6 +125,16 @@ class Stability(Open):
         "naming nothing or another cause counts against it), or another cause is named on two "
         "or more, in a sentence; null otherwise"
     )
+    replaced: list[str] | None = Field(
+        None,
+        description="the whole campaign's causes, each named on one resample at most, given up "
+        "for the cause a majority of the resamples name: the final model has that cause when "
+        "the selection on all the poses accepts it alone, else no effect (the geometric model; "
+        "the effects suspected, not in it); null when the campaign's own answer stands",
+    )
+    agreed: str | None = Field(
+        None, description="that replacement and the model it leaves, in a sentence"
+    )
 
 
 class Seconds(Open):
