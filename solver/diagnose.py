@@ -29,6 +29,7 @@ from .extrapolation import (
     span_parts,
 )
 from .gravity import gravity_suspects
+from .hedge import hedge
 from .identify import register
 from .kinematics import Layout, predict_rows
 from .motion import visit_order
@@ -643,6 +644,8 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     t2 = time.perf_counter()
     exts = [s[0] for s in steps]
     x, ee = diag.fit(exts)
+    if stability is not None and (h := hedge(diag, base, final, x, ee)) is not None:
+        x, ee, final, stability = h.x, h.exts, h.cv, replace(stability, half_way=h.gain)
     clock["final_fit"] = time.perf_counter() - t2
     floor = noise.mm
     from .diagnosis_report import build_report, figure_series

@@ -68,9 +68,8 @@ class Stability:
     final: tuple  # effect keys of the final model
     named: tuple  # per resample, the effect keys it named
     replaced: tuple = ()  # the whole campaign's causes, when the resamples agreed on another
-    agreed_on: tuple | None = (
-        None  # that other cause (in the final model unless all poses refuse it)
-    )
+    agreed_on: tuple | None = None  # that cause (in the final model unless all poses refuse it)
+    half_way: float | None = None  # a weak effect's held-out gain, when deployed half way (hedge)
 
     def count(self, key: tuple) -> int:
         return sum(key in keys for keys in self.named)
@@ -118,6 +117,17 @@ class Stability:
             "it; measure more poses before acting on them"
         )
 
+    def halved(self) -> str | None:
+        """Why the model is half way between geometry and the extended fit; None if it is not."""
+        if self.half_way is None:
+            return None
+        return (
+            f"the effects remove {self.half_way:.0%} of geometry's held-out RMS on this small "
+            "campaign, within what the fit's own noise gives: the model is half way between "
+            "geometry and the extended fit (geometry's parameters and the extended fit's, each "
+            "half; the effects at half their fitted size); measure more poses to fit them whole"
+        )
+
     def doubt(self) -> str | None:
         """Why the resamples put the answer in doubt, in a sentence; None when they do not."""
         n = len(self.named)
@@ -148,6 +158,7 @@ class Stability:
             doubt=self.doubt(),
             replaced=[key_label(k) for k in self.replaced] or None,
             agreed=self.agreed(),
+            half_way=self.halved(),
         )
 
 

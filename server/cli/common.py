@@ -199,7 +199,8 @@ def _print_diagnosis(doc: ReportDoc) -> None:
     # the cause taken from the resamples, then any doubt they leave (once: the verdict's
     # warnings below carry them when there is a verdict)
     warned = Validation.of(doc.validation).warnings if doc.validation is not None else ()
-    for said in (doc.stability.agreed, doc.stability.doubt) if doc.stability else ():
+    st = doc.stability
+    for said in (st.agreed, st.half_way, st.doubt) if st else ():
         if said and said not in warned:
             console.print(f"[yellow]{said}[/yellow]")
     if doc.validation is not None:  # the final model, judged as a calibration is

@@ -135,6 +135,13 @@ class Stability(Open):
     agreed: str | None = Field(
         None, description="that replacement and the model it leaves, in a sentence"
     )
+    half_way: str | None = Field(
+        None,
+        description="when the final model's held-out gain over geometry is weak (under 15 % of "
+        "geometry's RMS), the model deployed is half way between geometry and the extended fit "
+        "(parameters averaged, the effects at half their fitted size; its figures are that "
+        "model's), said in a sentence; null otherwise",
+    )
 
 
 class Seconds(Open):
