@@ -188,23 +188,28 @@ class Diagnoser:
     def cross_validate(self, exts) -> CV:
         m = self.prob.q.shape[0]
         exts = self._with_shift_time(exts)
+        fits: dict[int | str, tuple] = {}
+        for f, test in enumerate(self.folds):
+            fits[f] = self.fit(exts, np.setdiff1d(np.arange(m), test), fold=f)
+        fits["all"] = self.fit(exts)
+        return self.held_out(fits)
+
+    def held_out(self, fits: dict) -> CV:
+        """The CV of a model's fits: fold -> (x, extensions) judged on that fold's poses, and
+        "all" (the model fitted on every pose)."""
+        m = self.prob.q.shape[0]
         sq, n = np.zeros(m), np.zeros(m)
         resid = np.full(self.prob.meas.shape, np.nan)
         maxerr = 0.0
-        fits: dict[int | str, tuple] = {}
         for f, test in enumerate(self.folds):
-            train = np.setdiff1d(np.arange(m), test)
-            x, ee = self.fit(exts, train, fold=f)
-            fits[f] = (x, ee)
+            x, ee = fits[f]
             r = self.residuals(x, ee, test)
             resid[test] = r
             e2 = np.sum(r * r, axis=-1)
             sq[test] = np.nansum(e2, axis=1)
             n[test] = np.sum(np.isfinite(e2), axis=1)
             maxerr = max(maxerr, float(np.sqrt(np.nanmax(e2))))
-        x, ee = self.fit(exts)
-        fits["all"] = (x, ee)
-        return CV(sq, n, maxerr, ee, fits, resid)
+        return CV(sq, n, maxerr, fits["all"][1], fits, resid)
 
     def scan_shift(self, others, poses) -> float:
         """The time of a base shift that best explains the training residuals (solver.shift_scan)

@@ -30,7 +30,7 @@ class Hedged:
 
     x: np.ndarray
     exts: list
-    cv: object  # solver.diagnose.CV of the half-way model, fold by fold
+    cv: object  # solver.diagnose.CV of the half-way model: each fold's two fits blended
     gain: float  # the extended model's held-out gain over geometry, a share of geometry's RMS
 
 
@@ -43,27 +43,14 @@ def halved(exts, x_ext, x_geo):
 def hedge(diag, base, final, x, exts) -> Hedged | None:
     """The half-way model when the final model's held-out gain over geometry (base) is weak;
     None when it is not (or nothing is named). Its held-out figures blend each fold's two fits."""
-    from .diagnose import CV
-
     if not exts:
         return None
     gain = 1.0 - final.rmse / base.rmse
     if gain >= WEAK_GAIN:
         return None
-    m = diag.prob.q.shape[0]
-    sq, n = np.zeros(m), np.zeros(m)
-    resid = np.full(diag.prob.meas.shape, np.nan)
-    fits: dict = {}
-    maxerr = 0.0
-    for f, test in enumerate(diag.folds):
-        xf, ef = halved(final.fits[f][1], final.fits[f][0], base.fits[f][0])
-        fits[f] = (xf, ef)
-        r = diag.residuals(xf, ef, test)
-        resid[test] = r
-        e2 = np.sum(r * r, axis=-1)
-        sq[test] = np.nansum(e2, axis=1)
-        n[test] = np.sum(np.isfinite(e2), axis=1)
-        maxerr = max(maxerr, float(np.sqrt(np.nanmax(e2))))
-    xh, eh = halved(exts, x, base.fits["all"][0])
-    fits["all"] = (xh, eh)
-    return Hedged(xh, eh, CV(sq, n, maxerr, eh, fits, resid), float(gain))
+    fits: dict[int | str, tuple] = {
+        f: halved(final.fits[f][1], final.fits[f][0], base.fits[f][0])
+        for f in range(len(diag.folds))
+    }
+    xh, eh = fits["all"] = halved(exts, x, base.fits["all"][0])
+    return Hedged(xh, eh, diag.held_out(fits), float(gain))
