@@ -34,3 +34,29 @@ def test_the_real_ur5_on_30_random_poses_names_a_weak_effect_half_way(capsys):
     assert extended <= 1.02 * geometric
     assert st is not None and st.half_way is not None and "half way" in st.half_way
     assert model.validation is not None and st.half_way in model.validation.warnings
+
+
+def test_the_half_way_model_is_said_by_diagnose(tmp_path):
+    """The same 30 poses through `robocal diagnose`: report.json's stability says the model is
+    half way, and the printed summary says it once (as the verdict's warning)."""
+    import csv
+    import json
+
+    from tests.server.test_cli import robocal
+
+    train = REAL / "ur5_jacobi" / "train.csv"
+    with open(train, newline="") as f:
+        rows = list(csv.DictReader(f))
+    poses = list(dict.fromkeys(r["pose"] for r in rows))
+    rng = np.random.default_rng(0)
+    pick = {poses[i] for i in [rng.choice(len(poses), 30, replace=False) for _ in range(4)][3]}
+    with open(tmp_path / "sub.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(r for r in rows if r["pose"] in pick)
+    cell = REAL / "ur5_jacobi" / "cell.json"
+    r = robocal("diagnose", "sub.csv", "--cell", cell, "--out", "report.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    said = json.loads((tmp_path / "report.json").read_text())["stability"]["half_way"]
+    assert said is not None and "half way" in said
+    assert " ".join(r.stdout.split()).count(said) == 1, r.stdout
