@@ -29,6 +29,7 @@ from .extrapolation import (
     span_parts,
 )
 from .gravity import gravity_suspects
+from .hedge import hedge
 from .identify import register
 from .kinematics import Layout, predict_rows
 from .motion import visit_order
@@ -46,7 +47,7 @@ from .selection import (
     rmse_gain_interval,
 )
 from .shift_scan import shift_time
-from .stability import RESAMPLE_MAX_POSES, Stability, effect_key, leave_out
+from .stability import RESAMPLE_MAX_POSES, Stability, agreed_cause, effect_key, leave_out
 from .variants import (
     MIN_GAIN,
     T_SIMPLER,
@@ -187,23 +188,28 @@ class Diagnoser:
     def cross_validate(self, exts) -> CV:
         m = self.prob.q.shape[0]
         exts = self._with_shift_time(exts)
+        fits: dict[int | str, tuple] = {}
+        for f, test in enumerate(self.folds):
+            fits[f] = self.fit(exts, np.setdiff1d(np.arange(m), test), fold=f)
+        fits["all"] = self.fit(exts)
+        return self.held_out(fits)
+
+    def held_out(self, fits: dict) -> CV:
+        """The CV of a model's fits: fold -> (x, extensions) judged on that fold's poses, and
+        "all" (the model fitted on every pose)."""
+        m = self.prob.q.shape[0]
         sq, n = np.zeros(m), np.zeros(m)
         resid = np.full(self.prob.meas.shape, np.nan)
         maxerr = 0.0
-        fits: dict[int | str, tuple] = {}
         for f, test in enumerate(self.folds):
-            train = np.setdiff1d(np.arange(m), test)
-            x, ee = self.fit(exts, train, fold=f)
-            fits[f] = (x, ee)
+            x, ee = fits[f]
             r = self.residuals(x, ee, test)
             resid[test] = r
             e2 = np.sum(r * r, axis=-1)
             sq[test] = np.nansum(e2, axis=1)
             n[test] = np.sum(np.isfinite(e2), axis=1)
             maxerr = max(maxerr, float(np.sqrt(np.nanmax(e2))))
-        x, ee = self.fit(exts)
-        fits["all"] = (x, ee)
-        return CV(sq, n, maxerr, ee, fits, resid)
+        return CV(sq, n, maxerr, fits["all"][1], fits, resid)
 
     def scan_shift(self, others, poses) -> float:
         """The time of a base shift that best explains the training residuals (solver.shift_scan)
@@ -639,11 +645,16 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     steps, base, final, region = select_suspecting(diag, cands, log, clock=clock)
     t_resample = time.perf_counter()
     stability = resampled(diag, cands, steps)
+    if stability is not None:  # the cause its resamples agree on, if not the campaign's own
+        chosen = (steps, final, region)
+        (steps, final, region), stability = agreed_cause(diag, cands, stability, chosen, log)
     clock["resamples"] = time.perf_counter() - t_resample
     t2 = time.perf_counter()
     exts = [s[0] for s in steps]
     # the region folds' verdict fitted the kept model on all poses already, from the same start
     x, ee = region.fit if region.fit is not None else diag.fit(exts)
+    if stability is not None and (h := hedge(diag, base, final, x, ee)) is not None:
+        x, ee, final, stability = h.x, h.exts, h.cv, replace(stability, half_way=h.gain)
     clock["final_fit"] = time.perf_counter() - t2
     floor = noise.mm
     from .diagnosis_report import build_report, figure_series

@@ -110,6 +110,10 @@ class StabilityReport:
     agreeing: int
     effects: list[ResampledEffect]
     doubt: str | None  # why the answer is in doubt, in a sentence; None when it is not
+    # the whole campaign's causes, replaced by the one the resamples agree on (None: kept)
+    replaced: list[str] | None = None
+    agreed: str | None = None  # that replacement, in a sentence
+    half_way: str | None = None  # why the model is half way to geometry (solver.hedge), if it is
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)

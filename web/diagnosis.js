@@ -201,9 +201,11 @@ async function showDiagnosis(d) {
     });
     $("d-effects").replaceChildren(table);
   }
-  // a small campaign whose resamples name another cause: the cause is in doubt, said so
-  const doubt = report.stability?.doubt;
-  Object.assign($("d-doubt"), { hidden: !doubt, textContent: doubt ?? "" });
+  // a small campaign whose resamples name another cause: the cause is in doubt, said so; the
+  // cause taken from the resamples in the campaign's own choice's place, said first
+  const st = report.stability;
+  const said = [st?.agreed, st?.half_way, st?.doubt].filter(Boolean).join(" ");
+  Object.assign($("d-doubt"), { hidden: !said, textContent: said });
   showUnexplained(report.unexplained);
   showExtrapolation(report.extrapolation);
   showOutliers(report.outliers);

@@ -600,7 +600,7 @@ def validate_diagnosis(
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
     final = report.final
-    return verdict(
+    v = verdict(
         cell,
         meas,
         model.robot,
@@ -615,6 +615,10 @@ def validate_diagnosis(
         layout_condition=geometric.layout_condition,
         extension_reason=implausible_extensions(*model.layout(), model.extensions, meas.q),
     )
+    # a small campaign's resamples: the cause taken from them, or their doubt, said here too
+    st = report.stability
+    said = tuple(s for s in (st.agreed, st.half_way, st.doubt) if s) if st is not None else ()
+    return v.model_copy(update={"warnings": (*v.warnings, *said)}) if said else v
 
 
 def write_diagnosis(

@@ -196,8 +196,13 @@ def _print_diagnosis(doc: ReportDoc) -> None:
     )
     _print_unexplained(doc.unexplained)
     _print_extrapolation(doc.extrapolation)
-    if doc.stability is not None and doc.stability.doubt:
-        console.print(f"[yellow]{doc.stability.doubt}[/yellow]")
+    # the cause taken from the resamples, then any doubt they leave (once: the verdict's
+    # warnings below carry them when there is a verdict)
+    warned = Validation.of(doc.validation).warnings if doc.validation is not None else ()
+    st = doc.stability
+    for said in (st.agreed, st.half_way, st.doubt) if st else ():
+        if said and said not in warned:
+            console.print(f"[yellow]{said}[/yellow]")
     if doc.validation is not None:  # the final model, judged as a calibration is
         for line in tables.validation_lines(Validation.of(doc.validation)):
             console.print(line)

@@ -125,6 +125,23 @@ class Stability(Open):
         "naming nothing or another cause counts against it), or another cause is named on two "
         "or more, in a sentence; null otherwise"
     )
+    replaced: list[str] | None = Field(
+        None,
+        description="the whole campaign's causes, each named on one resample at most, given up "
+        "for the cause a majority of the resamples name: the final model has that cause when "
+        "the selection on all the poses accepts it alone, else no effect (the geometric model; "
+        "the effects suspected, not in it); null when the campaign's own answer stands",
+    )
+    agreed: str | None = Field(
+        None, description="that replacement and the model it leaves, in a sentence"
+    )
+    half_way: str | None = Field(
+        None,
+        description="when the final model's held-out gain over geometry is weak (under 15 % of "
+        "geometry's RMS), the model deployed is half way between geometry and the extended fit "
+        "(parameters averaged, the effects at half their fitted size; its figures are that "
+        "model's), said in a sentence; null otherwise",
+    )
 
 
 class Seconds(Open):

@@ -52,3 +52,33 @@ def test_another_cause_named_on_two_resamples_puts_the_answer_in_doubt():
     assert "joint_periodic(2, harmonic 2) named on 2 of 5" in doubt
     assert [e.in_final for e in rival.to_report().effects] == [True, False]
     assert key_label(("thermal_drift", None, None)) == "thermal_drift"
+
+
+S2 = ("joint_scale", 1, None)
+
+
+def test_a_cause_a_majority_of_resamples_name_in_the_final_models_place_is_the_rival():
+    """The bench's 30-pose compliance-and-periodic case (seed 7) named joint 2's scale on the
+    whole campaign, its compliance on 4 of 5 resamples: the resamples agree on the compliance."""
+    s = Stability(24, (S2,), ((C2,), (C2,), (S2,), (C2,), (C2,)))
+    assert s.rival() == C2 and s.agreed() is None
+    # a majority is needed, and the final model's causes on one resample at most each
+    assert Stability(24, (S2,), ((C2,), (C2,), (S2,), (), ())).rival() is None
+    assert Stability(24, (S2, P2), ((C2,), (C2,), (C2,), (P2,), (S2,))).rival() == C2
+    assert Stability(24, (S2, P2), ((C2,), (C2,), (C2,), (P2,), (P2,))).rival() is None
+    # the real QKM half (train q5 > 8.3 deg): joint 2's compliance on 2, joint 3's on 3
+    assert Stability(24, (S2,), ((C2,), (C2,), (C2,), (S2,), (S2,))).rival() is None
+    assert Stability(24, (S2,), ((C2,), (C2,), (C2,), (), ())).rival() == C2
+    taken = Stability(24, (C2,), s.named, replaced=(S2,), agreed_on=C2)
+    said = taken.agreed()
+    assert said is not None and "first choice, joint_scale(2) (on 1 of 5): " in said, said
+    assert said.endswith("joint_compliance(2) (named on 4 of 5); the model takes it instead")
+    rep = taken.to_report().to_json()
+    assert rep["replaced"] == ["joint_scale(2)"] and rep["agreed"] == said
+    assert rep["doubt"] is None  # 4 of 5 agree with the model it deploys
+    assert s.to_report().to_json()["replaced"] is None
+    # refused on all the poses: the geometric model, the effects suspected, no doubt beside it
+    none = Stability(24, (), s.named, replaced=(S2,), agreed_on=C2)
+    said = none.agreed()
+    assert said is not None and "the model is the geometric one" in said, said
+    assert none.doubt() is None and none.to_report().to_json()["agreed"] == said
