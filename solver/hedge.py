@@ -5,8 +5,8 @@ On 40 poses or fewer an effect that removes under WEAK_GAIN of geometry's held-o
 what the fit's own noise gives: its coefficient trades with the geometry, and on the poses the arm
 visits later it helps or hurts by a few per cent alike. The deployed model is then the average of
 the two (geometry's parameters and the extended fit's, each half; the effects at half their fitted
-size), the simplest model average when the data cannot choose between them. Measured (helper
-"resample"; real campaigns fitted on a subset, tested on the rest): the real one-SMR UR5's random
+size), the simplest model average when the data cannot choose between them. Measured (real
+campaigns fitted on a subset, tested on the rest): the real one-SMR UR5's random
 30- and 40-pose subsets gain 5.5-11.6 % held out on their own poses and test 0.92-1.08x geometry on
 the other ~960 poses (seed 0: four above 1.02x, seed 1: one); half way none is above 1.002x and
 the mean goes 1.004 -> 0.978 and 0.960 -> 0.958. The real IRB 120 and QKM halves and folds (18-36

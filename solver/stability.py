@@ -15,7 +15,7 @@ final model on one at most, the resamples agree on it and not on the whole campa
 (which a few poses decided): the selection on all the poses is offered that cause alone
 (`agreed_cause`: its null, cross-validation and region folds, as always). Accepted, the final
 model takes it; refused, neither answer stands and the model is the geometric one, the effects
-said suspected, not in it. Measured (helper "resample"): on the bench's 30-40-pose campaigns a
+said suspected, not in it. Measured: on the bench's 30-40-pose campaigns a
 compliance-and-periodic case named joint 2's scale where the resamples named its compliance 4 of
 5 (now the compliance: one more detection, 0.74 -> 0.69 of geometry on other poses); the real
 IRB 120 fitted on its 18 poses with q5 at or below the median named joint 3's compliance and a
