@@ -28,7 +28,7 @@ from .extrapolation import (
     region_folds,
     span_parts,
 )
-from .gravity import gravity_suspects
+from .gravity import gravity_suspects, most_loaded
 from .hedge import hedge
 from .identify import register
 from .kinematics import Layout, predict_rows
@@ -45,13 +45,15 @@ from .selection import (
     linear_scores,
     paired_t,
     rmse_gain_interval,
+    tied_suspect,
 )
 from .shift_scan import shift_time
-from .stability import RESAMPLE_MAX_POSES, Stability, agreed_cause, effect_key, leave_out
+from .stability import RESAMPLE_MAX_POSES, agreed_cause, resampled
 from .variants import (
     MIN_GAIN,
     T_SIMPLER,
     another_cause,
+    displaced,
     nested_simpler,
     same_effect,
     same_variant,
@@ -415,6 +417,10 @@ def select(
     remaining = list(cands)
     m = diag.prob.q.shape[0]
     grouped_tests = [f.test for f in grouped_folds(diag)]
+    # on a small campaign a tie with the best goes to the most gravity-loaded joint's compliance
+    loaded = (
+        most_loaded(diag.prob.layout, diag.x0, diag.prob.q) if m <= RESAMPLE_MAX_POSES else None
+    )
     while remaining and len(steps) < max_effects:
         trial, A, r, blocks, pose_of_row, scans = diag.linear_system(
             cv_now.fits["all"], current, remaining
@@ -467,6 +473,7 @@ def select(
         ):
             best = simplest
         best = nested_simpler(trial, ok, best, system, sc)
+        chance, best = best, tied_suspect(trial, best, sc, loaded, T_SIMPLER, MIN_GAIN)
         # a richer variant of an accepted effect replaces it (a compliance's masses fitted
         # where the nominal mass model's one stiffness left a clear part of its signature)
         replaced = next((k for k, st in enumerate(steps) if same_effect(st[0], trial[best])), None)
@@ -497,6 +504,8 @@ def select(
             "alternatives": alternatives,
             "holdout_gain_interval_mm": rmse_gain_interval(cv_now.sq, cv.sq, cv.n),
         }
+        if best != chance:
+            decision["tied"] = trial[chance]  # the data's own pick, which the suspect displaced
         c = trial[best]
         before = cv_now
         if replaced is not None:
@@ -548,6 +557,7 @@ def select_holding(
         if not region.refused:
             break
         gone = [e for e, _ in region.refused]
+        gone += displaced(steps, gone)
         pool = [c for c in pool if not any(same_variant(c, e) for e in gone)]
         if round_ == REFUSAL_ROUNDS - 1 or not pool:
             diag.warm = {}
@@ -676,22 +686,3 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     report.seconds = {k: round(v, 3) for k, v in clock.items()}
     report.cross_validation = CrossValidation(len(diag.folds), diag.fits, len(cands))
     return Diagnosis(report, prob.layout, x, ee, params, figures, clock, errors, diag.fits, geo)
-
-
-def resampled(diag: Diagnoser, cands, steps) -> Stability | None:
-    """On a small campaign that names effects, the effects named on resamples of it
-    (solver/stability.py); None otherwise (naming nothing is the cautious answer already)."""
-    m = diag.prob.q.shape[0]
-    if m > RESAMPLE_MAX_POSES or not steps:
-        return None
-    named = []
-    subsets = leave_out(m)
-    for keep in subsets:
-        prob = identify.Problem(diag.prob.layout, diag.prob.q[keep], diag.prob.meas[keep])
-        sub = Diagnoser(
-            prob, diag.x0, diag.free, diag.inputs.subset(keep), prior=diag.prior, shrunk=diag.shrunk
-        )
-        chosen, _, _, _ = select_suspecting(sub, cands, max_effects=1)  # the top cause may differ
-        named.append(tuple(effect_key(st[0]) for st in chosen))
-    final = tuple(effect_key(st[0]) for st in steps)
-    return Stability(min(map(len, subsets)), final, tuple(named))

@@ -82,16 +82,27 @@ def select_independent(B: np.ndarray, tol: float = 1e-6) -> np.ndarray:
 SUSPECT_SHARE = 0.25
 
 
-def gravity_suspects(layout: Layout, x, q: np.ndarray) -> list[int]:
-    """The joints (0-based) whose nominal gravity torque varies most over the poses q: those that
-    carry the arm's weight, where a compliance is the physics' first guess."""
+def gravity_spread(layout: Layout, x, q: np.ndarray) -> np.ndarray:
+    """Each joint's spread (standard deviation) of nominal gravity torque over the poses q."""
     g = gravity_in_base(layout, x)
-    spread = np.array(
+    return np.array(
         [
             np.std(gravity_basis(layout, x, q, j, g) @ nominal_masses(layout, x, j))
             for j in range(layout.robot.n_joints)
         ]
     )
+
+
+def gravity_suspects(layout: Layout, x, q: np.ndarray) -> list[int]:
+    """The joints (0-based) whose nominal gravity torque varies most over the poses q: those that
+    carry the arm's weight, where a compliance is the physics' first guess."""
+    spread = gravity_spread(layout, x, q)
     if not spread.max() > 0:
         return []
     return [int(j) for j in np.flatnonzero(spread >= SUSPECT_SHARE * spread.max())]
+
+
+def most_loaded(layout: Layout, x, q: np.ndarray) -> int | None:
+    """The joint (0-based) whose nominal gravity torque varies most over the poses q, if any."""
+    spread = gravity_spread(layout, x, q)
+    return int(np.argmax(spread)) if spread.max() > 0 else None

@@ -184,3 +184,25 @@ def agreed_cause(diag, cands, stability: Stability, chosen: tuple, log=None, clo
     out = (steps, final if steps else base, replace(region, refused=refused))
     keys = tuple(effect_key(st[0]) for st in steps)
     return out, replace(stability, final=keys, replaced=stability.final, agreed_on=rival)
+
+
+def resampled(diag, cands, steps) -> Stability | None:
+    """On a small campaign that names effects, the effects named on resamples of it; None
+    otherwise (naming nothing is the cautious answer already)."""
+    from . import identify
+    from .diagnose import Diagnoser, select_suspecting  # diagnose imports this module
+
+    m = diag.prob.q.shape[0]
+    if m > RESAMPLE_MAX_POSES or not steps:
+        return None
+    named = []
+    subsets = leave_out(m)
+    for keep in subsets:
+        prob = identify.Problem(diag.prob.layout, diag.prob.q[keep], diag.prob.meas[keep])
+        sub = Diagnoser(
+            prob, diag.x0, diag.free, diag.inputs.subset(keep), prior=diag.prior, shrunk=diag.shrunk
+        )
+        chosen, _, _, _ = select_suspecting(sub, cands, max_effects=1)  # the top cause may differ
+        named.append(tuple(effect_key(st[0]) for st in chosen))
+    final = tuple(effect_key(st[0]) for st in steps)
+    return Stability(min(map(len, subsets)), final, tuple(named))

@@ -22,6 +22,16 @@ def same_variant(a: Extension, b: Extension) -> bool:
     return same_effect(a, b) and a.n_params == b.n_params
 
 
+def displaced(steps, gone) -> list[Extension]:
+    """The look-alikes a gravity suspect displaced (selection.tied_suspect) when the region folds
+    refuse the suspect: the data could not tell them apart, so the look-alike is no better bet."""
+    return [
+        st[3]["tied"]
+        for st in steps
+        if "tied" in st[3] and any(same_variant(st[0], e) for e in gone)
+    ]
+
+
 def same_effect(a: Extension, b: Extension) -> bool:
     """Two variants of one effect: the same kind on the same joint and harmonic."""
     return a.name == b.name and a.joint == b.joint and a.harmonic == b.harmonic
