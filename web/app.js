@@ -221,6 +221,8 @@ async function loadCells(select) {
     const pick = select || $("c-cell").value || "default";
     $("c-cell").replaceChildren(...cells.map((c) => new Option(cellLabel(c), c.id)));
     $("c-cell").value = ids.includes(pick) ? pick : ids[0];
+    // the page's own "default" option stands before any cell is known: this marks the API's
+    $("c-cell").dataset.loaded = "true";
     showEstimate();
   } catch (e) { say(e); }
 }

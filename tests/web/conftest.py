@@ -43,11 +43,12 @@ def page():
 
 
 def sign_in(page, served) -> None:
-    """Open the page, give it the token, and wait for the cells it then lists."""
+    """Open the page, give it the token, and wait for the cells it then lists (data-loaded: the
+    page's own default option is there before them)."""
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
 
 
 def shot(page, name: str) -> Path:

@@ -76,7 +76,7 @@ def test_campaign_to_calibration_charts_in_the_browser(served, page, tmp_path):
     page.click("#token-form button[type=submit]")
     assert page.evaluate("sessionStorage.getItem('robocal.token')") == served.token
 
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     page.select_option("#c-cell", "default")
     page.fill("#c-poses", "20")
     page.fill("#c-seed", "3")
@@ -194,7 +194,7 @@ def test_cell_picker_upload_and_refusal(served, page):
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     page.click("#cell-upload summary")
     page.fill("#cell-json", '{"schema": 1,\n "robot": ')  # broken JSON: a 422 with its line
     page.click("#cell-upload-btn")

@@ -86,7 +86,7 @@ def test_hidden_effect_is_named_with_its_evidence_and_figure(served, page, tmp_p
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     page.click("#meas-import summary")
     # A malformed file is refused with its line, and nothing is imported.
     bad = csv.read_text().splitlines()

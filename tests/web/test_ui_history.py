@@ -98,7 +98,7 @@ def test_history_reload_stream_notice_and_compare(served, page):
     assert "token.sha256" in page.text_content("#token-help")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     page.wait_for_function("document.getElementById('live').textContent === 'live'")
 
     # Planning fields and the estimate before planning: 3 SMRs on the default cell.

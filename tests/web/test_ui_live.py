@@ -16,7 +16,7 @@ def test_the_page_polls_while_the_stream_is_down_and_reconnects(served, page):
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     page.wait_for_function("document.getElementById('live').textContent.includes('reconnecting')")
     assert page.text_content("#live") == "updates every 5 s (reconnecting)"
 

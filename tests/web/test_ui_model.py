@@ -47,7 +47,7 @@ def open_campaign(served, page, cid: int) -> None:
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     page.evaluate(
         "async (cid) => { useCampaign(await api('GET', `/campaigns/${cid}`)); refreshCampaign(); }",
         cid,

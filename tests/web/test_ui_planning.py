@@ -19,7 +19,7 @@ def test_a_planning_job_is_followed_to_its_campaign(served, page):
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     _create(page, "chosen")
     page.wait_for_selector("#c-planning:not([hidden])", timeout=10_000)
     assert re.fullmatch(r"planning\.\.\. \d{1,3} %", page.text_content("#c-planning"))

@@ -34,7 +34,7 @@ def test_buttons_walk_the_life_cycle(served, page):
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     page.fill("#c-poses", str(POSES))
     page.click("#create")
     page.wait_for_selector("#progress:not([hidden])")

@@ -87,7 +87,7 @@ def test_page_shows_the_unexplained_and_the_optional_keys(served, page, tmp_path
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     page.click("#meas-import summary")
     page.set_input_files("#m-file", str(csv))
     page.click("#m-import-btn")

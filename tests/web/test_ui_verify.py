@@ -44,7 +44,7 @@ def test_verify_from_the_results_and_open_the_certificate(served, page):
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     page.fill("#c-poses", "40")
     page.fill("#c-seed", "23")
     page.click("#create")

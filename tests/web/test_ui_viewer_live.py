@@ -47,7 +47,7 @@ def test_running_campaign_shows_live_in_the_viewer(served, gl_page):  # noqa: F8
     page.goto(served.url + "/")
     page.fill("#token", served.token)
     page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#c-cell option[value=default]", state="attached")
+    page.wait_for_selector("#c-cell[data-loaded] option[value=default]", state="attached")
     page.fill("#c-poses", str(POSES))
     page.fill("#c-pause", "20")
     page.fill("#c-samples", "500")
