@@ -212,3 +212,20 @@ def test_prev_q_in_degrees_is_never_taken_for_radians(campaign, tmp_path, poses)
         for prev in (part.prev_q, homes, first_home, beside, np.radians(np.full((poses, n), 1e-3))):
             path = _with_prev(tmp_path, part, prev)
             read_campaign(path, cell.robot)  # no InputError
+
+
+def test_files_with_other_columns_pasted_together_name_the_second_header(campaign, tmp_path):
+    """Two halves of a campaign pasted together, the second written with prev_q columns: `robocal
+    calibrate` names the second header line and the columns it adds, not "row has 17 fields";
+    nothing is written."""
+    cell, meas, _ = campaign
+    write_campaign(tmp_path / "a.csv", replace(meas.subset(np.arange(10)), prev_q=None))
+    write_campaign(tmp_path / "b.csv", meas.subset(np.arange(10, 20)))
+    a = (tmp_path / "a.csv").read_text()
+    (tmp_path / "ab.csv").write_text(a + (tmp_path / "b.csv").read_text())
+    second = len(a.splitlines()) + 1
+    r = robocal("calibrate", "ab.csv", "--out", "model.json", cwd=tmp_path)
+    assert r.returncode != 0 and r.stderr.count("\n") == 1, r.stderr
+    assert f"ab.csv:{second}: line {second} is a second header row" in r.stderr, r.stderr
+    assert "other columns (adds 'prev_q1', 'prev_q2', 'prev_q3' and 3 more)" in r.stderr
+    assert not (tmp_path / "model.json").exists()
