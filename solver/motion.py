@@ -5,6 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
+# A file sorted by a joint after the fact: that joint only rises (or only falls) down its rows. A
+# plan of this many poses rarely does (a sweep may, and then that joint's backlash, always
+# approached from one side, does not show either).
+SORTED_MIN_POSES = 10
+
 
 def visit_order(time_s: np.ndarray | None, m: int) -> np.ndarray:
     """Pose indices in the order visited: by each pose's first reading time, else the file order.
@@ -47,3 +52,38 @@ def last_motion(
         given = np.isfinite(step) & (step != 0)
         out = np.where(given, step, out)
     return out
+
+
+def ordered_by_rows(time_s: np.ndarray | None, prev_q: np.ndarray | None, m: int) -> int:
+    """How many of m poses take the direction of their joints' last motion from the file order:
+    those without prev_q when time_s does not order every pose (visit_order); the first row's
+    (no motion before it) does not count."""
+    if m < 2:
+        return 0
+    if (
+        time_s is not None
+        and np.isfinite(np.asarray(time_s, dtype=float)).reshape(m, -1).any(axis=1).all()
+    ):
+        return 0  # the times order every pose
+    without = (
+        np.ones(m, dtype=bool)
+        if prev_q is None
+        else ~np.isfinite(np.asarray(prev_q, dtype=float)).all(axis=1)
+    )
+    return int(without[1:].sum())
+
+
+def sorted_joint(q: np.ndarray) -> tuple[int, int] | None:
+    """The first joint (index, +1 rising, -1 falling) whose value only rises or only falls over
+    the poses q (m, n) in file order, when m >= SORTED_MIN_POSES; None when none does."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    if len(q) < SORTED_MIN_POSES:
+        return None
+    step = np.diff(q, axis=0)
+    for j in range(q.shape[1]):
+        if np.ptp(q[:, j]) > 0:
+            if np.all(step[:, j] >= 0):
+                return j, 1
+            if np.all(step[:, j] <= 0):
+                return j, -1
+    return None

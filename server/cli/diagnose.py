@@ -41,6 +41,12 @@ def cmd_diagnose(args) -> None:
             viewer_url=args.rerun_viewer,
         )
     _print_diagnosis(report)
+    from ..formats.model_json import diagnosis_order
+
+    if why := diagnosis_order(model, meas.q, meas.time_s, meas.prev_q):
+        import sys
+
+        print(f"robocal: warning: {args.meas}: {why}", file=sys.stderr)
     console.print(
         f"report written to {args.out}"
         + (f", model to {args.model_out}" if args.model_out else "")

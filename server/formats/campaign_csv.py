@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 
 import numpy as np
 
@@ -90,6 +90,37 @@ def prev_header(t: Table, robot: Robot) -> list[str]:
     return have
 
 
+# prev_q1..prev_qN in other units than q1..qN (radians beside degrees). An arm comes to a pose
+# from nearby poses of its plan (the previous pose, an approach point) or from one place (home):
+# the joints it comes from spread about as much as the poses do, or not at all; in radians they
+# spread 1/57.3 as much, all within the joints' limits read as radians. Measured with prev_q the
+# previous pose's joints on the real IRB 120, QKM and UR5 campaigns: spread ratios 0.92-1.15 on
+# 30-pose subsets, 0.40-2.6 on 3-pose ones (99% of 2,000 each); so radians fall within
+# PREV_UNIT_BAND of 1/57.3 on all 5-pose subsets and 99.75% of 3-pose ones, and poses that
+# always come from home (a ratio of 0) or an approach point beside them (about 1) never do.
+PREV_UNIT_BAND = 3.0  # a ratio within this factor of 1/57.3 (or 57.3) is the other unit
+PREV_MIN_POSES = 3  # never on one pose alone (the first pose's prev_q: home at zero joints)
+PREV_MIN_SPAN_DEG = 20.0  # the degrees' joints move this much: their spread means something
+
+
+def spread_ratio(small: np.ndarray, big: np.ndarray) -> float:
+    """RMS spread of the rows of small (poses, n) over that of big (the same poses)."""
+    s_big = float(np.sqrt(np.sum(np.var(big, axis=0))))
+    return float(np.sqrt(np.sum(np.var(small, axis=0)))) / s_big if s_big > 0 else float("nan")
+
+
+def looks_like_radians(small: np.ndarray, big: np.ndarray, robot: Robot) -> bool:
+    """Whether joints small (poses, n, as read) are radians where big (the same poses) are
+    degrees: every value of small within the joint limits in radians, big moving at least
+    PREV_MIN_SPAN_DEG, and small spreading 1/57.3 as much as big (PREV_UNIT_BAND)."""
+    if len(small) < PREV_MIN_POSES or np.ptp(big, axis=0).max() < PREV_MIN_SPAN_DEG:
+        return False
+    if np.any(small < robot.lower - LIMIT_TOL_DEG) or np.any(small > robot.upper + LIMIT_TOL_DEG):
+        return False
+    ratio = spread_ratio(small, big) * np.rad2deg(1.0)
+    return 1 / PREV_UNIT_BAND <= ratio <= PREV_UNIT_BAND
+
+
 class PrevJoints:
     """Each pose's prev_q (degrees, or None), the same on every row of the pose."""
 
@@ -129,6 +160,35 @@ class PrevJoints:
                 differs,
                 f"the joints the arm came from differ from line {first.line}, an earlier row of "
                 f"pose {pid!r}",
+            )
+
+    def check_units(self, q_deg: Sequence[Sequence[float] | None]) -> None:
+        """InputError naming the first row where prev_q1..prev_qN look like radians beside q1..qN
+        in degrees (looks_like_radians), or q1..qN beside prev_q in degrees; q_deg: each pose's
+        joints, None where a pose gives none (a target without a starting guess)."""
+        given = sorted((k, row, v) for k, (row, v) in self.by_pose.items() if v is not None)
+        both = [(row, v, q_deg[k]) for k, row, v in given if q_deg[k] is not None]
+        if len(both) < PREV_MIN_POSES:
+            return
+        prev = np.array([v for _, v, _ in both])
+        q = np.array([w for _, _, w in both])
+        n = self.robot.n_joints
+        for small, big, name, other in ((prev, q, "prev_q", "q"), (q, prev, "q", "prev_q")):
+            if not looks_like_radians(small, big, self.robot):
+                continue
+            j = int(np.argmax(np.ptp(big, axis=0)))  # the joint that shows it best
+            # a row that shows it: the degrees' joint beyond a turn in radians, the other off 0
+            # (the first pose's prev_q is often home)
+            shows = [i for i in range(len(both)) if abs(big[i, j]) > 2 * np.pi]
+            at = next((i for i in shows if np.abs(small[i]).max() > LIMIT_TOL_DEG), shows[0])
+            raise self.table.error(
+                both[at][0],
+                f"{name}{j + 1}",
+                f"{small[at, j]:.6g} while {other}{j + 1} is {big[at, j]:.6g}: "
+                f"{name}1..{name}{n} look like radians (over the {len(both)} poses that give "
+                f"both they lie within the joint limits read as radians and spread "
+                f"{spread_ratio(small, big):.3g} times as much as {other}1..{other}{n}, where "
+                f"the joints an arm comes from spread like its poses); give them in degrees",
             )
 
     def rad(self, m: int) -> np.ndarray | None:
@@ -244,6 +304,7 @@ def read_campaign_rows(
         # A blank time or temperature means "not recorded" (NaN), unlike a blank coordinate.
         more = [t.number(row, c, np.nan, *BOUNDS[c]) for c in extras]
         readings.append((k, target, point, more))
+    prev.check_units(poses.q_deg)
 
     order = tuple(sorted(names))
     col = {n: j for j, n in enumerate(order)}
@@ -299,6 +360,7 @@ def read_poses_rows(path, robot: Robot, text: str | None = None):
                 values[c].append(t.number(row, c, np.nan, *BOUNDS[c]))
             elif np.isnan(values[c][k]):
                 values[c][k] = t.number(row, c, np.nan, *BOUNDS[c])
+    prev.check_units(poses.q_deg)
     arrays = {c: np.array(v, dtype=float) for c, v in values.items()}
     ids = list(poses.ids)
     return ids, poses.q_rad(), arrays.get("time_s"), arrays.get("temp_c"), prev.rad(len(ids))

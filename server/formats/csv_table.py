@@ -17,6 +17,12 @@ NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
 _NOT_FINITE = {"nan", "inf", "infinity"}
 
 
+def _names(cols: list[str], most: int = 3) -> str:
+    """Column names quoted, the first few of many."""
+    said = ", ".join(repr(c) for c in cols[:most])
+    return said + (f" and {len(cols) - most} more" if len(cols) > most else "")
+
+
 @dataclass(frozen=True)
 class Row:
     """One data row: its 1-based line number in the file and its raw fields."""
@@ -70,15 +76,39 @@ class Table:
         return records
 
     def _check_repeated_header(self, line: int, fields: list[str], names: set[str]) -> None:
-        # Two files concatenated: said as such, not as the first column's "'q1' is not a number".
-        if fields[0].strip().lower() in names and all(f.strip().lower() in names for f in fields):
-            raise InputError(
-                self.path,
-                line,
-                None,
-                f"line {line} is a second header row (the header is line {self.header_line}): "
-                "two files concatenated? remove it",
+        # Two files concatenated: said as such, not as the first column's "'q1' is not a number"
+        # or, when the second file has other columns (a temp_c, prev_q), as "row has N fields".
+        if fields[0].strip().lower() not in names and (
+            len(fields) < 2 or fields[1].strip().lower() not in names
+        ):
+            return  # a header's first columns are among the header's (pose, q1, target...)
+        if any(NUMBER.fullmatch(f.strip()) for f in fields):
+            return  # a data row has numbers (joints, coordinates); a header has none
+        given = [f.strip() for f in fields if f.strip()]
+        known = [f for f in given if f.lower() in names]
+        same = len(known) == len(given) and fields[0].strip().lower() in names
+        if not (same or (len(known) >= 2 and 2 * len(known) >= len(given))):
+            return
+        where = f"line {line} is a second header row (the header is line {self.header_line})"
+        ours = [h for h in self.header if h]
+        if [f.lower() for f in given] == [h.lower() for h in ours]:
+            raise InputError(self.path, line, None, f"{where}: two files concatenated? remove it")
+        theirs = {f.lower() for f in given}
+        diff = [
+            f"{what} {_names(cols)}"
+            for what, cols in (
+                ("adds", [f for f in given if f.lower() not in names]),
+                ("lacks", [h for h in ours if h.lower() not in theirs]),
             )
+            if cols
+        ]
+        raise InputError(
+            self.path,
+            line,
+            None,
+            f"{where} with other columns ({', '.join(diff) or 'in another order'}): two files "
+            "concatenated? give the rows below it their own file, or one header that fits all",
+        )
 
     def _check_width(self, line: int, fields: list[str]) -> None:
         n, width = len(fields), len(self.header)

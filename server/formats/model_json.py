@@ -245,30 +245,76 @@ def extrapolated(model: ModelFile, q_rad: np.ndarray, pose_ids) -> str | None:
     return None
 
 
+def rows_as_motion(q_rad, time_s, prev_q, what: str) -> str | None:
+    """One clause when the file's row order decides the direction of some poses' last motion
+    (neither time_s nor prev_q for them; solver.motion) for `what` (the backlash that needs it),
+    naming a joint the rows look sorted by; None when the data orders every pose."""
+    from robocal.solver.motion import ordered_by_rows, sorted_joint
+
+    q = np.atleast_2d(np.asarray(q_rad, dtype=float))
+    count = ordered_by_rows(time_s, prev_q, len(q))
+    if not count:
+        return None
+    n = q.shape[1]
+    poses = "the poses" if count == len(q) - 1 else f"{count} poses"
+    said = (
+        f"the rows' order is taken as the order of motion for {poses} without time_s or "
+        f"prev_q1..prev_q{n}: {what} takes the joints' approach directions from it, wrong if "
+        "the file was sorted or merged after the fact"
+    )
+    if (sort := sorted_joint(q)) is not None:
+        j, way = sort
+        said += f" (q{j + 1} only {'rises' if way > 0 else 'falls'} down the rows: sorted?)"
+    return said
+
+
+def diagnosis_order(model: ModelFile, q_rad, time_s, prev_q) -> str | None:
+    """rows_as_motion for a diagnosis whose final model has backlash (its approach directions
+    came from the rows) or whose rows look sorted by a joint (the backlash it tested on every
+    joint read directions a sort scrambles); None otherwise: a campaign in visit order without
+    times, whose diagnosis named no backlash, is not warned about what did not matter."""
+    from robocal.solver.motion import sorted_joint
+
+    lost = [e.label() for e in model.extensions if e.name == "joint_backlash"]
+    if not lost and sorted_joint(q_rad) is None:
+        return None
+    what = f"the diagnosed {', '.join(lost)}" if lost else "the backlash tested on each joint"
+    return rows_as_motion(q_rad, time_s, prev_q, what)
+
+
 def approach_unknown(model: ModelFile, q_rad, time_s, prev_q, pose_ids) -> str | None:
-    """One sentence naming the poses (q_rad (m, n)) where a joint the model gives backlash has no
-    direction of its last motion (the first pose visited, without prev_q; solver.motion), so
-    that its backlash is not applied there; None when every such pose has one."""
+    """One sentence when the model has backlash and the data leaves its approach directions to
+    the row order (rows_as_motion), and naming the poses (q_rad (m, n)) where a backlash joint has
+    no direction of its last motion (the first pose visited, without prev_q; solver.motion), so
+    that its backlash is not applied there; None when every pose's direction is from the data."""
     from robocal.solver.motion import last_motion
 
     lost = [e for e in model.extensions if e.name == "joint_backlash"]
     if not lost or len(q_rad) == 0:
         return None
+    n = model.robot.n_joints
+    labels = ", ".join(e.label() for e in lost)
+    order = rows_as_motion(q_rad, time_s, prev_q, f"the model's {labels}")
     motion = last_motion(np.asarray(q_rad, dtype=float), time_s, prev_q)
+    give = f"give prev_q1 ... prev_q{n}, the joints the arm comes from"
     for e in lost:
         none = np.flatnonzero(motion[:, e.joint] == 0)
         if len(none):
             b = abs(float(np.degrees(e.coef[0])))
-            n = model.robot.n_joints
             first = pose_ids[none[0]]
             who = (
                 f"{len(none)} poses (first {first!r}) give"
                 if len(none) > 1
                 else f"pose {first!r} gives"
             )
+            if order:  # the first row: one sentence for both, as they have one cause
+                return (
+                    f"{order}; at {who.removesuffix(' give').removesuffix(' gives')} (no motion "
+                    f"before) joint {e.joint + 1}'s is unknown, its {b:.3g} deg not applied; {give}"
+                )
             return (
                 f"{who} no direction of joint {e.joint + 1}'s last motion (the first visited, "
                 f"without prev_q): the model's {e.label()} ({b:.3g} deg) is not applied there; "
-                f"give prev_q1 ... prev_q{n}, the joints the arm comes from"
+                + give
             )
-    return None
+    return f"{order}; {give}" if order else None

@@ -132,6 +132,7 @@ def read_targets(path, robot: Robot, names, orientation: bool = False) -> Target
         point = [t.number(row, c, None, *BOUNDS[c]) for c in MEASURED]
         more = [t.number(row, c, np.nan, *BOUNDS[c]) for c in extras]
         readings.append((k, col[target], point, more))
+    prev.check_units(guesses)
     m, K, n = len(ids), len(names), robot.n_joints
     desired = np.zeros((m, K, 3))
     mask = np.zeros((m, K), dtype=bool)

@@ -64,3 +64,67 @@ def test_one_pose_without_its_approach_is_said_and_with_it_not(model_dir):
         assert "prev_q" in warn[0], warn
         r = robocal(cmd[0], "model.json", "tp.csv", "--out", "o.csv", cwd=d)
         assert r.returncode == 0 and "last motion" not in r.stderr, r.stderr
+
+
+ORDER = "the rows' order is taken as the order of motion"
+
+
+def test_the_row_order_taken_as_the_order_of_motion_is_said_where_backlash_needs_it(model_dir):
+    """A backlash model on a file with neither time_s nor prev_q: `predict`, `evaluate` and
+    `compensate` say in one warning line that the rows' order is the order of motion (a file
+    sorted after the fact, here by q1, is named as such); with times or prev_q they do not."""
+    from robocal.server.formats.campaign_csv import write_campaign
+
+    d, meas = model_dir
+    part = meas.subset(np.arange(20))
+    by_q1 = part.subset(np.argsort(part.q[:, 0]))
+    prev = np.vstack([np.full((1, part.q.shape[1]), np.nan), part.q[:-1]])
+    files = {
+        "rows.csv": (part, False),
+        "sorted.csv": (by_q1, True),
+        "timed.csv": (replace(part, time_s=np.arange(20.0)[:, None].repeat(3, axis=1)), None),
+        "prev.csv": (replace(part, prev_q=prev), None),
+    }
+    for name, (m, is_sorted) in files.items():
+        write_campaign(d / name, m)
+        for cmd in (
+            ("predict", "model.json", name, "--out", "o.csv"),
+            ("evaluate", "model.json", name),
+            ("compensate", "model.json", name, "--out", "o.csv"),
+        ):
+            r = robocal(*cmd, cwd=d)
+            assert r.returncode == 0, (cmd, r.stderr)
+            said = [ln for ln in r.stderr.splitlines() if ORDER in ln]
+            if is_sorted is None:
+                assert not said, (cmd, r.stderr)
+                continue
+            assert len(said) == 1 and "joint_backlash(2)" in said[0], (cmd, r.stderr)
+            assert len([ln for ln in r.stderr.splitlines() if "last motion" in ln]) <= 1
+            assert ("q1 only rises down the rows" in said[0]) == is_sorted, said
+
+
+def test_diagnose_says_the_row_order_only_where_backlash_is_involved(model_dir, tmp_path):
+    """`diagnose` without time_s or prev_q: said when it names backlash or when the rows look
+    sorted by a joint (the backlash it tests reads scrambled directions), not for a campaign in
+    its order whose diagnosis names none; `calibrate` (geometry, no motion order) never says it."""
+    from robocal.server.formats.campaign_csv import write_campaign
+
+    d, meas = model_dir
+    write_campaign(tmp_path / "rows.csv", meas)
+    write_campaign(tmp_path / "sorted.csv", meas.subset(np.argsort(meas.q[:, 0])))
+    r = robocal("simulate", "--poses", 40, "--seed", 3, "--out", "clean.csv", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    text = (tmp_path / "clean.csv").read_text().splitlines()
+    head = text[0].split(",")
+    keep = [i for i, c in enumerate(head) if c not in ("time_s", "temp_c")]
+    (tmp_path / "clean.csv").write_text(
+        "\n".join(",".join(ln.split(",")[i] for i in keep) for ln in text) + "\n"
+    )
+    for name, said in (("rows.csv", True), ("sorted.csv", True), ("clean.csv", False)):
+        r = robocal("diagnose", name, "--out", "r.json", cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+        lines = [ln for ln in r.stderr.splitlines() if ORDER in ln]
+        assert len(lines) == int(said), (name, r.stderr)
+        assert ("q1 only rises" in r.stderr) == (name == "sorted.csv"), r.stderr
+    r = robocal("calibrate", "sorted.csv", "--out", "m.json", cwd=tmp_path)
+    assert r.returncode == 0 and ORDER not in r.stderr, r.stderr

@@ -154,3 +154,78 @@ def test_targets_read_prev_q_for_compensation(campaign, tmp_path):
     (tmp_path / "u.csv").write_text("\n".join(ln.rsplit(",", 1)[0] for ln in text) + "\n")
     with pytest.raises(InputError, match=r"u.csv:1: missing column 'prev_q6'"):
         read_targets(tmp_path / "u.csv", cell.robot, part.target_names)
+
+
+def _with_prev(tmp_path, meas, prev_rad, name="m.csv"):
+    """The campaign written with prev_q1..prev_qN fields holding prev_rad's numbers as read
+    (write_campaign prints degrees: radians are written by passing them as degrees)."""
+    write_campaign(tmp_path / name, replace(meas, prev_q=prev_rad))
+    return tmp_path / name
+
+
+def test_prev_q_in_radians_is_refused_naming_line_field_and_unit(campaign, tmp_path):
+    """prev_q1..prev_qN given in radians beside q1..qN in degrees (or the other way round) would
+    turn every backlash's approach toward zero: each reader refuses them in one line, and `robocal
+    predict` and `evaluate` exit non-zero with that line."""
+    from robocal.server.formats.targets_csv import read_targets
+
+    cell, meas, _ = campaign
+    part = replace(meas.subset(np.arange(20)), temp_c=None)
+    path = _with_prev(tmp_path, part, np.deg2rad(part.prev_q))  # the fields: radians
+    for read in (read_campaign, read_poses, lambda p, r: read_targets(p, r, part.target_names)):
+        with pytest.raises(InputError) as e:
+            read(path, cell.robot)
+        msg = str(e.value)
+        assert msg.startswith(f"{path}:") and "column 'prev_q" in msg, msg
+        assert "prev_q1..prev_q6 look like radians" in msg, msg
+        assert msg.endswith("give them in degrees") and "\n" not in msg
+    _, model = workflow.diagnose(cell, replace(meas, time_s=None), screen=False)
+    write_model(tmp_path / "model.json", model)
+    for args in (
+        ("predict", "model.json", "m.csv", "--out", "p.csv"),
+        ("evaluate", "model.json", "m.csv"),
+    ):
+        r = robocal(*args, cwd=tmp_path)
+        assert r.returncode != 0 and "Traceback" not in r.stderr
+        assert r.stderr.count("\n") == 1 and "look like radians" in r.stderr, r.stderr
+    assert not (tmp_path / "p.csv").exists()
+    # joints in radians beside prev_q in degrees: the joints are named
+    q_rad = _with_prev(tmp_path, replace(part, q=np.deg2rad(part.q)), part.prev_q, "q.csv")
+    with pytest.raises(InputError, match=r"column 'q\d+': .* q1..q6 look like radians"):
+        read_poses(q_rad, cell.robot)
+
+
+@pytest.mark.parametrize("poses", [3, 5, 20])
+def test_prev_q_in_degrees_is_never_taken_for_radians(campaign, tmp_path, poses):
+    """The joints an arm comes from, in degrees, pass: the previous pose's (any run of poses),
+    home at zero joints for the first pose or for all of them, or an approach point beside each
+    pose; a pose from home alone never refuses the file."""
+    cell, meas, _ = campaign
+    n = meas.q.shape[1]
+    for start in range(0, meas.n_poses - poses, poses):
+        part = meas.subset(np.arange(start, start + poses))
+        homes = np.zeros_like(part.prev_q)
+        first_home = part.prev_q.copy()
+        first_home[0] = 0.0
+        beside = part.q - np.deg2rad(2.0)
+        beside = np.clip(beside, cell.robot.lower, cell.robot.upper)
+        for prev in (part.prev_q, homes, first_home, beside, np.radians(np.full((poses, n), 1e-3))):
+            path = _with_prev(tmp_path, part, prev)
+            read_campaign(path, cell.robot)  # no InputError
+
+
+def test_files_with_other_columns_pasted_together_name_the_second_header(campaign, tmp_path):
+    """Two halves of a campaign pasted together, the second written with prev_q columns: `robocal
+    calibrate` names the second header line and the columns it adds, not "row has 17 fields";
+    nothing is written."""
+    cell, meas, _ = campaign
+    write_campaign(tmp_path / "a.csv", replace(meas.subset(np.arange(10)), prev_q=None))
+    write_campaign(tmp_path / "b.csv", meas.subset(np.arange(10, 20)))
+    a = (tmp_path / "a.csv").read_text()
+    (tmp_path / "ab.csv").write_text(a + (tmp_path / "b.csv").read_text())
+    second = len(a.splitlines()) + 1
+    r = robocal("calibrate", "ab.csv", "--out", "model.json", cwd=tmp_path)
+    assert r.returncode != 0 and r.stderr.count("\n") == 1, r.stderr
+    assert f"ab.csv:{second}: line {second} is a second header row" in r.stderr, r.stderr
+    assert "other columns (adds 'prev_q1', 'prev_q2', 'prev_q3' and 3 more)" in r.stderr
+    assert not (tmp_path / "model.json").exists()

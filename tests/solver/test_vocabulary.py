@@ -105,3 +105,24 @@ def test_a_gravity_loaded_joint_has_three_compliance_variants_the_middle_one_its
     assert j1 and not any(c.masses is not None and c.keep is not None for c in j1), j1
     mid.coef = np.ones(mid.n_params)
     assert parameters(mid, joint_basis(mid, lay, x, inputs))["gravity_terms"] == mid.n_params
+
+
+def test_which_poses_take_their_approach_from_the_row_order_and_a_sorted_joint():
+    """solver.motion: poses without prev_q take their approach from the rows unless every pose
+    is timed (the first row has none to take); a joint that only rises or falls over 10+ rows
+    says the file was sorted by it."""
+    from robocal.solver.motion import ordered_by_rows, sorted_joint
+
+    rng = np.random.default_rng(1)
+    q = rng.uniform(-1, 1, (12, 3))
+    prev = np.full_like(q, np.nan)
+    assert ordered_by_rows(None, None, 12) == 11
+    assert ordered_by_rows(np.arange(12.0), None, 12) == 0
+    assert ordered_by_rows(np.r_[np.arange(11.0), np.nan], None, 12) == 11  # one pose untimed
+    prev[3:] = 0.0
+    assert ordered_by_rows(None, prev, 12) == 2  # rows 1 and 2
+    assert ordered_by_rows(None, None, 1) == 0
+    assert sorted_joint(q) is None
+    assert sorted_joint(q[np.argsort(q[:, 1])]) == (1, 1)
+    assert sorted_joint(q[np.argsort(-q[:, 2])][:, [0, 2]]) == (1, -1)
+    assert sorted_joint(q[np.argsort(q[:, 0])][:9]) is None  # too few rows to tell

@@ -119,3 +119,34 @@ def test_the_openapi_says_what_the_uploads_refuse(live):
     for url in ("/api/campaigns", "/api/cells"):
         r = c.post(url, content=deep, headers={"content-type": "application/json"})
         assert 400 <= r.status_code < 500 and r.headers["content-type"] == PROBLEM, r.text
+
+
+@pytest.mark.sqlite_only
+def test_an_import_with_prev_q_in_radians_is_refused_naming_its_line_and_field(live):
+    """prev_q1..prev_q6 in radians beside q1..q6 in degrees: a 422 naming the line, the field and
+    the unit, nothing stored."""
+    import math
+
+    c = live.client
+    poses = [
+        [10, 20, -30, 40, 50, 60],
+        [-20, -10, 10, -40, 30, -60],
+        [30, 40, -60, 20, -30, 90],
+        [0, 5, -5, 60, 10, -30],
+    ]
+    head = "pose,q1,q2,q3,q4,q5,q6,target,x,y,z," + ",".join(f"prev_q{i}" for i in range(1, 7))
+    rows = [head]
+    for k, q in enumerate(poses):
+        prev = [math.radians(v) for v in (poses[k - 1] if k else [0] * 6)]
+        rows.append(f"{k + 1},{','.join(map(str, q))},A,1,2,3,{','.join(f'{v:.6f}' for v in prev)}")
+    before = len(c.get("/api/campaigns").json())
+    r = c.post(
+        "/api/measurements/import",
+        content=("\n".join(rows) + "\n").encode(),
+        headers={"content-type": "text/csv"},
+    )
+    p = r.json()
+    assert r.status_code == 422 and r.headers["content-type"] == PROBLEM, r.text
+    assert p["line"] == 3 and "column 'prev_q" in p["detail"], r.text
+    assert "prev_q1..prev_q6 look like radians" in p["detail"], r.text
+    assert len(c.get("/api/campaigns").json()) == before
