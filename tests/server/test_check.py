@@ -170,6 +170,31 @@ def test_a_first_check_far_from_the_model_is_judged_by_its_level(cell, tmp_path)
     assert doc["rms_mm"] > 10 * doc["expected_rms_mm"]
 
 
+def test_a_check_beyond_the_models_tolerance_says_recalibrate(cell, tmp_path):
+    """The model calibrated with --tolerance-mm 0.005 (held out ~0.017 mm: not deployable):
+    every clean check said 'ok' against its own held-out error, though the arm misses what the
+    application needs 3x; judged against the tolerance too, it says recalibrate and why. With
+    --tolerance-mm 0.5 the same checks stay ok."""
+    d, vc, poses = cell
+    for tol, name in ((0.005, "tight"), (0.5, "loose")):
+        r = robocal("calibrate", "train.csv", "--tolerance-mm", tol, "--out", f"{name}.json", cwd=d)
+        assert r.returncode == 0, r.stderr
+    verdicts = {"tight": [], "loose": []}
+    for k in range(3):
+        measured(vc, poses, 300 + k, d / f"clean{k}.csv")
+        for name in verdicts:
+            r = robocal(
+                "check", f"{name}.json", f"clean{k}.csv", "--db", tmp_path / f"{name}.db",
+                "--out", f"{name}{k}.json", cwd=d,
+            )  # fmt: skip
+            doc = json.loads((d / f"{name}{k}.json").read_text())
+            verdicts[name].append((r.returncode, doc["verdict"]))
+            if name == "tight":
+                assert "beyond the tolerance 0.005 mm" in doc["reason"], doc
+    assert verdicts["tight"] == [(3, "recalibrate")] * 3, verdicts
+    assert all(code == 0 and v in ("ok", "watch") for code, v in verdicts["loose"]), verdicts
+
+
 def test_a_pose_name_measured_elsewhere_is_refused(cell, tmp_path):
     """`check --plan 6` and `--plan 8` both name their poses check1, check2 ... at other joints:
     a check of the second plan was compared with the first plan's errors under the same names.
