@@ -161,6 +161,22 @@ def test_bad_input_is_one_line_and_stores_nothing(cell, tmp_path):
             assert con.execute("SELECT count(*) FROM model_check").fetchone() == (0,)
 
 
+def test_an_unwritable_out_is_refused_before_the_check_is_stored(cell, tmp_path):
+    """`--out` under a file (or a folder as --out): the check was appended to the history, then
+    the command failed writing check.json ('robocal: error: x.csv: File exists', exit 1), and
+    run again it was counted twice. Refused first, in one line naming the path; nothing stored."""
+    d, vc, poses = cell
+    db = tmp_path / "h.db"
+    measured(vc, poses, 11, d / "once.csv")
+    for out, said in (("once.csv/check.json", "cannot write"), (".", "is a folder")):
+        r = robocal("check", "model.json", "once.csv", "--db", db, "--out", out, cwd=d)
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert said in r.stderr and "Traceback" not in r.stderr, r.stderr
+    if db.exists():
+        with sqlite3.connect(db) as con:
+            assert con.execute("SELECT count(*) FROM model_check").fetchone() == (0,)
+
+
 def test_a_first_check_far_from_the_model_is_judged_by_its_level(cell, tmp_path):
     d, vc, poses = cell
     measured(bumped(vc, 0.5), poses, 50, d / "moved.csv")
