@@ -37,7 +37,7 @@ def _campaign_only_with_database(args) -> None:
 # The arguments naming files a command reads, and those it writes (flag spellings for messages).
 READS = ("meas", "cell", "model", "poses", "targets", "check", "joints", "db", "check_poses")
 WRITES = {"out": "--out", "model_out": "--model-out", "truth_out": "--truth-out"}
-WRITES["recording"] = "--recording"
+WRITES.update(recording="--recording", json="--json")
 
 
 def refuse_overwriting(args) -> None:
