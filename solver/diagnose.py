@@ -55,6 +55,7 @@ from .variants import (
     another_cause,
     displaced,
     nested_simpler,
+    reversed_stiffness,
     same_effect,
     same_variant,
     simplest_variant,
@@ -355,6 +356,7 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
             own = [c for c in checks if c.worse]
             x, ee = diag.fit(exts)
             wild = implausible_joints(diag.prob.layout, x, ee, diag.prob.q, REFUSED_SPAN_DEG)
+            wild = {**reversed_stiffness(lambda e: diag.fit_plain(e, None), exts, ee), **wild}
             joint = own[0].fold.joint if own else min(wild, default=None)
             if joint is None:
                 return kept, Extrapolation(folds, checks, refused, (x, ee))

@@ -119,7 +119,8 @@ class Refused(Open):
     reason: str | None = Field(
         None,
         description="why it was refused, in a sentence: worse than geometry on region folds, "
-        "or terms that turn their joint by more than any gear or compliance error can",
+        "terms that turn their joint by more than any gear or compliance error can, or a "
+        "compliance whose fitted link masses reverse the sign of its stiffness",
     )
 
 
