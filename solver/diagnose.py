@@ -55,6 +55,7 @@ from .variants import (
     another_cause,
     displaced,
     nested_simpler,
+    reversed_stiffness,
     same_effect,
     same_variant,
     simplest_variant,
@@ -355,6 +356,7 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
             own = [c for c in checks if c.worse]
             x, ee = diag.fit(exts)
             wild = implausible_joints(diag.prob.layout, x, ee, diag.prob.q, REFUSED_SPAN_DEG)
+            wild = {**reversed_stiffness(lambda e: diag.fit_plain(e, None), exts, ee), **wild}
             joint = own[0].fold.joint if own else min(wild, default=None)
             if joint is None:
                 return kept, Extrapolation(folds, checks, refused, (x, ee))
@@ -663,17 +665,19 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     exts = [s[0] for s in steps]
     # the region folds' verdict fitted the kept model on all poses already, from the same start
     x, ee = region.fit if region.fit is not None else diag.fit(exts)
-    if stability is not None and (h := hedge(diag, base, final, x, ee)) is not None:
+    h = hedge(diag, base, final, x, ee) if stability is not None else None
+    if h is not None and stability is not None:  # every figure below is the half-way model's
         x, ee, final, stability = h.x, h.exts, h.cv, replace(stability, half_way=h.gain)
     clock["final_fit"] = time.perf_counter() - t2
     floor = noise.mm
     from .diagnosis_report import build_report, figure_series
 
-    params, report = build_report(diag, steps, base, final, ee, x, floor, noise.source, len(cands))
+    args = (diag, steps, base, final, ee, x, floor, noise.source, len(cands))
+    params, report = build_report(*args, hedged=h)
     from .fit_errors import diagnosis_errors
 
-    errors = diagnosis_errors(diag, x, ee, report, params)  # adds each effect's `uncertainty`
-    figures = figure_series(diag, steps, ee, x)
+    errors = diagnosis_errors(diag, x, ee, report, params, h)  # each effect's `uncertainty`
+    figures = figure_series(diag, steps, ee, x, h)
     from .unexplained import unexplained
 
     report.unexplained = unexplained(final.resid, prob.layout, x, ee, inputs, floor, base.mse)

@@ -61,7 +61,8 @@ class Refused:
     label: str
     joint: int | None
     worse_on: list[str]  # the folds it made worse than geometry, in a phrase each
-    reason: str  # why refused, in a sentence: the folds, or a term no gear can have
+    # why refused, in a sentence: the folds, a term no gear can have, a reversed stiffness
+    reason: str
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "label": self.label}
