@@ -32,6 +32,7 @@ from .gravity import gravity_suspects, most_loaded
 from .hedge import hedge
 from .identify import register
 from .kinematics import Layout, predict_rows
+from .lookalike import hold_lookalikes
 from .motion import visit_order
 from .noise import from_distances as noise_floor  # noqa: F401 (the tests' measured floor)
 from .noise import noise_floor as tracker_noise
@@ -665,7 +666,11 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     exts = [s[0] for s in steps]
     # the region folds' verdict fitted the kept model on all poses already, from the same start
     x, ee = region.fit if region.fit is not None else diag.fit(exts)
-    h = hedge(diag, base, final, x, ee) if stability is not None else None
+    h = None
+    if stability is not None:  # a look-alike parting past the covered range holds the effect
+        ee, held = hold_lookalikes(diag, final, x, ee, cands)
+        stability = replace(stability, held=tuple(held))
+        h = hedge(diag, base, final, x, ee)
     if h is not None and stability is not None:  # every figure below is the half-way model's
         x, ee, final, stability = h.x, h.exts, h.cv, replace(stability, half_way=h.gain)
     clock["final_fit"] = time.perf_counter() - t2

@@ -115,6 +115,8 @@ class StabilityReport:
     replaced: list[str] | None = None
     agreed: str | None = None  # that replacement, in a sentence
     half_way: str | None = None  # why the model is half way to geometry (solver.hedge), if it is
+    # per effect held to the joint range it was fitted on (solver.lookalike), why
+    held: list[str] | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)

@@ -72,6 +72,7 @@ class Stability:
     replaced: tuple = ()  # the whole campaign's causes, when the resamples agreed on another
     agreed_on: tuple | None = None  # that cause (in the final model unless all poses refuse it)
     half_way: float | None = None  # a weak effect's held-out gain, when deployed half way (hedge)
+    held: tuple = ()  # solver.lookalike.Held: effects held to the joint range they were fitted on
 
     def count(self, key: tuple) -> int:
         return sum(key in keys for keys in self.named)
@@ -161,6 +162,7 @@ class Stability:
             replaced=[key_label(k) for k in self.replaced] or None,
             agreed=self.agreed(),
             half_way=self.halved(),
+            held=[h.sentence() for h in self.held] or None,
         )
 
 

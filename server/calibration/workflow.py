@@ -617,7 +617,11 @@ def validate_diagnosis(
     )
     # a small campaign's resamples: the cause taken from them, or their doubt, said here too
     st = report.stability
-    said = tuple(s for s in (st.agreed, st.half_way, st.doubt) if s) if st is not None else ()
+    said = (
+        tuple(s for s in (st.agreed, st.half_way, *(st.held or ()), st.doubt) if s)
+        if st is not None
+        else ()
+    )
     return v.model_copy(update={"warnings": (*v.warnings, *said)}) if said else v
 
 

@@ -176,6 +176,13 @@ class Stability(Open):
         "two fits' cross-covariance, model.json's `uncertainty.estimator` says so); what the "
         "selection judged is each effect's `whole_effect`",
     )
+    held: list[str] | None = Field(
+        None,
+        description="per joint scale or periodic term held to the joint range the campaign "
+        "covered (its value at the range's edge beyond it; model.json's `held_range_deg`): "
+        "look-alikes on its joint that the data cannot tell from it part past that range by "
+        "more than the final held-out RMS, in a sentence each; null when none is held",
+    )
 
 
 class Seconds(Open):
