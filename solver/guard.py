@@ -179,6 +179,7 @@ def judge(
     max_floor_ratio: float | None = MAX_FLOOR_RATIO,
     layout_condition: float | None = None,
     max_fit_mm: float | None = None,
+    nominal_holdout_mm: float | None = None,
 ) -> Validation:
     """The guard: each limit the fit breaks is one reason, naming its figures and the limit.
 
@@ -190,7 +191,9 @@ def judge(
     layout_condition: the identified parameters' condition number on rich poses (None: unknown),
     within LAYOUT_EXCESS of which a condition number past the limit is a warning;
     max_fit_mm: the most a right description of the arm errs once calibrated on its own
-    readings (solver.plausibility), past which the description, not an effect, is at fault.
+    readings (solver.plausibility), past which the description, not an effect, is at fault;
+    nominal_holdout_mm: the nominal arm's own held-out RMS (its base and SMRs registered, nothing
+    of it fitted), None: unknown; a model that predicts new poses worse is never deployable.
     """
     v = Validation(
         fit_rms_mm,
@@ -267,6 +270,7 @@ def judge(
             "fitted on"
         )
     v.reasons += beyond_tolerance(v.holdout_rms_mm, tolerance_mm)
+    v.reasons += worse_than_nominal(v.holdout_rms_mm, nominal_holdout_mm)
     wrong_arm = max_fit_mm is not None and not fit_rms_mm <= max_fit_mm
     if wrong_arm:
         v.reasons.append(
@@ -301,6 +305,22 @@ def beyond_tolerance(holdout_rms_mm: float, tolerance_mm: float | None) -> list[
     return [
         f"held-out error {holdout_rms_mm:.{digits}g} mm RMS exceeds the tolerance "
         f"{tolerance_mm:g} mm"
+    ]
+
+
+def worse_than_nominal(holdout_rms_mm: float, nominal_holdout_mm: float | None) -> list[str]:
+    """The reason a model that predicts new poses worse than the nominal arm gives (none when
+    it does not, or when either figure is unknown)."""
+    if nominal_holdout_mm is None or not np.isfinite(nominal_holdout_mm):
+        return []
+    if not np.isfinite(holdout_rms_mm) or holdout_rms_mm <= nominal_holdout_mm:
+        return []
+    return [
+        f"held-out error {holdout_rms_mm:.4g} mm RMS exceeds the nominal model's own "
+        f"{nominal_holdout_mm:.4g} mm (held out alike; its base and SMRs registered, nothing of "
+        "the arm fitted): the calibration makes the arm less accurate than its nominal "
+        "description (too few or too noisy poses for the parameters fitted, or a wrong "
+        "description)"
     ]
 
 

@@ -45,10 +45,11 @@ def validation_block(
     holdout_method: str = HOLDOUT_METHOD,
     *,
     nominal_rms_mm: float | None,
+    nominal_holdout_rms_mm: float | None = None,
     warnings: list[str],
 ) -> Validation:
     """model.json's `validation` block: the verdict, its reasons, the held-out figure (the
-    headline) beside the fit's and the nominal arm's, the limits applied, the warnings."""
+    headline) beside the fit's and the nominal arm's (on the readings and held out), the limits applied, the warnings."""
     return Validation(
         deployable=v.deployable,
         reasons=tuple(v.reasons),
@@ -71,6 +72,7 @@ def validation_block(
             max_holdout_ratio=guard.MAX_HOLDOUT_RATIO,
         ),
         nominal_rms_mm=nominal_rms_mm,
+        nominal_holdout_rms_mm=nominal_holdout_rms_mm,
         warnings=tuple(warnings),
     )
 

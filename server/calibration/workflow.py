@@ -297,6 +297,7 @@ def verdict(
     from robocal.solver.plausibility import nominal_error_bound
 
     mm, source = floor
+    nominal = nominal_errors(cell, meas)
     v = guard.judge(
         fit_rms_mm=fit_rms_mm,
         holdout=holdout,
@@ -309,6 +310,7 @@ def verdict(
         tolerance_mm=cell.tolerance_mm,
         layout_condition=layout_condition,
         max_fit_mm=nominal_error_bound(cell.robot),
+        nominal_holdout_mm=nominal.holdout_rms_mm,
     )
     v.reasons += implausible(cell, meas, robot) + ([extension_reason] if extension_reason else [])
     return validation_block(
@@ -316,7 +318,8 @@ def verdict(
         list(meas.pose_ids),
         source,
         holdout_method,
-        nominal_rms_mm=nominal_rms(cell, meas),
+        nominal_rms_mm=nominal.fit_rms_mm,
+        nominal_holdout_rms_mm=nominal.holdout_rms_mm,
         warnings=v.warnings + layout_warnings(cell, meas, targets),
     )
 
@@ -344,15 +347,31 @@ def layout_warnings(cell: Cell, meas: Measurements, targets) -> list[str]:
     return [why] if why else []
 
 
-def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
-    """The nominal model's RMS error (mm a reading) on the readings, its base and SMRs
-    registered on them: what the calibration is to improve on."""
+@dataclass
+class NominalErrors:
+    """The nominal model's RMS errors (mm a reading) on a campaign, its base and SMRs registered
+    on it: on those readings and held out (leave-one-pose-out, as a calibration's); None: no
+    figure."""
+
+    fit_rms_mm: float | None
+    holdout_rms_mm: float | None
+
+
+def nominal_errors(cell: Cell, meas: Measurements) -> NominalErrors:
+    """The nominal model's errors on the readings: what the calibration is to improve on, held
+    out as the calibrated model is (a model worse than it is not deployable)."""
     from robocal.solver.calibrate import calibrate
+    from robocal.solver.fit_errors import calibration_figures
 
     nom = calibrate(cell_problem(cell, meas), "nominal")
     r = np.linalg.norm(predict(nom.layout, nom.x, meas.q) - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
-    return json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
+    fit = json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
+    try:
+        held = json_number(calibration_figures(nom, meas.q, meas.xyz)[1].rms())
+    except (np.linalg.LinAlgError, ValueError):  # no pose can be held out: no figure
+        held = None
+    return NominalErrors(fit, held)
 
 
 def model_predict(
