@@ -77,6 +77,32 @@ def validation_block(
     )
 
 
+def late_shift_warning(meas: Measurements, residuals) -> str | None:
+    """The warning the last poses of a campaign give when they miss together, far beyond the
+    others (solver.shift_scan.late_shift: too few poses after it for a base shift to be fitted);
+    residuals (poses, SMRs, 3): the model's prediction minus every reading, the screened-out
+    ones too (a bumped tracker's last poses are gross errors to the screening)."""
+    from robocal.solver.motion import visit_order
+    from robocal.solver.shift_scan import late_shift
+
+    if residuals is None:
+        return None
+    late = late_shift(residuals, visit_order(meas.time_s, meas.n_poses), meas.xyz)
+    if late is None:
+        return None
+    k = len(late.poses)
+    which = ", ".join(str(meas.pose_ids[i]) for i in late.poses)
+    moved = ", ".join(f"{-v:+.3f}" for v in late.shift_mm)
+    said = "the last pose" if k == 1 else f"the last {k} poses"
+    return (
+        f"{said} in time order ({which}) miss{'es' if k == 1 else ''} by {late.miss_mm:.3f} mm "
+        f"together (readings off the model by {moved} mm in the tracker frame; one rigid motion "
+        f"of them leaves {late.left_mm:.3f} mm), {late.miss_mm / late.rest_mm:.0f}x the other "
+        f"poses' {late.rest_mm:.3f} mm: a bumped tracker or moved base? Too few poses after it "
+        "to fit a base shift: measure a few poses again, or leave these out, and recalibrate"
+    )
+
+
 def expected_accuracy(v: guard.Validation, holdout_method: str = HOLDOUT_METHOD) -> str:
     """The accuracy to expect on new poses in one sentence (the held-out RMS and max), and how
     it stands against the tolerance; the verdict's reasons are said apart."""

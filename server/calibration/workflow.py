@@ -13,6 +13,7 @@ from robocal.server.calibration.validation import (
     HOLDOUT_METHOD,
     absurd_errors,
     json_number,
+    late_shift_warning,
     noise_floor,
     tracker_spec,
     validation_block,
@@ -244,7 +245,9 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable
     floor = cal.noise_floor or noise_floor(cell, used)  # a fit not made by run_method has none
-    v = model.validation = validate(cal, cell, used, holdout, errors, acc.rmse, floor)
+    v = model.validation = validate(
+        cal, cell, used, holdout, errors, acc.rmse, floor, late_shift_warning(meas, pred - meas.xyz)
+    )
     if cal.method != "nominal":
         block = geometric_block(
             cal.layout, cal.x, used.q, errors, v.holdout_rms_mm, v.noise_floor_mm
@@ -255,10 +258,18 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
 
 
 def validate(
-    cal: Calibration, cell: Cell, used: Measurements, holdout, errors, fit_rms, floor: NoiseFloor
+    cal: Calibration,
+    cell: Cell,
+    used: Measurements,
+    holdout,
+    errors,
+    fit_rms,
+    floor: NoiseFloor,
+    late: str | None = None,
 ) -> Validation:
     """model.json's `validation` block of a calibration on the readings it used (holdout: its
-    leave-one-pose-out residuals, solver.guard.Holdout; floor: the tracker's noise on them)."""
+    leave-one-pose-out residuals, solver.guard.Holdout; floor: the tracker's noise on them;
+    late: the warning of the campaign's last poses moved together, see verdict)."""
     return verdict(
         cell,
         used,
@@ -270,6 +281,7 @@ def validate(
         free_parameters=effective_parameters(errors.column, cal.shrunk),
         floor=(floor.mm, floor.source),
         layout_condition=cal.layout_condition,
+        late=late,
     )
 
 
@@ -287,12 +299,14 @@ def verdict(
     holdout_method: str = HOLDOUT_METHOD,
     layout_condition: float | None = None,
     extension_reason: str | None = None,
+    late: str | None = None,
 ) -> Validation:
     """The `validation` block of a model fitted on meas, `calibrate`'s and `diagnose`'s alike (one
     model, one verdict): the guard's limits (solver.guard.judge: past MAX_FLOOR_RATIO times the
     noise floor a reason without a tolerance, a warning with one), the physics' (implausible),
     the SMR layout's warnings; layout_condition: the identified parameters' condition number on
-    rich poses (solver.identifiability.layout_condition), None: unknown."""
+    rich poses (solver.identifiability.layout_condition), None: unknown; late: the warning that
+    the campaign's last poses moved together (late_shift_warning: a bumped tracker), None."""
     from robocal.solver import guard
     from robocal.solver.plausibility import nominal_error_bound
 
@@ -320,7 +334,7 @@ def verdict(
         holdout_method,
         nominal_rms_mm=nominal.fit_rms_mm,
         nominal_holdout_rms_mm=nominal.holdout_rms_mm,
-        warnings=v.warnings + layout_warnings(cell, meas, targets),
+        warnings=v.warnings + layout_warnings(cell, meas, targets) + ([late] if late else []),
     )
 
 
@@ -633,6 +647,7 @@ def validate_diagnosis(
         holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
         layout_condition=geometric.layout_condition,
         extension_reason=implausible_extensions(*model.layout(), model.extensions, meas.q),
+        late=late_shift_warning(meas, pred - meas.xyz),
     )
     # a small campaign's resamples: the cause taken from them, or their doubt, said here too
     st = report.stability
