@@ -679,7 +679,8 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     figures = figure_series(diag, steps, ee, x)
     from .unexplained import unexplained
 
-    report.unexplained = unexplained(final.resid, prob.layout, x, ee, inputs, floor, base.mse)
+    args = final.resid, prob.layout, x, ee, inputs, floor, base.mse, noise.source
+    report.unexplained = unexplained(*args)
     clock["total"] = time.perf_counter() - t0
     if screening is not None:
         report.outliers = screening.report(pose_ids, target_names)

@@ -300,13 +300,16 @@ def verdict(
     layout_condition: float | None = None,
     extension_reason: str | None = None,
     late: str | None = None,
+    explained_share: float | None = None,
 ) -> Validation:
     """The `validation` block of a model fitted on meas, `calibrate`'s and `diagnose`'s alike (one
     model, one verdict): the guard's limits (solver.guard.judge: past MAX_FLOOR_RATIO times the
     noise floor a reason without a tolerance, a warning with one), the physics' (implausible),
     the SMR layout's warnings; layout_condition: the identified parameters' condition number on
     rich poses (solver.identifiability.layout_condition), None: unknown; late: the warning that
-    the campaign's last poses moved together (late_shift_warning: a bumped tracker), None."""
+    the campaign's last poses moved together (late_shift_warning: a bumped tracker), None;
+    explained_share: the strongest covariate's share of a diagnosis's remainder (its
+    unexplained block), None."""
     from robocal.solver import guard
     from robocal.solver.plausibility import nominal_error_bound
 
@@ -325,6 +328,7 @@ def verdict(
         layout_condition=layout_condition,
         max_fit_mm=nominal_error_bound(cell.robot),
         nominal_holdout_mm=nominal.holdout_rms_mm,
+        explained_share=explained_share,
     )
     v.reasons += implausible(cell, meas, robot) + ([extension_reason] if extension_reason else [])
     return validation_block(
@@ -632,7 +636,7 @@ def validate_diagnosis(
     pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q, meas.pose_ids)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
-    final = report.final
+    final, left = report.final, report.unexplained
     v = verdict(
         cell,
         meas,
@@ -648,6 +652,7 @@ def validate_diagnosis(
         layout_condition=geometric.layout_condition,
         extension_reason=implausible_extensions(*model.layout(), model.extensions, meas.q),
         late=late_shift_warning(meas, pred - meas.xyz),
+        explained_share=max((c.strength for c in left.covariates), default=None) if left else None,
     )
     # a small campaign's resamples: the cause taken from them, or their doubt, said here too
     st = report.stability
