@@ -4,6 +4,7 @@ whether data it is evaluated on is of its cell."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -13,7 +14,9 @@ from robocal.server.formats.cell_json import Cell
 from robocal.server.formats.model_json import ModelFile
 from robocal.solver import guard
 from robocal.solver.effects import Inputs
+from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
+from robocal.solver.problem import Problem
 
 if TYPE_CHECKING:
     from robocal.solver.metrics import Evaluation
@@ -36,6 +39,39 @@ def noise_floor(cell: Cell, meas: Measurements) -> NoiseFloor:
 def tracker_spec(cell: Cell) -> dict | None:
     """The cell's tracker spec when its cell.json gave one, None for the default."""
     return cell.tracker if cell.tracker_spec_given else None
+
+
+def cell_problem(cell: Cell, meas: Measurements) -> Problem:
+    """The solver's problem of a campaign in a cell: its arm, SMRs, base guess and tracker spec."""
+    targets = cell.target_positions(meas.target_names)
+    return Problem.of(cell.robot, targets, meas, cell.base, tracker_spec=tracker_spec(cell))
+
+
+@dataclass
+class NominalErrors:
+    """The nominal model's RMS errors (mm a reading) on a campaign, its base and SMRs registered
+    on it: on those readings and held out (leave-one-pose-out, as a calibration's); None: no
+    figure."""
+
+    fit_rms_mm: float | None
+    holdout_rms_mm: float | None
+
+
+def nominal_errors(cell: Cell, meas: Measurements) -> NominalErrors:
+    """The nominal model's errors on the readings: what the calibration is to improve on, held
+    out as the calibrated model is (a model worse than it is not deployable)."""
+    from robocal.solver.calibrate import calibrate
+    from robocal.solver.fit_errors import calibration_figures
+
+    nom = calibrate(cell_problem(cell, meas), "nominal")
+    r = np.linalg.norm(predict(nom.layout, nom.x, meas.q) - meas.xyz, axis=-1)
+    r = r[np.isfinite(r)]
+    fit = json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
+    try:
+        held = json_number(calibration_figures(nom, meas.q, meas.xyz)[1].rms())
+    except (np.linalg.LinAlgError, ValueError):  # no pose can be held out: no figure
+        held = None
+    return NominalErrors(fit, held)
 
 
 def validation_block(

@@ -12,10 +12,11 @@ from robocal.server.calibration.units import radian_refusal, units_refusal
 from robocal.server.calibration.validation import (
     HOLDOUT_METHOD,
     absurd_errors,
+    cell_problem,
     json_number,
     late_shift_warning,
     noise_floor,
-    tracker_spec,
+    nominal_errors,
     validation_block,
 )
 from robocal.server.formats.blocks import Diagnosis, Fit, HeldOut, Validation
@@ -55,12 +56,6 @@ PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
 
 class DataError(ValueError):
     """Inputs that are well-formed but do not fit together; the message names the file."""
-
-
-def cell_problem(cell: Cell, meas: Measurements) -> Problem:
-    """The solver's problem of a campaign in a cell: its arm, SMRs, base guess and tracker spec."""
-    targets = cell.target_positions(meas.target_names)
-    return Problem.of(cell.robot, targets, meas, cell.base, tracker_spec=tracker_spec(cell))
 
 
 def load_cell(path) -> Cell:
@@ -363,33 +358,6 @@ def layout_warnings(cell: Cell, meas: Measurements, targets) -> list[str]:
     nominal = cell.target_positions(names)
     why = check_layout(names, nominal, np.asarray(targets, dtype=float)).reason()
     return [why] if why else []
-
-
-@dataclass
-class NominalErrors:
-    """The nominal model's RMS errors (mm a reading) on a campaign, its base and SMRs registered
-    on it: on those readings and held out (leave-one-pose-out, as a calibration's); None: no
-    figure."""
-
-    fit_rms_mm: float | None
-    holdout_rms_mm: float | None
-
-
-def nominal_errors(cell: Cell, meas: Measurements) -> NominalErrors:
-    """The nominal model's errors on the readings: what the calibration is to improve on, held
-    out as the calibrated model is (a model worse than it is not deployable)."""
-    from robocal.solver.calibrate import calibrate
-    from robocal.solver.fit_errors import calibration_figures
-
-    nom = calibrate(cell_problem(cell, meas), "nominal")
-    r = np.linalg.norm(predict(nom.layout, nom.x, meas.q) - meas.xyz, axis=-1)
-    r = r[np.isfinite(r)]
-    fit = json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
-    try:
-        held = json_number(calibration_figures(nom, meas.q, meas.xyz)[1].rms())
-    except (np.linalg.LinAlgError, ValueError):  # no pose can be held out: no figure
-        held = None
-    return NominalErrors(fit, held)
 
 
 def model_predict(
