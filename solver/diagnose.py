@@ -673,9 +673,8 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     if stability is not None:  # a look-alike parting past the covered range holds the effect
         ee, held = hold_lookalikes(diag, final, x, ee, cands)
         stability = replace(stability, held=tuple(held))
-        h = hedge(diag, base, final, x, ee)
-    if h is not None and stability is not None:  # every figure below is the half-way model's
-        x, ee, final, stability = h.x, h.exts, h.cv, replace(stability, half_way=h.gain)
+        if (h := hedge(diag, base, final, x, ee)) is not None:  # every figure below is its
+            x, ee, final, stability = h.x, h.exts, h.cv, replace(stability, half_way=h.gain)
     clock["final_fit"] = time.perf_counter() - t2
     floor = noise.mm
     from .diagnosis_report import build_report, figure_series
@@ -688,8 +687,8 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     figures = figure_series(diag, steps, ee, x, h)
     from .unexplained import unexplained
 
-    args = final.resid, prob.layout, x, ee, inputs, floor, base.mse, noise.source
-    report.unexplained = unexplained(*args)
+    leftover = final.resid, prob.layout, x, ee, inputs, floor, base.mse, noise.source
+    report.unexplained = unexplained(*leftover)
     clock["total"] = time.perf_counter() - t0
     if screening is not None:
         report.outliers = screening.report(pose_ids, target_names)

@@ -269,7 +269,9 @@ def figure_series(diag, steps, exts, x, hedged=None) -> list[EffectFigure]:
             D, _ = point_shift(ext, bases[i][mask], p, ext.kind.origin(ext, layout, x))
         D_res = D - (Q @ (Q.T @ D.ravel())).reshape(D.shape)
         others = [e for j, e in enumerate(exts) if j != i]
-        xb, eb, _ = fit_extended(prob, inputs, diag.x0, diag.free, others, prior=diag.prior)
+        xb, eb, _ = fit_extended(
+            prob, inputs, diag.x0, diag.free, others, start=diag.start, prior=diag.prior
+        )
         r_before = predict_extended(layout, xb, eb, inputs)[mask] - meas
         sig = _signature(ext, Jq, p, layout, x, pose, m)
         expected = np.asarray(sig(-D_res), dtype=float)

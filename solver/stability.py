@@ -201,9 +201,8 @@ def resampled(diag, cands, steps) -> Stability | None:
     subsets = leave_out(m)
     for keep in subsets:
         prob = identify.Problem(diag.prob.layout, diag.prob.q[keep], diag.prob.meas[keep])
-        sub = Diagnoser(
-            prob, diag.x0, diag.free, diag.inputs.subset(keep), prior=diag.prior, shrunk=diag.shrunk
-        )
+        inputs, d = diag.inputs.subset(keep), diag  # fits start where the campaign's did
+        sub = Diagnoser(prob, d.x0, d.free, inputs, prior=d.prior, shrunk=d.shrunk, start=d.start)
         chosen, _, _, _ = select_suspecting(sub, cands, max_effects=1)  # the top cause may differ
         named.append(tuple(effect_key(st[0]) for st in chosen))
     final = tuple(effect_key(st[0]) for st in steps)
