@@ -32,6 +32,7 @@ from .gravity import gravity_suspects, most_loaded
 from .hedge import hedge
 from .identify import register
 from .kinematics import Layout, predict_rows
+from .lookalike import hold_lookalikes
 from .motion import visit_order
 from .noise import from_distances as noise_floor  # noqa: F401 (the tests' measured floor)
 from .noise import noise_floor as tracker_noise
@@ -55,6 +56,7 @@ from .variants import (
     another_cause,
     displaced,
     nested_simpler,
+    reversed_stiffness,
     same_effect,
     same_variant,
     simplest_variant,
@@ -132,8 +134,12 @@ class Diagnoser:
         k_folds=FOLDS,
         prior=None,
         shrunk=None,
+        start=None,
     ):
         self.prob, self.x0, self.free, self.inputs = prob, x0, free, inputs
+        # fits start from the geometric calibration's solution (default x0): from x0 a wrong
+        # description's fits land on branches a twist +-180 deg apart, fold by fold
+        self.start = x0 if start is None else np.asarray(start, dtype=float)
         # the geometric calibration's prior (solver.prior) in every fit, and the parameters
         # (bool mask) it rather than the data pins: free, but no poses are needed for them
         self.prior = prior
@@ -167,13 +173,13 @@ class Diagnoser:
             origin=self.centroid,
         )
 
-    def fit(self, exts, poses=None, fold="all"):
+    def fit(self, exts, poses=None, fold="all", near=None):
+        """The model fitted on the poses, from the fold's warm start, else from `near` (its fit
+        on all poses: a fold's fit must not land on another branch than the model's)."""
         self.fits += 1
         poses = np.arange(self.prob.q.shape[0]) if poses is None else poses
-        start = None
-        if fold in self.warm:
-            # the current model's fit on the same poses: only the new extension starts from zero
-            start, known = self.warm[fold]
+        start, known = self.warm.get(fold, near or (self.start, []))
+        if known:  # the fits' own coefficients; a new extension starts from zero
             exts = [
                 Extension(**{**e.__dict__, "coef": k.coef}) if i < len(known) else e
                 for i, (e, k) in enumerate(zip(exts, known + [None] * len(exts)))
@@ -190,10 +196,9 @@ class Diagnoser:
     def cross_validate(self, exts) -> CV:
         m = self.prob.q.shape[0]
         exts = self._with_shift_time(exts)
-        fits: dict[int | str, tuple] = {}
+        fits: dict[int | str, tuple] = {"all": self.fit(exts)}
         for f, test in enumerate(self.folds):
-            fits[f] = self.fit(exts, np.setdiff1d(np.arange(m), test), fold=f)
-        fits["all"] = self.fit(exts)
+            fits[f] = self.fit(exts, np.setdiff1d(np.arange(m), test), f, fits["all"])
         return self.held_out(fits)
 
     def held_out(self, fits: dict) -> CV:
@@ -258,9 +263,8 @@ class Diagnoser:
         return np.diag(np.sqrt(self.prior.weight[idx])), self.prior.rows(x, idx)
 
     def fit_plain(self, exts, poses):
-        x, ee, _ = fit_extended(
-            self.prob, self.inputs, self.x0, self.free, exts, poses, prior=self.prior
-        )
+        p = self.prob, self.inputs, self.x0, self.free
+        x, ee, _ = fit_extended(*p, exts, poses, start=self.start, prior=self.prior)
         return x, ee
 
     def region_residuals(self, exts, fold: RegionFold) -> tuple[np.ndarray, np.ndarray] | None:
@@ -355,6 +359,7 @@ def extrapolating(diag: Diagnoser, steps: list, log=None) -> tuple[list, Extrapo
             own = [c for c in checks if c.worse]
             x, ee = diag.fit(exts)
             wild = implausible_joints(diag.prob.layout, x, ee, diag.prob.q, REFUSED_SPAN_DEG)
+            wild = {**reversed_stiffness(lambda e: diag.fit_plain(e, None), exts, ee), **wild}
             joint = own[0].fold.joint if own else min(wild, default=None)
             if joint is None:
                 return kept, Extrapolation(folds, checks, refused, (x, ee))
@@ -650,7 +655,8 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     free = np.array([n not in geo.fixed for n in prob.layout.names()])
     clock["setup"] = time.perf_counter() - t0
     shrunk = np.isin(prob.layout.names(), list(geo.shrunk))
-    diag = Diagnoser(prob, x0, free, inputs, prior=geo.prior, shrunk=shrunk)
+    start = prob.layout.expressed(geo.layout, geo.x)
+    diag = Diagnoser(prob, x0, free, inputs, prior=geo.prior, shrunk=shrunk, start=start)
     cands = candidates(prob.layout, x0, inputs)
     steps, base, final, region = select_suspecting(diag, cands, log, clock=clock)
     t_resample = time.perf_counter()
@@ -663,20 +669,26 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
     exts = [s[0] for s in steps]
     # the region folds' verdict fitted the kept model on all poses already, from the same start
     x, ee = region.fit if region.fit is not None else diag.fit(exts)
-    if stability is not None and (h := hedge(diag, base, final, x, ee)) is not None:
-        x, ee, final, stability = h.x, h.exts, h.cv, replace(stability, half_way=h.gain)
+    h = None
+    if stability is not None:  # a look-alike parting past the covered range holds the effect
+        ee, held = hold_lookalikes(diag, final, x, ee, cands)
+        stability = replace(stability, held=tuple(held))
+        if (h := hedge(diag, base, final, x, ee)) is not None:  # every figure below is its
+            x, ee, final, stability = h.x, h.exts, h.cv, replace(stability, half_way=h.gain)
     clock["final_fit"] = time.perf_counter() - t2
     floor = noise.mm
     from .diagnosis_report import build_report, figure_series
 
-    params, report = build_report(diag, steps, base, final, ee, x, floor, noise.source, len(cands))
+    args = (diag, steps, base, final, ee, x, floor, noise.source, len(cands))
+    params, report = build_report(*args, hedged=h)
     from .fit_errors import diagnosis_errors
 
-    errors = diagnosis_errors(diag, x, ee, report, params)  # adds each effect's `uncertainty`
-    figures = figure_series(diag, steps, ee, x)
+    errors = diagnosis_errors(diag, x, ee, report, params, h)  # each effect's `uncertainty`
+    figures = figure_series(diag, steps, ee, x, h)
     from .unexplained import unexplained
 
-    report.unexplained = unexplained(final.resid, prob.layout, x, ee, inputs, floor, base.mse)
+    leftover = final.resid, prob.layout, x, ee, inputs, floor, base.mse, noise.source
+    report.unexplained = unexplained(*leftover)
     clock["total"] = time.perf_counter() - t0
     if screening is not None:
         report.outliers = screening.report(pose_ids, target_names)

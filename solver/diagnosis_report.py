@@ -19,6 +19,7 @@ from .report_blocks import (
     StabilityReport,
 )
 from .screen import Outlier
+from .selection import rmse_gain_interval
 
 
 def parameters(ext: Extension, basis: np.ndarray | None) -> dict:
@@ -26,8 +27,11 @@ def parameters(ext: Extension, basis: np.ndarray | None) -> dict:
     return ext.kind.parameters(ext, basis)
 
 
-def evidence(ext: Extension, p: dict, before: float, after: float, decision: dict, m: int) -> str:
-    """One sentence a person can check against the figure."""
+def evidence(
+    ext: Extension, p: dict, before: float, after: float, decision: dict, m: int, half=None
+) -> str:
+    """One sentence a person can check against the figure. ext and p: the effect as fitted
+    (whole); half: the deployed half-way model's held-out RMS (before, after), when it is."""
     gain = (
         f"modelling it cuts the held-out RMS from {before:.4f} to {after:.4f} mm over {m} poses "
         f"(p = {decision['p_value']:.4f} against this campaign's own null, "
@@ -39,6 +43,11 @@ def evidence(ext: Extension, p: dict, before: float, after: float, decision: dic
             else ")"
         )
     )
+    if half is not None:
+        gain += (
+            f"; the model deploys it at half that size, which cuts the held-out RMS from "
+            f"{half[0]:.4f} to {half[1]:.4f} mm"
+        )
     return ext.kind.evidence(ext, p, gain)
 
 
@@ -53,6 +62,20 @@ class Score:
     model: str  # geometric, then each effect: geometric+joint_compliance(2)
     holdout_rmse_mm: float
     holdout_max_mm: float
+
+
+@dataclass
+class WholeEffect:
+    """An effect deployed half way (solver.hedge), as the selection judged it: fitted whole, its
+    held-out figures, gain interval, parameters and their standard errors."""
+
+    holdout_rmse_before_mm: float
+    holdout_rmse_after_mm: float
+    holdout_max_before_mm: float
+    holdout_max_after_mm: float
+    holdout_gain_interval_mm: list[float]
+    parameters: dict[str, Any]
+    uncertainty: dict[str, Any] | None = None
 
 
 @dataclass
@@ -72,6 +95,7 @@ class Finding:
     alternatives: list[Alternative]  # candidates the data could not tell apart from it
     parameters: dict[str, Any]  # in mm, degrees, ppm and seconds
     uncertainty: dict[str, Any] | None = None  # each parameter's standard error, once estimated
+    whole_effect: WholeEffect | None = None  # the effect fitted whole, when deployed half way
 
     @property
     def harmonic(self) -> int | None:
@@ -88,6 +112,10 @@ class Finding:
         out["alternatives"] = [a.to_json() for a in self.alternatives]
         if self.uncertainty is None:
             del out["uncertainty"]
+        if self.whole_effect is None:
+            del out["whole_effect"]
+        elif self.whole_effect.uncertainty is None:
+            del out["whole_effect"]["uncertainty"]
         return out
 
 
@@ -141,30 +169,45 @@ class Report:
         return out
 
 
-def build_report(diag, steps, base, final, exts, x, floor, source, n_candidates):
+def build_report(diag, steps, base, final, exts, x, floor, source, n_candidates, hedged=None):
     """Each extension's parameters (in step order) and the report: FORMATS.md section 5, plus what
-    a person needs to check it (effects most important first)."""
+    a person needs to check it (effects most important first).
+
+    hedged (solver.hedge.Hedged): the model deployed half way; each effect's figures are then the
+    half-way model's, and what the selection judged (the effect fitted whole) its `whole_effect`.
+    """
     layout, inputs = diag.prob.layout, diag.inputs
     m = diag.prob.q.shape[0]
     effects, params = [], []
-    for (_, before, after, decision), fitted in zip(steps, exts):
+    whole = exts if hedged is None else hedged.whole[1]
+    deployed = [s[1:3] for s in steps] if hedged is None else hedged.steps(diag, steps, base)
+    for (_, before, after, decision), fitted, full, (b, a) in zip(steps, exts, whole, deployed):
         basis = joint_basis(fitted, layout, diag.x0, inputs) if fitted.is_joint else None
-        p = parameters(fitted, basis)
+        p, pw = parameters(fitted, basis), parameters(full, basis)
         params.append(p)
+        interval = list(decision["holdout_gain_interval_mm"])
+        half = None if hedged is None else (b.rmse, a.rmse)
         effects.append(
             Finding(
                 name=fitted.name,
                 joint=None if fitted.joint is None else fitted.joint + 1,
                 own={k: getattr(fitted, k) for k in fitted.kind.report_keys},
-                evidence=evidence(fitted, p, before.rmse, after.rmse, decision, m),
-                holdout_rmse_before_mm=before.rmse,
-                holdout_rmse_after_mm=after.rmse,
-                holdout_max_before_mm=before.maxerr,
-                holdout_max_after_mm=after.maxerr,
-                holdout_gain_interval_mm=list(decision["holdout_gain_interval_mm"]),
+                evidence=evidence(full, pw, before.rmse, after.rmse, decision, m, half),
+                holdout_rmse_before_mm=b.rmse,
+                holdout_rmse_after_mm=a.rmse,
+                holdout_max_before_mm=b.maxerr,
+                holdout_max_after_mm=a.maxerr,
+                holdout_gain_interval_mm=(
+                    interval if hedged is None else list(rmse_gain_interval(b.sq, a.sq, a.n))
+                ),
                 significance=Significance(*(decision[k] for k in ("z", "threshold", "p_value"))),
                 alternatives=decision["alternatives"],
                 parameters=p,
+                whole_effect=None
+                if hedged is None
+                else WholeEffect(
+                    before.rmse, after.rmse, before.maxerr, after.maxerr, interval, pw
+                ),
             )
         )
     effects.sort(key=lambda e: e.holdout_rmse_after_mm - e.holdout_rmse_before_mm)
@@ -194,13 +237,14 @@ class EffectFigure:
     y_label: str
 
 
-def figure_series(diag, steps, exts, x) -> list[EffectFigure]:
+def figure_series(diag, steps, exts, x, hedged=None) -> list[EffectFigure]:
     """For each found effect, its signature in the residuals against its variable, before and after.
 
     `before` is the residual of the model fitted without the effect, `expected` what the effect
     leaves in such residuals once the geometric parameters have absorbed what they can (its
     displacement minus the projection on the geometric Jacobian): the points should follow it.
-    `after` is the residual of the final model.
+    `after` is the residual of the final model (x, exts). hedged: that model is half way
+    (solver.hedge); `expected` is then the effect fitted whole, which the points before follow.
     """
     from .extended import fit_extended
 
@@ -208,13 +252,15 @@ def figure_series(diag, steps, exts, x) -> list[EffectFigure]:
     mask = prob.mask
     pose = np.nonzero(mask)[0]
     m = prob.q.shape[0]
+    meas = prob.meas[mask]
+    r_after = predict_extended(layout, x, exts, inputs)[mask] - meas
+    if hedged is not None:
+        x, exts = hedged.whole
     bases = [prepare(e, layout, diag.x0, inputs) for e in exts]
     dq = joint_offsets(exts, bases, layout.robot.n_joints)
     idx = np.flatnonzero(diag.free)
     p, Jt, Jq = predict_rows(layout, x, inputs.q, mask, idx, dq=dq, joint_cols=True)
     Q, _ = np.linalg.qr(finite(Jt.reshape(len(idx), -1).T, "an effect's Jacobian"))
-    meas = prob.meas[mask]
-    r_after = predict_extended(layout, x, exts, inputs, bases)[mask] - meas
     out = []
     for i, ext in enumerate(exts):
         if ext.is_joint:
@@ -223,7 +269,9 @@ def figure_series(diag, steps, exts, x) -> list[EffectFigure]:
             D, _ = point_shift(ext, bases[i][mask], p, ext.kind.origin(ext, layout, x))
         D_res = D - (Q @ (Q.T @ D.ravel())).reshape(D.shape)
         others = [e for j, e in enumerate(exts) if j != i]
-        xb, eb, _ = fit_extended(prob, inputs, diag.x0, diag.free, others, prior=diag.prior)
+        xb, eb, _ = fit_extended(
+            prob, inputs, diag.x0, diag.free, others, start=diag.start, prior=diag.prior
+        )
         r_before = predict_extended(layout, xb, eb, inputs)[mask] - meas
         sig = _signature(ext, Jq, p, layout, x, pose, m)
         expected = np.asarray(sig(-D_res), dtype=float)

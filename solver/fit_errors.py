@@ -341,16 +341,24 @@ class ExtendedErrors:
     coefficients: list[list[float]]  # per extension, its coefficients' standard errors
 
 
-def diagnosis_errors(diag, x, exts, report: Report, params: list) -> ExtendedErrors:
+def diagnosis_errors(diag, x, exts, report: Report, params: list, hedged=None) -> ExtendedErrors:
     """Standard errors of a diagnosis's final model; each report effect gets its `uncertainty`.
 
     params: per extension, its parameters as the report states them (matched to the report's
-    effects by value, whatever order the report lists them in).
+    effects by value, whatever order the report lists them in). hedged (solver.hedge.Hedged):
+    the final model is half way between geometry and the extended fit; its errors are that
+    model's (hedge.half_way_errors), and each effect's `whole_effect` gets the whole fit's.
     """
     from .diagnosis_report import parameters
     from .effects import joint_basis
 
-    errors = extended_errors(diag.prob, diag.inputs, diag.x0, diag.free, x, exts, diag.prior)
+    if hedged is None:
+        errors = extended_errors(diag.prob, diag.inputs, diag.x0, diag.free, x, exts, diag.prior)
+    else:
+        errors = hedged.errors(diag)
+        # the whole coefficients' covariance: four times the halved ones' (c = 2 x c/2)
+        whole = copy.copy(errors)
+        whole.cov = 4.0 * errors.cov
     lay = diag.prob.layout
     effects = []
     for i, (ext, p) in enumerate(zip(exts, params)):
@@ -360,6 +368,9 @@ def diagnosis_errors(diag, x, exts, report: Report, params: list) -> ExtendedErr
         e = next((e for e in report.effects if e.parameters == p and e.uncertainty is None), None)
         if e is not None:
             e.uncertainty = u
+            if hedged is not None and e.whole_effect is not None:
+                full = hedged.whole[1]
+                e.whole_effect.uncertainty = effect_uncertainty(whole, full, i, basis, parameters)
     coefs = [
         np.sqrt(np.clip(np.diag(coef_covariance(errors, exts, i)), 0.0, None)).tolist()
         for i in range(len(exts))

@@ -179,6 +179,8 @@ def judge(
     max_floor_ratio: float | None = MAX_FLOOR_RATIO,
     layout_condition: float | None = None,
     max_fit_mm: float | None = None,
+    nominal_holdout_mm: float | None = None,
+    explained_share: float | None = None,
 ) -> Validation:
     """The guard: each limit the fit breaks is one reason, naming its figures and the limit.
 
@@ -190,7 +192,11 @@ def judge(
     layout_condition: the identified parameters' condition number on rich poses (None: unknown),
     within LAYOUT_EXCESS of which a condition number past the limit is a warning;
     max_fit_mm: the most a right description of the arm errs once calibrated on its own
-    readings (solver.plausibility), past which the description, not an effect, is at fault.
+    readings (solver.plausibility), past which the description, not an effect, is at fault;
+    nominal_holdout_mm: the nominal arm's own held-out RMS (its base and SMRs registered, nothing
+    of it fitted), None: unknown; a model that predicts new poses worse is never deployable;
+    explained_share: the share of the held-out remainder a covariate explains on poses left out
+    (a diagnosis's unexplained block), None: not measured; see lacking_effect.
     """
     v = Validation(
         fit_rms_mm,
@@ -267,6 +273,7 @@ def judge(
             "fitted on"
         )
     v.reasons += beyond_tolerance(v.holdout_rms_mm, tolerance_mm)
+    v.reasons += worse_than_nominal(v.holdout_rms_mm, nominal_holdout_mm)
     wrong_arm = max_fit_mm is not None and not fit_rms_mm <= max_fit_mm
     if wrong_arm:
         v.reasons.append(
@@ -277,7 +284,7 @@ def judge(
         )
     # else the excess is the fit's or the description's, said above
     if not overfit and not wrong_arm and equations >= need:
-        lacking = lacking_effect(v, max_floor_ratio)
+        lacking = lacking_effect(v, max_floor_ratio, explained_share)
         if tolerance_mm is None:
             v.reasons += lacking
         else:
@@ -304,20 +311,54 @@ def beyond_tolerance(holdout_rms_mm: float, tolerance_mm: float | None) -> list[
     ]
 
 
-def lacking_effect(v: Validation, max_floor_ratio: float | None) -> list[str]:
+def worse_than_nominal(holdout_rms_mm: float, nominal_holdout_mm: float | None) -> list[str]:
+    """The reason a model that predicts new poses worse than the nominal arm gives (none when
+    it does not, or when either figure is unknown)."""
+    if nominal_holdout_mm is None or not np.isfinite(nominal_holdout_mm):
+        return []
+    if not np.isfinite(holdout_rms_mm) or holdout_rms_mm <= nominal_holdout_mm:
+        return []
+    return [
+        f"held-out error {holdout_rms_mm:.4g} mm RMS exceeds the nominal model's own "
+        f"{nominal_holdout_mm:.4g} mm (held out alike; its base and SMRs registered, nothing of "
+        "the arm fitted): the calibration makes the arm less accurate than its nominal "
+        "description (too few or too noisy poses for the parameters fitted, or a wrong "
+        "description)"
+    ]
+
+
+def lacking_effect(
+    v: Validation, max_floor_ratio: float | None, explained_share: float | None = None
+) -> list[str]:
     """What a held-out error far above the noise floor says: the model lacks an effect; without
-    a tolerance, the accuracy to expect and how to judge it against the application's need."""
+    a tolerance, the accuracy to expect and how to judge it against the application's need.
+
+    explained_share s: the share of the held-out remainder a covariate explains on poses left
+    out; noise, which nothing predicts, holds at most the rest, rms sqrt(1 - s). Far below a
+    stated floor (a tracker spec's MPE, which the readings may beat) that bound is the data's
+    own word: the remainder is judged against it too."""
     rms, floor = v.holdout_rms_mm, v.noise_floor_mm
     if not max_floor_ratio or not floor or not np.isfinite(rms):
         return []
     ratio = rms / floor
-    if ratio <= max_floor_ratio:
+    share = explained_share or 0.0
+    room = rms * np.sqrt(max(1.0 - share, 0.0)) if share else floor
+    if ratio > max_floor_ratio:
+        said = (
+            f"held-out error {rms:.3g} mm is {ratio:.3g}x the noise floor {floor:.3f} mm (more "
+            f"than {max_floor_ratio:g}x): an effect the model lacks (a diagnosis's unexplained "
+            "block says what the remainder follows)"
+        )
+    elif room < floor and rms > max_floor_ratio * room:
+        said = (
+            f"held-out error {rms:.3g} mm is within {max_floor_ratio:g}x the stated noise floor "
+            f"{floor:.3f} mm, but {100 * share:.0f}% of it follows a covariate on poses "
+            f"left out (the diagnosis's unexplained block), which leaves noise at most "
+            f"{room:.3g} mm, {rms / room:.3g}x less: the floor overstates the readings' noise "
+            "and the model lacks an effect"
+        )
+    else:
         return []
-    said = (
-        f"held-out error {rms:.3g} mm is {ratio:.3g}x the noise floor {floor:.3f} mm (more than "
-        f"{max_floor_ratio:g}x): an effect the model lacks (a diagnosis's unexplained block says "
-        "what the remainder follows)"
-    )
     if v.tolerance_mm is not None:
         return [said]
     return [

@@ -232,7 +232,10 @@ def structural_r(layout: Layout, x, q, rows, weight) -> np.ndarray:
 
 
 def condition_number(J: np.ndarray) -> float:
-    """Condition number of J after scaling every column to unit norm."""
+    """Condition number of J after scaling every column to unit norm; NaN without a column
+    (nothing identified: every parameter the data moves shrunk toward nominal)."""
+    if J.shape[-1] == 0:
+        return float("nan")
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
     s = np.linalg.svd(finite(J / norms, "the identification Jacobian"), compute_uv=False)

@@ -123,6 +123,20 @@ class Layout:
         tx, ty, tz, rz, ry, rx = x[self.base_slice]
         return self.base_ref @ translation(tx, ty, tz) @ rot(2, rz) @ rot(1, ry) @ rot(0, rx)
 
+    def expressed(self, other: Layout, x) -> np.ndarray:
+        """x of `other` (the same robot and SMRs, another base_ref) in this layout: the same
+        arm, base and SMRs, its base entries taken against this base_ref."""
+        M = np.linalg.solve(self.base_ref, other.base(x))
+        R = M[:3, :3]
+        y = np.array(x, dtype=float)
+        y[self.base_slice] = (
+            *M[:3, 3],
+            np.arctan2(R[1, 0], R[0, 0]),
+            np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)),
+            np.arctan2(R[2, 1], R[2, 2]),
+        )
+        return y
+
     def rebased(self, x) -> tuple[Layout, np.ndarray]:
         """An equivalent layout whose base_ref absorbs x's base entries (which become zero)."""
         lay = Layout(self.robot, self.base(x), self.target_names)

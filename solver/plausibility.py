@@ -246,6 +246,10 @@ def registered_rms(robot: Robot, targets: np.ndarray, q: np.ndarray, xyz: np.nda
     return float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
 
 
+# An angle changed by half a turn within this many degrees: an axis reversed in the description.
+HALF_TURN_DEG = 5.0
+
+
 @dataclass(frozen=True)
 class ParameterChange:
     """A geometric parameter changed from nominal by more than an arm of this size can have."""
@@ -277,6 +281,14 @@ class ChangeCheck:
         text += "".join(f", {c.name} by {_signed(c)}" for c in shown)
         if len(rest) > len(shown):
             text += f" and {len(rest) - len(shown)} more"
+        if any(
+            c.unit == "deg" and abs(abs(c.change) - 180.0) < HALF_TURN_DEG for c in self.changes
+        ):
+            # a twist or an offset half a turn away: the same axis, reversed
+            return text + (
+                ": the cell's robot is not the arm measured (a twist's or a joint's sign in its "
+                "DH table, a joint turning the other way); check the nominal geometry"
+            )
         return text + ": check the units of the data and the nominal geometry"
 
 
@@ -296,6 +308,7 @@ def implausible_changes(nominal: Robot, identified: Robot) -> ChangeCheck:
                 out.append(ParameterChange(name, float(d), length_limit, "mm"))
         else:
             limit = OFFSET_CHANGE_DEG if kind == "theta" else TWIST_CHANGE_DEG
+            d = (d + np.pi) % (2 * np.pi) - np.pi  # a full turn changes no angle
             if abs(np.rad2deg(d)) > limit:
                 out.append(ParameterChange(name, float(np.rad2deg(d)), limit, "deg"))
     out.sort(key=lambda c: -abs(c.change) / c.limit)

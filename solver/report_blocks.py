@@ -61,7 +61,8 @@ class Refused:
     label: str
     joint: int | None
     worse_on: list[str]  # the folds it made worse than geometry, in a phrase each
-    reason: str  # why refused, in a sentence: the folds, or a term no gear can have
+    # why refused, in a sentence: the folds, a term no gear can have, a reversed stiffness
+    reason: str
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "label": self.label}
@@ -114,6 +115,8 @@ class StabilityReport:
     replaced: list[str] | None = None
     agreed: str | None = None  # that replacement, in a sentence
     half_way: str | None = None  # why the model is half way to geometry (solver.hedge), if it is
+    # per effect held to the joint range it was fitted on (solver.lookalike), why
+    held: list[str] | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)

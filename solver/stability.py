@@ -72,6 +72,7 @@ class Stability:
     replaced: tuple = ()  # the whole campaign's causes, when the resamples agreed on another
     agreed_on: tuple | None = None  # that cause (in the final model unless all poses refuse it)
     half_way: float | None = None  # a weak effect's held-out gain, when deployed half way (hedge)
+    held: tuple = ()  # solver.lookalike.Held: effects held to the joint range they were fitted on
 
     def count(self, key: tuple) -> int:
         return sum(key in keys for keys in self.named)
@@ -161,6 +162,7 @@ class Stability:
             replaced=[key_label(k) for k in self.replaced] or None,
             agreed=self.agreed(),
             half_way=self.halved(),
+            held=[h.sentence() for h in self.held] or None,
         )
 
 
@@ -199,9 +201,8 @@ def resampled(diag, cands, steps) -> Stability | None:
     subsets = leave_out(m)
     for keep in subsets:
         prob = identify.Problem(diag.prob.layout, diag.prob.q[keep], diag.prob.meas[keep])
-        sub = Diagnoser(
-            prob, diag.x0, diag.free, diag.inputs.subset(keep), prior=diag.prior, shrunk=diag.shrunk
-        )
+        inputs, d = diag.inputs.subset(keep), diag  # fits start where the campaign's did
+        sub = Diagnoser(prob, d.x0, d.free, inputs, prior=d.prior, shrunk=d.shrunk, start=d.start)
         chosen, _, _, _ = select_suspecting(sub, cands, max_effects=1)  # the top cause may differ
         named.append(tuple(effect_key(st[0]) for st in chosen))
     final = tuple(effect_key(st[0]) for st in steps)

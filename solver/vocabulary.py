@@ -87,6 +87,9 @@ class Extension:
     # compliance under the nominal mass model: fixed weights of the raw gravity basis (one
     # stiffness fitted), instead of the kept columns' masses fitted one by one
     masses: np.ndarray | None = None
+    # scale, periodic: the joint range (lo, hi) rad the effect is held to, at its edge value
+    # beyond it, when its look-alikes part past the range it was fitted on (solver.lookalike)
+    held: np.ndarray | None = None
 
     @property
     def kind(self):
@@ -169,7 +172,34 @@ class Effect:
         return Jq[ext.joint], MDEG_PER_RAD
 
 
-class JointPeriodic(Effect):
+class HeldJointEffect(Effect):
+    """A function of its own joint's angle, which may be held to a joint range (Extension.held):
+    past it the effect keeps its value at the range's edge. Stored as `held_range_deg`."""
+
+    KEY = "held_range_deg"
+
+    def angle(self, ext, inputs) -> np.ndarray:
+        """Its joint's angle (m,) rad, within the held range when there is one."""
+        q = inputs.q[:, ext.joint]
+        return q if ext.held is None else np.clip(q, ext.held[0], ext.held[1])
+
+    def to_json(self, ext):
+        out = super().to_json(ext)
+        if ext.held is not None:
+            out[self.KEY] = np.degrees(np.asarray(ext.held, dtype=float)).tolist()
+        return out
+
+    def from_json(self, read):
+        out = super().from_json(read)
+        if read.has(self.KEY):
+            lo_hi = read.vector(self.KEY)
+            if len(lo_hi) != 2 or not lo_hi[0] <= lo_hi[1]:
+                raise read.error(self.KEY, "expected [low, high] degrees, low <= high")
+            out["held"] = np.radians(lo_hi)
+        return out
+
+
+class JointPeriodic(HeldJointEffect):
     """dq_j = a sin(k q_j) + b cos(k q_j): a cyclic transmission or encoder error."""
 
     name, params, stored, report_keys = (
@@ -184,7 +214,7 @@ class JointPeriodic(Effect):
         return f"{self.name}({ext.joint + 1},k={ext.harmonic})"
 
     def basis(self, ext, layout, x, inputs):
-        kq = ext.harmonic * inputs.q[:, ext.joint]
+        kq = ext.harmonic * self.angle(ext, inputs)
         return np.stack([np.sin(kq), np.cos(kq)], axis=1)
 
     def candidates(self, layout, x, inputs):
@@ -210,13 +240,13 @@ class JointPeriodic(Effect):
         )
 
 
-class JointScale(Effect):
+class JointScale(HeldJointEffect):
     """dq_j = s q_j: a gear-ratio or encoder scale error."""
 
     name = "joint_scale"
 
     def basis(self, ext, layout, x, inputs):
-        return inputs.q[:, ext.joint, None]
+        return self.angle(ext, inputs)[:, None]
 
     def parameters(self, ext, basis):
         return {"scale_ppm": float(ext.coef[0] * 1e6)}

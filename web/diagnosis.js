@@ -204,7 +204,7 @@ async function showDiagnosis(d) {
   // a small campaign whose resamples name another cause: the cause is in doubt, said so; the
   // cause taken from the resamples in the campaign's own choice's place, said first
   const st = report.stability;
-  const said = [st?.agreed, st?.half_way, st?.doubt].filter(Boolean).join(" ");
+  const said = [st?.agreed, st?.half_way, ...(st?.held ?? []), st?.doubt].filter(Boolean).join(" ");
   Object.assign($("d-doubt"), { hidden: !said, textContent: said });
   showUnexplained(report.unexplained);
   showExtrapolation(report.extrapolation);

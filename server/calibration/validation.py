@@ -4,6 +4,7 @@ whether data it is evaluated on is of its cell."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -13,7 +14,9 @@ from robocal.server.formats.cell_json import Cell
 from robocal.server.formats.model_json import ModelFile
 from robocal.solver import guard
 from robocal.solver.effects import Inputs
+from robocal.solver.kinematics import predict
 from robocal.solver.measurements import Measurements
+from robocal.solver.problem import Problem
 
 if TYPE_CHECKING:
     from robocal.solver.metrics import Evaluation
@@ -38,6 +41,39 @@ def tracker_spec(cell: Cell) -> dict | None:
     return cell.tracker if cell.tracker_spec_given else None
 
 
+def cell_problem(cell: Cell, meas: Measurements) -> Problem:
+    """The solver's problem of a campaign in a cell: its arm, SMRs, base guess and tracker spec."""
+    targets = cell.target_positions(meas.target_names)
+    return Problem.of(cell.robot, targets, meas, cell.base, tracker_spec=tracker_spec(cell))
+
+
+@dataclass
+class NominalErrors:
+    """The nominal model's RMS errors (mm a reading) on a campaign, its base and SMRs registered
+    on it: on those readings and held out (leave-one-pose-out, as a calibration's); None: no
+    figure."""
+
+    fit_rms_mm: float | None
+    holdout_rms_mm: float | None
+
+
+def nominal_errors(cell: Cell, meas: Measurements) -> NominalErrors:
+    """The nominal model's errors on the readings: what the calibration is to improve on, held
+    out as the calibrated model is (a model worse than it is not deployable)."""
+    from robocal.solver.calibrate import calibrate
+    from robocal.solver.fit_errors import calibration_figures
+
+    nom = calibrate(cell_problem(cell, meas), "nominal")
+    r = np.linalg.norm(predict(nom.layout, nom.x, meas.q) - meas.xyz, axis=-1)
+    r = r[np.isfinite(r)]
+    fit = json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
+    try:
+        held = json_number(calibration_figures(nom, meas.q, meas.xyz)[1].rms())
+    except (np.linalg.LinAlgError, ValueError):  # no pose can be held out: no figure
+        held = None
+    return NominalErrors(fit, held)
+
+
 def validation_block(
     v: guard.Validation,
     pose_ids,
@@ -45,10 +81,11 @@ def validation_block(
     holdout_method: str = HOLDOUT_METHOD,
     *,
     nominal_rms_mm: float | None,
+    nominal_holdout_rms_mm: float | None = None,
     warnings: list[str],
 ) -> Validation:
     """model.json's `validation` block: the verdict, its reasons, the held-out figure (the
-    headline) beside the fit's and the nominal arm's, the limits applied, the warnings."""
+    headline) beside the fit's and the nominal arm's (on the readings and held out), the limits applied, the warnings."""
     return Validation(
         deployable=v.deployable,
         reasons=tuple(v.reasons),
@@ -71,7 +108,34 @@ def validation_block(
             max_holdout_ratio=guard.MAX_HOLDOUT_RATIO,
         ),
         nominal_rms_mm=nominal_rms_mm,
+        nominal_holdout_rms_mm=nominal_holdout_rms_mm,
         warnings=tuple(warnings),
+    )
+
+
+def late_shift_warning(meas: Measurements, residuals) -> str | None:
+    """The warning the last poses of a campaign give when they miss together, far beyond the
+    others (solver.shift_scan.late_shift: too few poses after it for a base shift to be fitted);
+    residuals (poses, SMRs, 3): the model's prediction minus every reading, the screened-out
+    ones too (a bumped tracker's last poses are gross errors to the screening)."""
+    from robocal.solver.motion import visit_order
+    from robocal.solver.shift_scan import late_shift
+
+    if residuals is None:
+        return None
+    late = late_shift(residuals, visit_order(meas.time_s, meas.n_poses), meas.xyz)
+    if late is None:
+        return None
+    k = len(late.poses)
+    which = ", ".join(str(meas.pose_ids[i]) for i in late.poses)
+    moved = ", ".join(f"{-v:+.3f}" for v in late.shift_mm)
+    said = "the last pose" if k == 1 else f"the last {k} poses"
+    return (
+        f"{said} in time order ({which}) miss{'es' if k == 1 else ''} by {late.miss_mm:.3f} mm "
+        f"together (readings off the model by {moved} mm in the tracker frame; one rigid motion "
+        f"of them leaves {late.left_mm:.3f} mm), {late.miss_mm / late.rest_mm:.0f}x the other "
+        f"poses' {late.rest_mm:.3f} mm: a bumped tracker or moved base? Too few poses after it "
+        "to fit a base shift: measure a few poses again, or leave these out, and recalibrate"
     )
 
 

@@ -12,9 +12,11 @@ from robocal.server.calibration.units import radian_refusal, units_refusal
 from robocal.server.calibration.validation import (
     HOLDOUT_METHOD,
     absurd_errors,
+    cell_problem,
     json_number,
+    late_shift_warning,
     noise_floor,
-    tracker_spec,
+    nominal_errors,
     validation_block,
 )
 from robocal.server.formats.blocks import Diagnosis, Fit, HeldOut, Validation
@@ -55,12 +57,6 @@ PAPER_METHODS = ("nominal", "ls-single", "ls-sum", "minimax", "ls-pose")
 
 class DataError(ValueError):
     """Inputs that are well-formed but do not fit together; the message names the file."""
-
-
-def cell_problem(cell: Cell, meas: Measurements) -> Problem:
-    """The solver's problem of a campaign in a cell: its arm, SMRs, base guess and tracker spec."""
-    targets = cell.target_positions(meas.target_names)
-    return Problem.of(cell.robot, targets, meas, cell.base, tracker_spec=tracker_spec(cell))
 
 
 def load_cell(path) -> Cell:
@@ -245,7 +241,9 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     # the nominal arm, registered, is judged as any calibration: a model without a verdict is
     # never deployable
     floor = cal.noise_floor or noise_floor(cell, used)  # a fit not made by run_method has none
-    v = model.validation = validate(cal, cell, used, holdout, errors, acc.rmse, floor)
+    v = model.validation = validate(
+        cal, cell, used, holdout, errors, acc.rmse, floor, late_shift_warning(meas, pred - meas.xyz)
+    )
     if cal.method != "nominal":
         block = geometric_block(
             cal.layout, cal.x, used.q, errors, v.holdout_rms_mm, v.noise_floor_mm
@@ -256,10 +254,18 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
 
 
 def validate(
-    cal: Calibration, cell: Cell, used: Measurements, holdout, errors, fit_rms, floor: NoiseFloor
+    cal: Calibration,
+    cell: Cell,
+    used: Measurements,
+    holdout,
+    errors,
+    fit_rms,
+    floor: NoiseFloor,
+    late: str | None = None,
 ) -> Validation:
     """model.json's `validation` block of a calibration on the readings it used (holdout: its
-    leave-one-pose-out residuals, solver.guard.Holdout; floor: the tracker's noise on them)."""
+    leave-one-pose-out residuals, solver.guard.Holdout; floor: the tracker's noise on them;
+    late: the warning of the campaign's last poses moved together, see verdict)."""
     return verdict(
         cell,
         used,
@@ -271,6 +277,7 @@ def validate(
         free_parameters=effective_parameters(errors.column, cal.shrunk),
         floor=(floor.mm, floor.source),
         layout_condition=cal.layout_condition,
+        late=late,
     )
 
 
@@ -288,16 +295,22 @@ def verdict(
     holdout_method: str = HOLDOUT_METHOD,
     layout_condition: float | None = None,
     extension_reason: str | None = None,
+    late: str | None = None,
+    explained_share: float | None = None,
 ) -> Validation:
     """The `validation` block of a model fitted on meas, `calibrate`'s and `diagnose`'s alike (one
     model, one verdict): the guard's limits (solver.guard.judge: past MAX_FLOOR_RATIO times the
     noise floor a reason without a tolerance, a warning with one), the physics' (implausible),
     the SMR layout's warnings; layout_condition: the identified parameters' condition number on
-    rich poses (solver.identifiability.layout_condition), None: unknown."""
+    rich poses (solver.identifiability.layout_condition), None: unknown; late: the warning that
+    the campaign's last poses moved together (late_shift_warning: a bumped tracker), None;
+    explained_share: the strongest covariate's share of a diagnosis's remainder (its
+    unexplained block), None."""
     from robocal.solver import guard
     from robocal.solver.plausibility import nominal_error_bound
 
     mm, source = floor
+    nominal = nominal_errors(cell, meas)
     v = guard.judge(
         fit_rms_mm=fit_rms_mm,
         holdout=holdout,
@@ -310,6 +323,8 @@ def verdict(
         tolerance_mm=cell.tolerance_mm,
         layout_condition=layout_condition,
         max_fit_mm=nominal_error_bound(cell.robot),
+        nominal_holdout_mm=nominal.holdout_rms_mm,
+        explained_share=explained_share,
     )
     idle = idle_reason(idle_joints(meas.q[used := np.any(meas.mask, axis=1)]), int(used.sum()))
     v.reasons += implausible(cell, meas, robot) + [r for r in (idle, extension_reason) if r]
@@ -318,8 +333,9 @@ def verdict(
         list(meas.pose_ids),
         source,
         holdout_method,
-        nominal_rms_mm=nominal_rms(cell, meas),
-        warnings=v.warnings + layout_warnings(cell, meas, targets),
+        nominal_rms_mm=nominal.fit_rms_mm,
+        nominal_holdout_rms_mm=nominal.holdout_rms_mm,
+        warnings=v.warnings + layout_warnings(cell, meas, targets) + ([late] if late else []),
     )
 
 
@@ -344,17 +360,6 @@ def layout_warnings(cell: Cell, meas: Measurements, targets) -> list[str]:
     nominal = cell.target_positions(names)
     why = check_layout(names, nominal, np.asarray(targets, dtype=float)).reason()
     return [why] if why else []
-
-
-def nominal_rms(cell: Cell, meas: Measurements) -> float | None:
-    """The nominal model's RMS error (mm a reading) on the readings, its base and SMRs
-    registered on them: what the calibration is to improve on."""
-    from robocal.solver.calibrate import calibrate
-
-    nom = calibrate(cell_problem(cell, meas), "nominal")
-    r = np.linalg.norm(predict(nom.layout, nom.x, meas.q) - meas.xyz, axis=-1)
-    r = r[np.isfinite(r)]
-    return json_number(float(np.sqrt(np.mean(r * r)))) if r.size else None
 
 
 def model_predict(
@@ -601,7 +606,7 @@ def validate_diagnosis(
     pred = model_predict(model, meas.q, meas.time_s, meas.temp_c, meas.prev_q, meas.pose_ids)
     r = np.linalg.norm(pred - meas.xyz, axis=-1)
     r = r[np.isfinite(r)]
-    final = report.final
+    final, left = report.final, report.unexplained
     v = verdict(
         cell,
         meas,
@@ -616,10 +621,16 @@ def validate_diagnosis(
         holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
         layout_condition=geometric.layout_condition,
         extension_reason=implausible_extensions(*model.layout(), model.extensions, meas.q),
+        late=late_shift_warning(meas, pred - meas.xyz),
+        explained_share=max((c.strength for c in left.covariates), default=None) if left else None,
     )
     # a small campaign's resamples: the cause taken from them, or their doubt, said here too
     st = report.stability
-    said = tuple(s for s in (st.agreed, st.half_way, st.doubt) if s) if st is not None else ()
+    said = (
+        tuple(s for s in (st.agreed, st.half_way, *(st.held or ()), st.doubt) if s)
+        if st is not None
+        else ()
+    )
     return v.model_copy(update={"warnings": (*v.warnings, *said)}) if said else v
 
 

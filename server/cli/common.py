@@ -228,7 +228,7 @@ def _print_diagnosis(doc: ReportDoc) -> None:
     # warnings below carry them when there is a verdict)
     warned = Validation.of(doc.validation).warnings if doc.validation is not None else ()
     st = doc.stability
-    for said in (st.agreed, st.half_way, st.doubt) if st else ():
+    for said in (st.agreed, st.half_way, *(st.held or ()), st.doubt) if st else ():
         if said and said not in warned:
             console.print(f"[yellow]{said}[/yellow]")
     if doc.validation is not None:  # the final model, judged as a calibration is

@@ -288,7 +288,13 @@ def validation_lines(v: Validation) -> list[str]:
         out.append(
             f"[bold]held-out RMS {_mm(v.holdout_rms_mm)}[/bold] ({_holdout_kind(v)}, max "
             f"{_mm(v.holdout_max_mm)}); fit RMS {_mm(v.fit_rms_mm)}"
-            + (f" (nominal {_mm(v.nominal_rms_mm)})" if v.nominal_rms_mm else "")
+            + (f" (nominal {_mm(v.nominal_rms_mm)}" if v.nominal_rms_mm else "")
+            + (
+                f", {_mm(v.nominal_holdout_rms_mm)} held out"
+                if v.nominal_rms_mm and v.nominal_holdout_rms_mm
+                else ""
+            )
+            + (")" if v.nominal_rms_mm else "")
             + "; condition number "
             f"{_f(v.condition_number, 3)}; noise floor {_mm(v.noise_floor_mm)}"
             + (f" (from the {v.noise_floor_source})" if v.noise_floor_source else "")

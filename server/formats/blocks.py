@@ -235,6 +235,11 @@ class Validation(Block):
     nominal_rms_mm: Figure | None = Field(
         None, description="the nominal model's RMS on the fitted readings, base and SMRs registered"
     )
+    nominal_holdout_rms_mm: Figure | None = Field(
+        None,
+        description="the nominal model's held-out RMS (leave-one-pose-out): a model past it is "
+        "not deployable",
+    )
     warnings: tuple[Text, ...] = Field(
         (), description="what deserves a look but leaves the model deployable, one sentence each"
     )

@@ -24,8 +24,31 @@ class Alternative(Open):
     holdout_rmse_mm: float
 
 
+class WholeEffect(Open):
+    """An effect the model deploys at half its fitted size (`stability.half_way`), as the
+    selection judged it: fitted whole."""
+
+    holdout_rmse_before_mm: float
+    holdout_rmse_after_mm: float = Field(
+        description="the model with the effect whole: the figure that selected it"
+    )
+    holdout_max_before_mm: float | None = None
+    holdout_max_after_mm: float | None = None
+    holdout_gain_interval_mm: list[float] | None = Field(None, min_length=2, max_length=2)
+    parameters: dict[str, Figure | list[Figure] | str | None] = Field(
+        description="the effect's parameters at its whole fitted size"
+    )
+    uncertainty: dict[str, Figure | list[Figure] | None] | None = Field(
+        None, description="their standard errors, the extended fit's own"
+    )
+
+
 class Effect(Open):
-    """An effect judged real, with the held-out evidence for it."""
+    """An effect judged real, with the held-out evidence for it. Every figure is the deployed
+    model's: with the model half way (`stability.half_way`), the held-out figures are the
+    half-way model's up to this effect, the parameters the effect at half its fitted size with
+    that model's standard errors, and the selection's evidence (the effect whole) `whole_effect`.
+    """
 
     def key(self) -> tuple[str, int | None, int | None]:
         """(name, joint from 1, harmonic): which effect it is, as a model's extension says."""
@@ -46,6 +69,12 @@ class Effect(Open):
     holdout_gain_interval_mm: list[float] | None = Field(None, min_length=2, max_length=2)
     alternatives: list[Alternative] | None = Field(
         None, description="candidates the data could not tell apart from it"
+    )
+    whole_effect: WholeEffect | None = Field(
+        None,
+        description="when the model deploys the effect half way (`stability.half_way`): the "
+        "effect fitted whole, as the selection judged it (its held-out figures, gain interval, "
+        "parameters and their standard errors); absent otherwise",
     )
 
 
@@ -90,7 +119,8 @@ class Refused(Open):
     reason: str | None = Field(
         None,
         description="why it was refused, in a sentence: worse than geometry on region folds, "
-        "or terms that turn their joint by more than any gear or compliance error can",
+        "terms that turn their joint by more than any gear or compliance error can, or a "
+        "compliance whose fitted link masses reverse the sign of its stiffness",
     )
 
 
@@ -139,8 +169,19 @@ class Stability(Open):
         None,
         description="when the final model's held-out gain over geometry is weak (under 15 % of "
         "geometry's RMS), the model deployed is half way between geometry and the extended fit "
-        "(parameters averaged, the effects at half their fitted size; its figures are that "
-        "model's), said in a sentence; null otherwise",
+        "(parameters averaged, the effects at half their fitted size), said in a sentence; "
+        "null otherwise. Every figure of the report is then that model's: `final`, each "
+        "effect's held-out figures, gain interval, parameters and standard errors (the "
+        "effects' coefficients' are half the extended fit's; an averaged parameter's carry the "
+        "two fits' cross-covariance, model.json's `uncertainty.estimator` says so); what the "
+        "selection judged is each effect's `whole_effect`",
+    )
+    held: list[str] | None = Field(
+        None,
+        description="per joint scale or periodic term held to the joint range the campaign "
+        "covered (its value at the range's edge beyond it; model.json's `held_range_deg`): "
+        "look-alikes on its joint that the data cannot tell from it part past that range by "
+        "more than the final held-out RMS, in a sentence each; null when none is held",
     )
 
 

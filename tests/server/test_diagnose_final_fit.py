@@ -15,8 +15,8 @@ def test_the_final_model_is_the_verdicts_fit_not_fitted_again(monkeypatch):
     selected: list = []  # how many fits were made when the selection ended, and its Diagnoser
     fit, resampled = diagnosis.Diagnoser.fit, diagnosis.resampled
 
-    def recording(self, exts, poses=None, fold="all"):
-        out = fit(self, exts, poses, fold)
+    def recording(self, exts, poses=None, fold="all", near=None):
+        out = fit(self, exts, poses, fold, near)
         if poses is None:
             made.append((self, out))
         return out
