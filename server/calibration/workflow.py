@@ -30,6 +30,7 @@ from robocal.server.formats.model_json import (
     read_model,
     uncertainty_to_json,
 )
+from robocal.solver.coverage import idle_joints, idle_reason
 from robocal.solver.effects import Inputs
 from robocal.solver.extended import predict_model
 from robocal.solver.finite import require_inputs
@@ -325,7 +326,8 @@ def verdict(
         nominal_holdout_mm=nominal.holdout_rms_mm,
         explained_share=explained_share,
     )
-    v.reasons += implausible(cell, meas, robot) + ([extension_reason] if extension_reason else [])
+    idle = idle_reason(idle_joints(meas.q[used := np.any(meas.mask, axis=1)]), int(used.sum()))
+    v.reasons += implausible(cell, meas, robot) + [r for r in (idle, extension_reason) if r]
     return validation_block(
         v,
         list(meas.pose_ids),

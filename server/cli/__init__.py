@@ -102,6 +102,9 @@ def main(argv=None) -> int:
     if args.command == "demo" and args.effect is None:
         args.effect = ["joint_compliance:2"]
     try:
+        from .common import refuse_overwriting
+
+        refuse_overwriting(args)
         code = args.func(args)
     except KeyboardInterrupt:  # before or after any motion
         print("robocal: interrupted", file=sys.stderr)

@@ -17,8 +17,13 @@ def cmd_check(args) -> int:
     from robocal.server.cli.tables import console
 
     from .. import store
+    from ..formats.files import ready_to_write
     from ..formats.model_json import write_json_atomic
 
+    if args.out:
+        # before the check is stored: one whose check.json could not be written was appended to
+        # the history all the same, and run again, counted twice
+        ready_to_write(args.out)
     with store.open_database(args.db) as db:
         res = run_check(args.model, args.check, db)
     if args.out:

@@ -34,6 +34,34 @@ def _campaign_only_with_database(args) -> None:
         )
 
 
+# The arguments naming files a command reads, and those it writes (flag spellings for messages).
+READS = ("meas", "cell", "model", "poses", "targets", "check", "joints", "db", "check_poses")
+WRITES = {"out": "--out", "model_out": "--model-out", "truth_out": "--truth-out"}
+WRITES.update(recording="--recording", json="--json")
+
+
+def refuse_overwriting(args) -> None:
+    """ValueError naming both when a file a command writes is one it reads or writes already:
+    `calibrate meas.csv --out meas.csv` replaced the campaign with the model, `predict model.json
+    meas.csv --out meas.csv` with the predictions, `diagnose --out r.json --model-out r.json`
+    the report with the model, each said 'written' as if all were well."""
+    seen: dict[Path, str] = {}
+    for name in READS:
+        path = getattr(args, name, None)
+        if isinstance(path, str) and path and "://" not in path:
+            seen.setdefault(Path(path).resolve(), f"the {name.replace('_', ' ')} file it reads")
+    for name, flag in WRITES.items():
+        path = getattr(args, name, None)
+        if not isinstance(path, str) or not path:
+            continue
+        key = Path(path).resolve()
+        if key in seen:
+            raise ValueError(
+                f"{flag} {path} is {seen[key]}: it would be overwritten; write to another file"
+            )
+        seen[key] = f"{flag}'s file too"
+
+
 def _number(text: str) -> float:
     try:
         return float(text)

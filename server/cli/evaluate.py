@@ -52,8 +52,26 @@ def cmd_evaluate(args) -> None:
                 f"{k} {v:.1f}%" for k, v in res.improvement_pct.to_json().items() if np.isfinite(v)
             )
         )
+    _verdict_lines(args.model, model.verdict, res.model.ap.rms)
     if args.json:
         write_json_atomic(args.json, res.to_json())
+
+
+def _verdict_lines(path, verdict, rms_mm: float) -> None:
+    """The model's own verdict beside its accuracy here: the tolerance it was validated against,
+    met or not on this data, and a warning if it is not deployable (evaluate printed a model 0.87
+    mm RMS off beside nothing, its tolerance 0.05 mm and its 'not deployable' unsaid)."""
+    from robocal.server.cli.tables import console
+
+    tol = verdict.tolerance_mm
+    if tol is not None and np.isfinite(rms_mm):
+        side = "within" if rms_mm <= tol else "BEYOND"
+        console.print(
+            f"{rms_mm:.4g} mm RMS on this data: {side} the tolerance {tol:g} mm the model was "
+            "validated against"
+        )
+    if not verdict.deployable:
+        print(f"robocal: warning: {path}: {verdict.refusal()}", file=sys.stderr)
 
 
 def add(sub) -> None:

@@ -46,6 +46,20 @@ def check_writable(path) -> None:
         raise InputError(path, None, None, f"cannot write: no folder {directory}")
 
 
+def ready_to_write(path) -> None:
+    """Make path's folder (as write_json_atomic would) and check it can take the file; InputError
+    naming path if not: for a command that records something before it writes its output."""
+    directory = os.path.dirname(os.path.abspath(path))
+    try:
+        os.makedirs(directory, exist_ok=True)
+    except OSError as e:
+        why = e.strerror or str(e)
+        raise InputError(path, None, None, f"cannot write: {why} ({e.filename})") from None
+    check_writable(path)
+    if not os.access(directory, os.W_OK):
+        raise InputError(path, None, None, f"cannot write: no permission in {directory}")
+
+
 def atomic_write_text(path, text: str) -> None:
     """Write text (UTF-8) to path via a temporary file in the same directory and os.replace."""
     path = os.fspath(path)

@@ -161,6 +161,22 @@ def test_bad_input_is_one_line_and_stores_nothing(cell, tmp_path):
             assert con.execute("SELECT count(*) FROM model_check").fetchone() == (0,)
 
 
+def test_an_unwritable_out_is_refused_before_the_check_is_stored(cell, tmp_path):
+    """`--out` under a file (or a folder as --out): the check was appended to the history, then
+    the command failed writing check.json ('robocal: error: x.csv: File exists', exit 1), and
+    run again it was counted twice. Refused first, in one line naming the path; nothing stored."""
+    d, vc, poses = cell
+    db = tmp_path / "h.db"
+    measured(vc, poses, 11, d / "once.csv")
+    for out, said in (("once.csv/check.json", "cannot write"), (".", "is a folder")):
+        r = robocal("check", "model.json", "once.csv", "--db", db, "--out", out, cwd=d)
+        assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert said in r.stderr and "Traceback" not in r.stderr, r.stderr
+    if db.exists():
+        with sqlite3.connect(db) as con:
+            assert con.execute("SELECT count(*) FROM model_check").fetchone() == (0,)
+
+
 def test_a_first_check_far_from_the_model_is_judged_by_its_level(cell, tmp_path):
     d, vc, poses = cell
     measured(bumped(vc, 0.5), poses, 50, d / "moved.csv")
@@ -168,6 +184,31 @@ def test_a_first_check_far_from_the_model_is_judged_by_its_level(cell, tmp_path)
     assert code == 3 and doc["history"] == 1 and doc["change_mm"] is None, doc
     assert doc["cause"] == "rigid" and "re-registering the base suffices" in doc["reason"], doc
     assert doc["rms_mm"] > 10 * doc["expected_rms_mm"]
+
+
+def test_a_check_beyond_the_models_tolerance_says_recalibrate(cell, tmp_path):
+    """The model calibrated with --tolerance-mm 0.005 (held out ~0.017 mm: not deployable):
+    every clean check said 'ok' against its own held-out error, though the arm misses what the
+    application needs 3x; judged against the tolerance too, it says recalibrate and why. With
+    --tolerance-mm 0.5 the same checks stay ok."""
+    d, vc, poses = cell
+    for tol, name in ((0.005, "tight"), (0.5, "loose")):
+        r = robocal("calibrate", "train.csv", "--tolerance-mm", tol, "--out", f"{name}.json", cwd=d)
+        assert r.returncode == 0, r.stderr
+    verdicts = {"tight": [], "loose": []}
+    for k in range(3):
+        measured(vc, poses, 300 + k, d / f"clean{k}.csv")
+        for name in verdicts:
+            r = robocal(
+                "check", f"{name}.json", f"clean{k}.csv", "--db", tmp_path / f"{name}.db",
+                "--out", f"{name}{k}.json", cwd=d,
+            )  # fmt: skip
+            doc = json.loads((d / f"{name}{k}.json").read_text())
+            verdicts[name].append((r.returncode, doc["verdict"]))
+            if name == "tight":
+                assert "beyond the tolerance 0.005 mm" in doc["reason"], doc
+    assert verdicts["tight"] == [(3, "recalibrate")] * 3, verdicts
+    assert all(code == 0 and v in ("ok", "watch") for code, v in verdicts["loose"]), verdicts
 
 
 def test_a_pose_name_measured_elsewhere_is_refused(cell, tmp_path):

@@ -258,3 +258,30 @@ def test_a_campaign_not_done_is_used_with_a_note(files, tmp_path):
     (line,) = r.stderr.strip().splitlines()
     assert "note: stopped.db: campaign 1" in line and "estopped, not done" in line, line
     assert "30 of 30 poses" in line
+
+
+OVERWRITES = [
+    (("calibrate", "meas.csv", "--out", "meas.csv"), "meas.csv"),
+    (("predict", "model.json", "meas.csv", "--out", "meas.csv"), "meas.csv"),
+    (("simulate", "--cell", "cell.json", "--poses", 10, "--out", "cell.json"), "cell.json"),
+    (("diagnose", "meas.csv", "--out", "r.json", "--model-out", "./r.json"), "r.json"),
+    (("compensate", "model.json", "targets.csv", "--out", "targets.csv"), "targets.csv"),
+    (("check", "model.json", "meas.csv", "--db", "h.db", "--out", "h.db"), "h.db"),
+    (("export", "model.json", "--out", "model.json"), "model.json"),
+]
+
+
+@pytest.mark.parametrize("args,victim", OVERWRITES, ids=[a[0] for a, _ in OVERWRITES])
+def test_an_output_that_is_an_input_is_refused_and_the_input_kept(files, tmp_path, args, victim):
+    """`calibrate meas.csv --out meas.csv` replaced the campaign with the model ('model written
+    to meas.csv'); predict, simulate, compensate, check and export alike, and diagnose's report
+    with its model: refused in one line naming the flag and the file, nothing touched."""
+    for name in ("meas.csv", "model.json", "targets.csv"):
+        (tmp_path / name).write_bytes((files / name).read_bytes())
+    (tmp_path / "cell.json").write_text('{"robot": "irb2600", "targets": {"A": [60, 0, 35]}}')
+    (tmp_path / "h.db").write_bytes(b"")
+    before = (tmp_path / victim).read_bytes() if (tmp_path / victim).exists() else None
+    r = robocal(*args, cwd=tmp_path)
+    one_line_error(r, victim, "overwritten")
+    after = (tmp_path / victim).read_bytes() if (tmp_path / victim).exists() else None
+    assert after == before

@@ -255,3 +255,19 @@ def test_the_cells_tolerance_survives_its_json_round_trip():
     assert cell.tolerance_mm == 0.25
     assert parse_cell(json.dumps(cell_to_json(cell))).tolerance_mm == 0.25
     assert parse_cell(json.dumps(CELL)).tolerance_mm is None
+
+
+def test_evaluate_says_the_models_tolerance_and_verdict(campaign):
+    """evaluate printed the accuracy alone: a model not deployable past its 0.005 mm tolerance
+    read as 0.02 mm RMS with nothing beside it. It now says the tolerance, met or not on this
+    data, and warns that the model is not deployable; within a loose one it says so."""
+    d = campaign
+    calibrate(d, cell_file(d, "tight.json", tolerance_mm=0.005))
+    r = robocal("evaluate", "model.json", "m.csv", cwd=d)
+    assert r.returncode == 0, r.stderr
+    assert "BEYOND the tolerance 0.005 mm the model was validated against" in r.stdout
+    assert "the model is not deployable: held-out error" in r.stderr, r.stderr
+    calibrate(d, cell_file(d, "loose.json", tolerance_mm=0.5))
+    r = robocal("evaluate", "model.json", "m.csv", cwd=d)
+    assert r.returncode == 0 and "within the tolerance 0.5 mm" in r.stdout, r.stdout
+    assert "not deployable" not in r.stderr, r.stderr
