@@ -83,7 +83,8 @@ def test_right_units_calibrate_with_the_nominal_error_beside(folder, model, caps
     capsys.readouterr()
     args = ["calibrate", str(folder / "meas.csv"), "--method", "ls-sum", "--out"]
     assert main([*args, str(folder / "again.json")]) == 0
-    assert f"(nominal {v['nominal_rms_mm']:.4f} mm)" in capsys.readouterr().out
+    said = f"(nominal {v['nominal_rms_mm']:.4f} mm, {v['nominal_holdout_rms_mm']:.4f} mm held out)"
+    assert said in capsys.readouterr().out
 
 
 def test_wrong_nominal_geometry_not_deployable(folder, capsys):
