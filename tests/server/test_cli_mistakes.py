@@ -70,6 +70,25 @@ META_EDITS = [
     ("uncertainty.json", "uncertainty", "x", "uncertainty: expected an object"),
     ("fixed.json", "fit", {"fixed_parameters": 3}, "fit.fixed_parameters: expected an object"),
     ("errors.json", "uncertainty", {"standard_errors": {"a1": "0.1"}}, "standard_errors.a1"),
+    # a negative or non-finite error figure in the verdict was read as if written by the program
+    (
+        "negative_rms.json",
+        "validation",
+        {"deployable": True, "holdout_rms_mm": -0.02},
+        "validation.holdout_rms_mm: -0.02 is below the minimum 0",
+    ),
+    (
+        "nan_floor.json",
+        "validation",
+        {"deployable": True, "noise_floor_mm": float("nan")},
+        "validation.noise_floor_mm: nan is not a finite number",
+    ),
+    (
+        "negative_fit.json",
+        "validation",
+        {"deployable": True, "fit_rms_mm": -1},
+        "validation.fit_rms_mm: -1 is below the minimum 0",
+    ),
 ]
 
 
@@ -169,6 +188,14 @@ CASES = [
         )
     ],
     (("calibrate", "meas.csv", "--cell", "deep.json"), ["deep.json", "nested too deeply"]),
+    *[
+        ((*cmd, "negative_rms.json", *rest), ["negative_rms.json", "holdout_rms_mm", "minimum 0"])
+        for cmd, rest in (
+            (("predict",), ("poses.csv", "--out", "pred.csv")),
+            (("evaluate",), ("meas.csv",)),
+            (("check",), ("meas.csv",)),
+        )
+    ],
     *[
         ((cmd, name, *rest), [name, why])
         for name, _, _, why in META_EDITS
