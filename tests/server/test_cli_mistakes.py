@@ -153,6 +153,15 @@ CASES = [
         ("simulate", "--poses", 3, "--out", "x.csv", "--effect", "joint_complance:2"),
         ["unknown effect 'joint_complance'", "did you mean 'joint_compliance'?"],
     ),
+    # an effect past any real cell's (a typo, or another unit) was simulated as given
+    (
+        ("simulate", "--poses", 3, "--out", "x.csv", "--effect", "base_shift=1e9"),
+        ["'base_shift=1e9'", "1e+09 mm is past any real cell's base_shift", "0 to 100 mm"],
+    ),
+    (
+        ("simulate", "--poses", 3, "--out", "x.csv", "--effect", "joint_scale:2=-2e4"),
+        ["-20000 ppm", "bound -10000 to 10000 ppm"],
+    ),
     (("bench", "solver", "--sizes", 0), ["--sizes", "'0'"]),
     (("schema", "modle"), ["did you mean 'model'?"]),
     (("calibrate", "meas.csv", "--recording", "folder"), ["folder", "is a folder"]),
