@@ -29,6 +29,8 @@ def files(tmp_path_factory):
     (d / "empty.csv").write_text("")
     (d / "empty.json").write_text("")
     (d / "fake.db").write_bytes((d / "meas.csv").read_bytes())
+    lines = (d / "meas.csv").read_text().splitlines(keepends=True)
+    (d / "two_smrs.csv").write_text("".join(x for x in lines if ",C," not in x))
     (d / "poses.csv").write_text("pose,q1,q2,q3,q4,q5,q6\n1,0,10,0,0,20,0\n")
     (d / "targets.csv").write_text("pose,target,x,y,z,q1,q2,q3,q4,q5,q6\n1,A,0,0,0,0,0,0,0,0,0\n")
     model = (d / "model.json").read_text().rstrip().removesuffix("}")
@@ -128,6 +130,15 @@ CASES = [
     (("calibrate", "meas.csv", "--campaign", 1), ["meas.csv", "--campaign", "database"]),
     (("calibrate", "meas.csv", "--method", "minmax"), ["did you mean 'minimax'?"]),
     (("calibrate", "meas.csv", "--method", "ls-sun"), ["did you mean 'ls-sum'?"]),
+    # what the data lacks for a method was said without naming the data
+    (
+        ("calibrate", "two_smrs.csv", "--method", "ls-pose"),
+        ["two_smrs.csv: ls-pose needs at least three SMRs", "has 2 (A, B)"],
+    ),
+    (
+        ("calibrate", "two_smrs.csv", "--method", "ls-single:C"),
+        ["two_smrs.csv: method 'ls-single:C': no target 'C'"],
+    ),
     (("calibrat", "meas.csv"), ["invalid choice: 'calibrat'", "did you mean 'calibrate'?"]),
     (("calibrate", "missing.csv"), ["missing.csv", "No such file"]),
     (("calibrate", "missing.db"), ["missing.db", "no such file"]),
