@@ -9,7 +9,7 @@ from robocal.drivers.cell import VirtualCell
 from robocal.drivers.effects import make_effects
 from robocal.server.formats.campaign_csv import write_campaign
 from robocal.server.formats.cell_json import default_cell
-from tests.server.api.conftest import wait_for
+from tests.server.api.test_job_limits import finished, queue
 
 ORDER = "the rows' order is taken as the order of motion"
 
@@ -28,12 +28,7 @@ def test_a_diagnosis_job_and_its_evaluation_say_the_row_order(live, tmp_path):
     r = c.post("/api/measurements/import?name=untimed", content=(tmp_path / "meas.csv").read_text())
     assert r.status_code == 201, r.text
     cid = r.json()["id"]
-    j = c.post("/api/jobs", json={"campaign_id": cid, "kind": "diagnosis"}).json()
-    job = wait_for(
-        lambda: c.get(f"/api/jobs/{j['id']}").json(),
-        lambda s: s["state"] in ("done", "failed"),
-        timeout=120,
-    )
+    job = finished(live, queue(live, cid, kind="diagnosis")["id"])
     assert job["state"] == "done", job
     said = [w for w in job["validation"]["warnings"] if ORDER in w]
     assert len(said) == 1 and "joint_backlash(2)" in said[0], job["validation"]
