@@ -45,12 +45,19 @@ class PosesTooConstrained(ValueError):
     """Too few random poses meet the pose checks; the message names the check to relax."""
 
 
-def too_constrained(n: int, found: int, drawn: int, passed: dict[str, int]) -> PosesTooConstrained:
+def too_constrained(
+    n: int, found: int, drawn: int, passed: dict[str, int], cell: VirtualCell | None = None, q=None
+) -> PosesTooConstrained:
     """The refusal of a draw that found `found` of `n` poses: each check's pass rate, and what
-    to change for the checks that pass least (under 1%, else the rarest)."""
+    to change for the checks that pass least (under 1%, else the rarest); with the cell and
+    poses q drawn, what ruled out the SMRs' facing (VirtualCell.facing_said)."""
     rates = {k: v / drawn for k, v in passed.items()}
     worst = [k for k, r in rates.items() if r < 0.01] or [min(rates, key=lambda k: rates[k])]
-    fixes = "; ".join(f"{k}: {CHECK_FIXES.get(k, 'relax it')}" for k in worst)
+    said = {"facing": cell.facing_said(q)} if cell is not None and q is not None else {}
+    fixes = "; ".join(
+        f"{k}: " + (f"{said[k]}: " if said.get(k) else "") + CHECK_FIXES.get(k, "relax it")
+        for k in worst
+    )
     fewer = " or ask for fewer poses," if found else ""
     shown = ", ".join(f"{k} {r:.1%}" for k, r in rates.items())
     return PosesTooConstrained(
@@ -199,6 +206,32 @@ class VirtualCell:
             checks["wrist"] = cross >= np.sin(WRIST_MIN_RAD)
         return checks
 
+    def facing_said(self, q) -> str:
+        """What kept the SMRs from facing the tracker in poses q (m, N) rad: the best angle any
+        pose gives, and the one direction the normal keeps when the arm cannot turn it."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        pt, _, R, _, _ = self._points(q)
+        normal = np.einsum("ij,mj->mi", self.base[:3, :3], R[:, :, 2])  # tracker frame
+        cos = np.einsum("mj,mkj->mk", normal, -pt) / np.linalg.norm(pt, axis=-1)
+        best = np.degrees(np.arccos(np.clip(cos.min(axis=1).max(), -1.0, 1.0)))
+        said = (
+            f"the SMRs face along the flange's z axis, at best {best:.0f} deg from the tracker "
+            f"in {len(q)} poses drawn ({np.degrees(self.acceptance_rad):.0f} deg accepted)"
+        )
+        z = R[:, :, 2]  # the base frame
+        mean = z.mean(axis=0)
+        if np.linalg.norm(mean) < 1e-9:
+            return said
+        mean /= np.linalg.norm(mean)
+        spread = np.degrees(np.arccos(np.clip(z @ mean, -1.0, 1.0))).max()
+        if spread >= 90.0:
+            return said
+        way = {1: "up (the base's +z)", -1: "down (the base's -z)"}.get(
+            int(np.sign(mean[2])) if abs(mean[2]) > 0.9 else 0,
+            "(" + ", ".join(f"{v:+.2f}" for v in mean) + ") in the base frame",
+        )
+        return f"{said}: in every one they face within {spread:.0f} deg of {way}"
+
     def sample_poses(self, n: int, rng, max_batches: int = 50) -> np.ndarray:
         """n poses (n, N) rad drawn uniformly within the limits and meeting every pose check."""
         margin = limit_margin(self.true_robot)
@@ -214,7 +247,7 @@ class VirtualCell:
             found.append(q[np.logical_and.reduce(list(checks.values()))])
             if sum(len(f) for f in found) >= n:
                 return np.concatenate(found)[:n]
-        raise too_constrained(n, sum(len(f) for f in found), max_batches * batch, passed)
+        raise too_constrained(n, sum(len(f) for f in found), max_batches * batch, passed, self, q)
 
     def true_points(self, q, time_s=None, temp_c=None, pose_dq=None) -> np.ndarray:
         """Noise-free SMR centres (m, K, 3) in the tracker frame, with every effect applied.

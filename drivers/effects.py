@@ -126,6 +126,11 @@ class _Effect:
     takes_joint = takes_harmonic = False
     first_joint = 1  # lowest joint it can act on (from 1)
     signed = False  # a negative magnitude means something (else it is refused)
+    # the largest |magnitude| a cell can have, beyond which a spec is a typo or another unit,
+    # not physics: far past any real arm's (10-100x), and past the diagnosis suite's aimed
+    # magnitudes (bench.diagnose_suite, 2000 seeds: at most 0.43 of it, joint_scale's 4300 ppm;
+    # joint_periodic 1.23 deg, thermal_drift 1000 ppm/degC)
+    most = math.inf
 
     def __init__(self, magnitude: float, joint: int | None = None, harmonic: int | None = None):
         self.magnitude = float(magnitude)
@@ -171,6 +176,7 @@ class JointCompliance(_Effect):
     """dq_J = c tau_J(q): the joint gives way under the gravity torque of a random mass model."""
 
     name, unit, default, takes_joint = "joint_compliance", "urad/(N m)", 0.3, True
+    most = 50.0  # a heavy arm's joints: 1 to 5
     law = "dq = compliance x gravity torque"
 
     def __init__(self, cell, rng, magnitude, joint, harmonic=None):
@@ -190,6 +196,7 @@ class JointPeriodic(_Effect):
     """dq_J = A sin(K q_J + phase): a cyclic transmission or encoder error."""
 
     name, unit, default, takes_joint, takes_harmonic = "joint_periodic", "deg", 0.01, True, True
+    most = 5.0  # a reducer's transmission error: arc seconds to minutes
     law = "dq = A sin(K q + phase), K 1 or 2 drawn if omitted"
 
     def __init__(self, cell, rng, magnitude, joint, harmonic=None):
@@ -210,6 +217,7 @@ class JointScale(_Effect):
     """dq_J = s q_J: a gear-ratio or encoder scale error."""
 
     name, unit, default, takes_joint, signed = "joint_scale", "ppm", 100.0, True, True
+    most = 1e4  # 1 %
     law = "dq = s q"
 
     def __init__(self, cell, rng, magnitude, joint, harmonic=None):
@@ -223,6 +231,7 @@ class ThermalDrift(_Effect):
     """The arm grows with the air temperature: base-frame points scale by 1 + kappa (T - T0)."""
 
     name, unit, default, signed = "thermal_drift", "ppm/degC", 50.0, True
+    most = 5000.0  # steel 11.5, aluminium 23
     law = "growth per degree of air, which then warms 2-5 degC"
 
     def __init__(self, cell, rng, magnitude, joint=None, harmonic=None):
@@ -250,6 +259,7 @@ class BaseShift(_Effect):
     """At at_s the base moves `magnitude` mm and turns magnitude/2000 rad, in random directions."""
 
     name, unit, default = "base_shift", "mm", 0.2
+    most = 100.0
     law = "a rigid move at a random time mid-campaign"
 
     def __init__(self, cell, rng, magnitude, joint=None, harmonic=None):
@@ -295,6 +305,7 @@ class JointBacklash(_Effect):
     """
 
     name, unit, default, takes_joint = "joint_backlash", "deg", 0.01, True
+    most = 5.0  # a worn reducer's: a few hundredths
     law = "dq = -b x the sign of the joint's last move, state kept pose to pose"
 
     def __init__(self, cell, rng, magnitude, joint, harmonic=None):
@@ -328,6 +339,7 @@ class JointCoupling(_Effect):
     """dq_J = c q_(J-1): joint J turns with the joint before it (a coupled wrist); simulator only."""
 
     name, unit, default, takes_joint, signed = "joint_coupling", "ppm", 200.0, True, True
+    most = 1e4  # 1 %
     law = "dq_J = c q_(J-1), a wrist coupling"
     first_joint = 2
 
@@ -410,6 +422,12 @@ def make_effect(spec: str, cell, rng):
             raise ValueError(f"effect {spec!r}: magnitude must be finite")
         if magnitude < 0 and not cls.signed:
             raise ValueError(f"effect {spec!r}: magnitude must not be negative (in {cls.unit})")
+        if abs(magnitude) > cls.most:
+            m = f"{cls.most:g}"
+            raise ValueError(
+                f"effect {spec!r}: magnitude {magnitude:g} {cls.unit} is past any real cell's "
+                f"{name} (bound {'-' + m if cls.signed else '0'} to {m} {cls.unit})"
+            )
     return cls(cell, rng, magnitude, joint, harmonic)
 
 

@@ -21,6 +21,21 @@ def _targets(targets) -> tuple[tuple[str, ...], np.ndarray]:
     return tuple(f"T{i + 1}" for i in range(len(t))), t
 
 
+def _planning_cell(robot: Robot, base_in_tracker, targets, acceptance_deg, floor_mm):
+    """A cell whose "true" arm is the model we plan with: its pose_checks are the rules."""
+    names, t = _targets(targets)
+    return VirtualCell(
+        robot,
+        robot,
+        names,
+        t,
+        t,
+        np.asarray(base_in_tracker, dtype=float),
+        acceptance_rad=np.deg2rad(acceptance_deg),
+        floor_clearance_mm=floor_mm,
+    )
+
+
 def pose_checks(
     robot: Robot,
     base_in_tracker,
@@ -34,24 +49,13 @@ def pose_checks(
 
     bounds: optional ((xmin, ymin, zmin), (xmax, ymax, zmax)), mm in the robot base frame.
     """
-    names, t = _targets(targets)
-    # A cell whose "true" arm is the model we plan with: its pose_checks are the rules.
-    cell = VirtualCell(
-        robot,
-        robot,
-        names,
-        t,
-        t,
-        np.asarray(base_in_tracker, dtype=float),
-        acceptance_rad=np.deg2rad(acceptance_deg),
-        floor_clearance_mm=floor_mm,
-    )
+    cell = _planning_cell(robot, base_in_tracker, targets, acceptance_deg, floor_mm)
     q = np.atleast_2d(np.asarray(q, dtype=float))
     checks = cell.pose_checks(q)
     if bounds is not None:
         lo, hi = np.asarray(bounds, dtype=float).reshape(2, 3)
-        lay = Layout(robot, np.eye(4), names)
-        p = predict(lay, lay.initial(t), q)
+        lay = Layout(robot, np.eye(4), cell.target_names)
+        p = predict(lay, lay.initial(cell.nominal_targets), q)
         checks["bounds"] = np.all((p >= lo) & (p <= hi), axis=(1, 2))
     return checks
 
@@ -83,7 +87,8 @@ def plan_poses(
         count += len(found[-1])
         if count >= n:
             return np.concatenate(found)[:n]
-    raise too_constrained(n, count, max_batches * batch, passed)
+    cell = _planning_cell(robot, base_in_tracker, targets, acceptance_deg, floor_mm)
+    raise too_constrained(n, count, max_batches * batch, passed, cell, q)
 
 
 def default_speeds(n_joints: int) -> np.ndarray:

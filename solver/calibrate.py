@@ -157,8 +157,14 @@ class Calibration(Result):
         return self.layout.targets(self.x)
 
 
+class MethodDataError(ValueError):
+    """A method the data's targets cannot serve (ls-pose on fewer than three, ls-single on one
+    not measured): the data's fault, not the method name's."""
+
+
 def parse_method(method: str, target_names) -> tuple[str, list[int]]:
-    """Method name and the targets it fits: `ls-single:B` fits B only."""
+    """Method name and the targets it fits: `ls-single:B` fits B only; MethodDataError when
+    the targets cannot serve it."""
     name, _, arg = method.partition(":")
     if name not in METHODS:
         shown = ("minimax", "ls-sum", "ls-single", "ls-pose")
@@ -171,12 +177,17 @@ def parse_method(method: str, target_names) -> tuple[str, list[int]]:
     if name == "ls-single":
         arg = arg or target_names[0]
         if arg not in target_names:
-            raise ValueError(
+            raise MethodDataError(
                 f"method {method!r}: no target {arg!r} in the data ({', '.join(target_names)})"
             )
         return name, [list(target_names).index(arg)]
     if arg:
         raise ValueError(f"method {name!r} takes no ':' argument")
+    if name == "ls-pose" and len(target_names) < 3:
+        raise MethodDataError(
+            f"ls-pose needs at least three SMRs (a pose from each pose's readings); the data "
+            f"has {len(target_names)} ({', '.join(target_names)}): use minimax or ls-sum"
+        )
     return name, list(range(len(target_names)))
 
 

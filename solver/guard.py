@@ -273,6 +273,7 @@ def judge(
             "fitted on"
         )
     v.reasons += beyond_tolerance(v.holdout_rms_mm, tolerance_mm)
+    v.warnings += below_noise(tolerance_mm, noise_floor_mm, noise_floor_source)
     v.reasons += worse_than_nominal(v.holdout_rms_mm, nominal_holdout_mm)
     wrong_arm = max_fit_mm is not None and not fit_rms_mm <= max_fit_mm
     if wrong_arm:
@@ -308,6 +309,27 @@ def beyond_tolerance(holdout_rms_mm: float, tolerance_mm: float | None) -> list[
     return [
         f"held-out error {holdout_rms_mm:.{digits}g} mm RMS exceeds the tolerance "
         f"{tolerance_mm:g} mm"
+    ]
+
+
+def below_noise(
+    tolerance_mm: float | None, noise_floor_mm: float | None, source: str = ""
+) -> list[str]:
+    """The warning a tolerance below the readings' noise floor gives (none otherwise): no
+    held-out error can be shown below the noise of the readings it is measured with."""
+    if tolerance_mm is None or not noise_floor_mm or not tolerance_mm < noise_floor_mm:
+        return []
+    # a tolerance in metres is a thousandth of its figure in mm (0.0005 for 0.5 mm)
+    metres = 1000 * tolerance_mm >= noise_floor_mm
+    return [
+        f"the tolerance {tolerance_mm:g} mm is below the readings' noise floor "
+        f"{noise_floor_mm:.4f} mm" + (f" (from the {source})" if source else "") + ": no model "
+        "can be shown to meet it"
+        + (
+            f" (metres typed for mm? {tolerance_mm:g} m is {1000 * tolerance_mm:g} mm)"
+            if metres
+            else ""
+        )
     ]
 
 

@@ -25,7 +25,7 @@ from robocal.server.compensate.compensation import (
 )
 from robocal.server.figures import charts
 from robocal.server.formats.cell_json import parse_cell
-from robocal.server.formats.model_json import read_model
+from robocal.server.formats.model_json import approach_unknown, read_model
 from robocal.server.verify import run as verification
 from robocal.solver.finite import require_inputs
 
@@ -118,6 +118,9 @@ def evaluate_model(
         if not force:
             raise HTTPException(422, f"campaign {campaign_id}: {why}; force=true to go on")
         warnings.append(why)
+    # a backlash model's approach directions from the rows' order (as `robocal evaluate` says)
+    if order := approach_unknown(model, meas.q, meas.time_s, meas.prev_q, meas.pose_ids):
+        warnings.append(order)
     body = result.to_json()
     return {**body, "warnings": warnings} if warnings else body
 

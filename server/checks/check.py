@@ -22,7 +22,12 @@ from robocal.server.calibration.workflow import (
 )
 from robocal.server.formats.cell_json import Cell
 from robocal.server.formats.errors import InputError
-from robocal.server.formats.model_json import ModelFile, file_digest, read_model
+from robocal.server.formats.model_json import (
+    ModelFile,
+    approach_unknown,
+    file_digest,
+    read_model,
+)
 from robocal.server.store.model_checks import CheckRecord, NewCheck, append_check
 from robocal.solver import drift
 from robocal.solver.kinematics import joint_frames, predict
@@ -60,9 +65,13 @@ class CheckResult:
     change_score: float
     cusum: float
     cause: str | None  # rigid, joint N, scale, unknown; None when nothing changed
+    # said beside the verdict, not in check.json: the rows' order taken as the order of motion
+    # for a backlash model (model_json.approach_unknown)
+    warning: str | None = None
 
     def to_json(self) -> dict:
         out = asdict(self)
+        out.pop("warning")
         for k, v in out.items():
             if isinstance(v, float):
                 out[k] = round(v, 6)
@@ -84,6 +93,7 @@ class _Readings:
     time_s: np.ndarray | None = None
     temp_c: np.ndarray | None = None
     prev_q: np.ndarray | None = None
+    approach: str | None = None  # model_json.approach_unknown: how the backlash was applied
 
 
 def expected_rms(model: ModelFile) -> float:
@@ -124,6 +134,7 @@ def _readings(model: ModelFile, meas: Measurements, check_path) -> _Readings:
         time_s,
         temp_c,
         meas.prev_q,
+        approach_unknown(model, meas.q, time_s, meas.prev_q, meas.pose_ids),
     )
 
 
@@ -421,6 +432,7 @@ def record(db: store.Database, p: Prepared, source: str) -> CheckResult:
         change_score=last.change_z,
         cusum=last.cusum,
         cause=out["cause"],
+        warning=p.readings.approach,
     )
 
 

@@ -54,7 +54,7 @@ def cmd_calibrate(args) -> None:
     from robocal.server.calibration import workflow
     from robocal.server.cli import tables
     from robocal.server.cli.tables import console
-    from robocal.solver.calibrate import parse_method
+    from robocal.solver.calibrate import MethodDataError, parse_method
 
     from ..formats.model_json import write_model
 
@@ -66,7 +66,10 @@ def cmd_calibrate(args) -> None:
     cell, meas = workflow.load_data(args.meas, args.cell, args.campaign, note=_note)
     cell = _with_tolerance(cell, args)
     hold = _held_out_data(args, cell)
-    parse_method(args.method, meas.target_names)
+    try:
+        parse_method(args.method, meas.target_names)
+    except MethodDataError as e:  # the data's fault: named by its file
+        raise workflow.DataError(f"{args.meas}: {e}") from None
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
     model = workflow.model_file(cal, cell, meas, data_path=args.meas)
     if hold is not None:  # the separate validation figure beside the leave-one-out one

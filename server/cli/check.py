@@ -28,6 +28,10 @@ def cmd_check(args) -> int:
         res = run_check(args.model, args.check, db)
     if args.out:
         write_json_atomic(args.out, res.to_json())
+    if res.warning:
+        import sys
+
+        print(f"robocal: warning: {args.check}: {res.warning}", file=sys.stderr)
     console.print(f"{res.verdict} (check {res.history} of this model): {res.reason}")
     return EXIT_RECALIBRATE if res.verdict == "recalibrate" else 0
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 from .common import _require_deployable
 
 
@@ -12,7 +14,10 @@ def cmd_export(args) -> None:
     fmt = format_for(args.format, args.out)
     _require_deployable(args)
     for line in export(args.model, fmt, args.out, args.joints, args.targets):
-        print(line)
+        if line.startswith("warning: "):
+            print(f"robocal: {line}", file=sys.stderr)
+        else:
+            print(line)
 
 
 def add(sub) -> None:

@@ -101,6 +101,7 @@ def _rapid(model: ModelFile, model_path, joints_path, targets_path, out) -> tupl
             "holds 6 robot axes",
         )
     error_mm: np.ndarray | None
+    radians = None  # compensate writes degrees: only a joints file can hold radians
     if targets_path is not None:
         from robocal.server.compensate.compensation import compensate_file
 
@@ -108,11 +109,12 @@ def _rapid(model: ModelFile, model_path, joints_path, targets_path, out) -> tupl
         c = compensate_file(model_path, targets_path)
         pose_ids, q_deg, error_mm = c.pose_ids, c.q_deg, c.error_mm
     else:
-        from robocal.server.formats.joints_csv import read_joints
+        from robocal.server.formats.joints_csv import radians_warning, read_joints
 
         source = joints_path
         cmd = read_joints(joints_path, model.robot)
         pose_ids, q_deg, error_mm = cmd.pose_ids, cmd.q_deg, cmd.predicted_error_mm
+        radians = radians_warning(joints_path, cmd, model.robot)
     module = identifier(Path(out).stem)
     stamp = datetime.now(UTC).isoformat(timespec="seconds")
     about = [
@@ -126,4 +128,4 @@ def _rapid(model: ModelFile, model_path, joints_path, targets_path, out) -> tupl
     return text, [
         f"wrote module {module} to {out}: {len(pose_ids)} jointtargets moved to in order "
         f"by PROC {identifier('Run_' + module)} (MoveAbsJ, v100, fine, tool0)"
-    ]
+    ] + ([f"warning: {radians}"] if radians else [])

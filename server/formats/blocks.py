@@ -43,6 +43,8 @@ Figure = Annotated[
 ]
 # A figure a reader acts on: a finite JSON number
 Statistic = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+# An error or noise figure a reader acts on (an RMS, a maximum, mm): finite, never negative
+Error = Annotated[float, Field(strict=True, ge=0, allow_inf_nan=False)]
 Text = Annotated[str, Field(strict=True)]
 Count = Annotated[int, Field(strict=True)]
 
@@ -197,9 +199,9 @@ class HeldOut(Block):
     campaign_id: Count | None = None
     poses: Count
     readings: Count
-    rms_mm: Figure | None = Field(description="the calibrated model's 3-D RMS error")
-    max_mm: Figure | None
-    nominal_rms_mm: Figure | None = Field(description="the nominal model's, registered on them")
+    rms_mm: Error | None = Field(description="the calibrated model's 3-D RMS error")
+    max_mm: Error | None
+    nominal_rms_mm: Error | None = Field(description="the nominal model's, registered on them")
     warning: Text | None = Field(None, description="why the figures may not be of this cell")
 
 
@@ -221,21 +223,21 @@ class Validation(Block):
         description="the accuracy the application needs (--tolerance-mm, else the cell's "
         "`tolerance_mm`), mm; null: none given",
     )
-    holdout_rms_mm: Statistic | None = Field(None, description="the held-out RMS, mm")
-    holdout_max_mm: Statistic | None = Field(None, description="the held-out maximum, mm")
-    fit_rms_mm: Figure | None = None
+    holdout_rms_mm: Error | None = Field(None, description="the held-out RMS, mm")
+    holdout_max_mm: Error | None = Field(None, description="the held-out maximum, mm")
+    fit_rms_mm: Error | None = None
     holdout: Text | None = Field(None, description="how the held-out figures were had")
     condition_number: Figure | None = None
     equations: Count | None = None
     free_parameters: Count | None = None
-    noise_floor_mm: Figure | None = None
+    noise_floor_mm: Error | None = None
     noise_floor_source: Text | None = None
     unsupported_poses: list | None = Field(None, description="poses the others cannot do without")
     limits: ValidationLimits | None = None
-    nominal_rms_mm: Figure | None = Field(
+    nominal_rms_mm: Error | None = Field(
         None, description="the nominal model's RMS on the fitted readings, base and SMRs registered"
     )
-    nominal_holdout_rms_mm: Figure | None = Field(
+    nominal_holdout_rms_mm: Error | None = Field(
         None,
         description="the nominal model's held-out RMS (leave-one-pose-out): a model past it is "
         "not deployable",

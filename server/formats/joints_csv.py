@@ -54,6 +54,23 @@ def read_joints(path, robot: Robot) -> JointCommands:
     )
 
 
+def radians_warning(path, cmd: JointCommands, robot: Robot) -> str | None:
+    """A warning when every joint command lies within one turn in radians (+-2 pi) while each
+    joint's limits span four times that in degrees: degrees in name, radians in fact; None
+    otherwise. Not a refusal: poses near home can be so in degrees."""
+    q = np.abs(cmd.q_deg)
+    span = np.rad2deg(robot.upper - robot.lower)
+    # all at home (0 deg) says nothing of the units
+    if not q.size or q.max() > 2 * np.pi or q.max() == 0 or not np.all(span > 8 * np.pi):
+        return None
+    n = robot.n_joints
+    return (
+        f"{path}: q1..q{n} of all {len(cmd.pose_ids)} poses lie within +-{2 * np.pi:.2f} while "
+        f"each joint of {robot.name} spans {span.min():.0f} deg or more: they look like "
+        "radians (joints.csv holds degrees)"
+    )
+
+
 def write_joints(path, pose_ids, q_deg, error_mm) -> None:
     """Write `joints.csv`: pose, q1 ... qN (degrees), predicted_error_mm; atomically."""
     q_deg = np.asarray(q_deg, dtype=float)

@@ -180,6 +180,7 @@ def _verdict(v: Validation) -> dict:
 
 def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.JobInfo) -> dict:
     from robocal.server.calibration.workflow import diagnose, write_diagnosis
+    from robocal.server.formats.model_json import diagnosis_order
     from robocal.server.recordings.calibration import record_diagnosis
 
     cell, meas = job_data(db, job)
@@ -204,10 +205,14 @@ def _diagnose(db: store.Database, report: Report, setup: JobSetup, job: store.Jo
         model=model,
         viewer_url=setup.viewer_url,
     )
+    verdict = model.verdict
+    # what `robocal diagnose` says on stderr: the rows' order taken as the order of motion
+    if order := diagnosis_order(model, meas.q, meas.time_s, meas.prev_q):
+        verdict = verdict.model_copy(update={"warnings": (*verdict.warnings, order)})
     return {
         "model": str(path),
         "report": str(report_path),
         "recording": str(rrd),
         "figures": [str(p) for p in figures],
-        **_verdict(model.verdict),
+        **_verdict(verdict),
     }

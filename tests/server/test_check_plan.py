@@ -118,3 +118,32 @@ def test_plan_shows_each_change_better_than_random_poses(model):
     assert np.mean(ours > lds) >= 0.95
     assert 0.1 / plan.rigid_mm > 3 and 5 * STEEL_PPM_PER_K / plan.scale_ppm > 3
     assert 5 / plan.joint_zero_mdeg[2] > 3 and 5 / plan.joint_zero_mdeg[3] > 3
+
+
+def test_smrs_the_arm_cannot_turn_to_the_tracker_are_said_so(model):
+    """An arm whose joint limits keep the flange facing up (joints 2 to 5 within 5 deg of such
+    a pose): `check --plan` blamed 'the targets and the base guess'; it says what ruled out
+    every pose: the SMRs face up in every pose drawn, at best so far from the tracker."""
+    from dataclasses import replace
+
+    from robocal.drivers.cell import PosesTooConstrained
+
+    r = model.robot
+    vc = VirtualCell(
+        r, r, tuple(model.targets), *[np.array(list(model.targets.values()))] * 2, model.base
+    )
+    q = np.random.default_rng(0).uniform(r.lower, r.upper, (5000, r.n_joints))
+    q = q[np.abs(q[:, 4]) > np.radians(30)]  # off the wrist's singularity
+    _, _, R, _, _ = vc._points(q)
+    q0 = q[np.argmax(R[:, 2, 2])]  # the flange's z axis nearest the base's +z
+    d = np.radians(5)
+    joints = tuple(
+        j if i in (0, 5) else replace(j, limits=(q0[i] - d, q0[i] + d))
+        for i, j in enumerate(r.joints)
+    )
+    up = ModelFile(replace(r, joints=joints), model.base, model.targets)
+    with pytest.raises(PosesTooConstrained) as e:
+        plan_check(up, 6)
+    said = str(e.value)
+    assert "facing: the SMRs face along the flange's z axis, at best" in said, said
+    assert "in every one they face within" in said and "of up (the base's +z)" in said, said

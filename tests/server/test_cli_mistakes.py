@@ -29,6 +29,8 @@ def files(tmp_path_factory):
     (d / "empty.csv").write_text("")
     (d / "empty.json").write_text("")
     (d / "fake.db").write_bytes((d / "meas.csv").read_bytes())
+    lines = (d / "meas.csv").read_text().splitlines(keepends=True)
+    (d / "two_smrs.csv").write_text("".join(x for x in lines if ",C," not in x))
     (d / "poses.csv").write_text("pose,q1,q2,q3,q4,q5,q6\n1,0,10,0,0,20,0\n")
     (d / "targets.csv").write_text("pose,target,x,y,z,q1,q2,q3,q4,q5,q6\n1,A,0,0,0,0,0,0,0,0,0\n")
     model = (d / "model.json").read_text().rstrip().removesuffix("}")
@@ -70,6 +72,25 @@ META_EDITS = [
     ("uncertainty.json", "uncertainty", "x", "uncertainty: expected an object"),
     ("fixed.json", "fit", {"fixed_parameters": 3}, "fit.fixed_parameters: expected an object"),
     ("errors.json", "uncertainty", {"standard_errors": {"a1": "0.1"}}, "standard_errors.a1"),
+    # a negative or non-finite error figure in the verdict was read as if written by the program
+    (
+        "negative_rms.json",
+        "validation",
+        {"deployable": True, "holdout_rms_mm": -0.02},
+        "validation.holdout_rms_mm: -0.02 is below the minimum 0",
+    ),
+    (
+        "nan_floor.json",
+        "validation",
+        {"deployable": True, "noise_floor_mm": float("nan")},
+        "validation.noise_floor_mm: nan is not a finite number",
+    ),
+    (
+        "negative_fit.json",
+        "validation",
+        {"deployable": True, "fit_rms_mm": -1},
+        "validation.fit_rms_mm: -1 is below the minimum 0",
+    ),
 ]
 
 
@@ -109,6 +130,15 @@ CASES = [
     (("calibrate", "meas.csv", "--campaign", 1), ["meas.csv", "--campaign", "database"]),
     (("calibrate", "meas.csv", "--method", "minmax"), ["did you mean 'minimax'?"]),
     (("calibrate", "meas.csv", "--method", "ls-sun"), ["did you mean 'ls-sum'?"]),
+    # what the data lacks for a method was said without naming the data
+    (
+        ("calibrate", "two_smrs.csv", "--method", "ls-pose"),
+        ["two_smrs.csv: ls-pose needs at least three SMRs", "has 2 (A, B)"],
+    ),
+    (
+        ("calibrate", "two_smrs.csv", "--method", "ls-single:C"),
+        ["two_smrs.csv: method 'ls-single:C': no target 'C'"],
+    ),
     (("calibrat", "meas.csv"), ["invalid choice: 'calibrat'", "did you mean 'calibrate'?"]),
     (("calibrate", "missing.csv"), ["missing.csv", "No such file"]),
     (("calibrate", "missing.db"), ["missing.db", "no such file"]),
@@ -133,6 +163,15 @@ CASES = [
     (
         ("simulate", "--poses", 3, "--out", "x.csv", "--effect", "joint_complance:2"),
         ["unknown effect 'joint_complance'", "did you mean 'joint_compliance'?"],
+    ),
+    # an effect past any real cell's (a typo, or another unit) was simulated as given
+    (
+        ("simulate", "--poses", 3, "--out", "x.csv", "--effect", "base_shift=1e9"),
+        ["'base_shift=1e9'", "1e+09 mm is past any real cell's base_shift", "0 to 100 mm"],
+    ),
+    (
+        ("simulate", "--poses", 3, "--out", "x.csv", "--effect", "joint_scale:2=-2e4"),
+        ["-20000 ppm", "bound -10000 to 10000 ppm"],
     ),
     (("bench", "solver", "--sizes", 0), ["--sizes", "'0'"]),
     (("schema", "modle"), ["did you mean 'model'?"]),
@@ -169,6 +208,14 @@ CASES = [
         )
     ],
     (("calibrate", "meas.csv", "--cell", "deep.json"), ["deep.json", "nested too deeply"]),
+    *[
+        ((*cmd, "negative_rms.json", *rest), ["negative_rms.json", "holdout_rms_mm", "minimum 0"])
+        for cmd, rest in (
+            (("predict",), ("poses.csv", "--out", "pred.csv")),
+            (("evaluate",), ("meas.csv",)),
+            (("check",), ("meas.csv",)),
+        )
+    ],
     *[
         ((cmd, name, *rest), [name, why])
         for name, _, _, why in META_EDITS

@@ -196,6 +196,27 @@ def test_rapid_module_reads_back_to_the_joints(calibrated, tmp_path, capsys):
     check_rapid_text(text)
 
 
+def test_rapid_from_joints_in_radians_warns(calibrated, tmp_path, capsys):
+    """A joints.csv in radians was exported as degrees without a word."""
+    model = read_model(calibrated["dh"])
+    q = random_joints(model.robot, 10, seed=5).clip(-2 * np.pi, 2 * np.pi)
+    write_joints(tmp_path / "rad.csv", model.robot, q)
+    out = tmp_path / "t.mod"
+    code, _, err = run_export(
+        calibrated["dh"], "--joints", tmp_path / "rad.csv", "--out", out, capsys=capsys
+    )
+    assert code == 0 and out.exists()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("robocal: warning: "), err
+    assert "rad.csv: q1..q6 of all 10 poses lie within +-6.28" in lines[0]
+    assert "look like radians" in lines[0]
+    write_joints(tmp_path / "deg.csv", model.robot, np.rad2deg(q))
+    code, _, err = run_export(
+        calibrated["dh"], "--joints", tmp_path / "deg.csv", "--out", out, capsys=capsys
+    )
+    assert code == 0 and "radians" not in err
+
+
 def check_rapid_text(text):
     """What the controller requires of the text: lines, names, blocks, statements."""
     lines = text.splitlines()

@@ -127,6 +127,20 @@ def test_a_fit_below_a_floor_its_held_out_error_matches_is_a_quiet_tracker_not_o
     assert not v.deployable and v.reasons[0].endswith("the fit absorbed measurement noise")
 
 
+def test_a_tolerance_below_the_noise_floor_is_said_so():
+    """A tolerance below the readings' noise (1e-9 mm, or 0.0005: metres typed for mm) was
+    judged without a word on why no model could meet it."""
+    for tol in (1e-9, 0.0005):
+        v = verdict(tolerance_mm=tol, noise_floor_source="SMR-to-SMR distances in the data")
+        below = [w for w in v.warnings if "below the readings' noise floor 0.0155 mm" in w]
+        assert len(below) == 1 and "can be shown to meet it" in below[0], v.warnings
+        assert ("0.0005 m is 0.5 mm" in below[0]) == (tol == 0.0005), below
+    assert not any("noise floor" in w for w in verdict(tolerance_mm=0.05).warnings)
+    assert not any(
+        "noise floor" in w for w in verdict(tolerance_mm=0.01, noise_floor_mm=None).warnings
+    )
+
+
 def test_a_condition_number_near_its_layouts_warns_and_one_far_above_it_refuses():
     """Past the limit within LAYOUT_EXCESS of the layout's own: the robot's and SMRs', a warning;
     far above it (few or alike poses): the poses', a reason."""

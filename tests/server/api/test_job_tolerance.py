@@ -28,6 +28,8 @@ def test_the_tolerance_of_a_job_judges_its_model(live):
     v = tight["validation"]
     assert v["tolerance_mm"] == 0.0001 and v["deployable"] is False, v
     assert any("exceeds the tolerance 0.0001 mm" in r for r in v["reasons"]), v
+    # below the readings' noise: no model could meet it, and the verdict says why
+    assert any("0.0001 mm is below the readings' noise floor" in w for w in v["warnings"]), v
     model = c.get(f"/api/models/{tight['id']}").json()
     assert model["validation"]["deployable"] is False, model["validation"]
 
