@@ -176,7 +176,7 @@ class JointCompliance(_Effect):
     """dq_J = c tau_J(q): the joint gives way under the gravity torque of a random mass model."""
 
     name, unit, default, takes_joint = "joint_compliance", "urad/(N m)", 0.3, True
-    most = 50.0  # a heavy arm's joints: 1 to 5
+    most = 1000.0  # a heavy arm's joints: 1 to 5; a small wrist's tens
     law = "dq = compliance x gravity torque"
 
     def __init__(self, cell, rng, magnitude, joint, harmonic=None):

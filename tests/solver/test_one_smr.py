@@ -53,7 +53,7 @@ def test_one_smr_on_the_axis_calibrates_holding_the_last_joints_offset(name, exa
 
 def test_ls_pose_needs_three_smrs_whatever_their_layout():
     cell, cal, _ = one_smr(IRB2600, 3, True)
-    with pytest.raises(ValueError, match="three targets"):
+    with pytest.raises(ValueError, match="three SMRs"):
         calibrate(Problem(IRB2600, np.array([ON_AXIS["A"]]), ("A",), cal.q, cal.xyz), "ls-pose")
 
 
