@@ -201,41 +201,40 @@ class PrevJoints:
         n = self.robot.n_joints
         few = len(both) < PREV_MIN_POSES
         for small, big, name, other in ((prev, q, "prev_q", "q"), (q, prev, "q", "prev_q")):
-            if few:
-                if few_look_like_radians(small, big, self.robot):
-                    self._refuse_few(both, small, big, name, other)
-                continue
-            if not looks_like_radians(small, big, self.robot):
+            if few and few_look_like_radians(small, big, self.robot):
+                # the pose and joint that show it best: the degrees' largest joint
+                i, jd = (int(v) for v in np.unravel_index(int(np.argmax(np.abs(big))), big.shape))
+                far, near = (np.linalg.norm(big[i] - s) for s in (small[i], np.rad2deg(small[i])))
+                why = (
+                    f"they lie within the joint limits read as radians, and read so the pose lies "
+                    f"{near:.3g} deg from {other}1..{other}{n}, read as degrees {far:.3g} deg, "
+                    "where an arm comes from a pose near the one it goes to"
+                )
+                self._refuse(both[i][0], small[i], big[i], jd, (name, other), why)
+            if few or not looks_like_radians(small, big, self.robot):
                 continue
             j = int(np.argmax(np.ptp(big, axis=0)))  # the joint that shows it best
             # a row that shows it: the degrees' joint beyond a turn in radians, the other off 0
             # (the first pose's prev_q is often home)
             shows = [i for i in range(len(both)) if abs(big[i, j]) > 2 * np.pi]
             at = next((i for i in shows if np.abs(small[i]).max() > LIMIT_TOL_DEG), shows[0])
-            raise self.table.error(
-                both[at][0],
-                f"{name}{j + 1}",
-                f"{small[at, j]:.6g} while {other}{j + 1} is {big[at, j]:.6g}: "
-                f"{name}1..{name}{n} look like radians (over the {len(both)} poses that give "
-                f"both they lie within the joint limits read as radians and spread "
-                f"{spread_ratio(small, big):.3g} times as much as {other}1..{other}{n}, where "
-                f"the joints an arm comes from spread like its poses); give them in degrees",
+            why = (
+                f"over the {len(both)} poses that give both they lie within the joint limits "
+                f"read as radians and spread {spread_ratio(small, big):.3g} times as much as "
+                f"{other}1..{other}{n}, where the joints an arm comes from spread like its poses"
             )
+            self._refuse(both[at][0], small[at], big[at], j, (name, other), why)
 
-    def _refuse_few(self, both, small, big, name: str, other: str) -> None:
-        """few_look_like_radians's InputError, at the row and joint that show it best."""
-        at, j = np.unravel_index(int(np.argmax(np.abs(big))), big.shape)
+    def _refuse(self, row: Row, small, big, j: int, names: tuple[str, str], why: str) -> None:
+        """InputError at the row and joint j (0-based) that show names[0] in radians beside
+        names[1] in degrees (small, big: that pose's), and why they look so."""
+        name, other = names
         n = self.robot.n_joints
-        far = np.linalg.norm(big[at] - small[at])
-        near = np.linalg.norm(big[at] - np.rad2deg(small[at]))
         raise self.table.error(
-            both[at][0],
+            row,
             f"{name}{j + 1}",
-            f"{small[at, j]:.6g} while {other}{j + 1} is {big[at, j]:.6g}: {name}1..{name}{n} "
-            f"look like radians (they lie within the joint limits read as radians, and read so "
-            f"the pose lies {near:.3g} deg from {other}1..{other}{n}, read as degrees "
-            f"{far:.3g} deg, where an arm comes from a pose near the one it goes to); give them "
-            "in degrees",
+            f"{small[j]:.6g} while {other}{j + 1} is {big[j]:.6g}: {name}1..{name}{n} look like "
+            f"radians ({why}); give them in degrees",
         )
 
     def rad(self, m: int) -> np.ndarray | None:
