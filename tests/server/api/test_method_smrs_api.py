@@ -5,8 +5,6 @@ not the cell's."""
 import csv
 import io
 
-import pytest
-
 from robocal.server.cli import main as robocal
 
 
@@ -19,7 +17,6 @@ def _without_target(text: str, target: str) -> str:
     return out.getvalue()
 
 
-@pytest.mark.sqlite_only  # the refusal is the service's, not the store's
 def test_ls_pose_on_two_measured_smrs_of_a_three_smr_cell_is_a_422(live, tmp_path):
     """The default cell has SMRs A, B and C; a campaign that measured A and B only was queued
     for ls-pose and failed in the worker ('job failed') instead of being refused up front."""
