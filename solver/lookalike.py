@@ -79,8 +79,24 @@ def beyond(inputs: Inputs, j: int, lo: float, hi: float, limits) -> Inputs | Non
         return None
     q = np.concatenate([inputs.q] * len(angles))
     q[:, j] = np.repeat(angles, len(inputs.q))
-    tile = lambda a: None if a is None else np.concatenate([a] * len(angles))  # noqa: E731
-    return Inputs(q, tile(inputs.time_s), tile(inputs.temp_c), tile(inputs.motion))
+    n = len(angles)
+    return Inputs(q, _tiled(inputs.time_s, n), _tiled(inputs.temp_c, n), _tiled(inputs.motion, n))
+
+
+def _tiled(a: np.ndarray | None, n: int) -> np.ndarray | None:
+    """n copies of a per-pose array one after the other (None stays None)."""
+    return None if a is None else np.concatenate([a] * n)
+
+
+def _from_geometry(diag, exts):
+    """exts' cross-validation from the geometric start, the diagnoser's warm starts left as they
+    were: they hold the final model's coefficients by position, where a look-alike of another
+    kind (and size) takes its effect's place."""
+    warm, diag.warm = diag.warm, {}
+    try:
+        return diag.cross_validate(exts)
+    finally:
+        diag.warm = warm
 
 
 def _rms(d: np.ndarray) -> float:
@@ -107,8 +123,7 @@ def hold_lookalikes(diag, final, x, exts, cands) -> tuple[list, list[Held]]:
         here = predict_extended(layout, x, exts, moved)
         parting, names = 0.0, list[str]()
         for c in lookalikes(cands, e):
-            diag.warm = {}
-            cv = diag.cross_validate([c if o is e else o for o in exts])
+            cv = _from_geometry(diag, [c if o is e else o for o in exts])
             if paired_t(cv.sq, final.sq) >= T_SIMPLER:
                 continue  # the data tells it apart: worse on the held-out poses
             xa, ea = cv.fits["all"]

@@ -40,6 +40,11 @@ class CheckPublic(BaseModel):
     cause: str | None = Field(
         description="rigid, joint N, scale, payload or unknown, when recalibrate; else null"
     )
+    warnings: list[str] = Field(
+        default_factory=list,
+        description="what `robocal check` says on stderr beside the verdict (not in check.json): "
+        "a backlash model's approach directions taken from the rows' order",
+    )
 
 
 class CheckEntry(BaseModel):

@@ -72,8 +72,15 @@ def _check(jobs, db, job_id: int, data: bytes, filename: str) -> CheckPublic:
     path = jobs.model_path(job_id)
     with call_slot(jobs):
         prepared = run_call(jobs, uploads.read_check, path, data, filename)
-    res = check.record(db, prepared, filename)
-    return CheckPublic(job_id=job_id, **asdict(res))
+    return public_check(job_id, check.record(db, prepared, filename))
+
+
+def public_check(job_id: int, res: check.CheckResult) -> CheckPublic:
+    """A check's result as the API answers it: check.json's figures, and the warning `robocal
+    check` prints beside them (the same CheckResult.warning)."""
+    figures = asdict(res)
+    warning = figures.pop("warning")
+    return CheckPublic(job_id=job_id, **figures, warnings=[warning] if warning else [])
 
 
 CheckRunBody = Annotated[CheckRunCreate, Depends(read_json(CheckRunCreate))]
@@ -150,7 +157,7 @@ def run_check(
         campaign_url=f"/api/campaigns/{out.campaign_id}",
         started=out.started,
         note=out.note,
-        check=None if out.result is None else CheckPublic(job_id=job_id, **asdict(out.result)),
+        check=None if out.result is None else public_check(job_id, out.result),
     )
     if out.started:
         return JSONResponse(

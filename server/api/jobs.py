@@ -13,6 +13,7 @@ from pydantic import BaseModel, ConfigDict
 from robocal.server import store
 from robocal.server.formats.blocks import HeldOut, Validation
 from robocal.server.service.job_queue import DuplicateJob, Job
+from robocal.solver.calibrate import MethodDataError
 
 from . import problems
 from .bodies import json_body, read_json
@@ -104,6 +105,9 @@ def create_job(body: JobBody, jobs: JobsDep, request: Request) -> JobPublic | JS
         )
     except DuplicateJob as e:
         return problems.problem(request, 409, str(e), job_id=e.job_id)
+    except MethodDataError as e:  # the campaign's SMRs cannot serve the method: its field named
+        error = {"loc": ["body", "method"], "msg": str(e), "type": "value_error"}
+        return problems.problem(request, 422, f"method: {e}", errors=[error])
 
 
 @router.post(

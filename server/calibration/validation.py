@@ -74,6 +74,14 @@ def nominal_errors(cell: Cell, meas: Measurements) -> NominalErrors:
     return NominalErrors(fit, held)
 
 
+def nominal_model_errors(cal, fit_rms_mm: float, holdout) -> NominalErrors | None:
+    """A calibration's own errors as the nominal arm's when its method is `nominal` (the
+    nominal arm registered: nominal_errors would fit it again); None for any other method."""
+    if cal.method != "nominal":
+        return None
+    return NominalErrors(json_number(fit_rms_mm), json_number(holdout.rms()))
+
+
 def validation_block(
     v: guard.Validation,
     pose_ids,

@@ -11,12 +11,14 @@ import numpy as np
 from robocal.server.calibration.units import radian_refusal, units_refusal
 from robocal.server.calibration.validation import (
     HOLDOUT_METHOD,
+    NominalErrors,
     absurd_errors,
     cell_problem,
     json_number,
     late_shift_warning,
     noise_floor,
     nominal_errors,
+    nominal_model_errors,
     validation_block,
 )
 from robocal.server.formats.blocks import Diagnosis, Fit, HeldOut, Validation
@@ -278,6 +280,7 @@ def validate(
         floor=(floor.mm, floor.source),
         layout_condition=cal.layout_condition,
         late=late,
+        nominal=nominal_model_errors(cal, fit_rms, holdout),
     )
 
 
@@ -297,6 +300,7 @@ def verdict(
     extension_reason: str | None = None,
     late: str | None = None,
     explained_share: float | None = None,
+    nominal: NominalErrors | None = None,
 ) -> Validation:
     """The `validation` block of a model fitted on meas, `calibrate`'s and `diagnose`'s alike (one
     model, one verdict): the guard's limits (solver.guard.judge: past MAX_FLOOR_RATIO times the
@@ -305,12 +309,12 @@ def verdict(
     rich poses (solver.identifiability.layout_condition), None: unknown; late: the warning that
     the campaign's last poses moved together (late_shift_warning: a bumped tracker), None;
     explained_share: the strongest covariate's share of a diagnosis's remainder (its
-    unexplained block), None."""
+    unexplained block), None; nominal: the nominal arm's errors on meas when known already."""
     from robocal.solver import guard
     from robocal.solver.plausibility import nominal_error_bound
 
     mm, source = floor
-    nominal = nominal_errors(cell, meas)
+    nominal = nominal or nominal_errors(cell, meas)
     v = guard.judge(
         fit_rms_mm=fit_rms_mm,
         holdout=holdout,

@@ -30,6 +30,7 @@ from robocal.server.formats.model_json import (
 )
 from robocal.server.store.model_checks import CheckRecord, NewCheck, append_check
 from robocal.solver import drift
+from robocal.solver.gravity import DOWN
 from robocal.solver.kinematics import joint_frames, predict
 from robocal.solver.measurements import Measurements
 from robocal.solver.vocabulary import after_campaign
@@ -199,7 +200,9 @@ def _payload_columns(model: ModelFile, r: _Readings, moves) -> np.ndarray:
     mass at the SMRs (its compliance unknown), one column a joint whose torque matters."""
     lay, x = model.layout()
     frames = joint_frames(lay, x, r.q)
-    down = -model.base[:3, 2]  # the arm stands on its base: gravity along its -z
+    # gravity along the levelled tracker's -z (the frames are the tracker's), as the solver's
+    # compliance takes it (solver.gravity): on a wall- or ceiling-mounted arm the base's -z is not
+    down = DOWN
     centre = predict(lay, x, r.q).mean(axis=1)
     torque = np.array(
         [np.einsum("mi,mi->m", R[:, :, 2], np.cross(centre - o, down)) for R, o in frames]

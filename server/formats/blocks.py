@@ -45,6 +45,24 @@ Figure = Annotated[
 Statistic = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 # An error or noise figure a reader acts on (an RMS, a maximum, mm): finite, never negative
 Error = Annotated[float, Field(strict=True, ge=0, allow_inf_nan=False)]
+
+
+def _magnitude(value):
+    value = _figure(value)
+    if value < 0:  # False for NaN: the program writes one where it had nothing to compute
+        raise PydanticCustomError(
+            "greater_than_equal", "Input should be greater than or equal to {ge}", {"ge": 0}
+        )
+    return value
+
+
+# A size the program wrote, never negative (a condition number: NaN for the nominal method's)
+Magnitude = Annotated[
+    float,
+    PlainValidator(_magnitude),
+    PlainSerializer(lambda v: v),
+    WithJsonSchema({"type": "number", "minimum": 0}),
+]
 Text = Annotated[str, Field(strict=True)]
 Count = Annotated[int, Field(strict=True)]
 
@@ -90,16 +108,16 @@ class Ordered(Block):
 class Fit(Block):
     """model.json's `fit`: the fit's own figures (on the readings it was fitted on)."""
 
-    F_mm2: dict[str, Figure] | None = Field(None, description="per SMR, the objective F_i")
-    rmse_phi_mm: Figure | None = None
-    rmse_mm: Figure | None = Field(None, description="the fit's RMS error per reading")
-    ap_max_mm: Figure | None = None
-    condition_number: Figure | None = None
+    F_mm2: dict[str, Error] | None = Field(None, description="per SMR, the objective F_i")
+    rmse_phi_mm: Error | None = None
+    rmse_mm: Error | None = Field(None, description="the fit's RMS error per reading")
+    ap_max_mm: Error | None = None
+    condition_number: Magnitude | None = None
     fixed_parameters: dict[str, Text] | None = Field(
         None, description="parameters held fixed, and why"
     )
     iterations: Count | None = None
-    seconds: Figure | None = None
+    seconds: Error | None = None
     readings_used: Count | None = None
     excluded_readings: list[dict[str, Any]] | None = Field(
         None, description="readings left out as gross errors"
@@ -280,8 +298,8 @@ class Score(Block):
     """A model's held-out figures in a diagnosis (its baseline, its final model)."""
 
     model: str = Field(description="geometric, then each effect: geometric+joint_compliance(2)")
-    holdout_rmse_mm: float
-    holdout_max_mm: float
+    holdout_rmse_mm: Error
+    holdout_max_mm: Error
 
 
 class Diagnosis(Block):

@@ -121,6 +121,32 @@ def looks_like_radians(small: np.ndarray, big: np.ndarray, robot: Robot) -> bool
     return 1 / PREV_UNIT_BAND <= ratio <= PREV_UNIT_BAND
 
 
+# On one or two poses a spread says nothing, but each pose's own joints may: an arm touring its
+# poses comes to each from one near it, so prev_q read as radians lies near q, read as degrees
+# (within the joint limits read as radians: a few degrees from the zero pose) far from it.
+# Measured with prev_q the previous pose's on the real campaigns: in radians, 733 of the UR5
+# tour's 999 single poses (10-50 deg between poses) lie PREV_NEAR_BAND times nearer, none of the
+# IRB 120's and QKM's (random orders, 94-333 deg between poses: nothing tells the units there);
+# in degrees none of their 3,081 poses lies within the limits read as radians, and of 55,000
+# draws of an arm coming to them from within 0.1-6 deg of the zero pose (home jogged) none is
+# nearer (3 at a band of 3). A pose from exactly zero joints (home) says nothing either way.
+PREV_NEAR_BAND = 5.0
+
+
+def few_look_like_radians(small: np.ndarray, big: np.ndarray, robot: Robot) -> bool:
+    """On fewer than PREV_MIN_POSES poses: whether small (poses, n, as read) are radians where
+    big are degrees: every value of small within the joint limits in radians, big beyond a turn
+    in radians on some joint, and every pose whose small is not all zero (at least one) nearer
+    big read as radians than read as degrees by PREV_NEAR_BAND."""
+    if np.any(small < robot.lower - LIMIT_TOL_DEG) or np.any(small > robot.upper + LIMIT_TOL_DEG):
+        return False
+    speaks = np.abs(small).max(axis=1) > LIMIT_TOL_DEG
+    if np.abs(big).max() <= 2 * np.pi or not speaks.any():
+        return False
+    as_rad = np.linalg.norm(big - np.rad2deg(small), axis=1)[speaks]
+    return bool(np.all(PREV_NEAR_BAND * as_rad < np.linalg.norm(big - small, axis=1)[speaks]))
+
+
 class PrevJoints:
     """Each pose's prev_q (degrees, or None), the same on every row of the pose."""
 
@@ -168,28 +194,48 @@ class PrevJoints:
         joints, None where a pose gives none (a target without a starting guess)."""
         given = sorted((k, row, v) for k, (row, v) in self.by_pose.items() if v is not None)
         both = [(row, v, q_deg[k]) for k, row, v in given if q_deg[k] is not None]
-        if len(both) < PREV_MIN_POSES:
+        if not both:
             return
         prev = np.array([v for _, v, _ in both])
         q = np.array([w for _, _, w in both])
         n = self.robot.n_joints
+        few = len(both) < PREV_MIN_POSES
         for small, big, name, other in ((prev, q, "prev_q", "q"), (q, prev, "q", "prev_q")):
-            if not looks_like_radians(small, big, self.robot):
+            if few and few_look_like_radians(small, big, self.robot):
+                # the pose and joint that show it best: the degrees' largest joint
+                i, jd = (int(v) for v in np.unravel_index(int(np.argmax(np.abs(big))), big.shape))
+                far, near = (np.linalg.norm(big[i] - s) for s in (small[i], np.rad2deg(small[i])))
+                why = (
+                    f"they lie within the joint limits read as radians, and read so the pose lies "
+                    f"{near:.3g} deg from {other}1..{other}{n}, read as degrees {far:.3g} deg, "
+                    "where an arm comes from a pose near the one it goes to"
+                )
+                self._refuse(both[i][0], small[i], big[i], jd, (name, other), why)
+            if few or not looks_like_radians(small, big, self.robot):
                 continue
             j = int(np.argmax(np.ptp(big, axis=0)))  # the joint that shows it best
             # a row that shows it: the degrees' joint beyond a turn in radians, the other off 0
             # (the first pose's prev_q is often home)
             shows = [i for i in range(len(both)) if abs(big[i, j]) > 2 * np.pi]
             at = next((i for i in shows if np.abs(small[i]).max() > LIMIT_TOL_DEG), shows[0])
-            raise self.table.error(
-                both[at][0],
-                f"{name}{j + 1}",
-                f"{small[at, j]:.6g} while {other}{j + 1} is {big[at, j]:.6g}: "
-                f"{name}1..{name}{n} look like radians (over the {len(both)} poses that give "
-                f"both they lie within the joint limits read as radians and spread "
-                f"{spread_ratio(small, big):.3g} times as much as {other}1..{other}{n}, where "
-                f"the joints an arm comes from spread like its poses); give them in degrees",
+            why = (
+                f"over the {len(both)} poses that give both they lie within the joint limits "
+                f"read as radians and spread {spread_ratio(small, big):.3g} times as much as "
+                f"{other}1..{other}{n}, where the joints an arm comes from spread like its poses"
             )
+            self._refuse(both[at][0], small[at], big[at], j, (name, other), why)
+
+    def _refuse(self, row: Row, small, big, j: int, names: tuple[str, str], why: str) -> None:
+        """InputError at the row and joint j (0-based) that show names[0] in radians beside
+        names[1] in degrees (small, big: that pose's), and why they look so."""
+        name, other = names
+        n = self.robot.n_joints
+        raise self.table.error(
+            row,
+            f"{name}{j + 1}",
+            f"{small[j]:.6g} while {other}{j + 1} is {big[j]:.6g}: {name}1..{name}{n} look like "
+            f"radians ({why}); give them in degrees",
+        )
 
     def rad(self, m: int) -> np.ndarray | None:
         """(m, n) rad, NaN rows where a pose gives none; None without the columns."""

@@ -24,8 +24,10 @@ PREV_NOTE = (
     "from before the pose: where given, they set the direction of each joint's last motion "
     "(backlash) in place of the visit order (time_s, else the file order), so a file split or "
     "reordered keeps it. Given in radians beside q1..qN in degrees (over three poses or more, "
-    "within the joint limits read as radians and spreading 1/57.3 as much as the joints), or "
-    "the other way round, they are refused naming the unit. Without them or time_s, the commands "
+    "within the joint limits read as radians and spreading 1/57.3 as much as the joints; on one "
+    "or two poses, within those limits and, read as radians, five times nearer the pose than "
+    "read as degrees), or the other way round, they are refused naming the unit. Without them "
+    "or time_s, the commands "
     "whose model has backlash (and `diagnose`, when it names backlash or the rows look sorted by "
     "a joint) warn that the file order is taken as the order of motion."
 )

@@ -20,7 +20,7 @@ from robocal.server.formats.model_json import model_to_json
 from robocal.server.service.events import Events
 from robocal.server.service.processes import Child, call, exit_reason, one_line, warm_up
 from robocal.server.service.worker import JobSetup, campaign_data, job_event, run_job, run_planning
-from robocal.solver.calibrate import parse_method
+from robocal.solver.calibrate import MethodDataError, parse_method
 
 JOB_STATES = ("queued", "running", "done", "failed")
 JOB_KINDS = ("calibration", "diagnosis")  # of a done campaign; planning makes one
@@ -67,8 +67,14 @@ def check_job(db: store.Database, *, kind: str, campaign_id: int, method: str) -
             f"campaign {campaign_id} is {info.status}; {kind} needs a done campaign"
         )
     if kind == "calibration":
-        targets = sorted(parse_cell(info.cell_json, f"<campaign {campaign_id} cell>").targets)
-        parse_method(method, targets)
+        # The SMRs the worker fits are those measured (store.campaign_measurements), not the cell's.
+        targets = store.measured_targets(db, campaign_id=campaign_id)
+        if not targets:
+            raise store.StoreError(f"campaign {campaign_id} has no readings")
+        try:
+            parse_method(method, targets)
+        except MethodDataError as e:
+            raise MethodDataError(f"campaign {campaign_id}: {e}") from None
 
 
 def check_holdout(db: store.Database, *, campaign_id: int, holdout_campaign_id: int) -> None:

@@ -16,6 +16,7 @@ from .exchange import (
     export_csv,
     export_lines,
     import_csv,
+    measured_targets,
 )
 from .jobs import (
     JobInfo,
@@ -72,6 +73,7 @@ __all__ = [
     "export_lines",
     "get_campaign",
     "import_csv",
+    "measured_targets",
     "list_campaigns",
     "update_settings",
     "latest_air",

@@ -93,6 +93,18 @@ def campaign_measurements(
     )
 
 
+def measured_targets(db: Database, *, campaign_id: int) -> tuple[str, ...]:
+    """The SMRs with a good reading in the campaign, sorted: campaign_measurements' targets."""
+    with db.session() as s:
+        _campaign(s, campaign_id)
+        rows = s.scalars(
+            select(Reading.target)
+            .where(Reading.campaign_id == campaign_id, Reading.status == "ok")
+            .distinct()
+        )
+        return tuple(sorted(rows))
+
+
 def export_csv(db: Database, *, campaign_id: int, path, robot: Robot | None = None) -> None:
     """Write the campaign's readings as a `meas.csv` (spec section 1), atomically."""
     meas = campaign_measurements(db, campaign_id=campaign_id, robot=robot)

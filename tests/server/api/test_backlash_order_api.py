@@ -14,21 +14,32 @@ from tests.server.api.test_job_limits import finished, queue
 ORDER = "the rows' order is taken as the order of motion"
 
 
+def _untimed_backlash(tmp_path, poses: int, seed: int) -> str:
+    """A campaign's CSV text (no time_s, no prev_q) of an arm with joint 2's backlash."""
+    cell = default_cell()
+    vc = VirtualCell.random(cell.robot, cell.targets, seed=4)
+    vc.effects.extend(make_effects(["joint_backlash:2=0.05"], vc, 4))
+    path = tmp_path / f"meas_{poses}_{seed}.csv"
+    write_campaign(path, replace(vc.campaign(poses, seed=seed), time_s=None, temp_c=None))
+    return path.read_text()
+
+
+def _diagnosed(live, tmp_path) -> tuple[int, dict]:
+    """The untimed campaign's id and its done diagnosis job."""
+    r = live.client.post(
+        "/api/measurements/import?name=untimed", content=_untimed_backlash(tmp_path, 80, 4)
+    )
+    assert r.status_code == 201, r.text
+    cid = r.json()["id"]
+    return cid, finished(live, queue(live, cid, kind="diagnosis")["id"])
+
+
 @pytest.mark.sqlite_only  # the service's words, not the store's: once is enough
 def test_a_diagnosis_job_and_its_evaluation_say_the_row_order(live, tmp_path):
     """A diagnosis job naming joint 2's backlash on an untimed campaign said nothing of the
     rows' order its approach directions came from; nor did evaluating the model on it."""
-    cell = default_cell()
-    vc = VirtualCell.random(cell.robot, cell.targets, seed=4)
-    vc.effects.extend(make_effects(["joint_backlash:2=0.05"], vc, 4))
-    write_campaign(
-        tmp_path / "meas.csv", replace(vc.campaign(80, seed=4), time_s=None, temp_c=None)
-    )
     c = live.client
-    r = c.post("/api/measurements/import?name=untimed", content=(tmp_path / "meas.csv").read_text())
-    assert r.status_code == 201, r.text
-    cid = r.json()["id"]
-    job = finished(live, queue(live, cid, kind="diagnosis")["id"])
+    cid, job = _diagnosed(live, tmp_path)
     assert job["state"] == "done", job
     said = [w for w in job["validation"]["warnings"] if ORDER in w]
     assert len(said) == 1 and "joint_backlash(2)" in said[0], job["validation"]
@@ -36,3 +47,20 @@ def test_a_diagnosis_job_and_its_evaluation_say_the_row_order(live, tmp_path):
     assert r.status_code == 200, r.text
     said = [w for w in r.json().get("warnings", []) if ORDER in w]
     assert len(said) == 1 and "joint_backlash(2)" in said[0], r.json().get("warnings")
+
+
+@pytest.mark.sqlite_only
+def test_an_uploaded_check_says_the_row_order(live, tmp_path):
+    """`robocal check` warns that a check file without time_s or prev_q has its rows' order
+    taken as the order of motion for the model's backlash; the check endpoint dropped it."""
+    _, job = _diagnosed(live, tmp_path)
+    assert job["state"] == "done", job
+    r = live.client.post(
+        f"/api/models/{job['id']}/checks",
+        params={"filename": "check.csv"},
+        content=_untimed_backlash(tmp_path, 8, 11),
+    )
+    assert r.status_code == 201, r.text
+    said = [w for w in r.json()["warnings"] if ORDER in w]
+    print("\n", said)
+    assert len(said) == 1 and "joint_backlash(2)" in said[0], r.json()
