@@ -25,7 +25,11 @@ def cmd_simulate(args) -> None:
 
     cell = workflow.load_cell(args.cell)
     vc = VirtualCell.random(
-        cell.robot, cell.targets, seed=args.seed, tracker=TrackerSpec.of(cell.tracker)
+        cell.robot,
+        cell.targets,
+        seed=args.seed,
+        tracker=TrackerSpec.of(cell.tracker),
+        base=cell.base,  # a wall or ceiling mount: the arm where the cell says, gravity with it
     )
     vc.effects.extend(make_effects(args.effect, vc, args.seed))  # bad specs fail before any output
     meas = vc.campaign(
