@@ -208,12 +208,36 @@ def compensate_targets(
         )
     if guess.any():
         warnings += _kept(targets, res, guess, solver, max_move_deg)
+    if open_turn := _open_turns(targets, nominal, ~guess & given):
+        warnings.append(open_turn)
     beyond = extrapolated(model, res.q, targets.pose_ids)
     if beyond:
         warnings.append(beyond)
     if unknown := approach_unknown(model, res.q, targets.time_s, targets.prev_q, targets.pose_ids):
         warnings.append(unknown)
     return res, warnings
+
+
+def _open_turns(targets: Targets, nominal, alone: np.ndarray) -> str | None:
+    """A warning when poses asked for by confdata alone have joints it leaves a turn open on (a
+    UR-like arm's +-360 deg joints 2 and 3): the solver took the turn nearest zero."""
+    joints = configuration.open_turns(nominal)
+    if not joints or not alone.any():
+        return None
+    k = int(np.flatnonzero(alone)[0])
+    names = " and ".join(str(j + 1) for j in joints)
+    plural = "s" if len(joints) > 1 else ""
+    ranges = ", ".join(
+        f"{np.degrees(nominal.lower[j]):g} to {np.degrees(nominal.upper[j]):g}" for j in joints
+    )
+    return (
+        f"{int(alone.sum())} poses (first {targets.pose_ids[k]!r}) give a "
+        f"configuration (cf1, cf4, cf6, cfx) alone, which holds joints 1, 4 and 6 to a quadrant; "
+        f"{nominal.name}'s joint{plural} {names} can turn more than a full turn within the "
+        f"limits ({ranges} deg), a turn confdata leaves open: taken at the angle nearest zero; "
+        f"give starting joints "
+        f"q1 ... q{nominal.n_joints} for another turn"
+    )
 
 
 def _pose_error(targets: Targets, k: int, what: str) -> InputError:
