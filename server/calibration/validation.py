@@ -153,6 +153,8 @@ def expected_accuracy(v: guard.Validation, holdout_method: str = HOLDOUT_METHOD)
     if v.tolerance_mm is None:
         return said + "; no tolerance given (--tolerance-mm, or the cell's tolerance_mm)"
     within = np.isfinite(v.holdout_rms_mm) and v.holdout_rms_mm <= v.tolerance_mm
+    if within and v.holdout_max_mm > v.tolerance_mm:  # the RMS is judged; its max said beside
+        return said + f"; its RMS within the tolerance {v.tolerance_mm:g} mm, its max beyond"
     return said + f"; {'within' if within else 'beyond'} the tolerance {v.tolerance_mm:g} mm"
 
 
