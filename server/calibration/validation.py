@@ -113,7 +113,7 @@ def validation_block(
     )
 
 
-def late_shift_warning(meas: Measurements, residuals) -> str | None:
+def late_shift_warning(meas: Measurements, residuals, floor_mm: float | None) -> str | None:
     """The warning the last poses of a campaign give when they miss together, far beyond the
     others (solver.shift_scan.late_shift: too few poses after it for a base shift to be fitted);
     residuals (poses, SMRs, 3): the model's prediction minus every reading, the screened-out
@@ -123,9 +123,10 @@ def late_shift_warning(meas: Measurements, residuals) -> str | None:
 
     if residuals is None:
         return None
-    late = late_shift(residuals, visit_order(meas.time_s, meas.n_poses), meas.xyz)
+    order = visit_order(meas.time_s, meas.n_poses)
+    late = late_shift(residuals, order, meas.xyz)
     if late is None:
-        return None
+        return order_step_warning(meas, residuals, order, floor_mm)
     k = len(late.poses)
     which = ", ".join(str(meas.pose_ids[i]) for i in late.poses)
     moved = ", ".join(f"{-v:+.3f}" for v in late.shift_mm)
@@ -208,3 +209,24 @@ def file_refusal(path) -> str | None:
     from robocal.server.formats.model_json import read_model
 
     return read_model(path).verdict.refusal()
+
+
+def order_step_warning(meas: Measurements, residuals, order, floor_mm) -> str | None:
+    """The warning the poses after a split in the visit order give when they are off the model
+    together against the ones before (solver.order_step: a tracker bumped mid-campaign, which the
+    diagnosis fits as a base shift only against time_s), None when none is."""
+    from robocal.solver.order_step import order_step
+
+    step = order_step(residuals, order, floor_mm)
+    if step is None:
+        return None
+    by = "time order" if meas.time_s is not None else "the file's order (no time_s)"
+    moved = ", ".join(f"{-v:+.3f}" for v in step.shift_mm)
+    return (
+        f"the {step.after} poses from {meas.pose_ids[step.first_after]!r} on in {by} are off "
+        f"the model by {np.linalg.norm(step.shift_mm):.3f} mm together against the "
+        f"{step.before} before (readings moved {moved} mm in the tracker frame; beyond every one "
+        f"of {round(1 / step.p_value) - 1} random reorderings of the poses): a tracker bumped or "
+        "a base moved mid-campaign? Calibrate the two parts apart, or give time_s so that "
+        "diagnose can fit a base shift"
+    )

@@ -242,7 +242,14 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     # never deployable
     floor = cal.noise_floor or noise_floor(cell, used)  # a fit not made by run_method has none
     v = model.validation = validate(
-        cal, cell, used, holdout, errors, acc.rmse, floor, late_shift_warning(meas, pred - meas.xyz)
+        cal,
+        cell,
+        used,
+        holdout,
+        errors,
+        acc.rmse,
+        floor,
+        late_shift_warning(meas, pred - meas.xyz, floor.mm if floor else None),
     )
     if cal.method != "nominal":
         block = geometric_block(
@@ -621,7 +628,7 @@ def validate_diagnosis(
         holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
         layout_condition=geometric.layout_condition,
         extension_reason=implausible_extensions(*model.layout(), model.extensions, meas.q),
-        late=late_shift_warning(meas, pred - meas.xyz),
+        late=late_shift_warning(meas, pred - meas.xyz, report.noise_floor_mm),
         explained_share=max((c.strength for c in left.covariates), default=None) if left else None,
     )
     # a small campaign's resamples: the cause taken from them, or their doubt, said here too
