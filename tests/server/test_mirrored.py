@@ -60,3 +60,31 @@ def test_a_wrong_description_is_not_taken_for_a_mirror():
         q[:, j] = -q[:, j]
         c = check_mirror(cell.robot, t, q, meas.xyz)
         assert c is None or c.reason() is None, j
+
+
+def test_one_joint_in_radians_is_refused_naming_it(tmp_path, capsys):
+    """The real IRB 120 with q4 alone in radians was 'not deployable' for an idle joint 4 and an
+    arm that is not the one measured (78 mm RMS); the file-wide unit check cannot see one joint."""
+    src, dst = IRB / "train.csv", tmp_path / "q4rad.csv"
+    with open(src, newline="") as f:
+        rows = list(csv.DictReader(f))
+    with open(dst, "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows({**r, "q4": repr(float(np.radians(float(r["q4"]))))} for r in rows)
+    args = ["calibrate", str(dst), "--cell", str(IRB / "cell.json"), "--method", "ls-sum"]
+    assert main([*args, "--out", str(tmp_path / "m.json")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"robocal: error: {dst}: "), err
+    assert "q4 looks like radians while the other joints are degrees" in err, err
+
+
+def test_each_joint_in_radians_is_named():
+    cell = default_cell()
+    meas = VirtualCell.random(cell.robot, cell.targets, seed=1).campaign(40, seed=1)
+    t = cell.target_positions(meas.target_names)
+    for j in range(cell.robot.n_joints):
+        q = meas.q.copy()
+        q[:, j] = np.deg2rad(q[:, j])
+        said = check_mirror(cell.robot, t, q, meas.xyz).reason()
+        assert said and f"q{j + 1} looks like radians" in said, (j, said)
