@@ -230,3 +230,27 @@ def order_step_warning(meas: Measurements, residuals, order, floor_mm) -> str | 
         "a base moved mid-campaign? Calibrate the two parts apart, or give time_s so that "
         "diagnose can fit a base shift"
     )
+
+
+def repeated_readings_warning(meas: Measurements) -> str | None:
+    """The warning poses whose every reading repeats another pose's to the last digit give (a
+    row block copied: no tracker reads a point twice alike), None when none does: each copy
+    counts as a pose of its own, and a held-out copy is predicted by its twin."""
+    flat = np.where(np.isfinite(meas.xyz), meas.xyz, np.inf).reshape(meas.n_poses, -1)
+    _, first, inverse, counts = np.unique(
+        flat, axis=0, return_index=True, return_inverse=True, return_counts=True
+    )
+    copies = [
+        (int(first[g]), k)
+        for k, g in enumerate(np.asarray(inverse).reshape(-1))
+        if counts[g] > 1 and k != first[g]
+    ]
+    if not copies:
+        return None
+    a, b = copies[0]
+    more = f" ({len(copies) - 1} more poses repeat another so)" if len(copies) > 1 else ""
+    return (
+        f"pose {meas.pose_ids[b]!r} repeats every reading of pose {meas.pose_ids[a]!r} to the "
+        f"last digit{more}: a copied block of rows? Each copy counts as a pose of its own, and "
+        "the held-out figures predict it from its twin; remove the copies"
+    )

@@ -17,6 +17,7 @@ from robocal.server.calibration.validation import (
     late_shift_warning,
     noise_floor,
     nominal_errors,
+    repeated_readings_warning,
     validation_block,
 )
 from robocal.server.formats.blocks import Diagnosis, Fit, HeldOut, Validation
@@ -342,7 +343,9 @@ def verdict(
         holdout_method,
         nominal_rms_mm=nominal.fit_rms_mm,
         nominal_holdout_rms_mm=nominal.holdout_rms_mm,
-        warnings=v.warnings + layout_warnings(cell, meas, targets) + ([late] if late else []),
+        warnings=v.warnings
+        + layout_warnings(cell, meas, targets)
+        + [w for w in (late, repeated_readings_warning(meas)) if w],
     )
 
 
