@@ -254,3 +254,27 @@ def repeated_readings_warning(meas: Measurements) -> str | None:
         f"last digit{more}: a copied block of rows? Each copy counts as a pose of its own, and "
         "the held-out figures predict it from its twin; remove the copies"
     )
+
+
+# A quick survey of the cell puts the base some 10 mm and half a degree off; past these, the
+# cell's base describes another setup (a wall or ceiling mount the data does not show, metres)
+BASE_GUESS_MM, BASE_GUESS_DEG = 100.0, 10.0
+
+
+def base_guess_warning(cell: Cell, base) -> str | None:
+    """The warning a base identified far from the cell's `base` guess gives (the fit holds: the
+    base is found from the data), None when it is near or the cell gives none."""
+    if cell.base is None or base is None:
+        return None
+    guess, found = np.asarray(cell.base, dtype=float), np.asarray(base, dtype=float)
+    moved = float(np.linalg.norm(found[:3, 3] - guess[:3, 3]))
+    cos = (np.trace(guess[:3, :3].T @ found[:3, :3]) - 1.0) / 2.0
+    turned = float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    if moved <= BASE_GUESS_MM and turned <= BASE_GUESS_DEG:
+        return None
+    return (
+        f"the base identified lies {moved:.0f} mm and {turned:.1f} deg from the cell's base "
+        f"(more than {BASE_GUESS_MM:g} mm or {BASE_GUESS_DEG:g} deg, past a survey's error): the "
+        "data places the arm elsewhere than the cell says (another mount, the tracker moved, "
+        "metres); the fit takes the data's, check the cell's base before planning with it"
+    )

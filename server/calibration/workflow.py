@@ -12,6 +12,7 @@ from robocal.server.calibration.units import radian_refusal, units_refusal
 from robocal.server.calibration.validation import (
     HOLDOUT_METHOD,
     absurd_errors,
+    base_guess_warning,
     cell_problem,
     json_number,
     late_shift_warning,
@@ -286,6 +287,7 @@ def validate(
         floor=(floor.mm, floor.source),
         layout_condition=cal.layout_condition,
         late=late,
+        base=cal.layout.base(cal.x),
     )
 
 
@@ -305,6 +307,7 @@ def verdict(
     extension_reason: str | None = None,
     late: str | None = None,
     explained_share: float | None = None,
+    base=None,
 ) -> Validation:
     """The `validation` block of a model fitted on meas, `calibrate`'s and `diagnose`'s alike (one
     model, one verdict): the guard's limits (solver.guard.judge: past MAX_FLOOR_RATIO times the
@@ -313,7 +316,7 @@ def verdict(
     rich poses (solver.identifiability.layout_condition), None: unknown; late: the warning that
     the campaign's last poses moved together (late_shift_warning: a bumped tracker), None;
     explained_share: the strongest covariate's share of a diagnosis's remainder (its
-    unexplained block), None."""
+    unexplained block), None; base: the identified base (4x4), against the cell's guess."""
     from robocal.solver import guard
     from robocal.solver.plausibility import nominal_error_bound
 
@@ -345,7 +348,7 @@ def verdict(
         nominal_holdout_rms_mm=nominal.holdout_rms_mm,
         warnings=v.warnings
         + layout_warnings(cell, meas, targets)
-        + [w for w in (late, repeated_readings_warning(meas)) if w],
+        + [w for w in (late, repeated_readings_warning(meas), base_guess_warning(cell, base)) if w],
     )
 
 
@@ -632,6 +635,7 @@ def validate_diagnosis(
         layout_condition=geometric.layout_condition,
         extension_reason=implausible_extensions(*model.layout(), model.extensions, meas.q),
         late=late_shift_warning(meas, pred - meas.xyz, report.noise_floor_mm),
+        base=model.base,
         explained_share=max((c.strength for c in left.covariates), default=None) if left else None,
     )
     # a small campaign's resamples: the cause taken from them, or their doubt, said here too
