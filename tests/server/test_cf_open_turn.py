@@ -5,12 +5,12 @@ not chosen silently (a UR10-like campaign's q2 -248.5 deg came back as +111.5)."
 import csv
 import json
 
-import numpy as np
-
 from robocal.server.cli import main
 from robocal.server.formats.cell_doc import CellDoc
-from robocal.solver.configuration import confdata, open_turns
+from robocal.solver.configuration import open_turns
 from robocal.solver.robot import IRB2600
+
+from .test_outside_cells import _confdata_targets
 
 TABLE = [
     (0, 127.3, 90),
@@ -29,18 +29,6 @@ def _cell(limits) -> dict:
         for (a, d, al), lim in zip(TABLE, limits)
     ]
     return {"robot": {"name": "ur10-like", "convention": "dh", "joints": joints}, "targets": RING}
-
-
-def _confdata_targets(cell: dict, meas, out, poses: int) -> None:
-    robot = CellDoc.model_validate(cell).robot_model
-    rows = [r for r in csv.DictReader(open(meas)) if int(r["pose"]) <= poses]
-    with open(out, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["pose", "target", "x", "y", "z", "cf1", "cf4", "cf6", "cfx"])
-        for r in rows:
-            q = np.radians([float(r[f"q{i}"]) for i in range(1, 7)])
-            cf = np.asarray(confdata(robot, q)).reshape(-1)
-            w.writerow([r["pose"], r["target"], r["x"], r["y"], r["z"], *map(int, cf)])
 
 
 def test_which_joints_confdata_leaves_a_turn_open():
@@ -73,11 +61,11 @@ def test_a_turn_confdata_leaves_open_is_said(tmp_path, capsys):
     )
     args = ["calibrate", p["meas.csv"], "--cell", p["cell.json"], "--method", "ls-sum"]
     assert main([*args, "--out", p["model.json"]]) == 0
-    _confdata_targets(cell, p["meas.csv"], p["t.csv"], 6)
+    _confdata_targets(tmp_path, tmp_path / "cell.json", "meas.csv", "t.csv")
     capsys.readouterr()
     assert main(["compensate", p["model.json"], p["t.csv"], "--out", p["j.csv"]]) == 0
     err = capsys.readouterr().err
-    assert "6 poses (first '1') give a configuration (cf1, cf4, cf6, cfx) alone" in err, err
+    assert "30 poses (first '1') give a configuration (cf1, cf4, cf6, cfx) alone" in err, err
     assert "joints 2 and 3 can turn more than a full turn" in err, err
     got = list(csv.DictReader(open(p["j.csv"])))
     assert all(abs(float(r[f"q{j}"])) <= 180.0 for r in got for j in (2, 3))

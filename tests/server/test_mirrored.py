@@ -3,7 +3,6 @@ one line naming the file: the real IRB 120 with x and y swapped calibrated to a 
 (0.54 mm RMS, d4 -603 mm, alpha4 +180 deg) blamed on the cell's DH table. A DH table with a
 twist's sign or a zero offset wrong, or a joint read reversed, is never taken for a mirror."""
 
-import csv
 from dataclasses import replace
 
 import numpy as np
@@ -13,25 +12,21 @@ from robocal.drivers.cell import VirtualCell
 from robocal.server.cli import main
 from robocal.server.formats.cell_json import default_cell
 from robocal.solver.mirror import check_mirror
-from tests.real import REAL
+from tests.real import REAL, rewritten
 
 IRB = REAL / "irb120_wu"
 
 
 @pytest.mark.parametrize("how", ["x<->y", "-z"])
 def test_mirrored_readings_are_refused(tmp_path, capsys, how):
-    src, dst = IRB / "train.csv", tmp_path / "mirrored.csv"
-    with open(src, newline="") as f:
-        rows = list(csv.DictReader(f))
-    with open(dst, "w", newline="") as f:
-        w = csv.DictWriter(f, list(rows[0]))
-        w.writeheader()
-        for r in rows:
-            if how == "x<->y":
-                r = {**r, "x": r["y"], "y": r["x"]}
-            else:
-                r = {**r, "z": repr(-float(r["z"]))}
-            w.writerow(r)
+    dst = tmp_path / "mirrored.csv"
+
+    def mirrored(r: dict) -> dict:
+        if how == "x<->y":
+            return {**r, "x": r["y"], "y": r["x"]}
+        return {**r, "z": repr(-float(r["z"]))}
+
+    rewritten(IRB / "train.csv", dst, mirrored)
     args = ["calibrate", str(dst), "--cell", str(IRB / "cell.json"), "--method", "ls-sum"]
     assert main([*args, "--out", str(tmp_path / "m.json")]) == 1
     err = capsys.readouterr().err.strip()
@@ -65,13 +60,10 @@ def test_a_wrong_description_is_not_taken_for_a_mirror():
 def test_one_joint_in_radians_is_refused_naming_it(tmp_path, capsys):
     """The real IRB 120 with q4 alone in radians was 'not deployable' for an idle joint 4 and an
     arm that is not the one measured (78 mm RMS); the file-wide unit check cannot see one joint."""
-    src, dst = IRB / "train.csv", tmp_path / "q4rad.csv"
-    with open(src, newline="") as f:
-        rows = list(csv.DictReader(f))
-    with open(dst, "w", newline="") as f:
-        w = csv.DictWriter(f, list(rows[0]))
-        w.writeheader()
-        w.writerows({**r, "q4": repr(float(np.radians(float(r["q4"]))))} for r in rows)
+    dst = tmp_path / "q4rad.csv"
+    rewritten(
+        IRB / "train.csv", dst, lambda r: {**r, "q4": repr(float(np.radians(float(r["q4"]))))}
+    )
     args = ["calibrate", str(dst), "--cell", str(IRB / "cell.json"), "--method", "ls-sum"]
     assert main([*args, "--out", str(tmp_path / "m.json")]) == 1
     err = capsys.readouterr().err.strip()

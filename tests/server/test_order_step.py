@@ -4,7 +4,6 @@ real IRB 120 with its last 17 poses moved 0.36 mm: 'deployable', the remainder p
 arm's repeatability). The step in the file's order is said in a warning; clean campaigns, and a
 real campaign visited in grid order, say nothing."""
 
-import csv
 import json
 
 import numpy as np
@@ -15,21 +14,18 @@ from robocal.server.cli import main
 from robocal.server.formats.cell_json import default_cell
 from robocal.solver.kinematics import predict
 from robocal.solver.order_step import order_step
-from tests.real import REAL
+from tests.real import REAL, rewritten
 
 IRB = REAL / "irb120_wu"
 
 
 def _bumped(src, dst, after: int, by=(0.3, -0.2, 0.0)) -> None:
-    with open(src, newline="") as f:
-        rows = list(csv.DictReader(f))
-    with open(dst, "w", newline="") as f:
-        w = csv.DictWriter(f, list(rows[0]))
-        w.writeheader()
-        for r in rows:
-            if int(r["pose"]) > after:
-                r = {**r, **{c: repr(float(r[c]) + d) for c, d in zip("xyz", by)}}
-            w.writerow(r)
+    def moved(r: dict) -> dict:
+        if int(r["pose"]) <= after:
+            return r
+        return {**r, **{c: repr(float(r[c]) + d) for c, d in zip("xyz", by)}}
+
+    rewritten(src, dst, moved)
 
 
 def test_a_bump_in_the_files_order_is_said(tmp_path, capsys):

@@ -8,22 +8,12 @@ import pytest
 
 from robocal.server.cli import main
 
-UR10 = [
-    (0, 127.3, 90),
-    (-612, 0, 0),
-    (-572.3, 0, 0),
-    (0, 163.941, 90),
-    (0, 115.7, -90),
-    (0, 92.2, 0),
-]
+from .test_cf_open_turn import _cell as ur10_like
 
 
 def _cell(tracker=None) -> dict:
-    joints = [
-        {"a": a, "d": d, "theta": 0.0, "alpha": al, "limits": [-360, 360]} for a, d, al in UR10
-    ]
-    cell = {"robot": {"name": "ur10-like", "convention": "dh", "joints": joints}}
-    cell["targets"] = {"A": [30.0, 10.0, 40.0]}
+    """The UR10-like arm of test_cf_open_turn, one SMR off the flange axis."""
+    cell = {**ur10_like([(-360, 360)] * 6), "targets": {"A": [30.0, 10.0, 40.0]}}
     return cell if tracker is None else {**cell, "tracker": tracker}
 
 
