@@ -54,3 +54,18 @@ def test_a_ceiling_arm_sags_the_other_way():
         sag[name] = effect.joint_offsets(vc, q, None, None)[:, 1]
     assert np.all(np.abs(sag["floor"]) > 1e-6)
     np.testing.assert_allclose(sag["ceiling"], -sag["floor"], rtol=1e-9)
+
+
+def test_a_wall_arms_first_joint_compliance_is_named(tmp_path):
+    """On a wall the first joint's axis lies level and carries the arm's weight: its compliance,
+    simulated along the tracker's gravity, is named by diagnose (which takes gravity from the
+    identified base): 0.82 mm held out to 0.017 mm."""
+    cell = tmp_path / "cell.json"
+    cell.write_text(json.dumps({"robot": "irb2600", "targets": TARGETS, "base": WALL}))
+    meas, report = str(tmp_path / "meas.csv"), str(tmp_path / "r.json")
+    args = ["simulate", "--cell", str(cell), "--poses", "60", "--seed", "6"]
+    assert main([*args, "--effect", "joint_compliance:1=2", "--out", meas]) == 0
+    assert main(["diagnose", meas, "--cell", str(cell), "--out", report]) == 0
+    r = json.loads(open(report).read())
+    assert [(e["name"], e["joint"]) for e in r["effects"]] == [("joint_compliance", 1)], r
+    assert r["final"]["holdout_rmse_mm"] < 2 * r["noise_floor_mm"], r["final"]
