@@ -204,7 +204,8 @@ def compensate_targets(
             targets,
             k,
             f"is unreachable within the joint limits: the model comes no closer than "
-            f"{res.error_mm[k]:.3f} mm RMS (at most {max_error_mm:g} mm allowed){_more(len(bad))}",
+            f"{res.error_mm[k]:.3f} mm RMS (at most {max_error_mm:g} mm allowed){_more(len(bad))}"
+            + _elsewhere(res.error_mm, len(bad)),
         )
     if guess.any():
         warnings += _kept(targets, res, guess, solver, max_move_deg)
@@ -237,6 +238,21 @@ def _open_turns(targets: Targets, nominal, alone: np.ndarray) -> str | None:
         f"limits ({ranges} deg), a turn confdata leaves open: taken at the angle nearest zero; "
         f"give starting joints "
         f"q1 ... q{nominal.n_joints} for another turn"
+    )
+
+
+# every pose missed by this much or more: no arm's error, the targets are in another frame
+ELSEWHERE_MM = 100.0
+
+
+def _elsewhere(error_mm: np.ndarray, bad: int) -> str:
+    """A clause when every pose is missed by ELSEWHERE_MM or more (targets from another
+    campaign's tracker frame, or in other units), empty otherwise."""
+    if bad < len(error_mm) or not np.min(error_mm) >= ELSEWHERE_MM:
+        return ""
+    return (
+        f"; every pose misses by {np.min(error_mm):.0f} mm or more: are the targets in this "
+        "model's tracker frame (measured with the tracker where it stood for the calibration)?"
     )
 
 
