@@ -62,7 +62,7 @@ def order_step(resid: np.ndarray, order: np.ndarray, floor_mm: float | None) -> 
     m = len(order)
     if m < 4 * EDGE_POSES:
         return None
-    x = np.array([r[p][seen[p]].mean(axis=0) for p in order])
+    x = np.where(seen[..., None], r, 0.0)[order].sum(axis=1) / seen[order].sum(axis=1)[:, None]
     t, k = _best_step(x)
     shift = x[k:].mean(axis=0) - x[:k].mean(axis=0)
     if floor_mm is not None and not np.linalg.norm(shift) >= MIN_FLOORS * floor_mm:
