@@ -141,6 +141,9 @@ class VirtualCell:
     effects: list = field(default_factory=list)
     seed: int | None = None
     last_campaign: dict | None = None
+    # gravity's direction in the base frame: a floor-mounted arm's -z unless the cell's base (a
+    # wall or ceiling mount seen from a levelled tracker) says otherwise
+    down: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -1.0]))
 
     @classmethod
     def random(
@@ -153,26 +156,35 @@ class VirtualCell:
         acceptance_rad: float = np.deg2rad(60.0),
         floor_clearance_mm: float = 150.0,
         effects=(),
+        base=None,
     ) -> VirtualCell:
-        """A cell whose true geometry, SMR positions and tracker placement are drawn from `seed`."""
+        """A cell whose true geometry, SMR positions and tracker placement are drawn from `seed`;
+        `base` (the cell's 4x4 base in the tracker frame, a levelled tracker) places the arm
+        instead, mounted on a wall or a ceiling as its rotation says."""
         rng = np.random.default_rng(seed)
         names = tuple(targets)
         nominal_t = np.array([targets[n] for n in names], dtype=float).reshape(len(names), 3)
         p0 = robot.param_vector()
         p_true = p0 + errors.sigmas(robot.param_names()) * rng.normal(size=p0.size)
         true_t = nominal_t + rng.normal(scale=errors.smr_mm, size=nominal_t.shape)
+        placement = random_tracker_placement(rng)  # drawn always: the seed's other draws stay
+        down = np.array([0.0, 0.0, -1.0])
+        if base is not None:
+            placement = np.asarray(base, dtype=float)
+            down = placement[:3, :3].T @ down  # the tracker's -z, levelled, in the base frame
         return cls(
             robot,
             robot.with_params(p_true),
             names,
             nominal_t,
             true_t,
-            random_tracker_placement(rng),
+            placement,
             tracker,
             acceptance_rad,
             floor_clearance_mm,
             list(effects),
             seed,
+            down=down,
         )
 
     def _points(self, q, dq=None, motion=None, record=False):
@@ -405,6 +417,7 @@ class VirtualCell:
             "true_targets": targets(self.true_targets),
             "nominal_targets": targets(self.nominal_targets),
             "base": self.base.tolist(),
+            "gravity_in_base": self.down.tolist(),
             "tracker": asdict(self.tracker),
             "acceptance_deg": float(np.rad2deg(self.acceptance_rad)),
             "floor_clearance_mm": float(self.floor_clearance_mm),

@@ -16,7 +16,7 @@ from robocal.solver import chain
 from robocal.solver.kinematics import joint_ops, translation
 from robocal.solver.robot import Robot
 
-G = 9.81  # m/s^2, along -z of the robot base frame (a floor-mounted arm)
+G = 9.81  # m/s^2, along the cell's `down` (-z of the base frame on a floor-mounted arm)
 REFERENCE_TEMP_C = 20.0  # ISO 1 reference temperature: zero growth until a campaign sets T0
 EFFECT_STREAM = 0xEFFEC7  # effects draw from their own stream, so the cell's geometry is unchanged
 
@@ -88,12 +88,12 @@ class MassModel:
     def _place(self, R, o):
         return o[:, self.link] + np.einsum("mbij,bj->mbi", R[:, self.link], self.cog_mm)
 
-    def torques(self, robot: Robot, q) -> np.ndarray:
-        """Gravity torque (m, N) about each joint axis, N m: z_J . sum_(bodies beyond J) r x m g."""
+    def torques(self, robot: Robot, q, down=(0.0, 0.0, -1.0)) -> np.ndarray:
+        """Gravity torque (m, N) about each joint axis, N m: z_J . sum_(bodies beyond J) r x m g,
+        gravity along `down` (a unit vector in the base frame)."""
         axes, points, R, o = link_frames(robot, q)
         r = self._place(R, o)
-        force = np.zeros((len(self.mass_kg), 3))
-        force[:, 2] = -G * self.mass_kg
+        force = G * self.mass_kg[:, None] * np.asarray(down, dtype=float)[None, :]
         tau = np.empty(axes.shape[:2])
         for j in range(axes.shape[1]):
             beyond = self.link >= j
@@ -185,7 +185,8 @@ class JointCompliance(_Effect):
 
     def joint_offsets(self, cell, q, time_s, temp_c):
         return self._dq(
-            q, 1e-6 * self.magnitude * self.mass.torques(cell.true_robot, q)[:, self.joint]
+            q,
+            1e-6 * self.magnitude * self.mass.torques(cell.true_robot, q, cell.down)[:, self.joint],
         )
 
     def hidden(self) -> dict:

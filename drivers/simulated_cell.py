@@ -29,8 +29,13 @@ class SimulatedCell:
         expected_s: float = 2000.0,
         noise_seed=None,
         repeatability_mm: float | None = None,
+        base=None,
     ):
-        self.cell = VirtualCell.random(robot, targets, seed=seed, tracker=TrackerSpec.of(tracker))
+        # the cell's base, where it gives one, places the arm (a wall or ceiling mount): a
+        # tracker placed at random instead saw none of the SMRs the plan aimed it at
+        self.cell = VirtualCell.random(
+            robot, targets, seed=seed, tracker=TrackerSpec.of(tracker), base=base
+        )
         self.cell.effects.extend(make_effects(list(effects), self.cell, seed))
         noise = seed if noise_seed is None else noise_seed
         self.world = SimulatedWorld(

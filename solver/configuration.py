@@ -149,6 +149,18 @@ def bounds(robot: Robot, cf) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
+def open_turns(robot: Robot) -> list[int]:
+    """Joints (0-based) whose turn confdata leaves open within the limits: joints 2 and 3 with more
+    than a full turn between their limits, joint 5 with more than one on a side of zero (its sign
+    is cfx's bit). ABB's arms have none; a UR-like arm's +-360 deg joints have all three."""
+    turn = 2.0 * np.pi + np.deg2rad(1e-7)
+    lo, hi = robot.lower, robot.upper
+    out = [j for j in (1, 2) if hi[j] - lo[j] > turn]
+    if max(hi[4], 0.0) > turn or -min(lo[4], 0.0) > turn:
+        out.append(4)
+    return sorted(out)
+
+
 def describe(cf) -> str:
     """confdata as ABB writes it: [cf1,cf4,cf6,cfx]."""
     return "[" + ",".join(str(int(v)) for v in cf) + "]"

@@ -273,6 +273,7 @@ def judge(
             "fitted on"
         )
     v.reasons += beyond_tolerance(v.holdout_rms_mm, tolerance_mm)
+    v.warnings += max_beyond_tolerance(v.holdout_rms_mm, v.holdout_max_mm, tolerance_mm)
     v.warnings += below_noise(tolerance_mm, noise_floor_mm, noise_floor_source)
     v.reasons += worse_than_nominal(v.holdout_rms_mm, nominal_holdout_mm)
     wrong_arm = max_fit_mm is not None and not fit_rms_mm <= max_fit_mm
@@ -309,6 +310,20 @@ def beyond_tolerance(holdout_rms_mm: float, tolerance_mm: float | None) -> list[
     return [
         f"held-out error {holdout_rms_mm:.{digits}g} mm RMS exceeds the tolerance "
         f"{tolerance_mm:g} mm"
+    ]
+
+
+def max_beyond_tolerance(
+    holdout_rms_mm: float, holdout_max_mm: float, tolerance_mm: float | None
+) -> list[str]:
+    """The warning a held-out RMS within the tolerance gives when the worst held-out reading is
+    beyond it: the verdict judges the RMS, the application may need every point."""
+    if tolerance_mm is None or not holdout_rms_mm <= tolerance_mm < holdout_max_mm:
+        return []
+    return [
+        f"the held-out RMS {holdout_rms_mm:.3g} mm is within the tolerance {tolerance_mm:g} mm, "
+        f"but the worst held-out reading misses by {holdout_max_mm:.3g} mm: some new poses will "
+        "be beyond it"
     ]
 
 

@@ -48,29 +48,58 @@ def last_motion(
     out = np.empty_like(seq)
     out[order] = seq
     if prev_q is not None:
-        step = np.sign(q - np.asarray(prev_q, dtype=float))  # NaN where not given
+        prev = np.asarray(prev_q, dtype=float)
+        step = np.sign(q - prev)  # NaN where not given
         given = np.isfinite(step) & (step != 0)
+        if not _timed(time_s, m) and rows_follow_prev_q(q, prev) is False:
+            # the rows are not the visit order (the prev_q given do not follow their rows): a
+            # pose without prev_q has no known approach, like the first visited (a shuffled
+            # file's one such pose took a random row's direction: 0.63 mm off its backlash)
+            out = np.where(np.isfinite(prev).all(axis=1)[:, None], out, 0.0)
         out = np.where(given, step, out)
     return out
 
 
-def ordered_by_rows(time_s: np.ndarray | None, prev_q: np.ndarray | None, m: int) -> int:
+def _timed(time_s, m: int) -> bool:
+    """Whether time_s orders every one of the m poses (visit_order follows it)."""
+    if time_s is None:
+        return False
+    return bool(np.isfinite(np.asarray(time_s, dtype=float)).reshape(m, -1).any(axis=1).all())
+
+
+# prev_q equal to the row above's joints within this (rad): the file is in the order visited
+FOLLOWS_RAD = 1e-6
+
+
+def rows_follow_prev_q(q: np.ndarray, prev_q: np.ndarray) -> bool | None:
+    """Whether the file's rows are the order visited, as its prev_q tell (each pose's prev_q the
+    row above's joints, for half those given at least); None when no pose but the first gives
+    them (nothing to tell by)."""
+    prev = np.asarray(prev_q, dtype=float)
+    have = np.isfinite(prev).all(axis=1)
+    have[0] = False
+    if not have.any():
+        return None
+    k = np.flatnonzero(have)
+    follows = np.all(np.abs(prev[k] - q[k - 1]) <= FOLLOWS_RAD, axis=1)
+    return bool(2 * follows.sum() >= len(k))
+
+
+def ordered_by_rows(
+    time_s: np.ndarray | None, prev_q: np.ndarray | None, m: int, q: np.ndarray | None = None
+) -> int:
     """How many of m poses take the direction of their joints' last motion from the file order:
     those without prev_q when time_s does not order every pose (visit_order); the first row's
     (no motion before it) does not count."""
     if m < 2:
         return 0
-    if (
-        time_s is not None
-        and np.isfinite(np.asarray(time_s, dtype=float)).reshape(m, -1).any(axis=1).all()
-    ):
+    if _timed(time_s, m):
         return 0  # the times order every pose
-    without = (
-        np.ones(m, dtype=bool)
-        if prev_q is None
-        else ~np.isfinite(np.asarray(prev_q, dtype=float)).all(axis=1)
-    )
-    return int(without[1:].sum())
+    if prev_q is None:
+        return m - 1
+    if q is not None and rows_follow_prev_q(np.asarray(q, dtype=float), prev_q) is False:
+        return 0  # the rows are not the order visited: a pose without prev_q has none (0)
+    return int((~np.isfinite(np.asarray(prev_q, dtype=float)).all(axis=1))[1:].sum())
 
 
 def sorted_joint(q: np.ndarray) -> tuple[int, int] | None:

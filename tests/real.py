@@ -27,3 +27,16 @@ def import_real(client, name: str, tolerance_mm: float | None = None) -> int:
     )
     assert r.status_code == 201, r.text
     return r.json()["id"]
+
+
+def rewritten(src: Path, dst: Path, change) -> None:
+    """src's rows (a CSV with a header) each passed through change (a dict to a dict) into dst:
+    a campaign mangled as a user's file may be."""
+    import csv
+
+    with open(src, newline="") as f:
+        rows = list(csv.DictReader(f))
+    with open(dst, "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(change(r) for r in rows)

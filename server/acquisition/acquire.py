@@ -381,6 +381,7 @@ def acquire(
                 expected_s=20.0 * opts.poses,
                 noise_seed=opts.noise_seed,
                 repeatability_mm=cell.repeatability_mm,
+                base=cell.base,
             )
             stack.callback(sim.close)
         else:

@@ -9,14 +9,19 @@ from robocal.solver.measurements import Measurements
 
 def units_refusal(cell: Cell, meas: Measurements) -> str | None:
     """Why the readings are not in mm and degrees: their spread is not the one the cell's
-    nominal arm gives at the measured joints; None if they may be, or if the cell does not name
-    their SMRs (refused elsewhere)."""
+    nominal arm gives at the measured joints, or they are its mirror image (solver.mirror);
+    None if they may be, or if the cell does not name their SMRs (refused elsewhere)."""
     from robocal.solver.plausibility import check_units
 
     if any(t not in cell.targets for t in meas.target_names):
         return None
+    from robocal.solver.mirror import check_mirror
+
     targets = cell.target_positions(meas.target_names)
-    return check_units(cell.robot, targets, meas.q, meas.xyz).reason()
+    if why := check_units(cell.robot, targets, meas.q, meas.xyz).reason():
+        return why
+    mirror = check_mirror(cell.robot, targets, meas.q, meas.xyz)
+    return mirror.reason() if mirror is not None else None
 
 
 def radian_refusal(cell: Cell, meas: Measurements) -> str | None:

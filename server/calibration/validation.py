@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from robocal.server.calibration.units import units_refusal
 from robocal.server.formats.blocks import Validation, ValidationLimits
 from robocal.server.formats.cell_json import Cell
 from robocal.server.formats.model_json import ModelFile
@@ -121,7 +122,7 @@ def validation_block(
     )
 
 
-def late_shift_warning(meas: Measurements, residuals) -> str | None:
+def late_shift_warning(meas: Measurements, residuals, floor_mm: float | None) -> str | None:
     """The warning the last poses of a campaign give when they miss together, far beyond the
     others (solver.shift_scan.late_shift: too few poses after it for a base shift to be fitted);
     residuals (poses, SMRs, 3): the model's prediction minus every reading, the screened-out
@@ -131,9 +132,10 @@ def late_shift_warning(meas: Measurements, residuals) -> str | None:
 
     if residuals is None:
         return None
-    late = late_shift(residuals, visit_order(meas.time_s, meas.n_poses), meas.xyz)
+    order = visit_order(meas.time_s, meas.n_poses)
+    late = late_shift(residuals, order, meas.xyz)
     if late is None:
-        return None
+        return order_step_warning(meas, residuals, order, floor_mm)
     k = len(late.poses)
     which = ", ".join(str(meas.pose_ids[i]) for i in late.poses)
     moved = ", ".join(f"{-v:+.3f}" for v in late.shift_mm)
@@ -161,6 +163,8 @@ def expected_accuracy(v: guard.Validation, holdout_method: str = HOLDOUT_METHOD)
     if v.tolerance_mm is None:
         return said + "; no tolerance given (--tolerance-mm, or the cell's tolerance_mm)"
     within = np.isfinite(v.holdout_rms_mm) and v.holdout_rms_mm <= v.tolerance_mm
+    if within and v.holdout_max_mm > v.tolerance_mm:  # the RMS is judged; its max said beside
+        return said + f"; its RMS within the tolerance {v.tolerance_mm:g} mm, its max beyond"
     return said + f"; {'within' if within else 'beyond'} the tolerance {v.tolerance_mm:g} mm"
 
 
@@ -214,3 +218,95 @@ def file_refusal(path) -> str | None:
     from robocal.server.formats.model_json import read_model
 
     return read_model(path).verdict.refusal()
+
+
+def order_step_warning(meas: Measurements, residuals, order, floor_mm) -> str | None:
+    """The warning the poses after a split in the visit order give when they are off the model
+    together against the ones before (solver.order_step: a tracker bumped mid-campaign, which the
+    diagnosis fits as a base shift only against time_s), None when none is."""
+    from robocal.solver.order_step import order_step
+
+    step = order_step(residuals, order, floor_mm)
+    if step is None:
+        return None
+    by = "time order" if meas.time_s is not None else "the file's order (no time_s)"
+    moved = ", ".join(f"{-v:+.3f}" for v in step.shift_mm)
+    return (
+        f"the {step.after} poses from {meas.pose_ids[step.first_after]!r} on in {by} are off "
+        f"the model by {np.linalg.norm(step.shift_mm):.3f} mm together against the "
+        f"{step.before} before (readings moved {moved} mm in the tracker frame; beyond every one "
+        f"of {round(1 / step.p_value) - 1} random reorderings of the poses): a tracker bumped or "
+        "a base moved mid-campaign? Calibrate the two parts apart, or give time_s so that "
+        "diagnose can fit a base shift"
+    )
+
+
+def repeated_readings_warning(meas: Measurements) -> str | None:
+    """The warning poses whose every reading repeats another pose's to the last digit give (a
+    row block copied: no tracker reads a point twice alike), None when none does: each copy
+    counts as a pose of its own, and a held-out copy is predicted by its twin."""
+    flat = np.where(np.isfinite(meas.xyz), meas.xyz, np.inf).reshape(meas.n_poses, -1)
+    _, first, inverse, counts = np.unique(
+        flat, axis=0, return_index=True, return_inverse=True, return_counts=True
+    )
+    copies = [
+        (int(first[g]), k)
+        for k, g in enumerate(np.asarray(inverse).reshape(-1))
+        if counts[g] > 1 and k != first[g]
+    ]
+    if not copies:
+        return None
+    a, b = copies[0]
+    more = f" ({len(copies) - 1} more poses repeat another so)" if len(copies) > 1 else ""
+    return (
+        f"pose {meas.pose_ids[b]!r} repeats every reading of pose {meas.pose_ids[a]!r} to the "
+        f"last digit{more}: a copied block of rows? Each copy counts as a pose of its own, and "
+        "the held-out figures predict it from its twin; remove the copies"
+    )
+
+
+# A quick survey of the cell puts the base some 10 mm and half a degree off; past these, the
+# cell's base describes another setup (a wall or ceiling mount the data does not show, metres)
+BASE_GUESS_MM, BASE_GUESS_DEG = 100.0, 10.0
+
+
+def base_guess_warning(cell: Cell, base) -> str | None:
+    """The warning a base identified far from the cell's `base` guess gives (the fit holds: the
+    base is found from the data), None when it is near or the cell gives none."""
+    if cell.base is None or base is None:
+        return None
+    guess, found = np.asarray(cell.base, dtype=float), np.asarray(base, dtype=float)
+    moved = float(np.linalg.norm(found[:3, 3] - guess[:3, 3]))
+    cos = (np.trace(guess[:3, :3].T @ found[:3, :3]) - 1.0) / 2.0
+    turned = float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    if moved <= BASE_GUESS_MM and turned <= BASE_GUESS_DEG:
+        return None
+    return (
+        f"the base identified lies {moved:.0f} mm and {turned:.1f} deg from the cell's base "
+        f"(more than {BASE_GUESS_MM:g} mm or {BASE_GUESS_DEG:g} deg, past a survey's error): the "
+        "data places the arm elsewhere than the cell says (another mount, the tracker moved, "
+        "metres); the fit takes the data's, check the cell's base before planning with it"
+    )
+
+
+def implausible(cell: Cell, meas: Measurements, robot) -> list[str]:
+    """The verdict's reasons against a model physics rules out (solver.plausibility): readings
+    in other units than the cell's nominal arm implies, or an identified geometry changed from
+    the nominal beyond what an arm of its size can have."""
+    from robocal.solver.plausibility import implausible_changes
+
+    units = units_refusal(cell, meas)
+    changes = implausible_changes(cell.robot, robot).reason()
+    return [why for why in (units, changes) if why]
+
+
+def layout_warnings(cell: Cell, meas: Measurements, targets) -> list[str]:
+    """The verdict's warnings: SMRs (targets (K, 3), the readings' order) identified far from
+    where the cell puts them. The fit holds (the SMR positions are free), so the model stays
+    deployable, but the cell's layout or its flange frame is not what the user thinks."""
+    from robocal.solver.plausibility import check_layout
+
+    names = meas.target_names
+    nominal = cell.target_positions(names)
+    why = check_layout(names, nominal, np.asarray(targets, dtype=float)).reason()
+    return [why] if why else []

@@ -13,12 +13,16 @@ from robocal.server.calibration.validation import (
     HOLDOUT_METHOD,
     NominalErrors,
     absurd_errors,
+    base_guess_warning,
     cell_problem,
+    implausible,
     json_number,
     late_shift_warning,
+    layout_warnings,
     noise_floor,
     nominal_errors,
     nominal_model_errors,
+    repeated_readings_warning,
     validation_block,
 )
 from robocal.server.formats.blocks import Diagnosis, Fit, HeldOut, Validation
@@ -244,7 +248,14 @@ def model_file(cal: Calibration, cell: Cell, meas: Measurements, data_path=None)
     # never deployable
     floor = cal.noise_floor or noise_floor(cell, used)  # a fit not made by run_method has none
     v = model.validation = validate(
-        cal, cell, used, holdout, errors, acc.rmse, floor, late_shift_warning(meas, pred - meas.xyz)
+        cal,
+        cell,
+        used,
+        holdout,
+        errors,
+        acc.rmse,
+        floor,
+        late_shift_warning(meas, pred - meas.xyz, floor.mm if floor else None),
     )
     if cal.method != "nominal":
         block = geometric_block(
@@ -281,6 +292,7 @@ def validate(
         layout_condition=cal.layout_condition,
         late=late,
         nominal=nominal_model_errors(cal, fit_rms, holdout),
+        base=cal.layout.base(cal.x),
     )
 
 
@@ -301,6 +313,7 @@ def verdict(
     late: str | None = None,
     explained_share: float | None = None,
     nominal: NominalErrors | None = None,
+    base=None,
 ) -> Validation:
     """The `validation` block of a model fitted on meas, `calibrate`'s and `diagnose`'s alike (one
     model, one verdict): the guard's limits (solver.guard.judge: past MAX_FLOOR_RATIO times the
@@ -309,7 +322,8 @@ def verdict(
     rich poses (solver.identifiability.layout_condition), None: unknown; late: the warning that
     the campaign's last poses moved together (late_shift_warning: a bumped tracker), None;
     explained_share: the strongest covariate's share of a diagnosis's remainder (its
-    unexplained block), None; nominal: the nominal arm's errors on meas when known already."""
+    unexplained block), None; nominal: the nominal arm's errors on meas when known already;
+    base: the identified base (4x4), against the cell's guess."""
     from robocal.solver import guard
     from robocal.solver.plausibility import nominal_error_bound
 
@@ -339,31 +353,10 @@ def verdict(
         holdout_method,
         nominal_rms_mm=nominal.fit_rms_mm,
         nominal_holdout_rms_mm=nominal.holdout_rms_mm,
-        warnings=v.warnings + layout_warnings(cell, meas, targets) + ([late] if late else []),
+        warnings=v.warnings
+        + layout_warnings(cell, meas, targets)
+        + [w for w in (late, repeated_readings_warning(meas), base_guess_warning(cell, base)) if w],
     )
-
-
-def implausible(cell: Cell, meas: Measurements, robot) -> list[str]:
-    """The verdict's reasons against a model physics rules out (solver.plausibility): readings
-    in other units than the cell's nominal arm implies, or an identified geometry changed from
-    the nominal beyond what an arm of its size can have."""
-    from robocal.solver.plausibility import implausible_changes
-
-    units = units_refusal(cell, meas)
-    changes = implausible_changes(cell.robot, robot).reason()
-    return [why for why in (units, changes) if why]
-
-
-def layout_warnings(cell: Cell, meas: Measurements, targets) -> list[str]:
-    """The verdict's warnings: SMRs (targets (K, 3), the readings' order) identified far from
-    where the cell puts them. The fit holds (the SMR positions are free), so the model stays
-    deployable, but the cell's layout or its flange frame is not what the user thinks."""
-    from robocal.solver.plausibility import check_layout
-
-    names = meas.target_names
-    nominal = cell.target_positions(names)
-    why = check_layout(names, nominal, np.asarray(targets, dtype=float)).reason()
-    return [why] if why else []
 
 
 def model_predict(
@@ -625,7 +618,8 @@ def validate_diagnosis(
         holdout_method=f"{FOLDS}-fold cross-validation of the diagnosis",
         layout_condition=geometric.layout_condition,
         extension_reason=implausible_extensions(*model.layout(), model.extensions, meas.q),
-        late=late_shift_warning(meas, pred - meas.xyz),
+        late=late_shift_warning(meas, pred - meas.xyz, report.noise_floor_mm),
+        base=model.base,
         explained_share=max((c.strength for c in left.covariates), default=None) if left else None,
     )
     # a small campaign's resamples: the cause taken from them, or their doubt, said here too

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import sys
+
+import numpy as np
 
 from .common import _nonnegative, _nonnegative_int, _positive_int, _rate
 
@@ -25,7 +28,11 @@ def cmd_simulate(args) -> None:
 
     cell = workflow.load_cell(args.cell)
     vc = VirtualCell.random(
-        cell.robot, cell.targets, seed=args.seed, tracker=TrackerSpec.of(cell.tracker)
+        cell.robot,
+        cell.targets,
+        seed=args.seed,
+        tracker=TrackerSpec.of(cell.tracker),
+        base=cell.base,  # a wall or ceiling mount: the arm where the cell says, gravity with it
     )
     vc.effects.extend(make_effects(args.effect, vc, args.seed))  # bad specs fail before any output
     meas = vc.campaign(
@@ -38,6 +45,8 @@ def cmd_simulate(args) -> None:
         noise_scale=args.noise_scale,
     )
     write_campaign(args.out, meas)
+    for why in _unseen(vc, meas):
+        print(f"robocal: warning: {args.out}: {why}", file=sys.stderr)
     truth = vc.truth()
     truth["noise_floor_mm"] = vc.noise_floor_mm(meas.q, args.noise_scale)
     if args.truth_out:
@@ -48,6 +57,28 @@ def cmd_simulate(args) -> None:
         f"tracker noise floor {truth['noise_floor_mm']:.4f} mm RMS; effects: "
         + (", ".join(e.label() for e in vc.effects) or "none")
     )
+
+
+# a compliance turning its joint less than this over the campaign moves an SMR a metre away 1 um,
+# a tenth of a tracker's noise (a SCARA's joint 2, its axis tilted by its geometric errors: 2.6e-7)
+UNSEEN_RAD = 1e-6
+
+
+def _unseen(vc, meas) -> list[str]:
+    """A sentence per compliance that does not show in the campaign: the gravity torque about
+    its joint does not change over the poses (a SCARA's vertical axes), nothing to find."""
+    out = []
+    for e in vc.effects:
+        if e.name != "joint_compliance":
+            continue
+        dq = e.joint_offsets(vc, meas.q, None, None)[:, e.joint]
+        if np.ptp(dq) < UNSEEN_RAD:
+            out.append(
+                f"{e.label()} turns joint {e.joint + 1} by {np.degrees(np.ptp(dq)):.1g} deg over "
+                f"the campaign: the gravity torque about its axis does not change on this arm (an "
+                "axis along gravity), so the data holds nothing of it"
+            )
+    return out
 
 
 def add(sub) -> None:

@@ -204,16 +204,56 @@ def compensate_targets(
             targets,
             k,
             f"is unreachable within the joint limits: the model comes no closer than "
-            f"{res.error_mm[k]:.3f} mm RMS (at most {max_error_mm:g} mm allowed){_more(len(bad))}",
+            f"{res.error_mm[k]:.3f} mm RMS (at most {max_error_mm:g} mm allowed){_more(len(bad))}"
+            + _elsewhere(res.error_mm, len(bad)),
         )
     if guess.any():
         warnings += _kept(targets, res, guess, solver, max_move_deg)
+    if open_turn := _open_turns(targets, nominal, ~guess & given):
+        warnings.append(open_turn)
     beyond = extrapolated(model, res.q, targets.pose_ids)
     if beyond:
         warnings.append(beyond)
     if unknown := approach_unknown(model, res.q, targets.time_s, targets.prev_q, targets.pose_ids):
         warnings.append(unknown)
     return res, warnings
+
+
+def _open_turns(targets: Targets, nominal, alone: np.ndarray) -> str | None:
+    """A warning when poses asked for by confdata alone have joints it leaves a turn open on (a
+    UR-like arm's +-360 deg joints 2 and 3): the solver took the turn nearest zero."""
+    joints = configuration.open_turns(nominal)
+    if not joints or not alone.any():
+        return None
+    k = int(np.flatnonzero(alone)[0])
+    names = " and ".join(str(j + 1) for j in joints)
+    plural = "s" if len(joints) > 1 else ""
+    ranges = ", ".join(
+        f"{np.degrees(nominal.lower[j]):g} to {np.degrees(nominal.upper[j]):g}" for j in joints
+    )
+    return (
+        f"{int(alone.sum())} poses (first {targets.pose_ids[k]!r}) give a "
+        f"configuration (cf1, cf4, cf6, cfx) alone, which holds joints 1, 4 and 6 to a quadrant; "
+        f"{nominal.name}'s joint{plural} {names} can turn more than a full turn within the "
+        f"limits ({ranges} deg), a turn confdata leaves open: taken at the angle nearest zero; "
+        f"give starting joints "
+        f"q1 ... q{nominal.n_joints} for another turn"
+    )
+
+
+# every pose missed by this much or more: no arm's error, the targets are in another frame
+ELSEWHERE_MM = 100.0
+
+
+def _elsewhere(error_mm: np.ndarray, bad: int) -> str:
+    """A clause when every pose is missed by ELSEWHERE_MM or more (targets from another
+    campaign's tracker frame, or in other units), empty otherwise."""
+    if bad < len(error_mm) or not np.min(error_mm) >= ELSEWHERE_MM:
+        return ""
+    return (
+        f"; every pose misses by {np.min(error_mm):.0f} mm or more: are the targets in this "
+        "model's tracker frame (measured with the tracker where it stood for the calibration)?"
+    )
 
 
 def _pose_error(targets: Targets, k: int, what: str) -> InputError:

@@ -202,7 +202,9 @@ class _Columns:
         strict = [n for n in names if n not in blank_ok]
         loose = [n for n in names if n in blank_ok]
         try:
-            return dict(zip(names, self._load(names, float).T, strict=True))
+            v = self._load(names, float)
+            # numpy reads 'NaN' and 'inf' as numbers: the row reader refuses them, by name
+            return dict(zip(names, v.T, strict=True)) if np.isfinite(v).all() else None
         except ValueError:  # a blank, or no number: the row reader says which
             if not loose:
                 return None

@@ -165,6 +165,10 @@ RobotField = Annotated[
 ]
 
 
+MPE_UM = (1.0, 500.0)  # a laser tracker's constant MPE term, um (0 allowed: none stated)
+MPE_UM_PER_M_MAX = 100.0
+
+
 class TrackerDoc(Doc):
     """The tracker's accuracy spec (maximum permissible error) and its traceability (serial,
     its own calibration certificate and when that falls due, the SMRs' ids); other keys are
@@ -186,6 +190,27 @@ class TrackerDoc(Doc):
     smr_ids: dict[str, Label] | None = Field(
         None, description="each SMR's own id (serial or inventory number), by target name"
     )
+
+    @model_validator(mode="after")
+    def _a_trackers_error(self):
+        # A laser tracker's MPE is a few um to tens (+ a few um/m): a figure past these bounds is
+        # another unit, and the floor it sets weighs the fit (a 10,000 um spec took a one-SMR
+        # campaign's held-out error from 0.0165 to 0.908 mm, "deployable"), or makes every
+        # verdict "an effect the model lacks" (0.01 um: 1,170x the floor)
+        for key, low, high, per in (
+            ("mpe_um", MPE_UM[0], MPE_UM[1], ""),
+            ("mpe_um_per_m", 0.0, MPE_UM_PER_M_MAX, "/m"),
+        ):
+            v = getattr(self, key)
+            if v == 0 or low <= v <= high:
+                continue
+            unit = "mm typed for um? " if v < low else "nm typed for um? "
+            raise located(
+                f"{v:g} um{per} is no laser tracker's MPE ({low:g} to {high:g} um{per}, or 0): "
+                f"{unit}give the data sheet's figure in um (for instance 10 um + 2.5 um/m)",
+                key,
+            )
+        return self
 
     @model_validator(mode="after")
     def _some_error(self):

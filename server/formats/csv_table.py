@@ -112,6 +112,20 @@ class Table:
 
     def _check_width(self, line: int, fields: list[str]) -> None:
         n, width = len(fields), len(self.header)
+        if n != width and width == 1 and any(sep in self.header[0] for sep in ";\t"):
+            # a header of one column the rows split: another separator (a spreadsheet's export
+            # with decimal commas splits its rows at them), said at the header, not "row has N"
+            raise InputError(
+                self.path,
+                self.header_line,
+                None,
+                f"the header is one column{self._header_hint()}"
+                + (
+                    "; its rows' commas look like decimal commas: give decimal points"
+                    if n > 1
+                    else ""
+                ),
+            )
         if n < width:
             raise InputError(
                 self.path,

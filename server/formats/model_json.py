@@ -252,7 +252,7 @@ def rows_as_motion(q_rad, time_s, prev_q, what: str) -> str | None:
     from robocal.solver.motion import ordered_by_rows, sorted_joint
 
     q = np.atleast_2d(np.asarray(q_rad, dtype=float))
-    count = ordered_by_rows(time_s, prev_q, len(q))
+    count = ordered_by_rows(time_s, prev_q, len(q), q)
     if not count:
         return None
     n = q.shape[1]
