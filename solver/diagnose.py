@@ -23,10 +23,10 @@ from .extrapolation import (
     RegionFold,
     configuration_folds,
     extrapolation_report,
-    gravity_loaded,
     joint_folds,
     region_folds,
     span_parts,
+    split_joints,
 )
 from .gravity import gravity_suspects, most_loaded
 from .hedge import hedge
@@ -391,8 +391,8 @@ def fold_poses(diag: Diagnoser) -> int:
 
 
 def own_folds(diag: Diagnoser) -> list[RegionFold]:
-    """Folds across each joint gravity does not load, judging only that joint's effects."""
-    loaded = gravity_loaded(diag.prob.layout, diag.x0, diag.prob.q)
+    """Folds across each joint the region folds do not split at, judging only its effects."""
+    loaded = split_joints(diag.prob.layout, diag.x0, diag.prob.q)
     others = [j for j in range(diag.prob.q.shape[1]) if j not in loaded]
     return joint_folds(diag.prob.q, fold_poses(diag), others, own=True)
 
