@@ -265,11 +265,11 @@ def judge(model: ModelFile, r: _Readings, history: list[CheckRecord], expected: 
     change = None
     if history:
         H = _matched(history, r.keys)
-        seen = np.isfinite(H[: drift.BASELINE_CHECKS, :, 0]).any(axis=0)
+        stats = [(c.change_z, c.cusum) for c in history]
+        seen = np.isfinite(H[: drift.baseline_checks(stats), :, 0]).any(axis=0)
         if seen.sum() >= 2:
             # Each pose's mean error is one vector: its SMRs share the arm's scatter.
             at = r.reading_pose[seen]
-            stats = [(c.change_z, c.cusum) for c in history]
             change = drift.since_baseline(
                 _by_pose(r.error[seen], at), _by_pose(H[:, seen], at), stats, prior
             )
