@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.server import store
+from robocal.server.calibration.units import MODEL_ARM
 from robocal.server.calibration.workflow import (
     DataError,
     _pose_column,
@@ -397,7 +398,8 @@ def prepare(model_path, check_path) -> Prepared:
     fit): the heavy part, parsed where the caller likes (the service: a worker process)."""
     model = read_model(model_path)
     expected = expected_rms(model)
-    meas = load_campaign(check_path, Cell(model.robot, model.targets, None, {}, None))
+    cell = Cell(model.robot, model.targets, None, {}, None)
+    meas = load_campaign(check_path, cell, arm=MODEL_ARM)
     return Prepared(model, file_digest(model_path), expected, _readings(model, meas, check_path))
 
 
