@@ -243,6 +243,13 @@ def configuration_folds(robot, q: np.ndarray, min_poses: int) -> list[RegionFold
     return out
 
 
+def fold_poses(diag) -> int:
+    """Poses enough to fit on one side of a fold of a diagnosis (solver.diagnose.Diagnoser): its
+    free parameters over the SMRs a pose (the prior, not the data, pins the shrunk ones)."""
+    per_pose = max(1, int(diag.prob.mask.any(axis=0).sum()))  # SMRs a pose
+    return int(np.ceil((diag.free & ~diag.shrunk).sum() / per_pose)) + 1
+
+
 def joint_ranges(q: np.ndarray) -> np.ndarray:
     """(n, 2) the joint-space box the campaign covers, rad: where the model may be trusted."""
     return np.stack([q.min(axis=0), q.max(axis=0)], axis=1)
