@@ -36,3 +36,17 @@ def test_redundant_columns_are_held_in_order_and_independent_ones_kept():
     assert independent(J.T @ J).all()
     J = np.column_stack([J, -2.0 * J[:, 1], np.zeros(60)])  # a copy of column 1, a dead column
     assert independent(J.T @ J).tolist() == [True, True, True, True, False, False]
+
+
+def test_an_upside_down_base_changes_the_short_way_round(tmp_path, capsys):
+    cell, meas, model = tmp_path / "cell.json", tmp_path / "m.csv", tmp_path / "model.json"
+    cell.write_text(json.dumps({"robot": SCARA, "targets": {"A": [0, 0, 30]}, "base": BASE}))
+    sim = ["simulate", "--cell", str(cell), "--poses", "40", "--seed", "3", "--out", str(meas)]
+    assert main(sim) == 0
+    assert main(["calibrate", str(meas), "--cell", str(cell), "--out", str(model)]) == 0
+    rows = json.loads(model.read_text())["identified"]["rows"]
+    rx = next(r for r in rows if r["parameter"] == "base_rx")
+    print(capsys.readouterr().out.count("+359.9998"), rx)
+    # rx 180 deg nominal (hung from the ceiling), identified at 179.9998: a change of -0.0002
+    assert abs(rx["calibrated"]) > 179.9 and abs(rx["change"]) < 0.01
+    assert all(-180 <= r["change"] < 180 for r in rows if r["unit"] == "deg" and r["change"])
