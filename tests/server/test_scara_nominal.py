@@ -15,12 +15,18 @@ from .test_simulate_unseen import SCARA
 BASE = [[1, 0, 0, 300.0], [0, -1, 0, 0.0], [0, 0, -1, 2000.0], [0, 0, 0, 1]]
 
 
-def test_one_smr_scara_has_a_nominal_held_out_figure(tmp_path, capsys):
+def calibrated(tmp_path):
+    """model.json of a 40-pose one-SMR SCARA campaign hung from the ceiling (seed 3)."""
     cell, meas, model = tmp_path / "cell.json", tmp_path / "m.csv", tmp_path / "model.json"
     cell.write_text(json.dumps({"robot": SCARA, "targets": {"A": [0, 0, 30]}, "base": BASE}))
     sim = ["simulate", "--cell", str(cell), "--poses", "40", "--seed", "3", "--out", str(meas)]
     assert main(sim) == 0
     assert main(["calibrate", str(meas), "--cell", str(cell), "--out", str(model)]) == 0
+    return model
+
+
+def test_one_smr_scara_has_a_nominal_held_out_figure(tmp_path, capsys):
+    model = calibrated(tmp_path)
     out = capsys.readouterr().out
     v = json.loads(model.read_text())["validation"]
     print(out, v["nominal_rms_mm"], v["nominal_holdout_rms_mm"], v["holdout_rms_mm"])
@@ -39,11 +45,7 @@ def test_redundant_columns_are_held_in_order_and_independent_ones_kept():
 
 
 def test_an_upside_down_base_changes_the_short_way_round(tmp_path, capsys):
-    cell, meas, model = tmp_path / "cell.json", tmp_path / "m.csv", tmp_path / "model.json"
-    cell.write_text(json.dumps({"robot": SCARA, "targets": {"A": [0, 0, 30]}, "base": BASE}))
-    sim = ["simulate", "--cell", str(cell), "--poses", "40", "--seed", "3", "--out", str(meas)]
-    assert main(sim) == 0
-    assert main(["calibrate", str(meas), "--cell", str(cell), "--out", str(model)]) == 0
+    model = calibrated(tmp_path)
     rows = json.loads(model.read_text())["identified"]["rows"]
     rx = next(r for r in rows if r["parameter"] == "base_rx")
     print(capsys.readouterr().out.count("+359.9998"), rx)
