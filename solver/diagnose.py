@@ -23,10 +23,11 @@ from .extrapolation import (
     RegionFold,
     configuration_folds,
     extrapolation_report,
-    gravity_loaded,
+    fold_poses,
     joint_folds,
     region_folds,
     span_parts,
+    split_joints,
 )
 from .gravity import gravity_suspects, most_loaded
 from .hedge import hedge
@@ -50,6 +51,7 @@ from .selection import (
 )
 from .shift_scan import shift_time
 from .stability import RESAMPLE_MAX_POSES, agreed_cause, resampled
+from .step_chain import chained
 from .variants import (
     MIN_GAIN,
     T_SIMPLER,
@@ -383,16 +385,9 @@ def grouped_folds(diag: Diagnoser) -> list[RegionFold]:
     return folds + configuration_folds(diag.prob.layout.robot, q, least)
 
 
-def fold_poses(diag: Diagnoser) -> int:
-    """Poses enough to fit on one side of a fold (the prior, not the data, pins the shrunk
-    parameters)."""
-    per_pose = max(1, int(diag.prob.mask.any(axis=0).sum()))  # SMRs a pose
-    return int(np.ceil((diag.free & ~diag.shrunk).sum() / per_pose)) + 1
-
-
 def own_folds(diag: Diagnoser) -> list[RegionFold]:
-    """Folds across each joint gravity does not load, judging only that joint's effects."""
-    loaded = gravity_loaded(diag.prob.layout, diag.x0, diag.prob.q)
+    """Folds across each joint the region folds do not split at, judging only its effects."""
+    loaded = split_joints(diag.prob.layout, diag.x0, diag.prob.q)
     others = [j for j in range(diag.prob.q.shape[1]) if j not in loaded]
     return joint_folds(diag.prob.q, fold_poses(diag), others, own=True)
 
@@ -511,13 +506,10 @@ def select(
         }
         if best != chance:
             decision["tied"] = trial[chance]  # the data's own pick, which the suspect displaced
-        c = trial[best]
-        before = cv_now
-        if replaced is not None:
+        c, at = trial[best], len(steps) if replaced is None else replaced
+        if replaced is not None:  # in its place: its figures chain again (step_chain.chained)
             decision["replaces"] = steps.pop(replaced)
-            before = decision["replaces"][1]
-            decision["holdout_gain_interval_mm"] = rmse_gain_interval(before.sq, cv.sq, cv.n)
-        steps.append((cv.exts[-1], before, cv, decision))
+        steps.insert(at, (cv.exts[-1], cv_now, cv, decision))
         current = model[:-1] + [c if c.kind.located_in_time else cv.exts[-1]]
         # the same joint's other candidates of the same kind stay: two effects may share a joint;
         # of this one, only its richer variants stay
@@ -666,6 +658,7 @@ def diagnose(problem: Problem, *, log=None, screen_outliers=True) -> Diagnosis:
         (steps, final, region), stability = agreed_cause(diag, cands, stability, chosen, log)
     clock["resamples"] = time.perf_counter() - t_resample
     t2 = time.perf_counter()
+    steps = chained(diag, steps, base, final)  # a replaced effect's figures too
     exts = [s[0] for s in steps]
     # the region folds' verdict fitted the kept model on all poses already, from the same start
     x, ee = region.fit if region.fit is not None else diag.fit(exts)

@@ -35,7 +35,7 @@ Z_WATCH = stats.norm.isf(LEVEL_WATCH_P)
 Z_JUMP = stats.norm.isf(1e-6)
 PRIOR_DOF = 3.0  # the degrees of freedom the repeatability guess weighs as
 POSE_PRIOR_DOF = 6.0  # those a pose's own scatter is shrunk toward the pooled one with
-BASELINE_CHECKS = 3  # the first checks of a model, which later ones are compared with
+BASELINE_CHECKS = 3  # the first checks of a model, which later ones are compared with (at most)
 ADEQUATE_P = 1e-3  # a change explained when what is left is as likely as this from scatter
 # A cause that another contains (joint 1's zero is a rigid turn about axis 1) gives way to it when
 # the larger fits the change better than scatter would by this chance (F test): a shifted
@@ -170,7 +170,7 @@ def since_baseline(
     the earlier checks' errors past (c, P, 3) (NaN where one lacks a pose) and their (score,
     CUSUM); None when no baseline check shares two poses with it."""
     past = np.asarray(past, dtype=float)
-    base = past[:BASELINE_CHECKS]
+    base = past[: baseline_checks(history)]
     n_base = np.isfinite(base[..., 0]).sum(axis=0)
     ok = n_base > 0
     if len(past) == 0 or ok.sum() < 2:
@@ -181,6 +181,14 @@ def since_baseline(
     mean = np.array([np.mean(b[np.isfinite(b[:, 0])], axis=0) for b in base[:, ok].swapaxes(0, 1)])
     c = change(now[ok], mean, n_base[ok], var, nu, history[-1][1])
     return Change(c.rms_mm, c.scatter_mm, c.z, c.cusum, c.verdict, c.diff, c.var_change, ok)
+
+
+def baseline_checks(history: list[tuple[float, float]]) -> int:
+    """How many of the first checks the baseline is (the model's own error at the check's poses):
+    BASELINE_CHECKS, ending before the first check whose change tripped recalibrate. A moved arm
+    is no reference: two clean checks, then two moved 0.15 mm, and the fourth measured its move
+    from a baseline holding the third, as 0.100 mm."""
+    return min(BASELINE_CHECKS, first_change(history))
 
 
 def first_change(history: list[tuple[float, float]]) -> int:

@@ -172,7 +172,8 @@ def calibration_blocks(cal: Calibration, q, meas, block=None) -> tuple[Blocks, n
     smr = lambda ks: [ts + 3 * k + a for k in ks for a in range(3)]  # noqa: E731
     others = [k for k in range(len(lay.target_names)) if k not in rows]
     if name == "nominal":
-        free = np.r_[np.arange(lay.base_slice.start, lay.base_slice.stop), smr(rows)]
+        registered = np.r_[np.arange(lay.base_slice.start, lay.base_slice.stop), smr(rows)]
+        free = registered[independent(registration_normal(cal, q, meas, mask, registered))]
     else:
         free = np.array(
             [i for i, n in enumerate(names) if n not in cal.fixed and i not in smr(others)],
@@ -211,6 +212,45 @@ def calibration_blocks(cal: Calibration, q, meas, block=None) -> tuple[Blocks, n
             yield rows_of(lo, min(m, lo + step))
 
     return blocks, column
+
+
+# A column whose part outside the span of the columns kept before it is below this share of its
+# norm (squared, on the Jacobi-scaled normal matrix) is redundant with them: rounding, not data.
+REDUNDANT = 1e-10
+
+
+def registration_normal(cal: Calibration, q, meas, mask, cols) -> np.ndarray:
+    """J'J of the nominal model's registration (base and SMRs, columns cols) on the readings."""
+    step = max(1, TWIST_BLOCK_ENTRIES // (6 * (len(cols) + 1)))
+    A = np.zeros((len(cols), len(cols)))
+    x = np.asarray(cal.x, dtype=float)
+    for lo in range(0, len(q), step):
+        at = slice(lo, lo + step)
+        A += PointNormal(cal.layout, q[at], mask[at], meas[at], cols)(x).A
+    return A
+
+
+def independent(A: np.ndarray) -> np.ndarray:
+    """Which columns of the normal matrix A to keep, in their order, each adding a direction the
+    ones kept before it lack (a pivoted Cholesky on the Jacobi-scaled A). The nominal model's
+    registration frees base and SMRs together, which the readings need not all move: one SMR on
+    a SCARA (every axis vertical) gives base z and the SMR's z one column; the first is kept,
+    the rest held, as a calibration holds what the data cannot move."""
+    d = np.sqrt(np.clip(np.diag(A), 0.0, None))
+    keep = d > 0
+    S = A / np.outer(np.where(keep, d, 1.0), np.where(keep, d, 1.0))
+    kept: list[int] = []
+    for j in np.flatnonzero(keep):
+        if kept:
+            K = S[np.ix_(kept, kept)]
+            left = S[j, j] - S[j, kept] @ np.linalg.solve(K, S[kept, j])
+        else:
+            left = S[j, j]
+        if left > REDUNDANT:
+            kept.append(int(j))
+    out = np.zeros(len(A), dtype=bool)
+    out[kept] = True
+    return out
 
 
 def minimax_weights(lam) -> np.ndarray:

@@ -31,20 +31,20 @@ class MirrorCheck:
     radian_joint: int = -1
     radian_mm: float = float("inf")
 
-    def reason(self) -> str | None:
+    def reason(self, arm: str = "the nominal arm") -> str | None:
         """One sentence when the readings look mirrored or a joint's column looks like radians,
-        None otherwise."""
+        None otherwise; arm: the geometry registered (a model's, when evaluated or checked)."""
         if self.radian_mm * MIRROR_RATIO < min(self.as_read_mm, self.mirrored_mm):
             j = self.radian_joint + 1
             return (
-                f"the nominal arm fits the readings within {self.radian_mm:.3g} mm RMS with "
+                f"{arm} fits the readings within {self.radian_mm:.3g} mm RMS with "
                 f"q{j} read as radians but only within {self.as_read_mm:.3g} mm as read: q{j} "
                 f"looks like radians while the other joints are degrees; give it in degrees"
             )
         if not self.mirrored_mm * MIRROR_RATIO < self.as_read_mm:
             return None
         return (
-            f"the nominal arm at the measured joints fits the readings' mirror image within "
+            f"{arm} at the measured joints fits the readings' mirror image within "
             f"{self.mirrored_mm:.3g} mm RMS but the readings as they are only within "
             f"{self.as_read_mm:.3g} mm: x, y, z look mirrored (two columns swapped, or one "
             "axis's sign flipped: a left-handed frame); give them in the tracker's right-handed "

@@ -80,16 +80,19 @@ class UnitCheck:
     def plausible(self) -> bool:
         return self.likely is None
 
-    def reason(self, points: str = "readings", joints_are: str = "measured") -> str | None:
+    def reason(
+        self, points: str = "readings", joints_are: str = "measured", arm: str = "the nominal arm"
+    ) -> str | None:
         """One sentence naming the likely units, None when the data's units are plausible;
-        points and joints_are name the data (a targets file's points at its starting joints)."""
+        points and joints_are name the data (a targets file's points at its starting joints),
+        arm the geometry predicted (a model's, when its data is evaluated or checked)."""
         if self.likely is None:
             return None
         length, joints = self.likely
         about = "each SMR's centroid" if self.per_smr else "their centroid"
         told = (
             f"the {points} span {_mm(self.measured_spread_mm)} (RMS from {about}) while "
-            f"the nominal arm at the {joints_are} joints spans {_mm(self.predicted_spread_mm)}"
+            f"{arm} at the {joints_are} joints spans {_mm(self.predicted_spread_mm)}"
         )
         wrong = []
         if length != "mm":

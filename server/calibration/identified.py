@@ -51,6 +51,12 @@ def _status(name: str, fixed, shrunk) -> str:
     return "shrunk toward nominal" if name in shrunk else "identified"
 
 
+def _change(d: float, unit: str) -> float:
+    """A change from nominal; an angle's the short way round: a base hung upside down (rx 180
+    deg nominal) identified at 179.9998 deg changed by -0.0002 deg, not +359.9998."""
+    return (d + 180.0) % 360.0 - 180.0 if unit == "deg" else d
+
+
 def _row(
     e: Entry, fixed, nominal: float | None, standard_error: float | None, shrunk=()
 ) -> ParameterRow:
@@ -71,7 +77,7 @@ def _row(
         unit=e.unit,
         nominal=nominal,
         calibrated=e.calibrated,
-        change=None if nominal is None else e.calibrated - nominal,
+        change=None if nominal is None else _change(e.calibrated - nominal, e.unit),
         standard_error=standard_error,
         status=_status(e.name, fixed, shrunk),
     )

@@ -6,11 +6,16 @@ from __future__ import annotations
 from robocal.server.formats.cell_json import Cell
 from robocal.solver.measurements import Measurements
 
+# How a refusal names the arm when a model's data is evaluated or checked: its calibrated robot
+# is the geometry registered on the readings, not the nominal one.
+MODEL_ARM = "the model's calibrated arm"
 
-def units_refusal(cell: Cell, meas: Measurements) -> str | None:
-    """Why the readings are not in mm and degrees: their spread is not the one the cell's
-    nominal arm gives at the measured joints, or they are its mirror image (solver.mirror);
-    None if they may be, or if the cell does not name their SMRs (refused elsewhere)."""
+
+def units_refusal(cell: Cell, meas: Measurements, arm: str = "the nominal arm") -> str | None:
+    """Why the readings are not in mm and degrees: their spread is not the one the cell's arm
+    gives at the measured joints, or they are its mirror image (solver.mirror); None if they may
+    be, or if the cell does not name their SMRs (refused elsewhere). arm names the cell's robot
+    in the sentence (a model's calibrated one, when its data is evaluated or checked)."""
     from robocal.solver.plausibility import check_units
 
     if any(t not in cell.targets for t in meas.target_names):
@@ -18,10 +23,10 @@ def units_refusal(cell: Cell, meas: Measurements) -> str | None:
     from robocal.solver.mirror import check_mirror
 
     targets = cell.target_positions(meas.target_names)
-    if why := check_units(cell.robot, targets, meas.q, meas.xyz).reason():
+    if why := check_units(cell.robot, targets, meas.q, meas.xyz).reason(arm=arm):
         return why
     mirror = check_mirror(cell.robot, targets, meas.q, meas.xyz)
-    return mirror.reason() if mirror is not None else None
+    return mirror.reason(arm) if mirror is not None else None
 
 
 def radian_refusal(cell: Cell, meas: Measurements) -> str | None:

@@ -69,25 +69,27 @@ def load_cell(path) -> Cell:
     return default_cell() if path is None else read_cell(path)
 
 
-def load_campaign(path, cell: Cell, cell_path=None) -> Measurements:
+def load_campaign(path, cell: Cell, cell_path=None, arm: str = "the nominal arm") -> Measurements:
     """A campaign whose targets the cell (read from cell_path, None for the built-in) describes,
-    in the units it implies."""
+    in the units it implies; arm names the cell's robot in a refusal (a model's own)."""
     meas = read_campaign(path, cell.robot, list(cell.targets))
     try:
         require_inputs(meas.q, meas.xyz)
     except ValueError as e:
         raise DataError(f"{path}: {e}") from None
-    refuse_wrong_units(cell_path, path, cell, meas)
+    refuse_wrong_units(cell_path, path, cell, meas, arm)
     return meas
 
 
-def refuse_wrong_units(cell_path, path, cell: Cell, meas: Measurements) -> None:
+def refuse_wrong_units(
+    cell_path, path, cell: Cell, meas: Measurements, arm: str = "the nominal arm"
+) -> None:
     """DataError naming the cell.json whose robot's angles the readings say are radians, or the
     campaign whose readings are not in mm and degrees (server.calibration.units)."""
     # the angles before the units: radians change the arm's spread; a built-in robot's are never
     if cell_path is not None and (why := radian_refusal(cell, meas)):
         raise DataError(f"{cell_path}: {why}")
-    if why := units_refusal(cell, meas):
+    if why := units_refusal(cell, meas, arm):
         raise DataError(f"{path}: {why}")
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.server import store
+from robocal.server.calibration.units import MODEL_ARM
 from robocal.server.calibration.workflow import (
     DataError,
     _pose_column,
@@ -265,11 +266,11 @@ def judge(model: ModelFile, r: _Readings, history: list[CheckRecord], expected: 
     change = None
     if history:
         H = _matched(history, r.keys)
-        seen = np.isfinite(H[: drift.BASELINE_CHECKS, :, 0]).any(axis=0)
+        stats = [(c.change_z, c.cusum) for c in history]
+        seen = np.isfinite(H[: drift.baseline_checks(stats), :, 0]).any(axis=0)
         if seen.sum() >= 2:
             # Each pose's mean error is one vector: its SMRs share the arm's scatter.
             at = r.reading_pose[seen]
-            stats = [(c.change_z, c.cusum) for c in history]
             change = drift.since_baseline(
                 _by_pose(r.error[seen], at), _by_pose(H[:, seen], at), stats, prior
             )
@@ -397,7 +398,8 @@ def prepare(model_path, check_path) -> Prepared:
     fit): the heavy part, parsed where the caller likes (the service: a worker process)."""
     model = read_model(model_path)
     expected = expected_rms(model)
-    meas = load_campaign(check_path, Cell(model.robot, model.targets, None, {}, None))
+    cell = Cell(model.robot, model.targets, None, {}, None)
+    meas = load_campaign(check_path, cell, arm=MODEL_ARM)
     return Prepared(model, file_digest(model_path), expected, _readings(model, meas, check_path))
 
 

@@ -264,7 +264,9 @@ def _print_extrapolation(block: Extrapolation | None) -> None:
             )
         )
     else:
-        console.print("not tested off its training poses: too few poses to split")
+        console.print(
+            "not tested off its training poses: too few poses to split, or no joint to split at moved 10 deg"
+        )
     for r in block.refused:
         why = r.reason or f"worse than geometry on {'; '.join(r.worse_on)}"
         console.print(f"  refused {r.label}: {why}")

@@ -22,9 +22,11 @@ def cmd_evaluate(args) -> None:
         # The model's own robot reads the joints: the campaign's cell may differ in its targets.
         _, meas = workflow.load_data(args.meas, None, args.campaign, note=_note)
     else:
+        from ..calibration.units import MODEL_ARM
         from ..formats.cell_json import Cell
 
-        meas = workflow.load_campaign(args.meas, Cell(model.robot, model.targets, None, {}, None))
+        cell = Cell(model.robot, model.targets, None, {}, None)
+        meas = workflow.load_campaign(args.meas, cell, arm=MODEL_ARM)
     try:
         res = workflow.evaluate(model, meas)
     except workflow.DataError as e:

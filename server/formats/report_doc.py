@@ -209,7 +209,8 @@ class ReportDoc(Open):
     extrapolation: Extrapolation | None = Field(
         None,
         description="the final model tested off its training region: trained on one side of "
-        "each gravity-loaded joint's median (of any other joint for that joint's own effects; a "
+        "each gravity-loaded joint's median (of every joint moving an SMR where gravity loads "
+        "none, a SCARA's; of any other joint for that joint's own effects; a "
         "smaller end on a small campaign), or in one elbow or "
         "wrist configuration where the data has both, tested on the other; an effect that made "
         "any such "
