@@ -98,37 +98,6 @@ def check_method(db: store.Database, *, campaign_id: int, method: str) -> None:
     check_job(db, kind="calibration", campaign_id=campaign_id, method=method)
 
 
-def check_duplicate(
-    db: store.Database,
-    *,
-    kind: str,
-    campaign_id: int,
-    method: str,
-    holdout_campaign_id: int | None = None,
-    tolerance_mm: float | None = None,
-) -> None:
-    """DuplicateJob if the same calibration (campaign, method, held-out campaign and tolerance)
-    is queued or running: another held-out campaign or tolerance is another verdict."""
-    if kind != "calibration":
-        return
-    tol = None if tolerance_mm is None else float(tolerance_mm)
-    same = (kind, campaign_id, method, holdout_campaign_id, tol)
-    for state in ("running", "queued"):
-        for job in store.list_jobs(db, state=state):
-            if (
-                job.kind,
-                job.campaign_id,
-                job.method,
-                job.holdout_campaign_id,
-                job.tolerance_mm,
-            ) == same:
-                raise DuplicateJob(
-                    f"campaign {campaign_id} already has {kind} job {job.id} "
-                    f"({method}) {state}; cancel it or wait for it",
-                    job.id,
-                )
-
-
 def calibrate_campaign(db: store.Database, *, campaign_id: int, method: str) -> dict:
     """Fit `method` to a stored campaign; the model.json object."""
     cell, meas = campaign_data(db, campaign_id)
@@ -218,7 +187,7 @@ class Jobs:
         tolerance_mm: float | None = None,
     ) -> Job:
         """Check and queue a job; the job as queued. DuplicateJob (a Conflict) if the same
-        calibration (check_duplicate) is queued or running."""
+        calibration (store.create_job's unique) is queued or running."""
         if kind == "diagnosis":
             method = "diagnose"
         check_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
@@ -229,22 +198,22 @@ class Jobs:
         with self._lock:  # the check and the insert together: two clicks make one job
             if self._closing:
                 raise store.Conflict("the service is stopping; no new jobs")
-            check_duplicate(
-                self.db,
-                kind=kind,
-                campaign_id=campaign_id,
-                method=method,
-                holdout_campaign_id=holdout_campaign_id,
-                tolerance_mm=tolerance_mm,
-            )
-            job = store.create_job(
-                self.db,
-                kind=kind,
-                campaign_id=campaign_id,
-                method=method,
-                holdout_campaign_id=holdout_campaign_id,
-                tolerance_mm=tolerance_mm,
-            )
+            try:  # a calibration once: checked in the insert's transaction (two services)
+                job = store.create_job(
+                    self.db,
+                    kind=kind,
+                    campaign_id=campaign_id,
+                    method=method,
+                    holdout_campaign_id=holdout_campaign_id,
+                    tolerance_mm=tolerance_mm,
+                    unique=kind == "calibration",
+                )
+            except store.ActiveJob as e:
+                raise DuplicateJob(
+                    f"campaign {campaign_id} already has {kind} job {e.job.id} "
+                    f"({method}) {e.job.state}; cancel it or wait for it",
+                    e.job.id,
+                ) from None
             self._queue.append(job.id)
         self._publish(job)
         self._wake()

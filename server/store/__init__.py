@@ -18,6 +18,7 @@ from .exchange import (
     import_csv,
 )
 from .jobs import (
+    ActiveJob,
     JobInfo,
     create_job,
     fail_unfinished_jobs,
@@ -49,6 +50,7 @@ from .readings import (
 
 __all__ = [
     "JobInfo",
+    "ActiveJob",
     "create_job",
     "fail_unfinished_jobs",
     "get_job",
