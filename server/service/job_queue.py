@@ -14,6 +14,7 @@ from multiprocessing.connection import wait
 from pathlib import Path
 
 from robocal.server import store
+from robocal.server.acquisition.lease import is_dead, process_owner
 from robocal.server.calibration.workflow import model_file, run_method
 from robocal.server.formats.cell_json import parse_cell
 from robocal.server.formats.model_json import model_to_json
@@ -98,6 +99,20 @@ def check_method(db: store.Database, *, campaign_id: int, method: str) -> None:
     check_job(db, kind="calibration", campaign_id=campaign_id, method=method)
 
 
+# The job queues of this process that still run (a test may start a service after another).
+_LIVE_OWNERS: set[str] = set()
+
+
+def _gone(owner: str | None) -> bool:
+    """Whether a job's owner runs it no more: a process gone, a queue of this process shut
+    down, or unknown (a job queued before owners were kept); another live process's are its own."""
+    if owner is None:
+        return True
+    if owner.split(":")[:2] == process_owner().split(":")[:2]:  # this process
+        return owner not in _LIVE_OWNERS
+    return is_dead(owner)
+
+
 def calibrate_campaign(db: store.Database, *, campaign_id: int, method: str) -> dict:
     """Fit `method` to a stored campaign; the model.json object."""
     cell, meas = campaign_data(db, campaign_id)
@@ -158,8 +173,11 @@ class Jobs:
         self._slot_held = threading.local()
         self._calls: set[Child] = set()
         self._wake_r, self._wake_w = os.pipe()
-        # Nothing runs a job this process did not queue: fail those a stop cut off.
-        for job_id in store.fail_unfinished_jobs(db, reason=RESTART_REASON):
+        # Nothing runs a job its service did not queue: fail those a stop cut off (their
+        # service gone), not those another live service on the database runs.
+        self.owner = process_owner()
+        _LIVE_OWNERS.add(self.owner)
+        for job_id in store.fail_unfinished_jobs(db, reason=RESTART_REASON, gone=_gone):
             self._publish(store.get_job(db, job_id=job_id))
         self._supervisor = threading.Thread(
             target=self._supervise, name="robocal-jobs", daemon=True
@@ -207,6 +225,7 @@ class Jobs:
                     holdout_campaign_id=holdout_campaign_id,
                     tolerance_mm=tolerance_mm,
                     unique=kind == "calibration",
+                    owner=self.owner,
                 )
             except store.ActiveJob as e:
                 raise DuplicateJob(
@@ -226,7 +245,9 @@ class Jobs:
         with self._lock:
             if self._closing:
                 raise store.Conflict("the service is stopping; no new jobs")
-            job = store.create_job(self.db, kind="planning", campaign_id=None, method=method)
+            job = store.create_job(
+                self.db, kind="planning", campaign_id=None, method=method, owner=self.owner
+            )
             self._plans[job.id] = (cell, opts)
             self._queue.append(job.id)
         self._publish(job)
@@ -338,6 +359,7 @@ class Jobs:
             if self._closing:
                 return
             self._closing = True
+            _LIVE_OWNERS.discard(self.owner)
             children = [c for c in self._running.values() if c is not None] + list(self._calls)
             cut_off = sorted(self._running) + list(self._queue)
             self._queue.clear()

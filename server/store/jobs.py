@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from sqlalchemy import select
@@ -65,11 +66,12 @@ def create_job(
     holdout_campaign_id: int | None = None,
     tolerance_mm: float | None = None,
     unique: bool = False,
+    owner: str | None = None,
 ) -> JobInfo:
     """Store a queued job on an existing campaign (none for a planning job); the job. unique:
     ActiveJob if the same job (kind, campaign, method, held-out campaign, tolerance) is queued or
     running, looked for in the insert's own write transaction, so that two services on one
-    database cannot both queue it."""
+    database cannot both queue it. owner: the process that runs it (fail_unfinished_jobs)."""
     checks.one_of(kind, JOB_KINDS, "kind")
     if (campaign_id is None) != (kind == "planning"):
         raise ValueError("a planning job has no campaign yet; every other job has one")
@@ -85,6 +87,7 @@ def create_job(
             campaign_id=campaign_id,
             holdout_campaign_id=holdout_campaign_id,
             tolerance_mm=tol,
+            owner=owner,
             method=str(method),
             state="queued",
             progress=0.0,
@@ -158,10 +161,14 @@ def update_job(db: Database, *, job_id: int, state: str | None = None, **changes
         return _job_info(job)
 
 
-def fail_unfinished_jobs(db: Database, *, reason: str) -> list[int]:
-    """Mark every queued or running job failed with `reason` (nothing runs them any more); ids."""
+def fail_unfinished_jobs(
+    db: Database, *, reason: str, gone: Callable[[str | None], bool] = lambda owner: True
+) -> list[int]:
+    """Mark failed with `reason` every queued or running job whose owner is `gone` (nothing runs
+    them any more; another live service's jobs are its own); ids."""
     with db.session(write=True) as s:
-        jobs = list(s.scalars(select(Job).where(Job.state.in_(("queued", "running")))))
+        unfinished = s.scalars(select(Job).where(Job.state.in_(("queued", "running"))))
+        jobs = [j for j in unfinished if gone(j.owner)]
         for job in jobs:
             job.state, job.reason, job.finished_at = "failed", reason, utcnow()
         return [j.id for j in jobs]
