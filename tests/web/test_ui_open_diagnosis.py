@@ -5,19 +5,12 @@ hidden or of another campaign, so "open" showed nothing before."""
 from __future__ import annotations
 
 from tests.real import import_real
-from tests.server.api.conftest import wait_for
+from tests.server.api.conftest import done_job
 from tests.web.conftest import sign_in
 
 
 def _done(c, body) -> int:
-    r = c.post("/api/jobs", json=body)
-    assert r.status_code == 202, r.text
-    job = wait_for(
-        lambda: c.get(f"/api/jobs/{r.json()['id']}").json(),
-        lambda j: j["state"] in ("done", "failed"),
-    )
-    assert job["state"] == "done", job
-    return job["id"]
+    return done_job(c, **body)["id"]
 
 
 def test_a_diagnosis_opened_from_the_history_is_shown(served, page):

@@ -5,20 +5,13 @@ identified calibration, and that one's jump is from the calibration before it.""
 from __future__ import annotations
 
 from tests.real import REAL
-from tests.server.api.conftest import wait_for
+from tests.server.api.conftest import done_job
 
 CSV = {"content-type": "text/csv"}
 
 
 def _calibrated(c, cid: int, method: str) -> int:
-    r = c.post("/api/jobs", json={"campaign_id": cid, "method": method})
-    assert r.status_code == 202, r.text
-    job = wait_for(
-        lambda: c.get(f"/api/jobs/{r.json()['id']}").json(),
-        lambda j: j["state"] in ("done", "failed"),
-    )
-    assert job["state"] == "done", job
-    return job["id"]
+    return done_job(c, campaign_id=cid, method=method)["id"]
 
 
 def test_a_nominal_fit_does_not_hide_the_arms_calibration(live):

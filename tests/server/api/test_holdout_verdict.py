@@ -12,7 +12,7 @@ import json
 import pytest
 
 from tests.real import REAL
-from tests.server.api.conftest import wait_for
+from tests.server.api.conftest import done_job
 
 CSV = {"content-type": "text/csv"}
 
@@ -32,14 +32,7 @@ def _split(first: int) -> tuple[bytes, bytes]:
 
 
 def _job(c, **body) -> dict:
-    r = c.post("/api/jobs", json={"method": "ls-sum", **body})
-    assert r.status_code == 202, r.text
-    job = wait_for(
-        lambda: c.get(f"/api/jobs/{r.json()['id']}").json(),
-        lambda j: j["state"] in ("done", "failed"),
-    )
-    assert job["state"] == "done", job
-    return job
+    return done_job(c, method="ls-sum", **body)
 
 
 @pytest.mark.sqlite_only  # the verdict is the worker's; the store's part runs elsewhere
