@@ -494,6 +494,9 @@ $("job-form").addEventListener("submit", async (ev) => {
   try {
     const body = { campaign_id: state.campaign, method: $("j-method").value };
     if ($("j-holdout").value) body.holdout_campaign_id = Number($("j-holdout").value);
+    // the application's tolerance, over the cell's (empty: the cell's); the diagnosis's too
+    const tolerance = $("j-tolerance").value.trim() ? { tolerance_mm: Number($("j-tolerance").value) } : {};
+    Object.assign(body, tolerance);
     const j = await api("POST", "/jobs", body);
     state.job = j.id;
     state.diag = null;
@@ -504,7 +507,7 @@ $("job-form").addEventListener("submit", async (ev) => {
     watchJob(j, followJob);
     // Automatic extensions: a diagnosis job on the same campaign, alongside the calibration.
     if ($("j-auto").checked) {
-      const d = await api("POST", "/jobs", { campaign_id: state.campaign, kind: "diagnosis" });
+      const d = await api("POST", "/jobs", { campaign_id: state.campaign, kind: "diagnosis", ...tolerance });
       useDiagnosis(d);  // diagnosis.js
     }
   } catch (e) { say(e); refreshCalibrate(); }

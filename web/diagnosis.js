@@ -8,7 +8,7 @@ function useDiagnosis(d) {
   $("diagnosis").hidden = false;
   $("d-effects").replaceChildren();
   $("d-unexplained").hidden = $("d-outliers").hidden = $("d-doubt").hidden = true;
-  $("d-extrapolation").hidden = true;
+  $("d-extrapolation").hidden = $("d-verdict").hidden = true;
   $("d-figures").replaceChildren();
   $("d-links").replaceChildren();
   watchJob(d, followDiagnosis);
@@ -69,6 +69,37 @@ function makeTable(id, headings, rows) {
     row.forEach((v) => { tr.insertCell().textContent = v; });
   });
   return table;
+}
+
+/** The extended model's verdict: not fit to deploy with each reason, or deployable with the
+ * accuracy to expect; the warnings either way. */
+function showDiagnosisVerdict(v) {
+  const box = $("d-verdict");
+  box.hidden = !v;
+  if (!v) return box.replaceChildren();
+  const parts = [];
+  if (!v.deployable) {
+    const warn = Object.assign(document.createElement("div"), { id: "d-unfit" });
+    warn.setAttribute("role", "alert");
+    const list = document.createElement("ul");
+    (v.reasons || []).forEach((r) => { list.appendChild(document.createElement("li")).textContent = r; });
+    warn.append(heading("Extended model not fit to deploy", "strong"), list);
+    parts.push(warn);
+    if (v.summary) {
+      parts.push(Object.assign(document.createElement("p"), { id: "d-expected", className: "muted",
+        textContent: `${v.summary[0].toUpperCase()}${v.summary.slice(1)}.` }));
+    }
+  } else {
+    parts.push(Object.assign(document.createElement("p"), { id: "d-fit-ok", className: "muted",
+      textContent: `Extended model deployable: ${v.summary || `expected accuracy `
+        + `${fmt(v.holdout_rms_mm)} mm RMS held out`}.` }));
+  }
+  if ((v.warnings || []).length) {
+    const list = Object.assign(document.createElement("ul"), { id: "d-warnings" });
+    v.warnings.forEach((w) => { list.appendChild(document.createElement("li")).textContent = w; });
+    parts.push(list);
+  }
+  box.replaceChildren(...parts);
 }
 
 /** What the final model leaves unexplained: how much, and the covariates it follows most. */
@@ -170,6 +201,11 @@ async function showDiagnosis(d) {
   const [report, figures] = await Promise.all([api("GET", d.report_url.slice(4)),
                                                api("GET", d.figures_url.slice(4))]);
   if (d.id !== state.diag) return;
+  // the extended model's own verdict (the job's, as the API gives it): what its download and
+  // exports act on, said here as the calibration's is under Results
+  const v = d.validation !== undefined ? d.validation : (await api("GET", `/jobs/${d.id}`)).validation;
+  if (d.id !== state.diag) return;
+  showDiagnosisVerdict(v);
   const b = report.baseline, f = report.final;
   $("d-state").textContent = `geometric model: held-out RMS ${fmt(b.holdout_rmse_mm)} mm; `
     + `${f.model}: ${fmt(f.holdout_rmse_mm)} mm (noise floor `

@@ -148,7 +148,17 @@ async function openJob(id, scroll = false) {
   try {
     const j = await api("GET", `/jobs/${id}`);
     if (j.campaign_id !== state.campaign) await openCampaign(j.campaign_id, true);
-    if (j.kind === "diagnosis") {  // its report, beside whatever calibration the page shows
+    if (j.kind === "diagnosis") {  // its report, beside a calibration of its campaign
+      if (await shownCampaign() !== j.campaign_id) {
+        // the report sits under Results: show its campaign's latest calibration there first
+        const cal = await latestCalibration(j.campaign_id);
+        if (cal === null) {
+          say(`diagnosis job ${j.id} is shown beside a calibration of campaign ${j.campaign_id}:`
+            + " calibrate that campaign to see it", true);
+          return;
+        }
+        await openJob(cal);
+      }
       useDiagnosis(j);
       renderJobs();
       if (scroll) $("diagnosis").scrollIntoView({ block: "start" });
@@ -167,6 +177,19 @@ async function openJob(id, scroll = false) {
     }
     if (scroll) ($("results").hidden ? $("calibration") : $("results")).scrollIntoView({ block: "start" });
   } catch (e) { say(e); }
+}
+
+/** The campaign of the calibration whose results the page shows; null if none is shown. */
+async function shownCampaign() {
+  if (state.job === null || $("results").hidden) return null;
+  return (await api("GET", `/jobs/${state.job}`)).campaign_id;
+}
+
+/** The latest done calibration job of a campaign (its id); null if it has none. */
+async function latestCalibration(cid) {
+  const done = (await api("GET", "/jobs"))
+    .filter((x) => x.kind === "calibration" && x.state === "done" && x.campaign_id === cid);
+  return done.length ? done[done.length - 1].id : null;
 }
 
 /** The URL says which campaign and job the page shows (replaced, not a new history entry). */

@@ -89,6 +89,11 @@ class ModelHealth(BaseModel):
     history: int = Field(description="checks of this model")
     rms_mm: float | None
     expected_rms_mm: float | None
+    deployable: bool = Field(
+        description="the model's own verdict (its validation block): a check judges only "
+        "whether the arm still matches the model, not whether the model was fit to deploy"
+    )
+    not_deployable: list[str] = Field(description="why the model is not deployable; [] if it is")
 
 
 class CheckRunCreate(BaseModel):

@@ -15,7 +15,7 @@ from robocal.server.acquisition import cells
 from robocal.server.checks import charts as check_charts
 from robocal.server.checks import check
 from robocal.server.checks import service as check_service
-from robocal.server.formats.model_json import file_digest
+from robocal.server.formats.model_json import file_digest, read_model
 from robocal.server.service import uploads
 from robocal.server.store.model_checks import CheckRecord, model_checks
 from robocal.solver import drift
@@ -213,6 +213,8 @@ def model_health(job_id: JobId, jobs: JobsDep, db: DbDep) -> ModelHealth:
     verdict (ok, watch, recalibrate), reason and time, and how many checks it has; a model never
     checked says so (verdict null)."""
     sha, checks = _history(jobs, db, job_id)
+    verdict = read_model(jobs.model_path(job_id)).verdict  # a check does not judge that
+    deploy = {"deployable": bool(verdict.deployable), "not_deployable": list(verdict.reasons)}
     if not checks:
         return ModelHealth(
             job_id=job_id,
@@ -225,6 +227,7 @@ def model_health(job_id: JobId, jobs: JobsDep, db: DbDep) -> ModelHealth:
             history=0,
             rms_mm=None,
             expected_rms_mm=None,
+            **deploy,
         )
     last = checks[-1]
     return ModelHealth(
@@ -237,6 +240,7 @@ def model_health(job_id: JobId, jobs: JobsDep, db: DbDep) -> ModelHealth:
         history=len(checks),
         rms_mm=last.rms_mm,
         expected_rms_mm=last.expected_rms_mm,
+        **deploy,
     )
 
 

@@ -92,7 +92,13 @@ PROBLEM: dict[str, Any] = {"content": {"application/problem+json": {}}}
 def create_job(body: JobBody, jobs: JobsDep, request: Request) -> JobPublic | JSONResponse:
     """Queue a calibration or diagnosis of a done campaign; poll GET /jobs/{id} or /api/events.
     A second calibration of a campaign with the same method while one is queued or running is
-    refused (409); another method is accepted."""
+    refused (409); another method is accepted. A diagnosis takes no method (422 naming it)."""
+    if body.kind == "diagnosis" and "method" in body.model_fields_set:
+        # else a calibration's body with only its kind changed would be run as something else
+        raise ValueError(
+            f"method: a diagnosis takes none (it fits the geometry by ls-sum, then the "
+            f"extensions), not {body.method!r}; leave method out, or ask a calibration"
+        )
     try:
         return public_job(
             jobs.submit(

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from robocal.server.calibration.units import units_refusal
-from robocal.server.formats.blocks import Validation, ValidationLimits
+from robocal.server.formats.blocks import HeldOut, Validation, ValidationLimits
 from robocal.server.formats.cell_json import Cell
 from robocal.server.formats.model_json import ModelFile
 from robocal.solver import guard
@@ -209,6 +209,33 @@ def absurd_errors(result: Evaluation, verdict: Validation | None = None) -> str 
         + (", or the model is unfit (its validation says not deployable)" if unfit else "")
         + (f"; the nominal robot registered on it errs {nominal:.3f} mm RMS" if nominal else "")
     )
+
+
+def with_held_out(v: Validation, held: HeldOut) -> None:
+    """Give the verdict a separate held-out campaign's (or file's) errors, judged as the
+    leave-one-out figure is: measured on poses the fit never saw, they are the stronger word, so
+    beyond the tolerance (or, without one, past guard.MAX_FLOOR_RATIO x the noise floor) they make
+    the model undeployable even where the leave-one-out estimate passes."""
+    v.held_out = held
+    rms, floor, tol = held.rms_mm, v.noise_floor_mm, v.tolerance_mm
+    if rms is None or held.warning or not v.deployable:  # not of this cell, or already refused
+        return
+    where = f"campaign {held.campaign_id}" if held.campaign_id is not None else held.file
+    said = f"the held-out {where}'s error {rms:.3g} mm RMS (max {held.max_mm:.3g} mm)"
+    if tol is not None and rms > tol:
+        reason = f"{said} exceeds the tolerance {tol:g} mm"
+        v.summary = f"{v.summary}; on held-out {where} {rms:.3g} mm RMS, beyond the tolerance"
+    elif tol is None and floor and rms > guard.MAX_FLOOR_RATIO * floor:
+        reason = (
+            f"{said} is {rms / floor:.3g}x the noise floor {floor:.3f} mm (more than "
+            f"{guard.MAX_FLOOR_RATIO:g}x): the model does not hold on poses it was not fitted "
+            "on; give the tolerance the application needs (--tolerance-mm, or the cell's "
+            "tolerance_mm) to deploy within it"
+        )
+    else:
+        return
+    v.deployable = False
+    v.reasons = (*v.reasons, reason)
 
 
 def file_refusal(path) -> str | None:

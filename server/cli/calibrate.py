@@ -73,13 +73,14 @@ def cmd_calibrate(args) -> None:
     cal = workflow.run_method(cell, meas, args.method, qp=args.qp, screening=not args.keep_outliers)
     model = workflow.model_file(cal, cell, meas, data_path=args.meas)
     if hold is not None:  # the separate validation figure beside the leave-one-out one
+        from robocal.server.calibration.validation import with_held_out
         from robocal.server.calibration.workflow import held_out_errors
 
         held_out = held_out_errors(
             model, hold, file=Path(args.held_out).name, campaign_id=args.held_out_campaign or None
         )
         if model.validation is not None:
-            model.validation.held_out = held_out
+            with_held_out(model.validation, held_out)
     write_model(args.out, model)
     if args.recording:
         from robocal.server.recordings.calibration import record_calibration

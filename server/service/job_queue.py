@@ -14,6 +14,7 @@ from multiprocessing.connection import wait
 from pathlib import Path
 
 from robocal.server import store
+from robocal.server.acquisition.lease import is_dead, process_owner
 from robocal.server.calibration.workflow import model_file, run_method
 from robocal.server.formats.cell_json import parse_cell
 from robocal.server.formats.model_json import model_to_json
@@ -104,35 +105,18 @@ def check_method(db: store.Database, *, campaign_id: int, method: str) -> None:
     check_job(db, kind="calibration", campaign_id=campaign_id, method=method)
 
 
-def check_duplicate(
-    db: store.Database,
-    *,
-    kind: str,
-    campaign_id: int,
-    method: str,
-    holdout_campaign_id: int | None = None,
-    tolerance_mm: float | None = None,
-) -> None:
-    """DuplicateJob if the same calibration (campaign, method, held-out campaign and tolerance)
-    is queued or running: another held-out campaign or tolerance is another verdict."""
-    if kind != "calibration":
-        return
-    tol = None if tolerance_mm is None else float(tolerance_mm)
-    same = (kind, campaign_id, method, holdout_campaign_id, tol)
-    for state in ("running", "queued"):
-        for job in store.list_jobs(db, state=state):
-            if (
-                job.kind,
-                job.campaign_id,
-                job.method,
-                job.holdout_campaign_id,
-                job.tolerance_mm,
-            ) == same:
-                raise DuplicateJob(
-                    f"campaign {campaign_id} already has {kind} job {job.id} "
-                    f"({method}) {state}; cancel it or wait for it",
-                    job.id,
-                )
+# The job queues of this process that still run (a test may start a service after another).
+_LIVE_OWNERS: set[str] = set()
+
+
+def _gone(owner: str | None) -> bool:
+    """Whether a job's owner runs it no more: a process gone, a queue of this process shut
+    down, or unknown (a job queued before owners were kept); another live process's are its own."""
+    if owner is None:
+        return True
+    if owner.split(":")[:2] == process_owner().split(":")[:2]:  # this process
+        return owner not in _LIVE_OWNERS
+    return is_dead(owner)
 
 
 def calibrate_campaign(db: store.Database, *, campaign_id: int, method: str) -> dict:
@@ -195,8 +179,11 @@ class Jobs:
         self._slot_held = threading.local()
         self._calls: set[Child] = set()
         self._wake_r, self._wake_w = os.pipe()
-        # Nothing runs a job this process did not queue: fail those a stop cut off.
-        for job_id in store.fail_unfinished_jobs(db, reason=RESTART_REASON):
+        # Nothing runs a job its service did not queue: fail those a stop cut off (their
+        # service gone), not those another live service on the database runs.
+        self.owner = process_owner()
+        _LIVE_OWNERS.add(self.owner)
+        for job_id in store.fail_unfinished_jobs(db, reason=RESTART_REASON, gone=_gone):
             self._publish(store.get_job(db, job_id=job_id))
         self._supervisor = threading.Thread(
             target=self._supervise, name="robocal-jobs", daemon=True
@@ -224,7 +211,7 @@ class Jobs:
         tolerance_mm: float | None = None,
     ) -> Job:
         """Check and queue a job; the job as queued. DuplicateJob (a Conflict) if the same
-        calibration (check_duplicate) is queued or running."""
+        calibration (store.create_job's unique) is queued or running."""
         if kind == "diagnosis":
             method = "diagnose"
         check_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
@@ -235,22 +222,23 @@ class Jobs:
         with self._lock:  # the check and the insert together: two clicks make one job
             if self._closing:
                 raise store.Conflict("the service is stopping; no new jobs")
-            check_duplicate(
-                self.db,
-                kind=kind,
-                campaign_id=campaign_id,
-                method=method,
-                holdout_campaign_id=holdout_campaign_id,
-                tolerance_mm=tolerance_mm,
-            )
-            job = store.create_job(
-                self.db,
-                kind=kind,
-                campaign_id=campaign_id,
-                method=method,
-                holdout_campaign_id=holdout_campaign_id,
-                tolerance_mm=tolerance_mm,
-            )
+            try:  # a calibration once: checked in the insert's transaction (two services)
+                job = store.create_job(
+                    self.db,
+                    kind=kind,
+                    campaign_id=campaign_id,
+                    method=method,
+                    holdout_campaign_id=holdout_campaign_id,
+                    tolerance_mm=tolerance_mm,
+                    unique=kind == "calibration",
+                    owner=self.owner,
+                )
+            except store.ActiveJob as e:
+                raise DuplicateJob(
+                    f"campaign {campaign_id} already has {kind} job {e.job.id} "
+                    f"({method}) {e.job.state}; cancel it or wait for it",
+                    e.job.id,
+                ) from None
             self._queue.append(job.id)
         self._publish(job)
         self._wake()
@@ -263,7 +251,9 @@ class Jobs:
         with self._lock:
             if self._closing:
                 raise store.Conflict("the service is stopping; no new jobs")
-            job = store.create_job(self.db, kind="planning", campaign_id=None, method=method)
+            job = store.create_job(
+                self.db, kind="planning", campaign_id=None, method=method, owner=self.owner
+            )
             self._plans[job.id] = (cell, opts)
             self._queue.append(job.id)
         self._publish(job)
@@ -375,6 +365,7 @@ class Jobs:
             if self._closing:
                 return
             self._closing = True
+            _LIVE_OWNERS.discard(self.owner)
             children = [c for c in self._running.values() if c is not None] + list(self._calls)
             cut_off = sorted(self._running) + list(self._queue)
             self._queue.clear()

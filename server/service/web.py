@@ -20,14 +20,16 @@ class _Page(StaticFiles):
             # A route that exists with other methods: 405 naming them (the mount at / matches
             # every path, so the router never gets to say it).
             allowed = _allowed_methods(scope["app"], "/" + path)
-            if allowed:
+            # the file server's path is normalised ("api/fleet/x/.." is "api/fleet"): a method the
+            # route takes means the request's own path matched no route
+            if allowed and scope["method"] not in allowed:
                 raise HTTPException(
                     405,
                     f"/{path} allows {', '.join(allowed)}, not {scope['method']}",
                     headers={"Allow": ", ".join(allowed)},
                 )
             # Without this, POST /api/<missing> would answer 405 from the file server.
-            raise HTTPException(404, f"no API route {scope['method']} /{path}")
+            raise HTTPException(404, f"no API route {scope['method']} {scope['path']}")
         return await super().get_response(path, scope)
 
 

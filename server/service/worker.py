@@ -12,6 +12,7 @@ from pathlib import Path
 
 from robocal.server import store
 from robocal.server.calibration.identified import arm_parameters
+from robocal.server.calibration.validation import with_held_out
 from robocal.server.calibration.workflow import held_out_errors, model_file, run_method
 from robocal.server.formats.blocks import Validation
 from robocal.server.formats.cell_json import parse_cell
@@ -134,7 +135,7 @@ def _calibrate(db: store.Database, report: Report, setup: JobSetup, job: store.J
     if hold is not None:  # the separate validation figure beside the leave-one-out one
         summary = held_out_errors(fitted, hold[1], campaign_id=job.holdout_campaign_id)
         if fitted.validation is not None:
-            fitted.validation.held_out = summary
+            with_held_out(fitted.validation, summary)
     model = model_to_json(fitted)
     model["data"]["campaign"] = job.campaign_id
     path = setup.models_dir / f"job-{job.id}.model.json"

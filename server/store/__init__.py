@@ -19,6 +19,7 @@ from .exchange import (
     measured_targets,
 )
 from .jobs import (
+    ActiveJob,
     JobInfo,
     create_job,
     fail_unfinished_jobs,
@@ -50,6 +51,7 @@ from .readings import (
 
 __all__ = [
     "JobInfo",
+    "ActiveJob",
     "create_job",
     "fail_unfinished_jobs",
     "get_job",

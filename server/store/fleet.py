@@ -49,8 +49,8 @@ def robot_model_of(cell_json: str) -> str:
 
 
 def arm_calibrations(db: Database, *, robot_model: str | None = None) -> list[ArmCalibration]:
-    """Done calibrations of named arms (of this robot model, if given) whose job stored the
-    arm's parameters, oldest first."""
+    """Done calibrations of named arms (of this robot model, if given) whose job stored some of
+    the arm's parameters, oldest first."""
     query = (
         select(Job, Campaign)
         .join(Campaign, Job.campaign_id == Campaign.id)
@@ -63,7 +63,9 @@ def arm_calibrations(db: Database, *, robot_model: str | None = None) -> list[Ar
         for job, campaign in s.execute(query):
             model = robot_model_of(campaign.cell_json)
             rows = (job.results or {}).get("parameters")
-            if rows is None or (want is not None and model_key(model) != want):
+            # a fit that identified none of the arm's parameters (the `nominal` method) says
+            # nothing of the arm: taken as its latest, it would hide the arm's calibration
+            if not rows or (want is not None and model_key(model) != want):
                 continue
             out.append(
                 ArmCalibration(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from sqlalchemy import select
@@ -45,6 +46,17 @@ class JobInfo:
     tolerance_mm: float | None = None  # the accuracy asked for, over the cell's; None: the cell's
 
 
+class ActiveJob(Conflict):
+    """The same job is already queued or running (`job`): create_job(unique=True) refused."""
+
+    def __init__(self, job: JobInfo):
+        super().__init__(f"job {job.id} is the same and {job.state}")
+        self.job = job
+
+    def __reduce__(self):
+        return type(self), (self.job,)
+
+
 def create_job(
     db: Database,
     *,
@@ -53,20 +65,29 @@ def create_job(
     method: str,
     holdout_campaign_id: int | None = None,
     tolerance_mm: float | None = None,
+    unique: bool = False,
+    owner: str | None = None,
 ) -> JobInfo:
-    """Store a queued job on an existing campaign (none for a planning job); the job."""
+    """Store a queued job on an existing campaign (none for a planning job); the job. unique:
+    ActiveJob if the same job (kind, campaign, method, held-out campaign, tolerance) is queued or
+    running, looked for in the insert's own write transaction, so that two services on one
+    database cannot both queue it. owner: the process that runs it (fail_unfinished_jobs)."""
     checks.one_of(kind, JOB_KINDS, "kind")
     if (campaign_id is None) != (kind == "planning"):
         raise ValueError("a planning job has no campaign yet; every other job has one")
+    tol = None if tolerance_mm is None else float(tolerance_mm)
     with db.session(write=True) as s:
         for cid in (campaign_id, holdout_campaign_id):
             if cid is not None:
                 _campaign(s, cid)
+        if unique:
+            _refuse_active(s, (kind, campaign_id, str(method), holdout_campaign_id, tol))
         job = Job(
             kind=kind,
             campaign_id=campaign_id,
             holdout_campaign_id=holdout_campaign_id,
-            tolerance_mm=None if tolerance_mm is None else float(tolerance_mm),
+            tolerance_mm=tol,
+            owner=owner,
             method=str(method),
             state="queued",
             progress=0.0,
@@ -76,6 +97,27 @@ def create_job(
         s.add(job)
         s.flush()
         return _job_info(job)
+
+
+def _refuse_active(s: Session, same: tuple) -> None:
+    """ActiveJob if a queued or running job is `same` (kind, campaign, method, held-out
+    campaign, tolerance), running ones first."""
+    kind, campaign_id, method = same[:3]
+    query = select(Job).where(
+        Job.kind == kind,
+        Job.campaign_id == campaign_id,
+        Job.method == method,
+        Job.state.in_(("running", "queued")),
+    )
+    for job in sorted(s.scalars(query), key=lambda j: (j.state != "running", j.id)):
+        if (
+            job.kind,
+            job.campaign_id,
+            job.method,
+            job.holdout_campaign_id,
+            job.tolerance_mm,
+        ) == same:
+            raise ActiveJob(_job_info(job))
 
 
 def get_job(db: Database, *, job_id: int) -> JobInfo:
@@ -119,10 +161,14 @@ def update_job(db: Database, *, job_id: int, state: str | None = None, **changes
         return _job_info(job)
 
 
-def fail_unfinished_jobs(db: Database, *, reason: str) -> list[int]:
-    """Mark every queued or running job failed with `reason` (nothing runs them any more); ids."""
+def fail_unfinished_jobs(
+    db: Database, *, reason: str, gone: Callable[[str | None], bool] = lambda owner: True
+) -> list[int]:
+    """Mark failed with `reason` every queued or running job whose owner is `gone` (nothing runs
+    them any more; another live service's jobs are its own); ids."""
     with db.session(write=True) as s:
-        jobs = list(s.scalars(select(Job).where(Job.state.in_(("queued", "running")))))
+        unfinished = s.scalars(select(Job).where(Job.state.in_(("queued", "running"))))
+        jobs = [j for j in unfinished if gone(j.owner)]
         for job in jobs:
             job.state, job.reason, job.finished_at = "failed", reason, utcnow()
         return [j.id for j in jobs]

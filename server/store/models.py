@@ -220,6 +220,8 @@ class Job(Base):
     )
     # The accuracy the application needs (mm), which wins over the cell's; None: the cell's.
     tolerance_mm: Mapped[float | None] = mapped_column(Float)
+    # The service process that queued it (host:pid:random); None: queued before migration 0012.
+    owner: Mapped[str | None] = mapped_column(Text)
     state: Mapped[str] = mapped_column(String(16), default="queued")
     reason: Mapped[str | None] = mapped_column(Text)
     progress: Mapped[float] = mapped_column(Float, default=0.0)  # 0..1

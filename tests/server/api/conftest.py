@@ -103,3 +103,15 @@ def wait_for(get, done, timeout=180.0, interval=0.1):
             return result
         assert time.monotonic() < deadline, f"timed out; last: {result}"
         time.sleep(interval)
+
+
+def done_job(client, **body) -> dict:
+    """A job queued with this POST /api/jobs body and waited for; the job, asserted done."""
+    r = client.post("/api/jobs", json=body)
+    assert r.status_code == 202, r.text
+    job = wait_for(
+        lambda: client.get(f"/api/jobs/{r.json()['id']}").json(),
+        lambda j: j["state"] in ("done", "failed"),
+    )
+    assert job["state"] == "done", job
+    return job

@@ -59,7 +59,7 @@ def test_two_stations_share_one_database(tmp_path):
         with ThreadPoolExecutor(2) as pool:
             north, south = pool.map(next, servers)
         try:
-            assert execute(url, "SELECT version_num FROM alembic_version") == [("0011",)]
+            assert execute(url, "SELECT version_num FROM alembic_version") == [("0012",)]
             tables = execute(
                 url,
                 "SELECT table_name FROM information_schema.tables "

@@ -57,7 +57,7 @@ def test_migrations_create_the_schema(tmp_path):
     uniques = {tuple(u["column_names"]) for u in insp.get_unique_constraints("reading")}
     assert ("campaign_id", "pose_index", "target") in uniques
     with db.engine.connect() as c:
-        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0011"
+        assert c.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0012"
         # The migration and the models describe the same schema.
         assert (
             compare_metadata(
@@ -163,7 +163,7 @@ def test_alembic_command_line_with_database_url(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     con = sqlite3.connect(path)
-    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0011",)
+    assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0012",)
     assert con.execute("PRAGMA journal_mode").fetchone() == ("wal",)
     con.close()
 
@@ -219,7 +219,7 @@ def test_opening_a_new_store_from_many_places_at_once(store_url):
             return c.execute(text("SELECT version_num FROM alembic_version")).all()
 
     with ThreadPoolExecutor(4) as pool:
-        assert list(pool.map(version, range(4))) == [[("0011",)]] * 4
+        assert list(pool.map(version, range(4))) == [[("0012",)]] * 4
     for p in procs:
         _, err = p.communicate(timeout=120)
         assert p.returncode == 0, err
