@@ -57,5 +57,9 @@ def smr_ring(k: int) -> np.ndarray:
 def in_child(fn, args: tuple, timeout: float):
     """fn(*args) run in a child process: its result, or TimeoutError (the child killed) past
     timeout s; for numerics that a regression could hang in native code."""
-    with multiprocessing.get_context("forkserver").Pool(1) as pool:
+    ctx = multiprocessing.get_context("forkserver")
+    # the fork server (started at the first call) imports fn's module, numpy and the solver
+    # once: each child forks from it instead of importing them again (a second or two each)
+    ctx.set_forkserver_preload(["__main__", fn.__module__])
+    with ctx.Pool(1) as pool:
         return pool.apply_async(fn, args).get(timeout)
