@@ -27,32 +27,19 @@ def served(tmp_path):
     yield from serve(settings_for(tmp_path))
 
 
-@pytest.fixture(scope="package")
-def playwright():
-    """Playwright, started once for the browser tests of a worker in a row (a second each)."""
+@pytest.fixture
+def page():
     if not CHROMIUM.exists():
         pytest.skip("no /usr/bin/chromium (.ci/run installs it)")
     sync_api = pytest.importorskip("playwright.sync_api")
     with sync_api.sync_playwright() as pw:
-        yield pw
-
-
-@pytest.fixture(scope="package")
-def browser(playwright):
-    """The headless Chromium those tests share; each test opens its own context (cookies,
-    storage and cache of its own, as a fresh browser's)."""
-    browser = playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
-    yield browser
-    browser.close()
-
-
-@pytest.fixture
-def page(browser):
-    context = browser.new_context(viewport={"width": 1200, "height": 900})
-    page = context.new_page()
-    page.set_default_timeout(60_000)
-    yield page
-    context.close()
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
+        context = browser.new_context(viewport={"width": 1200, "height": 900})
+        page = context.new_page()
+        page.set_default_timeout(60_000)
+        yield page
+        context.close()
+        browser.close()
 
 
 def sign_in(page, served) -> None:
