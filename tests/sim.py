@@ -6,6 +6,7 @@ from __future__ import annotations
 import multiprocessing
 import tracemalloc
 from dataclasses import dataclass
+from multiprocessing import forkserver
 
 import numpy as np
 
@@ -57,5 +58,13 @@ def smr_ring(k: int) -> np.ndarray:
 def in_child(fn, args: tuple, timeout: float):
     """fn(*args) run in a child process: its result, or TimeoutError (the child killed) past
     timeout s; for numerics that a regression could hang in native code."""
-    with multiprocessing.get_context("forkserver").Pool(1) as pool:
+    ctx = multiprocessing.get_context("forkserver")
+    # A fork server not yet started imports fn's module (numpy, the solver) too, once: each
+    # child forks from it instead of importing them again (a second or more each). Added to
+    # what it preloads already (the service's job modules: its API tests share the server).
+    preload = getattr(forkserver._forkserver, "_preload_modules", None) or []
+    ctx.set_forkserver_preload(
+        [*preload, *(m for m in ("__main__", fn.__module__) if m not in preload)]
+    )
+    with ctx.Pool(1) as pool:
         return pool.apply_async(fn, args).get(timeout)

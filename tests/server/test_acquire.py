@@ -20,6 +20,7 @@ from robocal.drivers.tracker.client import TrackerClient
 from robocal.drivers.tracker.sim import SimulatedTracker, serve_tracker
 from robocal.drivers.world import SimulatedWorld
 from robocal.solver.robot import IRB2600
+from tests import cli_process
 from tests.backends import execute
 from tests.robots import TARGETS
 
@@ -27,9 +28,9 @@ CMD = [sys.executable, "-m", "robocal.server.cli"]
 
 
 def robocal(*args, cwd, check=True):
-    r = subprocess.run(
-        CMD + list(map(str, args)), cwd=cwd, capture_output=True, text=True, timeout=600
-    )
+    """`robocal ARGS` in its own process, forked from one that has imported the program (the
+    killed acquisition starts a fresh interpreter: CMD)."""
+    r = cli_process.run(*args, cwd=cwd, timeout=600)
     if check:
         assert r.returncode == 0, r.stderr
     return r

@@ -18,8 +18,15 @@ def _run(tmp_path, **kw):
     return summary, events
 
 
-def test_the_campaign_stops_at_the_target_with_its_steps_stored_and_reported(tmp_path):
-    summary, events = _run(tmp_path, target_accuracy_mm=0.045)
+@pytest.fixture(scope="module")
+def at_target(tmp_path_factory):
+    """(folder, summary, events) of a campaign to 0.045 mm (the two tests below only read it)."""
+    d = tmp_path_factory.mktemp("adaptive")
+    return d, *_run(d, target_accuracy_mm=0.045)
+
+
+def test_the_campaign_stops_at_the_target_with_its_steps_stored_and_reported(at_target):
+    tmp_path, summary, events = at_target
     a = summary.adaptive
     assert summary.state == "done" and a.stopped == "target"
     assert a.predicted_mm <= 0.045
@@ -54,10 +61,10 @@ def test_the_campaign_stops_at_its_maximum_when_the_target_is_out_of_reach(tmp_p
     assert a.predicted_mm > 0.001
 
 
-def test_chosen_poses_come_from_the_candidates_without_repeats(tmp_path):
+def test_chosen_poses_come_from_the_candidates_without_repeats(at_target):
     from robocal.server.acquisition.adaptive import _planner, base_guess_for
 
-    summary, _ = _run(tmp_path, target_accuracy_mm=0.045)
+    tmp_path, summary, _ = at_target
     with store.open_database(tmp_path / "a.db") as db:
         q = np.array([p.joints_deg for p in store.planned_poses(db, campaign_id=1)])
         info = store.get_campaign(db, campaign_id=1)

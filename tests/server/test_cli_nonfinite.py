@@ -3,12 +3,10 @@ at once (the parser may refuse it, else the solver's finite checks do; never a h
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import pytest
 
 from robocal.server.cli import main as robocal
+from tests import cli_process
 
 LIMIT_S = 120  # a hang would be a regression: the test fails instead of waiting
 
@@ -36,12 +34,7 @@ def test_a_huge_coordinate_exits_with_one_line(files, command):
         "evaluate": ["evaluate", str(model), str(bad)],
         "diagnose": ["diagnose", str(bad), "--out", str(d / "report.json")],
     }[command]
-    run = subprocess.run(
-        [sys.executable, "-m", "robocal.server.cli", *args],
-        capture_output=True,
-        text=True,
-        timeout=LIMIT_S,
-    )
+    run = cli_process.run(*args, cwd=d, timeout=LIMIT_S)
     print(f"\n{command}: exit {run.returncode}: {run.stderr.strip()}")
     assert run.returncode != 0
     assert run.stderr.startswith("robocal: error:") and len(run.stderr.splitlines()) == 1, (

@@ -4,8 +4,6 @@ compliance, after a calibration campaign through the same acquisition, diagnosed
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -16,6 +14,7 @@ from robocal.server.calibration import workflow
 from robocal.server.formats.cell_json import default_cell
 from robocal.server.formats.model_json import write_model
 from robocal.server.verify.run import VerifyOptions, verify
+from tests import cli_process
 
 EFFECT = "joint_compliance:2=1.0"
 
@@ -69,11 +68,10 @@ def test_acquire_verify_writes_the_figures_and_refuses_bad_points(verified, tmp_
     pts = tmp_path / "points.csv"
     pts.write_text("point,x_mm,y_mm,z_mm\nA,1,2,3\nB,4,oops,6\n")
 
-    def robocal(*args):
-        return subprocess.run(
-            [sys.executable, "-m", "robocal.server.cli", "acquire", "--db", str(d / "cell.db"),
-             "--seed", str(seed), "--effect", EFFECT, "--verify", str(d / "model.json"), *args],
-            cwd=tmp_path, capture_output=True, text=True, timeout=600,
+    def robocal(*args):  # its own process, forked from one that has imported the program
+        return cli_process.run(
+            "acquire", "--db", d / "cell.db", "--seed", seed, "--effect", EFFECT,
+            "--verify", d / "model.json", *args, cwd=tmp_path, timeout=600,
         )  # fmt: skip
 
     r = robocal("--points", str(pts))

@@ -6,6 +6,8 @@ propagated through its Jacobian columns, against the true error at independent p
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 
 from robocal.drivers.cell import VirtualCell
@@ -41,9 +43,11 @@ def _extension(layout, x0, inputs, name, joint, harmonic):
     )
 
 
-def case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """(true error, U) at the SMRs of TEST_POSES independent poses, mm, of an extended model
-    fitted on POSES poses; its covariance and scatter multiplied by `shrink`."""
+@cache
+def _fitted(robot, seed: int, kind: str):
+    """An extended model fitted on POSES poses, its errors and joint scatter, the TEST_POSES
+    independent poses with its extensions' bases there, and the true error at their SMRs, mm
+    (kept: the too-small check scales the very fits the coverage check judged)."""
     name, joint, harmonic, spec = MODELLED[seed % len(MODELLED)]
     vc = VirtualCell.random(robot, TARGETS, seed=seed)
     vc.effects = make_effects([spec] + ([UNMODELLED] if kind == "extra" else []), vc, seed)
@@ -68,5 +72,12 @@ def case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray, 
     test = Inputs(q)
     at_test = [prepare(e, lay, x0, test) for e in exts]
     err = np.linalg.norm(predict_extended(lay, x, exts, test, at_test) - truth, axis=-1)
+    return lay, x, exts, at_test, test, errors, s, err
+
+
+def case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(true error, U) at the SMRs of TEST_POSES independent poses, mm, of an extended model
+    fitted on POSES poses; its covariance and scatter multiplied by `shrink`."""
+    lay, x, exts, at_test, test, errors, s, err = _fitted(robot, seed, kind)
     at = pu.extended_spread_at(lay, x, exts, at_test, test, errors.cov * shrink, errors.column)
     return err, pu.position_uncertainty(at, s * np.sqrt(shrink)).expanded_mm

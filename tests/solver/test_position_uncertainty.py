@@ -6,6 +6,8 @@ check fails, so it can."""
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 import pytest
 
@@ -24,9 +26,11 @@ from tests.solver.coverage_suite import ARMS, SEEDS, TARGETS, TEST_POSES, covera
 EFFECTS = ("joint_compliance:2=0.3", "joint_periodic:3=0.01", "joint_compliance:3=0.3")
 
 
-def _case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """(true error, U) at the SMRs of TEST_POSES independent poses, mm, of a 40-pose ls-sum
-    calibration; its covariance and scatter multiplied by `shrink`."""
+@cache
+def _fitted(robot, seed: int, kind: str):
+    """A 40-pose ls-sum calibration, its errors and joint scatter, the TEST_POSES independent
+    poses and the true error at their SMRs, mm (kept: the too-small check scales the very
+    calibrations the coverage check judged)."""
     vc = VirtualCell.random(robot, TARGETS, seed=seed)
     scatter = 0.003 if kind == "scatter" else 0.0
     if kind == "effect":
@@ -44,6 +48,13 @@ def _case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray,
     q = vc.sample_poses(TEST_POSES, rng)
     truth = vc.true_points(q, pose_dq=np.deg2rad(scatter) * rng.normal(size=q.shape))
     err = np.linalg.norm(predict(cal.layout, cal.x, q) - truth, axis=-1)
+    return cal, errors, s, q, err
+
+
+def _case(robot, seed: int, kind: str, shrink: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(true error, U) at the SMRs of TEST_POSES independent poses, mm, of a 40-pose ls-sum
+    calibration; its covariance and scatter multiplied by `shrink`."""
+    cal, errors, s, q, err = _fitted(robot, seed, kind)
     at = pu.spread_at(cal.layout, cal.x, q, errors.cov * shrink, errors.column)
     return err, pu.position_uncertainty(at, s * np.sqrt(shrink)).expanded_mm
 
