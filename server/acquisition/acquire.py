@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from robocal.drivers.campaign import CampaignEngine, Settings
+from robocal.drivers.campaign import CampaignEngine, NothingMeasured, Settings
 from robocal.drivers.clock import RealClock, VirtualClock
 from robocal.drivers.lifecycle import MOVING, StateError, next_state
 from robocal.drivers.predictor import SmrPredictor
@@ -465,6 +465,8 @@ def acquire(
                 f"after {engine.stats.poses} poses; its readings are stored, run "
                 "again with --reset to resume"
             ) from None
+        except NothingMeasured as e:
+            raise AcquisitionFailed(f"campaign {cid} ({name}) failed: {e}") from e
         except store.DatabaseGone as e:
             raise AcquisitionFailed(
                 f"campaign {cid} ({name}) stopped at pose {engine.stats.poses + (start or 0) + 1}"
