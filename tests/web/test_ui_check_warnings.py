@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from tests.real import import_real
 from tests.server.api.conftest import done_job
-from tests.server.api.test_backlash_order_api import ORDER, _diagnosed, _untimed_backlash
+from tests.server.api.test_backlash_order_api import ORDER, posted_untimed_check
 from tests.server.api.test_health_deployable import _six_poses
 from tests.web.conftest import sign_in
 
@@ -33,14 +33,7 @@ def test_a_posted_check_says_the_model_is_not_fit_to_deploy(served, page, tmp_pa
 def test_a_checks_row_order_warning_is_shown(served, page, tmp_path):
     """The page checks calibrations' models, which have no backlash; a diagnosis's extended model
     checked over the API does, and the page shows that real answer's warning as it is."""
-    _, job = _diagnosed(served, tmp_path)
-    assert job["state"] == "done", job
-    r = served.client.post(
-        f"/api/models/{job['id']}/checks",
-        params={"filename": "check.csv"},
-        content=_untimed_backlash(tmp_path, 8, 11),
-    )
-    assert r.status_code == 201, r.text
+    r = posted_untimed_check(served, tmp_path)
     sign_in(page, served)
     page.evaluate("(c) => renderCheckWarnings(c)", r.json())
     said = page.locator("#k-warnings li").all_text_contents()

@@ -3,12 +3,11 @@
 continues."""
 
 import signal
-import time
 
 import httpx
 
 from tests.server.api.conftest import free_port
-from tests.server.api.test_restart import start
+from tests.server.api.test_restart import start, started
 
 
 def test_a_campaign_left_running_by_a_killed_service_says_why(tmp_path):
@@ -16,14 +15,8 @@ def test_a_campaign_left_running_by_a_killed_service_says_why(tmp_path):
     proc, token = start(tmp_path, port)
     url = f"http://127.0.0.1:{port}/api"
     auth = {"Authorization": f"Bearer {token}"}
-    with httpx.Client(headers=auth, timeout=30) as c:
-        body = {"poses": 60, "seed": 3, "name": "k", "pause_s": 0.0, "samples": 5}
-        cid = c.post(f"{url}/campaigns", json=body).json()["id"]
-        assert c.post(f"{url}/campaigns/{cid}/start").status_code == 202
-        deadline = time.monotonic() + 120
-        while c.get(f"{url}/campaigns/{cid}").json()["poses_done"] < 3:
-            assert time.monotonic() < deadline
-            time.sleep(0.05)
+    body = {"poses": 60, "seed": 3, "name": "k", "pause_s": 0.0, "samples": 5}
+    cid = started(url, auth, body, 3)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     proc2, _ = start(tmp_path, port)
