@@ -622,14 +622,15 @@ def estop_engine(engine) -> bool:
 
 
 def _history(db, cid, names, start, cell):
-    """Joints and readings of the poses already done, and the readings of a cut-off pose."""
-    if start is None or start == 0:
-        partial = {} if start is None else _partial(db, cid, 0)
-        return None, partial
+    """Joints and readings of the poses already done (start None: every pose has its outcome),
+    and the readings of a cut-off pose; the engine fails a run whose campaign holds none."""
+    if start == 0:
+        return None, _partial(db, cid, 0)
     meas = store.campaign_measurements(db, campaign_id=cid, targets=names)
     index = {p.label: p.index for p in store.planned_poses(db, campaign_id=cid)}
-    keep = [i for i, label in enumerate(meas.pose_ids) if index[label] < start]
-    return (meas.q[keep], meas.xyz[keep]), _partial(db, cid, start)
+    keep = [i for i, label in enumerate(meas.pose_ids) if start is None or index[label] < start]
+    partial = {} if start is None else _partial(db, cid, start)
+    return (meas.q[keep], meas.xyz[keep]), partial
 
 
 def _partial(db, cid, pose_index) -> dict:

@@ -8,6 +8,7 @@ import json
 
 from robocal.server import store
 from robocal.server.cli import main
+from tests.backends import execute
 from tests.server.api.conftest import wait_for
 
 # one SMR and a beam that (nearly) never holds: every pose ends with its target missing
@@ -23,6 +24,20 @@ def test_acquire_of_no_reading_fails(tmp_path, capsys):
     assert "campaign 1 (campaign-seed0) failed: no reading stored" in " ".join(err.split()), err
     with store.open_database(str(db)) as d:
         assert store.get_campaign(d, campaign_id=1).status == "failed"
+
+
+def test_a_measured_campaign_left_failed_at_its_end_resumes_to_done(tmp_path, capsys):
+    """A campaign killed after its last pose's outcome (every pose measured, the state not yet
+    done) resumes with nothing left to measure: done, its readings counted, not "no reading"."""
+    cell, db = tmp_path / "cell.json", tmp_path / "acq.db"
+    cell.write_text(json.dumps({"robot": "irb2600", "targets": {"A": [60.0, 0.0, 35.0]}}))
+    args = ["acquire", "--db", str(db), "--poses", "4", "--cell", str(cell), "--name", "k"]
+    assert main(args) == 0
+    execute(str(db), "UPDATE campaign SET status = 'running' WHERE id = 1")  # as a kill leaves it
+    capsys.readouterr()
+    assert main(args) == 0, capsys.readouterr().err
+    with store.open_database(str(db)) as d:
+        assert store.get_campaign(d, campaign_id=1).status == "done"
 
 
 def test_api_campaign_of_no_reading_fails_with_the_reason(live):
