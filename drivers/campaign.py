@@ -35,6 +35,10 @@ TELL_WAIT_S = 5.0
 ARRIVAL_MARGIN_S = 1e-3
 
 
+class NothingMeasured(RuntimeError):
+    """A run reached the end of its plan and the campaign holds no reading: it failed."""
+
+
 class EngineBusy(StateError):
     """A request that needs the engine's run to have returned (it is still ending its message)."""
 
@@ -249,6 +253,7 @@ class CampaignEngine(Sighting):
         if plan is None:
             plan = campaign_plan(poses_deg, names, start, stored, order=self.measuring_order)
         epoch = self._begin()
+        nothing = False  # the plan ran to its end without one reading: failed, not done
         try:
             run = _Run(epoch, names, start, stored)
             if history is not None:
@@ -264,7 +269,8 @@ class CampaignEngine(Sighting):
                 if not go_on:
                     break
             else:
-                self._event("finish", epoch)
+                nothing = _measured_nothing(run, self.stats)
+                self._event("fail" if nothing else "finish", epoch)
         except Exception as e:
             with self._cond:
                 stopped = self._estops != epoch
@@ -295,6 +301,13 @@ class CampaignEngine(Sighting):
             # an e-stop's transition may still be on its request's thread: the run's listener
             # (the store) must have the last state before the run's owner closes it
             self._tell(wait_s=TELL_WAIT_S)
+        if nothing and self._state == "failed":
+            st = self.stats
+            raise NothingMeasured(
+                f"no reading stored: {st.poses + st.skipped} poses, every target missing "
+                f"({st.missing} missing, {st.beam_breaks} beam breaks, {st.skipped} skipped); "
+                "check that the tracker sees the SMRs (line of sight, the cell's targets and base)"
+            )
         return self.stats
 
     def measuring_order(self, q_deg) -> tuple[str, ...]:
@@ -464,7 +477,7 @@ class CampaignEngine(Sighting):
         return work.q_rad, row
 
 
-__all__ = ["CampaignEngine", "EngineBusy", "Settings", "StateError", "Stats"]
+__all__ = ["CampaignEngine", "EngineBusy", "NothingMeasured", "Settings", "StateError", "Stats"]
 
 
 @dataclass
@@ -478,6 +491,13 @@ class _Run:
     q_done: list = field(default_factory=list)  # joints (rad) and readings of the poses done
     m_done: list = field(default_factory=list)
     work: _Pose | None = None  # the pose being measured
+
+
+def _measured_nothing(run: _Run, stats: Stats) -> bool:
+    """True if neither this run nor an earlier one (history, a cut-off pose) stored a reading."""
+    if stats.readings or run.stored:
+        return False
+    return not any(np.isfinite(np.asarray(m, dtype=float)).any() for m in run.m_done)
 
 
 # the PhaseSeconds field each message's time goes to (else "other")

@@ -54,9 +54,18 @@ function renderChecks(hist) {
   $("k-history").replaceChildren(table);
 }
 
+// the model whose checks were shown last: its posted check's warnings stay until another is shown
+let shownChecks = null;
+
 /** The shown model's checks: verdict, history table and chart. */
 async function showChecks(jobId) {
   $("m-health").hidden = true;
+  if (jobId !== shownChecks) {  // another model: the last posted check's words are not its
+    $("k-warnings").replaceChildren();
+    $("k-warnings").hidden = true;
+    $("k-state").textContent = "";
+    shownChecks = jobId;
+  }
   $("k-history").replaceChildren();
   $("k-charts").hidden = true;
   clearImage($("k-chart"));
@@ -83,9 +92,24 @@ $("k-post").addEventListener("click", async () => {
     const c = await api("POST", `/models/${job}/checks?filename=${encodeURIComponent(file.name)}`,
       await file.text(), true, "text/csv");
     $("k-state").textContent = `check ${c.history}: ${c.verdict}`;
+    renderCheckWarnings(c);
     if (state.job === job) await showChecks(job);
   } catch (e) { $("k-state").textContent = ""; say(e); }
 });
+
+/** What the posted check says beside its verdict (the warnings `robocal check` prints, not kept
+ * in the history), and that the model itself is not fit to deploy, if so: an "ok" check of it
+ * says only that the arm still matches it. */
+function renderCheckWarnings(c) {
+  const lines = [...(c.warnings || [])];
+  if (c.deployable === false) {
+    lines.push("the model itself is not fit to deploy: " + (c.not_deployable || []).join("; "));
+  }
+  const list = $("k-warnings");
+  list.replaceChildren(...lines.map((w) => Object.assign(document.createElement("li"),
+    { textContent: w })));
+  list.hidden = !lines.length;
+}
 
 // How often a check run on the cell is asked for its progress (a simulated check takes seconds).
 const CHECK_POLL_MS = 500;

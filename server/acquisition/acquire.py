@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from robocal.drivers.campaign import CampaignEngine, Settings
+from robocal.drivers.campaign import CampaignEngine, NothingMeasured, Settings
 from robocal.drivers.clock import RealClock, VirtualClock
 from robocal.drivers.lifecycle import MOVING, StateError, next_state
 from robocal.drivers.predictor import SmrPredictor
@@ -465,6 +465,8 @@ def acquire(
                 f"after {engine.stats.poses} poses; its readings are stored, run "
                 "again with --reset to resume"
             ) from None
+        except NothingMeasured as e:
+            raise AcquisitionFailed(f"campaign {cid} ({name}) failed: {e}") from e
         except store.DatabaseGone as e:
             raise AcquisitionFailed(
                 f"campaign {cid} ({name}) stopped at pose {engine.stats.poses + (start or 0) + 1}"
@@ -620,14 +622,15 @@ def estop_engine(engine) -> bool:
 
 
 def _history(db, cid, names, start, cell):
-    """Joints and readings of the poses already done, and the readings of a cut-off pose."""
-    if start is None or start == 0:
-        partial = {} if start is None else _partial(db, cid, 0)
-        return None, partial
+    """Joints and readings of the poses already done (start None: every pose has its outcome),
+    and the readings of a cut-off pose; the engine fails a run whose campaign holds none."""
+    if start == 0:
+        return None, _partial(db, cid, 0)
     meas = store.campaign_measurements(db, campaign_id=cid, targets=names)
     index = {p.label: p.index for p in store.planned_poses(db, campaign_id=cid)}
-    keep = [i for i, label in enumerate(meas.pose_ids) if index[label] < start]
-    return (meas.q[keep], meas.xyz[keep]), _partial(db, cid, start)
+    keep = [i for i, label in enumerate(meas.pose_ids) if start is None or index[label] < start]
+    partial = {} if start is None else _partial(db, cid, start)
+    return (meas.q[keep], meas.xyz[keep]), partial
 
 
 def _partial(db, cid, pose_index) -> dict:

@@ -18,6 +18,14 @@ VERDICT = (
     "longer describes the arm, judged over the history)"
 )
 
+# The model's own verdict beside a check's: "ok" says the arm still matches the model, not
+# that the model was fit to deploy (a nominal one is not)
+DEPLOYABLE = Field(
+    description="the model's own verdict (its validation block): a check judges only "
+    "whether the arm still matches the model, not whether the model was fit to deploy"
+)
+NOT_DEPLOYABLE = Field(description="why the model is not deployable; [] if it is")
+
 
 class CheckPublic(BaseModel):
     """One check as `robocal check` writes check.json (FORMATS section 8), and its job."""
@@ -45,6 +53,8 @@ class CheckPublic(BaseModel):
         description="what `robocal check` says on stderr beside the verdict (not in check.json): "
         "a backlash model's approach directions taken from the rows' order",
     )
+    deployable: bool = DEPLOYABLE
+    not_deployable: list[str] = NOT_DEPLOYABLE
 
 
 class CheckEntry(BaseModel):
@@ -89,11 +99,8 @@ class ModelHealth(BaseModel):
     history: int = Field(description="checks of this model")
     rms_mm: float | None
     expected_rms_mm: float | None
-    deployable: bool = Field(
-        description="the model's own verdict (its validation block): a check judges only "
-        "whether the arm still matches the model, not whether the model was fit to deploy"
-    )
-    not_deployable: list[str] = Field(description="why the model is not deployable; [] if it is")
+    deployable: bool = DEPLOYABLE
+    not_deployable: list[str] = NOT_DEPLOYABLE
 
 
 class CheckRunCreate(BaseModel):

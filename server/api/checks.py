@@ -72,15 +72,23 @@ def _check(jobs, db, job_id: int, data: bytes, filename: str) -> CheckPublic:
     path = jobs.model_path(job_id)
     with call_slot(jobs):
         prepared = run_call(jobs, uploads.read_check, path, data, filename)
-    return public_check(job_id, check.record(db, prepared, filename))
+    return public_check(job_id, check.record(db, prepared, filename), path)
 
 
-def public_check(job_id: int, res: check.CheckResult) -> CheckPublic:
-    """A check's result as the API answers it: check.json's figures, and the warning `robocal
-    check` prints beside them (the same CheckResult.warning)."""
+def public_check(job_id: int, res: check.CheckResult, model_path) -> CheckPublic:
+    """A check's result as the API answers it: check.json's figures, the warning `robocal
+    check` prints beside them (the same CheckResult.warning), and the model's own verdict."""
     figures = asdict(res)
     warning = figures.pop("warning")
-    return CheckPublic(job_id=job_id, **figures, warnings=[warning] if warning else [])
+    return CheckPublic(
+        job_id=job_id, **figures, warnings=[warning] if warning else [], **_deploy(model_path)
+    )
+
+
+def _deploy(model_path) -> dict:
+    """The model's own deployable verdict and reasons (a check does not judge that)."""
+    verdict = read_model(model_path).verdict
+    return {"deployable": bool(verdict.deployable), "not_deployable": list(verdict.reasons)}
 
 
 CheckRunBody = Annotated[CheckRunCreate, Depends(read_json(CheckRunCreate))]
@@ -157,7 +165,7 @@ def run_check(
         campaign_url=f"/api/campaigns/{out.campaign_id}",
         started=out.started,
         note=out.note,
-        check=None if out.result is None else public_check(job_id, out.result),
+        check=None if out.result is None else public_check(job_id, out.result, path),
     )
     if out.started:
         return JSONResponse(
@@ -213,8 +221,7 @@ def model_health(job_id: JobId, jobs: JobsDep, db: DbDep) -> ModelHealth:
     verdict (ok, watch, recalibrate), reason and time, and how many checks it has; a model never
     checked says so (verdict null)."""
     sha, checks = _history(jobs, db, job_id)
-    verdict = read_model(jobs.model_path(job_id)).verdict  # a check does not judge that
-    deploy = {"deployable": bool(verdict.deployable), "not_deployable": list(verdict.reasons)}
+    deploy = _deploy(jobs.model_path(job_id))
     if not checks:
         return ModelHealth(
             job_id=job_id,

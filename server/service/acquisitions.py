@@ -116,12 +116,16 @@ class Acquisitions:
         try:
             now = store.get_campaign(self.db, campaign_id=info.id)
             left = self._left_in(now)
+            # (its lease now ours: the owner that left it is the one read before the claim)
+            reason = self._left_reason(replace(now, lease_owner=info.lease_owner), left, True)
             if left is not None:
                 store.set_status(self.db, campaign_id=info.id, status=left)
                 self._publish(info.id, left, now.status)
             with self._lock:  # the store has the run's last state now
                 if info.id in self._runs:
                     self._runs[info.id] = replace(self._runs[info.id], ended=None)
+                elif reason is not None:  # kept for the API: the store holds no reason
+                    self._runs[info.id] = reason
         finally:
             store.release_lease(self.db, campaign_id=info.id, owner=self.owner)
         return store.get_campaign(self.db, campaign_id=info.id)
@@ -154,8 +158,9 @@ class Acquisitions:
         the store (its counts then hold every pose the state implies)."""
         run = self.get(campaign_id)
         live = self._live_state(campaign_id)
-        info = self._as_shown(store.get_campaign(self.db, campaign_id=campaign_id))
-        return info, _state(live, info), run
+        stored = store.get_campaign(self.db, campaign_id=campaign_id)
+        info = self._as_shown(stored)
+        return info, _state(live, info), run or self._left_reason(stored, info.status)
 
     def shown_all(
         self, status: str | None = None
@@ -166,10 +171,34 @@ class Acquisitions:
             current, runs = self._current, dict(self._runs)
         live = None if current is None else self._live_state(current)
         every = (
-            (info, _state(live if info.id == current else None, info), runs.get(info.id))
-            for info in map(self._as_shown, store.list_campaigns(self.db))
+            (info, _state(live if info.id == current else None, info), run)
+            for stored in store.list_campaigns(self.db)
+            for info in (self._as_shown(stored),)
+            for run in (runs.get(info.id) or self._left_reason(stored, info.status),)
         )
         return [(i, shown, run) for i, shown, run in every if status is None or shown == status]
+
+    def _left_reason(
+        self, stored: store.CampaignInfo, shown: str | None, claimed: bool = False
+    ) -> Run | None:
+        """Why a campaign left moving by a process that is gone shows failed (the store keeps a
+        state, not its reason): a run of this service ended, with that said; else None."""
+        if stored.status not in MOVING or shown != "failed":
+            return None
+        if not claimed and self._foreign(stored):
+            return None
+        try:
+            nxt = store.next_unmeasured_pose(self.db, campaign_id=stored.id)
+        except store.StoreError:
+            nxt = None
+        by = f" ({stored.lease_owner})" if stored.lease_owner else ""
+        return Run(
+            stored.id,
+            active=False,
+            detail=f"the process that ran it{by} stopped while it was {stored.status} (killed, "
+            "or the machine went down); the readings it stored are kept: "
+            + ("resume ends it" if nxt is None else f"resume continues at pose {nxt + 1}"),
+        )
 
     def _live_state(self, campaign_id: int) -> str | None:
         engine = self._engine_of(campaign_id)

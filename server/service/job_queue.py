@@ -217,7 +217,10 @@ class Jobs:
         check_job(self.db, kind=kind, campaign_id=campaign_id, method=method)
         if holdout_campaign_id is not None:
             if kind != "calibration":
-                raise ValueError("only a calibration takes a held-out campaign")
+                raise ValueError(
+                    "holdout_campaign_id: only a calibration takes a held-out campaign (a "
+                    f"{kind} holds out its own folds); leave it out, or ask a calibration"
+                )
             check_holdout(self.db, campaign_id=campaign_id, holdout_campaign_id=holdout_campaign_id)
         with self._lock:  # the check and the insert together: two clicks make one job
             if self._closing:

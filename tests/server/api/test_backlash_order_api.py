@@ -49,10 +49,9 @@ def test_a_diagnosis_job_and_its_evaluation_say_the_row_order(live, tmp_path):
     assert len(said) == 1 and "joint_backlash(2)" in said[0], r.json().get("warnings")
 
 
-@pytest.mark.sqlite_only
-def test_an_uploaded_check_says_the_row_order(live, tmp_path):
-    """`robocal check` warns that a check file without time_s or prev_q has its rows' order
-    taken as the order of motion for the model's backlash; the check endpoint dropped it."""
+def posted_untimed_check(live, tmp_path):
+    """An untimed check.csv posted to the model of a diagnosis naming joint 2's backlash; the
+    201 answer."""
     _, job = _diagnosed(live, tmp_path)
     assert job["state"] == "done", job
     r = live.client.post(
@@ -61,6 +60,14 @@ def test_an_uploaded_check_says_the_row_order(live, tmp_path):
         content=_untimed_backlash(tmp_path, 8, 11),
     )
     assert r.status_code == 201, r.text
+    return r
+
+
+@pytest.mark.sqlite_only
+def test_an_uploaded_check_says_the_row_order(live, tmp_path):
+    """`robocal check` warns that a check file without time_s or prev_q has its rows' order
+    taken as the order of motion for the model's backlash; the check endpoint dropped it."""
+    r = posted_untimed_check(live, tmp_path)
     said = [w for w in r.json()["warnings"] if ORDER in w]
     print("\n", said)
     assert len(said) == 1 and "joint_backlash(2)" in said[0], r.json()

@@ -1,6 +1,7 @@
 """The production line's single question, GET /api/models/{id}/health, also says whether the model
 was fit to deploy at all: a check of the nominal model (not deployable) may well say "ok" (the arm
-still matches it), and before, nothing in the answer but a clause of the reason said otherwise."""
+still matches it), and before, nothing in the answer but a clause of the reason said otherwise.
+The check's own answer (POST .../checks, "verdict": "ok") carries the same."""
 
 from __future__ import annotations
 
@@ -41,6 +42,12 @@ def test_health_says_whether_the_model_is_deployable(live):
         headers={"content-type": "text/csv"},
     )
     assert r.status_code == 201, r.text
+    # the check's own answer says it too: a line automating over POST .../checks sees it
+    got = r.json()
+    assert (got["deployable"], got["not_deployable"]) == (
+        False,
+        nominal["validation"]["reasons"],
+    ), got
     h = c.get(f"/api/models/{nominal['id']}/health").json()
     assert h["checked"] is True and h["verdict"] == r.json()["verdict"], h
     assert h["deployable"] is False, h

@@ -76,7 +76,7 @@ def test_a_calibration_validated_on_a_held_out_campaign(live, tmp_path):
         (
             {"campaign_id": fit, "holdout_campaign_id": held, "kind": "diagnosis"},
             422,
-            "only a calibration takes a held-out campaign",
+            "holdout_campaign_id: only a calibration takes a held-out campaign",
         ),
     ):
         r = c.post("/api/jobs", json=body)

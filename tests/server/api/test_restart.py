@@ -41,19 +41,25 @@ def start(tmp_path, port):
     raise RuntimeError("service did not start")
 
 
+def started(url, auth, body: dict, poses_done: int) -> int:
+    """A campaign of this body started, once it has `poses_done` poses measured; its id."""
+    with httpx.Client(headers=auth, timeout=30) as c:
+        cid = c.post(f"{url}/campaigns", json=body).json()["id"]
+        assert c.post(f"{url}/campaigns/{cid}/start").status_code == 202
+        deadline = time.monotonic() + 120
+        while c.get(f"{url}/campaigns/{cid}").json()["poses_done"] < poses_done:
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+    return cid
+
+
 def test_kill_dash_nine_mid_campaign_then_resume(tmp_path):
     port = free_port()
     proc, token = start(tmp_path, port)
     assert token
     url = f"http://127.0.0.1:{port}/api"
     auth = {"Authorization": f"Bearer {token}"}
-    with httpx.Client(headers=auth, timeout=30) as c:
-        cid = c.post(f"{url}/campaigns", json={"poses": 150, "seed": 3, "name": "k"}).json()["id"]
-        assert c.post(f"{url}/campaigns/{cid}/start").status_code == 202
-        deadline = time.monotonic() + 120
-        while c.get(f"{url}/campaigns/{cid}").json()["poses_done"] < 20:
-            assert time.monotonic() < deadline
-            time.sleep(0.05)
+    cid = started(url, auth, {"poses": 150, "seed": 3, "name": "k"}, 20)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     proc2, again = start(tmp_path, port)
