@@ -629,8 +629,7 @@ def _history(db, cid, names, start, cell):
     meas = store.campaign_measurements(db, campaign_id=cid, targets=names)
     index = {p.label: p.index for p in store.planned_poses(db, campaign_id=cid)}
     keep = [i for i, label in enumerate(meas.pose_ids) if start is None or index[label] < start]
-    partial = {} if start is None else _partial(db, cid, start)
-    return (meas.q[keep], meas.xyz[keep]), partial
+    return (meas.q[keep], meas.xyz[keep]), {} if start is None else _partial(db, cid, start)
 
 
 def _partial(db, cid, pose_index) -> dict:

@@ -63,7 +63,11 @@ def test_evaluating_on_a_planned_campaign_says_it_has_no_measured_pose(live, mod
     body = {"poses": 3, "name": "dark", "pause_s": 0, "beam_break_rate": 0.9999}
     dark = c.post("/api/campaigns", json=body).json()["id"]
     assert c.post(f"/api/campaigns/{dark}/start").status_code in (200, 202)
-    wait_for(lambda: c.get(f"/api/campaigns/{dark}").json(), lambda j: j["status"] == "done")
+    # a run that stores no reading fails, saying so
+    ended = wait_for(
+        lambda: c.get(f"/api/campaigns/{dark}").json(), lambda j: j["status"] == "failed"
+    )
+    assert "no reading stored" in ended["run"]["detail"], ended
     r = c.get(f"/api/models/{job}/evaluate", params={"campaign_id": dark})
     assert r.status_code == 409, r.text
     assert r.json()["detail"] == f"campaign {dark} (dark) has no reading: every target was missing"
